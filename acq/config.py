@@ -1,0 +1,114 @@
+"""Load bench and profile TOML files into validated models; errors name the file, key and value.
+
+A config error is one line, e.g.::
+
+    configs/benches/lab.toml: [daq] rate_hz = -25600: must be greater than 0
+    configs/benches/lab.toml: [motor] pole_pair: unknown key
+    configs/profiles/x.toml: top_speed_rpm: missing
+"""
+
+from __future__ import annotations
+
+import json
+import tomllib
+from pathlib import Path
+from typing import Any, TypeVar
+
+from pydantic import BaseModel, ValidationError
+
+from drivers.config import Bench, Profile
+from drivers.errors import ConfigError
+
+CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
+DEFAULT_BENCH = CONFIG_DIR / "benches" / "sim.toml"
+_DISCRIMINATED = {"daq", "drive"}
+
+M = TypeVar("M", bound=BaseModel)
+
+
+def _key_path(loc: tuple[Any, ...], data: dict[str, Any]) -> tuple[str, Any]:
+    """Turn a pydantic error location into a TOML key path and the value found there."""
+    parts: list[str] = []
+    node: Any = data
+    for i, element in enumerate(loc):
+        if i == 1 and loc[0] in _DISCRIMINATED and isinstance(element, str) and not (
+            isinstance(node, dict) and element in node
+        ):
+            continue  # the discriminated union's tag (e.g. "nidaqmx") is not a key in the file
+        if isinstance(element, str) and element.endswith("]"):
+            continue
+        parts.append(str(element))
+        node = node.get(element) if isinstance(node, dict) else (
+            node[element] if isinstance(node, list) and isinstance(element, int) and element < len(node) else None
+        )
+    if len(parts) > 1:
+        return f"[{'.'.join(parts[:-1])}] {parts[-1]}", node
+    return (parts[0] if parts else "(top level)"), node
+
+
+def _message(error: dict[str, Any]) -> str:
+    kind = error["type"]
+    if kind == "extra_forbidden":
+        return "unknown key"
+    if kind == "missing":
+        return "missing"
+    if kind == "union_tag_invalid":
+        return f"unknown driver (expected one of {error.get('ctx', {}).get('expected_tags', '')})"
+    if kind == "union_tag_not_found":
+        return "missing key 'driver'"
+    return error["msg"].lower().replace("input should be", "must be")
+
+
+def _format(path: Path, error: dict[str, Any], data: dict[str, Any]) -> str:
+    loc = tuple(error["loc"])
+    if error["type"].startswith("union_tag"):
+        loc = (*loc, "driver")
+    key, value = _key_path(loc, data)
+    what = _message(error)
+    if error["type"] in ("missing", "union_tag_not_found") or value is None:
+        return f"{path}: {key}: {what}"
+    shown = json.dumps(value) if isinstance(value, (str, list, dict, bool)) else repr(value)
+    return f"{path}: {key} = {shown}: {what}"
+
+
+def read_toml(path: Path) -> dict[str, Any]:
+    """Parse a TOML file; a missing file or a syntax error becomes a :class:`ConfigError`."""
+    try:
+        with path.open("rb") as f:
+            return tomllib.load(f)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except tomllib.TOMLDecodeError as e:
+        raise ConfigError(f"{path}: not valid TOML: {e}") from None
+
+
+def validate(model: type[M], data: dict[str, Any], source: Path | str) -> M:
+    """Validate ``data`` into ``model``; the first error becomes a one-line :class:`ConfigError`."""
+    try:
+        return model.model_validate(data)
+    except ValidationError as e:
+        raise ConfigError(_format(Path(source), e.errors()[0], data)) from None
+
+
+def load_bench(path: Path | str | None = None) -> Bench:
+    """Load a bench config; ``None`` is the built-in simulated bench."""
+    p = Path(path) if path is not None else DEFAULT_BENCH
+    return validate(Bench, read_toml(p), p)
+
+
+def resolve_profile_path(name_or_path: str) -> Path:
+    """A profile given as a path, or as a name under ``configs/profiles/`` (e.g. ``triangle_0.2s``)."""
+    p = Path(name_or_path)
+    if p.suffix == ".toml" or p.exists():
+        return p
+    candidate = CONFIG_DIR / "profiles" / f"{name_or_path}.toml"
+    if candidate.exists():
+        return candidate
+    known = sorted(q.stem for q in (CONFIG_DIR / "profiles").glob("*.toml"))
+    raise ConfigError(f"--profile {name_or_path}: no such profile (known: {', '.join(known)})")
+
+
+def load_profile(name_or_path: str) -> Profile:
+    """Load a motion profile by name or path."""
+    p = resolve_profile_path(name_or_path)
+    return validate(Profile, read_toml(p), p)

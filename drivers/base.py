@@ -1,0 +1,169 @@
+"""The hardware roles as Protocols, and the records they yield.
+
+Two roles meet on a bench, each on its own clock:
+
+* a :class:`CurrentSource` (a DAQ card) delivers phase currents in :class:`CurrentBlock` s, each
+  stamped with its cumulative sample index (the card's own clock) and the host arrival time;
+* a :class:`Drive` (servo drive) executes a motion profile and streams the encoder position in
+  :class:`EncoderBlock` s, each sample carrying the drive's own cycle index (SYNC counter / frame
+  sequence, unwrapped to a cumulative int64) and its host arrival time.
+
+Host times are ``time.monotonic_ns()`` values (simulated benches running ``--fast`` use a virtual
+host clock that starts at the real one). Nothing here resamples or corrects a timestamp: raw stream
+indices go to disk, alignment is the analysis's job. Gaps are found by the recorder from the
+indices, never from timing. Adapters raise :class:`drivers.errors.DeviceError` on device failure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, Protocol, runtime_checkable
+
+import numpy as np
+
+from drivers.config import Profile
+
+StreamName = Literal["current", "encoder", "drive", "recorder"]
+EventKind = Literal["gap", "error", "warning", "info"]
+
+
+@dataclass(frozen=True)
+class CurrentBlock:
+    """One read from a current source.
+
+    Attributes
+    ----------
+    first_index : int
+        Cumulative index of the first sample in the DAQ's own sample clock (0 at start).
+    current_a : ndarray, shape (n_channels, n_samples), float64
+        Phase currents, A, channels in the order of :attr:`CurrentSourceInfo.channels`.
+    host_ns : int
+        Host monotonic time when the read returned, ns.
+    """
+
+    first_index: int
+    current_a: np.ndarray
+    host_ns: int
+
+    @property
+    def count(self) -> int:
+        """Samples per channel in this block."""
+        return int(self.current_a.shape[1])
+
+
+@dataclass(frozen=True)
+class EncoderBlock:
+    """Encoder samples from a drive, one entry per drive cycle received.
+
+    Attributes
+    ----------
+    index : ndarray of int64
+        Cumulative drive cycle index (SYNC counter or frame sequence, unwrapped by the driver).
+    position_counts : ndarray of int64
+        Position register, counts, unwrapped from its wire width by the driver.
+    host_ns : ndarray of int64
+        Host monotonic arrival time of each sample, ns.
+    drive_time_s : ndarray of float64 or None
+        The drive's own time stamp of each sample, s, where the transport carries one.
+    velocity_counts_per_s : ndarray of float64 or None
+        The drive's velocity actual value, counts/s, where mapped.
+    """
+
+    index: np.ndarray
+    position_counts: np.ndarray
+    host_ns: np.ndarray
+    drive_time_s: np.ndarray | None = None
+    velocity_counts_per_s: np.ndarray | None = None
+
+    @property
+    def count(self) -> int:
+        """Samples in this block."""
+        return int(self.index.shape[0])
+
+
+@dataclass(frozen=True)
+class StreamEvent:
+    """Something worth keeping that is not a sample: a gap, a device error, a warning."""
+
+    host_ns: int
+    stream: StreamName
+    kind: EventKind
+    detail: str
+
+
+@dataclass(frozen=True)
+class CurrentSourceInfo:
+    """What a started current source reports about itself.
+
+    ``rate_hz`` is the rate the card actually runs at (coerced), not the one asked for.
+    """
+
+    rate_hz: float
+    channels: tuple[str, ...]
+    device: str
+    units: str = "A"
+
+
+@dataclass(frozen=True)
+class DriveInfo:
+    """What a started drive reports about itself.
+
+    ``period_s`` is the drive cycle between encoder samples; ``transport`` is ``canopen``,
+    ``serial`` or ``sim``; ``timestamp_kind`` says what ``index`` counts (e.g. ``sync_counter``).
+    """
+
+    period_s: float
+    counts_per_rev: int
+    transport: str
+    timestamp_kind: str
+    device: str
+
+
+@runtime_checkable
+class CurrentSource(Protocol):
+    """A DAQ that samples phase currents on its own clock."""
+
+    def start(self) -> CurrentSourceInfo:
+        """Configure and start continuous acquisition; return the coerced settings."""
+        ...
+
+    def read(self, timeout_s: float) -> CurrentBlock | None:
+        """Return the next block, or None if none arrived within ``timeout_s``."""
+        ...
+
+    def stop(self) -> None:
+        """Stop acquisition and release the device. Idempotent."""
+        ...
+
+    def events(self) -> list[StreamEvent]:
+        """Return and forget the events noticed since the last call."""
+        ...
+
+
+@runtime_checkable
+class Drive(Protocol):
+    """A servo drive: streams encoder position on its own cycle and executes a motion profile."""
+
+    def start(self) -> DriveInfo:
+        """Connect, configure the encoder stream and start it (the motor stays still)."""
+        ...
+
+    def start_motion(self, profile: Profile) -> None:
+        """Enable the drive and start executing ``profile`` until :meth:`stop_motion`."""
+        ...
+
+    def read(self, timeout_s: float) -> EncoderBlock | None:
+        """Return the samples received since the last read, or None after ``timeout_s``."""
+        ...
+
+    def stop_motion(self) -> None:
+        """Bring the motor to rest and disable it. Idempotent; safe after a failure."""
+        ...
+
+    def stop(self) -> None:
+        """Stop streaming and release the transport. Idempotent."""
+        ...
+
+    def events(self) -> list[StreamEvent]:
+        """Return and forget the events noticed since the last call."""
+        ...

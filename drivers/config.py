@@ -1,0 +1,168 @@
+"""The bench and motion-profile schema: validated models of the TOML configs (SI units in names).
+
+These models only describe; they import no vendor library. ``acq.config`` loads TOML files into them
+and turns validation failures into one-line errors naming the file, the key and the value.
+Every model forbids unknown keys, so a misspelt key is an error, never silently ignored.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt
+
+
+class Strict(BaseModel):
+    """Base for all config sections: unknown keys are errors, values are not coerced from strings."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+
+
+NonNegFloat = Annotated[float, Field(ge=0.0)]
+PhaseName = Literal["i_a", "i_b", "i_c"]
+
+
+class Motor(Strict):
+    torque_constant_Nm_per_A: PositiveFloat
+    pole_pairs: PositiveInt
+
+
+class Encoder(Strict):
+    counts_per_rev: PositiveInt
+
+
+class Gear(Strict):
+    ratio: PositiveFloat
+
+
+class Nominal(Strict):
+    """Nominal plant: the fit's starting point and the fixed inertias for ``--params K``."""
+
+    K_Nm_per_rad: PositiveFloat
+    Jm_kgm2: PositiveFloat
+    Jl_kgm2: PositiveFloat
+
+
+class DaqSim(Strict):
+    """Current from the simulated bench."""
+
+    driver: Literal["sim"]
+    rate_hz: PositiveFloat
+    channels: list[PhaseName] = Field(min_length=1, max_length=3)
+    block_s: PositiveFloat = 0.1
+
+
+class DaqNidaqmx(Strict):
+    """Current from an NI-DAQmx device (see ``drivers.nidaq``)."""
+
+    driver: Literal["nidaqmx"]
+    rate_hz: PositiveFloat
+    channels: list[PhaseName] = Field(min_length=1, max_length=3)
+    physical_channels: list[str] = Field(min_length=1, max_length=3)
+    block_s: PositiveFloat = 0.1
+    buffer_s: PositiveFloat = 5.0
+    measurement: Literal["voltage", "current"] = "voltage"
+    sensor_A_per_V: PositiveFloat = 1.0
+    range_V: PositiveFloat = 5.0
+    iepe_excitation_A: NonNegFloat = 0.0
+    coupling: Literal["dc", "ac"] = "dc"
+    terminal: Literal["default", "differential", "pseudo_differential", "rse", "nrse"] = "default"
+
+
+DaqSettings = Annotated[Union[DaqSim, DaqNidaqmx], Field(discriminator="driver")]
+
+
+class DriveSim(Strict):
+    """Encoder and motion from the simulated bench's drive (transport ``sim``)."""
+
+    driver: Literal["sim"]
+    period_s: PositiveFloat
+
+
+class DriveCanopen(Strict):
+    """A CiA 402 drive over CANopen (see ``drivers.canopen_drive``)."""
+
+    driver: Literal["canopen"]
+    period_s: PositiveFloat
+    interface: str = "socketcan"
+    channel: str = "can0"
+    bitrate: PositiveInt = 1_000_000
+    node_id: int = Field(default=1, ge=1, le=127)
+    tpdo: int = Field(default=1, ge=1, le=4)
+    map_velocity: bool = False
+    sdo_timeout_s: PositiveFloat = 0.5
+    state_timeout_s: PositiveFloat = 2.0
+    heartbeat_timeout_s: PositiveFloat = 0.5
+    velocity_units_per_rpm: PositiveFloat = 1.0
+    acceleration_units_per_rpm_per_s: PositiveFloat = 1.0
+    simulated_node: bool = False
+
+
+class DriveSerial(Strict):
+    """A drive streaming framed encoder telemetry over a serial link (see ``drivers.serial_drive``)."""
+
+    driver: Literal["serial"]
+    period_s: PositiveFloat
+    port: str = "/dev/ttyUSB0"
+    baud: PositiveInt = 921_600
+    parity: Literal["N", "E", "O"] = "N"
+    codec: str = "acq1"
+    read_timeout_s: PositiveFloat = 0.5
+    simulated_device: bool = False
+
+
+DriveSettings = Annotated[Union[DriveSim, DriveCanopen, DriveSerial], Field(discriminator="driver")]
+
+
+class SimSettings(Strict):
+    """The simulated bench's truth (plant, motor, measurement chain). Read only by ``drivers.sim``.
+
+    Defaults are the paper's bench (Xu et al. 2021, Table 2) reflected to the motor side.
+    """
+
+    K_Nm_per_rad: PositiveFloat = 891.0
+    Jm_kgm2: PositiveFloat = 0.003027
+    Jl_kgm2: PositiveFloat = 0.00748
+    C_Nms_per_rad: NonNegFloat = 0.1
+    bm_Nms_per_rad: NonNegFloat = 0.002
+    bl_Nms_per_rad: NonNegFloat = 0.002
+    arm_mass_kg: NonNegFloat = 5.0
+    arm_com_distance_m: NonNegFloat = 0.375
+    arm_start_deg: float = -60.0
+    speed_loop_hz: PositiveFloat = 4000.0
+    speed_bandwidth_hz: PositiveFloat = 15.0
+    current_bandwidth_hz: PositiveFloat = 1500.0
+    theta0_rad: float = 0.3
+    daq_offset_s: float = 0.037
+    daq_drift_ppm: float = 40.0
+    host_latency_s: NonNegFloat = 0.002
+    host_jitter_s: NonNegFloat = 0.0002
+    current_noise_A: NonNegFloat = 0.01
+    current_dc_offset_A: float = 0.005
+    pre_roll_s: NonNegFloat = 0.2
+    drop_encoder_frames: list[tuple[int, int]] = Field(default_factory=list)
+    seed: int = 0
+
+
+class Bench(Strict):
+    """A whole bench: joint name, motor, encoder, gear, nominal plant, DAQ, drive, optional sim truth."""
+
+    joint: str = Field(min_length=1)
+    motor: Motor
+    encoder: Encoder
+    gear: Gear
+    nominal: Nominal
+    daq: DaqSettings
+    drive: DriveSettings
+    sim: SimSettings | None = None
+
+
+class Profile(Strict):
+    """A motion: the triangle speed profile of the paper (speed up, down, reverse, back)."""
+
+    kind: Literal["triangle"]
+    top_speed_rpm: PositiveFloat
+    accel_time_s: PositiveFloat
+    decel_time_s: PositiveFloat
+    dwell_s: NonNegFloat = 0.0
+    duration_s: PositiveFloat

@@ -1,0 +1,39 @@
+"""The one error type people see, and its kinds.
+
+Exception tree (each kind maps to a process exit code in ``acq.cli``)::
+
+    AcqError                      one line for people; ``kind`` selects the exit code
+     ├── ConfigError              bad input: config file, option, session file  -> exit 2
+     └── DeviceError              a device failed, is missing or timed out      -> exit 1
+
+Drivers raise these with a message that names the device, channel, file, key or value.
+"""
+
+from __future__ import annotations
+
+from typing import Literal
+
+ErrorKind = Literal["input", "device"]
+
+
+class AcqError(Exception):
+    """An error with a one-line message meant for the person at the bench."""
+
+    kind: ErrorKind = "input"
+
+    @property
+    def exit_code(self) -> int:
+        """Process exit code: 2 for bad input, 1 for a failed device."""
+        return 2 if self.kind == "input" else 1
+
+
+class ConfigError(AcqError):
+    """Bad input: a config file, a command-line value or a session file."""
+
+    kind: ErrorKind = "input"
+
+
+class DeviceError(AcqError):
+    """A device is missing, refused a setting, stopped answering or reported an error."""
+
+    kind: ErrorKind = "device"
