@@ -22,6 +22,7 @@ from drivers.errors import ConfigError
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
 DEFAULT_BENCH = CONFIG_DIR / "benches" / "sim.toml"
 _DISCRIMINATED = {"daq", "drive"}
+_DRIVER_TAGS = {"sim", "nidaqmx", "canopen", "serial"}
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -31,9 +32,7 @@ def _key_path(loc: tuple[Any, ...], data: dict[str, Any]) -> tuple[str, Any]:
     parts: list[str] = []
     node: Any = data
     for i, element in enumerate(loc):
-        if i == 1 and loc[0] in _DISCRIMINATED and isinstance(element, str) and not (
-            isinstance(node, dict) and element in node
-        ):
+        if i == 1 and loc[0] in _DISCRIMINATED and element in _DRIVER_TAGS:
             continue  # the discriminated union's tag (e.g. "nidaqmx") is not a key in the file
         if isinstance(element, str) and element.endswith("]"):
             continue
@@ -66,7 +65,7 @@ def _format(path: Path, error: dict[str, Any], data: dict[str, Any]) -> str:
     key, value = _key_path(loc, data)
     what = _message(error)
     if error["type"] in ("missing", "union_tag_not_found") or value is None:
-        return f"{path}: {key}: {what}"
+        return f"{path}: {key}: missing" if error["type"] == "union_tag_not_found" else f"{path}: {key}: {what}"
     shown = json.dumps(value) if isinstance(value, (str, list, dict, bool)) else repr(value)
     return f"{path}: {key} = {shown}: {what}"
 
