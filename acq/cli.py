@@ -1,0 +1,130 @@
+"""The ``acq`` command line: record, info, check (more commands register themselves below).
+
+Errors for people: an :class:`~drivers.errors.AcqError` anywhere becomes one line on stderr and
+exit code 2 (bad input) or 1 (device); a usage error is click's own (exit 2); Ctrl-C is exit 130.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from acq import __version__
+from acq.config import load_bench, load_profile
+from acq.recorder import Recorder, RecordingResult
+from acq.session import load, repair
+from acq.summary import summarize, summary_table
+from drivers.errors import AcqError, ConfigError
+from drivers.registry import open_bench
+
+EXIT_INTERRUPTED = 130
+out = Console()
+err = Console(stderr=True)
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="acq")
+def cli() -> None:
+    """Record a robot joint on the bench and identify its stiffness K and inertias J_m, J_l."""
+
+
+def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> RecordingResult:
+    columns = (TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[seconds]}"),
+               TimeElapsedColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=err, transient=False) as progress:
+        task = progress.add_task(label, total=1.0, seconds=f"0.0 / {duration_s:g} s")
+
+        def update(fraction: float) -> None:
+            progress.update(task, completed=fraction, seconds=f"{fraction * duration_s:.1f} / {duration_s:g} s")
+
+        recorder.progress = update
+        return recorder.run()
+
+
+@cli.command()
+@click.option("--profile", "profile_name", required=True, help="Profile name in configs/profiles/ or a TOML path.")
+@click.option("--bench", "bench_path", type=click.Path(path_type=Path), default=None,
+              help="Bench TOML (default: the simulated bench configs/benches/sim.toml).")
+@click.option("--duration", "duration_s", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Seconds to record (default: the profile's duration_s).")
+@click.option("--joint", default=None, help="Joint name (default: the bench config's).")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("sessions"), show_default=True,
+              help="Folder for the session file.")
+@click.option("--operator", default="", help="Who is at the bench (stored in the session).")
+@click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
+def record(profile_name: str, bench_path: Path | None, duration_s: float | None, joint: str | None,
+           out_dir: Path, operator: str, fast: bool) -> int:
+    """Swing the joint on PROFILE, record current and encoder, write one session file."""
+    bench = load_bench(bench_path)
+    if joint:
+        bench = bench.model_copy(update={"joint": joint})
+    profile = load_profile(profile_name)
+    duration = duration_s if duration_s is not None else profile.duration_s
+    current, drive = open_bench(bench, fast=fast)
+    recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator)
+    result = _record_with_progress(recorder, duration, f"recording {bench.joint}")
+    out.print(summary_table(summarize(load(result.path))))
+    if result.status == "complete":
+        return 0
+    err.print(f"[bold red]{result.status}[/]: {result.stop_reason} — everything recorded up to the stop is kept "
+              f"in {result.path} ({result.current_samples} current samples, {result.encoder_samples} encoder samples)")
+    return EXIT_INTERRUPTED if result.status == "interrupted" else 1
+
+
+@cli.command()
+@click.argument("session_path", type=click.Path(path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+def info(session_path: Path, as_json: bool) -> int:
+    """Summarise a session: samples, durations, effective rates, gaps."""
+    summary = summarize(load(session_path))
+    if as_json:
+        click.echo(json.dumps(summary.to_json_dict(), indent=2))
+    else:
+        out.print(summary_table(summary))
+    return 0
+
+
+@cli.command()
+@click.argument("session_path", type=click.Path(path_type=Path))
+def check(session_path: Path) -> int:
+    """Check a session's integrity; mark one left by a killed recorder as interrupted and repair it."""
+    session = load(session_path)
+    summary = summarize(session)
+    if session.status == "recording":
+        repair(session_path, "recorder stopped without finishing the file (found by acq check)")
+        summary = summarize(load(session_path))
+        out.print(summary_table(summary))
+        out.print(f"{session_path}: interrupted — the recorder stopped without finishing the file; repaired: "
+                  f"status = interrupted, {summary.streams[0].samples} current and {summary.streams[1].samples} "
+                  "encoder samples kept")
+        return 0
+    out.print(summary_table(summary))
+    out.print(f"{session_path}: {session.status}, nothing to repair")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``acq`` console script."""
+    try:
+        code = cli.main(args=argv, prog_name="acq", standalone_mode=False)
+    except AcqError as e:
+        err.print(f"acq: error: {e}", highlight=False, markup=False)
+        sys.exit(e.exit_code)
+    except click.exceptions.Abort:
+        err.print("acq: interrupted")
+        sys.exit(EXIT_INTERRUPTED)
+    except KeyboardInterrupt:
+        err.print("acq: interrupted")
+        sys.exit(EXIT_INTERRUPTED)
+    except click.ClickException as e:
+        e.show()
+        sys.exit(e.exit_code)
+    except OSError as e:
+        err.print(f"acq: error: {e}", highlight=False, markup=False)
+        sys.exit(ConfigError("").exit_code)
+    sys.exit(code if isinstance(code, int) else 0)

@@ -1,0 +1,326 @@
+"""Record a session: run both streams, execute the profile, write everything raw, end cleanly.
+
+One reader thread per stream only reads its device and queues what it got; the calling thread
+checks stream indices (gaps by counters, never by timing), writes through
+:class:`acq.session.SessionWriter`, flushes at least every 0.5 s and always finishes the file:
+``complete`` when both streams have the requested duration, ``interrupted`` on Ctrl-C / SIGTERM,
+``failed`` on a device error. Timestamps are never altered: raw indices and host stamps go to disk.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from acq.session import SessionWriter, Status, session_filename, utc_now_iso
+from drivers.base import CurrentBlock, CurrentSource, Drive, EncoderBlock, StreamEvent
+from drivers.config import Bench, Profile
+from drivers.errors import AcqError, DeviceError
+
+FLUSH_INTERVAL_S = 0.5
+READ_TIMEOUT_S = 0.2
+STALL_TIMEOUT_S = 5.0
+
+#: Called in the recording thread after each block is written: (stream name, block).
+Listener = Callable[[str, Any], None]
+
+
+class Interrupted(Exception):
+    """Raised in the recording thread by Ctrl-C or SIGTERM."""
+
+
+@dataclass(frozen=True)
+class RecordingResult:
+    """What a finished recording reports (the session file holds the rest)."""
+
+    path: Path
+    status: Status
+    stop_reason: str
+    current_samples: int
+    encoder_samples: int
+    current_gaps: int
+    encoder_gaps: int
+
+
+class _Reader(threading.Thread):
+    """Reads one device until it has ``target`` samples or is told to stop; queues everything."""
+
+    def __init__(self, name: str, device: CurrentSource | Drive, target: int, out: queue.Queue[tuple[str, Any]]):
+        super().__init__(name=f"acq-{name}-reader", daemon=True)
+        self.stream = name
+        self.device = device
+        self.target = target
+        self.out = out
+        self.stop_requested = threading.Event()
+        self.first_index: int | None = None
+        self.covered = 0
+
+    def _advance(self, block: CurrentBlock | EncoderBlock) -> None:
+        """Stream position covered so far, by the stream's own index (drops do not delay the end)."""
+        if isinstance(block, CurrentBlock):
+            first, end = block.first_index, block.first_index + block.count
+        else:
+            first, end = int(block.index[0]), int(block.index[-1]) + 1
+        if self.first_index is None:
+            self.first_index = first
+        self.covered = end - self.first_index
+
+    def run(self) -> None:
+        try:
+            while not self.stop_requested.is_set() and self.covered < self.target:
+                block = self.device.read(READ_TIMEOUT_S)
+                for event in self.device.events():
+                    self.out.put(("event", event))
+                if block is not None and block.count:
+                    self._advance(block)
+                    self.out.put((self.stream, block))
+        except Exception as e:  # noqa: BLE001 - every device failure ends the recording cleanly
+            self.out.put(("error", e))
+        finally:
+            self.out.put(("done", self.stream))
+
+
+class _StreamChecker:
+    """Keeps the stored streams strictly ordered and turns index jumps into gap events."""
+
+    def __init__(self) -> None:
+        self.next_current: int | None = None
+        self.last_cycle: int | None = None
+        self.current_gaps = 0
+        self.encoder_gaps = 0
+
+    def current(self, block: CurrentBlock) -> tuple[CurrentBlock | None, list[StreamEvent]]:
+        events: list[StreamEvent] = []
+        if self.next_current is not None and block.first_index != self.next_current:
+            missing = block.first_index - self.next_current
+            if missing > 0:
+                self.current_gaps += 1
+                events.append(StreamEvent(block.host_ns, "current", "gap",
+                                          f"{missing} samples missing before index {block.first_index}"))
+            else:
+                overlap = min(-missing, block.count)
+                events.append(StreamEvent(block.host_ns, "current", "warning",
+                                          f"{overlap} samples repeated at index {block.first_index} dropped"))
+                if overlap == block.count:
+                    return None, events
+                block = CurrentBlock(block.first_index + overlap, block.current_a[:, overlap:], block.host_ns)
+        self.next_current = block.first_index + block.count
+        return block, events
+
+    def encoder(self, block: EncoderBlock) -> tuple[EncoderBlock | None, list[StreamEvent]]:
+        events: list[StreamEvent] = []
+        idx = np.asarray(block.index, dtype=np.int64)
+        prev = np.r_[self.last_cycle if self.last_cycle is not None else idx[0] - 1, idx[:-1]]
+        keep = idx > np.maximum.accumulate(prev)
+        if not keep.all():
+            events.append(StreamEvent(int(block.host_ns[0]), "encoder", "warning",
+                                      f"{int((~keep).sum())} samples out of order or repeated dropped"))
+            block = _select(block, keep)
+            idx = idx[keep]
+            if idx.size == 0:
+                return None, events
+        steps = np.diff(np.r_[self.last_cycle if self.last_cycle is not None else idx[0] - 1, idx])
+        for pos in np.flatnonzero(steps > 1):
+            self.encoder_gaps += 1
+            events.append(StreamEvent(int(block.host_ns[pos]), "encoder", "gap",
+                                      f"{int(steps[pos] - 1)} frames missing before cycle {int(idx[pos])}"))
+        self.last_cycle = int(idx[-1])
+        return block, events
+
+
+def _select(block: EncoderBlock, keep: np.ndarray) -> EncoderBlock:
+    def pick(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else np.asarray(a)[keep]
+
+    return EncoderBlock(
+        index=np.asarray(block.index)[keep],
+        position_counts=np.asarray(block.position_counts)[keep],
+        host_ns=np.asarray(block.host_ns)[keep],
+        drive_time_s=pick(block.drive_time_s),
+        velocity_counts_per_s=pick(block.velocity_counts_per_s),
+    )
+
+
+@contextmanager
+def _sigterm_interrupts() -> Iterator[None]:
+    """Treat SIGTERM like Ctrl-C while recording (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum: int, frame: object) -> None:
+        raise Interrupted("stopped by SIGTERM")
+
+    previous = signal.signal(signal.SIGTERM, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+class Recorder:
+    """Record ``duration_s`` of both streams while the drive executes ``profile``.
+
+    Parameters
+    ----------
+    bench, profile : the configs (stored in the session).
+    current, drive : the devices (real or simulated; the recorder cannot tell).
+    out_dir : folder for the session file, named ``<UTC start>_<joint>.h5``.
+    duration_s : seconds of data wanted in each stream (counted in samples, not wall time).
+    listeners : called after each block is written (e.g. a live view's queue).
+    progress : called with the fraction recorded (0..1) as data arrives.
+    """
+
+    def __init__(
+        self,
+        bench: Bench,
+        profile: Profile,
+        current: CurrentSource,
+        drive: Drive,
+        out_dir: Path,
+        duration_s: float,
+        *,
+        operator: str = "",
+        tags: dict[str, Any] | None = None,
+        listeners: list[Listener] | None = None,
+        progress: Callable[[float], None] | None = None,
+    ) -> None:
+        self.bench, self.profile = bench, profile
+        self.current, self.drive = current, drive
+        self.out_dir = Path(out_dir)
+        self.duration_s = duration_s
+        self.operator, self.tags = operator, tags
+        self.listeners = listeners or []
+        self.progress = progress
+
+    def run(self) -> RecordingResult:
+        """Record; always returns with the file finished (device set-up errors raise before a file exists)."""
+        self._start_devices()
+        cur_info, drive_info = self._cur_info, self._drive_info
+        start_ns = time.monotonic_ns()
+        path = self.out_dir / session_filename(self.bench.joint, utc_now_iso())
+        writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=cur_info,
+                               drive_info=drive_info, host_ns_at_start=start_ns,
+                               operator=self.operator, tags=self.tags)
+        inbox: queue.Queue[tuple[str, Any]] = queue.Queue()
+        readers = {
+            "current": _Reader("current", self.current, math.ceil(self.duration_s * cur_info.rate_hz), inbox),
+            "encoder": _Reader("encoder", self.drive, math.ceil(self.duration_s / drive_info.period_s), inbox),
+        }
+        checker = _StreamChecker()
+        counts = {"current": 0, "encoder": 0}
+        status: Status = "complete"
+        reason = f"recorded {self.duration_s:g} s"
+        try:
+            with _sigterm_interrupts():
+                for r in readers.values():
+                    r.start()
+                self.drive.start_motion(self.profile)
+                self._pump(inbox, readers, writer, checker, counts)
+        except (KeyboardInterrupt, Interrupted) as e:
+            status, reason = "interrupted", "interrupted by user (Ctrl-C)" if isinstance(e, KeyboardInterrupt) else str(e)
+        except AcqError as e:
+            status, reason = "failed", str(e)
+        except Exception as e:  # noqa: BLE001 - keep the data whatever went wrong, and say what
+            status, reason = "failed", f"{type(e).__name__}: {e}"
+        finally:
+            status, reason = self._shut_down(inbox, readers, writer, checker, counts, status, reason)
+        return RecordingResult(path, status, reason, counts["current"], counts["encoder"],
+                               checker.current_gaps, checker.encoder_gaps)
+
+    def _start_devices(self) -> None:
+        try:
+            self._cur_info = self.current.start()
+            self._drive_info = self.drive.start()
+        except BaseException:
+            self.drive.stop()
+            self.current.stop()
+            raise
+
+    def _pump(self, inbox: queue.Queue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
+              checker: _StreamChecker, counts: dict[str, int]) -> None:
+        done: set[str] = set()
+        last_flush = last_data = time.monotonic()
+        while len(done) < len(readers):
+            try:
+                kind, item = inbox.get(timeout=READ_TIMEOUT_S)
+            except queue.Empty:
+                kind, item = "", None
+            now = time.monotonic()
+            if kind == "error":
+                raise item if isinstance(item, AcqError) else DeviceError(f"{type(item).__name__}: {item}")
+            if kind == "done":
+                done.add(item)
+            elif kind:
+                self._store(kind, item, writer, checker, counts)
+                last_data = now
+            if now - last_data > STALL_TIMEOUT_S:
+                silent = [n for n, r in readers.items() if n not in done]
+                raise DeviceError(f"no data from {', '.join(silent)} for {STALL_TIMEOUT_S:g} s")
+            if now - last_flush >= FLUSH_INTERVAL_S:
+                writer.flush()
+                last_flush = now
+
+    def _store(self, kind: str, item: Any, writer: SessionWriter, checker: _StreamChecker,
+               counts: dict[str, int]) -> None:
+        if kind == "event":
+            writer.add_event(item)
+            return
+        block, events = checker.current(item) if kind == "current" else checker.encoder(item)
+        for event in events:
+            writer.add_event(event)
+        if block is None:
+            return
+        if kind == "current":
+            writer.append_current(block)
+        else:
+            writer.append_encoder(block)
+        counts[kind] += block.count
+        for listener in self.listeners:
+            listener(kind, block)
+        if self.progress is not None and kind == "current":
+            self.progress(min(1.0, counts["current"] / (self.duration_s * self._cur_info.rate_hz)))
+
+    def _shut_down(self, inbox: queue.Queue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
+                   checker: _StreamChecker, counts: dict[str, int], status: Status, reason: str) -> tuple[Status, str]:
+        """Stop motion first (safety), then the readers; store what they still queued; finish the file."""
+        try:
+            self.drive.stop_motion()
+        except Exception as e:  # noqa: BLE001 - the file must still be finished
+            writer.add_event(StreamEvent(time.monotonic_ns(), "drive", "error", f"stop motion failed: {e}"))
+        for r in readers.values():
+            r.stop_requested.set()
+        for r in readers.values():
+            if r.is_alive():
+                r.join(timeout=2.0)
+        for stop in (self.current.stop, self.drive.stop):
+            try:
+                stop()
+            except Exception as e:  # noqa: BLE001
+                writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "error", f"device stop failed: {e}"))
+        while True:
+            try:
+                kind, item = inbox.get_nowait()
+            except queue.Empty:
+                break
+            if kind in ("current", "encoder", "event"):
+                self._store(kind, item, writer, checker, counts)
+            elif kind == "error" and status == "complete":
+                status, reason = "failed", str(item)
+        for device in (self.current, self.drive):
+            for event in device.events():
+                writer.add_event(event)
+        if status != "complete":
+            writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "info", f"stopped: {reason}"))
+        writer.finish(status, reason)
+        return status, reason

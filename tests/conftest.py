@@ -1,0 +1,3 @@
+"""Shared fixtures. Tests import the installed package (``pip install -e ".[test]"``)."""
+
+from __future__ import annotations
