@@ -113,18 +113,18 @@ def main(argv: list[str] | None = None) -> None:
     try:
         code = cli.main(args=argv, prog_name="acq", standalone_mode=False)
     except AcqError as e:
-        err.print(f"acq: error: {e}", highlight=False, markup=False)
+        click.echo(f"acq: error: {e}", err=True)
         sys.exit(e.exit_code)
     except click.exceptions.Abort:
-        err.print("acq: interrupted")
+        click.echo("acq: interrupted", err=True)
         sys.exit(EXIT_INTERRUPTED)
     except KeyboardInterrupt:
-        err.print("acq: interrupted")
+        click.echo("acq: interrupted", err=True)
         sys.exit(EXIT_INTERRUPTED)
     except click.ClickException as e:
         e.show()
         sys.exit(e.exit_code)
     except OSError as e:
-        err.print(f"acq: error: {e}", highlight=False, markup=False)
+        click.echo(f"acq: error: {e}", err=True)
         sys.exit(ConfigError("").exit_code)
     sys.exit(code if isinstance(code, int) else 0)

@@ -86,7 +86,10 @@ def validate(model: type[M], data: dict[str, Any], source: Path | str) -> M:
     try:
         return model.model_validate(data)
     except ValidationError as e:
-        raise ConfigError(_format(Path(source), e.errors()[0], data)) from None
+        errors = e.errors()
+        # A misspelt key shows up as "unknown" and "missing"; the unknown one names the cause.
+        first = next((err for err in errors if err["type"] == "extra_forbidden"), errors[0])
+        raise ConfigError(_format(Path(source), first, data)) from None
 
 
 def load_bench(path: Path | str | None = None) -> Bench:

@@ -1,0 +1,5 @@
+"""``python -m acq`` runs the command line."""
+
+from acq.cli import main
+
+main()

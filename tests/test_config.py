@@ -1,0 +1,84 @@
+"""Config validation: every bad input is one line naming file, key and value, exit code 2."""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from acq.config import DEFAULT_BENCH, load_bench, load_profile
+from tests.helpers import run_cli
+
+SIM_TOML = DEFAULT_BENCH.read_text()
+
+
+def _bench_with(tmp_path: Path, old: str, new: str) -> Path:
+    assert old in SIM_TOML
+    p = tmp_path / "bench.toml"
+    p.write_text(SIM_TOML.replace(old, new, 1))
+    return p
+
+
+def test_shipped_configs_validate() -> None:
+    bench = load_bench()
+    assert bench.sim is not None and bench.sim.K_Nm_per_rad == 891.0
+    assert bench.daq.rate_hz == 25600 and bench.drive.period_s == 0.001
+    for name in ("triangle_0.2s", "triangle_0.5s"):
+        profile = load_profile(name)
+        assert profile.kind == "triangle" and profile.duration_s == 10
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "message"),
+    [
+        ("rate_hz = 25600", "rate_hz = -25600", "[daq] rate_hz = -25600: must be greater than 0"),
+        ("rate_hz = 25600", "rate_hz = \"fast\"", "[daq] rate_hz = \"fast\": must be a valid number"),
+        ("pole_pairs = 4", "pole_pair = 4", "[motor] pole_pair = 4: unknown key"),
+        ("pole_pairs = 4", "", "[motor] pole_pairs: missing"),
+        ("driver = \"sim\"\nrate_hz", "driver = \"labview\"\nrate_hz",
+         "[daq] driver = \"labview\": unknown driver (expected one of 'sim', 'nidaqmx')"),
+        ("counts_per_rev = 131072", "counts_per_rev = 131072.5",
+         "[encoder] counts_per_rev = 131072.5: must be a valid integer"),
+    ],
+)
+def test_bad_bench_config_is_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                             old: str, new: str, message: str) -> None:
+    path = _bench_with(tmp_path, old, new)
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(path), "--fast",
+                  "--out", str(tmp_path / "s"))
+    assert run.code == 2
+    assert run.err.strip() == f"acq: error: {path}: {message}"
+    assert "Traceback" not in run.err
+    assert not (tmp_path / "s").exists(), "no session file for a rejected config"
+
+
+def test_toml_syntax_error_names_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "broken.toml"
+    path.write_text("joint = \n")
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(path))
+    assert run.code == 2
+    assert run.err.startswith(f"acq: error: {path}: not valid TOML:")
+    assert len(run.err.strip().splitlines()) == 1
+
+
+def test_unknown_profile_lists_known_ones(capsys: pytest.CaptureFixture[str]) -> None:
+    run = run_cli(capsys, "record", "--profile", "sawtooth")
+    assert run.code == 2
+    assert run.err.strip() == "acq: error: --profile sawtooth: no such profile (known: triangle_0.2s, triangle_0.5s)"
+
+
+def test_bad_profile_value(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "p.toml"
+    text = (Path(__file__).parent.parent / "configs/profiles/triangle_0.2s.toml").read_text()
+    path.write_text(text.replace("accel_time_s = 0.2", "accel_time_s = 0"))
+    assert tomllib.loads(path.read_text())["accel_time_s"] == 0
+    run = run_cli(capsys, "record", "--profile", str(path))
+    assert run.code == 2
+    assert run.err.strip() == f"acq: error: {path}: accel_time_s = 0: must be greater than 0"
+
+
+def test_missing_bench_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(tmp_path / "nope.toml"))
+    assert run.code == 2
+    assert run.err.strip() == f"acq: error: {tmp_path / 'nope.toml'}: no such file"
