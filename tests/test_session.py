@@ -1,0 +1,119 @@
+"""The session file: layout of design §6, read back by h5py; crash repair keeps every flushed sample."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from acq.config import load_bench, load_profile
+from acq.session import FORMAT, SessionWriter, load, repair
+from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
+
+
+def _writer(path: Path) -> SessionWriter:
+    return SessionWriter(
+        path,
+        bench=load_bench(),
+        profile=load_profile("triangle_0.2s"),
+        current_info=CurrentSourceInfo(25600.0, ("i_a", "i_b"), "test-daq"),
+        drive_info=DriveInfo(0.001, 131072, "sim", "drive_cycle", "test-drive"),
+        host_ns_at_start=123,
+        operator="ana",
+        tags={"payload_kg": 2.0},
+    )
+
+
+def _current(first: int, n: int) -> CurrentBlock:
+    idx = np.arange(first, first + n, dtype=float)
+    return CurrentBlock(first, np.vstack([idx, -idx]), host_ns=1000 + first)
+
+
+def _encoder(cycles: np.ndarray) -> EncoderBlock:
+    return EncoderBlock(cycles, cycles * 7, cycles * 10, drive_time_s=cycles * 0.001)
+
+
+def test_round_trip_layout_and_footer(tmp_path: Path) -> None:
+    path = tmp_path / "s.h5"
+    w = _writer(path)
+    w.append_current(_current(0, 100))
+    w.append_current(_current(150, 50))  # a gap of 50 samples kept as it is
+    w.append_encoder(_encoder(np.arange(0, 10)))
+    w.append_encoder(_encoder(np.arange(12, 20)))
+    w.add_event(StreamEvent(5, "encoder", "gap", "2 frames missing before cycle 12"))
+    w.finish("complete", "recorded 10 s")
+
+    with h5py.File(path, "r") as f:
+        assert f.attrs["format"] == FORMAT and f.attrs["status"] == "complete"
+        assert f.attrs["stop_reason"] == "recorded 10 s" and len(f.attrs["session_id"]) == 36
+        assert f["current"].attrs["rate_hz"] == 25600.0
+        assert f["current/i_a_A"].dtype == np.float64 and f["current/i_a_A"].shape == (150,)
+        assert list(f["current/blocks/first_index"][...]) == [0, 150]
+        assert f["encoder/position_counts"].dtype == np.int64
+        assert f["encoder"].attrs["transport"] == "sim"
+        assert "velocity_counts_per_s" not in f["encoder"], "never-filled optional columns are removed"
+        assert f.attrs["current_samples"] == 150 and f.attrs["encoder_samples"] == 18
+
+    s = load(path)
+    assert s.bench.joint == "joint1" and s.profile.accel_time_s == 0.2 and s.tags == {"payload_kg": 2.0}
+    np.testing.assert_array_equal(s.current.sample_index(), np.r_[np.arange(100), np.arange(150, 200)])
+    np.testing.assert_array_equal(s.current.phases_a["i_b"], -s.current.sample_index())
+    np.testing.assert_array_equal(s.encoder.index, np.r_[np.arange(10), np.arange(12, 20)])
+    np.testing.assert_allclose(s.encoder.drive_time_s, s.encoder.index * 0.001)
+    assert s.events == [StreamEvent(5, "encoder", "gap", "2 frames missing before cycle 12")]
+
+
+KILLED_WRITER = textwrap.dedent(
+    """
+    import os, signal, sys
+    import numpy as np
+    sys.path.insert(0, {tests!r})
+    from test_session import _writer, _current, _encoder
+    w = _writer(__import__("pathlib").Path({path!r}))
+    for k in range(20):
+        w.append_current(_current(k * 100, 100))
+        w.append_encoder(_encoder(np.arange(k * 4, k * 4 + 4)))
+        w.flush()
+    w.append_current(_current(2000, 100))  # appended, never flushed
+    os.kill(os.getpid(), signal.SIGKILL)
+    """
+)
+
+
+def test_killed_writer_leaves_readable_file_and_repair_keeps_all_flushed(tmp_path: Path) -> None:
+    path = tmp_path / "killed.h5"
+    code = KILLED_WRITER.format(tests=str(Path(__file__).parent), path=str(path))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert proc.returncode == -9, proc.stderr
+    s = load(path)
+    assert s.status == "recording"
+    assert s.current.sample_count >= 2000 and s.encoder.index.size == 80
+    np.testing.assert_array_equal(s.current.sample_index()[:2000], np.arange(2000))
+
+    repair(path, "recorder killed")
+    fixed = load(path)
+    assert fixed.status == "interrupted" and fixed.attrs["stop_reason"] == "recorder killed"
+    assert fixed.current.sample_count == s.current.sample_count
+    np.testing.assert_array_equal(fixed.encoder.position_counts, s.encoder.position_counts)
+    with h5py.File(path, "r") as f:  # a normal (non-SWMR) open works again after repair
+        assert f.attrs["encoder_samples"] == 80
+
+
+def test_not_a_session(tmp_path: Path) -> None:
+    from drivers.errors import ConfigError
+
+    other = tmp_path / "other.h5"
+    with h5py.File(other, "w", libver=("v110", "latest")) as f:
+        f.attrs["format"] = "something-else"
+    with pytest.raises(ConfigError, match="not an acq session"):
+        load(other)
+    with pytest.raises(ConfigError, match="no such session file"):
+        load(tmp_path / "missing.h5")
+    (tmp_path / "text.h5").write_text("hello")
+    with pytest.raises(ConfigError, match="not a readable HDF5 session file"):
+        load(tmp_path / "text.h5")
