@@ -1,0 +1,229 @@
+"""The simulated bench: one joint's physics shared by the simulated DAQ and drive, and their clocks.
+
+Clocks (all times in s unless the name says ns):
+
+* drive clock — the reference: drive cycle k is at t = k·``drive.period_s``; the physics runs on it;
+* DAQ clock — sample n is at t = ``daq_offset_s`` + n/``rate_hz``·(1 + ``daq_drift_ppm``·1e-6), i.e. the
+  analysis's convention t_drive = offset + t_daq·(1 + drift), t_daq = n/rate; before t = 0 the joint rests;
+* host clock — host_ns = host_t0_ns + (t + ``host_latency_s`` + |jitter|)·1e9, host_t0_ns being
+  ``time.monotonic_ns()`` at construction; jitter ~ N(0, ``host_jitter_s``).
+
+Samples are computed from indices and rates, never from the wall clock; :meth:`SimBench.pace_until` is
+the separate real-time layer (no sleeping when not real-time). Noise and jitter are functions of the
+sample index and ``sim.seed`` only, so a session is reproducible whatever the read pattern or threads.
+
+The physics advances on demand to whatever time a stream asks for, under one lock (the DAQ and the
+drive are read from different threads). History older than every registered consumer's cursor (see
+:meth:`SimBench.hold_history`) is dropped unless ``keep_history``.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from typing import Any, Literal
+
+import numpy as np
+
+from drivers.config import Bench, Profile, SimSettings
+from drivers.sim.motion import MotionSchedule
+from drivers.sim.physics import Gravity, JointSimulation
+from drivers.sim.plant import TwoMass, tune_speed_pi
+
+PHASE_SHIFT_RAD = {"i_a": 0.0, "i_b": -2.0 * np.pi / 3.0, "i_c": 2.0 * np.pi / 3.0}
+_NOISE_CHUNK = 1 << 14
+NoiseStream = Literal["current", "daq_host", "drive_host"]
+_STREAM_IDS = {"current": 1, "daq_host": 2, "drive_host": 3}
+
+
+def _int32(counts: np.ndarray) -> np.ndarray:
+    """Wrap int64 counts to a two's-complement int32 register."""
+    return ((counts + 2**31) % 2**32 - 2**31).astype(np.int32)
+
+
+class SimBench:
+    """Physics, measurement chain and clocks of the simulated bench.
+
+    Parameters
+    ----------
+    bench : the bench config; ``bench.sim`` holds the truth (a default :class:`SimSettings` if absent).
+    realtime : pace reads to the host clock (True) or run as fast as possible (False, ``--fast``).
+    keep_history : keep every simulated state (for :meth:`true_state_at` on the whole session).
+    """
+
+    def __init__(self, bench: Bench, *, realtime: bool, keep_history: bool = False) -> None:
+        self.bench = bench
+        self.sim: SimSettings = bench.sim if bench.sim is not None else SimSettings()
+        self.realtime = realtime
+        self.keep_history = keep_history
+        s, nom = self.sim, bench.nominal
+        self.plant = TwoMass(s.K_Nm_per_rad, s.Jm_kgm2, s.Jl_kgm2, s.C_Nms_per_rad, s.bm_Nms_per_rad,
+                             s.bl_Nms_per_rad, bench.motor.torque_constant_Nm_per_A, s.current_bandwidth_hz)
+        self.speed_pi = tune_speed_pi(nom.Jm_kgm2 + nom.Jl_kgm2, s.speed_bandwidth_hz, 1.0 / s.speed_loop_hz)
+        gravity = Gravity(s.arm_mass_kg, s.arm_com_distance_m, math.radians(s.arm_start_deg), bench.gear.ratio)
+        self.schedule = MotionSchedule()
+        self._physics = JointSimulation(self.plant, self.speed_pi, gravity, bench.encoder.counts_per_rev,
+                                        self.schedule)
+        self.channels: tuple[str, ...] = tuple(bench.daq.channels)
+        self.daq_rate_hz = float(bench.daq.rate_hz)
+        self.drive_period_s = float(bench.drive.period_s)
+        self.counts_per_rev = int(bench.encoder.counts_per_rev)
+        self.dc_offset_A = np.array([s.current_dc_offsets_A.get(c, s.current_dc_offset_A) for c in self.channels])
+        self.host_t0_ns = time.monotonic_ns()
+        self._lock = threading.RLock()
+        self._cursors: dict[str, float] = {}
+        self._noise_cache: dict[tuple[str, int, int], np.ndarray] = {}
+
+    # ---- truth -------------------------------------------------------------------------------------
+    @property
+    def truth(self) -> dict[str, Any]:
+        """The true plant and clock values (SI units; keys carry the unit) for scoring the analysis.
+
+        ``theta0_encoder_rad`` is the electrical offset relative to the encoder's count zero, i.e.
+        i_a = −i_q·sin(p·counts·2π/cpr + theta0_encoder_rad) up to quantisation.
+        """
+        s, p = self.sim, self.plant
+        f_a, f_r = p.resonances_hz()
+        pp = self.bench.motor.pole_pairs
+        theta0_enc = (s.theta0_rad - pp * 2 * math.pi * s.encoder_start_counts / self.counts_per_rev) % (2 * math.pi)
+        with self._lock:
+            motions = self.schedule.describe()
+        return {
+            "K_Nm_per_rad": p.K_Nm_per_rad, "Jm_kgm2": p.Jm_kgm2, "Jl_kgm2": p.Jl_kgm2,
+            "C_Nms_per_rad": p.C_Nms_per_rad, "bm_Nms_per_rad": p.bm_Nms_per_rad, "bl_Nms_per_rad": p.bl_Nms_per_rad,
+            "f_a_hz": f_a, "f_r_hz": f_r,
+            "kt_Nm_per_A": p.kt_Nm_per_A, "pole_pairs": pp, "theta0_rad": s.theta0_rad,
+            "theta0_encoder_rad": theta0_enc, "encoder_start_counts": s.encoder_start_counts,
+            "current_dc_offset_A": dict(zip(self.channels, self.dc_offset_A.tolist())),
+            "current_noise_A": s.current_noise_A,
+            "daq_offset_s": s.daq_offset_s, "daq_drift_ppm": s.daq_drift_ppm, "daq_rate_hz": self.daq_rate_hz,
+            "drive_period_s": self.drive_period_s, "counts_per_rev": self.counts_per_rev,
+            "host_t0_ns": self.host_t0_ns, "host_latency_s": s.host_latency_s, "host_jitter_s": s.host_jitter_s,
+            "speed_kp_Nms_per_rad": self.speed_pi.kp_Nms_per_rad, "speed_ki_Nm_per_rad": self.speed_pi.ki_Nm_per_rad,
+            "speed_loop_hz": s.speed_loop_hz, "current_bandwidth_hz": s.current_bandwidth_hz,
+            "motions": motions,
+        }
+
+    # ---- clocks ------------------------------------------------------------------------------------
+    def daq_time_s(self, indices: np.ndarray) -> np.ndarray:
+        """Drive-clock time (s) of DAQ samples ``indices``: offset + n/rate·(1 + drift·1e-6)."""
+        n = np.asarray(indices, dtype=np.float64)
+        return self.sim.daq_offset_s + n / self.daq_rate_hz * (1.0 + self.sim.daq_drift_ppm * 1e-6)
+
+    def host_ns_at(self, t_s: np.ndarray | float, jitter_s: np.ndarray | float = 0.0) -> np.ndarray:
+        """Host monotonic time (int64 ns) at which something at drive time ``t_s`` (s) arrives."""
+        t = np.asarray(t_s, dtype=np.float64) + self.sim.host_latency_s + np.abs(jitter_s)
+        return self.host_t0_ns + np.round(t * 1e9).astype(np.int64)
+
+    def host_jitter_s(self, stream: NoiseStream, first_index: int, count: int) -> np.ndarray:
+        """Arrival jitter (s, ≥ 0) of items ``first_index …`` of a stream; a function of the index only."""
+        return np.abs(self._normal(stream, first_index, count, 1)[0]) * self.sim.host_jitter_s
+
+    def pace_until(self, host_ns: int, timeout_s: float | None = None) -> bool:
+        """Real-time layer: sleep until ``time.monotonic_ns() >= host_ns``, at most ``timeout_s`` (s).
+
+        Returns True if that host time is reached. Never sleeps when not real-time.
+        """
+        if not self.realtime:
+            return True
+        wait_s = (host_ns - time.monotonic_ns()) * 1e-9
+        if timeout_s is not None and wait_s > timeout_s:
+            time.sleep(max(timeout_s, 0.0))
+            return False
+        if wait_s > 0:
+            time.sleep(wait_s)
+        return True
+
+    # ---- motion ------------------------------------------------------------------------------------
+    def start_motion(self, profile: Profile, t_start_s: float) -> float:
+        """Start ``profile`` at drive time ``t_start_s`` (s), or at the simulated frontier if that is
+        later (the simulated past cannot change). Returns the actual start time, s."""
+        with self._lock:
+            return self.schedule.start(profile, max(t_start_s, self._physics.t_end_s))
+
+    def stop_motion(self, t_s: float) -> float | None:
+        """Ramp the reference to rest from drive time ``t_s`` (s, or the frontier if later) at the
+        profile's deceleration. Returns the time the reference reaches zero, None if not moving."""
+        with self._lock:
+            return self.schedule.stop(max(t_s, self._physics.t_end_s))
+
+    # ---- history -----------------------------------------------------------------------------------
+    def hold_history(self, consumer: str, from_t_s: float) -> None:
+        """Declare that ``consumer`` will still read states at drive times ≥ ``from_t_s`` (s)."""
+        with self._lock:
+            self._cursors[consumer] = from_t_s
+            if not self.keep_history:
+                self._physics.forget_before(min(self._cursors.values()))
+
+    def release_history(self, consumer: str) -> None:
+        """``consumer`` reads no more (its stream stopped)."""
+        with self._lock:
+            self._cursors.pop(consumer, None)
+
+    # ---- measurements ------------------------------------------------------------------------------
+    def _states(self, t_s: np.ndarray) -> np.ndarray:
+        with self._lock:
+            self._physics.advance_to(float(np.max(t_s, initial=0.0)))
+            return self._physics.states_at(t_s)
+
+    def true_state_at(self, t_drive_s: np.ndarray | float) -> dict[str, np.ndarray]:
+        """True joint state at drive times ``t_drive_s`` (s) (older history needs ``keep_history``).
+
+        Returns ``iq_A`` (A), ``torque_Nm`` (electromagnetic, k_t·i_q, N·m), ``theta_m_rad``,
+        ``omega_m_rad_s``, ``theta_l_rad``, ``omega_l_rad_s`` (motor side, rad and rad/s).
+        """
+        t = np.asarray(t_drive_s, dtype=np.float64)
+        x = self._states(t.ravel())
+        shape = t.shape
+        return {
+            "iq_A": x[:, 4].reshape(shape), "torque_Nm": (self.plant.kt_Nm_per_A * x[:, 4]).reshape(shape),
+            "theta_m_rad": x[:, 0].reshape(shape), "omega_m_rad_s": x[:, 1].reshape(shape),
+            "theta_l_rad": x[:, 2].reshape(shape), "omega_l_rad_s": x[:, 3].reshape(shape),
+        }
+
+    def current_samples(self, first_index: int, count: int) -> np.ndarray:
+        """Phase currents (A), shape (n_channels, count), of DAQ samples ``first_index …``.
+
+        i_x = −i_q·sin(p·θ_m + θ0 + shift_x) + dc_x + noise, shift = 0, −2π/3, +2π/3 for a, b, c.
+        """
+        x = self._states(self.daq_time_s(np.arange(first_index, first_index + count)))
+        theta_e = self.bench.motor.pole_pairs * x[:, 0] + self.sim.theta0_rad
+        shifts = np.array([PHASE_SHIFT_RAD[c] for c in self.channels])[:, None]
+        clean = -x[:, 4][None, :] * np.sin(theta_e[None, :] + shifts)
+        noise = self._normal("current", first_index, count, len(self.channels)) * self.sim.current_noise_A
+        return clean + self.dc_offset_A[:, None] + noise
+
+    def encoder_counts(self, first_cycle: int, count: int) -> np.ndarray:
+        """Unwrapped position (int64 counts) at drive cycles ``first_cycle …``: floor(θ_m/2π·cpr) + start."""
+        t = np.arange(first_cycle, first_cycle + count) * self.drive_period_s
+        theta_m = self._states(t)[:, 0]
+        return np.floor(theta_m / (2 * np.pi) * self.counts_per_rev).astype(np.int64) + self.sim.encoder_start_counts
+
+    def encoder_register(self, first_cycle: int, count: int) -> np.ndarray:
+        """The drive's position register (int32 counts, wraps like CiA 402 0x6064) at drive cycles."""
+        return _int32(self.encoder_counts(first_cycle, count))
+
+    def _normal(self, stream: NoiseStream, first_index: int, count: int, rows: int) -> np.ndarray:
+        """Standard normal draws (rows, count) for items ``first_index …``, fixed by (seed, stream, index)."""
+        out = np.empty((rows, count))
+        c0, c1 = first_index // _NOISE_CHUNK, (first_index + count - 1) // _NOISE_CHUNK
+        pos = 0
+        for c in range(c0, c1 + 1):
+            block = self._noise_chunk(stream, rows, c)
+            lo = max(first_index - c * _NOISE_CHUNK, 0)
+            hi = min(first_index + count - c * _NOISE_CHUNK, _NOISE_CHUNK)
+            out[:, pos:pos + hi - lo] = block[:, lo:hi]
+            pos += hi - lo
+        return out
+
+    def _noise_chunk(self, stream: NoiseStream, rows: int, chunk: int) -> np.ndarray:
+        key = (stream, rows, chunk)
+        with self._lock:
+            block = self._noise_cache.get(key)
+            if block is None:
+                seq = np.random.SeedSequence([self.sim.seed % 2**64, _STREAM_IDS[stream], rows, chunk])
+                block = np.random.default_rng(seq).standard_normal((rows, _NOISE_CHUNK))
+                self._noise_cache = {k: v for k, v in self._noise_cache.items() if k[:2] != key[:2] or k[2] == chunk - 1}
+                self._noise_cache[key] = block
+            return block

@@ -1,0 +1,201 @@
+"""Time-stepping of the simulated joint: discrete speed loop around the exactly discretised plant.
+
+Per control period T (``speed_loop_hz``) the drive reads its encoder (quantised to counts), runs the PI
+with acceleration feed-forward, and holds the current reference i_q,ref and the gravity torque T_g over
+the period; the plant + current lag then advance by the exact ZOH map. The state is also stored on a
+fine grid of ``n_sub`` points per period (precomputed stacked matrices, one vectorised product per
+advance); states between grid points come from cubic Hermite interpolation with the exact derivative
+A·x + B·u, so any instant can be read accurately (error ~1e-6 of a current step).
+
+Time is the drive's clock in seconds, t = 0 at the first control step. Before t = 0 the joint rests at
+its gravity equilibrium. Not thread-safe: :class:`drivers.sim.bench.SimBench` serialises access.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from drivers.sim.motion import MotionSchedule
+from drivers.sim.plant import N_INPUTS, N_STATES, SpeedPI, TwoMass, discretise
+
+G_M_S2 = 9.80665
+
+
+@dataclass(frozen=True)
+class Gravity:
+    """Arm weight through the gear: T_g = m·g·d·cos(φ0 + θ_l/N)/N on the motor side, N·m."""
+
+    mass_kg: float
+    com_distance_m: float
+    start_rad: float
+    ratio: float
+
+    def torque_Nm(self, theta_l_rad: float) -> float:
+        """Gravity torque on the motor side, N·m, at load angle ``theta_l_rad`` (motor-side rad)."""
+        return self.mass_kg * G_M_S2 * self.com_distance_m * math.cos(self.start_rad + theta_l_rad / self.ratio) / self.ratio
+
+
+class _Rows:
+    """A growable 2-D array that drops rows at the front cheaply (amortised)."""
+
+    def __init__(self, width: int) -> None:
+        self._data = np.empty((1024, width))
+        self._lo = 0
+        self._hi = 0
+
+    def __len__(self) -> int:
+        return self._hi - self._lo
+
+    @property
+    def view(self) -> np.ndarray:
+        return self._data[self._lo:self._hi]
+
+    def append(self, rows: np.ndarray) -> None:
+        n = rows.shape[0]
+        if self._hi + n > self._data.shape[0]:
+            keep = self.view
+            bigger = np.empty((max(2 * (len(self) + n), 1024), self._data.shape[1]))
+            bigger[:len(keep)] = keep
+            self._data, self._lo, self._hi = bigger, 0, len(keep)
+        self._data[self._hi:self._hi + n] = rows
+        self._hi += n
+
+    def drop_front(self, n: int) -> None:
+        self._lo += min(max(n, 0), len(self))
+
+    def drop_back(self, n: int) -> None:
+        self._hi -= min(max(n, 0), len(self))
+
+
+class JointSimulation:
+    """The joint under its speed loop, advanced on demand.
+
+    Parameters
+    ----------
+    plant : the true joint (simulated truth).
+    pi : speed controller (tuned on the nominal inertia).
+    gravity : arm weight model.
+    counts_per_rev : encoder resolution the speed loop sees, counts/rev.
+    schedule : the speed reference.
+    n_sub : fine-grid points per control period.
+    """
+
+    def __init__(self, plant: TwoMass, pi: SpeedPI, gravity: Gravity, counts_per_rev: int,
+                 schedule: MotionSchedule, n_sub: int = 16) -> None:
+        self.plant, self.pi, self.gravity, self.schedule = plant, pi, gravity, schedule
+        self.A, self.B = plant.state_space()
+        self.disc = discretise(self.A, self.B, pi.period_s, n_sub)
+        self.n_sub = n_sub
+        self.h_s = pi.period_s / n_sub
+        self._rad_per_count = 2.0 * math.pi / counts_per_rev
+        self.x_rest = self._equilibrium()
+        self._x = self.x_rest.copy()
+        self._counts_prev = math.floor(self._x[0] / self._rad_per_count)
+        self._integral_Nm = self.gravity.torque_Nm(self._x[2])
+        self._k = 0                      # control steps done
+        self._fine = _Rows(N_STATES)     # fine points i0 … k·n_sub (the last one is the frontier state)
+        self._fine.append(self._x[None, :])
+        self._i0 = 0
+        self._u = _Rows(N_INPUTS)        # inputs of steps k0 … k−1
+        self._k0 = 0
+        stacked = np.concatenate([self.disc.Phi_sub, self.disc.Gam_sub], axis=2)  # (n_sub, 5, 7)
+        self._stacked_T = stacked.reshape(n_sub * N_STATES, N_STATES + N_INPUTS).T
+
+    def _equilibrium(self) -> np.ndarray:
+        """Rest under gravity: θ_m at half a count, the shaft twisted by T_g/K, i_q carrying T_g."""
+        p = self.plant
+        theta_m = 0.5 * self._rad_per_count
+        theta_l = theta_m
+        for _ in range(5):
+            theta_l = theta_m - self.gravity.torque_Nm(theta_l) / p.K_Nm_per_rad
+        iq = self.gravity.torque_Nm(theta_l) / p.kt_Nm_per_A
+        return np.array([theta_m, 0.0, theta_l, 0.0, iq])
+
+    @property
+    def t_end_s(self) -> float:
+        """Drive time up to which states are known, s."""
+        return self._k * self.pi.period_s
+
+    @property
+    def t_begin_s(self) -> float:
+        """Earliest drive time still held (before t = 0 the joint is at rest), s."""
+        return self._i0 * self.h_s if self._i0 > 0 else -math.inf
+
+    def advance_to(self, t_s: float) -> None:
+        """Simulate until the known span covers ``t_s`` (s, drive clock), i.e. :attr:`t_end_s` > ``t_s``."""
+        n = math.floor(t_s / self.pi.period_s) + 1 - self._k
+        if n <= 0:
+            return
+        T, kt = self.pi.period_s, self.plant.kt_Nm_per_A
+        kp, ki_T, Jff = self.pi.kp_Nms_per_rad, self.pi.ki_Nm_per_rad * T, self.pi.ff_inertia_kgm2
+        speed_ref, accel_ref = self.schedule.reference((self._k + np.arange(n)) * T)
+        ff = (Jff * accel_ref).tolist()
+        wref = speed_ref.tolist()
+        xs = np.empty((n, N_STATES + N_INPUTS))  # [x[k], u[k]] per step
+        AB = np.concatenate([self.disc.Ad, self.disc.Bd], axis=1)
+        z = np.empty(N_STATES + N_INPUTS)
+        x, counts_prev, integral = self._x, self._counts_prev, self._integral_Nm
+        rad_per_count, q_per_T = self._rad_per_count, self._rad_per_count / T
+        g = self.gravity
+        g_scale, g_start, g_ratio = g.mass_kg * G_M_S2 * g.com_distance_m / g.ratio, g.start_rad, g.ratio
+        for j in range(n):
+            counts = math.floor(x[0] / rad_per_count)
+            err = wref[j] - (counts - counts_prev) * q_per_T
+            z[:N_STATES] = x
+            z[N_STATES] = (ff[j] + kp * err + integral) / kt             # i_q reference, A
+            z[N_STATES + 1] = g_scale * math.cos(g_start + x[2] / g_ratio)  # T_g, N·m (= Gravity.torque_Nm)
+            integral += ki_T * err
+            counts_prev = counts
+            xs[j] = z
+            x = AB @ z
+        self._x, self._counts_prev, self._integral_Nm = x, counts_prev, integral
+        fine = (xs @ self._stacked_T).reshape(n * self.n_sub, N_STATES)
+        self._fine.drop_back(1)
+        self._fine.append(fine)
+        self._fine.append(x[None, :])
+        self._u.append(xs[:, N_STATES:])
+        self._k += n
+
+    def states_at(self, t_s: np.ndarray) -> np.ndarray:
+        """States (n, 5) at drive times ``t_s`` (s); rest before 0. Call :meth:`advance_to` first."""
+        t = np.asarray(t_s, dtype=float).ravel()
+        out = np.empty((t.size, N_STATES))
+        rest = t < 0.0
+        out[rest] = self.x_rest
+        tt = t[~rest]
+        if tt.size == 0:
+            return out
+        if tt.max() > self.t_end_s + 1e-12 or tt.min() < self.t_begin_s - 1e-12:
+            raise ValueError(f"state requested at {tt.min():.6f}…{tt.max():.6f} s outside the simulated span "
+                             f"{max(self.t_begin_s, 0.0):.6f}…{self.t_end_s:.6f} s")
+        i = np.minimum(np.floor(tt / self.h_s).astype(np.int64), self._k * self.n_sub - 1)
+        i = np.maximum(i, self._i0)
+        tau = ((tt - i * self.h_s) / self.h_s)[:, None]
+        F = self._fine.view
+        x0, x1 = F[i - self._i0], F[i + 1 - self._i0]
+        u = self._u.view[i // self.n_sub - self._k0]
+        bu = u @ self.B.T
+        d0 = (x0 @ self.A.T + bu) * self.h_s
+        d1 = (x1 @ self.A.T + bu) * self.h_s
+        tau2, tau3 = tau * tau, tau * tau * tau
+        out[~rest] = ((2 * tau3 - 3 * tau2 + 1) * x0 + (tau3 - 2 * tau2 + tau) * d0
+                      + (3 * tau2 - 2 * tau3) * x1 + (tau3 - tau2) * d1)
+        return out
+
+    def forget_before(self, t_s: float) -> None:
+        """Drop history older than ``t_s`` (s); later reads before it raise ValueError."""
+        i_cut = min(math.floor(t_s / self.h_s) - 1, self._k * self.n_sub - 1)
+        k_cut = i_cut // self.n_sub
+        if i_cut > self._i0 and k_cut > self._k0:
+            i_cut = k_cut * self.n_sub  # keep whole control steps so every fine point has its input
+            self._fine.drop_front(i_cut - self._i0)
+            self._u.drop_front(k_cut - self._k0)
+            self._i0, self._k0 = i_cut, k_cut
+
+    @property
+    def held_points(self) -> int:
+        """Fine-grid points in memory (for tests of the history bound)."""
+        return len(self._fine)
