@@ -139,6 +139,8 @@ class SimSettings(Strict):
     host_jitter_s: NonNegFloat = 0.0002
     current_noise_A: NonNegFloat = 0.01
     current_dc_offset_A: float = 0.005
+    current_dc_offsets_A: dict[PhaseName, float] = Field(default_factory=dict)  # per phase, overrides the above
+    encoder_start_counts: int = 0  # position register at θ_m = 0 (near ±2**31 to exercise the int32 wrap)
     pre_roll_s: NonNegFloat = 0.2
     drop_encoder_frames: list[tuple[int, int]] = Field(default_factory=list)
     seed: int = 0
