@@ -1,0 +1,108 @@
+"""The two-mass model of a robot joint: torque → motor speed (design §2, paper eq. 4/13/15).
+
+All quantities are reflected to the motor side: motor inertia ``J_m`` and load inertia ``J_l``
+(kg·m²), joint stiffness ``K`` (N·m/rad), joint damping ``C`` (N·m·s/rad), viscous frictions
+``b_m``, ``b_l`` (N·m·s/rad). The frequency response from electromagnetic torque T_e (N·m) to motor
+speed ω_m (rad/s) is::
+
+    H(s) = (J_l s² + (C + b_l) s + K) /
+           (J_m J_l s³ + ((J_m+J_l) C + J_l b_m + J_m b_l) s²
+            + ((J_m+J_l) K + (b_m+b_l) C + b_m b_l) s + K (b_m+b_l))
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class TwoMassParams:
+    """Parameters of the two-mass joint model, SI units, reflected to the motor side.
+
+    Attributes
+    ----------
+    K_Nm_per_rad : float
+        Torsional stiffness of the joint, N·m/rad.
+    Jm_kgm2 : float
+        Motor-side inertia, kg·m².
+    Jl_kgm2 : float
+        Load inertia reflected to the motor side, kg·m².
+    C_Nms_per_rad : float
+        Joint damping, N·m·s/rad.
+    bm_Nms_per_rad, bl_Nms_per_rad : float
+        Viscous friction of motor and load, N·m·s/rad (0 by default).
+    """
+
+    K_Nm_per_rad: float
+    Jm_kgm2: float
+    Jl_kgm2: float
+    C_Nms_per_rad: float
+    bm_Nms_per_rad: float = 0.0
+    bl_Nms_per_rad: float = 0.0
+
+    @property
+    def antiresonance_hz(self) -> float:
+        """Anti-resonance √(K/J_l)/2π, Hz (undamped)."""
+        return antiresonance_hz(self.K_Nm_per_rad, self.Jl_kgm2)
+
+    @property
+    def resonance_hz(self) -> float:
+        """Resonance √(K (J_m+J_l)/(J_m J_l))/2π, Hz (undamped)."""
+        return resonance_hz(self.K_Nm_per_rad, self.Jm_kgm2, self.Jl_kgm2)
+
+
+def antiresonance_hz(K_Nm_per_rad: float, Jl_kgm2: float) -> float:
+    """Anti-resonance frequency √(K/J_l)/2π, Hz (paper eq. 5)."""
+    return float(np.sqrt(K_Nm_per_rad / Jl_kgm2) / (2.0 * np.pi))
+
+
+def resonance_hz(K_Nm_per_rad: float, Jm_kgm2: float, Jl_kgm2: float) -> float:
+    """Resonance (natural torsional) frequency √(K (J_m+J_l)/(J_m J_l))/2π, Hz (paper eq. 6)."""
+    return float(np.sqrt(K_Nm_per_rad * (Jm_kgm2 + Jl_kgm2) / (Jm_kgm2 * Jl_kgm2)) / (2.0 * np.pi))
+
+
+def transfer_function(p: TwoMassParams) -> tuple[np.ndarray, np.ndarray]:
+    """Numerator and denominator of H(s) = ω_m/T_e in powers of s, highest first.
+
+    Parameters
+    ----------
+    p : TwoMassParams
+        Model parameters, SI units.
+
+    Returns
+    -------
+    num : ndarray, shape (3,)
+        ``[J_l, C + b_l, K]``.
+    den : ndarray, shape (4,)
+        ``[J_m J_l, (J_m+J_l) C + J_l b_m + J_m b_l, (J_m+J_l) K + (b_m+b_l) C + b_m b_l, K (b_m+b_l)]``.
+        Units make H rad/s per N·m (as expected by ``scipy.signal.lti``).
+    """
+    K, Jm, Jl, C = p.K_Nm_per_rad, p.Jm_kgm2, p.Jl_kgm2, p.C_Nms_per_rad
+    bm, bl = p.bm_Nms_per_rad, p.bl_Nms_per_rad
+    num = np.array([Jl, C + bl, K])
+    den = np.array(
+        [Jm * Jl, (Jm + Jl) * C + Jl * bm + Jm * bl, (Jm + Jl) * K + (bm + bl) * C + bm * bl, K * (bm + bl)]
+    )
+    return num, den
+
+
+def frequency_response(p: TwoMassParams, f_hz: np.ndarray) -> np.ndarray:
+    """The model's frequency response H(j2πf) from torque to motor speed.
+
+    Parameters
+    ----------
+    p : TwoMassParams
+        Model parameters, SI units.
+    f_hz : array_like
+        Frequencies, Hz.
+
+    Returns
+    -------
+    ndarray of complex
+        H at ``f_hz``, (rad/s)/(N·m), same shape as ``f_hz``.
+    """
+    s = 2j * np.pi * np.asarray(f_hz, dtype=float)
+    num, den = transfer_function(p)
+    return np.polyval(num, s) / np.polyval(den, s)
