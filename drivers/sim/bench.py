@@ -14,7 +14,8 @@ sample index and ``sim.seed`` only, so a session is reproducible whatever the re
 
 The physics advances on demand to whatever time a stream asks for, under one lock (the DAQ and the
 drive are read from different threads). History older than every registered consumer's cursor (see
-:meth:`SimBench.hold_history`) is dropped unless ``keep_history``.
+:meth:`SimBench.hold_history`; the sim DAQ and drive register when constructed, release on ``stop()``)
+is dropped unless ``keep_history``. With no consumer registered nothing is dropped.
 """
 
 from __future__ import annotations

@@ -11,7 +11,6 @@ from drivers.base import CurrentBlock, CurrentSourceInfo, StreamEvent
 from drivers.config import Bench
 from drivers.sim.bench import SimBench
 
-_CONSUMER = "sim-daq"
 
 
 class SimCurrentSource:
@@ -23,11 +22,12 @@ class SimCurrentSource:
         self._next = 0
         self._last_host_ns = 0
         self._running = False
+        self._consumer = f"sim-daq@{id(self):x}"  # its history cursor in the SimBench
+        self._sim.hold_history(self._consumer, float(self._sim.daq_time_s(self._next)))
 
     def start(self) -> CurrentSourceInfo:
         """Start acquiring at sample 0 (drive time ``daq_offset_s``)."""
         self._running = True
-        self._sim.hold_history(_CONSUMER, float(self._sim.daq_time_s(self._next)))
         return CurrentSourceInfo(rate_hz=self._sim.daq_rate_hz, channels=self._sim.channels, device="sim-daq")
 
     def read(self, timeout_s: float) -> CurrentBlock | None:
@@ -41,13 +41,13 @@ class SimCurrentSource:
             return None
         current_a = self._sim.current_samples(first, n)
         self._next, self._last_host_ns = first + n, host_ns
-        self._sim.hold_history(_CONSUMER, float(self._sim.daq_time_s(self._next)))
+        self._sim.hold_history(self._consumer, float(self._sim.daq_time_s(self._next)))
         return CurrentBlock(first_index=first, current_a=current_a, host_ns=host_ns)
 
     def stop(self) -> None:
         """Stop acquiring. Idempotent."""
         self._running = False
-        self._sim.release_history(_CONSUMER)
+        self._sim.release_history(self._consumer)
 
     def events(self) -> list[StreamEvent]:
         """Nothing goes wrong on the simulated card."""

@@ -17,7 +17,6 @@ from drivers.base import DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from drivers.sim.bench import SimBench
 
-_CONSUMER = "sim-drive"
 BATCH_S = 0.01
 MAX_CATCH_UP_BATCHES = 100
 
@@ -33,11 +32,12 @@ class SimDrive:
         self._next = 0
         self._last_host_ns = 0
         self._running = False
+        self._consumer = f"sim-drive@{id(self):x}"  # its history cursor in the SimBench
+        self._sim.hold_history(self._consumer, self._next * self._period_s)
 
     def start(self) -> DriveInfo:
         """Start streaming from cycle 0 (the motor rests)."""
         self._running = True
-        self._sim.hold_history(_CONSUMER, self._next * self._period_s)
         return DriveInfo(period_s=self._period_s, counts_per_rev=self._sim.counts_per_rev, transport="sim",
                          timestamp_kind="drive_cycle", device="sim-drive")
 
@@ -75,7 +75,7 @@ class SimDrive:
             return None
         counts = self._sim.encoder_counts(first, n)
         self._next, self._last_host_ns = first + n, int(host_ns[-1])
-        self._sim.hold_history(_CONSUMER, self._next * self._period_s)
+        self._sim.hold_history(self._consumer, self._next * self._period_s)
         keep = np.ones(n, dtype=bool)
         for a, b in self._drops:
             keep[max(a - first, 0):max(b - first, 0)] = False
@@ -89,7 +89,7 @@ class SimDrive:
         if self._running:
             self.stop_motion()
         self._running = False
-        self._sim.release_history(_CONSUMER)
+        self._sim.release_history(self._consumer)
 
     def events(self) -> list[StreamEvent]:
         """Nothing goes wrong on the simulated drive."""

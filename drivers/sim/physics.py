@@ -2,10 +2,10 @@
 
 Per control period T (``speed_loop_hz``) the drive reads its encoder (quantised to counts), runs the PI
 with acceleration feed-forward, and holds the current reference i_q,ref and the gravity torque T_g over
-the period; the plant + current lag then advance by the exact ZOH map. The state is also stored on a
-fine grid of ``n_sub`` points per period (precomputed stacked matrices, one vectorised product per
-advance); states between grid points come from cubic Hermite interpolation with the exact derivative
-A·x + B·u, so any instant can be read accurately (error ~1e-6 of a current step).
+the period; the plant + current lag then advance by the exact ZOH map. Only [x[k], u[k]] per control
+step is stored; the state at any instant comes from the fine sub-grid (n_sub points per period, exact
+through precomputed stacked matrices) and cubic Hermite interpolation between two fine points with the
+exact derivative A·x + B·u (error ~1e-6 of a current step).
 
 Time is the drive's clock in seconds, t = 0 at the first control step. Before t = 0 the joint rests at
 its gravity equilibrium. Not thread-safe: :class:`drivers.sim.bench.SimBench` serialises access.
@@ -66,9 +66,6 @@ class _Rows:
     def drop_front(self, n: int) -> None:
         self._lo += min(max(n, 0), len(self))
 
-    def drop_back(self, n: int) -> None:
-        self._hi -= min(max(n, 0), len(self))
-
 
 class JointSimulation:
     """The joint under its speed loop, advanced on demand.
@@ -96,13 +93,12 @@ class JointSimulation:
         self._counts_prev = math.floor(self._x[0] / self._rad_per_count)
         self._integral_Nm = self.gravity.torque_Nm(self._x[2])
         self._k = 0                      # control steps done
-        self._fine = _Rows(N_STATES)     # fine points i0 … k·n_sub (the last one is the frontier state)
-        self._fine.append(self._x[None, :])
-        self._i0 = 0
-        self._u = _Rows(N_INPUTS)        # inputs of steps k0 … k−1
+        self._steps = _Rows(N_STATES + N_INPUTS)   # [x[k], u[k]] of steps k0 … k−1
         self._k0 = 0
-        stacked = np.concatenate([self.disc.Phi_sub, self.disc.Gam_sub], axis=2)  # (n_sub, 5, 7)
-        self._stacked_T = stacked.reshape(n_sub * N_STATES, N_STATES + N_INPUTS).T
+        # fine point j of a step (j = 0 … n_sub, n_sub being the next control instant) = Psi[j]·[x[k], u[k]]
+        psi = np.concatenate([self.disc.Phi_sub, self.disc.Gam_sub], axis=2)
+        last = np.concatenate([self.disc.Ad, self.disc.Bd], axis=1)[None]
+        self._psi = np.concatenate([psi, last], axis=0)
 
     def _equilibrium(self) -> np.ndarray:
         """Rest under gravity: θ_m at half a count, the shaft twisted by T_g/K, i_q carrying T_g."""
@@ -122,7 +118,7 @@ class JointSimulation:
     @property
     def t_begin_s(self) -> float:
         """Earliest drive time still held (before t = 0 the joint is at rest), s."""
-        return self._i0 * self.h_s if self._i0 > 0 else -math.inf
+        return self._k0 * self.pi.period_s if self._k0 > 0 else -math.inf
 
     def advance_to(self, t_s: float) -> None:
         """Simulate until the known span covers ``t_s`` (s, drive clock), i.e. :attr:`t_end_s` > ``t_s``."""
@@ -135,7 +131,7 @@ class JointSimulation:
         ff = (Jff * accel_ref).tolist()
         wref = speed_ref.tolist()
         xs = np.empty((n, N_STATES + N_INPUTS))  # [x[k], u[k]] per step
-        AB = np.concatenate([self.disc.Ad, self.disc.Bd], axis=1)
+        AB = self._psi[-1]
         z = np.empty(N_STATES + N_INPUTS)
         x, counts_prev, integral = self._x, self._counts_prev, self._integral_Nm
         rad_per_count, q_per_T = self._rad_per_count, self._rad_per_count / T
@@ -152,11 +148,7 @@ class JointSimulation:
             xs[j] = z
             x = AB @ z
         self._x, self._counts_prev, self._integral_Nm = x, counts_prev, integral
-        fine = (xs @ self._stacked_T).reshape(n * self.n_sub, N_STATES)
-        self._fine.drop_back(1)
-        self._fine.append(fine)
-        self._fine.append(x[None, :])
-        self._u.append(xs[:, N_STATES:])
+        self._steps.append(xs)
         self._k += n
 
     def states_at(self, t_s: np.ndarray) -> np.ndarray:
@@ -171,13 +163,14 @@ class JointSimulation:
         if tt.max() > self.t_end_s + 1e-12 or tt.min() < self.t_begin_s - 1e-12:
             raise ValueError(f"state requested at {tt.min():.6f}…{tt.max():.6f} s outside the simulated span "
                              f"{max(self.t_begin_s, 0.0):.6f}…{self.t_end_s:.6f} s")
-        i = np.minimum(np.floor(tt / self.h_s).astype(np.int64), self._k * self.n_sub - 1)
-        i = np.maximum(i, self._i0)
-        tau = ((tt - i * self.h_s) / self.h_s)[:, None]
-        F = self._fine.view
-        x0, x1 = F[i - self._i0], F[i + 1 - self._i0]
-        u = self._u.view[i // self.n_sub - self._k0]
-        bu = u @ self.B.T
+        T = self.pi.period_s
+        k = np.clip(np.floor(tt / T).astype(np.int64), self._k0, self._k - 1)
+        j = np.clip(np.floor((tt - k * T) / self.h_s).astype(np.int64), 0, self.n_sub - 1)
+        tau = ((tt - k * T - j * self.h_s) / self.h_s)[:, None]
+        z = self._steps.view[k - self._k0]
+        x0 = np.einsum("nij,nj->ni", self._psi[j], z)
+        x1 = np.einsum("nij,nj->ni", self._psi[j + 1], z)
+        bu = z[:, N_STATES:] @ self.B.T
         d0 = (x0 @ self.A.T + bu) * self.h_s
         d1 = (x1 @ self.A.T + bu) * self.h_s
         tau2, tau3 = tau * tau, tau * tau * tau
@@ -187,15 +180,12 @@ class JointSimulation:
 
     def forget_before(self, t_s: float) -> None:
         """Drop history older than ``t_s`` (s); later reads before it raise ValueError."""
-        i_cut = min(math.floor(t_s / self.h_s) - 1, self._k * self.n_sub - 1)
-        k_cut = i_cut // self.n_sub
-        if i_cut > self._i0 and k_cut > self._k0:
-            i_cut = k_cut * self.n_sub  # keep whole control steps so every fine point has its input
-            self._fine.drop_front(i_cut - self._i0)
-            self._u.drop_front(k_cut - self._k0)
-            self._i0, self._k0 = i_cut, k_cut
+        k_cut = min(math.floor(t_s / self.pi.period_s), self._k - 1)
+        if k_cut > self._k0:
+            self._steps.drop_front(k_cut - self._k0)
+            self._k0 = k_cut
 
     @property
-    def held_points(self) -> int:
-        """Fine-grid points in memory (for tests of the history bound)."""
-        return len(self._fine)
+    def held_s(self) -> float:
+        """Span of history in memory, s (for tests of the history bound)."""
+        return len(self._steps) * self.pi.period_s

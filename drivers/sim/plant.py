@@ -89,11 +89,6 @@ class Discretised:
     Phi_sub: np.ndarray
     Gam_sub: np.ndarray
 
-    @property
-    def n_sub(self) -> int:
-        """Sub-steps per control period."""
-        return int(self.Phi_sub.shape[0])
-
 
 def discretise(A: np.ndarray, B: np.ndarray, period_s: float, n_sub: int) -> Discretised:
     """ZOH-discretise ``(A, B)`` over ``period_s`` (s) and its ``n_sub`` equal sub-steps (matrix exponential)."""
