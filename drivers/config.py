@@ -142,7 +142,9 @@ class SimSettings(Strict):
     current_dc_offsets_A: dict[PhaseName, float] = Field(default_factory=dict)  # per phase, overrides the above
     encoder_start_counts: int = 0  # position register at θ_m = 0 (near ±2**31 to exercise the int32 wrap)
     pre_roll_s: NonNegFloat = 0.2
-    drop_encoder_frames: list[tuple[int, int]] = Field(default_factory=list)
+    # (first_cycle, count) frames the sim drive never delivers; a TOML array of pairs becomes tuples
+    drop_encoder_frames: list[Annotated[tuple[Annotated[int, Field(ge=0)], PositiveInt], Field(strict=False)]] = (
+        Field(default_factory=list))
     seed: int = 0
 
 
