@@ -1,0 +1,403 @@
+"""Offline alignment of the DAQ clock to the drive clock from the data itself (design §4).
+
+Convention (shared with the simulator and the report): t_drive = offset_s + t_daq·(1 + drift_ppm·1e-6),
+with t_daq = n / rate_hz for DAQ sample n and t_drive = k·T for drive cycle k.
+
+Three stages, each narrowing the search of the next:
+
+1. host: the arrival stamps of DAQ blocks and encoder samples on the host's monotonic clock give the
+   relation to a few ms (latencies differ between the streams).
+2. frequency: the electrical frequency carried by the current (zero-crossing rate of i_a) must equal
+   p·|ω|/2π from the encoder (zero-crossing rate of sin θ_e); the lag between the two, found in
+   windows along the record, gives offset and drift to a fraction of a ms. Independent of θ_0, of
+   the torque's sign and of the plant.
+3. angle: in short windows the phase of i_a against the encoder's electrical angle is θ_0 + p·ω·δ(t)
+   where δ(t) is the remaining clock error; a coherent search then weighted least squares on
+   2·phase (blind to the sign of i_q) fit offset, drift and θ_0 to µs.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.ndimage import median_filter
+
+from analysis.torque import window_phasors
+
+_CHUNK = 1 << 20  # samples per pass over the DAQ record
+_GRID_HZ = 1000.0  # grid of the frequency stage
+
+
+@dataclass(frozen=True)
+class ClockFit:
+    """The recovered relation t_drive = offset_s + t_daq·(1 + drift_ppm·1e-6).
+
+    Attributes
+    ----------
+    offset_s : float
+        Drive time of DAQ sample 0, s.
+    drift_ppm : float
+        Rate of the drive clock against the DAQ clock, ppm.
+    residual_s : float
+        Information-weighted RMS timing residual of the angle windows, s (NaN below the angle stage).
+    offset_std_s, drift_std_ppm : float
+        Standard errors of offset (at DAQ time 0), s, and drift, ppm (NaN below the angle stage).
+    theta0_rad : float
+        Electrical offset θ_0 modulo π from the angle stage, rad (NaN below it).
+    host_offset_s, host_drift_ppm : float
+        Stage 1 result from the host stamps (NaN without stamps).
+    frequency_offset_s, frequency_drift_ppm : float
+        Stage 2 result (NaN when the motion gave no usable window).
+    n_windows : int
+        Angle windows used in the final fit.
+    method : {"angle", "frequency", "host", "none"}
+        The last stage that succeeded ("none": streams taken as started together, no alignment).
+    """
+
+    offset_s: float
+    drift_ppm: float
+    residual_s: float = np.nan
+    offset_std_s: float = np.nan
+    drift_std_ppm: float = np.nan
+    theta0_rad: float = np.nan
+    host_offset_s: float = np.nan
+    host_drift_ppm: float = np.nan
+    frequency_offset_s: float = np.nan
+    frequency_drift_ppm: float = np.nan
+    n_windows: int = 0
+    method: Literal["angle", "frequency", "host", "none"] = "none"
+
+    def drive_time_s(self, t_daq_s: np.ndarray | float) -> np.ndarray:
+        """Drive time, s, of DAQ time ``t_daq_s``, s."""
+        return self.offset_s + np.asarray(t_daq_s) * (1.0 + self.drift_ppm * 1e-6)
+
+    def daq_time_s(self, t_drive_s: np.ndarray | float) -> np.ndarray:
+        """DAQ time, s, of drive time ``t_drive_s``, s."""
+        return (np.asarray(t_drive_s) - self.offset_s) / (1.0 + self.drift_ppm * 1e-6)
+
+
+def host_relation(daq_last_index: np.ndarray, daq_host_ns: np.ndarray, rate_hz: float,
+                  encoder_index: np.ndarray, encoder_host_ns: np.ndarray, period_s: float) -> tuple[float, float]:
+    """Stage 1: offset, s, and drift, ppm, from host arrival stamps.
+
+    Each stream's host time is fitted as a line of its own time (DAQ: the last sample of each block;
+    encoder: each sample), shifted to the 2nd percentile of the residual (the least-delayed
+    arrivals), and the two lines are composed.
+
+    Parameters
+    ----------
+    daq_last_index : ndarray of int
+        DAQ sample index of the last sample of each block.
+    daq_host_ns : ndarray of int
+        Host monotonic time each block arrived, ns.
+    rate_hz : float
+        DAQ sample rate, Hz.
+    encoder_index : ndarray of int
+        Drive cycle of each encoder sample.
+    encoder_host_ns : ndarray of int
+        Host monotonic arrival time of each encoder sample, ns.
+    period_s : float
+        Drive cycle, s.
+    """
+    ref_ns = int(min(np.min(daq_host_ns), np.min(encoder_host_ns)))
+    a_d, b_d = _lower_line(np.asarray(daq_last_index) / rate_hz, (np.asarray(daq_host_ns) - ref_ns) * 1e-9)
+    a_e, b_e = _lower_line(np.asarray(encoder_index) * period_s, (np.asarray(encoder_host_ns) - ref_ns) * 1e-9)
+    return (a_d - a_e) / b_e, (b_d / b_e - 1.0) * 1e6
+
+
+def _lower_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Least-squares slope, intercept moved down to the 2nd percentile of the residual."""
+    if x.size < 2:
+        return float(np.min(y - x)), 1.0
+    b = np.polyfit(x, y, 1)[0]
+    return float(np.percentile(y - b * x, 2.0)), float(b)
+
+
+def current_crossings_s(current_a: np.ndarray, rate_hz: float, first_index: int = 0) -> np.ndarray:
+    """DAQ times, s, at which one phase current crosses its DC level (with hysteresis).
+
+    The hysteresis is 5× the white noise (from the second difference) or 2 % of the amplitude,
+    whichever is larger, so quasi-DC stretches near reversals and standstill do not chatter.
+    """
+    i = np.asarray(current_a, dtype=np.float64)
+    lo, hi = np.percentile(i, [1.0, 99.0])
+    noise = 1.4826 * np.median(np.abs(np.diff(i[: 1 << 18], 2))) / np.sqrt(6.0)
+    return (first_index + _crossings(lambda a, b: i[a:b] - 0.5 * (lo + hi), i.size,
+                                     max(5.0 * noise, 0.01 * (hi - lo)))) / rate_hz
+
+
+def angle_crossings_s(angle: CubicSpline, pole_pairs: int, t_start_s: float, t_stop_s: float,
+                      rate_hz: float = 10_000.0) -> np.ndarray:
+    """Drive times, s, at which sin(p·θ_m) crosses zero, read from the angle spline at ``rate_hz``.
+
+    The same estimator as :func:`current_crossings_s` (hysteresis 0.05), so biases cancel.
+    """
+    n = int((t_stop_s - t_start_s) * rate_hz)
+    return t_start_s + _crossings(lambda a, b: np.sin(pole_pairs * angle(t_start_s + np.arange(a, b) / rate_hz)),
+                                  n, 0.05) / rate_hz
+
+
+def _crossings(chunk: Callable[[int, int], np.ndarray], n: int, h: float) -> np.ndarray:
+    """Sample positions where a Schmitt trigger of threshold ±h on the chunked signal switches."""
+    out, state = [], 0
+    for a in range(0, n, _CHUNK):
+        x = chunk(a, min(n, a + _CHUNK))
+        s = np.where(x > h, 1, np.where(x < -h, -1, 0)).astype(np.int8)
+        nz = np.flatnonzero(s)
+        vals = s[nz]
+        before = np.concatenate(([state], vals[:-1]))  # the trigger's state before each decided sample
+        out.append(a + nz[(vals != before) & (before != 0)])
+        if nz.size:
+            state = int(vals[-1])
+    return np.concatenate(out).astype(np.float64)
+
+
+def crossing_frequency_hz(crossings_s: np.ndarray, grid_s: np.ndarray) -> np.ndarray:
+    """Electrical frequency, Hz, on ``grid_s`` from half-period intervals between zero crossings.
+
+    Each interval gives 1/(2·interval) at its midpoint; a 15-sample median filter removes the short
+    spikes of an extra crossing (e.g. where i_q changes sign). Zero outside the crossings' span.
+    """
+    if crossings_s.size < 3:
+        return np.zeros_like(grid_s)
+    mid = 0.5 * (crossings_s[1:] + crossings_s[:-1])
+    f = 0.5 / np.maximum(np.diff(crossings_s), 1e-6)
+    return median_filter(np.interp(grid_s, mid, f, left=0.0, right=0.0), size=15, mode="nearest")
+
+
+def frequency_alignment(f_current_hz: np.ndarray, t_daq_s: np.ndarray, f_encoder: Callable[[np.ndarray], np.ndarray],
+                        offset_s: float, drift_ppm: float, max_lag_s: float,
+                        window_s: float = 2.0) -> tuple[float, float, int]:
+    """Stage 2: refine ``offset_s``/``drift_ppm`` so the encoder's electrical frequency matches the current's.
+
+    In each window the lag τ minimising Σ (f_current(t) − f_encoder(t_drive(t) + τ))² over
+    |τ| ≤ ``max_lag_s`` is found on the grid and refined by a parabola; a line through the windows'
+    lags (outliers beyond 4 MAD dropped) corrects offset and drift. Windows without motion are skipped.
+
+    Parameters
+    ----------
+    f_current_hz : ndarray
+        Current's electrical frequency on the uniform DAQ-time grid ``t_daq_s``, Hz.
+    t_daq_s : ndarray
+        Uniform grid, s.
+    f_encoder : callable
+        Encoder's electrical frequency, Hz, as a function of drive time, s.
+    offset_s, drift_ppm : float
+        Starting relation.
+    max_lag_s : float
+        Search half-range, s.
+    window_s : float
+        Window length, s.
+
+    Returns
+    -------
+    offset_s, drift_ppm : float
+        The refined relation (the inputs if no window was usable).
+    n_windows : int
+        Windows used.
+    """
+    dt = t_daq_s[1] - t_daq_s[0]
+    lags = np.arange(-int(round(max_lag_s / dt)), int(round(max_lag_s / dt)) + 1) * dt
+    nw_len = max(3, int(round(window_s / dt)))
+    nw = t_daq_s.size // nw_len
+    if nw == 0:
+        return offset_s, drift_ppm, 0
+    n = nw * nw_len
+    t_drive = offset_s + t_daq_s[:n] * (1.0 + drift_ppm * 1e-6)
+    fc = f_current_hz[:n].reshape(nw, nw_len)
+    cost = np.empty((lags.size, nw))
+    for j, lag in enumerate(lags):
+        cost[j] = np.mean((fc - f_encoder(t_drive + lag).reshape(nw, nw_len)) ** 2, axis=1)
+    f_enc0 = f_encoder(t_drive).reshape(nw, nw_len)
+    moving = f_enc0.std(axis=1) > 0.05 * max(np.max(f_enc0), 1e-9)
+    best = np.argmin(cost, axis=0)
+    interior = (best > 0) & (best < lags.size - 1)
+    ok = moving & interior
+    if not ok.any():
+        return offset_s, drift_ppm, 0
+    cols = np.flatnonzero(ok)
+    c0, c1, c2 = cost[best[cols] - 1, cols], cost[best[cols], cols], cost[best[cols] + 1, cols]
+    curv = c0 - 2 * c1 + c2
+    tau = lags[best[cols]] + dt * np.where(curv > 0, 0.5 * (c0 - c2) / np.where(curv > 0, curv, 1.0), 0.0)
+    t_c = t_daq_s[0] + (cols + 0.5) * nw_len * dt
+    keep = np.ones(cols.size, bool)
+    for _ in range(3):
+        if keep.sum() >= 3:
+            a, b = np.polyfit(t_c[keep], tau[keep], 1)[::-1]
+        else:
+            a, b = float(np.median(tau[keep])), 0.0
+        r = tau - a - b * t_c
+        mad = 1.4826 * np.median(np.abs(r[keep]))
+        keep = np.abs(r) <= max(4.0 * mad, 2.0 * dt)
+    return offset_s + a, drift_ppm + b * 1e6, int(keep.sum())
+
+
+@dataclass(frozen=True)
+class _AngleFit:
+    offset_s: float
+    drift_ppm: float
+    theta0_rad: float
+    residual_s: float
+    offset_std_s: float
+    drift_std_ppm: float
+    n_windows: int
+
+
+def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline, pole_pairs: int,
+                    offset_s: float, drift_ppm: float, search_s: float = 4e-3, window_s: float = 0.02,
+                    iterations: int = 3) -> _AngleFit | None:
+    """Stage 3: offset, drift and θ_0 from the phase of i_a against the encoder's electrical angle.
+
+    Parameters
+    ----------
+    current_a : ndarray
+        One phase current, A; element 0 is DAQ sample ``first_index``.
+    rate_hz : float
+        DAQ rate, Hz.
+    first_index : int
+        DAQ sample index of ``current_a[0]``.
+    angle : CubicSpline
+        Mechanical angle θ_m(t_drive), rad.
+    pole_pairs : int
+        Pole pairs p.
+    offset_s, drift_ppm : float
+        Starting relation, within ``search_s`` of the truth.
+    search_s : float
+        Half-range of the coherent search for the offset, s.
+    window_s : float
+        Demodulation window, s.
+    iterations : int
+        Re-demodulations after the search.
+
+    Returns
+    -------
+    _AngleFit or None
+        None when fewer than 10 windows turn half an electrical revolution.
+    """
+    wl = max(8, int(round(window_s * rate_hz)))
+    t_ref = (first_index + 0.5 * current_a.size) / rate_hz
+    t_span = angle.x[[0, -1]]
+    speed = angle.derivative()
+    theta0 = 0.0
+    for it in range(iterations + 1):
+        z, t_c, w_m = _phasors(current_a, rate_hz, first_index, angle, speed, pole_pairs, offset_s, drift_ppm, wl, t_span)
+        if z.size < 10:
+            return None
+        k = 2.0 * pole_pairs * w_m
+        if it == 0:
+            grid = np.arange(-search_s, search_s + 1e-9, 2.5e-5)
+            power = np.abs(np.exp(-1j * np.outer(grid, k)) @ z)
+            shift = grid[int(np.argmax(power))]
+            offset_s += shift
+            z = z * np.exp(-1j * k * shift)
+            theta0 = 0.5 * np.angle(np.sum(z))
+        A = np.column_stack((2.0 * np.ones_like(k), k, k * (t_c - t_ref)))
+        w = np.abs(z)
+        r = np.angle(z * np.exp(-2j * theta0))
+        keep = np.ones(z.size, bool)
+        for _ in range(3):
+            sw = np.sqrt(w[keep])
+            sol = np.linalg.lstsq(A[keep] * sw[:, None], r[keep] * sw, rcond=None)[0]
+            res = r - A @ sol
+            mad = 1.4826 * np.median(np.abs(res[keep]))
+            keep = np.abs(res) <= max(4.0 * mad, 1e-3)
+        theta0 += sol[0]
+        d_drift = sol[2]
+        offset_s += sol[1] - d_drift * t_ref
+        drift_ppm += d_drift * 1e6
+    # uncertainty of the last step (the corrections are then tiny), at t_ref then moved to t = 0
+    sw = np.sqrt(w[keep])
+    Aw = A[keep] * sw[:, None]
+    s2 = np.sum((res[keep] * sw) ** 2) / max(1, keep.sum() - 3)
+    cov = s2 * np.linalg.inv(Aw.T @ Aw)
+    var_off0 = cov[1, 1] - 2 * t_ref * cov[1, 2] + t_ref**2 * cov[2, 2]
+    resid = np.sqrt(np.sum(w[keep] * res[keep] ** 2) / np.sum(w[keep] * k[keep] ** 2))
+    theta0 = float(np.angle(np.exp(2j * theta0)) / 2.0)
+    return _AngleFit(offset_s, drift_ppm, theta0, float(resid), float(np.sqrt(var_off0)),
+                     float(np.sqrt(cov[2, 2]) * 1e6), int(keep.sum()))
+
+
+def _phasors(current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline, speed: CubicSpline,
+             pole_pairs: int, offset_s: float, drift_ppm: float, wl: int,
+             t_span: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Squared window phasors (i_q²·e^{2j(θ_0 + pωδ)}), window-centre DAQ times, s, and speeds, rad/s."""
+    zs, ts, ws = [], [], []
+    step = (_CHUNK // wl) * wl
+    scale = 1.0 + drift_ppm * 1e-6
+    for a in range(0, current_a.size - wl + 1, step):
+        seg = current_a[a:a + step]
+        t_daq = (first_index + a + np.arange(seg.size)) / rate_hz
+        t_drv = offset_s + t_daq * scale
+        wp = window_phasors(seg, pole_pairs * angle(t_drv), wl)
+        t_c = (first_index + a + wp.centre_index) / rate_hz
+        t_c_drv = offset_s + t_c * scale
+        inside = (t_c_drv - 0.5 * wl / rate_hz > t_span[0]) & (t_c_drv + 0.5 * wl / rate_hz < t_span[1])
+        ok = wp.valid & inside
+        zs.append(wp.phasor_a[ok] ** 2)
+        ts.append(t_c[ok])
+        ws.append(speed(t_c_drv[ok]))
+    return np.concatenate(zs), np.concatenate(ts), np.concatenate(ws)
+
+
+def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline, pole_pairs: int,
+              host: tuple[float, float] | None, max_lag_s: float = 2.0) -> ClockFit:
+    """Align the DAQ clock to the drive clock through the three stages (module docstring).
+
+    Parameters
+    ----------
+    current_a : ndarray
+        One phase current, A; element 0 is DAQ sample ``first_index`` (a gap-free run).
+    rate_hz : float
+        DAQ rate, Hz.
+    first_index : int
+        DAQ sample index of ``current_a[0]``.
+    angle : CubicSpline
+        Mechanical angle θ_m(t_drive), rad, over a gap-free encoder run (:func:`analysis.encoder.angle_spline`).
+    pole_pairs : int
+        Pole pairs p.
+    host : (offset_s, drift_ppm) or None
+        Stage 1 result (:func:`host_relation`); None when the streams carry no host stamps, in which case
+        the streams are taken as started together and the frequency stage searches ±``max_lag_s``.
+    max_lag_s : float
+        Search half-range without host stamps, s.
+    """
+    if host is not None:
+        offset_s, drift_ppm = host
+        method = "host"
+    else:
+        offset_s, drift_ppm = float(angle.x[0]) - first_index / rate_hz, 0.0
+        method = "none"
+    t_enc = angle.x[[0, -1]]
+    t0 = first_index / rate_hz
+    grid = t0 + np.arange(int(current_a.size / rate_hz * _GRID_HZ)) / _GRID_HZ
+    f_cur = crossing_frequency_hz(current_crossings_s(current_a, rate_hz, first_index), grid)
+    enc_grid = np.arange(t_enc[0], t_enc[1], 1.0 / _GRID_HZ)
+    f_enc_grid = crossing_frequency_hz(angle_crossings_s(angle, pole_pairs, t_enc[0], t_enc[1]), enc_grid)
+
+    def f_enc(t: np.ndarray) -> np.ndarray:
+        return np.interp(t, enc_grid, f_enc_grid, left=np.nan, right=np.nan)
+
+    def f_enc_filled(t: np.ndarray) -> np.ndarray:
+        v = f_enc(t)
+        return np.where(np.isnan(v), 0.0, v)
+
+    freq = (np.nan, np.nan)
+    if host is None:
+        step = 10
+        offset_s, _, n = frequency_alignment(f_cur[::step], grid[::step], f_enc_filled, offset_s, 0.0,
+                                             max_lag_s, window_s=grid.size / _GRID_HZ)
+    for lag in (0.03, 0.004):
+        o, d, n = frequency_alignment(f_cur, grid, f_enc_filled, offset_s, drift_ppm, lag)
+        if n:
+            offset_s, drift_ppm, freq, method = o, d, (o, d), "frequency"
+    fit = angle_alignment(current_a, rate_hz, first_index, angle, pole_pairs, offset_s, drift_ppm)
+    common = dict(host_offset_s=host[0] if host else np.nan, host_drift_ppm=host[1] if host else np.nan,
+                  frequency_offset_s=freq[0], frequency_drift_ppm=freq[1])
+    if fit is None:
+        return ClockFit(offset_s, drift_ppm, method=method, **common)
+    return ClockFit(fit.offset_s, fit.drift_ppm, fit.residual_s, fit.offset_std_s, fit.drift_std_ppm,
+                    fit.theta0_rad, n_windows=fit.n_windows, method="angle", **common)

@@ -1,0 +1,151 @@
+"""Encoder counts → angle and speed on the drive's own regular time base.
+
+The drive samples the position register once per cycle; sample ``k`` (the cumulative cycle index)
+is at drive time ``t = k·T``. Everything here works on that grid, never on host arrival stamps.
+The backward difference is not d/dt: its response (1 − e^{−jωT})/(jωT) is returned by
+:func:`difference_response` so the FRF stage can divide it out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+_INT32_SPAN = 1 << 32
+
+
+@dataclass(frozen=True)
+class Span:
+    """A gap-free run of encoder samples.
+
+    Attributes
+    ----------
+    start, stop : int
+        Array positions of the run, ``stop`` exclusive (``index[start:stop]`` is gap-free).
+    gaps : tuple of tuple of int
+        Every discontinuity of the whole record as ``(cycle before, cycle after)`` pairs.
+    """
+
+    start: int
+    stop: int
+    gaps: tuple[tuple[int, int], ...]
+
+    @property
+    def count(self) -> int:
+        """Samples in the run."""
+        return self.stop - self.start
+
+
+def counts_to_rad(position_counts: np.ndarray, counts_per_rev: int) -> np.ndarray:
+    """Mechanical angle, rad, from an unwrapped position in encoder counts.
+
+    Parameters
+    ----------
+    position_counts : array_like of int
+        Position, counts (unwrapped, see :func:`unwrap_int32`).
+    counts_per_rev : int
+        Encoder counts per mechanical revolution.
+    """
+    if counts_per_rev <= 0:
+        raise ValueError(f"counts_per_rev must be positive, got {counts_per_rev}")
+    return np.asarray(position_counts, dtype=np.float64) * (2.0 * np.pi / counts_per_rev)
+
+
+def electrical_angle_rad(position_counts: np.ndarray, counts_per_rev: int, pole_pairs: int) -> np.ndarray:
+    """Electrical angle θ_e = p·θ_m, rad (without the motor's electrical offset θ_0)."""
+    if pole_pairs <= 0:
+        raise ValueError(f"pole_pairs must be positive, got {pole_pairs}")
+    return pole_pairs * counts_to_rad(position_counts, counts_per_rev)
+
+
+def unwrap_int32(raw_counts: np.ndarray) -> np.ndarray:
+    """Undo the int32 wrap of a position register, counts (int64).
+
+    A step of more than half the int32 range between consecutive samples is taken as a wrap.
+    """
+    raw = np.asarray(raw_counts, dtype=np.int64)
+    if raw.size == 0:
+        return raw.copy()
+    step = np.diff(raw)
+    wraps = np.where(step > _INT32_SPAN // 2, -1, 0) + np.where(step < -(_INT32_SPAN // 2), 1, 0)
+    return raw + np.concatenate(([0], np.cumsum(wraps) * _INT32_SPAN))
+
+
+def longest_gap_free_span(index: np.ndarray) -> Span:
+    """The longest run of consecutive drive cycles in ``index`` (a step of exactly 1 is no gap).
+
+    Parameters
+    ----------
+    index : array_like of int
+        Cumulative drive cycle index of each sample.
+    """
+    idx = np.asarray(index, dtype=np.int64)
+    if idx.ndim != 1 or idx.size == 0:
+        raise ValueError("index must be a non-empty 1-D array")
+    breaks = np.flatnonzero(np.diff(idx) != 1) + 1
+    edges = np.concatenate(([0], breaks, [idx.size]))
+    longest = int(np.argmax(np.diff(edges)))
+    gaps = tuple((int(idx[b - 1]), int(idx[b])) for b in breaks)
+    return Span(int(edges[longest]), int(edges[longest + 1]), gaps)
+
+
+def speed_from_counts(position_counts: np.ndarray, counts_per_rev: int, period_s: float) -> np.ndarray:
+    """Motor speed, rad/s, by backward difference on the drive's grid k·T.
+
+    ``speed[i] = (θ[i+1] − θ[i]) / T`` belongs to the instant of sample ``i+1``; the result has one
+    sample fewer than ``position_counts``. Its response against the true speed is
+    :func:`difference_response`. The samples must be gap-free (see :func:`longest_gap_free_span`).
+
+    Parameters
+    ----------
+    position_counts : array_like of int
+        Unwrapped position, counts, one per drive cycle.
+    counts_per_rev : int
+        Counts per mechanical revolution.
+    period_s : float
+        Drive cycle T, s.
+    """
+    if period_s <= 0:
+        raise ValueError(f"period_s must be positive, got {period_s}")
+    counts = np.asarray(position_counts, dtype=np.int64)
+    if counts.size < 2:
+        raise ValueError("need at least two encoder samples for a speed")
+    return counts_to_rad(np.diff(counts), counts_per_rev) / period_s
+
+
+def difference_response(f_hz: np.ndarray, period_s: float) -> np.ndarray:
+    """Complex response (1 − e^{−jωT})/(jωT) of the backward difference against d/dt (1 at 0 Hz).
+
+    Parameters
+    ----------
+    f_hz : array_like
+        Frequencies, Hz.
+    period_s : float
+        Drive cycle T, s.
+    """
+    wT = 2.0 * np.pi * np.asarray(f_hz, dtype=np.float64) * period_s
+    # (1 − e^{−jx})/(jx) = e^{−jx/2}·sinc(x/2π), exact also at x = 0
+    return np.exp(-0.5j * wT) * np.sinc(wT / (2.0 * np.pi))
+
+
+def angle_spline(first_cycle: int, period_s: float, theta_rad: np.ndarray) -> CubicSpline:
+    """Cubic spline θ(t) through the encoder angles at drive times t = (first_cycle + i)·T.
+
+    Used to read the electrical angle at the DAQ instants for demodulation and alignment (the speed
+    itself is never interpolated). The samples must be gap-free.
+
+    Parameters
+    ----------
+    first_cycle : int
+        Drive cycle index of ``theta_rad[0]``.
+    period_s : float
+        Drive cycle T, s.
+    theta_rad : ndarray
+        Angle, rad (mechanical or electrical), one per cycle.
+    """
+    th = np.asarray(theta_rad, dtype=np.float64)
+    if th.size < 4:
+        raise ValueError("need at least four encoder samples for an angle spline")
+    return CubicSpline((first_cycle + np.arange(th.size)) * period_s, th)

@@ -1,0 +1,305 @@
+"""Electromagnetic torque T_e = k_t·i_q from the measured phase currents (design §5.1).
+
+Motor model (i_d = 0): i_a = −i_q·sin(θ_e + θ_0) + dc, i_b and i_c shifted by ∓2π/3, where θ_e = p·θ_m
+is the encoder's electrical angle at the DAQ instants (mapped through the clock fit) and θ_0 the
+motor's electrical offset. All functions return torque at the DAQ samples they were given.
+
+* :func:`torque_hilbert` — the paper's baseline: k_t·|hilbert(i_a)| with a sign per sample.
+* :func:`torque_encoder` — one phase, demodulated with the encoder angle: i_q is a cubic B-spline in
+  time fitted by penalised least squares to i_a. Every sample counts with weight sin²(θ_e + θ_0), so
+  where the phase carries no information (|sin| small) the spline is carried by its neighbours instead
+  of an explicit interpolation; the penalty only bridges those holes. No speed enters the estimate.
+* :func:`torque_park` — two or three phases, Clarke + Park with the encoder angle, exact.
+
+θ_0 is known from one phase only modulo π (the sign of i_q and θ_0 + π give the same current);
+:func:`phase_offset` returns θ_0 in (−π/2, π/2] and the caller fixes the sign (one bit) from the motion.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.linalg import solveh_banded
+from scipy.signal import find_peaks, hilbert, sosfiltfilt, butter
+
+_SQRT3 = np.sqrt(3.0)
+
+
+@dataclass(frozen=True)
+class WindowPhasors:
+    """Least-squares fits i ≈ a·sin θ_e + b·cos θ_e + c over consecutive windows.
+
+    Attributes
+    ----------
+    centre_index : ndarray of float
+        Sample position of each window's centre (0 = first sample given).
+    phasor_a : ndarray of complex
+        a + j·b, A; for i = −i_q·sin(θ_e + θ_0) + dc this is −i_q·e^{jθ_0}.
+    dc_a : ndarray of float
+        c, A.
+    valid : ndarray of bool
+        The window's angle spans at least ``min_span_rad`` (else the fit is ill-posed; values NaN).
+    """
+
+    centre_index: np.ndarray
+    phasor_a: np.ndarray
+    dc_a: np.ndarray
+    valid: np.ndarray
+
+
+@dataclass(frozen=True)
+class PhaseOffset:
+    """Electrical offset and sensor DC of one phase.
+
+    Attributes
+    ----------
+    theta0_rad : float
+        θ_0 modulo π, in (−π/2, π/2], rad.
+    dc_a : float
+        Sensor DC offset, A.
+    n_windows : int
+        Windows that carried the estimate.
+    """
+
+    theta0_rad: float
+    dc_a: float
+    n_windows: int
+
+
+def window_phasors(current_a: np.ndarray, theta_e_rad: np.ndarray, window_len: int,
+                   min_span_rad: float = np.pi) -> WindowPhasors:
+    """Fit a·sin θ_e + b·cos θ_e + c to ``current_a`` over consecutive windows of ``window_len`` samples.
+
+    Parameters
+    ----------
+    current_a : ndarray
+        One phase current, A.
+    theta_e_rad : ndarray
+        Electrical angle at the same samples, rad.
+    window_len : int
+        Samples per window (a trailing remainder is dropped).
+    min_span_rad : float
+        Smallest angle excursion in a window for its fit to count, rad.
+    """
+    i = np.asarray(current_a, dtype=np.float64)
+    th = np.asarray(theta_e_rad, dtype=np.float64)
+    if i.shape != th.shape or i.ndim != 1:
+        raise ValueError("current_a and theta_e_rad must be 1-D arrays of the same length")
+    if window_len < 8:
+        raise ValueError(f"window_len must be at least 8 samples, got {window_len}")
+    nw = i.size // window_len
+    i = i[: nw * window_len].reshape(nw, window_len)
+    th = th[: nw * window_len].reshape(nw, window_len)
+    s, c = np.sin(th), np.cos(th)
+    M = np.empty((nw, 3, 3))
+    M[:, 0, 0] = np.einsum("ij,ij->i", s, s)
+    M[:, 1, 1] = np.einsum("ij,ij->i", c, c)
+    M[:, 0, 1] = M[:, 1, 0] = np.einsum("ij,ij->i", s, c)
+    M[:, 0, 2] = M[:, 2, 0] = s.sum(axis=1)
+    M[:, 1, 2] = M[:, 2, 1] = c.sum(axis=1)
+    M[:, 2, 2] = window_len
+    rhs = np.stack([np.einsum("ij,ij->i", s, i), np.einsum("ij,ij->i", c, i), i.sum(axis=1)], axis=1)
+    valid = (th.max(axis=1) - th.min(axis=1)) >= min_span_rad
+    sol = np.full((nw, 3), np.nan)
+    if valid.any():
+        sol[valid] = np.linalg.solve(M[valid], rhs[valid, :, None])[..., 0]
+    centre = (np.arange(nw) + 0.5) * window_len - 0.5
+    return WindowPhasors(centre, sol[:, 0] + 1j * sol[:, 1], sol[:, 2], valid)
+
+
+def phase_offset(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float,
+                 window_s: float = 0.02) -> PhaseOffset:
+    """Estimate θ_0 (mod π) and the sensor DC of one phase by windowed least squares.
+
+    θ_0 is the argument of Σ phasor² / 2 (each window weighted by i_q²); dc the median of the windows'
+    constants. Windows where the motor moves less than π electrical are skipped.
+
+    Parameters
+    ----------
+    current_a, theta_e_rad : ndarray
+        Phase current, A, and electrical angle at the same samples, rad.
+    rate_hz : float
+        Sampling rate, Hz.
+    window_s : float
+        Window length, s.
+    """
+    w = window_phasors(current_a, theta_e_rad, max(8, int(round(window_s * rate_hz))))
+    if not w.valid.any():
+        raise ValueError("the motor never turns half an electrical revolution within a window: "
+                         "θ_0 and the current's DC cannot be estimated")
+    z = np.sum(w.phasor_a[w.valid] ** 2)
+    return PhaseOffset(float(np.angle(z) / 2.0), float(np.median(w.dc_a[w.valid])), int(w.valid.sum()))
+
+
+def apex_sign(speed_rad_s: np.ndarray, period_s: float, smooth_hz: float = 20.0) -> np.ndarray:
+    """Sign of the torque restored at the speed apexes (paper §3.2), ±1 per speed sample.
+
+    Between two apexes (extrema of the speed above half its peak) the sign is that of the speed change
+    from one apex to the next; before the first apex it heads towards it, after the last away from it.
+    The speed is only used to place the sign flips, never to shape the torque.
+
+    Parameters
+    ----------
+    speed_rad_s : ndarray
+        Motor speed, rad/s, on the drive's grid.
+    period_s : float
+        Drive cycle, s.
+    smooth_hz : float
+        Cut-off of the zero-phase low-pass applied before looking for apexes, Hz.
+    """
+    w = np.asarray(speed_rad_s, dtype=np.float64)
+    if w.size < 32:
+        raise ValueError("need at least 32 speed samples to find apexes")
+    ws = sosfiltfilt(butter(2, smooth_hz, fs=1.0 / period_s, output="sos"), w)
+    height = 0.5 * np.max(np.abs(ws))
+    distance = max(1, int(0.05 / period_s))
+    hi, _ = find_peaks(ws, height=height, distance=distance)
+    lo, _ = find_peaks(-ws, height=height, distance=distance)
+    apex = np.sort(np.concatenate((hi, lo)))
+    if apex.size == 0:
+        return np.full(w.size, 1.0 if ws[-1] >= ws[0] else -1.0)
+    sign = np.empty(w.size)
+    sign[: apex[0]] = np.sign(ws[apex[0]])
+    for a, b in zip(apex[:-1], apex[1:]):
+        sign[a:b] = 1.0 if ws[b] > ws[a] else -1.0
+    sign[apex[-1]:] = -np.sign(ws[apex[-1]])
+    sign[sign == 0] = 1.0
+    return sign
+
+
+def torque_hilbert(current_a: np.ndarray, k_t_Nm_per_A: float, sign: np.ndarray) -> np.ndarray:
+    """The paper's torque: T_e = sign·k_t·|hilbert(i_a − mean)|, N·m.
+
+    Parameters
+    ----------
+    current_a : ndarray
+        One phase current, A.
+    k_t_Nm_per_A : float
+        Torque constant, N·m/A.
+    sign : ndarray
+        ±1 per sample (e.g. :func:`apex_sign` mapped onto the DAQ instants).
+    """
+    i = np.asarray(current_a, dtype=np.float64)
+    if np.shape(sign) != i.shape:
+        raise ValueError("sign must have one entry per current sample")
+    return k_t_Nm_per_A * np.asarray(sign) * np.abs(hilbert(i - i.mean()))
+
+
+def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float, k_t_Nm_per_A: float,
+                   offset: PhaseOffset, knot_spacing_s: float = 5e-4, smoothing: float = 1e-3) -> np.ndarray:
+    """Torque from one phase demodulated with the encoder angle, N·m, at the given samples.
+
+    Solves min Σ_n (i_a[n] − dc + i_q(t_n)·sin(θ_e[n] + θ_0))² + λ·Σ (Δ² c)² for the coefficients c of
+    a uniform cubic B-spline i_q(t) (a banded system, cost linear in the record length), jointly with
+    the sensor DC; a second pass linearises in θ_0 and re-estimates it with the DC. ``offset`` only
+    starts the estimate (its θ_0 must be within a few degrees and carry the chosen sign).
+
+    Parameters
+    ----------
+    current_a, theta_e_rad : ndarray
+        Phase current, A, and electrical angle at the same samples (clock-aligned), rad.
+    rate_hz : float
+        Sampling rate, Hz.
+    k_t_Nm_per_A : float
+        Torque constant, N·m/A.
+    offset : PhaseOffset
+        Starting θ_0 (sign chosen) and sensor DC.
+    knot_spacing_s : float
+        Knot spacing of the spline, s; its bandwidth is about 1/(2·spacing).
+    smoothing : float
+        λ relative to the mean data weight per coefficient; only matters where |sin| is small.
+    """
+    i = np.asarray(current_a, dtype=np.float64)
+    th = np.asarray(theta_e_rad, dtype=np.float64)
+    if i.shape != th.shape or i.ndim != 1:
+        raise ValueError("current_a and theta_e_rad must be 1-D arrays of the same length")
+    m = max(1, int(round(knot_spacing_s * rate_hz)))
+    if i.size < 4 * m:
+        raise ValueError("record shorter than four spline knots")
+    ones = np.ones_like(i)
+    phi = th + offset.theta0_rad
+    iq, _ = _spline_iq(i, -np.sin(phi), m, smoothing, [ones])
+    iq, (_, dtheta) = _spline_iq(i, -np.sin(phi), m, smoothing, [ones, -iq * np.cos(phi)])
+    iq, _ = _spline_iq(i, -np.sin(phi + dtheta), m, smoothing, [ones])
+    return k_t_Nm_per_A * iq
+
+
+def _bspline_weights(m: int) -> np.ndarray:
+    """Uniform cubic B-spline weights of the 4 active coefficients at the m samples of one knot span."""
+    r = np.arange(m) / m
+    return np.stack([(1 - r) ** 3, 3 * r**3 - 6 * r**2 + 4, -3 * r**3 + 3 * r**2 + 3 * r + 1, r**3], axis=1) / 6.0
+
+
+def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, smoothing: float,
+               extra: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Penalised LS of y ≈ g·s(t) + Σ β_k·extra_k, s a uniform cubic B-spline (knot every m samples).
+
+    The global coefficients β border the banded spline system and are eliminated by their Schur
+    complement. Returns s at the samples and β.
+    """
+    n = y.size
+    nk = -(-n // m)
+
+    def spans(x: np.ndarray) -> np.ndarray:
+        return np.concatenate((x, np.zeros(nk * m - n))).reshape(nk, m)
+
+    W = _bspline_weights(m)
+
+    def project(x: np.ndarray) -> np.ndarray:
+        """Bᵀ(g·x): the spline's normal-equation column of a sample vector x."""
+        out = np.zeros(nk + 3)
+        gx = spans(g * x)
+        for k in range(4):
+            out[k:k + nk] += gx @ W[:, k]
+        return out
+
+    G2 = spans(g * g)
+    ab = np.zeros((4, nk + 3))  # upper banded storage: ab[3 - d, j] = A[j - d, j]
+    for k in range(4):
+        for l in range(k, 4):
+            ab[3 - (l - k), l:l + nk] += G2 @ (W[:, k] * W[:, l])
+    lam = smoothing * ab[3].mean()
+    d2 = np.array([1.0, -2.0, 1.0])
+    for a in range(3):
+        for b in range(a, 3):
+            ab[3 - (b - a), b:b + nk + 1] += lam * d2[a] * d2[b]
+    U = np.stack([project(u) for u in extra], axis=1)
+    X = solveh_banded(ab, np.column_stack((project(y), U)))
+    x_y, x_u = X[:, 0], X[:, 1:]
+    E = np.array([[u @ v for v in extra] for u in extra])
+    beta = np.linalg.solve(E - U.T @ x_u, np.array([u @ y for u in extra]) - U.T @ x_y)
+    coef = x_y - x_u @ beta
+    s = sum(np.outer(coef[k:k + nk], W[:, k]) for k in range(4))
+    return s.reshape(-1)[:n], beta
+
+
+def torque_park(currents_a: dict[str, np.ndarray], theta_e_rad: np.ndarray, k_t_Nm_per_A: float,
+                theta0_rad: float, dc_a: dict[str, float]) -> np.ndarray:
+    """Torque from two or three phases by Clarke + Park with the encoder angle, N·m.
+
+    i_α = i_a, i_β = (i_b − i_c)/√3 (amplitude-invariant; i_c = −i_a − i_b when only a and b are
+    recorded), i_q = −i_α·sin φ + i_β·cos φ with φ = θ_e + θ_0.
+
+    Parameters
+    ----------
+    currents_a : dict
+        ``"i_a"``, ``"i_b"`` and optionally ``"i_c"``, A.
+    theta_e_rad : ndarray
+        Electrical angle at the same samples, rad.
+    k_t_Nm_per_A : float
+        Torque constant, N·m/A.
+    theta0_rad : float
+        Electrical offset θ_0 (sign chosen), rad.
+    dc_a : dict
+        Sensor DC of each phase used, A.
+    """
+    if "i_a" not in currents_a or "i_b" not in currents_a:
+        raise ValueError("park needs at least the phases i_a and i_b")
+    ia = np.asarray(currents_a["i_a"], dtype=np.float64) - dc_a["i_a"]
+    ib = np.asarray(currents_a["i_b"], dtype=np.float64) - dc_a["i_b"]
+    ic = (np.asarray(currents_a["i_c"], dtype=np.float64) - dc_a["i_c"]) if "i_c" in currents_a else -ia - ib
+    i_alpha = (2.0 * ia - ib - ic) / 3.0
+    i_beta = (ib - ic) / _SQRT3
+    phi = np.asarray(theta_e_rad, dtype=np.float64) + theta0_rad
+    return k_t_Nm_per_A * (-i_alpha * np.sin(phi) + i_beta * np.cos(phi))
