@@ -16,6 +16,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from acq import __version__
 from acq.config import load_bench, load_profile
+from acq.devices import devices_command
 from acq.recorder import Recorder, RecordingResult
 from acq.session import load, repair
 from acq.summary import summarize, summary_table
@@ -106,6 +107,9 @@ def check(session_path: Path) -> int:
     out.print(summary_table(summary))
     out.print(f"{session_path}: {session.status}, nothing to repair")
     return 0
+
+
+cli.add_command(devices_command)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -53,7 +53,19 @@ class DaqSim(Strict):
 
 
 class DaqNidaqmx(Strict):
-    """Current from an NI-DAQmx device (see ``drivers.nidaq``)."""
+    """Current from an NI-DAQmx device (see ``drivers.nidaq``).
+
+    Attributes
+    ----------
+    rate_hz : requested sample rate, Hz (the card coerces it; the coerced rate is stored).
+    channels, physical_channels : phase names and the DAQmx channels they are wired to, same order.
+    block_s : samples per read, s of data (~10 reads/s); buffer_s : host buffer, s of data.
+    measurement : ``voltage`` (sensor with a voltage output) or ``current`` (current output).
+    sensor_A_per_V, range_V : sensor gain, A of phase current per V; input range, ±V.
+    sensor_A_per_A, range_A : sensor ratio, A of phase current per A measured; input range, ±A.
+    iepe_excitation_A : IEPE excitation current, A (0 = off); coupling : ``dc`` or ``ac``.
+    terminal : input terminal configuration.
+    """
 
     driver: Literal["nidaqmx"]
     rate_hz: PositiveFloat
@@ -64,6 +76,8 @@ class DaqNidaqmx(Strict):
     measurement: Literal["voltage", "current"] = "voltage"
     sensor_A_per_V: PositiveFloat = 1.0
     range_V: PositiveFloat = 5.0
+    sensor_A_per_A: PositiveFloat = 1.0
+    range_A: PositiveFloat = 0.02
     iepe_excitation_A: NonNegFloat = 0.0
     coupling: Literal["dc", "ac"] = "dc"
     terminal: Literal["default", "differential", "pseudo_differential", "rse", "nrse"] = "default"

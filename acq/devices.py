@@ -1,0 +1,138 @@
+"""``acq devices``: what this machine can record from, and why a section is empty when it is.
+
+Four sections: NI-DAQmx devices with their AI channels (needs the NI-DAQmx driver), CAN interfaces
+python-can detects (software buses such as ``virtual`` are not hardware and are left out), serial ports
+pyserial sees, and the simulated bench, which is always there. Each probe is a small function that
+returns a :class:`Section`; a library or driver that is missing empties its section with the reason.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from typing import Any
+
+import click
+from rich.console import Console
+from rich.table import Table
+
+from acq.config import DEFAULT_BENCH
+from drivers.errors import DeviceError
+from drivers.nidaq import DRIVER_MISSING, first_line, import_nidaqmx
+
+#: python-can interfaces that are software buses, not something a drive can be wired to.
+SOFTWARE_CAN = frozenset({"virtual", "udp_multicast"})
+#: What a detected configuration means when python-can only guesses it from the port.
+CAN_NOTES = {"serial": "python-can's serial-line CAN protocol; only if such an adapter is on this port"}
+
+
+@dataclass(frozen=True)
+class Section:
+    """One kind of device: rows of (name, kind, detail), and why there are none if there are none."""
+
+    title: str
+    rows: list[tuple[str, str, str]] = field(default_factory=list)
+    empty_because: str = ""
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """``{"title", "devices": [{"device", "kind", "detail"}], "empty_because"}``."""
+        devices = [dict(zip(("device", "kind", "detail"), row)) for row in self.rows]
+        return {"title": self.title, "devices": devices, "empty_because": self.empty_because}
+
+
+def ni_section() -> Section:
+    """NI-DAQmx devices and their AI physical channels (nidaqmx imported only here)."""
+    title = "NI-DAQmx devices"
+    try:
+        nidaqmx = import_nidaqmx()
+    except DeviceError as e:
+        return Section(title, empty_because=str(e))
+    try:
+        system = nidaqmx.system.System.local()
+        v = system.driver_version
+        rows = [(d.name, d.product_type, ", ".join(ch.name for ch in d.ai_physical_chans) or "no AI channels")
+                for d in system.devices]
+    except nidaqmx.errors.DaqNotFoundError:
+        return Section(title, empty_because=DRIVER_MISSING)
+    except nidaqmx.errors.DaqError as e:
+        return Section(title, empty_because=f"NI-DAQmx: {first_line(e)} (DAQmx error {e.error_code})")
+    version = f"{v.major_version}.{v.minor_version}.{v.update_version}"
+    return Section(title, rows, "" if rows else f"NI-DAQmx {version} is installed but sees no device "
+                                                 "(check the cable, power, or NI MAX)")
+
+
+@contextmanager
+def _quiet(logger_name: str) -> Iterator[None]:
+    """Silence a library's warnings about optional vendor back-ends while probing."""
+    logger = logging.getLogger(logger_name)
+    level = logger.level
+    logger.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        logger.setLevel(level)
+
+
+def can_section() -> Section:
+    """CAN interfaces python-can detects (``can.detect_available_configs``), software buses left out."""
+    import can
+
+    with _quiet("can"):
+        configs: list[dict[str, Any]] = can.detect_available_configs()
+    rows = [(str(c.get("channel", "")), str(c["interface"]),
+             CAN_NOTES.get(c["interface"], ", ".join(f"{k}={v}" for k, v in c.items()
+                                                     if k not in ("interface", "channel"))))
+            for c in configs if c.get("interface") not in SOFTWARE_CAN]
+    software = sorted({str(c["interface"]) for c in configs if c.get("interface") in SOFTWARE_CAN})
+    because = "python-can detects no CAN interface (no adapter plugged in, or its driver is missing)"
+    if software:
+        because += f"; only software buses: {', '.join(software)}"
+    return Section("CAN interfaces (python-can)", rows, "" if rows else because)
+
+
+def serial_section() -> Section:
+    """Serial ports pyserial sees (``serial.tools.list_ports.comports``)."""
+    from serial.tools import list_ports
+
+    rows = [(p.device, p.description or "", p.hwid or "") for p in list_ports.comports()]
+    return Section("Serial ports (pyserial)", rows, "" if rows else "pyserial sees no serial port")
+
+
+def sim_section() -> Section:
+    """The simulated bench: always available."""
+    return Section("Simulated bench", [("sim", "simulated DAQ + drive", str(DEFAULT_BENCH))])
+
+
+def discover() -> list[Section]:
+    """Every section, in display order."""
+    return [ni_section(), can_section(), serial_section(), sim_section()]
+
+
+def sections_table(sections: list[Section]) -> Table:
+    """One rich table: a header row per section, then its devices or the reason it is empty."""
+    table = Table(title="What this machine can record from")
+    for column in ("device", "kind", "detail"):
+        table.add_column(column, overflow="fold")
+    for s in sections:
+        table.add_row(f"[bold]{s.title}[/]", "", "")
+        for name, kind, detail in s.rows:
+            table.add_row(name, kind, detail)
+        if s.empty_because:
+            table.add_row("[dim]none[/]", "", s.empty_because)
+        table.rows[-1].end_section = True
+    return table
+
+
+@click.command("devices")
+@click.option("--json", "as_json", is_flag=True, help="Print the sections as JSON.")
+def devices_command(as_json: bool) -> int:
+    """List NI devices and AI channels, CAN interfaces, serial ports and the simulated bench."""
+    sections = discover()
+    if as_json:
+        click.echo(json.dumps([s.to_json_dict() for s in sections], indent=2))
+    else:
+        Console().print(sections_table(sections))
+    return 0
