@@ -16,6 +16,10 @@ from scipy import signal
 from analysis.encoder import difference_response
 
 
+KERNEL_PER_BIN = 8
+KERNEL_HALF_WIDTH_BINS = 4
+
+
 class RecordTooShortError(ValueError):
     """The signals are too short for two Welch segments; the message names the duration needed."""
 
@@ -33,7 +37,10 @@ class FrequencyResponse:
     coherence : ndarray
         Magnitude-squared coherence γ² between torque and speed, 0…1.
     torque_psd : ndarray
-        One-sided power spectral density of the torque, (N·m)²/Hz.
+        One-sided power spectral density of the torque, (N·m)²/Hz, at ``f_hz``.
+    torque_psd_fine : ndarray
+        The same at ``KERNEL_PER_BIN`` times finer spacing (segments that much longer, or the
+        whole record zero-padded), for the spectral window of :func:`window_kernel`.
     segment_s : float
         Welch segment length, s.
     n_segments : int
@@ -46,6 +53,7 @@ class FrequencyResponse:
     H: np.ndarray
     coherence: np.ndarray
     torque_psd: np.ndarray
+    torque_psd_fine: np.ndarray
     segment_s: float
     n_segments: int
     period_s: float
@@ -56,35 +64,36 @@ def min_duration_s(segment_s: float, overlap: float = 0.5) -> float:
     return segment_s * (2.0 - overlap)
 
 
-def window_kernel(frf: FrequencyResponse, half_width_bins: int = 4, per_bin: int = 8) -> tuple[np.ndarray, np.ndarray]:
-    """The Welch estimate's spectral window: what one FRF bin averages over.
+def window_kernel(frf: FrequencyResponse) -> tuple[np.ndarray, np.ndarray]:
+    """The Welch estimate's spectral window: what each FRF bin averages over.
 
-    The expected H1 at a bin is, for a torque spectrum smooth over a few bins, the true H
-    convolved with |W(ν)|², the squared magnitude of the Hann window's transform, normalised to
-    unit sum. Sharp features (the resonance peak, the anti-resonance notch, a few hertz wide) are
-    flattened by it at 0.5 s segments; the fit applies the same kernel to the model.
+    The expected H1 at bin f is Σ_ν H(f+ν)·S(f+ν)·|W(ν)|² / Σ_ν S(f+ν)·|W(ν)|², with |W|² the
+    squared magnitude of the Hann window's transform and S the torque spectrum at a resolution
+    finer than the bins (:attr:`FrequencyResponse.torque_psd_fine`; it resolves the harmonics of
+    the rectangular torque). Sharp features — the resonance peak and the anti-resonance notch,
+    a few hertz wide — are flattened by it at 0.5 s segments; the fit applies the same kernel to
+    the model.
 
     Parameters
     ----------
     frf : FrequencyResponse
-        The estimate (its segment length and period define the window).
-    half_width_bins : int, optional
-        Kernel support ± this many bins.
-    per_bin : int, optional
-        Kernel samples per bin.
+        The estimate (segment length, period and fine torque spectrum define the kernel).
 
     Returns
     -------
-    offsets_hz : ndarray
-        Frequency offsets ν, Hz, symmetric about 0.
-    weights : ndarray
-        |W(ν)|² normalised to sum 1.
+    offsets_hz : ndarray, shape (m,)
+        Frequency offsets ν, Hz, ± ``KERNEL_HALF_WIDTH_BINS`` bins around each bin.
+    weights : ndarray, shape (n_bins, m)
+        Kernel of each bin of ``frf.f_hz``, rows summing to 1.
     """
     nperseg = int(round(frf.segment_s / frf.period_s))
-    spectrum = np.abs(np.fft.fft(signal.get_window("hann", nperseg), nperseg * per_bin)) ** 2
-    k = np.arange(-half_width_bins * per_bin, half_width_bins * per_bin + 1)
-    weights = spectrum[k % spectrum.size]
-    return k / (per_bin * frf.segment_s), weights / weights.sum()
+    spectrum = np.abs(np.fft.fft(signal.get_window("hann", nperseg), nperseg * KERNEL_PER_BIN)) ** 2
+    k = np.arange(-KERNEL_HALF_WIDTH_BINS * KERNEL_PER_BIN, KERNEL_HALF_WIDTH_BINS * KERNEL_PER_BIN + 1)
+    fine = np.abs(np.arange(frf.f_hz.size)[:, None] * KERNEL_PER_BIN + k[None, :])
+    fine = np.minimum(fine, 2 * (frf.torque_psd_fine.size - 1) - fine)  # mirror at Nyquist
+    weights = frf.torque_psd_fine[fine] * spectrum[k % spectrum.size][None, :]
+    weights /= np.maximum(weights.sum(axis=1, keepdims=True), np.finfo(float).tiny)
+    return k / (KERNEL_PER_BIN * frf.segment_s), weights
 
 
 def estimate_frf(
@@ -138,6 +147,9 @@ def estimate_frf(
     f, gxx = signal.welch(x, **kw)
     _, gyy = signal.welch(y, **kw)
     _, gxy = signal.csd(x, y, **kw)
+    n_fine = KERNEL_PER_BIN * nperseg
+    _, gxx_fine = signal.welch(x, fs=fs, window="hann", nperseg=min(n_fine, x.size), nfft=n_fine,
+                               detrend="linear")
     with np.errstate(divide="ignore", invalid="ignore"):
         h = gxy / gxx / difference_response(f, period_s)
         coh = np.abs(gxy) ** 2 / (gxx * gyy)
@@ -147,6 +159,7 @@ def estimate_frf(
         H=h,
         coherence=coh,
         torque_psd=gxx,
+        torque_psd_fine=gxx_fine,
         segment_s=nperseg * period_s,
         n_segments=n_segments,
         period_s=period_s,

@@ -1,0 +1,214 @@
+"""Verdict on an identification: ok / poor / failed, with the reasons in words (design §5 step 6).
+
+A number is only printed with confidence when the data back it: the joint must be excited between
+its anti-resonance f_a and resonance f_r (coherence there, torque power there), the model must
+match |H|, the confidence intervals must be narrow, and the clocks must have been aligned. The
+paper's 0.5 s profile fails the first test (paper §5.2): the verdict then says so and how to fix
+it instead of handing out a stiffness.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import numpy as np
+
+from analysis.fit import COHERENCE_CLIP, FitResult, band_mask
+from analysis.frf import FrequencyResponse
+
+Verdict = Literal["ok", "poor", "failed"]
+_RANK: dict[Verdict, int] = {"ok": 0, "poor": 1, "failed": 2}
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """Limits of the verdict; a value past ``*_poor`` makes it poor, past ``*_failed`` failed.
+
+    Attributes
+    ----------
+    excitation_poor, excitation_failed : float
+        Mean coherence γ² between f_a and f_r below which the joint counts as weakly / not excited.
+    coherence_poor, coherence_failed : float
+        Mean coherence in the whole fit band.
+    misfit_ratio_poor : float
+        Ratio of the fit's residual to the residual the coherence explains, above which the model
+        counts as missing the data. Noise alone is judged by the coherence checks, not here.
+    residual_poor, residual_failed : float
+        Weighted RMS misfit of ln|H| (≈ relative misfit of |H|) that makes such a misfit poor /
+        failed.
+    ci_K_poor, ci_K_failed : float
+        Relative half-width of the 95 % interval of K.
+    ci_J_poor, ci_J_failed : float
+        Relative half-width of the 95 % intervals of J_m and J_l (when fitted).
+    clock_residual_amplitude_s, clock_residual_complex_s : float
+        Clock-alignment residual, s, above which the result is poor, for an amplitude fit (a delay
+        of a small fraction of a Welch segment does not bias |H|) and for a complex fit (a delay
+        τ turns the phase by 2π f τ).
+    """
+
+    excitation_poor: float = 0.7
+    excitation_failed: float = 0.4
+    coherence_poor: float = 0.4
+    coherence_failed: float = 0.2
+    misfit_ratio_poor: float = 3.0
+    residual_poor: float = 0.05
+    residual_failed: float = 0.30
+    ci_K_poor: float = 0.02
+    ci_K_failed: float = 0.10
+    ci_J_poor: float = 0.04
+    ci_J_failed: float = 0.20
+    clock_residual_amplitude_s: float = 1e-3
+    clock_residual_complex_s: float = 1e-4
+
+
+@dataclass(frozen=True)
+class Quality:
+    """How far an identification can be trusted.
+
+    Attributes
+    ----------
+    verdict : {"ok", "poor", "failed"}
+        The worst of the checks.
+    mean_coherence : float
+        Mean γ² over the fit band.
+    excitation_coherence : float
+        Mean γ² between f_a and f_r of the fit (NaN if the fit failed).
+    excitation_torque_db : float
+        Mean torque PSD between f_a and f_r, dB re 1 (N·m)²/Hz (NaN if the fit failed).
+    residual_rms : float
+        The fit's weighted RMS misfit of ln|H|.
+    misfit_ratio : float
+        ``residual_rms`` over the RMS that noise alone would leave, from the coherence: ≈ 1 when
+        the model explains everything but noise.
+    ci_rel_halfwidth : dict of str to float
+        Half-width of each fitted parameter's 95 % interval relative to its value.
+    clock_residual_s : float or None
+        Clock-alignment residual as given, s.
+    reasons : tuple of str
+        One sentence per check that is not ok, worst first; empty when ok.
+    """
+
+    verdict: Verdict
+    mean_coherence: float
+    excitation_coherence: float
+    excitation_torque_db: float
+    residual_rms: float
+    misfit_ratio: float
+    ci_rel_halfwidth: dict[str, float]
+    clock_residual_s: float | None
+    reasons: tuple[str, ...]
+
+
+def assess(
+    frf: FrequencyResponse,
+    fit: FitResult,
+    *,
+    clock_residual_s: float | None = None,
+    thresholds: Thresholds = Thresholds(),
+) -> Quality:
+    """Judge an identification from its FRF, its fit and the clock alignment.
+
+    Parameters
+    ----------
+    frf : FrequencyResponse
+        The measured frequency response.
+    fit : FitResult
+        The fit of the two-mass model to ``frf``.
+    clock_residual_s : float or None, optional
+        RMS residual of the clock alignment, s; None when the caller did not align (not judged).
+    thresholds : Thresholds, optional
+        Limits of the verdict.
+
+    Returns
+    -------
+    Quality
+    """
+    th = thresholds
+    findings: list[tuple[Verdict, str]] = []
+    in_band = band_mask(frf.f_hz, fit.band)
+    mean_coh = float(np.mean(frf.coherence[in_band])) if np.any(in_band) else float("nan")
+    lo, hi = fit.band
+    if fit.status == "failed":
+        findings.append(("failed", f"the fit did not converge ({fit.message})"))
+    elif fit.status == "max_evaluations":
+        findings.append(("poor", "the fit stopped at its evaluation limit before converging"))
+
+    exc_coh = exc_db = float("nan")
+    if np.isfinite(fit.f_a) and np.isfinite(fit.f_r):
+        if not (lo <= fit.f_a and fit.f_r <= hi):
+            findings.append(("failed", f"fitted f_a {fit.f_a:.0f} Hz … f_r {fit.f_r:.0f} Hz lies outside the "
+                                       f"fit band {lo:g}…{hi:g} Hz — widen the band or check the bench"))
+        sel = band_mask(frf.f_hz, (fit.f_a, fit.f_r)) & in_band
+        if np.any(sel):
+            exc_coh = float(np.mean(frf.coherence[sel]))
+            exc_db = float(10.0 * np.log10(np.mean(frf.torque_psd[sel])))
+            level = _grade(exc_coh, th.excitation_poor, th.excitation_failed)
+            if level != "ok":
+                what = "does not excite" if level == "failed" else "barely excites"
+                findings.append((level, f"coherence {exc_coh:.2f} between f_a {fit.f_a:.0f} Hz and f_r "
+                                        f"{fit.f_r:.0f} Hz (torque {exc_db:.0f} dB re 1 N²m²/Hz there): the "
+                                        f"motion {what} the joint — shorten the acceleration time"))
+
+    level = _grade(mean_coh, th.coherence_poor, th.coherence_failed)
+    if level != "ok":
+        findings.append((level, f"mean coherence {mean_coh:.2f} in {lo:g}…{hi:g} Hz: speed and torque are "
+                                f"mostly noise there"))
+
+    ratio = fit.residual_rms / _noise_rms(frf, in_band)
+    if np.isfinite(fit.residual_rms):
+        level = _grade(-fit.residual_rms, -th.residual_poor, -th.residual_failed)
+        if level != "ok" and ratio > th.misfit_ratio_poor:
+            findings.append((level, f"the two-mass model misses |H| by {100 * fit.residual_rms:.0f} % RMS, "
+                                    f"{ratio:.1f}× what noise explains — another mode or a nonlinearity "
+                                    f"in the band; try --band"))
+
+    ci_rel = {name: _rel_halfwidth(fit, name) for name in fit.fitted}
+    for name, (poor, failed) in {"K_Nm_per_rad": (th.ci_K_poor, th.ci_K_failed),
+                                 "Jm_kgm2": (th.ci_J_poor, th.ci_J_failed),
+                                 "Jl_kgm2": (th.ci_J_poor, th.ci_J_failed)}.items():
+        if name in ci_rel and fit.status != "failed":
+            level = _grade(-ci_rel[name], -poor, -failed)
+            if level != "ok":
+                findings.append((level, f"{_LABEL[name]} is known only to ±{100 * ci_rel[name]:.1f} % (95 %)"))
+
+    if clock_residual_s is not None:
+        limit = th.clock_residual_complex_s if fit.options.kind == "complex" else th.clock_residual_amplitude_s
+        if not clock_residual_s <= limit:
+            findings.append(("poor", f"clock alignment residual {1e6 * clock_residual_s:.0f} µs exceeds "
+                                     f"{1e6 * limit:.0f} µs for a {fit.options.kind} fit"))
+
+    findings.sort(key=lambda fv: -_RANK[fv[0]])
+    verdict: Verdict = findings[0][0] if findings else "ok"
+    return Quality(
+        verdict=verdict, mean_coherence=mean_coh, excitation_coherence=exc_coh, excitation_torque_db=exc_db,
+        residual_rms=float(fit.residual_rms), misfit_ratio=float(ratio), ci_rel_halfwidth=ci_rel, clock_residual_s=clock_residual_s,
+        reasons=tuple(text for _, text in findings),
+    )
+
+
+_LABEL = {"K_Nm_per_rad": "K", "Jm_kgm2": "J_m", "Jl_kgm2": "J_l", "C_Nms_per_rad": "C"}
+
+
+def _grade(value: float, poor_below: float, failed_below: float) -> Verdict:
+    """ok / poor / failed for a value that is good when high (NaN counts as failed)."""
+    if not value >= failed_below:
+        return "failed"
+    return "poor" if value < poor_below else "ok"
+
+
+def _noise_rms(frf: FrequencyResponse, in_band: np.ndarray) -> float:
+    """Weighted RMS of ln|H1| that noise alone leaves, from the coherence.
+
+    var ln|H1| ≈ (1 − γ²)/(2 n γ²) per bin with n averaged segments, so with the fit's weights
+    w = γ²/(1 − γ²) the expected weighted mean square is N / (2 n Σ w) over N bins.
+    """
+    g2 = np.clip(frf.coherence[in_band], 0.0, COHERENCE_CLIP)
+    sum_w = float(np.sum(g2 / (1.0 - g2)))
+    return float(np.sqrt(g2.size / (2.0 * frf.n_segments * sum_w))) if sum_w > 0 else float("nan")
+
+
+def _rel_halfwidth(fit: FitResult, name: str) -> float:
+    """Half-width of the 95 % interval of ``name`` relative to its value (NaN if unknown)."""
+    low, high = fit.ci95[name]
+    return float(0.5 * (high - low) / getattr(fit.values, name))
