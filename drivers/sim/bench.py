@@ -225,6 +225,8 @@ class SimBench:
             if block is None:
                 seq = np.random.SeedSequence([self.sim.seed % 2**64, _STREAM_IDS[stream], rows, chunk])
                 block = np.random.default_rng(seq).standard_normal((rows, _NOISE_CHUNK))
-                self._noise_cache = {k: v for k, v in self._noise_cache.items() if k[:2] != key[:2] or k[2] == chunk - 1}
+                # keep this chunk and its predecessor per (stream, rows): reads move forwards
+                self._noise_cache = {k: v for k, v in self._noise_cache.items()
+                                     if k[:2] != key[:2] or k[2] == chunk - 1}
                 self._noise_cache[key] = block
             return block

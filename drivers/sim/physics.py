@@ -35,7 +35,8 @@ class Gravity:
 
     def torque_Nm(self, theta_l_rad: float) -> float:
         """Gravity torque on the motor side, N·m, at load angle ``theta_l_rad`` (motor-side rad)."""
-        return self.mass_kg * G_M_S2 * self.com_distance_m * math.cos(self.start_rad + theta_l_rad / self.ratio) / self.ratio
+        arm_rad = self.start_rad + theta_l_rad / self.ratio
+        return self.mass_kg * G_M_S2 * self.com_distance_m * math.cos(arm_rad) / self.ratio
 
 
 class _Rows:
