@@ -12,6 +12,7 @@ from pathlib import Path
 
 import click
 from rich.console import Console
+from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from acq import __version__
@@ -72,8 +73,9 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     out.print(summary_table(summarize(load(result.path))))
     if result.status == "complete":
         return 0
-    err.print(f"[bold red]{result.status}[/]: {result.stop_reason} — everything recorded up to the stop is kept "
-              f"in {result.path} ({result.current_samples} current samples, {result.encoder_samples} encoder samples)")
+    err.print(f"[bold red]{result.status}[/]: {escape(result.stop_reason)} — everything recorded up to the stop is "
+              f"kept in {escape(str(result.path))} ({result.current_samples} current samples, "
+              f"{result.encoder_samples} encoder samples)")
     return EXIT_INTERRUPTED if result.status == "interrupted" else 1
 
 

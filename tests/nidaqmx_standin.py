@@ -82,6 +82,7 @@ class StandinHardware:
     timeout_every: int = 0
     miscount: int = 0
     tasks: list[Task] = field(default_factory=list)
+    arrays_read_into: set[int] = field(default_factory=set)
 
     def device(self, name: str) -> StandinDevice | None:
         return next((d for d in self.devices if d.name.lower() == name.lower()), None)
@@ -252,6 +253,7 @@ class AnalogMultiChannelReader:
             raise errors.DaqError("Read cannot be performed because the NumPy array passed into this function "
                                   "is not shaped correctly.", -1)
         self._in_stream.read_count += 1
+        hw.arrays_read_into.add(id(data))
         first = task.acquired
         n = number_of_samples_per_channel
         if hw.overflow_code is not None and first + n > hw.overflow_after:
