@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from acq.session import SessionWriter, Status, session_filename, utc_now_iso
+from acq.session import SessionWriter, Status, new_session_path, utc_now_iso
 from drivers.base import CurrentBlock, CurrentSource, Drive, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from drivers.errors import AcqError, DeviceError
@@ -208,7 +208,7 @@ class Recorder:
         self._start_devices()
         cur_info, drive_info = self._cur_info, self._drive_info
         start_ns = time.monotonic_ns()
-        path = self.out_dir / session_filename(self.bench.joint, utc_now_iso())
+        path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
         writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=cur_info,
                                drive_info=drive_info, host_ns_at_start=start_ns,
                                operator=self.operator, tags=self.tags)

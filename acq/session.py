@@ -56,10 +56,15 @@ def utc_now_iso() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
 
 
-def session_filename(joint: str, created_utc: str) -> str:
-    """``<UTC start>_<joint>.h5`` with characters that are safe on every file system."""
+def new_session_path(out_dir: Path, joint: str, created_utc: str) -> Path:
+    """``<out_dir>/<UTC start>_<joint>.h5`` (file-system safe), ``_2``, ``_3`` … if taken."""
     stamp = created_utc.replace("+00:00", "").replace(":", "-")
-    return f"{stamp}_{joint}.h5"
+    path = Path(out_dir) / f"{stamp}_{joint}.h5"
+    n = 2
+    while path.exists():
+        path = Path(out_dir) / f"{stamp}_{joint}_{n}.h5"
+        n += 1
+    return path
 
 
 def _extendable(group: h5py.Group, name: str, dtype: Any, chunk: int) -> h5py.Dataset:
@@ -70,6 +75,21 @@ def _append(ds: h5py.Dataset, values: np.ndarray) -> None:
     n = ds.shape[0]
     ds.resize((n + values.shape[0],))
     ds[n:] = values
+
+
+class _PendingColumns:
+    """Appends held in memory until the next flush, so each dataset grows once per flush."""
+
+    def __init__(self) -> None:
+        self._parts: dict[str, list[np.ndarray]] = {}
+
+    def add(self, name: str, values: np.ndarray) -> None:
+        self._parts.setdefault(name, []).append(values)
+
+    def write_to(self, f: h5py.File) -> None:
+        for name, parts in self._parts.items():
+            _append(f[name], np.concatenate(parts))
+        self._parts.clear()
 
 
 class SessionWriter:
@@ -103,6 +123,7 @@ class SessionWriter:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._channels = current_info.channels
         self._filled_optional: set[str] = set()
+        self._pending = _PendingColumns()
         f = h5py.File(self.path, "w-", libver=LIBVER)
         self._file = f
         created = utc_now_iso()
@@ -160,25 +181,22 @@ class SessionWriter:
 
     def append_current(self, block: CurrentBlock) -> None:
         """Append one DAQ block (caller guarantees increasing, non-overlapping indices)."""
-        cur = self._file["current"]
         for row, ch in enumerate(self._channels):
-            _append(cur[f"{ch}_A"], np.asarray(block.current_a[row], dtype=np.float64))
-        blocks = cur["blocks"]
-        _append(blocks["first_index"], np.array([block.first_index], dtype=np.int64))
-        _append(blocks["count"], np.array([block.count], dtype=np.int64))
-        _append(blocks["host_ns"], np.array([block.host_ns], dtype=np.int64))
+            self._pending.add(f"current/{ch}_A", np.asarray(block.current_a[row], dtype=np.float64))
+        self._pending.add("current/blocks/first_index", np.array([block.first_index], dtype=np.int64))
+        self._pending.add("current/blocks/count", np.array([block.count], dtype=np.int64))
+        self._pending.add("current/blocks/host_ns", np.array([block.host_ns], dtype=np.int64))
 
     def append_encoder(self, block: EncoderBlock) -> None:
         """Append encoder samples (caller guarantees strictly increasing ``index``)."""
-        enc = self._file["encoder"]
-        _append(enc["position_counts"], np.asarray(block.position_counts, dtype=np.int64))
-        _append(enc["index"], np.asarray(block.index, dtype=np.int64))
-        _append(enc["host_ns"], np.asarray(block.host_ns, dtype=np.int64))
+        self._pending.add("encoder/position_counts", np.asarray(block.position_counts, dtype=np.int64))
+        self._pending.add("encoder/index", np.asarray(block.index, dtype=np.int64))
+        self._pending.add("encoder/host_ns", np.asarray(block.host_ns, dtype=np.int64))
         for name, values in zip(_OPTIONAL_ENCODER, (block.drive_time_s, block.velocity_counts_per_s)):
             if values is not None:
                 self._filled_optional.add(name)
             filler = np.full(block.count, np.nan) if values is None else np.asarray(values, dtype=np.float64)
-            _append(enc[name], filler)
+            self._pending.add(f"encoder/{name}", filler)
 
     def add_event(self, event: StreamEvent) -> None:
         """Append one event row."""
@@ -186,15 +204,16 @@ class SessionWriter:
             [(event.host_ns, event.stream.encode(), event.kind.encode(), event.detail.encode()[:240])],
             dtype=EVENT_DTYPE,
         )
-        _append(self._file["events"], row)
+        self._pending.add("events", row)
 
     def flush(self) -> None:
-        """Make everything appended so far durable and visible to SWMR readers."""
+        """Write everything appended so far; make it durable and visible to SWMR readers."""
+        self._pending.write_to(self._file)
         self._file.flush()
 
     def finish(self, status: Status, stop_reason: str) -> None:
         """Close the SWMR file and write the footer: status, reason, stop time, sample counts."""
-        self._file.flush()
+        self.flush()
         self._file.close()
         with h5py.File(self.path, "r+", libver=LIBVER) as f:
             _write_footer(f, status, stop_reason, self._filled_optional)

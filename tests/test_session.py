@@ -117,3 +117,13 @@ def test_not_a_session(tmp_path: Path) -> None:
     (tmp_path / "text.h5").write_text("hello")
     with pytest.raises(ConfigError, match="not a readable HDF5 session file"):
         load(tmp_path / "text.h5")
+
+
+def test_sessions_started_in_the_same_second_get_distinct_files(tmp_path: Path) -> None:
+    from acq.session import new_session_path
+
+    first = new_session_path(tmp_path, "joint1", "2026-11-22T10:15:03+00:00")
+    assert first.name == "2026-11-22T10-15-03_joint1.h5"
+    first.touch()
+    second = new_session_path(tmp_path, "joint1", "2026-11-22T10:15:03+00:00")
+    assert second.name == "2026-11-22T10-15-03_joint1_2.h5"
