@@ -39,6 +39,7 @@ from drivers.serial_drive import bits_per_byte
 
 MAX_WAIT_S = 0.02
 MAX_BATCH_FRAMES = 1000
+LOOKAHEAD_NS = 10_000_000  # frames are computed in batches up to 10 ms ahead, each still sent when due
 _FLIP_FROM_BYTE = 3  # type, payload and CRC: every single-bit error there is a CRC error
 
 
@@ -187,15 +188,17 @@ class SimSerialDevice:
         return int((host_ns - self._t0_ns) // round(self.period_s * 1e9))
 
     def _run(self) -> None:
+        readable: list[int] = []
         while not self._closed.is_set():
-            now = time.monotonic_ns()
-            self._receive()
+            if readable:
+                self._receive()
             with self._lock:
+                now = time.monotonic_ns()
                 if self._streaming:
                     self._produce(now)
-                wake_ns = self._transmit(time.monotonic_ns())
+                wake_ns = self._transmit(now)
             wait_s = min(max((wake_ns - time.monotonic_ns()) * 1e-9, 0.0), MAX_WAIT_S)
-            select.select([self._master], [], [], wait_s)
+            readable, _, _ = select.select([self._master], [], [], wait_s)
 
     # ---- host → device -----------------------------------------------------------------------------
     def _receive(self) -> None:
@@ -230,7 +233,7 @@ class SimSerialDevice:
     # ---- device → host -----------------------------------------------------------------------------
     def _produce(self, now_ns: int) -> None:
         """Queue the frames due by ``now_ns`` with their scheduled faults (under the lock)."""
-        count = min(self._cycle_at(now_ns) + 1 - self._next_cycle, MAX_BATCH_FRAMES)
+        count = min(self._cycle_at(now_ns + LOOKAHEAD_NS) + 1 - self._next_cycle, MAX_BATCH_FRAMES)
         if count <= 0:
             return
         first = self._next_cycle
@@ -288,8 +291,7 @@ class SimSerialDevice:
                 self._tx[0] = (ready_ns, item[n:])
             else:
                 self._tx.popleft()
-        next_frame_ns = int(self.source.host_ns_at((self._next_cycle) * self.period_s))
-        return next_frame_ns if self._streaming else now_ns + round(MAX_WAIT_S * 1e9)
+        return now_ns + round(MAX_WAIT_S * 1e9)
 
 
 def open_simulated_device(bench: Bench, sim_bench: FrameSource | None) -> SimSerialDevice:
