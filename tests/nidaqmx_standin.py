@@ -34,6 +34,17 @@ from nidaqmx import constants, errors
 CurrentSamples = Callable[[int, int], np.ndarray]
 
 
+def real_driver_installed() -> bool:
+    """Whether the real NI-DAQmx driver is on this machine (tests of its absence skip if it is)."""
+    from nidaqmx.system import System
+
+    try:
+        System.local().driver_version  # noqa: B018
+    except errors.DaqNotFoundError:
+        return False
+    return True
+
+
 def synthetic_currents(rate_hz: float, n_channels: int) -> CurrentSamples:
     """Three-phase 40 Hz currents of 10 A plus a slow ramp, a pure function of the sample index."""
 

@@ -24,7 +24,7 @@ from drivers.sim.bench import SimBench
 from drivers.sim.drive import SimDrive
 from nidaqmx import constants
 from tests.helpers import run_cli
-from tests.nidaqmx_standin import StandinDevice, StandinHardware, synthetic_currents
+from tests.nidaqmx_standin import StandinDevice, StandinHardware, real_driver_installed, synthetic_currents
 
 RATE_HZ, BLOCK, A_PER_V = 25600, 2560, 10.0
 NI_9234_CHANNELS = "cDAQ1Mod1/ai0, cDAQ1Mod1/ai1, cDAQ1Mod1/ai2, cDAQ1Mod1/ai3"
@@ -205,18 +205,7 @@ def test_inconsistent_daq_settings_are_input_errors(tmp_path: Path, hardware: St
     assert (run.code, last_line(run.err)) == (2, f"acq: error: {message}")
 
 
-def _driver_installed() -> bool:
-    from nidaqmx.errors import DaqNotFoundError
-    from nidaqmx.system import System
-
-    try:
-        System.local().driver_version  # noqa: B018
-    except DaqNotFoundError:
-        return False
-    return True
-
-
-@pytest.mark.skipif(_driver_installed(), reason="the NI-DAQmx driver is installed here")
+@pytest.mark.skipif(real_driver_installed(), reason="the NI-DAQmx driver is installed here")
 def test_real_nidaqmx_without_driver_end_to_end(tmp_path: Path) -> None:
     """The installed nidaqmx package, no driver: `acq record` says so in one line, exit 1, no session."""
     bench = write_bench(tmp_path)
