@@ -123,6 +123,7 @@ class NidaqCurrentSource:
             timing = self._task.timing
             timing.cfg_samp_clk_timing(s.rate_hz, sample_mode=lib.constants.AcquisitionType.CONTINUOUS,
                                        samps_per_chan=math.ceil(s.buffer_s * s.rate_hz))
+            self._task.control(lib.constants.TaskMode.TASK_COMMIT)  # DAQmx may coerce the rate only when verifying
             self._rate_hz = float(timing.samp_clk_rate)
             self._task.in_stream.input_buf_size = math.ceil(s.buffer_s * self._rate_hz)
             block = max(1, round(s.block_s * self._rate_hz))

@@ -8,7 +8,8 @@ adapter under test catches the very exception classes and codes the driver raise
   checked: DAQmx errors -200220 / -200170), settable ``ai_excit_src``, ``ai_excit_val``, ``ai_coupling``
   (-200452 on a card without them), ``timing.cfg_samp_clk_timing`` with rate coercion to the card's
   rate ladder (NI 9234: 51.2 kS/s / n), ``timing.samp_clk_rate``, ``in_stream.input_buf_size``,
-  ``in_stream.total_samp_per_chan_acquired``, ``devices``, ``start``/``stop``/``close``;
+  ``in_stream.total_samp_per_chan_acquired``, ``devices``, ``control`` (the rate reads back coerced only
+  once the task is verified or committed, as DAQmx may coerce it then), ``start``/``stop``/``close``;
 * ``stream_readers.AnalogMultiChannelReader(task.in_stream).read_many_sample(data,
   number_of_samples_per_channel, timeout)`` filling the caller's array (channel-major) with what the
   sensors output (current / sensor gain, clipped to the range) and returning samples per channel;
@@ -193,16 +194,25 @@ class AIChannelCollection:
 
 
 class Timing:
+    """Like DAQmx, the rate reads back coerced only once the task is verified (or committed)."""
+
     def __init__(self, task: Task) -> None:
         self._task = task
-        self.samp_clk_rate = 0.0
+        self._rate_hz = 0.0
         self.sample_mode: Any = None
 
     def cfg_samp_clk_timing(self, rate: float, source: str = "", active_edge: Any = constants.Edge.RISING,
                             sample_mode: Any = constants.AcquisitionType.FINITE, samps_per_chan: int = 1000) -> None:
-        self.samp_clk_rate = self._task.ai_channels.channels[0].device.coerce(rate)
+        self._rate_hz = rate
         self.sample_mode = sample_mode
         self._task.in_stream.input_buf_size = samps_per_chan
+        self._task.verified = False
+
+    @property
+    def samp_clk_rate(self) -> float:
+        if not self._task.verified:
+            return self._rate_hz
+        return self._task.ai_channels.channels[0].device.coerce(self._rate_hz)
 
 
 class InStream:
@@ -227,6 +237,7 @@ class Task:
         self.timing = Timing(self)
         self.in_stream = InStream(self)
         self.acquired = 0
+        self.verified = False
         self.running = False
         self.closed = False
         self.hardware.tasks.append(self)
@@ -238,8 +249,12 @@ class Task:
             seen.setdefault(channel.device.name, channel.device)
         return list(seen.values())
 
+    def control(self, action: Any) -> None:
+        if action in (constants.TaskMode.TASK_VERIFY, constants.TaskMode.TASK_COMMIT):
+            self.verified = True
+
     def start(self) -> None:
-        self.running = True
+        self.verified = self.running = True
 
     def stop(self) -> None:
         self.running = False
