@@ -39,6 +39,7 @@ from analysis.model import TwoMassParams, antiresonance_hz, frequency_response, 
 FitKind = Literal["amplitude", "complex"]
 FitParams = Literal["K", "K,Jm,Jl"]
 FitStatus = Literal["converged", "max_evaluations", "failed"]
+FitWeighting = Literal["coherence", "uniform"]
 
 PARAM_NAMES: tuple[str, ...] = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")
 BAND_LOW_HZ = 10.0
@@ -66,11 +67,14 @@ class FitOptions:
         Fit |H| only (immune to a clock offset) or the complex H.
     band_hz : tuple of float or None
         Fit band (low, high), Hz; None for 10 Hz … min(0.4·f_enc, 500 Hz).
+    weighting : {"coherence", "uniform"}
+        Bin weights γ²/(1−γ²) (ours) or all 1 (the paper's).
     """
 
     params: FitParams = "K,Jm,Jl"
     kind: FitKind = "amplitude"
     band_hz: tuple[float, float] | None = None
+    weighting: FitWeighting = "coherence"
 
 
 @dataclass(frozen=True)
@@ -183,7 +187,7 @@ class _Problem:
         self.f = frf.f_hz[sel]
         self.log_h = np.log(frf.H[sel])
         g2 = np.clip(frf.coherence[sel], 0.0, COHERENCE_CLIP)
-        self.w = g2 / (1.0 - g2)
+        self.w = g2 / (1.0 - g2) if options.weighting == "coherence" else np.ones_like(g2)
         self.sqrt_w = np.sqrt(self.w)
         self.kind = options.kind
         self.free = ("K_Nm_per_rad", "C_Nms_per_rad") if options.params == "K" else PARAM_NAMES

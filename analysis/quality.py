@@ -49,10 +49,10 @@ class Thresholds:
 
     excitation_poor: float = 0.7
     excitation_failed: float = 0.4
-    coherence_poor: float = 0.4
-    coherence_failed: float = 0.2
+    coherence_poor: float = 0.7
+    coherence_failed: float = 0.3
     misfit_ratio_poor: float = 3.0
-    residual_poor: float = 0.05
+    residual_poor: float = 0.08
     residual_failed: float = 0.30
     ci_K_poor: float = 0.02
     ci_K_failed: float = 0.10
@@ -152,8 +152,9 @@ def assess(
 
     level = _grade(mean_coh, th.coherence_poor, th.coherence_failed)
     if level != "ok":
-        findings.append((level, f"mean coherence {mean_coh:.2f} in {lo:g}…{hi:g} Hz: speed and torque are "
-                                f"mostly noise there"))
+        findings.append((level, f"mean coherence {mean_coh:.2f} in {lo:g}…{hi:g} Hz: the motion excites the band "
+                                f"weakly (in closed loop that biases |H|, not only scatters it) — shorten the "
+                                f"acceleration time"))
 
     ratio = fit.residual_rms / _noise_rms(frf, in_band)
     if np.isfinite(fit.residual_rms):

@@ -190,16 +190,24 @@ def test_given_band_is_used_and_an_empty_band_is_refused():
 
 def test_good_excitation_gives_ok_and_the_slow_profile_does_not():
     """Same plant, same disturbance: 0.2 s ramps excite the joint, the paper's 0.5 s ramps do not."""
-    fast_frf, fast_fit = identify(simulate(PAPER, 1, accel_time_s=0.2, disturbance_Nm=1.5))
+    fast_frf, fast_fit = identify(simulate(PAPER, 1, accel_time_s=0.2))
     fast = assess(fast_frf, fast_fit, clock_residual_s=2e-5)
     assert fast.verdict == "ok" and fast.reasons == ()
-    assert fast.excitation_coherence > 0.8
-    slow_frf, slow_fit = identify(simulate(PAPER, 1, accel_time_s=0.5, disturbance_Nm=1.5))
+    assert fast.mean_coherence > 0.8 and fast.excitation_coherence > 0.9
+    slow_frf, slow_fit = identify(simulate(PAPER, 1, accel_time_s=0.5))
     slow = assess(slow_frf, slow_fit, clock_residual_s=2e-5)
     assert slow.verdict in ("poor", "failed")
-    assert slow.excitation_coherence < 0.7
+    assert slow.mean_coherence < 0.7
     assert "shorten the acceleration time" in slow.reasons[0]
     assert slow.excitation_torque_db < fast.excitation_torque_db - 6.0
+
+
+def test_a_noisy_slow_profile_fails_on_the_excitation_between_fa_and_fr():
+    frf, fit = identify(simulate(PAPER, 1, accel_time_s=0.5, disturbance_Nm=3.0))
+    q = assess(frf, fit)
+    assert q.verdict == "failed" and q.excitation_coherence < 0.4
+    assert any(r.startswith(f"coherence {q.excitation_coherence:.2f} between f_a") and "does not excite" in r
+               for r in q.reasons)
 
 
 def test_unmodelled_mode_and_clock_residual_are_reported():

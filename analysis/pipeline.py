@@ -1,0 +1,155 @@
+"""A raw recording → identified joint: signals → FRF → fit → quality → result (design §5).
+
+``pipeline="acq"`` is our chain (clock alignment, the chosen torque estimator, anti-alias
+resampling, coherence-weighted fit). ``pipeline="paper"`` is Xu et al.'s, kept for comparison:
+Hilbert torque, no alignment, linear interpolation to the encoder rate, uniform weights.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from analysis.clocks import ClockFit
+from analysis.fit import FitKind, FitOptions, FitParams, FitResult, PARAM_NAMES, fit_two_mass
+from analysis.frf import FrequencyResponse, estimate_frf
+from analysis.model import TwoMassParams
+from analysis.quality import Quality, assess
+from analysis.report import FigureData, figure_data
+from analysis.signals import Recording, TorqueMethod, prepare_signals, prepare_signals_paper
+
+Pipeline = Literal["acq", "paper"]
+
+
+@dataclass(frozen=True)
+class AnalysisOptions:
+    """What the analysis does.
+
+    Attributes
+    ----------
+    torque_method : {"encoder", "hilbert", "park"}
+        Torque estimator (ignored by ``pipeline="paper"``, which uses hilbert).
+    params : {"K,Jm,Jl", "K"}
+        Free parameters besides C; ``"K"`` fixes J_m, J_l to ``nominal``.
+    fit : {"amplitude", "complex"}
+        Fit |H| or the complex H.
+    band_hz : tuple of float or None
+        Fit band (low, high), Hz; None for 10 Hz … min(0.4·f_enc, 500 Hz).
+    align : bool
+        Align the clocks from the data (ignored by ``pipeline="paper"``, which does not).
+    segment_s : float
+        Welch segment length, s.
+    nominal : TwoMassParams or None
+        The bench's nominal values (needed for ``params="K"``; otherwise one extra fit start).
+    pipeline : {"acq", "paper"}
+        Our chain or the paper's.
+    """
+
+    torque_method: TorqueMethod = "encoder"
+    params: FitParams = "K,Jm,Jl"
+    fit: FitKind = "amplitude"
+    band_hz: tuple[float, float] | None = None
+    align: bool = True
+    segment_s: float = 0.5
+    nominal: TwoMassParams | None = None
+    pipeline: Pipeline = "acq"
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The options as JSON-ready values."""
+        nominal = None if self.nominal is None else {n: getattr(self.nominal, n) for n in PARAM_NAMES[:3]}
+        return {"pipeline": self.pipeline, "torque_method": self.torque_method if self.pipeline == "acq" else "hilbert",
+                "params": self.params, "fit": self.fit, "band_hz": None if self.band_hz is None else list(self.band_hz),
+                "align": self.align and self.pipeline == "acq", "segment_s": self.segment_s, "nominal": nominal}
+
+
+@dataclass(frozen=True)
+class Result:
+    """An identified joint with everything needed to judge and draw it.
+
+    Attributes
+    ----------
+    fit : FitResult
+        Parameters, intervals, band, f_a, f_r.
+    quality : Quality
+        Verdict and reasons.
+    clock : ClockFit
+        The DAQ → drive clock relation used.
+    frf : FrequencyResponse
+        The measured frequency response.
+    figures : FigureData
+        Data of the report figures.
+    options : AnalysisOptions
+        Options as given.
+    notes : tuple of str
+        What the signal chain reports (gaps and spans used, clock stage, torque sign).
+    """
+
+    fit: FitResult
+    quality: Quality
+    clock: ClockFit
+    frf: FrequencyResponse
+    figures: FigureData
+    options: AnalysisOptions
+    notes: tuple[str, ...]
+
+    def to_json_dict(self) -> dict[str, Any]:
+        """The result as JSON-ready values (NaN → None), keys as documented for ``--json``.
+
+        ``quality.reasons`` lists the verdict's reasons, then the signal chain's notes prefixed
+        ``"note: "``.
+        """
+        v = self.fit.values
+        return {
+            **{n: _num(getattr(v, n)) for n in PARAM_NAMES},
+            "ci95": {n: [_num(lo), _num(hi)] for n, (lo, hi) in self.fit.ci95.items()},
+            "antiresonance_hz": _num(self.fit.f_a),
+            "resonance_hz": _num(self.fit.f_r),
+            "clock": {"offset_s": _num(self.clock.offset_s), "drift_ppm": _num(self.clock.drift_ppm),
+                      "residual_s": _num(self.clock.residual_s)},
+            "quality": {"verdict": self.quality.verdict, "mean_coherence": _num(self.quality.mean_coherence),
+                        "reasons": [*self.quality.reasons, *(f"note: {n}" for n in self.notes)]},
+            "options": {**self.options.to_json_dict(), "band_hz": list(self.fit.band)},
+        }
+
+
+def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Result:
+    """Identify K, J_m, J_l, C of a joint from a raw recording.
+
+    Parameters
+    ----------
+    rec : Recording
+        Phase current(s), encoder positions and their indices/stamps, as recorded.
+    options : AnalysisOptions, optional
+        Torque method, free parameters, fit kind, band, alignment, chain.
+
+    Returns
+    -------
+    Result
+
+    Raises
+    ------
+    ValueError
+        Bad input; in particular :class:`analysis.frf.RecordTooShortError` when the usable span
+        holds fewer than two Welch segments and :class:`analysis.fit.FitInputError` for a bad band
+        or ``params="K"`` without nominal values. Messages are one line.
+    """
+    if options.pipeline == "paper":
+        sig = prepare_signals_paper(rec)
+        weighting = "uniform"
+    else:
+        sig = prepare_signals(rec, options.torque_method, align=options.align)
+        weighting = "coherence"
+    frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=options.segment_s)
+    fit = fit_two_mass(frf, FitOptions(params=options.params, kind=options.fit, band_hz=options.band_hz,
+                                       weighting=weighting), nominal=options.nominal)
+    residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
+    quality = assess(frf, fit, clock_residual_s=residual)
+    return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
+                  figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit),
+                  options=options, notes=tuple(sig.notes))
+
+
+def _num(x: float) -> float | None:
+    """A float for JSON, None for NaN or infinity."""
+    return float(x) if math.isfinite(x) else None

@@ -1,0 +1,118 @@
+"""The data of the report figures, as plain arrays (no plotting library here).
+
+A viewer or the PNG writer draws: the torque and speed traces (decimated), the measured |H| with
+the fitted model and its 95 % band, f_a and f_r marked, and the coherence.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from analysis.fit import Z95, FitResult
+from analysis.frf import FrequencyResponse
+from analysis.model import frequency_response
+
+MAX_TRACE_POINTS = 5000
+MODEL_POINTS = 600
+_LOG_STEP = 1e-6
+
+
+@dataclass(frozen=True)
+class FigureData:
+    """Everything a report figure shows, SI units.
+
+    Attributes
+    ----------
+    t_s, torque_Nm, speed_rad_s : ndarray
+        Time traces, decimated to at most :data:`MAX_TRACE_POINTS` samples.
+    f_hz, H_abs, coherence : ndarray
+        Measured FRF amplitude, (rad/s)/(N·m), and coherence γ² from 0 Hz to Nyquist.
+    model_f_hz, model_abs, model_low, model_high : ndarray
+        Fitted model |H| on a log grid over the fit band and its pointwise 95 % band
+        (linear propagation of the parameter covariance); NaN when the fit failed.
+    band_hz : tuple of float
+        Fit band (low, high), Hz.
+    f_a_hz, f_r_hz : float
+        Anti-resonance and resonance of the fitted model, Hz.
+    """
+
+    t_s: np.ndarray
+    torque_Nm: np.ndarray
+    speed_rad_s: np.ndarray
+    f_hz: np.ndarray
+    H_abs: np.ndarray
+    coherence: np.ndarray
+    model_f_hz: np.ndarray
+    model_abs: np.ndarray
+    model_low: np.ndarray
+    model_high: np.ndarray
+    band_hz: tuple[float, float]
+    f_a_hz: float
+    f_r_hz: float
+
+
+def decimate_trace(n: int, max_points: int = MAX_TRACE_POINTS) -> slice:
+    """A slice taking every k-th of ``n`` samples so that at most ``max_points`` remain."""
+    return slice(None, None, max(1, -(-n // max_points)))
+
+
+def model_band(fit: FitResult, f_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The fitted model's |H| and its pointwise 95 % band.
+
+    σ²(f) = gᵀ Σ g with g = ∂ln|H(f)|/∂ln θ over the fitted parameters (central differences) and Σ
+    the covariance of their logarithms.
+
+    Parameters
+    ----------
+    fit : FitResult
+        The fit.
+    f_hz : ndarray
+        Frequencies, Hz.
+
+    Returns
+    -------
+    abs_H, low, high : ndarray
+        |H| and its 95 % band, (rad/s)/(N·m).
+    """
+    log_abs = np.log(np.abs(frequency_response(fit.values, f_hz)))
+    grads = []
+    for name in fit.fitted:
+        value = getattr(fit.values, name)
+        up = replace(fit.values, **{name: value * np.exp(_LOG_STEP)})
+        down = replace(fit.values, **{name: value * np.exp(-_LOG_STEP)})
+        grads.append((np.log(np.abs(frequency_response(up, f_hz)))
+                      - np.log(np.abs(frequency_response(down, f_hz)))) / (2.0 * _LOG_STEP))
+    g = np.array(grads)
+    sigma = np.sqrt(np.clip(np.einsum("if,ij,jf->f", g, fit.covariance, g), 0.0, None))
+    return np.exp(log_abs), np.exp(log_abs - Z95 * sigma), np.exp(log_abs + Z95 * sigma)
+
+
+def figure_data(
+    t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: np.ndarray, frf: FrequencyResponse, fit: FitResult
+) -> FigureData:
+    """Assemble the report's figure data.
+
+    Parameters
+    ----------
+    t_s, torque_Nm, speed_rad_s : ndarray
+        The prepared signals: time (s), torque (N·m), motor speed (rad/s).
+    frf : FrequencyResponse
+        The measured frequency response.
+    fit : FitResult
+        The model fitted to it.
+
+    Returns
+    -------
+    FigureData
+    """
+    keep = decimate_trace(len(t_s))
+    f_model = np.geomspace(fit.band[0], fit.band[1], MODEL_POINTS)
+    abs_h, low, high = model_band(fit, f_model)
+    return FigureData(
+        t_s=np.asarray(t_s)[keep], torque_Nm=np.asarray(torque_Nm)[keep], speed_rad_s=np.asarray(speed_rad_s)[keep],
+        f_hz=frf.f_hz, H_abs=np.abs(frf.H), coherence=frf.coherence,
+        model_f_hz=f_model, model_abs=abs_h, model_low=low, model_high=high,
+        band_hz=fit.band, f_a_hz=fit.f_a, f_r_hz=fit.f_r,
+    )
