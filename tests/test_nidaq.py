@@ -226,3 +226,14 @@ def test_hardware_template_documents_every_daq_and_drive_key() -> None:
     for model in (DaqNidaqmx, DriveCanopen, DriveSerial):
         for key in model.model_fields:
             assert f"\n{key} = " in text or f"\n# {key} = " in text, key
+
+
+def test_current_channels_scale_by_the_sensor_ratio(tmp_path: Path, hardware: StandinHardware) -> None:
+    settings = load_bench(write_bench(tmp_path, measurement="current", sensor_A_per_A=1000.0, range_A=0.02)).daq
+    hardware.sensor_gain = 1000.0  # a closed-loop Hall sensor, 1:1000, into a ±20 mA input
+    source = NidaqCurrentSource(settings, lib=hardware.module())
+    source.start()
+    block = source.read(0.2)
+    source.stop()
+    assert block is not None and [c.measurement for c in hardware.tasks[0].ai_channels.channels] == ["current"]
+    np.testing.assert_allclose(block.current_a, hardware.currents(0, BLOCK), rtol=1e-12)
