@@ -16,6 +16,7 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from acq import __version__
+from acq.analyze import analyze_session, result_table
 from acq.config import load_bench, load_profile
 from acq.devices import devices_command
 from acq.recorder import Recorder, RecordingResult
@@ -59,8 +60,9 @@ def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> 
               help="Folder for the session file.")
 @click.option("--operator", default="", help="Who is at the bench (stored in the session).")
 @click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
+@click.option("--no-analyze", is_flag=True, help="Only record; do not identify the joint afterwards.")
 def record(profile_name: str, bench_path: Path | None, duration_s: float | None, joint: str | None,
-           out_dir: Path, operator: str, fast: bool) -> int:
+           out_dir: Path, operator: str, fast: bool, no_analyze: bool) -> int:
     """Swing the joint on PROFILE, record current and encoder, write one session file."""
     bench = load_bench(bench_path)
     if joint:
@@ -71,12 +73,69 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator)
     result = _record_with_progress(recorder, duration, f"recording {bench.joint}")
     out.print(summary_table(summarize(load(result.path))))
+    if not no_analyze and result.current_samples and result.encoder_samples:
+        _analyze_after_recording(result.path)
     if result.status == "complete":
         return 0
     err.print(f"[bold red]{result.status}[/]: {escape(result.stop_reason)} — everything recorded up to the stop is "
               f"kept in {escape(str(result.path))} ({result.current_samples} current samples, "
               f"{result.encoder_samples} encoder samples)")
     return EXIT_INTERRUPTED if result.status == "interrupted" else 1
+
+
+def _analyze_after_recording(path: Path) -> None:
+    """Identify the joint of a session just recorded; a failure is reported, the recording stands."""
+    with err.status("identifying the joint …"):
+        try:
+            done = analyze_session(path)
+        except AcqError as e:
+            click.echo(f"acq: analysis: {e}", err=True)
+            return
+    out.print(result_table(done.json_dict))
+    out.print(f"result: {done.json_path}" + (f" · report: {done.report_path}" if done.report_path else ""))
+
+
+def _parse_band(text: str | None) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--band {text}: must be LO,HI in Hz, e.g. 10,400") from None
+    if not 0 < lo < hi:
+        raise ConfigError(f"--band {text}: must be LO,HI in Hz with 0 < LO < HI")
+    return lo, hi
+
+
+@cli.command(name="analyze")
+@click.argument("session_path", type=click.Path(path_type=Path))
+@click.option("--torque", type=click.Choice(["encoder", "hilbert", "park"]), default=None,
+              help="Torque from current: encoder-angle demodulation (default, one phase), Park (≥ 2 phases), "
+                   "or the paper's Hilbert envelope.")
+@click.option("--params", type=click.Choice(["K,Jm,Jl", "K"]), default="K,Jm,Jl", show_default=True,
+              help="Free parameters besides C; K fixes J_m, J_l to the bench's nominal values.")
+@click.option("--fit", "fit_kind", type=click.Choice(["amplitude", "complex"]), default="amplitude",
+              show_default=True, help="Fit the FRF amplitude (paper) or the complex FRF.")
+@click.option("--band", default=None, help="Fit band LO,HI in Hz (default 10 … min(0.4·f_enc, 500)).")
+@click.option("--paper", is_flag=True, help="The paper's chain: Hilbert torque, no clock alignment, linear "
+                                            "resampling, uniform weights (for comparison).")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
+@click.option("--no-report", is_flag=True, help="Do not draw <session>.report.png.")
+def analyze_command(session_path: Path, torque: str | None, params: str, fit_kind: str, band: str | None,
+                    paper: bool, as_json: bool, no_report: bool) -> int:
+    """Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png."""
+    band_hz = _parse_band(band)
+    if as_json:
+        done = analyze_session(session_path, torque=torque, params=params, fit=fit_kind, band_hz=band_hz,
+                               pipeline="paper" if paper else "acq", report=not no_report)
+        click.echo(json.dumps(done.json_dict, indent=2))
+        return 0
+    with err.status(f"analysing {session_path} …"):
+        done = analyze_session(session_path, torque=torque, params=params, fit=fit_kind, band_hz=band_hz,
+                               pipeline="paper" if paper else "acq", report=not no_report)
+    out.print(result_table(done.json_dict))
+    out.print(f"result: {done.json_path}" + (f" · report: {done.report_path}" if done.report_path else ""))
+    return 0
 
 
 @cli.command()

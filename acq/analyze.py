@@ -1,0 +1,171 @@
+"""Analyse a session file: session → :mod:`analysis` → result table, ``.result.json``, ``.report.png``.
+
+The only place where the application meets the analysis: it turns an :class:`acq.session.Session`
+into the plain arrays of :class:`analysis.signals.Recording`, runs
+:func:`analysis.pipeline.analyze`, and writes the results beside the session (the raw groups are
+never touched). On the simulated bench the table also shows the simulated truth and the error.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rich.table import Table
+
+from acq import __version__
+from acq.session import Session, load, utc_now_iso
+from analysis.model import TwoMassParams
+from analysis.pipeline import AnalysisOptions, Pipeline, Result, analyze
+from analysis.signals import Recording, TorqueMethod
+from drivers.errors import ConfigError
+
+PARAMS = (("K_Nm_per_rad", "K", "N·m/rad"), ("Jm_kgm2", "J_m", "kg·m²"), ("Jl_kgm2", "J_l", "kg·m²"),
+          ("C_Nms_per_rad", "C", "N·m·s/rad"))
+
+
+@dataclass(frozen=True)
+class SessionResult:
+    """A session's identification with where its outputs went."""
+
+    session: Session
+    result: Result
+    json_dict: dict[str, Any]
+    json_path: Path
+    report_path: Path | None
+
+
+def recording_from_session(session: Session) -> Recording:
+    """The session's raw streams as the analysis's plain arrays (nothing resampled or corrected)."""
+    cur, enc, bench = session.current, session.encoder, session.bench
+    return Recording(
+        current_a=dict(cur.phases_a),
+        rate_hz=cur.rate_hz,
+        encoder_index=enc.index,
+        position_counts=enc.position_counts,
+        period_s=enc.period_s,
+        counts_per_rev=enc.counts_per_rev,
+        pole_pairs=bench.motor.pole_pairs,
+        k_t_Nm_per_A=bench.motor.torque_constant_Nm_per_A,
+        block_first_index=cur.block_first_index,
+        block_count=cur.block_count,
+        block_host_ns=cur.block_host_ns,
+        encoder_host_ns=enc.host_ns,
+    )
+
+
+def options_for(session: Session, *, torque: TorqueMethod | None = None, params: str = "K,Jm,Jl",
+                fit: str = "amplitude", band_hz: tuple[float, float] | None = None,
+                pipeline: Pipeline = "acq") -> AnalysisOptions:
+    """Analysis options with the bench's nominal plant; torque defaults to park with ≥ 2 phases."""
+    nominal = session.bench.nominal
+    if torque is None:
+        torque = "park" if len(session.current.phases_a) >= 2 else "encoder"
+    return AnalysisOptions(
+        torque_method=torque, params=params, fit=fit, band_hz=band_hz, pipeline=pipeline,  # type: ignore[arg-type]
+        nominal=TwoMassParams(K_Nm_per_rad=nominal.K_Nm_per_rad, Jm_kgm2=nominal.Jm_kgm2, Jl_kgm2=nominal.Jl_kgm2,
+                              C_Nms_per_rad=0.0),  # the bench gives no damping; the fit always fits C
+    )
+
+
+def sha256_of(path: Path) -> str:
+    """SHA-256 of a file, hex."""
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def simulated_truth(session: Session) -> dict[str, float] | None:
+    """The plant the simulated bench ran, when the current came from it (None for hardware)."""
+    sim = session.bench.sim
+    if sim is None or session.bench.daq.driver != "sim":
+        return None
+    return {"K_Nm_per_rad": sim.K_Nm_per_rad, "Jm_kgm2": sim.Jm_kgm2, "Jl_kgm2": sim.Jl_kgm2,
+            "C_Nms_per_rad": sim.C_Nms_per_rad, "offset_s": sim.daq_offset_s, "drift_ppm": sim.daq_drift_ppm}
+
+
+def result_json(session: Session, result: Result) -> dict[str, Any]:
+    """The ``--json`` / ``.result.json`` document: the result's keys plus what identifies the session."""
+    doc = result.to_json_dict()
+    doc["session"] = {
+        "path": str(session.path),
+        "session_id": session.attrs.get("session_id"),
+        "joint": session.attrs.get("joint"),
+        "created_utc": session.attrs.get("created_utc"),
+        "status": session.status,
+        "sha256": sha256_of(session.path),
+        "tags": session.tags,
+    }
+    doc["analyzed_utc"] = utc_now_iso()
+    doc["acq_version"] = __version__
+    truth = simulated_truth(session)
+    if truth is not None:
+        doc["simulated_truth"] = truth
+    return doc
+
+
+def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *, write: bool = True,
+                    report: bool = True, **option_kwargs: Any) -> SessionResult:
+    """Identify the joint of one session; write ``<session>.result.json`` (and the report PNG).
+
+    Bad or unusable input (too short, bad band, …) raises :class:`ConfigError` naming the session.
+    """
+    session = load(path)
+    opts = options if options is not None else options_for(session, **option_kwargs)
+    try:
+        result = analyze(recording_from_session(session), opts)
+    except ValueError as e:
+        raise ConfigError(f"{session.path}: {e}") from None
+    doc = result_json(session, result)
+    json_path = session.path.with_name(session.path.stem + ".result.json")
+    report_path = session.path.with_name(session.path.stem + ".report.png") if report else None
+    if write:
+        json_path.write_text(json.dumps(doc, indent=2))
+        if report_path is not None:
+            from acq.plots import render_report_png
+
+            render_report_png(result.figures, report_path, title=f"{session.attrs.get('joint')} · {session.path.name}",
+                              values=doc)
+    return SessionResult(session, result, doc, json_path, report_path if write else None)
+
+
+def _fmt(x: float | None) -> str:
+    return "—" if x is None or not math.isfinite(x) else f"{x:.5g}"
+
+
+def result_table(doc: dict[str, Any]) -> Table:
+    """The identified values with 95 % intervals, frequencies, clock relation and verdict."""
+    truth = doc.get("simulated_truth")
+    quality = doc["quality"]
+    table = Table(title=f"identification — verdict [bold]{quality['verdict']}[/bold]")
+    for column in ("quantity", "value", "95 % interval", "unit", *(("sim truth", "error") if truth else ())):
+        table.add_column(column, justify="left" if column == "quantity" else "right")
+    for key, name, unit in PARAMS:
+        value, (lo, hi) = doc[key], doc["ci95"][key]
+        row = [name, _fmt(value), f"{_fmt(lo)} … {_fmt(hi)}", unit]
+        if truth:
+            err = None if value is None else 100.0 * (value - truth[key]) / truth[key]
+            row += [_fmt(truth[key]), "—" if err is None else f"{err:+.2f} %"]
+        table.add_row(*row)
+    clock = doc["clock"]
+    extra = [("anti-resonance f_a", doc["antiresonance_hz"], "Hz", None),
+             ("resonance f_r", doc["resonance_hz"], "Hz", None),
+             ("clock offset", None if clock["offset_s"] is None else clock["offset_s"] * 1e6, "µs",
+              None if not truth else truth["offset_s"] * 1e6),
+             ("clock drift", clock["drift_ppm"], "ppm", None if not truth else truth["drift_ppm"]),
+             ("clock residual", None if clock["residual_s"] is None else clock["residual_s"] * 1e6, "µs", None),
+             ("mean coherence in band", quality["mean_coherence"], "", None)]
+    for name, value, unit, true_value in extra:
+        row = [name, _fmt(value), "", unit]
+        if truth:
+            row += [_fmt(true_value), "" if true_value is None or value is None else f"{value - true_value:+.1f} {unit}"]
+        table.add_row(*row)
+    if quality["reasons"]:
+        table.caption = "\n".join(quality["reasons"])
+    return table

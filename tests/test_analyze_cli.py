@@ -1,0 +1,92 @@
+"""`acq analyze` and the analysis at the end of `acq record`, on session files from the simulated bench."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from acq.session import load
+from tests.helpers import run_cli
+
+KEYS = {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "ci95", "antiresonance_hz", "resonance_hz",
+        "clock", "quality", "options"}
+
+
+@pytest.fixture(scope="module")
+def session_10s(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 10 s recording of the default simulated bench (recorded, not analysed)."""
+    out = tmp_path_factory.mktemp("sessions")
+    from acq.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(["record", "--profile", "triangle_0.2s", "--fast", "--no-analyze", "--out", str(out)])
+    assert exc.value.code == 0
+    (path,) = out.glob("*.h5")
+    return path
+
+
+def test_analyze_json_has_documented_keys_and_finds_K(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report")
+    assert run.code == 0, run.err
+    doc = json.loads(run.out)
+    assert KEYS <= set(doc)
+    assert set(doc["ci95"]) == {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad"}
+    assert set(doc["clock"]) == {"offset_s", "drift_ppm", "residual_s"}
+    assert {"verdict", "mean_coherence", "reasons"} <= set(doc["quality"])
+    assert doc["quality"]["verdict"] == "ok"
+    truth = doc["simulated_truth"]
+    assert doc["K_Nm_per_rad"] == pytest.approx(truth["K_Nm_per_rad"], rel=0.01)
+    assert doc["Jm_kgm2"] == pytest.approx(truth["Jm_kgm2"], rel=0.02)
+    assert doc["Jl_kgm2"] == pytest.approx(truth["Jl_kgm2"], rel=0.02)
+    assert doc["clock"]["offset_s"] == pytest.approx(truth["offset_s"], abs=50e-6)
+    assert doc["clock"]["drift_ppm"] == pytest.approx(truth["drift_ppm"], abs=5.0)
+    assert doc["options"]["torque_method"] == "encoder" and doc["options"]["params"] == "K,Jm,Jl"
+    written = json.loads(session_10s.with_name(session_10s.stem + ".result.json").read_text())
+    assert written["K_Nm_per_rad"] == doc["K_Nm_per_rad"]
+    assert written["session"]["session_id"] == load(session_10s).attrs["session_id"]
+
+
+def test_params_K_fixes_inertias_to_nominal(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report", "--params", "K")
+    doc = json.loads(run.out)
+    assert doc["Jm_kgm2"] == 0.003027 and doc["Jl_kgm2"] == 0.00748
+    assert doc["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.01)
+
+
+def test_papers_pipeline_is_worse_than_ours(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    ours = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report").out)
+    paper = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report", "--paper").out)
+    assert paper["options"]["pipeline"] == "paper" and paper["options"]["torque_method"] == "hilbert"
+    err = {name: abs(doc["Jm_kgm2"] / 0.003027 - 1) for name, doc in (("ours", ours), ("paper", paper))}
+    assert err["paper"] > 5 * err["ours"]
+
+
+@pytest.mark.parametrize(("band", "message"), [
+    ("500,10", "--band 500,10: must be LO,HI in Hz with 0 < LO < HI"),
+    ("ten,400", "--band ten,400: must be LO,HI in Hz, e.g. 10,400"),
+])
+def test_bad_band_is_one_line_exit_2(session_10s: Path, capsys: pytest.CaptureFixture[str], band: str,
+                                     message: str) -> None:
+    run = run_cli(capsys, "analyze", str(session_10s), "--band", band)
+    assert run.code == 2
+    assert run.err.strip() == f"acq: error: {message}"
+
+
+def test_record_then_too_short_session_fails_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.5", "--fast", "--out", str(tmp_path))
+    assert run.code == 0, "the recording itself is complete; its exit code reports the recording"
+    assert "acq: analysis:" in run.err and "the FRF needs at least 0.750 s" in run.err
+    (path,) = tmp_path.glob("*.h5")
+    again = run_cli(capsys, "analyze", str(path))
+    assert again.code == 2
+    assert again.err.startswith(f"acq: error: {path}: signals last ")
+    assert again.err.strip().endswith("the FRF needs at least 0.750 s (two 0.5 s Welch segments)")
+    assert "Traceback" not in again.err
+
+
+def test_missing_session_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = run_cli(capsys, "analyze", str(tmp_path / "nope.h5"))
+    assert run.code == 2
+    assert run.err.strip() == f"acq: error: {tmp_path / 'nope.h5'}: no such session file"
