@@ -209,11 +209,14 @@ def frequency_alignment(f_current_hz: np.ndarray, t_daq_s: np.ndarray, f_encoder
     n = nw * nw_len
     t_drive = offset_s + t_daq_s[:n] * (1.0 + drift_ppm * 1e-6)
     fc = f_current_hz[:n].reshape(nw, nw_len)
+    # only where the motor turns fast: there a half period is short and the estimate is local
+    fast = fc > 0.25 * np.max(fc)
+    weight = fast / np.maximum(fast.sum(axis=1, keepdims=True), 1)
     cost = np.empty((lags.size, nw))
     for j, lag in enumerate(lags):
-        cost[j] = np.mean((fc - f_encoder(t_drive + lag).reshape(nw, nw_len)) ** 2, axis=1)
+        cost[j] = np.sum(weight * (fc - f_encoder(t_drive + lag).reshape(nw, nw_len)) ** 2, axis=1)
     f_enc0 = f_encoder(t_drive).reshape(nw, nw_len)
-    moving = f_enc0.std(axis=1) > 0.05 * max(np.max(f_enc0), 1e-9)
+    moving = (f_enc0.std(axis=1) > 0.05 * max(np.max(f_enc0), 1e-9)) & (fast.mean(axis=1) > 0.1)
     best = np.argmin(cost, axis=0)
     interior = (best > 0) & (best < lags.size - 1)
     ok = moving & interior
@@ -249,7 +252,7 @@ class _AngleFit:
 
 def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline, pole_pairs: int,
                     offset_s: float, drift_ppm: float, search_s: float = 4e-3, window_s: float = 0.02,
-                    iterations: int = 3) -> _AngleFit | None:
+                    iterations: int = 2) -> _AngleFit | None:
     """Stage 3: offset, drift and θ_0 from the phase of i_a against the encoder's electrical angle.
 
     Parameters

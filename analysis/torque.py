@@ -192,8 +192,9 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
 
     Solves min Σ_n (i_a[n] − dc + i_q(t_n)·sin(θ_e[n] + θ_0))² + λ·Σ (Δ² c)² for the coefficients c of
     a uniform cubic B-spline i_q(t) (a banded system, cost linear in the record length), jointly with
-    the sensor DC; a second pass linearises in θ_0 and re-estimates it with the DC. ``offset`` only
-    starts the estimate (its θ_0 must be within a few degrees and carry the chosen sign).
+    what is left of the sensor DC after subtracting ``offset.dc_a``. A second pass adds the first
+    pass's −i_q·cos(θ_e + θ_0) as a column, i.e. re-estimates θ_0 linearised, so an error of a few
+    mrad in ``offset.theta0_rad`` (which matters where |sin| is small) does not leak into the torque.
 
     Parameters
     ----------
@@ -204,7 +205,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     k_t_Nm_per_A : float
         Torque constant, N·m/A.
     offset : PhaseOffset
-        Starting θ_0 (sign chosen) and sensor DC.
+        θ_0 (sign chosen) and a first estimate of the sensor DC (refined jointly).
     knot_spacing_s : float
         Knot spacing of the spline, s; its bandwidth is about 1/(2·spacing).
     smoothing : float
@@ -217,11 +218,10 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     m = max(1, int(round(knot_spacing_s * rate_hz)))
     if i.size < 4 * m:
         raise ValueError("record shorter than four spline knots")
-    ones = np.ones_like(i)
-    phi = th + offset.theta0_rad
-    iq, _ = _spline_iq(i, -np.sin(phi), m, smoothing, [ones])
-    iq, (_, dtheta) = _spline_iq(i, -np.sin(phi), m, smoothing, [ones, -iq * np.cos(phi)])
-    iq, _ = _spline_iq(i, -np.sin(phi + dtheta), m, smoothing, [ones])
+    y, phi = i - offset.dc_a, th + offset.theta0_rad
+    ones = np.ones_like(y)
+    iq, _ = _spline_iq(y, -np.sin(phi), m, smoothing, [ones])
+    iq, _ = _spline_iq(y, -np.sin(phi), m, smoothing, [ones, -iq * np.cos(phi)])
     return k_t_Nm_per_A * iq
 
 

@@ -1,0 +1,277 @@
+"""The signal chain: a raw recording → torque and speed on the encoder's own instants (design §4, §5.1–5.3).
+
+:func:`prepare_signals` is our chain: gap-free spans, clock fit (:mod:`analysis.clocks`), torque by
+the chosen method at the DAQ samples (:mod:`analysis.torque`), moved to the encoder instants after a
+zero-phase anti-alias filter (:mod:`analysis.resample`), speed by backward difference on k·T
+(:mod:`analysis.encoder`). Long records are processed in chunks of ~20 s with overlapping margins,
+so memory stays a few times one chunk whatever the length.
+
+:func:`prepare_signals_paper` is the paper's chain for comparison: Hilbert torque, no alignment (both
+streams taken as started together, no drift) and linear interpolation onto the common 1/T grid.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field, replace
+from typing import Literal
+
+import numpy as np
+
+from analysis import encoder, resample, torque
+from analysis.clocks import ClockFit, fit_clock, host_relation
+
+TorqueMethod = Literal["hilbert", "encoder", "park"]
+Resampling = Literal["antialias", "linear"]
+
+_CHUNK_S = 20.0
+_MARGIN_S = 0.1
+_PASS_FRACTION = 0.4  # anti-alias pass edge, × encoder rate
+_STOP_FRACTION = 0.6  # anti-alias stop edge, × encoder rate
+
+
+@dataclass(frozen=True)
+class Recording:
+    """One session's raw data as plain arrays (what ``acq.session`` reads; nothing resampled).
+
+    Attributes
+    ----------
+    current_a : dict of str → ndarray
+        Phase currents, A (``"i_a"`` required; ``"i_b"``, ``"i_c"`` optional), all blocks concatenated.
+    rate_hz : float
+        DAQ sample rate as coerced by the card, Hz; DAQ sample n is at t_daq = n / rate_hz.
+    encoder_index : ndarray of int64
+        Cumulative drive cycle k of each encoder sample (at drive time k·period_s).
+    position_counts : ndarray of int64
+        Unwrapped position, counts.
+    period_s : float
+        Drive cycle, s.
+    counts_per_rev : int
+        Encoder counts per mechanical revolution.
+    pole_pairs : int
+        Motor pole pairs p.
+    k_t_Nm_per_A : float
+        Torque constant, N·m/A.
+    block_first_index, block_count : ndarray of int64 or None
+        DAQ sample index of the first sample of each read, and its sample count. None: one gap-free
+        block starting at sample 0.
+    block_host_ns, encoder_host_ns : ndarray of int64 or None
+        Host monotonic arrival stamps of each DAQ read and each encoder sample, ns (None if not recorded;
+        then the frequency stage searches ±2 s around "both streams started together").
+    """
+
+    current_a: dict[str, np.ndarray]
+    rate_hz: float
+    encoder_index: np.ndarray
+    position_counts: np.ndarray
+    period_s: float
+    counts_per_rev: int
+    pole_pairs: int
+    k_t_Nm_per_A: float
+    block_first_index: np.ndarray | None = None
+    block_count: np.ndarray | None = None
+    block_host_ns: np.ndarray | None = None
+    encoder_host_ns: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class PreparedSignals:
+    """Torque and speed at the same instants, ready for the FRF.
+
+    Attributes
+    ----------
+    t_s : ndarray
+        Drive time of each sample, s: k·period_s over the longest gap-free encoder span covered by the current.
+    torque_Nm : ndarray
+        Electromagnetic torque at ``t_s``, N·m.
+    speed_rad_s : ndarray
+        Motor speed at ``t_s``, rad/s (backward difference: divide
+        :func:`analysis.encoder.difference_response` out of the FRF).
+    period_s : float
+        Drive cycle, s.
+    clock : ClockFit
+        The DAQ → drive clock relation used.
+    torque_method : {"hilbert", "encoder", "park"}
+        How the torque was computed.
+    aligned : bool
+        False for the paper's chain (no clock alignment).
+    theta0_rad : float
+        Electrical offset θ_0 used to demodulate, rad, sign chosen (NaN for hilbert).
+    notes : list of str
+        What a person should know (gaps, spans used, sign choices).
+    """
+
+    t_s: np.ndarray
+    torque_Nm: np.ndarray
+    speed_rad_s: np.ndarray
+    period_s: float
+    clock: ClockFit
+    torque_method: TorqueMethod
+    aligned: bool
+    theta0_rad: float = np.nan
+    notes: list[str] = field(default_factory=list)
+
+
+def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", align: bool = True,
+                    resampling: Resampling = "antialias") -> PreparedSignals:
+    """Torque and speed on the encoder instants from a raw recording.
+
+    Parameters
+    ----------
+    rec : Recording
+        The raw session.
+    torque_method : {"encoder", "hilbert", "park"}
+        Torque estimator (:mod:`analysis.torque`); ``park`` needs ``i_a`` and ``i_b``.
+    align : bool
+        Fit the clock relation from the data (True) or take both streams as started together (False).
+    resampling : {"antialias", "linear"}
+        Zero-phase anti-alias filter then spline read (ours) or the paper's plain linear interpolation.
+
+    Raises
+    ------
+    ValueError
+        Bad or too short input, or no overlap between the current and the encoder records.
+    """
+    _validate(rec, torque_method)
+    notes: list[str] = []
+    span = encoder.longest_gap_free_span(rec.encoder_index)
+    cycles = rec.encoder_index[span.start:span.stop]
+    counts = rec.position_counts[span.start:span.stop]
+    if span.gaps:
+        notes.append(f"encoder: {len(span.gaps)} gap(s), first after cycle {span.gaps[0][0]}: using the longest "
+                     f"gap-free span {cycles[0] * rec.period_s:.3f}–{cycles[-1] * rec.period_s:.3f} s")
+    if cycles.size < 8:
+        raise ValueError(f"only {cycles.size} gap-free encoder samples")
+    n0, lo, hi, daq_note = _daq_run(rec)
+    if daq_note:
+        notes.append(daq_note)
+    current = {name: a[lo:hi] for name, a in rec.current_a.items()}
+    angle = encoder.angle_spline(int(cycles[0]), rec.period_s, encoder.counts_to_rad(counts, rec.counts_per_rev))
+    if align:
+        clock = fit_clock(current["i_a"], rec.rate_hz, n0, angle, rec.pole_pairs, _host(rec))
+        if clock.method != "angle":
+            notes.append(f"clock: the angle stage failed (too little motion); using the {clock.method} stage")
+    else:
+        clock = ClockFit(float(cycles[0]) * rec.period_s - n0 / rec.rate_hz, 0.0)
+        notes.append("clock: not aligned (streams taken as started together, no drift)")
+
+    speed = encoder.speed_from_counts(counts, rec.counts_per_rev, rec.period_s)
+    t_s = cycles[1:] * rec.period_s
+    f_pass, f_stop = _PASS_FRACTION / rec.period_s, _STOP_FRACTION / rec.period_s
+    t_daq = clock.daq_time_s(t_s)
+    edge = resample.edge_s(rec.rate_hz, f_pass, f_stop) + 0.01 if resampling == "antialias" else 1.0 / rec.rate_hz
+    inside = (t_daq >= n0 / rec.rate_hz + edge) & (t_daq <= (n0 + hi - lo - 1) / rec.rate_hz - edge)
+    if inside.sum() < 8:
+        raise ValueError("the current and encoder records do not overlap in time")
+    if not inside.all():
+        notes.append(f"using {t_s[inside][0]:.3f}–{t_s[inside][-1]:.3f} s, where both streams have data")
+    t_s, speed, t_daq = t_s[inside], speed[inside], t_daq[inside]
+
+    sign = torque.apex_sign(speed, rec.period_s) if torque_method == "hilbert" else None
+    out = np.empty(t_s.size)
+    theta0 = np.nan
+    for a, b, m0, m1 in _chunks(current["i_a"].size, rec.rate_hz):
+        t0 = (n0 + a - m0) / rec.rate_hz
+        sel = (t_daq >= (n0 + a) / rec.rate_hz) & (t_daq < (n0 + b) / rec.rate_hz)
+        if not sel.any():
+            continue
+        piece = {name: c[a - m0:b + m1] for name, c in current.items()}
+        t_piece = t0 + np.arange(b + m1 - a + m0) / rec.rate_hz
+        if sign is None:
+            tq, theta0 = _demodulated(piece, rec, angle(clock.drive_time_s(t_piece)), torque_method, theta0)
+        else:
+            k = np.clip(np.searchsorted(t_daq, t_piece), 0, t_daq.size - 1)
+            tq = torque.torque_hilbert(piece["i_a"], rec.k_t_Nm_per_A, sign[k])
+        if resampling == "antialias":
+            out[sel] = resample.to_instants(tq, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
+        else:
+            out[sel] = resample.linear_at(tq, rec.rate_hz, t0, t_daq[sel])
+    prepared = PreparedSignals(t_s, out, speed, rec.period_s, clock, torque_method, align, theta0, notes)
+    return _signed(prepared) if sign is None else prepared
+
+
+def prepare_signals_paper(rec: Recording) -> PreparedSignals:
+    """The paper's chain: Hilbert torque, no clock alignment, linear interpolation to the encoder rate.
+
+    The common grid is the encoder's (1/T), so the speed keeps its samples and only the torque is
+    interpolated — linearly, without anti-alias filter.
+    """
+    return prepare_signals(rec, "hilbert", align=False, resampling="linear")
+
+
+def _validate(rec: Recording, torque_method: TorqueMethod) -> None:
+    if "i_a" not in rec.current_a:
+        raise ValueError(f"the recording has no phase i_a (phases: {sorted(rec.current_a)})")
+    if torque_method == "park" and "i_b" not in rec.current_a:
+        raise ValueError("torque method 'park' needs two or three phases; only i_a was recorded")
+    if torque_method not in ("hilbert", "encoder", "park"):
+        raise ValueError(f"unknown torque method {torque_method!r}: use hilbert, encoder or park")
+    n = rec.current_a["i_a"].size
+    if any(a.size != n for a in rec.current_a.values()):
+        raise ValueError("all phases must have the same number of samples")
+    if rec.rate_hz <= 0 or rec.period_s <= 0:
+        raise ValueError(f"rate_hz and period_s must be positive, got {rec.rate_hz}, {rec.period_s}")
+    if rec.encoder_index.size != rec.position_counts.size:
+        raise ValueError("encoder_index and position_counts differ in length")
+
+
+def _daq_run(rec: Recording) -> tuple[int, int, int, str]:
+    """Longest gap-free run of DAQ blocks: (sample index of its first sample, array start, stop, note)."""
+    n = rec.current_a["i_a"].size
+    if rec.block_first_index is None or rec.block_count is None or rec.block_first_index.size == 0:
+        return 0, 0, n, ""
+    first = np.asarray(rec.block_first_index, dtype=np.int64)
+    count = np.asarray(rec.block_count, dtype=np.int64)
+    starts = np.concatenate(([0], np.cumsum(count)[:-1]))
+    breaks = np.flatnonzero(first[1:] != first[:-1] + count[:-1]) + 1
+    if breaks.size == 0:
+        return int(first[0]), 0, n, ""
+    edges = np.concatenate(([0], breaks, [first.size]))
+    sizes = [int(count[a:b].sum()) for a, b in zip(edges[:-1], edges[1:])]
+    best = int(np.argmax(sizes))
+    a = int(edges[best])
+    note = (f"current: {breaks.size} gap(s) in the DAQ sample count; using the longest gap-free run, "
+            f"samples {first[a]}–{first[a] + sizes[best] - 1}")
+    return int(first[a]), int(starts[a]), int(starts[a]) + sizes[best], note
+
+
+def _host(rec: Recording) -> tuple[float, float] | None:
+    if rec.block_host_ns is None or rec.encoder_host_ns is None or rec.block_first_index is None:
+        return None
+    last = np.asarray(rec.block_first_index) + np.asarray(rec.block_count) - 1
+    return host_relation(last, rec.block_host_ns, rec.rate_hz, rec.encoder_index, rec.encoder_host_ns, rec.period_s)
+
+
+def _chunks(n: int, rate_hz: float) -> Iterator[tuple[int, int, int, int]]:
+    """(start, stop, left margin, right margin) in samples, covering 0…n in ~20 s pieces."""
+    size, margin = int(_CHUNK_S * rate_hz), int(_MARGIN_S * rate_hz)
+    for a in range(0, n, size):
+        b = min(n, a + size)
+        yield a, b, min(margin, a), min(margin, n - b)
+
+
+def _demodulated(piece: dict[str, np.ndarray], rec: Recording, theta_m_rad: np.ndarray, method: TorqueMethod,
+                 theta0_ref: float) -> tuple[np.ndarray, float]:
+    """Torque of one chunk by the encoder or park method; θ_0 kept on the branch (mod π) of ``theta0_ref``."""
+    theta_e = rec.pole_pairs * theta_m_rad
+    off = torque.phase_offset(piece["i_a"], theta_e, rec.rate_hz)
+    theta0 = off.theta0_rad if np.isnan(theta0_ref) else off.theta0_rad + np.pi * np.round(
+        (theta0_ref - off.theta0_rad) / np.pi)
+    if method == "encoder":
+        return torque.torque_encoder(piece["i_a"], theta_e, rec.rate_hz, rec.k_t_Nm_per_A,
+                                     replace(off, theta0_rad=theta0)), theta0
+    dc = {name: torque.phase_offset(c, theta_e, rec.rate_hz).dc_a for name, c in piece.items()}
+    return torque.torque_park(piece, theta_e, rec.k_t_Nm_per_A, theta0, dc), theta0
+
+
+def _signed(p: PreparedSignals) -> PreparedSignals:
+    """Fix the one bit θ_0 (mod π) leaves open: T_e must correlate positively with the acceleration.
+
+    The speed only decides this global sign, never the torque's shape.
+    """
+    accel = np.gradient(p.speed_rad_s, p.period_s)
+    if np.dot(p.torque_Nm - p.torque_Nm.mean(), accel) >= 0:
+        return p
+    theta0 = float(np.angle(np.exp(1j * (p.theta0_rad + np.pi))))
+    return replace(p, torque_Nm=-p.torque_Nm, theta0_rad=theta0,
+                   notes=[*p.notes, f"torque sign from its correlation with the acceleration (θ_0 = {theta0:.3f} rad)"])
