@@ -71,6 +71,7 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     duration = duration_s if duration_s is not None else profile.duration_s
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator)
+    recorder.start_devices()
     result = _record_with_progress(recorder, duration, f"recording {bench.joint}")
     out.print(summary_table(summarize(load(result.path))))
     if not no_analyze and result.current_samples and result.encoder_samples:

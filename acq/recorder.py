@@ -202,10 +202,24 @@ class Recorder:
         self.operator, self.tags = operator, tags
         self.listeners = listeners or []
         self.progress = progress
+        self._started = False
+
+    def start_devices(self) -> None:
+        """Start both devices (idempotent); a set-up error raises here, before any file exists."""
+        if self._started:
+            return
+        try:
+            self._cur_info = self.current.start()
+            self._drive_info = self.drive.start()
+        except BaseException:
+            self.drive.stop()
+            self.current.stop()
+            raise
+        self._started = True
 
     def run(self) -> RecordingResult:
         """Record; always returns with the file finished (device set-up errors raise before a file exists)."""
-        self._start_devices()
+        self.start_devices()
         cur_info, drive_info = self._cur_info, self._drive_info
         start_ns = time.monotonic_ns()
         path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
@@ -237,15 +251,6 @@ class Recorder:
             status, reason = self._shut_down(inbox, readers, writer, checker, counts, status, reason)
         return RecordingResult(path, status, reason, counts["current"], counts["encoder"],
                                checker.current_gaps, checker.encoder_gaps)
-
-    def _start_devices(self) -> None:
-        try:
-            self._cur_info = self.current.start()
-            self._drive_info = self.drive.start()
-        except BaseException:
-            self.drive.stop()
-            self.current.stop()
-            raise
 
     def _pump(self, inbox: queue.Queue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
               checker: _StreamChecker, counts: dict[str, int]) -> None:

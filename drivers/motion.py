@@ -24,30 +24,30 @@ def half_swing_rad(profile: Profile) -> float:
     return profile.top_speed_rpm * RPM_TO_RAD_S * (profile.accel_time_s + profile.decel_time_s) / 2.0
 
 
+def _phase(t_s: np.ndarray | float, profile: Profile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, direction ±1 of the current half-cycle, time u into that half-cycle), s."""
+    t = np.asarray(t_s, dtype=float)
+    half = profile.accel_time_s + profile.decel_time_s + profile.dwell_s
+    tau = np.mod(np.maximum(t, 0.0), 2.0 * half)
+    return t, np.where(tau < half, 1.0, -1.0), np.mod(tau, half)
+
+
 def triangle_speed_rad_s(t_s: np.ndarray | float, profile: Profile) -> np.ndarray:
     """Speed reference of the motor, rad/s, at times ``t_s`` (s) since the motion started.
 
     Zero before the start. Returns an array of the shape of ``t_s``.
     """
-    t = np.asarray(t_s, dtype=float)
+    t, sign, u = _phase(t_s, profile)
     top = profile.top_speed_rpm * RPM_TO_RAD_S
-    ta, td, tw = profile.accel_time_s, profile.decel_time_s, profile.dwell_s
-    half = ta + td + tw
-    tau = np.mod(np.maximum(t, 0.0), 2.0 * half)
-    sign = np.where(tau < half, 1.0, -1.0)
-    u = np.mod(tau, half)
+    ta, td = profile.accel_time_s, profile.decel_time_s
     ramp = np.where(u < ta, u / ta, np.where(u < ta + td, 1.0 - (u - ta) / td, 0.0))
     return np.where(t < 0.0, 0.0, sign * top * ramp)
 
 
 def triangle_accel_rad_s2(t_s: np.ndarray | float, profile: Profile) -> np.ndarray:
     """Acceleration reference, rad/s², at times ``t_s`` (s) since the motion started (the feed-forward)."""
-    t = np.asarray(t_s, dtype=float)
+    t, sign, u = _phase(t_s, profile)
     top = profile.top_speed_rpm * RPM_TO_RAD_S
-    ta, td, tw = profile.accel_time_s, profile.decel_time_s, profile.dwell_s
-    half = ta + td + tw
-    tau = np.mod(np.maximum(t, 0.0), 2.0 * half)
-    sign = np.where(tau < half, 1.0, -1.0)
-    u = np.mod(tau, half)
+    ta, td = profile.accel_time_s, profile.decel_time_s
     acc = np.where(u < ta, top / ta, np.where(u < ta + td, -top / td, 0.0))
     return np.where(t < 0.0, 0.0, sign * acc)
