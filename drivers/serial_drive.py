@@ -32,7 +32,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from drivers.base import DriveInfo, EncoderBlock, StreamEvent
+from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent
 from drivers.config import Bench, DriveSerial, Profile
 from drivers.errors import ConfigError, DeviceError
 from drivers.serial_codec import CODECS, Ack, Codec, Command, ParserStats, StreamParser, Telemetry
@@ -149,6 +149,8 @@ class SerialDrive:
         self._unwrap = FrameUnwrapper(settings.period_s * 1e6)
         self._frames = self._gaps = self._missing = self._bytes = 0
         self._command_lock = threading.Lock()
+        self._reported_errors = (0, 0, 0)
+        self._last_warning_s = time.monotonic()
 
     # ---- Drive protocol ----------------------------------------------------------------------------
     def start(self) -> DriveInfo:
@@ -225,9 +227,9 @@ class SerialDrive:
             return LinkStats(self._frames, p.crc_errors, p.bad_headers, p.resyncs, p.bytes_skipped, self._gaps,
                              self._missing, self._bytes)
 
-    def _event(self, kind: str, detail: str) -> None:
+    def _event(self, kind: EventKind, detail: str) -> None:
         with self._lock:
-            self._events.append(StreamEvent(time.monotonic_ns(), "drive", kind, detail))  # type: ignore[arg-type]
+            self._events.append(StreamEvent(time.monotonic_ns(), "drive", kind, detail))
 
     def _command(self, command: Command) -> None:
         """Send ``command`` and wait ``read_timeout_s`` for its acknowledgement."""
@@ -254,8 +256,6 @@ class SerialDrive:
 
     def _read_loop(self) -> None:
         """Reader thread: drain the port, cut frames, unwrap, queue; never blocks longer than a timeout."""
-        last_warning = time.monotonic()
-        reported = (0, 0, 0)
         try:
             while not self._stop.is_set():
                 data = self._port.read(max(1, min(self._port.in_waiting, READ_CHUNK_BYTES)))
@@ -267,18 +267,23 @@ class SerialDrive:
                     telemetry = [self._accept(frame, host_ns) for frame in self._parser.feed(data)]
                     if any(telemetry):
                         self._lock.notify_all()
-                    p = self._parser.stats
-                    now = time.monotonic()
-                    if (p.crc_errors, p.bad_headers, p.resyncs) != reported and now - last_warning >= WARNING_INTERVAL_S:
-                        reported, last_warning = (p.crc_errors, p.bad_headers, p.resyncs), now
-                        self._events.append(StreamEvent(host_ns, "drive", "warning",
-                                                        f"serial link {self.port_name}: {self.stats().describe()}"))
+                    self._warn_if_errors(host_ns)
         except Exception as e:  # noqa: BLE001 - a vanished port ends the stream with one clear error
             if not self._stop.is_set():
                 with self._lock:
                     self._failure = DeviceError(f"serial port {self.port_name}: link lost: {e}")
                     self._events.append(StreamEvent(time.monotonic_ns(), "drive", "error", str(self._failure)))
                     self._lock.notify_all()
+
+    def _warn_if_errors(self, host_ns: int) -> None:
+        """Summarise new link errors in one ``warning`` event, at most every WARNING_INTERVAL_S (under the lock)."""
+        p = self._parser.stats
+        errors = (p.crc_errors, p.bad_headers, p.resyncs)
+        now = time.monotonic()
+        if errors != self._reported_errors and now - self._last_warning_s >= WARNING_INTERVAL_S:
+            self._reported_errors, self._last_warning_s = errors, now
+            self._events.append(StreamEvent(host_ns, "drive", "warning",
+                                            f"serial link {self.port_name}: {self.stats().describe()}"))
 
     def _accept(self, frame: object, host_ns: int) -> bool:
         """Handle one good frame (under the lock); True if it was telemetry."""
@@ -309,7 +314,7 @@ def open_drive(bench: Bench, sim_bench: SimBench | None, fast: bool) -> SerialDr
     assert isinstance(settings, DriveSerial)
     codec_for(settings)
     if not settings.simulated_device:
-        if "://" not in settings.port and not os.path.exists(settings.port):
+        if settings.port.startswith("/") and not os.path.exists(settings.port):  # a device path (not a URL, not COM3)
             raise DeviceError(f"serial port {settings.port}: no such device (is the drive connected and powered?)")
         return SerialDrive(settings, bench.encoder.counts_per_rev)
     from drivers.sim.serial_device import open_simulated_device
