@@ -19,6 +19,8 @@ from acq import __version__
 from acq.analyze import analyze_session, result_table
 from acq.config import load_bench, load_profile
 from acq.devices import devices_command
+from acq.exporters import export_command
+from acq.importers import import_command
 from acq.recorder import Recorder, RecordingResult
 from acq.session import load, repair
 from acq.summary import summarize, summary_table
@@ -172,6 +174,8 @@ def check(session_path: Path) -> int:
 
 
 cli.add_command(devices_command)
+cli.add_command(import_command)
+cli.add_command(export_command)
 
 
 def main(argv: list[str] | None = None) -> None:

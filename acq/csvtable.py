@@ -1,0 +1,142 @@
+"""Read a numeric CSV table fast, and name the file, line and column of anything wrong in it.
+
+The body is parsed by numpy's C reader (:func:`numpy.loadtxt`, ~0.5 s for 1.5 M rows × 2 columns);
+only when it refuses the file is the file scanned again line by line to find the first bad cell, so
+valid files pay nothing for the diagnosis. Errors are :class:`~drivers.errors.ConfigError` s of the
+form ``FILE: line L, column NAME: what`` (line 1 is the header).
+"""
+
+from __future__ import annotations
+
+import csv
+import difflib
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from drivers.errors import ConfigError
+
+
+@dataclass(frozen=True)
+class CsvTable:
+    """The columns of a CSV file, float64, by header name, with the way back to line numbers.
+
+    Attributes
+    ----------
+    path : Path
+        The file read.
+    columns : dict of str to ndarray
+        One float64 array per header name, in header order.
+    """
+
+    path: Path
+    columns: dict[str, np.ndarray]
+
+    @property
+    def rows(self) -> int:
+        """Data rows read."""
+        return next(iter(self.columns.values())).shape[0]
+
+    def line(self, row: int) -> int:
+        """The file's line number (1-based, header = 1) of data row ``row`` (0-based)."""
+        return _data_line_numbers(self.path)[row] if _has_blank_lines(self.path) else row + 2
+
+    def error(self, row: int, column: str, what: str) -> ConfigError:
+        """A one-line error naming the file, the line of ``row`` and ``column``."""
+        return ConfigError(f"{self.path}: line {self.line(row)}, column {column}: {what}")
+
+
+def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> CsvTable:
+    """Read a comma-separated file whose header names its columns.
+
+    Parameters
+    ----------
+    path : Path
+        The CSV file: one header row, then one row of numbers per sample.
+    required : tuple of str
+        Column names that must be present.
+    optional : tuple of str
+        Column names that may be present; any other name is an error (a misspelt header).
+
+    Returns
+    -------
+    CsvTable
+
+    Raises
+    ------
+    ConfigError
+        No such file, an unknown, duplicate or missing column, a wrong number of fields, a cell that
+        is not a number, or a cell that is NaN or infinite.
+    """
+    names = _header(path, required, optional)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "input contained no data": the caller checks length
+        try:
+            data = np.loadtxt(path, delimiter=",", skiprows=1, comments=None, quotechar=None, ndmin=2,
+                              dtype=np.float64, encoding="utf-8-sig")
+        except ValueError as e:
+            raise _first_bad_cell(path, names) or ConfigError(f"{path}: {e}") from None
+    if data.shape[0] == 0:
+        data = np.zeros((0, len(names)))
+    table = CsvTable(path, {name: data[:, i] for i, name in enumerate(names)})
+    bad = ~np.isfinite(data)
+    if bad.any():
+        row, col = np.unravel_index(int(np.argmax(bad)), data.shape)
+        value = data[row, col]
+        raise table.error(int(row), names[int(col)], "NaN" if np.isnan(value) else f"{value} is not finite")
+    return table
+
+
+def _header(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) -> list[str]:
+    try:
+        with path.open(encoding="utf-8-sig", newline="") as f:
+            first = f.readline()
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise ConfigError(f"{path}: cannot be read as text ({e})") from None
+    names = [n.strip() for n in first.strip().split(",")]
+    known = (*required, *optional)
+    expected = ", ".join(known)
+    for name in names:
+        if name not in known:
+            close = difflib.get_close_matches(name, known, n=1, cut=0.6)
+            hint = f"did you mean {close[0]}? " if close else ""
+            raise ConfigError(f"{path}: line 1, column {name or '(empty)'}: unknown column ({hint}expected {expected})")
+        if names.count(name) > 1:
+            raise ConfigError(f"{path}: line 1, column {name}: appears twice")
+    for name in required:
+        if name not in names:
+            raise ConfigError(f"{path}: line 1, column {name}: missing (the header is {first.strip()!r})")
+    return names
+
+
+def _first_bad_cell(path: Path, names: list[str]) -> ConfigError | None:
+    """The first row numpy could not read, found by reading the file again line by line."""
+    with path.open(encoding="utf-8-sig", newline="") as f:
+        for line, fields in enumerate(csv.reader(f), start=1):
+            if line == 1 or not fields:
+                continue
+            if len(fields) != len(names):
+                return ConfigError(f"{path}: line {line}: {len(fields)} fields, the header has {len(names)}")
+            for name, cell in zip(names, fields):
+                try:
+                    float(cell)
+                except ValueError:
+                    what = "empty cell" if not cell.strip() else f"{cell.strip()!r} is not a number"
+                    return ConfigError(f"{path}: line {line}, column {name}: {what}")
+    return None
+
+
+def _has_blank_lines(path: Path) -> bool:
+    with path.open("rb") as f:
+        body = f.read().rstrip()
+    return b"\n\n" in body or b"\n\r\n" in body
+
+
+def _data_line_numbers(path: Path) -> list[int]:
+    """Line numbers of the non-blank lines after the header (what numpy counts as rows)."""
+    with path.open("rb") as f:
+        return [i for i, text in enumerate(f, start=1) if i > 1 and text.strip()]
