@@ -22,7 +22,7 @@ from drivers.config import DriveSerial, Profile
 from drivers.errors import ConfigError, DeviceError
 from drivers.serial_codec import Ack, Acq1Codec, Command, StreamParser, Telemetry
 from drivers.serial_drive import FrameUnwrapper, LinkStats, SerialDrive
-from drivers.sim.serial_device import SimSerialDevice
+from drivers.sim.serial_device import FaultLog, SimSerialDevice
 from tests.helpers import run_cli
 
 CODEC = Acq1Codec()
@@ -193,6 +193,8 @@ def test_injected_faults_are_counted_each_in_its_category_and_no_good_frame_is_l
     assert np.array_equal(idx[:expected.size], expected)
     assert np.array_equal(got["position_counts"], Ramp.counts(idx))
     assert empty_reads >= 2  # the 0.2 s pause: reads time out, then the held frames arrive
+    assert device.log == FaultLog(garbage_bytes=40 * 3 + 3 + 3, garbage_bursts=5, flipped_frames=3, dropped_frames=4,
+                                  pauses=1)
     stats = drive.stats()
     assert stats.frames >= idx.size  # the reader keeps reading after collect() returned
     assert replace(stats, frames=0, bytes_received=0) == LinkStats(
