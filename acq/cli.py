@@ -24,6 +24,7 @@ from acq.importers import import_command
 from acq.recorder import Recorder, RecordingResult
 from acq.session import load, repair
 from acq.summary import summarize, summary_table
+from acq.view import view_command
 from drivers.errors import AcqError, ConfigError
 from drivers.registry import open_bench
 
@@ -174,6 +175,7 @@ def check(session_path: Path) -> int:
 
 
 cli.add_command(devices_command)
+cli.add_command(view_command)
 cli.add_command(import_command)
 cli.add_command(export_command)
 

@@ -1,0 +1,90 @@
+"""``acq view SESSION [SESSION…] [--screenshot out.png]``: the report window of one or several sessions.
+
+Each session is identified through :func:`acq.analyze.analyze_session` (nothing written beside it);
+when ``<session>.result.json`` exists, its options are used, so the window shows what ``acq analyze``
+found (the JSON holds the values, not the curves, hence the re-run: ≲ 3 s for a 60 s session).
+Several sessions overlay their FRFs with a legend (e.g. the same joint months apart).
+
+Qt is imported only when a window or a screenshot is drawn, so the rest of the CLI starts fast.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import click
+
+from acq.analyze import analyze_session
+
+if TYPE_CHECKING:
+    from acq.plots import SessionFigure
+
+NO_DISPLAY_MESSAGE = ("acq view: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window as an image "
+                      "instead: acq view SESSION --screenshot out.png")
+
+
+def has_display() -> bool:
+    """True when Qt can show a window: an X11 or Wayland display, or Qt's offscreen platform chosen."""
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+                or os.environ.get("QT_QPA_PLATFORM", "").startswith("offscreen"))
+
+
+def stored_options(path: Path) -> dict[str, Any]:
+    """The analysis options recorded in ``<session>.result.json``, as :func:`analyze_session` keywords ({} if none)."""
+    result_path = path.with_name(path.stem + ".result.json")
+    if not result_path.exists():
+        return {}
+    opts = json.loads(result_path.read_text()).get("options", {})
+    band = opts.get("band_hz")
+    return {"torque": opts.get("torque_method") if opts.get("pipeline", "acq") == "acq" else None,
+            "params": opts.get("params", "K,Jm,Jl"), "fit": opts.get("fit", "amplitude"),
+            "band_hz": tuple(band) if band else None, "pipeline": opts.get("pipeline", "acq")}
+
+
+def session_figure(path: Path) -> SessionFigure:
+    """Identify one session (with its stored options, if any) and wrap what the figure needs."""
+    from acq.plots import SessionFigure
+
+    done = analyze_session(path, write=False, **stored_options(Path(path)))
+    return SessionFigure(Path(path).stem, done.result.figures, done.json_dict)
+
+
+def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"{text!r}: must be WIDTHxHEIGHT in pixels, e.g. 1600x1000") from None
+    if width < 200 or height < 200:
+        raise click.BadParameter(f"{text!r}: at least 200x200 pixels")
+    return width, height
+
+
+@click.command(name="view")
+@click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--screenshot", type=click.Path(path_type=Path), default=None,
+              help="Draw the window offscreen into this PNG and exit (needs no display).")
+@click.option("--size", default="1600x1000", show_default=True, callback=_parse_size,
+              help="Window / screenshot size WIDTHxHEIGHT, px.")
+def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tuple[int, int]) -> int:
+    """Show traces, FRF with the fitted model, coherence and identified values of SESSION(s)."""
+    if screenshot is None and not has_display():
+        click.echo(NO_DISPLAY_MESSAGE, err=True)
+        return 1
+    figures = [session_figure(p) for p in sessions]
+    from acq.plots import ReportView, ensure_app, grab_png
+
+    app = ensure_app(offscreen=screenshot is not None)
+    title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}" if len(figures) == 1
+             else f"{len(figures)} sessions")
+    window = ReportView(figures, title=title)
+    if screenshot is not None:
+        grab_png(window, screenshot, size)
+        click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")
+        return 0
+    window.resize(*size)
+    window.show()
+    app.exec()
+    return 0
