@@ -223,6 +223,9 @@ class Recorder:
         cur_info, drive_info = self._cur_info, self._drive_info
         start_ns = time.monotonic_ns()
         path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
+        keep_raw = getattr(self.drive, "keep_raw_frames", None)  # optional: transports that can log their raw traffic
+        if keep_raw is not None:
+            keep_raw(path)
         writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=cur_info,
                                drive_info=drive_info, host_ns_at_start=start_ns,
                                operator=self.operator, tags=self.tags)

@@ -109,6 +109,9 @@ class DriveCanopen(Strict):
     heartbeat_timeout_s: PositiveFloat = 0.5
     velocity_units_per_rpm: PositiveFloat = 1.0
     acceleration_units_per_rpm_per_s: PositiveFloat = 1.0
+    counts_per_rev: PositiveInt | None = None  # position units (0x6064, 0x607A) per motor rev; None: [encoder]'s
+    heartbeat_period_s: PositiveFloat = 0.1  # the drive's producer heartbeat time (0x1017)
+    max_bus_load: float = Field(default=0.7, gt=0.0, le=1.0)  # refuse settings whose traffic needs more
     simulated_node: bool = False
 
 

@@ -149,6 +149,14 @@ class SimBench:
         with self._lock:
             return self.schedule.stop(max(t_s, self._physics.t_end_s))
 
+    def use_reference(self, source: Any) -> None:
+        """Take the speed reference from ``source`` instead of :attr:`schedule` (e.g. a simulated drive's
+        own trajectory generator, :mod:`drivers.sim.pp_generator`): ``source.reference(t_s)`` returns
+        (speed rad/s, accel rad/s²) and must not change for times it was already asked for. After this
+        :meth:`start_motion` / :meth:`stop_motion` no longer move the joint."""
+        with self._lock:
+            self._physics.schedule = source
+
     # ---- history -----------------------------------------------------------------------------------
     def hold_history(self, consumer: str, from_t_s: float) -> None:
         """Declare that ``consumer`` will still read states at drive times ≥ ``from_t_s`` (s)."""

@@ -1,0 +1,104 @@
+"""The CiA 301 / CiA 402 objects ``acq`` uses, as a canopen object dictionary built in code.
+
+The host needs an object dictionary to talk to a drive (data types for SDO, PDO map entries); a real
+drive's EDS would do, but only the standard objects below are ever touched, so ``acq`` carries them
+itself and needs no vendor file. The simulated drive (:mod:`drivers.sim.can_node`) serves the same
+dictionary, with its ``default`` values as the power-on state. Imports :mod:`canopen` (only adapters
+that chose CANopen import this module).
+"""
+
+from __future__ import annotations
+
+from canopen import ObjectDictionary
+from canopen.objectdictionary import (INTEGER8, INTEGER32, UNSIGNED8, UNSIGNED16, UNSIGNED32, ODRecord,
+                                      ODVariable)
+
+DEVICE_TYPE = 0x1000
+HEARTBEAT_TIME = 0x1017
+SYNC_OVERFLOW = 0x1019
+TPDO_COMM = 0x1800
+TPDO_MAP = 0x1A00
+CONTROLWORD = 0x6040
+STATUSWORD = 0x6041
+MODE = 0x6060
+MODE_DISPLAY = 0x6061
+POSITION_ACTUAL = 0x6064
+VELOCITY_ACTUAL = 0x606C
+TARGET_POSITION = 0x607A
+PROFILE_VELOCITY = 0x6081
+PROFILE_ACCELERATION = 0x6083
+PROFILE_DECELERATION = 0x6084
+QUICK_STOP_DECELERATION = 0x6085
+SUPPORTED_MODES = 0x6502
+
+MODE_PROFILE_POSITION = 1
+PDO_INVALID = 1 << 31
+RTR_NOT_ALLOWED = 1 << 30
+N_TPDO = 4
+#: power-on TPDO1 mapping of the simulated drive: the statusword alone (as many drives ship)
+DEFAULT_TPDO1_MAP = (STATUSWORD << 16) | 16
+
+
+def tpdo_cob_id(tpdo: int, node_id: int) -> int:
+    """COB-ID of TPDO ``tpdo`` (1…4) in the predefined connection set."""
+    return 0x180 + 0x100 * (tpdo - 1) + node_id
+
+
+def map_entry(index: int, bits: int, subindex: int = 0) -> int:
+    """A PDO mapping entry: index (16 bit), subindex (8 bit), length in bits (8 bit)."""
+    return (index << 16) | (subindex << 8) | bits
+
+
+def _var(name: str, index: int, data_type: int, access: str, default: int | None = None,
+         subindex: int = 0, mappable: bool = False) -> ODVariable:
+    var = ODVariable(name, index, subindex)
+    var.data_type, var.access_type, var.default, var.pdo_mappable = data_type, access, default, mappable
+    return var
+
+
+def _tpdo_objects(n: int, node_id: int) -> tuple[ODRecord, ODRecord]:
+    comm = ODRecord(f"TPDO{n} communication parameter", TPDO_COMM + n - 1)
+    enabled = n == 1
+    cob_id = tpdo_cob_id(n, node_id) | (0 if enabled else PDO_INVALID)
+    for sub, name, dtype, access, default in (
+        (0, "Highest sub-index", UNSIGNED8, "const", 5),
+        (1, "COB-ID", UNSIGNED32, "rw", cob_id),
+        (2, "Transmission type", UNSIGNED8, "rw", 255),
+        (3, "Inhibit time", UNSIGNED16, "rw", 0),
+        (5, "Event timer", UNSIGNED16, "rw", 0),
+    ):
+        comm.add_member(_var(name, comm.index, dtype, access, default, sub))
+    mapping = ODRecord(f"TPDO{n} mapping parameter", TPDO_MAP + n - 1)
+    mapping.add_member(_var("Number of mapped objects", mapping.index, UNSIGNED8, "rw", 1 if enabled else 0))
+    for sub in range(1, 9):
+        default = DEFAULT_TPDO1_MAP if (enabled and sub == 1) else 0
+        mapping.add_member(_var(f"Mapped object {sub}", mapping.index, UNSIGNED32, "rw", default, sub))
+    return comm, mapping
+
+
+def drive_object_dictionary(node_id: int) -> ObjectDictionary:
+    """The CiA 301/402 objects of a profile-position servo drive used by ``acq`` (defaults: power-on)."""
+    od = ObjectDictionary()
+    od.node_id = node_id
+    for var in (
+        _var("Device type", DEVICE_TYPE, UNSIGNED32, "ro", 0x00020192),  # CiA 402 servo drive
+        _var("Producer heartbeat time", HEARTBEAT_TIME, UNSIGNED16, "rw", 0),
+        _var("Synchronous counter overflow value", SYNC_OVERFLOW, UNSIGNED8, "rw", 0),
+        _var("Controlword", CONTROLWORD, UNSIGNED16, "rw", 0, mappable=True),
+        _var("Statusword", STATUSWORD, UNSIGNED16, "ro", 0, mappable=True),
+        _var("Modes of operation", MODE, INTEGER8, "rw", 0, mappable=True),
+        _var("Modes of operation display", MODE_DISPLAY, INTEGER8, "ro", 0, mappable=True),
+        _var("Position actual value", POSITION_ACTUAL, INTEGER32, "ro", 0, mappable=True),
+        _var("Velocity actual value", VELOCITY_ACTUAL, INTEGER32, "ro", 0, mappable=True),
+        _var("Target position", TARGET_POSITION, INTEGER32, "rw", 0, mappable=True),
+        _var("Profile velocity", PROFILE_VELOCITY, UNSIGNED32, "rw", 0),
+        _var("Profile acceleration", PROFILE_ACCELERATION, UNSIGNED32, "rw", 0),
+        _var("Profile deceleration", PROFILE_DECELERATION, UNSIGNED32, "rw", 0),
+        _var("Quick stop deceleration", QUICK_STOP_DECELERATION, UNSIGNED32, "rw", 0),
+        _var("Supported drive modes", SUPPORTED_MODES, UNSIGNED32, "ro", 1 << (MODE_PROFILE_POSITION - 1)),
+    ):
+        od.add_object(var)
+    for n in range(1, N_TPDO + 1):
+        for record in _tpdo_objects(n, node_id):
+            od.add_object(record)
+    return od

@@ -1,0 +1,316 @@
+"""A simulated CiA 402 servo drive speaking real CANopen on a python-can ``virtual`` bus.
+
+:class:`SimCanNode` is a :class:`canopen.LocalNode` (SDO server, NMT slave, heartbeat producer) on its
+own :class:`canopen.Network`, on the same virtual channel as the host's — as canopen's
+``test/test_local.py`` pairs a RemoteNode with a LocalNode. Its object dictionary is
+:func:`drivers.canopen_od.drive_object_dictionary`, served over SDO, and it adds what a LocalNode
+lacks: TPDOs sent on SYNC by their mapping in 0x1800…/0x1A00… (remappable over SDO, transmission type
+1…240 = every n-th SYNC, in NMT OPERATIONAL only), a minimal CiA 402 state machine (controlword →
+statusword, quick stop ending in SWITCH ON DISABLED once at rest) and Profile Position: the
+new-set-point handshake feeds :class:`drivers.sim.pp_generator.ProfileGenerator`, which becomes the
+:class:`~drivers.sim.bench.SimBench` speed reference (0x607A, 0x6081, 0x6083, 0x6084, 0x6085).
+
+The drive's CAN controller answers SYNC "in hardware": :class:`_ControllerBus` queues the synchronous
+TPDOs on the virtual bus right behind the SYNC that triggers them, in the sender's thread, as a real
+controller does within microseconds — a Python thread could not keep the CiA 301 synchronous window
+(TPDO k before SYNC k+1) on a loaded host, and the host pairs each TPDO with the SYNC before it. SDO
+and NMT go through the LocalNode's own notifier thread as usual. The host's bus must be opened first
+(the controller's queue is the last one of the channel, so the SYNC reaches the host before the TPDO).
+
+Drive clock: one drive cycle per SYNC received (the first SYNC is the cycle the host clock says it
+is); a TPDO carries the bench's int32 position register (0x6064) and velocity (0x606C) at its cycle.
+A disable while moving ramps the reference to rest at the quick-stop deceleration (the bench's speed
+loop cannot let the motor coast).
+
+Fault switches, for tests: :meth:`~SimCanNode.drop_tpdos`, :meth:`~SimCanNode.stop_heartbeat`,
+``refuse_mode_change`` (0x6060 writes are ignored) and ``reject_mapping`` (0x1A0x keeps its
+power-on mapping while the SDO writes succeed — a mismatch only a read-back finds).
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import can
+import canopen
+import numpy as np
+from can.interfaces.virtual import VirtualBus, channels_lock
+
+from drivers.canopen_od import (MODE_PROFILE_POSITION, N_TPDO, PDO_INVALID, TPDO_COMM, TPDO_MAP,
+                                 drive_object_dictionary)
+from drivers.config import Bench, DriveCanopen
+from drivers.errors import ConfigError
+from drivers.motion import RPM_TO_RAD_S
+from drivers.sim.bench import SimBench
+from drivers.sim.pp_generator import ProfileGenerator
+
+SOD, RTSO, SO, OE, QSA = 0x40, 0x21, 0x23, 0x27, 0x07  # CiA 402 statusword state bits
+REMOTE, TARGET_REACHED, SETPOINT_ACK = 1 << 9, 1 << 10, 1 << 12
+HISTORY_EVERY = 64
+CACHE_CYCLES = 50
+
+
+class _TriggerQueue(queue.Queue):
+    """A receive queue that hands every SYNC to ``on_sync`` as it is delivered."""
+
+    def __init__(self, on_sync: Callable[[], None]) -> None:
+        super().__init__()
+        self._on_sync = on_sync
+
+    def put(self, item: can.Message, block: bool = True, timeout: float | None = None) -> None:
+        super().put(item, block, timeout)
+        if item.arbitration_id == 0x80 and not item.is_extended_id:
+            self._on_sync()
+
+
+class _ControllerBus(VirtualBus):
+    """The drive's end of a python-can ``virtual`` channel, answering SYNC at delivery (see module doc)."""
+
+    def __init__(self, channel: str, on_sync: Callable[[], None]) -> None:
+        super().__init__(channel=channel)
+        with channels_lock:
+            self.channel.remove(self.queue)
+            self.queue = _TriggerQueue(on_sync)
+            self.channel.append(self.queue)
+            if len(self.channel) < 2:
+                raise RuntimeError("open the host's bus before the simulated drive's (SYNC must reach it first)")
+
+
+class SimCanNode:
+    """The simulated drive of ``bench`` on ``sim_bench``; :meth:`start` puts it on the bus."""
+
+    def __init__(self, bench: Bench, sim_bench: SimBench) -> None:
+        s = bench.drive
+        assert isinstance(s, DriveCanopen)
+        if s.counts_per_rev not in (None, bench.encoder.counts_per_rev):
+            raise ConfigError("[drive] counts_per_rev: the simulated node counts in [encoder] counts_per_rev")
+        self._s, self._bench = s, sim_bench
+        self._period_s = s.period_s
+        self._rad_per_count = 2 * math.pi / sim_bench.counts_per_rev
+        self._start_counts = sim_bench.sim.encoder_start_counts
+        self.generator = ProfileGenerator()
+        self.network: canopen.Network | None = None
+        self.node: canopen.LocalNode | None = None
+        self._consumer = f"can-node@{id(self):x}"
+        self._cycle: int | None = None
+        self._syncs = 0
+        self._state = SOD
+        self._mode = 0
+        self._setpoint_latched = False
+        self._tpdos: list[tuple[int, int, list[tuple[int, int, int]]]] | None = None
+        self._drop = 0
+        self._lock = threading.RLock()  # the bus thread (SDO, NMT) and the SYNC sender's thread share the node
+        self._cache_first = 0
+        self._cache_counts = np.zeros(0, dtype=np.int32)
+        self._cache_omega = np.zeros(0)
+        self.refuse_mode_change = False
+        self.reject_mapping = False
+        self.tpdos_sent = 0
+        sim_bench.hold_history(self._consumer, 0.0)
+
+    # ---- fault switches ----------------------------------------------------------------------------
+    def drop_tpdos(self, count: int) -> None:
+        """Do not send the next ``count`` TPDOs (the host sees a gap in the SYNC counter)."""
+        self._drop += count
+
+    def stop_heartbeat(self) -> None:
+        """Stop producing heartbeats (SDO, SYNC and TPDOs carry on)."""
+        self.node.nmt.stop_heartbeat()
+
+    # ---- life cycle --------------------------------------------------------------------------------
+    def start(self) -> None:
+        """Join the virtual bus, boot (boot-up message) into NMT PRE-OPERATIONAL."""
+        self._bench.use_reference(self.generator)
+        self.network = canopen.Network(_ControllerBus(self._s.channel, self._on_sync))
+        self.network.connect()
+        self.node = canopen.LocalNode(self._s.node_id, drive_object_dictionary(self._s.node_id))
+        self.network.add_node(self.node)
+        self.node.add_read_callback(self._on_read)
+        self.node.add_write_callback(self._on_write)
+        self.node.nmt.state = "INITIALISING"
+        self.node.nmt.state = "PRE-OPERATIONAL"
+
+    def stop(self) -> None:
+        """Leave the bus. Idempotent."""
+        if self.network is not None:
+            self.node.nmt.stop_heartbeat()
+            self.network.disconnect()
+            self.network = None
+        self._bench.release_history(self._consumer)
+
+    @property
+    def state_402(self) -> int:
+        """The CiA 402 state bits of the statusword (e.g. 0x40 SWITCH ON DISABLED, 0x27 OPERATION ENABLED)."""
+        with self._lock:
+            self._settle()
+            return self._state
+
+    # ---- clock and measurements --------------------------------------------------------------------
+    def _now_cycle(self) -> int:
+        if self._cycle is not None:
+            return self._cycle
+        t_s = (time.monotonic_ns() - self._bench.host_t0_ns) * 1e-9 - self._bench.sim.host_latency_s
+        return max(0, int(t_s / self._period_s))
+
+    def _now_s(self) -> float:
+        return self._now_cycle() * self._period_s
+
+    def _sample(self) -> tuple[int, float]:
+        """Position register (counts) and speed (rad/s) at the present cycle, from a block computed ahead
+        (one vectorised bench query per ``CACHE_CYCLES``: a query per SYNC would cost the bus its timing)."""
+        cycle = self._now_cycle()
+        i = cycle - self._cache_first
+        if not 0 <= i < len(self._cache_counts):
+            self._cache_first, i = cycle, 0
+            self._cache_counts = self._bench.encoder_register(cycle, CACHE_CYCLES)
+            t_s = (cycle + np.arange(CACHE_CYCLES)) * self._period_s
+            self._cache_omega = self._bench.true_state_at(t_s)["omega_m_rad_s"]
+        return int(self._cache_counts[i]), float(self._cache_omega[i])
+
+    def _theta_rad(self) -> float:
+        return float(self._bench.true_state_at(self._now_s())["theta_m_rad"])
+
+    def _register(self, theta_rad: float) -> int:
+        counts = math.floor(theta_rad / self._rad_per_count) + self._start_counts
+        return (counts + 2**31) % 2**32 - 2**31
+
+    # ---- SDO ---------------------------------------------------------------------------------------
+    def _on_read(self, index: int, subindex: int, od: Any) -> int | None:
+        with self._lock:
+            return self._read(index, subindex, od)
+
+    def _read(self, index: int, subindex: int, od: Any) -> int | None:
+        if index == 0x6041:
+            return self._statusword()
+        if index == 0x6061:
+            return self._mode
+        if index == 0x6064:
+            return self._sample()[0]
+        if index == 0x606C:
+            return round(self._sample()[1] / RPM_TO_RAD_S * self._s.velocity_units_per_rpm)
+        if self.reject_mapping and TPDO_MAP <= index < TPDO_MAP + N_TPDO:
+            return od.default
+        return None
+
+    def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
+        with self._lock:
+            self._write(index, od, data)
+
+    def _write(self, index: int, od: Any, data: bytes) -> None:
+        if TPDO_COMM <= index < TPDO_COMM + N_TPDO or TPDO_MAP <= index < TPDO_MAP + N_TPDO:
+            self._tpdos = None
+        elif index == 0x6060 and not self.refuse_mode_change:
+            self._mode = od.decode_raw(data)
+        elif index == 0x6040:
+            self._controlword(od.decode_raw(data))
+
+    def _param(self, index: int) -> int:
+        return int(self.node.sdo[index].raw)
+
+    # ---- CiA 402 -----------------------------------------------------------------------------------
+    def _settle(self) -> None:
+        """Quick stop ends in SWITCH ON DISABLED once at rest (quick stop option code 2)."""
+        if self._state == QSA and self.generator.at_rest(self._now_s()):
+            self._state = SOD
+
+    def _statusword(self) -> int:
+        self._settle()
+        sw = self._state | REMOTE
+        if self._state in (OE, QSA):
+            now = self._now_s()
+            if self.generator.at_rest(now):
+                sw |= TARGET_REACHED
+            if self._setpoint_latched or self.generator.pending(now):
+                sw |= SETPOINT_ACK
+        return sw
+
+    def _ramp_to_rest(self) -> None:
+        decel = self._param(0x6085) or self._param(0x6084)
+        self.generator.stop(self._now_s(), max(decel, 1) / self._s.acceleration_units_per_rpm_per_s * RPM_TO_RAD_S)
+
+    def _controlword(self, cw: int) -> None:
+        self._settle()
+        state = self._state
+        if cw & 0x02 == 0:                      # disable voltage
+            if state in (OE, QSA):
+                self._ramp_to_rest()
+            self._state = SOD
+        elif cw & 0x06 == 0x02:                 # quick stop
+            if state == OE:
+                self._ramp_to_rest()
+                self._state = QSA
+            elif state in (RTSO, SO):
+                self._state = SOD
+        elif cw & 0x8F == 0x06 and state in (SOD, SO, OE):   # shutdown
+            if state == OE:
+                self._ramp_to_rest()
+            self._state = RTSO
+        elif cw & 0x8F == 0x07 and state in (RTSO, OE):      # switch on
+            if state == OE:
+                self._ramp_to_rest()
+            self._state = SO
+        elif cw & 0x8F == 0x0F and state in (SO, QSA):       # enable operation
+            if state == SO:
+                self.generator.hold_at(self._theta_rad())
+            self._state = OE
+        new_setpoint = bool(cw & 0x10)
+        if self._state == OE and self._mode == MODE_PROFILE_POSITION and new_setpoint and not self._setpoint_latched:
+            self._setpoint_latched = self._accept_setpoint()
+        elif not new_setpoint:
+            self._setpoint_latched = False
+
+    def _accept_setpoint(self) -> bool:
+        """Latch 0x607A into the generator unless a set-point is already buffered."""
+        now = self._now_s()
+        if self.generator.pending(now):
+            return False
+        cmd = self.generator.commanded_rad
+        steps = (self._param(0x607A) - self._register(cmd) + 2**31) % 2**32 - 2**31
+        v_units, a_units = self._s.velocity_units_per_rpm, self._s.acceleration_units_per_rpm_per_s
+        self.generator.move_to(cmd + steps * self._rad_per_count, now,
+                               self._param(0x6081) / v_units * RPM_TO_RAD_S,
+                               max(self._param(0x6083), 1) / a_units * RPM_TO_RAD_S,
+                               max(self._param(0x6084), 1) / a_units * RPM_TO_RAD_S)
+        return True
+
+    # ---- SYNC → TPDOs ------------------------------------------------------------------------------
+    def _tpdo_table(self) -> list[tuple[int, int, list[tuple[int, int, int]]]]:
+        """(COB-ID, transmission type, [(index, subindex, bytes)]) of every valid TPDO, read via the OD."""
+        table = []
+        for n in range(N_TPDO):
+            cob = self.node.sdo[TPDO_COMM + n][1].raw
+            kind = self.node.sdo[TPDO_COMM + n][2].raw
+            mapping = self.node.sdo[TPDO_MAP + n]
+            entries = [mapping[i].raw for i in range(1, mapping[0].raw + 1)]
+            if not cob & PDO_INVALID and 1 <= kind <= 240:
+                table.append((cob & 0x7FF, kind, [(e >> 16, (e >> 8) & 0xFF, (e & 0xFF) // 8) for e in entries]))
+        return table
+
+    def _on_sync(self) -> None:
+        with self._lock:
+            self._sync()
+
+    def _sync(self) -> None:
+        self._cycle = self._now_cycle() if self._cycle is None else self._cycle + 1
+        self._syncs += 1
+        if self._cycle % HISTORY_EVERY == 0:
+            self._bench.hold_history(self._consumer, self._cycle * self._period_s)
+        if self.node.nmt.state != "OPERATIONAL":
+            return
+        if self._tpdos is None:
+            self._tpdos = self._tpdo_table()
+        for cob, kind, entries in self._tpdos:
+            if self._syncs % kind:
+                continue
+            if self._drop > 0:
+                self._drop -= 1
+                continue
+            payload = b"".join(self.node.get_data(i, sub)[:size] for i, sub, size in entries)
+            self.network.send_message(cob, payload)
+            self.tpdos_sent += 1
+
