@@ -102,7 +102,7 @@ def _header(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) ->
     expected = ", ".join(known)
     for name in names:
         if name not in known:
-            close = difflib.get_close_matches(name, known, n=1, cut=0.6)
+            close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
             hint = f"did you mean {close[0]}? " if close else ""
             raise ConfigError(f"{path}: line 1, column {name or '(empty)'}: unknown column ({hint}expected {expected})")
         if names.count(name) > 1:

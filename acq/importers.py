@@ -129,7 +129,7 @@ def _register_column(table: CsvTable, column: str) -> np.ndarray:
     values = table.columns[column]
     fractional = np.flatnonzero(values != np.rint(values))
     if fractional.size:
-        raise table.error(int(fractional[0]), column, f"{values[fractional[0]]!r} is not an integer")
+        raise table.error(int(fractional[0]), column, f"{values[fractional[0]]:.12g} is not an integer")
     v = values.astype(np.int64)
     step = np.diff(v)
     jumps = np.flatnonzero(np.abs(step) > REGISTER_RANGE // 2)

@@ -1,0 +1,239 @@
+"""acq import / acq export: CSV and TDMS files from other tools become sessions that analyse like ours."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
+
+from acq.analyze import analyze_session
+from acq.config import DEFAULT_BENCH
+from acq.session import load
+from tests.helpers import run_cli
+
+RATE_HZ = 25600.0
+PERIOD_S = 0.001
+EXPECTED_COLUMNS = "expected t_s, i_a_A, i_b_A, i_c_A"
+
+
+def write_csv(path: Path, header: str, columns: list[np.ndarray], fmt: list[str]) -> Path:
+    rows = zip(*(c.tolist() for c in columns))
+    path.write_text(header + "\n" + "".join(",".join(f % v for f, v in zip(fmt, r)) + "\n" for r in rows))
+    return path
+
+
+def current_columns(duration_s: float = 2.5, rate_hz: float = RATE_HZ, t0_s: float = 0.0) -> list[np.ndarray]:
+    t = t0_s + np.arange(int(round(duration_s * rate_hz)) + 1) / rate_hz
+    return [t, 3.0 * np.sin(2 * np.pi * 50.0 * t), 3.0 * np.sin(2 * np.pi * 50.0 * t - 2 * np.pi / 3)]
+
+
+def encoder_columns(duration_s: float = 2.5, start_counts: int = 0) -> list[np.ndarray]:
+    k = np.arange(int(round(duration_s / PERIOD_S)) + 1)
+    jitter = np.random.default_rng(1).uniform(0.0, 2e-4, k.size)
+    return [k * PERIOD_S + 1e-3 + jitter, start_counts + 500 * k, k]
+
+
+@pytest.fixture
+def pair(tmp_path: Path) -> tuple[Path, Path]:
+    cur = write_csv(tmp_path / "cur.csv", "t_s,i_a_A,i_b_A", current_columns(), ["%.9f", "%r", "%r"])
+    enc = write_csv(tmp_path / "enc.csv", "t_s,position_counts,index", encoder_columns(), ["%.9f", "%d", "%d"])
+    return cur, enc
+
+
+def run_import(capsys: pytest.CaptureFixture[str], cur: Path, enc: Path, out: Path, *extra: str):
+    return run_cli(capsys, "import", "--current", str(cur), "--encoder", str(enc), "--bench", str(DEFAULT_BENCH),
+                   "--profile", "triangle_0.2s", "-o", str(out), *extra)
+
+
+def test_csv_pair_becomes_a_complete_session_with_rate_indices_host_stamps_and_origin(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    cur, enc = pair
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5", "--joint", "wrist")
+    assert r.code == 0, r.err
+    s = load(tmp_path / "s.h5")
+    assert s.status == "complete" and s.attrs["joint"] == "wrist"
+    assert s.current.rate_hz == pytest.approx(RATE_HZ, rel=1e-9)
+    t, i_a, i_b = current_columns()
+    np.testing.assert_array_equal(s.current.phases_a["i_a"], i_a)
+    np.testing.assert_array_equal(s.current.phases_a["i_b"], i_b)
+    np.testing.assert_array_equal(s.current.sample_index(), np.arange(t.size))
+    last = s.current.block_first_index + s.current.block_count - 1
+    np.testing.assert_allclose(s.current.block_host_ns * 1e-9, t[last], atol=1e-9)
+    t_enc, counts, k = encoder_columns()
+    np.testing.assert_array_equal(s.encoder.host_ns, np.rint(t_enc * 1e9).astype(np.int64))
+    np.testing.assert_array_equal(s.encoder.position_counts, counts)
+    np.testing.assert_array_equal(s.encoder.index, k)
+    assert s.encoder.period_s == PERIOD_S and s.encoder.transport == "imported"
+    origin = json.loads(s.attrs["origin_json"])
+    assert origin["kind"] == "imported" and origin["host_timeline"].startswith("shared")
+    assert [(f["role"], f["name"], f["sha256"]) for f in origin["files"]] == [
+        ("current", "cur.csv", hashlib.sha256(cur.read_bytes()).hexdigest()),
+        ("encoder", "enc.csv", hashlib.sha256(enc.read_bytes()).hexdigest())]
+    assert s.events == []
+
+
+def test_encoder_int32_wrap_is_unwrapped_and_index_gaps_become_events(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    cur, _ = pair
+    t, counts, k = encoder_columns(start_counts=2**31 - 300_000)
+    keep = np.ones(k.size, dtype=bool)
+    keep[[1000, 1001, 1002, 2000]] = False  # 3 cycles lost, then 1
+    wrapped = (counts + 2**31) % 2**32 - 2**31
+    enc = write_csv(tmp_path / "enc.csv", "t_s,position_counts,index",
+                    [t[keep], wrapped[keep], k[keep]], ["%.9f", "%d", "%d"])
+    assert wrapped.min() < 0 < wrapped.max()
+    assert run_import(capsys, cur, enc, tmp_path / "s.h5").code == 0
+    s = load(tmp_path / "s.h5")
+    np.testing.assert_array_equal(s.encoder.position_counts, counts[keep])
+    assert [(e.stream, e.kind, e.detail) for e in s.events] == [
+        ("encoder", "gap", "3 drive cycles missing before index 1003"),
+        ("encoder", "gap", "1 drive cycles missing before index 2001")]
+
+
+def _with_row_changed(path: Path, line: int, text: str) -> Path:
+    lines = path.read_text().splitlines()
+    lines[line - 1] = text
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+BAD_CURRENT = [
+    pytest.param(lambda p: p.write_text(p.read_text().replace("t_s,i_a_A,i_b_A", "i_a_A,i_b_A", 1)),
+                 "line 1, column t_s: missing (the header is 'i_a_A,i_b_A')", id="missing-header"),
+    pytest.param(lambda p: p.write_text(p.read_text().replace("t_s,i_a_A,i_b_A", "t_s,i_a_a,i_b_A", 1)),
+                 f"line 1, column i_a_a: unknown column (did you mean i_a_A? {EXPECTED_COLUMNS})", id="misspelt-header"),
+    pytest.param(lambda p: _with_row_changed(p, 57, "0.002187500,abc,1.0"),
+                 "line 57, column i_a_A: 'abc' is not a number", id="non-numeric"),
+    pytest.param(lambda p: _with_row_changed(p, 100, "0.003867188,0.5,"),
+                 "line 100, column i_b_A: empty cell", id="empty-cell"),
+    pytest.param(lambda p: _with_row_changed(p, 100, "0.003867188,nan,1.0"),
+                 "line 100, column i_a_A: NaN", id="nan"),
+    pytest.param(lambda p: _with_row_changed(p, 11, "0.000300000,0.5,1.0"),
+                 "line 11, column t_s: 0.0003 does not increase (previous row: 0.0003125)", id="non-monotonic"),
+    pytest.param(lambda p: write_csv(p, "t_s,i_a_A,i_b_A", current_columns(1.5), ["%.9f", "%r", "%r"]),
+                 "line 38402, column t_s: only 1.500 s of data (at least 2 s needed)", id="too-short"),
+    pytest.param(lambda p: write_csv(p, "t_s,i_a_A,i_b_A", current_columns(rate_hz=25000.0), ["%.9f", "%r", "%r"]),
+                 "lines 2–62502, column t_s: sample rate 25000 Hz disagrees with the bench's [daq] rate_hz = 25600 by "
+                 "2.34 % (more than 1 %)", id="rate"),
+]
+
+
+@pytest.mark.parametrize(("spoil", "message"), BAD_CURRENT)
+def test_bad_current_csv_is_one_line_naming_file_line_and_column_exit_2_and_no_session(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path], spoil, message: str) -> None:
+    cur, enc = pair
+    spoil(cur)
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5")
+    assert (r.code, r.err) == (2, f"acq: error: {cur}: {message}\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cur.csv", "enc.csv"]
+
+
+BAD_ENCODER = [
+    pytest.param(lambda p: p.write_text(p.read_text().replace("position_counts", "position", 1)),
+                 "line 1, column position: unknown column (did you mean position_counts? expected t_s, "
+                 "position_counts, index, drive_time_s)", id="misspelt-header"),
+    pytest.param(lambda p: _with_row_changed(p, 40, "0.030000000,19000,38"),
+                 "line 40, column t_s: 0.03 does not increase (previous row: 0.038105718)", id="non-monotonic-t"),
+    pytest.param(lambda p: _with_row_changed(p, 30, "0.029100000,1000.5,28"),
+                 "line 30, column position_counts: 1000.5 is not an integer", id="fractional-counts"),
+    pytest.param(lambda p: _with_row_changed(p, 30, "0.029100000,3000000000,28"),
+                 "line 30, column position_counts: jumps from 13500 to 3000000000, more than half the 32-bit register "
+                 "range, and is not a wrap", id="jump"),
+    pytest.param(lambda p: _with_row_changed(p, 30, "0.029100000,inf,28"),
+                 "line 30, column position_counts: inf is not finite", id="infinite"),
+    pytest.param(lambda p: _with_row_changed(p, 30, "0.029100000,14000,27"),
+                 "line 30, column index: 27 does not increase (previous row: 27)", id="index-repeated"),
+    pytest.param(lambda p: write_csv(p, "t_s,position_counts,index", encoder_columns(1.9), ["%.9f", "%d", "%d"]),
+                 "line 1902, column t_s: only 1.900 s of data (at least 2 s needed)", id="too-short"),
+]
+
+
+@pytest.mark.parametrize(("spoil", "message"), BAD_ENCODER)
+def test_bad_encoder_csv_is_one_line_naming_file_line_and_column_exit_2_and_no_session(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path], spoil, message: str) -> None:
+    cur, enc = pair
+    spoil(enc)
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5")
+    assert (r.code, r.err) == (2, f"acq: error: {enc}: {message}\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cur.csv", "enc.csv"]
+
+
+# ------------------------------------------------------------------------------------ TDMS
+
+
+def write_tdms(path: Path, columns: list[np.ndarray], segments: int = 5, t0_s: float = 0.0) -> Path:
+    props = {"wf_increment": 1.0 / RATE_HZ, "wf_start_offset": t0_s}
+    with TdmsWriter(path) as w:
+        for part in zip(*(np.array_split(c, segments) for c in columns)):
+            w.write_segment([RootObject(), GroupObject("DAQ"),
+                             *(ChannelObject("DAQ", f"ai{i}", data, properties=props) for i, data in enumerate(part))])
+    return path
+
+
+def test_tdms_round_trip_picks_channels_in_phase_order_and_takes_rate_from_wf_increment(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    _, enc = pair
+    _, i_a, i_b = current_columns()
+    cur = write_tdms(tmp_path / "cur.tdms", [i_b, i_a])
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5", "--current-channel", "DAQ/ai1", "--current-channel", "DAQ/ai0")
+    assert r.code == 0, r.err
+    s = load(tmp_path / "s.h5")
+    assert s.current.rate_hz == RATE_HZ
+    np.testing.assert_array_equal(s.current.phases_a["i_a"], i_a)
+    np.testing.assert_array_equal(s.current.phases_a["i_b"], i_b)
+    assert json.loads(s.attrs["origin_json"])["files"][0]["channels"] == ["DAQ/ai1", "DAQ/ai0"]
+
+
+def test_truncated_tdms_is_read_up_to_the_cut_with_a_warning_event(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    _, enc = pair
+    _, i_a, _ = current_columns(3.0)
+    cur = write_tdms(tmp_path / "cur.tdms", [i_a], segments=3)
+    data = cur.read_bytes()
+    cur.write_bytes(data[:-8000 * 8 - 4])  # the last segment loses 8000.5 samples
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5")
+    assert r.code == 0, r.err
+    s = load(tmp_path / "s.h5")
+    n = i_a.size - 8001
+    np.testing.assert_array_equal(s.current.phases_a["i_a"], i_a[:n])
+    detail = f"cur.tdms: truncated last segment; read {n} samples per channel, the rest of that segment is missing"
+    assert [(e.stream, e.kind, e.detail) for e in s.events] == [("current", "warning", detail)]
+    assert f"warning: {detail}" in " ".join(r.err.split())
+
+
+def test_tdms_with_several_channels_and_none_picked_names_them(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    _, enc = pair
+    _, i_a, i_b = current_columns()
+    cur = write_tdms(tmp_path / "cur.tdms", [i_a, i_b])
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5")
+    assert (r.code, r.err) == (2, f"acq: error: {cur}: 2 channels; pick the phases (a, b, c in that order) with "
+                                  "--current-channel GROUP/CHANNEL (channels: DAQ/ai0, DAQ/ai1)\n")
+    assert not (tmp_path / "s.h5").exists()
+
+
+# ------------------------------------------------------------------------------------ round trip
+
+
+def test_simulated_session_exported_and_imported_back_gives_the_same_K(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    r = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "10", "--fast", "--no-analyze",
+                "--out", str(tmp_path / "rec"))
+    assert r.code == 0, r.err
+    (recorded,) = (tmp_path / "rec").glob("*.h5")
+    assert run_cli(capsys, "export", str(recorded), "--csv", str(tmp_path / "csv")).code == 0
+    cur, enc = (tmp_path / "csv" / f"{recorded.stem}.{kind}.csv" for kind in ("current", "encoder"))
+    r = run_import(capsys, cur, enc, tmp_path / "imported.h5")
+    assert r.code == 0, r.err
+    original, imported = load(recorded), load(tmp_path / "imported.h5")
+    np.testing.assert_array_equal(imported.current.phases_a["i_a"], original.current.phases_a["i_a"])
+    np.testing.assert_array_equal(imported.encoder.position_counts, original.encoder.position_counts)
+    np.testing.assert_allclose(imported.encoder.host_ns,
+                               original.encoder.host_ns - original.attrs["host_monotonic_ns_at_start"], atol=1)
+    k_recorded = analyze_session(recorded, write=False).result.fit.values.K_Nm_per_rad
+    k_imported = analyze_session(tmp_path / "imported.h5", write=False).result.fit.values.K_Nm_per_rad
+    assert abs(k_imported / k_recorded - 1.0) < 1e-3
