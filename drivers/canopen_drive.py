@@ -443,12 +443,12 @@ class CanopenDrive:
         self._failure = error
         self._event("error", str(error))
         self._motion_stop.set()
-        if self._sync is not None:
-            self._sync.stop()
         try:
             self._quick_stop_and_disable()
         except AcqError as e:
             self._event("error", str(e))
+        if self._sync is not None:
+            self._sync.stop()
 
     def _report_counters(self) -> None:
         if self._capture is None or self._decoder is None:

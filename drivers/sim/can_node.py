@@ -111,6 +111,7 @@ class SimCanNode:
         self.refuse_mode_change = False
         self.reject_mapping = False
         self.tpdos_sent = 0
+        self.first_cycle: int | None = None  # drive cycle of the first SYNC (SYNC index 0)
         sim_bench.hold_history(self._consumer, 0.0)
 
     # ---- fault switches ----------------------------------------------------------------------------
@@ -158,7 +159,9 @@ class SimCanNode:
         return max(0, int(t_s / self._period_s))
 
     def _now_s(self) -> float:
-        return self._now_cycle() * self._period_s
+        """The drive's own time, s: its SYNC cycle, running on by the host clock when SYNC stops."""
+        t_host_s = (time.monotonic_ns() - self._bench.host_t0_ns) * 1e-9 - self._bench.sim.host_latency_s
+        return max(self._now_cycle() * self._period_s, t_host_s)
 
     def _sample(self) -> tuple[int, float]:
         """Position register (counts) and speed (rad/s) at the present cycle, from a block computed ahead
@@ -296,7 +299,10 @@ class SimCanNode:
             self._sync()
 
     def _sync(self) -> None:
-        self._cycle = self._now_cycle() if self._cycle is None else self._cycle + 1
+        if self._cycle is None:
+            self._cycle = self.first_cycle = self._now_cycle()
+        else:
+            self._cycle += 1
         self._syncs += 1
         if self._cycle % HISTORY_EVERY == 0:
             self._bench.hold_history(self._consumer, self._cycle * self._period_s)

@@ -1,0 +1,149 @@
+"""The CANopen drive adapter against the simulated CiA 402 drive, real canopen traffic on ``virtual``.
+
+Each test records on its own virtual channel. Nothing waits on wall-clock timing for synchronisation:
+faults are injected from the recorder's listener when a given block arrives, counts come from the SYNC
+counter, and the recording ends by sample count or by the failure it provokes.
+"""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from acq.config import load_bench, load_profile
+from acq.recorder import Recorder
+from acq.session import load
+from drivers.canopen_drive import CanopenDrive, bus_load, check_bus_load, open_drive
+from drivers.canopen_od import POSITION_ACTUAL, TPDO_COMM, TPDO_MAP, VELOCITY_ACTUAL, map_entry
+from drivers.canopen_stream import SyncUnwrapper
+from drivers.config import Bench, DriveCanopen
+from drivers.errors import ConfigError, DeviceError
+from drivers.sim.bench import SimBench
+from drivers.sim.daq import open_current_source
+
+BENCH_TOML = Path(__file__).parents[1] / "configs" / "benches" / "sim_canopen.toml"
+_channels = itertools.count()
+
+
+def _bench(**drive: object) -> Bench:
+    bench = load_bench(BENCH_TOML)
+    settings = {"channel": f"acq-test-{next(_channels)}", "state_timeout_s": 0.3, **drive}
+    return bench.model_copy(update={"drive": bench.drive.model_copy(update=settings)})
+
+
+def _parts(bench: Bench) -> tuple[SimBench, object, CanopenDrive]:
+    sim = SimBench(bench, realtime=True, keep_history=True)
+    return sim, open_current_source(bench, sim, False), open_drive(bench, sim, False)
+
+
+def _record(tmp_path: Path, bench: Bench, duration_s: float, on_encoder_block=None):
+    sim, current, drive = _parts(bench)
+    blocks = itertools.count()
+
+    def listener(kind: str, block: object) -> None:
+        if kind == "encoder" and on_encoder_block is not None:
+            on_encoder_block(next(blocks), drive)
+
+    result = Recorder(bench, load_profile("triangle_0.2s"), current, drive, tmp_path, duration_s,
+                      listeners=[listener]).run()
+    return result, load(result.path), sim, drive
+
+
+def test_mapping_round_trip_position_and_velocity_on_the_chosen_tpdo() -> None:
+    bench = _bench(tpdo=2, map_velocity=True)
+    _, _, drive = _parts(bench)
+    drive.start()
+    try:
+        node = drive.sim_node.node
+        assert node.sdo[TPDO_COMM + 1][2].raw == 1
+        assert node.sdo[TPDO_COMM + 1][1].raw & 0x7FF == 0x281
+        assert [node.sdo[TPDO_MAP + 1][i].raw for i in range(1, node.sdo[TPDO_MAP + 1][0].raw + 1)] == [
+            map_entry(POSITION_ACTUAL, 32), map_entry(VELOCITY_ACTUAL, 32)]
+        block = None
+        while block is None:
+            block = drive.read(1.0)
+        assert block.velocity_counts_per_s is not None and np.all(np.diff(block.index) == 1)
+    finally:
+        drive.stop()
+
+
+def test_3s_at_1kHz_loses_no_sample_and_each_sample_is_its_sync(tmp_path: Path) -> None:
+    result, s, sim, drive = _record(tmp_path, _bench(), 3.0)
+    assert result.status == "complete", result.stop_reason
+    idx = s.encoder.index
+    assert 3000 <= idx.size <= 3000 + 100
+    np.testing.assert_array_equal(np.diff(idx), 1)
+    assert [e for e in s.events if e.kind in ("gap", "warning", "error")] == []
+    truth = sim.encoder_counts(drive.sim_node.first_cycle + int(idx[0]), idx.size)
+    np.testing.assert_array_equal(s.encoder.position_counts - s.encoder.position_counts[0], truth - truth[0])
+    assert np.ptp(s.encoder.position_counts) > 100_000  # the profile-position triangle really moved the joint
+    assert drive.sim_node.state_402 == 0x40  # SWITCH ON DISABLED after the recording
+    assert result.path.with_suffix(".can.blf").stat().st_size > 0
+
+
+def test_dropped_tpdos_are_one_gap_event_with_their_count(tmp_path: Path) -> None:
+    def drop(n: int, drive: CanopenDrive) -> None:
+        if n == 2:
+            drive.sim_node.drop_tpdos(7)
+
+    result, s, _, _ = _record(tmp_path, _bench(), 1.0, drop)
+    assert result.status == "complete"
+    gaps = [e for e in s.events if e.kind == "gap"]
+    assert len(gaps) == 1 and gaps[0].detail.startswith("7 frames missing before cycle ")
+    assert int(np.sum(np.diff(s.encoder.index) - 1)) == 7
+
+
+def test_heartbeat_loss_fails_the_session_keeps_data_and_disables_the_drive(tmp_path: Path) -> None:
+    def silence(n: int, drive: CanopenDrive) -> None:
+        if n == 2:
+            drive.sim_node.stop_heartbeat()
+
+    result, s, _, drive = _record(tmp_path, _bench(heartbeat_timeout_s=0.3), 30.0, silence)
+    assert result.status == "failed"
+    assert result.stop_reason.startswith("CANopen node 1 on virtual:acq-test-")
+    assert ": heartbeat lost (none for 0." in result.stop_reason and "timeout 0.3 s)" in result.stop_reason
+    assert s.status == "failed" and s.encoder.index.size > 100 and s.current.sample_count > 2560
+    np.testing.assert_array_equal(np.diff(s.encoder.index), 1)
+    assert drive.sim_node.state_402 == 0x40
+
+
+def test_refused_mode_switch_is_a_one_line_device_error() -> None:
+    bench = _bench()
+    _, _, drive = _parts(bench)
+    drive.sim_node.refuse_mode_change = True
+    with pytest.raises(DeviceError) as err:
+        drive.start()
+    assert str(err.value) == (f"CANopen node 1 on virtual:{bench.drive.channel}: the drive refused Profile Position: "
+                              "0x6061 mode display is 0, not 1, 0.3 s after writing 0x6060")
+
+
+def test_mapping_that_reads_back_different_is_refused() -> None:
+    bench = _bench(map_velocity=True)
+    _, _, drive = _parts(bench)
+    drive.sim_node.reject_mapping = True
+    with pytest.raises(DeviceError) as err:
+        drive.start()
+    assert str(err.value) == (f"CANopen node 1 on virtual:{bench.drive.channel}: TPDO1 read back differs from what "
+                              "was written — wrote [0x6064:00/32, 0x606C:00/32] type 1 COB-ID 0x181, "
+                              "read [0x6041:00/16] type 1 COB-ID 0x40000181")
+
+
+def test_bus_load_refusal_names_the_figure() -> None:
+    # worst-case frame bits: SYNC with counter 65, 8-byte TPDO 135; + heartbeat at 10 Hz, SDO status poll at 100 Hz
+    cycle_bits = 65 + 2 * 135
+    assert bus_load(500_000, 1 / 4000, [8, 8]) == pytest.approx((cycle_bits * 4000 + 65 * 10 + 2 * 135 * 100) / 500_000)
+    settings = DriveCanopen(driver="canopen", period_s=0.00025, bitrate=500_000, map_velocity=True)
+    with pytest.raises(ConfigError) as err:
+        check_bus_load(settings)
+    assert str(err.value) == ("[drive] CAN bus load 166% > max_bus_load 70%: SYNC at 4000 Hz with a 8-byte TPDO "
+                              "at 500 kbit/s (worst-case bit stuffing) — raise period_s or bitrate")
+    assert check_bus_load(DriveCanopen(driver="canopen", period_s=0.001, map_velocity=True)) < 0.3
+
+
+def test_sync_counter_unwraps_through_wraps_and_long_silences() -> None:
+    u = SyncUnwrapper(240, 0.001, first_sync_ns=0)
+    assert [u.push(c, ns) for c, ns in ((1, 0), (2, 1_000_000), (240, 239_000_000), (1, 240_000_000))] == [0, 1, 239, 240]
+    assert u.push(5, 244_000_000 + 480_000_000) == 244 + 480  # two whole wraps of silence, told by host time
