@@ -209,14 +209,17 @@ def frequency_alignment(f_current_hz: np.ndarray, t_daq_s: np.ndarray, f_encoder
     n = nw * nw_len
     t_drive = offset_s + t_daq_s[:n] * (1.0 + drift_ppm * 1e-6)
     fc = f_current_hz[:n].reshape(nw, nw_len)
-    # only where the motor turns fast: there a half period is short and the estimate is local
-    fast = fc > 0.25 * np.max(fc)
+    f_enc0 = f_encoder(t_drive).reshape(nw, nw_len)
+    f_top = max(float(np.max(f_enc0)), 1e-9)
+    # only where the motor turns fast: there a half period is short and the estimate local; a truncated
+    # square ignores the spikes of the current's frequency where i_q changes sign
+    fast = f_enc0 > 0.25 * f_top
     weight = fast / np.maximum(fast.sum(axis=1, keepdims=True), 1)
+    clip = (0.1 * f_top) ** 2
     cost = np.empty((lags.size, nw))
     for j, lag in enumerate(lags):
-        cost[j] = np.sum(weight * (fc - f_encoder(t_drive + lag).reshape(nw, nw_len)) ** 2, axis=1)
-    f_enc0 = f_encoder(t_drive).reshape(nw, nw_len)
-    moving = (f_enc0.std(axis=1) > 0.05 * max(np.max(f_enc0), 1e-9)) & (fast.mean(axis=1) > 0.1)
+        cost[j] = np.sum(weight * np.minimum((fc - f_encoder(t_drive + lag).reshape(nw, nw_len)) ** 2, clip), axis=1)
+    moving = (f_enc0.std(axis=1) > 0.05 * f_top) & (fast.mean(axis=1) > 0.1)
     best = np.argmin(cost, axis=0)
     interior = (best > 0) & (best < lags.size - 1)
     ok = moving & interior

@@ -169,7 +169,7 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
 
     sign = torque.apex_sign(speed, rec.period_s) if torque_method == "hilbert" else None
     out = np.empty(t_s.size)
-    theta0 = np.nan
+    theta0 = np.nan if sign is not None else clock.theta0_rad  # NaN: the first chunk estimates it
     for a, b, m0, m1 in _chunks(current["i_a"].size, rec.rate_hz):
         t0 = (n0 + a - m0) / rec.rate_hz
         sel = (t_daq >= (n0 + a) / rec.rate_hz) & (t_daq < (n0 + b) / rec.rate_hz)
@@ -251,17 +251,18 @@ def _chunks(n: int, rate_hz: float) -> Iterator[tuple[int, int, int, int]]:
 
 
 def _demodulated(piece: dict[str, np.ndarray], rec: Recording, theta_m_rad: np.ndarray, method: TorqueMethod,
-                 theta0_ref: float) -> tuple[np.ndarray, float]:
-    """Torque of one chunk by the encoder or park method; θ_0 kept on the branch (mod π) of ``theta0_ref``."""
+                 theta0: float) -> tuple[np.ndarray, float]:
+    """Torque of one chunk by the encoder or park method, and the θ_0 used (mod π; estimated if NaN)."""
     theta_e = rec.pole_pairs * theta_m_rad
-    off = torque.phase_offset(piece["i_a"], theta_e, rec.rate_hz)
-    theta0 = off.theta0_rad if np.isnan(theta0_ref) else off.theta0_rad + np.pi * np.round(
-        (theta0_ref - off.theta0_rad) / np.pi)
     if method == "encoder":
+        if np.isnan(theta0):
+            theta0 = torque.phase_offset(piece["i_a"], theta_e, rec.rate_hz).theta0_rad
+        # the sensor DC is estimated jointly by the spline fit, θ_0 refined there
         return torque.torque_encoder(piece["i_a"], theta_e, rec.rate_hz, rec.k_t_Nm_per_A,
-                                     replace(off, theta0_rad=theta0)), theta0
-    dc = {name: torque.phase_offset(c, theta_e, rec.rate_hz).dc_a for name, c in piece.items()}
-    return torque.torque_park(piece, theta_e, rec.k_t_Nm_per_A, theta0, dc), theta0
+                                     torque.PhaseOffset(theta0, 0.0, 0)), theta0
+    offsets = {name: torque.phase_offset(c, theta_e, rec.rate_hz) for name, c in piece.items()}
+    theta0 = offsets["i_a"].theta0_rad if np.isnan(theta0) else theta0
+    return torque.torque_park(piece, theta_e, rec.k_t_Nm_per_A, theta0, {n: o.dc_a for n, o in offsets.items()}), theta0
 
 
 def _signed(p: PreparedSignals) -> PreparedSignals:
