@@ -40,8 +40,11 @@ class CsvTable:
         return next(iter(self.columns.values())).shape[0]
 
     def line(self, row: int) -> int:
-        """The file's line number (1-based, header = 1) of data row ``row`` (0-based)."""
-        return _data_line_numbers(self.path)[row] if _has_blank_lines(self.path) else row + 2
+        """The file's line number (1-based, header = 1) of data row ``row`` (0-based; -1 is the last).
+
+        Found by reading the file again (blank lines are not rows): for error messages only.
+        """
+        return _data_line_numbers(self.path)[row]
 
     def error(self, row: int, column: str, what: str) -> ConfigError:
         """A one-line error naming the file, the line of ``row`` and ``column``."""
@@ -128,12 +131,6 @@ def _first_bad_cell(path: Path, names: list[str]) -> ConfigError | None:
                     what = "empty cell" if not cell.strip() else f"{cell.strip()!r} is not a number"
                     return ConfigError(f"{path}: line {line}, column {name}: {what}")
     return None
-
-
-def _has_blank_lines(path: Path) -> bool:
-    with path.open("rb") as f:
-        body = f.read().rstrip()
-    return b"\n\n" in body or b"\n\r\n" in body
 
 
 def _data_line_numbers(path: Path) -> list[int]:

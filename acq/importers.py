@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import logging
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -106,16 +106,16 @@ def _check_increasing(table: CsvTable, column: str, values: np.ndarray, *, stric
         raise table.error(row, column, f"{values[row]:.12g} does not increase (previous row: {values[row - 1]:.12g})")
 
 
-def _check_duration(path: Path, where: str, span_s: float) -> None:
+def _check_duration(path: Path, where: Callable[[], str], span_s: float) -> None:
     if not span_s >= MIN_DURATION_S:
-        raise ConfigError(f"{path}: {where}: only {max(span_s, 0.0):.3f} s of data (at least {MIN_DURATION_S:g} s needed)")
+        raise ConfigError(f"{path}: {where()}: only {max(span_s, 0.0):.3f} s of data (at least {MIN_DURATION_S:g} s needed)")
 
 
-def _check_rate(path: Path, where: str, rate_hz: float, bench: Bench) -> None:
+def _check_rate(path: Path, where: Callable[[], str], rate_hz: float, bench: Bench) -> None:
     expected = bench.daq.rate_hz
     deviation = abs(rate_hz / expected - 1.0)
     if deviation > RATE_TOLERANCE:
-        raise ConfigError(f"{path}: {where}: sample rate {rate_hz:.6g} Hz disagrees with the bench's [daq] rate_hz = "
+        raise ConfigError(f"{path}: {where()}: sample rate {rate_hz:.6g} Hz disagrees with the bench's [daq] rate_hz = "
                           f"{expected:g} by {100 * deviation:.2f} % (more than {100 * RATE_TOLERANCE:g} %)")
 
 
@@ -179,10 +179,9 @@ def read_current_csv(path: Path, bench: Bench) -> CurrentTable:
     _nonempty(table)
     t = table.columns["t_s"]
     _check_increasing(table, "t_s", t, strict=True)
-    last = f"line {table.line(table.rows - 1)}, column t_s"
-    _check_duration(path, last, float(t[-1] - t[0]))
+    _check_duration(path, lambda: f"line {table.line(-1)}, column t_s", float(t[-1] - t[0]))
     index, rate = _regular_clock(table)
-    _check_rate(path, f"lines 2–{table.line(table.rows - 1)}, column t_s", rate, bench)
+    _check_rate(path, lambda: f"lines 2–{table.line(-1)}, column t_s", rate, bench)
     phases = {p: table.columns[f"{p}_A"] for p in PHASES if f"{p}_A" in table.columns}
     if not phases:
         raise ConfigError(f"{path}: line 1: no phase column (expected one or more of i_a_A, i_b_A, i_c_A)")
@@ -238,8 +237,8 @@ def read_current_tdms(path: Path, bench: Bench, channels: tuple[str, ...] = ()) 
         if bad.size:
             raise ConfigError(f"{path}: channel {name}, sample {bad[0]}: {'NaN' if np.isnan(d[bad[0]]) else 'not finite'}")
     rate = 1.0 / increments[0]
-    _check_duration(path, f"channel {first}, sample {n - 1}", (n - 1) / rate)
-    _check_rate(path, f"channel {first}, wf_increment", rate, bench)
+    _check_duration(path, lambda: f"channel {first}, sample {n - 1}", (n - 1) / rate)
+    _check_rate(path, lambda: f"channel {first}, wf_increment", rate, bench)
     t0 = float(picked[0][1].properties.get("wf_start_offset", 0.0))
     info = {"format": "tdms", "rate_from": "wf_increment", "channels": [name for name, _ in picked]}
     notes = [Note(t0 + (n - 1) / rate, "current", "warning", f"{path.name}: truncated last segment; read {n} samples "
@@ -256,7 +255,7 @@ def read_encoder_csv(path: Path, period_s: float) -> EncoderTable:
     _nonempty(table)
     t = table.columns["t_s"]
     _check_increasing(table, "t_s", t, strict=False)  # host stamps: several samples may arrive at once
-    _check_duration(path, f"line {table.line(table.rows - 1)}, column t_s", float(t[-1] - t[0]))
+    _check_duration(path, lambda: f"line {table.line(-1)}, column t_s", float(t[-1] - t[0]))
     position = _register_column(table, "position_counts")
     drive_time = table.columns.get("drive_time_s")
     notes: list[Note] = []
