@@ -64,8 +64,10 @@ def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> 
 @click.option("--operator", default="", help="Who is at the bench (stored in the session).")
 @click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
 @click.option("--no-analyze", is_flag=True, help="Only record; do not identify the joint afterwards.")
+@click.option("--live", is_flag=True, help="Watch it in a live window: phase current, speed, position, counters, gaps.")
 def record(profile_name: str, bench_path: Path | None, duration_s: float | None, joint: str | None,
-           out_dir: Path, operator: str, fast: bool, no_analyze: bool) -> int:
+           out_dir: Path, operator: str, fast: bool, no_analyze: bool,
+           live: bool) -> int:
     """Swing the joint on PROFILE, record current and encoder, write one session file."""
     bench = load_bench(bench_path)
     if joint:
@@ -74,8 +76,15 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     duration = duration_s if duration_s is not None else profile.duration_s
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator)
+    live_view = None
+    if live:
+        from acq.live import LiveView  # Qt is imported only when asked for
+
+        live_view = LiveView(recorder)  # before the devices start: no display → one-line error
     recorder.start_devices()
-    result = _record_with_progress(recorder, duration, f"recording {bench.joint}")
+    label = f"recording {bench.joint}"
+    result = (live_view.record(lambda: _record_with_progress(recorder, duration, label)) if live_view
+              else _record_with_progress(recorder, duration, label))
     out.print(summary_table(summarize(load(result.path))))
     if not no_analyze and result.current_samples and result.encoder_samples:
         _analyze_after_recording(result.path)
