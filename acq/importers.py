@@ -41,7 +41,8 @@ from acq.config import load_bench, load_profile
 from acq.csvtable import CsvTable, read_csv
 from acq.session import SessionWriter, load
 from acq.summary import summarize, summary_table
-from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent, StreamName
+from drivers.base import (CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, EventKind, StreamEvent,
+                          StreamName)
 from drivers.config import Bench, Profile
 from drivers.errors import ConfigError
 
@@ -60,8 +61,12 @@ class Note:
 
     t_s: float
     stream: StreamName
-    kind: str
+    kind: EventKind
     detail: str
+
+    def event(self, shift_s: float) -> StreamEvent:
+        """The session event, its file time moved onto the host timeline by ``shift_s``."""
+        return StreamEvent(int(_ns(self.t_s + shift_s)), self.stream, self.kind, self.detail)
 
 
 @dataclass(frozen=True)
@@ -108,7 +113,8 @@ def _check_increasing(table: CsvTable, column: str, values: np.ndarray, *, stric
 
 def _check_duration(path: Path, where: Callable[[], str], span_s: float) -> None:
     if not span_s >= MIN_DURATION_S:
-        raise ConfigError(f"{path}: {where()}: only {max(span_s, 0.0):.3f} s of data (at least {MIN_DURATION_S:g} s needed)")
+        raise ConfigError(f"{path}: {where()}: only {max(span_s, 0.0):.3f} s of data "
+                          f"(at least {MIN_DURATION_S:g} s needed)")
 
 
 def _check_rate(path: Path, where: Callable[[], str], rate_hz: float, bench: Bench) -> None:
@@ -235,7 +241,8 @@ def read_current_tdms(path: Path, bench: Bench, channels: tuple[str, ...] = ()) 
     for (name, _), d in zip(picked, data):
         bad = np.flatnonzero(~np.isfinite(d[:n]))
         if bad.size:
-            raise ConfigError(f"{path}: channel {name}, sample {bad[0]}: {'NaN' if np.isnan(d[bad[0]]) else 'not finite'}")
+            what = "NaN" if np.isnan(d[bad[0]]) else f"{d[bad[0]]} is not finite"
+            raise ConfigError(f"{path}: channel {name}, sample {bad[0]}: {what}")
     rate = 1.0 / increments[0]
     _check_duration(path, lambda: f"channel {first}, sample {n - 1}", (n - 1) / rate)
     _check_rate(path, lambda: f"channel {first}, wf_increment", rate, bench)
@@ -350,8 +357,7 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench, profile
         "encoder_index": enc.timestamp_kind,
     }
     notes = [*cur.notes, *enc.notes]
-    events = sorted((StreamEvent(int(_ns(n.t_s + (shift if n.stream == "current" else 0.0))), n.stream, n.kind,  # type: ignore[arg-type]
-                                 n.detail) for n in notes), key=lambda e: e.host_ns)
+    events = sorted((n.event(shift if n.stream == "current" else 0.0) for n in notes), key=lambda e: e.host_ns)
     cpr = getattr(bench.drive, "counts_per_rev", None) or bench.encoder.counts_per_rev
     tmp = out.with_name(f".{out.name}.importing")
     tmp.unlink(missing_ok=True)

@@ -94,6 +94,18 @@ def test_encoder_int32_wrap_is_unwrapped_and_index_gaps_become_events(
         ("encoder", "gap", "1 drive cycles missing before index 2001")]
 
 
+def test_files_on_separate_clocks_start_together_and_the_origin_says_so(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    _, enc = pair
+    cur = write_csv(tmp_path / "cur.csv", "t_s,i_a_A", current_columns(t0_s=5000.0)[:2], ["%.9f", "%r"])
+    assert run_import(capsys, cur, enc, tmp_path / "s.h5").code == 0
+    s = load(tmp_path / "s.h5")
+    assert json.loads(s.attrs["origin_json"])["host_timeline"].startswith("separate: the files' time columns do not "
+                                                                          "overlap; the current was shifted by -4999.99")
+    first_block_end_s = s.current.block_host_ns[0] * 1e-9
+    assert first_block_end_s == pytest.approx(encoder_columns()[0][0] + 2559 / RATE_HZ, abs=1e-9)
+
+
 def _with_row_changed(path: Path, line: int, text: str) -> Path:
     lines = path.read_text().splitlines()
     lines[line - 1] = text
@@ -105,7 +117,8 @@ BAD_CURRENT = [
     pytest.param(lambda p: p.write_text(p.read_text().replace("t_s,i_a_A,i_b_A", "i_a_A,i_b_A", 1)),
                  "line 1, column t_s: missing (the header is 'i_a_A,i_b_A')", id="missing-header"),
     pytest.param(lambda p: p.write_text(p.read_text().replace("t_s,i_a_A,i_b_A", "t_s,i_a_a,i_b_A", 1)),
-                 f"line 1, column i_a_a: unknown column (did you mean i_a_A? {EXPECTED_COLUMNS})", id="misspelt-header"),
+                 f"line 1, column i_a_a: unknown column (did you mean i_a_A? {EXPECTED_COLUMNS})",
+                 id="misspelt-header"),
     pytest.param(lambda p: _with_row_changed(p, 57, "0.002187500,abc,1.0"),
                  "line 57, column i_a_A: 'abc' is not a number", id="non-numeric"),
     pytest.param(lambda p: _with_row_changed(p, 100, "0.003867188,0.5,"),
@@ -165,8 +178,8 @@ def test_bad_encoder_csv_is_one_line_naming_file_line_and_column_exit_2_and_no_s
 # ------------------------------------------------------------------------------------ TDMS
 
 
-def write_tdms(path: Path, columns: list[np.ndarray], segments: int = 5, t0_s: float = 0.0) -> Path:
-    props = {"wf_increment": 1.0 / RATE_HZ, "wf_start_offset": t0_s}
+def write_tdms(path: Path, columns: list[np.ndarray], segments: int = 5, rate_hz: float = RATE_HZ) -> Path:
+    props = {"wf_increment": 1.0 / rate_hz, "wf_start_offset": 0.0}
     with TdmsWriter(path) as w:
         for part in zip(*(np.array_split(c, segments) for c in columns)):
             w.write_segment([RootObject(), GroupObject("DAQ"),
@@ -203,6 +216,35 @@ def test_truncated_tdms_is_read_up_to_the_cut_with_a_warning_event(
     detail = f"cur.tdms: truncated last segment; read {n} samples per channel, the rest of that segment is missing"
     assert [(e.stream, e.kind, e.detail) for e in s.events] == [("current", "warning", detail)]
     assert f"warning: {detail}" in " ".join(r.err.split())
+
+
+def _nan_at(values: np.ndarray, i: int) -> np.ndarray:
+    out = values.copy()
+    out[i] = np.nan
+    return out
+
+
+BAD_TDMS = [
+    pytest.param(lambda p, i: write_tdms(p, [_nan_at(i, 1234)]), (), "channel DAQ/ai0, sample 1234: NaN", id="nan"),
+    pytest.param(lambda p, i: write_tdms(p, [i[:40000]]), (),
+                 "channel DAQ/ai0, sample 39999: only 1.562 s of data (at least 2 s needed)", id="too-short"),
+    pytest.param(lambda p, i: write_tdms(p, [i], rate_hz=24000.0), (),
+                 "channel DAQ/ai0, wf_increment: sample rate 24000 Hz disagrees with the bench's [daq] rate_hz = 25600 "
+                 "by 6.25 % (more than 1 %)", id="rate"),
+    pytest.param(lambda p, i: write_tdms(p, [i]), ("--current-channel", "DAQ/ia0"),
+                 "channel DAQ/ia0: not in the file (channels: DAQ/ai0)", id="unknown-channel"),
+]
+
+
+@pytest.mark.parametrize(("make", "options", "message"), BAD_TDMS)
+def test_bad_tdms_is_one_line_naming_file_channel_and_sample_exit_2_and_no_session(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path], make, options, message) -> None:
+    _, enc = pair
+    _, i_a, _ = current_columns()
+    cur = make(tmp_path / "cur.tdms", i_a)
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5", *options)
+    assert (r.code, r.err) == (2, f"acq: error: {cur}: {message}\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cur.csv", "cur.tdms", "enc.csv"]
 
 
 def test_tdms_with_several_channels_and_none_picked_names_them(
