@@ -243,7 +243,9 @@ def frequency_alignment(f_current_hz: np.ndarray, t_daq_s: np.ndarray, f_encoder
 
 
 @dataclass(frozen=True)
-class _AngleFit:
+class AngleFit:
+    """Result of the angle stage: the relation, θ_0 (mod π, rad) and the fit's quality (see :class:`ClockFit`)."""
+
     offset_s: float
     drift_ppm: float
     theta0_rad: float
@@ -255,7 +257,7 @@ class _AngleFit:
 
 def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline, pole_pairs: int,
                     offset_s: float, drift_ppm: float, search_s: float = 4e-3, window_s: float = 0.02,
-                    iterations: int = 2) -> _AngleFit | None:
+                    iterations: int = 2) -> AngleFit | None:
     """Stage 3: offset, drift and θ_0 from the phase of i_a against the encoder's electrical angle.
 
     Parameters
@@ -281,7 +283,7 @@ def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, ang
 
     Returns
     -------
-    _AngleFit or None
+    AngleFit or None
         None when fewer than 10 windows turn half an electrical revolution.
     """
     wl = max(8, int(round(window_s * rate_hz)))
@@ -323,7 +325,7 @@ def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, ang
     var_off0 = cov[1, 1] - 2 * t_ref * cov[1, 2] + t_ref**2 * cov[2, 2]
     resid = np.sqrt(np.sum(w[keep] * res[keep] ** 2) / np.sum(w[keep] * k[keep] ** 2))
     theta0 = float(np.angle(np.exp(2j * theta0)) / 2.0)
-    return _AngleFit(offset_s, drift_ppm, theta0, float(resid), float(np.sqrt(var_off0)),
+    return AngleFit(offset_s, drift_ppm, theta0, float(resid), float(np.sqrt(var_off0)),
                      float(np.sqrt(cov[2, 2]) * 1e6), int(keep.sum()))
 
 
@@ -385,19 +387,15 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
     f_enc_grid = crossing_frequency_hz(angle_crossings_s(angle, pole_pairs, t_enc[0], t_enc[1]), enc_grid)
 
     def f_enc(t: np.ndarray) -> np.ndarray:
-        return np.interp(t, enc_grid, f_enc_grid, left=np.nan, right=np.nan)
-
-    def f_enc_filled(t: np.ndarray) -> np.ndarray:
-        v = f_enc(t)
-        return np.where(np.isnan(v), 0.0, v)
+        return np.interp(t, enc_grid, f_enc_grid, left=0.0, right=0.0)
 
     freq = (np.nan, np.nan)
     if host is None:
         step = 10
-        offset_s, _, n = frequency_alignment(f_cur[::step], grid[::step], f_enc_filled, offset_s, 0.0,
-                                             max_lag_s, window_s=grid.size / _GRID_HZ)
+        offset_s = frequency_alignment(f_cur[::step], grid[::step], f_enc, offset_s, 0.0, max_lag_s,
+                                       window_s=grid.size / _GRID_HZ)[0]
     for lag in (0.03, 0.004):
-        o, d, n = frequency_alignment(f_cur, grid, f_enc_filled, offset_s, drift_ppm, lag)
+        o, d, n = frequency_alignment(f_cur, grid, f_enc, offset_s, drift_ppm, lag)
         if n:
             offset_s, drift_ppm, freq, method = o, d, (o, d), "frequency"
     fit = angle_alignment(current_a, rate_hz, first_index, angle, pole_pairs, offset_s, drift_ppm)
