@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import logging
 import queue
+import threading
 import time
 from collections import deque
 from pathlib import Path
@@ -73,15 +74,15 @@ class FrameCapture:
     def __init__(self, with_counter: bool, max_frames: int) -> None:
         self.frames: queue.Queue[tuple[int, bytes, int]] = queue.Queue(max_frames)
         self._with_counter = with_counter
-        self._syncs = 0
+        self.syncs = 0
         self._counter = 0
         self.overruns = 0
         self.errors = 0
 
     def on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         try:
-            self._syncs += 1
-            self._counter = data[0] if self._with_counter else self._syncs
+            self.syncs += 1
+            self._counter = data[0] if self._with_counter else self.syncs
         except Exception:  # noqa: BLE001 - canopen would only log it; count it too
             self._failed()
 
@@ -169,6 +170,7 @@ class RawFrameLog(can.Listener):
 
     def __init__(self) -> None:
         self._pending: deque[can.Message] = deque()
+        self._lock = threading.Lock()  # the consumer drains, the recorder's thread may open or stop
         self._writer: can.BLFWriter | None = None
         self.path: Path | None = None
         self.frames_written = 0
@@ -178,23 +180,26 @@ class RawFrameLog(can.Listener):
 
     def open(self, path: Path) -> None:
         """Start writing to ``path`` (BLF, python-can's :class:`can.BLFWriter`), held frames first."""
-        self.path = path
-        self._writer = can.BLFWriter(path)
+        with self._lock:
+            self.path = path
+            self._writer = can.BLFWriter(path)
         self.drain()
 
     def drain(self) -> None:
         """Write what arrived since the last call (or trim the in-memory hold)."""
-        if self._writer is None:
-            while len(self._pending) > RAW_PRE_LOG_MAX:
-                self._pending.popleft()
-            return
-        while self._pending:
-            self._writer.on_message_received(self._pending.popleft())
-            self.frames_written += 1
+        with self._lock:
+            if self._writer is None:
+                while len(self._pending) > RAW_PRE_LOG_MAX:
+                    self._pending.popleft()
+                return
+            while self._pending:
+                self._writer.on_message_received(self._pending.popleft())
+                self.frames_written += 1
 
     def stop(self) -> None:
         """Write the rest and close the file. Idempotent."""
-        if self._writer is not None:
-            self.drain()
-            self._writer.stop()
-            self._writer = None
+        self.drain()
+        with self._lock:
+            if self._writer is not None:
+                self._writer.stop()
+                self._writer = None

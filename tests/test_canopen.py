@@ -10,6 +10,7 @@ from __future__ import annotations
 import itertools
 from pathlib import Path
 
+import can
 import numpy as np
 import pytest
 
@@ -18,7 +19,7 @@ from acq.recorder import Recorder
 from acq.session import load
 from drivers.canopen_drive import CanopenDrive, bus_load, check_bus_load, open_drive
 from drivers.canopen_od import POSITION_ACTUAL, TPDO_COMM, TPDO_MAP, VELOCITY_ACTUAL, map_entry
-from drivers.canopen_stream import SyncUnwrapper
+from drivers.canopen_stream import SYNC_COB_ID, FrameCapture, SyncUnwrapper, TpdoDecoder
 from drivers.config import Bench, DriveCanopen
 from drivers.errors import ConfigError, DeviceError
 from drivers.sim.bench import SimBench
@@ -81,7 +82,22 @@ def test_3s_at_1kHz_loses_no_sample_and_each_sample_is_its_sync(tmp_path: Path) 
     np.testing.assert_array_equal(s.encoder.position_counts - s.encoder.position_counts[0], truth - truth[0])
     assert np.ptp(s.encoder.position_counts) > 100_000  # the profile-position triangle really moved the joint
     assert drive.sim_node.state_402 == 0x40  # SWITCH ON DISABLED after the recording
-    assert result.path.with_suffix(".can.blf").stat().st_size > 0
+    rebuilt = _rebuild_from_raw_frames(result.path.with_suffix(".can.blf"))
+    np.testing.assert_array_equal(rebuilt[idx], s.encoder.position_counts)
+
+
+def _rebuild_from_raw_frames(blf: Path) -> np.ndarray:
+    """Position (counts) by SYNC index, from the .blf alone: each TPDO pairs with the SYNC before it."""
+    counter, frames, first_ns = 0, [], None
+    for msg in can.BLFReader(blf):
+        if msg.arbitration_id == SYNC_COB_ID:
+            counter, first_ns = msg.data[0], first_ns or int(msg.timestamp * 1e9)
+        elif msg.arbitration_id == 0x181 and counter:
+            frames.append((counter, bytes(msg.data), int(msg.timestamp * 1e9)))
+    block = TpdoDecoder(SyncUnwrapper(240, 0.001, first_ns), True, 1.0).decode(frames)
+    positions = np.full(int(block.index[-1]) + 1, np.iinfo(np.int64).min)
+    positions[block.index] = block.position_counts
+    return positions
 
 
 def test_dropped_tpdos_are_one_gap_event_with_their_count(tmp_path: Path) -> None:
@@ -138,8 +154,8 @@ def test_bus_load_refusal_names_the_figure() -> None:
     settings = DriveCanopen(driver="canopen", period_s=0.00025, bitrate=500_000, map_velocity=True)
     with pytest.raises(ConfigError) as err:
         check_bus_load(settings)
-    assert str(err.value) == ("[drive] CAN bus load 166% > max_bus_load 70%: SYNC at 4000 Hz with a 8-byte TPDO "
-                              "at 500 kbit/s (worst-case bit stuffing) — raise period_s or bitrate")
+    assert str(err.value) == ("[drive] CAN bus load 166% > max_bus_load 70%: SYNC at 4000 Hz and a TPDO of 8 "
+                              "bytes at 500 kbit/s (worst-case bit stuffing) — raise period_s or bitrate")
     assert check_bus_load(DriveCanopen(driver="canopen", period_s=0.001, map_velocity=True)) < 0.3
 
 
@@ -147,3 +163,13 @@ def test_sync_counter_unwraps_through_wraps_and_long_silences() -> None:
     u = SyncUnwrapper(240, 0.001, first_sync_ns=0)
     assert [u.push(c, ns) for c, ns in ((1, 0), (2, 1_000_000), (240, 239_000_000), (1, 240_000_000))] == [0, 1, 239, 240]
     assert u.push(5, 244_000_000 + 480_000_000) == 244 + 480  # two whole wraps of silence, told by host time
+
+
+def test_capture_counts_overruns_and_callback_errors_instead_of_raising() -> None:
+    capture = FrameCapture(with_counter=True, max_frames=2)
+    capture.on_sync(0x80, bytearray([7]), 0.0)
+    for _ in range(3):
+        capture.on_tpdo(0x181, bytearray(8), 0.0)
+    capture.on_sync(0x80, bytearray(), 0.0)  # a SYNC without its counter byte: logged and counted
+    assert (capture.frames.qsize(), capture.overruns, capture.errors) == (2, 1, 1)
+    assert capture.frames.get_nowait()[:2] == (7, bytes(8))

@@ -1,0 +1,184 @@
+"""CiA 402 motion of one CANopen drive: enable, the triangle by Profile Position, quick stop + disable.
+
+canopen's :class:`~canopen.profiles.p402.BaseNode402` walks the state machine (timeouts from
+``state_timeout_s``); the rest is here. The triangle is a loop of alternating absolute targets 0x607A
+with the new-set-point handshake: wait until statusword bit 12 (set-point acknowledge) is clear —
+the drive's set-point buffer is free — write the target, raise controlword bit 4, wait for bit 12,
+lower bit 4. With change-set-immediately (bit 5) clear the drive buffers the next target while the
+present move runs, so its own generator makes back-to-back ramps (0x6081/0x6083/0x6084). A
+``dwell_s`` waits for target reached (bit 10) and the dwell before the next target.
+
+All SDO traffic of the motion goes through one lock (the motion thread and a stop from any other
+thread share canopen's SDO client). Every stop is a quick stop on the 0x6085 ramp, a wait for rest
+(SWITCH ON DISABLED, or QUICK STOP ACTIVE with target reached), then disable voltage, verified.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+from drivers import canopen_od as od
+from drivers.config import DriveCanopen, Profile
+from drivers.errors import AcqError, DeviceError
+from drivers.motion import half_swing_rad
+
+STATUS_POLL_S = 0.01
+SW_TARGET_REACHED = 1 << 10
+SW_SETPOINT_ACK = 1 << 12
+CW_ENABLE = 0x000F
+CW_NEW_SETPOINT = 0x0010
+CW_QUICK_STOP = 0x0002
+CW_DISABLE_VOLTAGE = 0x0000
+
+
+@contextmanager
+def device_step(device: str, what: str) -> Iterator[None]:
+    """Turn canopen / python-can failures into one-line :class:`DeviceError` s naming device and step."""
+    import can
+    from canopen.nmt import NmtError
+    from canopen.sdo import SdoAbortedError, SdoCommunicationError
+
+    try:
+        yield
+    except AcqError:
+        raise
+    except (SdoAbortedError, SdoCommunicationError, NmtError, can.CanError, RuntimeError, ValueError, OSError) as e:
+        raise DeviceError(f"{device}: {what}: {e}") from None
+
+
+def node402(node_id: int) -> Any:
+    """A ``BaseNode402`` with acq's object dictionary that reads the statusword by SDO: acq maps no
+    statusword PDO, and canopen would log a warning on every read of its fallback."""
+    from canopen.profiles.p402 import BaseNode402
+
+    class Node402(BaseNode402):
+        @property
+        def statusword(self) -> int:
+            return int(self.sdo[od.STATUSWORD].raw)
+
+    return Node402(node_id, od.drive_object_dictionary(node_id))
+
+
+def _int32(value: int) -> int:
+    return (value + 2**31) % 2**32 - 2**31
+
+
+class ProfilePositionMotion:
+    """Motion of ``node`` (a started :func:`node402`) for a drive named ``device`` in messages.
+
+    ``on_failure`` is called (from the motion thread) with the error that ended the motion after
+    the drive was stopped; ``on_info`` with one-line notes for the session's events.
+    """
+
+    def __init__(self, node: Any, device: str, settings: DriveCanopen, counts_per_rev: int,
+                 on_failure: Callable[[DeviceError], None], on_info: Callable[[str], None]) -> None:
+        self._node, self._name, self._s, self._cpr = node, device, settings, counts_per_rev
+        self._on_failure, self._on_info = on_failure, on_info
+        self.sdo_lock = threading.RLock()
+        self._halt_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._enabled = False
+        self._stop_time_s = settings.state_timeout_s
+
+    def start(self, profile: Profile) -> None:
+        """Set the ramps from ``profile``, enable, and run the triangle in a thread until :meth:`stop`."""
+        s, node = self._s, self._node
+        top_rpm = profile.top_speed_rpm
+        decel = round(top_rpm / profile.decel_time_s * s.acceleration_units_per_rpm_per_s)
+        self._stop_time_s = s.state_timeout_s + profile.decel_time_s
+        try:
+            with self.sdo_lock, device_step(self._name, "setting the profile-position parameters failed"):
+                node.sdo[od.PROFILE_VELOCITY].raw = round(top_rpm * s.velocity_units_per_rpm)
+                node.sdo[od.PROFILE_ACCELERATION].raw = round(
+                    top_rpm / profile.accel_time_s * s.acceleration_units_per_rpm_per_s)
+                node.sdo[od.PROFILE_DECELERATION].raw = decel
+                node.sdo[od.QUICK_STOP_DECELERATION].raw = decel
+                p0 = int(node.sdo[od.POSITION_ACTUAL].raw)
+            with self.sdo_lock, device_step(self._name, f"did not reach OPERATION ENABLED within {s.state_timeout_s:g} s"):
+                self._enabled = True
+                node.state = "OPERATION ENABLED"
+        except BaseException:
+            self.quick_stop_and_disable()
+            raise
+        swing = round(half_swing_rad(profile) / (2 * math.pi) * self._cpr)
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run_triangle, args=(p0, swing, profile.dwell_s),
+                                        name="acq-canopen-motion", daemon=True)
+        self._thread.start()
+
+    def stop(self) -> None:
+        """Stop issuing targets, then quick stop and disable. Idempotent."""
+        self._stop.set()
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(self._stop_time_s + 4 * self._s.sdo_timeout_s)
+        self.quick_stop_and_disable()
+
+    def quick_stop_and_disable(self) -> None:
+        """Quick stop (controlword 0x0002), wait for rest, disable voltage, verify. Idempotent."""
+        self._stop.set()
+        with self._halt_lock:
+            if not self._enabled:
+                return
+            node, timeout = self._node, self._stop_time_s
+            with self.sdo_lock, device_step(self._name, "quick stop / disable failed"):
+                node.controlword = CW_QUICK_STOP
+                deadline = time.monotonic() + timeout
+                while (sw := int(node.statusword)) & 0x4F != 0x40 and not (sw & 0x6F == 0x07 and sw & SW_TARGET_REACHED):
+                    if time.monotonic() > deadline:
+                        raise DeviceError(f"{self._name}: not at rest {timeout:g} s after quick stop "
+                                          f"(statusword 0x{sw:04X})")
+                    time.sleep(STATUS_POLL_S)
+                node.controlword = CW_DISABLE_VOLTAGE
+                node.state = "SWITCH ON DISABLED"
+            self._enabled = False
+            self._on_info("drive quick-stopped and disabled (SWITCH ON DISABLED)")
+
+    def _wait_status(self, mask: int, value: int, timeout_s: float | None, what: str) -> bool:
+        """Poll the statusword until ``sw & mask == value``; False if stopped, DeviceError after timeout."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while not self._stop.is_set():
+            with self.sdo_lock:
+                sw = int(self._node.statusword)
+            if sw & 0x6F != 0x27:
+                raise DeviceError(f"{self._name}: drive left OPERATION ENABLED during the motion (statusword 0x{sw:04X})")
+            if sw & mask == value:
+                return True
+            if deadline is not None and time.monotonic() > deadline:
+                raise DeviceError(f"{self._name}: {what} within {timeout_s:g} s (statusword 0x{sw:04X})")
+            self._stop.wait(STATUS_POLL_S)
+        return False
+
+    def _run_triangle(self, p0: int, swing: int, dwell_s: float) -> None:
+        """Alternate absolute targets p0 + swing and p0 with the new-set-point handshake until stopped."""
+        targets = (p0 + swing, p0)
+        try:
+            for n in range(2**62):
+                if dwell_s > 0:
+                    if not self._wait_status(SW_TARGET_REACHED, SW_TARGET_REACHED, None, "target not reached"):
+                        return
+                    if self._stop.wait(dwell_s):
+                        return
+                if not self._wait_status(SW_SETPOINT_ACK, 0, None, "set-point buffer never freed"):
+                    return
+                with self.sdo_lock:
+                    self._node.sdo[od.TARGET_POSITION].raw = _int32(targets[n % 2])
+                    self._node.controlword = CW_ENABLE | CW_NEW_SETPOINT
+                acked = self._wait_status(SW_SETPOINT_ACK, SW_SETPOINT_ACK, self._s.state_timeout_s,
+                                          "set-point not acknowledged")
+                with self.sdo_lock:
+                    self._node.controlword = CW_ENABLE
+                if not acked:
+                    return
+        except Exception as e:  # noqa: BLE001 - any failure stops the drive and ends the recording
+            error = e if isinstance(e, DeviceError) else DeviceError(f"{self._name}: motion failed: {e}")
+            try:
+                self.quick_stop_and_disable()
+            except AcqError as stop_error:
+                self._on_info(str(stop_error))
+            self._on_failure(error)
