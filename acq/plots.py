@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
+import shiboken6
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
 from acq.analyze import PARAMS
@@ -280,4 +281,4 @@ def render_report_png(figure_data: FigureData, path: Path | str, size: tuple[int
     try:
         return grab_png(view, path, size)
     finally:
-        view.deleteLater()
+        shiboken6.delete(view)  # now, not at interpreter exit after the QApplication (that segfaults)
