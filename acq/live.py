@@ -149,7 +149,7 @@ class LiveWindow(QtWidgets.QWidget):
         self.curves: dict[str, pg.PlotDataItem] = {}
         self.traces = {name: _Trace() for name, _, _ in specs}
         for row, (name, plot_title, (text, units)) in enumerate(specs):
-            plot = self.graphics.ci.addPlot(row=row, col=0, name=name, title=plot_title)
+            plot = self.graphics.ci.addPlot(row=row, col=0, title=plot_title)
             plot.setLabel("left", text, units=units)
             plot.setLabel("bottom", "t (own clock of the stream)", units="s")
             for side in ("left", "bottom"):

@@ -72,9 +72,9 @@ def ensure_app(offscreen: bool = False) -> QtWidgets.QApplication:
     return app  # type: ignore[return-value]
 
 
-def _plot(layout: pg.GraphicsLayout, row: int, col: int, name: str, title: str,
+def _plot(layout: pg.GraphicsLayout, row: int, col: int, title: str,
           x: tuple[str, str], y: tuple[str, str]) -> pg.PlotItem:
-    plot = layout.addPlot(row=row, col=col, name=name, title=title)
+    plot = layout.addPlot(row=row, col=col, title=title)  # unnamed: pyqtgraph's view registry fails at teardown
     for side, (text, units) in (("bottom", x), ("left", y)):
         axis = plot.getAxis(side)
         axis.enableAutoSIPrefix(False)
@@ -111,10 +111,10 @@ class ReportView(QtWidgets.QWidget):
         if title:
             layout.addLabel(escape(title), row=0, col=0, colspan=2, size="12pt")
         self.plots = {
-            "torque": _plot(layout, 1, 0, "torque", "Electromagnetic torque", ("t (drive clock)", "s"), ("T_e", "N·m")),
-            "speed": _plot(layout, 2, 0, "speed", "Motor speed", ("t (drive clock)", "s"), ("ω_m", "rad/s")),
-            "frf": _plot(layout, 1, 1, "frf", "FRF amplitude |ω_m / T_e|", ("f", "Hz"), ("|H|", "rad/(s·N·m)")),
-            "coherence": _plot(layout, 2, 1, "coherence", "Coherence", ("f", "Hz"), ("γ²", "")),
+            "torque": _plot(layout, 1, 0, "Electromagnetic torque", ("t (drive clock)", "s"), ("T_e", "N·m")),
+            "speed": _plot(layout, 2, 0, "Motor speed", ("t (drive clock)", "s"), ("ω_m", "rad/s")),
+            "frf": _plot(layout, 1, 1, "FRF amplitude |ω_m / T_e|", ("f", "Hz"), ("|H|", "rad/(s·N·m)")),
+            "coherence": _plot(layout, 2, 1, "Coherence", ("f", "Hz"), ("γ²", "")),
         }
         self.plots["speed"].setXLink(self.plots["torque"])
         self.plots["coherence"].setXLink(self.plots["frf"])

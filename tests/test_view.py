@@ -150,7 +150,7 @@ def test_view_screenshot_and_live_window_under_xvfb(session: Path, tmp_path: Pat
                           env=env, capture_output=True, text=True, timeout=60)
     assert done.returncode == 0, done.stderr
     _assert_real_image(shot, (1600, 1000))
-    live = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.2s", "--duration", "1",
+    live = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.2s", "--duration", "0.5",
                            "--fast", "--live", "--no-analyze", "--out", str(tmp_path)],
                           env=env, capture_output=True, text=True, timeout=60)
     assert live.returncode == 0, live.stderr
