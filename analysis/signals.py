@@ -154,6 +154,12 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
     else:
         clock = ClockFit(float(cycles[0]) * rec.period_s - n0 / rec.rate_hz, 0.0)
         notes.append("clock: not aligned (streams taken as started together, no drift)")
+    # only the current within the encoder span: outside it the angle spline extrapolates (bad θ_0, DC, i_q)
+    enc_daq = clock.daq_time_s(cycles[[0, -1]] * rec.period_s) * rec.rate_hz - n0
+    first = int(np.clip(np.ceil(enc_daq[0]), 0, hi - lo))
+    last = int(np.clip(np.floor(enc_daq[1]) + 1, first, hi - lo))
+    current = {name: c[first:last] for name, c in current.items()}
+    n0, lo, hi = n0 + first, lo + first, lo + last
 
     speed = encoder.speed_from_counts(counts, rec.counts_per_rev, rec.period_s)
     t_s = cycles[1:] * rec.period_s

@@ -260,6 +260,15 @@ def test_gap_in_the_encoder_uses_the_longest_span_and_says_so(session3: tuple[Re
     assert any("gap" in n and "longest gap-free span" in n for n in prep.notes)
 
 
+def test_current_beyond_the_encoder_record_is_not_demodulated(session3: tuple[Recording, SimBench]) -> None:
+    rec, sim = session3
+    t_enc = rec.encoder_index * rec.period_s
+    short = (t_enc > 1.05) & (t_enc < 4.3)  # the motor moves at both ends of the encoder record
+    prep = prepare_signals(replace(rec, encoder_index=rec.encoder_index[short],
+                                   position_counts=rec.position_counts[short], encoder_host_ns=rec.encoder_host_ns[short]))
+    assert rms_pct(prep.torque_Nm, band_limited_truth(sim, rec, prep.t_s)) < 1.0
+
+
 def test_gap_in_the_daq_uses_the_longest_run(session3: tuple[Recording, SimBench]) -> None:
     rec, _ = session3
     drop = slice(10 * 2560, 12 * 2560)  # two reads lost
