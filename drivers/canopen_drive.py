@@ -70,9 +70,9 @@ def check_bus_load(s: DriveCanopen) -> float:
     load = bus_load(s.bitrate, s.period_s, tpdo, heartbeat_period_s=s.heartbeat_period_s)
     if load > s.max_bus_load:
         raise ConfigError(
-            f"[drive] CAN bus load {load:.0%} > max_bus_load {s.max_bus_load:.0%}: SYNC at {1 / s.period_s:g} Hz "
-            f"and a TPDO of {tpdo[0]} bytes at {s.bitrate / 1000:g} kbit/s (worst-case bit stuffing) — "
-            "raise period_s or bitrate")
+            f"[drive] period_s = {s.period_s:g}, bitrate = {s.bitrate}: CAN bus load {load:.0%} > max_bus_load "
+            f"{s.max_bus_load:.0%} (SYNC at {1 / s.period_s:g} Hz and a TPDO of {tpdo[0]} bytes, worst-case bit "
+            "stuffing) — raise period_s or bitrate")
     return load
 
 

@@ -38,24 +38,20 @@ RAW_PRE_LOG_MAX = 100_000  # frames kept while no raw log file is open yet
 class SyncProducer:
     """SYNC every ``period_s`` (s) with the counter 1…``overflow`` in its data byte (none if 0).
 
-    canopen's own :class:`canopen.sync.SyncProducer` sends a fixed message; the counter needs
-    python-can's cyclic task with a ``modifier_callback`` (a software thread on every interface).
+    canopen's own :class:`canopen.sync.SyncProducer` sends one fixed message. The counter is a cyclic
+    *sequence* of ``overflow`` messages, so python-can schedules it where the interface can — the
+    kernel's broadcast manager on SocketCAN (µs timing, no Python thread), a software thread elsewhere.
     """
 
     def __init__(self, bus: can.BusABC, period_s: float, overflow: int) -> None:
-        self._bus, self._period_s, self._overflow = bus, period_s, overflow
-        self._counter = 0
+        self._bus, self._period_s = bus, period_s
+        self._messages = [can.Message(arbitration_id=SYNC_COB_ID, is_extended_id=False, data=[c] if c else [])
+                          for c in (range(1, overflow + 1) if overflow else [0])]
         self._task: can.broadcastmanager.CyclicSendTaskABC | None = None
-
-    def _next(self, msg: can.Message) -> None:
-        self._counter = self._counter % self._overflow + 1
-        msg.data[0] = self._counter
 
     def start(self) -> None:
         """Start sending (the first SYNC carries counter 1)."""
-        counted = self._overflow > 0
-        msg = can.Message(arbitration_id=SYNC_COB_ID, is_extended_id=False, data=[0] if counted else [])
-        self._task = self._bus.send_periodic(msg, self._period_s, modifier_callback=self._next if counted else None)
+        self._task = self._bus.send_periodic(self._messages, self._period_s)
 
     def stop(self) -> None:
         """Stop sending. Idempotent."""

@@ -154,8 +154,9 @@ def test_bus_load_refusal_names_the_figure() -> None:
     settings = DriveCanopen(driver="canopen", period_s=0.00025, bitrate=500_000, map_velocity=True)
     with pytest.raises(ConfigError) as err:
         check_bus_load(settings)
-    assert str(err.value) == ("[drive] CAN bus load 166% > max_bus_load 70%: SYNC at 4000 Hz and a TPDO of 8 "
-                              "bytes at 500 kbit/s (worst-case bit stuffing) — raise period_s or bitrate")
+    assert str(err.value) == ("[drive] period_s = 0.00025, bitrate = 500000: CAN bus load 166% > max_bus_load 70% "
+                              "(SYNC at 4000 Hz and a TPDO of 8 bytes, worst-case bit stuffing) — raise period_s "
+                              "or bitrate")
     assert check_bus_load(DriveCanopen(driver="canopen", period_s=0.001, map_velocity=True)) < 0.3
 
 
