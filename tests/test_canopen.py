@@ -126,6 +126,19 @@ def test_heartbeat_loss_fails_the_session_keeps_data_and_disables_the_drive(tmp_
     assert drive.sim_node.state_402 == 0x40
 
 
+@pytest.mark.parametrize("error, status", [(RuntimeError("listener bug"), "failed"), (KeyboardInterrupt(), "interrupted")])
+def test_any_exception_or_ctrl_c_while_recording_quick_stops_and_disables(tmp_path: Path, error: BaseException,
+                                                                          status: str) -> None:
+    def explode(n: int, drive: CanopenDrive) -> None:
+        if n == 2:
+            raise error
+
+    result, s, _, drive = _record(tmp_path, _bench(), 30.0, explode)
+    assert result.status == status and s.encoder.index.size > 0
+    assert any(e.detail == "drive quick-stopped and disabled (SWITCH ON DISABLED)" for e in s.events)
+    assert drive.sim_node.state_402 == 0x40
+
+
 def test_refused_mode_switch_is_a_one_line_device_error() -> None:
     bench = _bench()
     _, _, drive = _parts(bench)

@@ -110,7 +110,6 @@ class SimCanNode:
         self._cache_omega = np.zeros(0)
         self.refuse_mode_change = False
         self.reject_mapping = False
-        self.tpdos_sent = 0
         self.first_cycle: int | None = None  # drive cycle of the first SYNC (SYNC index 0)
         sim_bench.hold_history(self._consumer, 0.0)
 
@@ -318,5 +317,4 @@ class SimCanNode:
                 continue
             payload = b"".join(self.node.get_data(i, sub)[:size] for i, sub, size in entries)
             self.network.send_message(cob, payload)
-            self.tpdos_sent += 1
 
