@@ -126,7 +126,7 @@ class ReportView(QtWidgets.QWidget):
         self.plots["frf"].addLegend(offset=(-10, 10))
         several = len(sessions) > 1
         for i, s in enumerate(sessions):
-            self._draw_session(s, COLORS[i % len(COLORS)], s.name if several else "")
+            self._draw_session(s, i, s.name if several else "")
         self.panel = QtWidgets.QLabel(values_html(sessions))
         self.panel.setTextFormat(QtCore.Qt.TextFormat.RichText)
         self.panel.setAlignment(QtCore.Qt.AlignmentFlag.AlignTop | QtCore.Qt.AlignmentFlag.AlignLeft)
@@ -140,8 +140,9 @@ class ReportView(QtWidgets.QWidget):
         box.addWidget(self.panel)
         self.resize(*DEFAULT_SIZE_PX)
 
-    def _draw_session(self, s: SessionFigure, color: str, name: str) -> None:
+    def _draw_session(self, s: SessionFigure, index: int, name: str) -> None:
         fd = s.figures
+        color = COLORS[index % len(COLORS)]
         prefix = f"{name}: " if name else ""
         pen = pg.mkPen(color, width=1.5)
         self.plots["torque"].plot(fd.t_s, fd.torque_Nm, pen=pen, name=f"{prefix}T_e")
@@ -169,7 +170,7 @@ class ReportView(QtWidgets.QWidget):
                 line = pg.InfiniteLine(pos=math.log10(f_hz), angle=90, movable=False,
                                        pen=pg.mkPen(color, width=1, style=QtCore.Qt.PenStyle.DashLine),
                                        label=f"{label} {f_hz:.1f} Hz",
-                                       labelOpts={"position": 0.08 if label == "f_a" else 0.16, "color": color,
+                                       labelOpts={"position": min(0.9, 0.06 + 0.08 * (2 * index + (label == "f_r"))), "color": color,
                                                   "fill": (255, 255, 255, 200)})
                 line.setObjectName(f"{prefix}{label}")
                 frf.addItem(line)
