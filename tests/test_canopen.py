@@ -8,6 +8,7 @@ counter, and the recording ends by sample count or by the failure it provokes.
 from __future__ import annotations
 
 import itertools
+import time
 from pathlib import Path
 
 import can
@@ -38,6 +39,14 @@ def _bench(**drive: object) -> Bench:
 def _parts(bench: Bench) -> tuple[SimBench, object, CanopenDrive]:
     sim = SimBench(bench, realtime=True, keep_history=True)
     return sim, open_current_source(bench, sim, False), open_drive(bench, sim, False)
+
+
+def _wait_until(condition, timeout_s: float) -> bool:
+    """Poll ``condition`` until it holds or ``timeout_s`` (s) passed; its last value."""
+    deadline = time.monotonic() + timeout_s
+    while not condition() and time.monotonic() < deadline:
+        time.sleep(0.01)
+    return condition()
 
 
 def _record(tmp_path: Path, bench: Bench, duration_s: float, on_encoder_block=None):
@@ -177,6 +186,21 @@ def test_sync_counter_unwraps_through_wraps_and_long_silences() -> None:
     u = SyncUnwrapper(240, 0.001, first_sync_ns=0)
     assert [u.push(c, ns) for c, ns in ((1, 0), (2, 1_000_000), (240, 239_000_000), (1, 240_000_000))] == [0, 1, 239, 240]
     assert u.push(5, 244_000_000 + 480_000_000) == 244 + 480  # two whole wraps of silence, told by host time
+
+
+def test_receive_queue_overruns_become_warning_events(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr("drivers.canopen_drive.QUEUE_FRAMES", 5)
+    _, _, drive = _parts(_bench())
+    drive.start()
+    try:
+        assert _wait_until(lambda: drive._capture.overruns >= 3, 5.0)  # nobody reads: the queue fills up
+        overruns = drive._capture.overruns
+        drive.read(1.0)
+        warnings = [e.detail for e in drive.events() if e.kind == "warning"]
+        assert warnings and warnings[0].endswith(" TPDO frames dropped: receive queue full (overrun)")
+        assert int(warnings[0].split()[0]) >= overruns
+    finally:
+        drive.stop()
 
 
 def test_capture_counts_overruns_and_callback_errors_instead_of_raising() -> None:
