@@ -31,7 +31,7 @@ import pyqtgraph as pg
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
 from acq.plots import ensure_app
-from acq.recorder import Interrupted, Recorder, RecordingResult, _StreamChecker
+from acq.recorder import Interrupted, Recorder, RecordingResult
 from acq.view import has_display
 from drivers.base import CurrentBlock, EncoderBlock, StreamEvent
 from drivers.errors import ConfigError
@@ -76,7 +76,6 @@ class LiveFeed:
         self.dropped = 0
         self.max_listener_s = 0.0
         self._targets = {"current": target_current, "encoder": target_encoder}
-        self._checker = _StreamChecker()
         self._stop_reason = ""
         self._stop_raised = False
 
@@ -84,14 +83,14 @@ class LiveFeed:
         """Ask the recording to end as ``interrupted`` with ``reason`` (any thread)."""
         self._stop_reason = self._stop_reason or reason
 
-    def __call__(self, stream: str, block: CurrentBlock | EncoderBlock) -> None:
+    def __call__(self, stream: str, block: CurrentBlock | EncoderBlock | StreamEvent) -> None:
         t0 = time.perf_counter()
+        if isinstance(block, StreamEvent):
+            if block.kind == "gap" and block.stream in self.gaps:
+                self.gaps[block.stream] += 1
+            self.events.append(block)
+            return
         self.counts[stream] += block.count
-        _, events = self._checker.current(block) if stream == "current" else self._checker.encoder(block)
-        for event in events:
-            if event.kind == "gap":
-                self.gaps[stream] += 1
-            self.events.append(event)
         try:
             self.blocks.put_nowait((stream, block))
         except queue.Full:

@@ -31,7 +31,8 @@ FLUSH_INTERVAL_S = 0.5
 READ_TIMEOUT_S = 0.2
 STALL_TIMEOUT_S = 5.0
 
-#: Called in the recording thread after each block is written: (stream name, block).
+#: Called in the recording thread after each block is written, ``("current" | "encoder", block)``,
+#: and for each event stored, ``("event", StreamEvent)`` (gaps found from the indices, device events).
 Listener = Callable[[str, Any], None]
 
 
@@ -282,11 +283,11 @@ class Recorder:
     def _store(self, kind: str, item: Any, writer: SessionWriter, checker: _StreamChecker,
                counts: dict[str, int]) -> None:
         if kind == "event":
-            writer.add_event(item)
+            self._event(writer, item)
             return
         block, events = checker.current(item) if kind == "current" else checker.encoder(item)
         for event in events:
-            writer.add_event(event)
+            self._event(writer, event)
         if block is None:
             return
         if kind == "current":
@@ -298,6 +299,12 @@ class Recorder:
             listener(kind, block)
         if self.progress is not None and kind == "current":
             self.progress(min(1.0, counts["current"] / (self.duration_s * self._cur_info.rate_hz)))
+
+    def _event(self, writer: SessionWriter, event: StreamEvent) -> None:
+        """Store an event and show it to the listeners as ``("event", event)``."""
+        writer.add_event(event)
+        for listener in self.listeners:
+            listener("event", event)
 
     def _shut_down(self, inbox: queue.Queue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
                    checker: _StreamChecker, counts: dict[str, int], status: Status, reason: str) -> tuple[Status, str]:

@@ -110,3 +110,20 @@ def test_sigkill_leaves_flushed_samples_and_check_repairs(tmp_path: Path, capsys
     np.testing.assert_array_equal(after.current.sample_index(), np.arange(after.current.sample_count))
     again = run_cli(capsys, "check", str(path))
     assert "interrupted, nothing to repair" in again.out.replace("\n", " ")
+
+
+def test_listeners_see_blocks_and_the_recorders_gap_events(tmp_path: Path) -> None:
+    from acq.config import load_bench, load_profile
+    from acq.recorder import Recorder
+    from drivers.registry import open_bench
+
+    bench = load_bench()
+    bench = bench.model_copy(update={"sim": bench.sim.model_copy(update={"drop_encoder_frames": [(300, 4)]})})
+    seen: list[tuple[str, object]] = []
+    current, drive = open_bench(bench, fast=True)
+    result = Recorder(bench, load_profile("triangle_0.2s"), current, drive, tmp_path, 1.0,
+                      listeners=[lambda stream, item: seen.append((stream, item))]).run()
+    assert result.status == "complete" and result.encoder_gaps == 1
+    events = [item for stream, item in seen if stream == "event"]
+    assert [(e.stream, e.kind, e.detail) for e in events] == [("encoder", "gap", "4 frames missing before cycle 304")]
+    assert sum(item.count for stream, item in seen if stream == "current") == result.current_samples
