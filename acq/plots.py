@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from html import escape
@@ -68,8 +69,15 @@ def ensure_app(offscreen: bool = False) -> QtWidgets.QApplication:
     if app is None:
         if offscreen:
             os.environ["QT_QPA_PLATFORM"] = "offscreen"
+        QtCore.qInstallMessageHandler(_qt_message)
         app = QtWidgets.QApplication(["acq"])
     return app  # type: ignore[return-value]
+
+
+def _qt_message(mode: QtCore.QtMsgType, context: QtCore.QMessageLogContext, message: str) -> None:
+    """Qt's log, less the offscreen platform's notice that it cannot propagate size hints."""
+    if "propagateSizeHints" not in message:
+        sys.stderr.write(f"{message}\n")
 
 
 def _plot(layout: pg.GraphicsLayout, row: int, col: int, title: str,
