@@ -82,12 +82,18 @@ def sha256_of(path: Path) -> str:
 
 
 def simulated_truth(session: Session) -> dict[str, float] | None:
-    """The plant the simulated bench ran, when the current came from it (None for hardware)."""
+    """The plant the simulated bench ran, when the current came from it (None for hardware).
+
+    The true clock offset refers to the simulator's drive cycle 0; it is given only when the stored
+    encoder index is that cycle (transport ``sim``) — a CANopen or serial index starts at its own first
+    SYNC or frame.
+    """
     sim = session.bench.sim
     if sim is None or session.bench.daq.driver != "sim":
         return None
+    offset = sim.daq_offset_s if session.encoder.transport == "sim" else None
     return {"K_Nm_per_rad": sim.K_Nm_per_rad, "Jm_kgm2": sim.Jm_kgm2, "Jl_kgm2": sim.Jl_kgm2,
-            "C_Nms_per_rad": sim.C_Nms_per_rad, "offset_s": sim.daq_offset_s, "drift_ppm": sim.daq_drift_ppm}
+            "C_Nms_per_rad": sim.C_Nms_per_rad, "offset_s": offset, "drift_ppm": sim.daq_drift_ppm}
 
 
 def result_json(session: Session, result: Result) -> dict[str, Any]:
@@ -157,7 +163,7 @@ def result_table(doc: dict[str, Any]) -> Table:
     extra = [("anti-resonance f_a", doc["antiresonance_hz"], "Hz", None),
              ("resonance f_r", doc["resonance_hz"], "Hz", None),
              ("clock offset", None if clock["offset_s"] is None else clock["offset_s"] * 1e6, "µs",
-              None if not truth else truth["offset_s"] * 1e6),
+              None if not truth or truth["offset_s"] is None else truth["offset_s"] * 1e6),
              ("clock drift", clock["drift_ppm"], "ppm", None if not truth else truth["drift_ppm"]),
              ("clock residual", None if clock["residual_s"] is None else clock["residual_s"] * 1e6, "µs", None),
              ("mean coherence in band", quality["mean_coherence"], "", None)]

@@ -64,6 +64,17 @@ def min_duration_s(segment_s: float, overlap: float = 0.5) -> float:
     return segment_s * (2.0 - overlap)
 
 
+def require_two_segments(n_samples: int, period_s: float, segment_s: float, overlap: float = 0.5) -> None:
+    """Raise :class:`RecordTooShortError` unless ``n_samples`` at ``period_s`` hold two Welch segments."""
+    nperseg = int(round(segment_s / period_s))
+    step = nperseg - int(round(overlap * nperseg))
+    if n_samples < nperseg + step:
+        raise RecordTooShortError(
+            f"signals last {n_samples * period_s:.3f} s; the FRF needs at least "
+            f"{min_duration_s(segment_s, overlap):.3f} s (two {segment_s:g} s Welch segments)"
+        )
+
+
 def window_kernel(frf: FrequencyResponse) -> tuple[np.ndarray, np.ndarray]:
     """The Welch estimate's spectral window: what each FRF bin averages over.
 
@@ -134,15 +145,11 @@ def estimate_frf(
     y = np.asarray(speed_rad_s, dtype=float)
     if x.shape != y.shape or x.ndim != 1:
         raise ValueError(f"torque and speed must be 1-D arrays of one length, got {x.shape} and {y.shape}")
+    require_two_segments(x.size, period_s, segment_s, overlap)
     fs = 1.0 / period_s
     nperseg = int(round(segment_s * fs))
     step = nperseg - int(round(overlap * nperseg))
-    n_segments = 0 if x.size < nperseg else 1 + (x.size - nperseg) // step
-    if n_segments < 2:
-        raise RecordTooShortError(
-            f"signals last {x.size * period_s:.3f} s; the FRF needs at least "
-            f"{min_duration_s(segment_s, overlap):.3f} s (two {segment_s:g} s Welch segments)"
-        )
+    n_segments = 1 + (x.size - nperseg) // step
     kw = dict(fs=fs, window="hann", nperseg=nperseg, noverlap=nperseg - step, detrend="linear")
     f, gxx = signal.welch(x, **kw)
     _, gyy = signal.welch(y, **kw)

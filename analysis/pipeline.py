@@ -13,7 +13,8 @@ from typing import Any, Literal
 
 from analysis.clocks import ClockFit
 from analysis.fit import FitKind, FitOptions, FitParams, FitResult, PARAM_NAMES, fit_two_mass
-from analysis.frf import FrequencyResponse, estimate_frf
+from analysis.encoder import longest_gap_free_span
+from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
 from analysis.model import TwoMassParams
 from analysis.quality import Quality, assess
 from analysis.report import FigureData, figure_data
@@ -134,6 +135,7 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
         holds fewer than two Welch segments and :class:`analysis.fit.FitInputError` for a bad band
         or ``params="K"`` without nominal values. Messages are one line.
     """
+    require_two_segments(longest_gap_free_span(rec.encoder_index).count, rec.period_s, options.segment_s)
     if options.pipeline == "paper":
         sig = prepare_signals_paper(rec)
         weighting = "uniform"
