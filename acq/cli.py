@@ -17,6 +17,8 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from acq import __version__
 from acq.analyze import analyze_session, result_table
+from acq.batch import analyze_many, is_batch
+from acq.catalogue import parse_tags
 from acq.config import load_bench, load_profile
 from acq.devices import devices_command
 from acq.exporters import export_command
@@ -24,6 +26,7 @@ from acq.importers import import_command
 from acq.recorder import Recorder, RecordingResult
 from acq.session import load, repair
 from acq.summary import summarize, summary_table
+from acq.trend import trend_command
 from acq.view import view_command
 from drivers.errors import AcqError, ConfigError
 from drivers.registry import open_bench
@@ -65,8 +68,10 @@ def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> 
 @click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
 @click.option("--no-analyze", is_flag=True, help="Only record; do not identify the joint afterwards.")
 @click.option("--live", is_flag=True, help="Watch it in a live window: phase current, speed, position, counters, gaps.")
+@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+              help="Tag the session (repeatable), e.g. --tag pose=home --tag payload_kg=2.5 --tag temperature_C=31.")
 def record(profile_name: str, bench_path: Path | None, duration_s: float | None, joint: str | None,
-           out_dir: Path, operator: str, fast: bool, no_analyze: bool,
+           out_dir: Path, operator: str, fast: bool, no_analyze: bool, tags: tuple[str, ...],
            live: bool) -> int:
     """Swing the joint on PROFILE, record current and encoder, write one session file."""
     bench = load_bench(bench_path)
@@ -75,7 +80,7 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     profile = load_profile(profile_name)
     duration = duration_s if duration_s is not None else profile.duration_s
     current, drive = open_bench(bench, fast=fast)
-    recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator)
+    recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))
     live_view = None
     if live:
         from acq.live import LiveView  # Qt is imported only when asked for
@@ -134,10 +139,27 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
                                             "resampling, uniform weights (for comparison).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
 @click.option("--no-report", is_flag=True, help="Do not draw <session>.report.png.")
+@click.option("--jobs", type=click.IntRange(min=1), default=None,
+              help="Folder or glob: parallel analyses (default: the CPU count).")
+@click.option("--catalogue", "catalogue_path", type=click.Path(path_type=Path), default=None,
+              help="Folder or glob: the SQLite catalogue to fill (default: catalogue.sqlite in the folder).")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Folder or glob: run on a Dask distributed cluster (tcp://host:8786); the workers must reach "
+                   "the session files at the same paths.")
 def analyze_command(session_path: Path, torque: str | None, params: str, fit_kind: str, band: str | None,
-                    paper: bool, as_json: bool, no_report: bool) -> int:
-    """Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png."""
+                    paper: bool, as_json: bool, no_report: bool, jobs: int | None, catalogue_path: Path | None,
+                    scheduler: str | None) -> int:
+    """Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png.
+
+    SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
+    (same file hash and options) is analysed in parallel and recorded there; exit code 1 if any failed.
+    """
     band_hz = _parse_band(band)
+    if is_batch(session_path):
+        request = {"torque": torque, "params": params, "fit": fit_kind, "band_hz": band_hz,
+                   "pipeline": "paper" if paper else "acq"}
+        return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
+                            report=not no_report, as_json=as_json, out=out)
     if as_json:
         done = analyze_session(session_path, torque=torque, params=params, fit=fit_kind, band_hz=band_hz,
                                pipeline="paper" if paper else "acq", report=not no_report)
@@ -184,9 +206,10 @@ def check(session_path: Path) -> int:
 
 
 cli.add_command(devices_command)
-cli.add_command(view_command)
+cli.add_command(trend_command)
 cli.add_command(import_command)
 cli.add_command(export_command)
+cli.add_command(view_command)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -1,0 +1,241 @@
+"""Batch re-analysis: every session of a folder or glob, in parallel, into the catalogue.
+
+One runner, two back ends with the same :class:`concurrent.futures.Executor` face: a local process
+pool (default) or a Dask distributed cluster (``--scheduler ADDRESS``), whose workers read the
+session files by the absolute paths given here — the files must be reachable at the same path on
+every worker (a shared mount). The parent only hashes the files, hands paths to the workers and
+writes the catalogue, one transaction per session as results come in.
+
+A session is skipped when the catalogue already holds a successful analysis of the same file
+(SHA-256) with the same request (options as asked for); a failed one is tried again. A session
+that fails is recorded with its error and the batch goes on.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import multiprocessing
+import os
+import time
+from collections.abc import Iterator, Sequence
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+from rich.table import Table
+
+from acq.analyze import analyze_session, sha256_of
+from acq.catalogue import Catalogue, Outcome
+from acq.session import Session, load
+from drivers.errors import AcqError, ConfigError
+
+CATALOGUE_NAME = "catalogue.sqlite"
+_GLOB_CHARS = frozenset("*?[")
+
+
+@dataclass(frozen=True)
+class BatchReport:
+    """What a batch did: the outcomes of the sessions analysed, the sessions skipped as current."""
+
+    outcomes: list[Outcome]
+    skipped: list[Path]
+    seconds: float
+
+    @property
+    def failed(self) -> list[Outcome]:
+        """Outcomes with an error."""
+        return [o for o in self.outcomes if o.error is not None]
+
+
+def is_batch(spec: Path | str) -> bool:
+    """True when ``spec`` names a folder or a glob pattern rather than one session file."""
+    return Path(spec).is_dir() or bool(_GLOB_CHARS & set(str(spec)))
+
+
+def find_sessions(spec: Path | str) -> tuple[list[Path], Path]:
+    """The session files (``*.h5``) of a folder or glob, sorted, and the folder they were sought in.
+
+    The folder is where the catalogue goes by default: the folder itself, or a glob's deepest
+    folder without wildcards.
+    """
+    spec = Path(spec)
+    if spec.is_dir():
+        paths, base = spec.glob("*.h5"), spec
+    else:
+        paths = (Path(p) for p in glob.glob(str(spec), recursive=True))
+        base = Path(*_prefix(spec.parts))
+    sessions = sorted(p for p in paths if p.suffix == ".h5" and p.is_file())
+    if not sessions:
+        raise ConfigError(f"{spec}: no session files (*.h5) found")
+    return sessions, base
+
+
+def _prefix(parts: Sequence[str]) -> Iterator[str]:
+    """The path parts before the first one with a wildcard ('.' when the first has one)."""
+    if not parts or _GLOB_CHARS & set(parts[0]):
+        yield "."
+        return
+    for part in parts:
+        if _GLOB_CHARS & set(part):
+            return
+        yield part
+
+
+def request_key(request: dict[str, Any]) -> str:
+    """The options asked for (keyword arguments of :func:`acq.analyze.options_for`), canonical JSON."""
+    return json.dumps(request, sort_keys=True)
+
+
+def session_meta(session: Session) -> dict[str, Any]:
+    """What the catalogue keeps of a session's root attributes."""
+    attrs = session.attrs
+    return {"session_id": attrs.get("session_id"), "joint": attrs.get("joint"),
+            "created_utc": attrs.get("created_utc"), "start_monotonic_ns": int(attrs.get("host_monotonic_ns_at_start", 0)),
+            "status": session.status, "tags": session.tags}
+
+
+def analyze_one(path: str, sha256: str, request: dict[str, Any], report: bool) -> Outcome:
+    """Analyse one session (runs in a worker process or on a Dask worker); never raises.
+
+    Parameters
+    ----------
+    path : str
+        Absolute path of the session file, as the worker sees it.
+    sha256 : str
+        The file's hash when the batch looked at it (kept when the analysis fails).
+    request : dict
+        Keyword arguments of :func:`acq.analyze.options_for`.
+    report : bool
+        Also draw ``<session>.report.png``.
+    """
+    start = time.perf_counter()
+    try:
+        done = analyze_session(path, report=report, **request)
+    except Exception as e:  # noqa: BLE001 — a batch records any session's failure and goes on
+        error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
+        return Outcome(path, sha256, request_key(request), _meta_if_readable(path), None, error,
+                       time.perf_counter() - start)
+    return Outcome(path, done.json_dict["session"]["sha256"], request_key(request), session_meta(done.session),
+                   done.json_dict, None, time.perf_counter() - start)
+
+
+def _meta_if_readable(path: str) -> dict[str, Any]:
+    try:
+        return session_meta(load(path))
+    except (AcqError, OSError, KeyError, ValueError):
+        return {}
+
+
+@contextmanager
+def _executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
+    if scheduler is None:
+        # forkserver: workers fork from a clean single-threaded server that has imported acq once (a plain fork
+        # of this process inherits the locks its threads — recorder, progress, BLAS — may hold, and can hang)
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(["acq.batch"])
+        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+            yield pool
+        return
+    try:
+        from distributed import Client
+    except ImportError:
+        raise ConfigError("--scheduler needs Dask distributed: pip install 'acq[cluster]'") from None
+    try:
+        client = Client(scheduler, timeout="10s")
+    except OSError as e:
+        raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({e})") from None
+    with client:
+        yield client.get_executor(pure=False)
+
+
+def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, Any], *, jobs: int | None = None,
+              scheduler: str | None = None, report: bool = True, console: Console | None = None) -> BatchReport:
+    """Analyse the sessions not yet current in ``catalogue``, recording each outcome as it arrives.
+
+    Parameters
+    ----------
+    paths : sequence of Path
+        Session files.
+    catalogue : Catalogue
+        Where the outcomes go (and what decides which sessions are current).
+    request : dict
+        Keyword arguments of :func:`acq.analyze.options_for` (torque, params, fit, band_hz, pipeline).
+    jobs : int, optional
+        Worker processes of the local pool (default: the CPU count); ignored with ``scheduler``.
+    scheduler : str, optional
+        Address of a Dask distributed scheduler to run on instead of the local pool.
+    report : bool
+        Also draw each session's report PNG.
+    console : rich.console.Console, optional
+        Where the progress bar goes (default: stderr).
+    """
+    start = time.perf_counter()
+    current = catalogue.current(request_key(request))
+    hashes = {p: sha256_of(p) for p in paths}
+    todo = [p for p in paths if hashes[p] not in current]
+    outcomes: list[Outcome] = []
+    if todo:
+        with _executor(jobs or os.cpu_count() or 1, scheduler) as executor:
+            futures: dict[Future[Outcome], Path] = {
+                executor.submit(analyze_one, str(p.resolve()), hashes[p], request, report): p for p in todo}
+            columns = (TextColumn("[bold]analysing"), BarColumn(), MofNCompleteColumn(),
+                       TextColumn("{task.fields[failed]} failed"), TimeElapsedColumn(), TimeRemainingColumn())
+            with Progress(*columns, console=console or Console(stderr=True)) as progress:
+                task = progress.add_task("analysing", total=len(todo), failed=0)
+                for future in as_completed(futures):
+                    outcome = _outcome(future, futures[future], hashes, request)
+                    catalogue.record(outcome)
+                    outcomes.append(outcome)
+                    progress.update(task, advance=1, failed=sum(o.error is not None for o in outcomes))
+    return BatchReport(outcomes, [p for p in paths if p not in todo], time.perf_counter() - start)
+
+
+def _outcome(future: Future[Outcome], path: Path, hashes: dict[Path, str], request: dict[str, Any]) -> Outcome:
+    """The worker's outcome, or a failure when the worker itself died (pool broken, cluster lost)."""
+    try:
+        return future.result()
+    except Exception as e:  # noqa: BLE001 — the worker never raises; this is the worker or cluster dying
+        return Outcome(str(path.resolve()), hashes[path], request_key(request), {}, None,
+                       f"{path}: worker failed: {type(e).__name__}: {e}", 0.0)
+
+
+def batch_table(report: BatchReport) -> Table:
+    """One row per session analysed (K, verdict or the error), a caption counting the skipped ones."""
+    table = Table(title="batch analysis")
+    for column in ("session", "joint", "K N·m/rad", "verdict", "error"):
+        table.add_column(column, justify="right" if column.startswith("K") else "left")
+    for o in sorted(report.outcomes, key=lambda o: o.path):
+        k = None if o.doc is None else o.doc["K_Nm_per_rad"]
+        table.add_row(Path(o.path).name, str(o.session.get("joint") or "?"), "—" if k is None else f"{k:.1f}",
+                      "failed" if o.doc is None else o.doc["quality"]["verdict"], o.error or "")
+    table.caption = (f"{len(report.outcomes)} analysed ({len(report.failed)} failed), {len(report.skipped)} skipped "
+                     f"as current, {report.seconds:.1f} s")
+    return table
+
+
+def report_json(report: BatchReport) -> list[dict[str, Any]]:
+    """The ``--json`` list: per session its path, what happened, K, verdict and error."""
+    done = [{"path": o.path, "outcome": "failed" if o.error else "analysed",
+             "K_Nm_per_rad": None if o.doc is None else o.doc["K_Nm_per_rad"],
+             "verdict": None if o.doc is None else o.doc["quality"]["verdict"], "error": o.error}
+            for o in report.outcomes]
+    return done + [{"path": str(p.resolve()), "outcome": "skipped"} for p in report.skipped]
+
+
+def analyze_many(spec: Path, request: dict[str, Any], *, jobs: int | None, catalogue_path: Path | None,
+                 scheduler: str | None, report: bool, as_json: bool, out: Console) -> int:
+    """``acq analyze FOLDER|GLOB``: the batch, its table (or JSON) on ``out``; 1 when a session failed, else 0."""
+    paths, base = find_sessions(spec)
+    with Catalogue(catalogue_path or base / CATALOGUE_NAME) as catalogue:
+        done = run_batch(paths, catalogue, request, jobs=jobs, scheduler=scheduler, report=report)
+    if as_json:
+        out.print_json(json.dumps(report_json(done)))
+    else:
+        out.print(batch_table(done))
+        out.print(f"catalogue: {catalogue.path}")
+    return 1 if done.failed else 0

@@ -1,0 +1,184 @@
+"""Condition monitoring: the catalogue, batch re-analysis (process pool and Dask), and the stiffness trend.
+
+A simulated wear series — one joint recorded six times while its simulated K steps 891 → 700 N·m/rad —
+is analysed by the batch into a catalogue and trended.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from acq.batch import find_sessions, request_key, run_batch
+from acq.catalogue import MIGRATIONS, SCHEMA_VERSION, Catalogue, Entry
+from acq.trend import compute_trend
+from tests.helpers import run_cli
+
+WEAR_K = (891.0, 853.0, 815.0, 777.0, 738.0, 700.0)
+REQUEST = {"torque": None, "params": "K,Jm,Jl", "fit": "amplitude", "band_hz": None, "pipeline": "acq"}
+SIM_TOML = Path(__file__).parents[1] / "configs" / "benches" / "sim.toml"
+ACQ = [sys.executable, "-m", "acq"]
+
+
+def _bench_with_truth(folder: Path, k: float) -> Path:
+    """A copy of the simulated bench whose [sim] (true) K is ``k``; the nominal K stays 891."""
+    head, section, sim = SIM_TOML.read_text().partition("\n[sim]")
+    path = folder / f"bench_K{k:g}.toml"
+    path.write_text(head + section + re.sub(r"(?m)^K_Nm_per_rad = .*$", f"K_Nm_per_rad = {k}", sim))
+    return path
+
+
+@pytest.fixture(scope="module")
+def wear(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Six 6 s sessions of joint1 (tagged pose=home), K stepping down, analysed into sessions/catalogue.sqlite."""
+    root = tmp_path_factory.mktemp("wear")
+    out = root / "sessions"
+    from acq.cli import main
+
+    for k in WEAR_K:
+        with pytest.raises(SystemExit) as exc:
+            main(["record", "--profile", "triangle_0.2s", "--duration", "6", "--fast", "--no-analyze", "--out", str(out),
+                  "--bench", str(_bench_with_truth(root, k)), "--tag", "pose=home", "--tag", "payload_kg=2"])
+        assert exc.value.code == 0
+    with pytest.raises(SystemExit) as exc:
+        main(["analyze", str(out), "--jobs", "2", "--no-report"])
+    assert exc.value.code == 0
+    return out
+
+
+def _copy_sessions(src: Path, dst: Path, n: int) -> list[Path]:
+    dst.mkdir()
+    return [Path(shutil.copy2(p, dst)) for p in find_sessions(src)[0][:n]]
+
+
+def test_wear_series_tracks_the_truth_and_alarms_at_the_first_drop_below_10_percent(
+        wear: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    png = tmp_path / "trend.png"
+    run = run_cli(capsys, "trend", str(wear), "--joint", "joint1", "--tag", "pose=home", "--json", "--png", str(png))
+    assert run.code == 3, run.err
+    doc = json.loads(run.out)
+    points = doc["points"]
+    assert [p["truth_K_Nm_per_rad"] for p in points] == list(WEAR_K)
+    assert all(p["verdict"] == "ok" and p["tags"] == {"pose": "home", "payload_kg": 2.0} for p in points)
+    for p in points:
+        assert p["K_Nm_per_rad"] == pytest.approx(p["truth_K_Nm_per_rad"], rel=0.02)
+    first_truth_below = next(i for i, k in enumerate(WEAR_K) if k < 0.9 * WEAR_K[0])
+    threshold = [i for i, p in enumerate(points) if "threshold" in p["reason"]]
+    assert threshold == list(range(first_truth_below, len(WEAR_K)))
+    ewma = [i for i, p in enumerate(points) if "EWMA" in p["reason"]]
+    assert ewma and ewma[0] <= first_truth_below and points[0]["state"] == "baseline"
+    assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
+    assert run_cli(capsys, "trend", str(wear), "--joint", "joint1", "--tag", "pose=away").code == 2
+
+
+def _entry(i: int, k: float, verdict: str = "ok", error: str | None = None, request: str = "{}") -> Entry:
+    return Entry(f"id{i}", f"id{i}", "p.h5", "j", "2026-01-01T00:00:00+00:00", {}, verdict, ["coherence 0.2: weak"],
+                 error, k, (k * 0.99, k * 1.01), 55.0, 102.0, request, "2026-01-02T00:00:00+00:00", None)
+
+
+def test_trend_skips_sessions_not_ok_and_a_stable_joint_raises_no_alarm() -> None:
+    ks = [891.0, 893.0, 889.0, 500.0, 890.0, 892.0, 888.0, 891.0, 890.5, 889.5]
+    entries = [_entry(i, k, verdict="poor" if k == 500 else "ok") for i, k in enumerate(ks)]
+    entries += [_entry(4, 700.0, request="other"), _entry(99, 0, error="x.h5: too short"),
+                _entry(100, 600.0, request="other")]  # other options: not compared with the rest
+    trend = compute_trend("j", entries, baseline_sessions=3)
+    assert [p.state for p in trend.points][:4] == ["baseline"] * 3 + ["skipped"]
+    assert trend.points[3].reason == "verdict poor: coherence 0.2: weak"
+    assert trend.points[-2].reason == "analysis failed: x.h5: too short"
+    assert trend.points[-1].state == "skipped" and "other options" in trend.points[-1].reason
+    assert len(trend.points) == len(ks) + 2 and trend.points[4].entry.K_Nm_per_rad == 890.0
+    assert not trend.alarm and all(p.state != "alarm" for p in trend.points)
+    assert trend.baseline_K_Nm_per_rad == pytest.approx(891.0)
+
+
+def test_rerun_skips_sessions_whose_result_is_current(wear: Path, tmp_path: Path) -> None:
+    paths, _ = find_sessions(wear)
+    with Catalogue(wear / "catalogue.sqlite") as catalogue:
+        again = run_batch(paths, catalogue, REQUEST, jobs=1)
+    assert not again.outcomes and again.skipped == paths
+    copy = _copy_sessions(wear, tmp_path / "copy", 1)  # same file elsewhere: current; other options: not
+    with Catalogue(wear / "catalogue.sqlite") as catalogue:
+        assert run_batch(copy, catalogue, REQUEST, jobs=1).skipped == copy
+        other = run_batch(copy, catalogue, {**REQUEST, "params": "K"}, jobs=1)
+    assert len(other.outcomes) == 1 and other.outcomes[0].doc is not None
+
+
+def test_failed_session_is_recorded_and_the_batch_continues(wear: Path, tmp_path: Path,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "mixed"
+    (good,) = _copy_sessions(wear, folder, 1)
+    (folder / "2026-01-01T00-00-00_joint1.h5").write_bytes(b"not an HDF5 file")
+    run = run_cli(capsys, "analyze", str(folder / "*.h5"), "--jobs", "2", "--no-report", "--json")
+    assert run.code == 1
+    outcomes = {Path(o["path"]).name: o for o in json.loads(run.out)}
+    assert outcomes[good.name]["outcome"] == "analysed" and outcomes[good.name]["verdict"] == "ok"
+    broken = outcomes["2026-01-01T00-00-00_joint1.h5"]
+    assert broken["outcome"] == "failed" and "2026-01-01T00-00-00_joint1.h5" in broken["error"]
+    with sqlite3.connect(folder / "catalogue.sqlite") as db:
+        errors = db.execute("SELECT error FROM analyses ORDER BY error IS NULL").fetchall()
+    assert len(errors) == 2 and errors[0][0] == broken["error"] and errors[1][0] is None
+
+
+def test_dask_cluster_runs_the_same_batch(wear: Path, tmp_path: Path) -> None:
+    distributed = pytest.importorskip("distributed")
+    paths = _copy_sessions(wear, tmp_path / "dask", 2)
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
+                                  dashboard_address=None) as cluster, Catalogue(tmp_path / "c.sqlite") as catalogue:
+        done = run_batch(paths, catalogue, REQUEST, scheduler=cluster.scheduler_address, report=False)
+        found = catalogue.entries("joint1")
+    assert not done.failed and len(done.outcomes) == 2
+    with Catalogue(wear / "catalogue.sqlite") as pool_catalogue:
+        pool = {e.session_id: e.K_Nm_per_rad for e in pool_catalogue.entries("joint1")
+                if e.request_key == request_key(REQUEST)}
+    for e in found:
+        assert e.K_Nm_per_rad == pytest.approx(pool[e.session_id], rel=1e-9)
+
+
+_WRITER = """
+import sys
+from acq.catalogue import Catalogue, Outcome
+with Catalogue(sys.argv[1]) as c:
+    for i in range(200):
+        c.record(Outcome(f"/x/{sys.argv[2]}-{i}.h5", "h", "r", {"session_id": f"{sys.argv[2]}-{i}", "joint": "j"},
+                         None, "synthetic", 0.0))
+"""
+
+
+def test_two_processes_share_a_catalogue(wear: Path, tmp_path: Path) -> None:
+    env = {**os.environ, "COLUMNS": "200"}
+    fresh = tmp_path / "fresh.sqlite"  # both create and migrate it at once, then write 200 rows each
+    writers = [subprocess.Popen([sys.executable, "-c", _WRITER, str(fresh), tag], env=env) for tag in "ab"]
+    folder = tmp_path / "two"
+    _copy_sessions(wear, folder, 2)
+    analyses = [subprocess.Popen([*ACQ, "analyze", str(folder), "--jobs", "1", "--no-report"], env=env,
+                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE) for _ in range(2)]
+    assert [w.wait(timeout=60) for w in writers] == [0, 0]
+    assert [a.wait(timeout=120) for a in analyses] == [0, 0]
+    for path, rows in ((fresh, 400), (folder / "catalogue.sqlite", 2)):
+        with sqlite3.connect(path) as db:
+            assert db.execute("PRAGMA integrity_check").fetchone()[0] == "ok"
+            assert db.execute("SELECT COUNT(*) FROM analyses").fetchone()[0] == rows
+            assert db.execute("SELECT COUNT(*) FROM sessions").fetchone()[0] == rows
+            assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
+
+
+def test_an_older_catalogue_is_migrated_with_its_rows(tmp_path: Path) -> None:
+    path = tmp_path / "v1.sqlite"
+    with sqlite3.connect(path) as db:
+        db.executescript(MIGRATIONS[0] + "PRAGMA user_version = 1;")
+        db.execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc) "
+                   "VALUES ('s1', 's1', '/a.h5', 'joint1', '2026-01-01T00:00:00+00:00')")
+        db.execute("INSERT INTO analyses (session_key, sha256, request_key, analyzed_utc, verdict, K_Nm_per_rad, K_lo,"
+                   " K_hi) VALUES ('s1', 'h', '{}', '2026-01-01T00:01:00+00:00', 'ok', 890.0, 880.0, 900.0)")
+    with Catalogue(path) as catalogue:
+        assert catalogue.schema_version == SCHEMA_VERSION > 1
+        (entry,) = catalogue.entries("joint1")
+    assert entry.K_Nm_per_rad == 890.0 and entry.tags == {} and entry.K_ci95 == (880.0, 900.0)
