@@ -241,9 +241,11 @@ class Recorder:
         reason = f"recorded {self.duration_s:g} s"
         try:
             with _sigterm_interrupts():
+                # Motion first: the started devices buffer their samples meanwhile, and a simulated
+                # bench then starts the motion at the same point of its record in every run.
+                self.drive.start_motion(self.profile)
                 for r in readers.values():
                     r.start()
-                self.drive.start_motion(self.profile)
                 self._pump(inbox, readers, writer, checker, counts)
         except (KeyboardInterrupt, Interrupted) as e:
             status, reason = "interrupted", "interrupted by user (Ctrl-C)" if isinstance(e, KeyboardInterrupt) else str(e)
