@@ -36,6 +36,7 @@ from drivers.errors import AcqError, ConfigError
 
 CATALOGUE_NAME = "catalogue.sqlite"
 _GLOB_CHARS = frozenset("*?[")
+_BLAS_THREADS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
 @dataclass(frozen=True)
@@ -95,8 +96,9 @@ def session_meta(session: Session) -> dict[str, Any]:
     """What the catalogue keeps of a session's root attributes."""
     attrs = session.attrs
     return {"session_id": attrs.get("session_id"), "joint": attrs.get("joint"),
-            "created_utc": attrs.get("created_utc"), "start_monotonic_ns": int(attrs.get("host_monotonic_ns_at_start", 0)),
-            "status": session.status, "tags": session.tags}
+            "created_utc": attrs.get("created_utc"),
+            "start_monotonic_ns": int(attrs.get("host_monotonic_ns_at_start", 0)), "status": session.status,
+            "tags": session.tags}
 
 
 def analyze_one(path: str, sha256: str, request: dict[str, Any], report: bool) -> Outcome:
@@ -135,7 +137,10 @@ def _meta_if_readable(path: str) -> dict[str, Any]:
 def _executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
     if scheduler is None:
         # forkserver: workers fork from a clean single-threaded server that has imported acq once (a plain fork
-        # of this process inherits the locks its threads — recorder, progress, BLAS — may hold, and can hang)
+        # of this process inherits the locks its threads — recorder, progress, BLAS — may hold, and can hang);
+        # one BLAS thread per worker, as Dask's workers have, so N jobs do not fight over the cores
+        for var in _BLAS_THREADS:
+            os.environ.setdefault(var, "1")
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["acq.batch"])
         with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:

@@ -258,8 +258,8 @@ def tags_match(tags: dict[str, Any], wanted: dict[str, str | float]) -> bool:
 
 def _entry(r: sqlite3.Row) -> Entry:
     truth = json.loads(r["truth_json"]) if r["truth_json"] else {}
-    return Entry(session_key=r["session_key"], session_id=r["session_id"], path=r["path"], joint=r["joint"], created_utc=r["created_utc"],
-                 tags=json.loads(r["tags_json"]), verdict=r["verdict"],
+    return Entry(session_key=r["session_key"], session_id=r["session_id"], path=r["path"], joint=r["joint"],
+                 created_utc=r["created_utc"], tags=json.loads(r["tags_json"]), verdict=r["verdict"],
                  reasons=json.loads(r["reasons_json"] or "[]"), error=r["error"], K_Nm_per_rad=r["K_Nm_per_rad"],
-                 K_ci95=(r["K_lo"], r["K_hi"]), f_a_hz=r["f_a_hz"], f_r_hz=r["f_r_hz"],
-                 request_key=r["request_key"], analyzed_utc=r["analyzed_utc"], truth_K_Nm_per_rad=truth.get("K_Nm_per_rad"))
+                 K_ci95=(r["K_lo"], r["K_hi"]), f_a_hz=r["f_a_hz"], f_r_hz=r["f_r_hz"], request_key=r["request_key"],
+                 analyzed_utc=r["analyzed_utc"], truth_K_Nm_per_rad=truth.get("K_Nm_per_rad"))

@@ -72,11 +72,6 @@ class TrendPoint:
         """The threshold rule fired here."""
         return self.state == "alarm" and "threshold" in self.reason
 
-    @property
-    def ewma_alarm(self) -> bool:
-        """The EWMA rule fired here."""
-        return self.state == "alarm" and "EWMA" in self.reason
-
 
 @dataclass(frozen=True)
 class Trend:
@@ -246,7 +241,8 @@ def trend_json(trend: Trend) -> dict[str, Any]:
             "baseline": trend.baseline_note, "sigma_K_Nm_per_rad": trend.sigma_K_Nm_per_rad,
             "threshold_pct": trend.threshold_pct, "ewma_lambda": trend.ewma_lambda, "ewma_L": EWMA_L,
             "points": [{**asdict(p.entry), "state": p.state, "reason": p.reason, "change_pct": p.change_pct,
-                        "ewma_change_pct": p.ewma_change_pct, "ewma_limit_pct": p.ewma_limit_pct} for p in trend.points]}
+                        "ewma_change_pct": p.ewma_change_pct, "ewma_limit_pct": p.ewma_limit_pct}
+                       for p in trend.points]}
 
 
 def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (1400, 900)) -> Path:
@@ -263,7 +259,8 @@ def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (14
     frame = QtWidgets.QWidget()
     widget = pg.GraphicsLayoutWidget()
     QtWidgets.QVBoxLayout(frame).addWidget(widget)
-    widget.ci.addLabel(f"stiffness trend — {trend.joint}" + ("  (ALARM)" if trend.alarm else ""), row=0, col=0, size="14pt")
+    widget.ci.addLabel(f"stiffness trend — {trend.joint}" + ("  (ALARM)" if trend.alarm else ""), row=0, col=0,
+                       size="14pt")
     k_plot = widget.addPlot(row=1, col=0)
     f_plot = widget.addPlot(row=2, col=0)
     k_plot.setXLink(f_plot)
@@ -284,7 +281,8 @@ def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (14
     base = trend.baseline_K_Nm_per_rad
     if base is not None:
         k_plot.addLine(y=base, pen=pg.mkPen("#17becf", width=2), label="baseline", labelOpts={"position": 0.05})
-        k_plot.addLine(y=base * (1 - trend.threshold_pct / 100), pen=pg.mkPen("#d62728", width=2, style=QtCore.Qt.PenStyle.DashLine),
+        dashed = pg.mkPen("#d62728", width=2, style=QtCore.Qt.PenStyle.DashLine)
+        k_plot.addLine(y=base * (1 - trend.threshold_pct / 100), pen=dashed,
                        label=f"−{trend.threshold_pct:g} %", labelOpts={"position": 0.05})
         judged = [(i, p) for i, p in enumerate(trend.points) if p.ewma_change_pct is not None]
         if judged:
@@ -299,7 +297,8 @@ def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (14
         f_plot.plot(fx, [getattr(trend.points[i].entry, key) for i in fx], pen=pg.mkPen(color, width=2), symbol="s",
                     symbolBrush=color, name=name)
     step = max(1, len(trend.points) // 10)
-    ticks = [(float(i), (p.entry.created_utc or "?")[:19].replace("T", "\n")) for i, p in enumerate(trend.points)][::step]
+    ticks = [(float(i), (p.entry.created_utc or "?")[:19].replace("T", "\n"))
+             for i, p in enumerate(trend.points)][::step]
     for plot, label, unit in ((k_plot, "K", "N·m/rad"), (f_plot, "frequency", "Hz")):
         plot.setLabel("left", label, units=unit)
         plot.getAxis("left").enableAutoSIPrefix(False)
@@ -339,7 +338,8 @@ def _catalogue_path(folder: Path | None, catalogue: Path | None) -> Path:
 @click.option("--ewma-lambda", type=click.FloatRange(0, 1, min_open=True), default=0.2, show_default=True,
               help="EWMA weight of the newest session (alarm at the 3σ control limit).")
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE", help="Only sessions with this tag (repeatable).")
-@click.option("--png", "png_path", type=click.Path(path_type=Path), default=None, help="Also draw the trend into this PNG.")
+@click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
+              help="Also draw the trend into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the trend as JSON.")
 def trend_command(folder: Path | None, catalogue_path: Path | None, joint: str, baseline_sessions: int | None,
                   baseline_id: str | None, threshold_pct: float, ewma_lambda: float, tags: tuple[str, ...],
@@ -351,8 +351,9 @@ def trend_command(folder: Path | None, catalogue_path: Path | None, joint: str, 
     with Catalogue(_catalogue_path(folder, catalogue_path)) as catalogue:
         entries = [e for e in catalogue.entries(joint) if tags_match(e.tags, wanted)]
         if not entries:
-            raise ConfigError(f"{catalogue.path}: no sessions of joint {joint}" + (f" tagged {' '.join(tags)}" if tags else "")
-                              + f" (joints: {', '.join(catalogue.joints()) or 'none'})")
+            tagged = f" tagged {' '.join(tags)}" if tags else ""
+            raise ConfigError(f"{catalogue.path}: no sessions of joint {joint}{tagged} "
+                              f"(joints: {', '.join(catalogue.joints()) or 'none'})")
     trend = compute_trend(joint, entries, baseline_sessions=baseline_sessions or 1, baseline_id=baseline_id,
                           threshold_pct=threshold_pct, ewma_lambda=ewma_lambda)
     out = Console()

@@ -45,8 +45,9 @@ def wear(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
     for k in WEAR_K:
         with pytest.raises(SystemExit) as exc:
-            main(["record", "--profile", "triangle_0.2s", "--duration", "6", "--fast", "--no-analyze", "--out", str(out),
-                  "--bench", str(_bench_with_truth(root, k)), "--tag", "pose=home", "--tag", "payload_kg=2"])
+            main(["record", "--profile", "triangle_0.2s", "--duration", "6", "--fast", "--no-analyze",
+                  "--out", str(out), "--bench", str(_bench_with_truth(root, k)), "--tag", "pose=home",
+                  "--tag", "payload_kg=2"])
         assert exc.value.code == 0
     with pytest.raises(SystemExit) as exc:
         main(["analyze", str(out), "--jobs", "2", "--no-report"])
