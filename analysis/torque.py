@@ -187,14 +187,22 @@ def torque_hilbert(current_a: np.ndarray, k_t_Nm_per_A: float, sign: np.ndarray)
 
 
 def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float, k_t_Nm_per_A: float,
-                   offset: PhaseOffset, knot_spacing_s: float = 5e-4, smoothing: float = 1e-3) -> np.ndarray:
+                   offset: PhaseOffset, knot_spacing_s: float = 2.5e-4, smoothing: float = 1e-2) -> np.ndarray:
     """Torque from one phase demodulated with the encoder angle, N·m, at the given samples.
 
     Solves min Σ_n (i_a[n] − dc + i_q(t_n)·sin(θ_e[n] + θ_0))² + λ·Σ (Δ² c)² for the coefficients c of
     a uniform cubic B-spline i_q(t) (a banded system, cost linear in the record length), jointly with
     what is left of the sensor DC after subtracting ``offset.dc_a``. A second pass adds the first
     pass's −i_q·cos(θ_e + θ_0) as a column, i.e. re-estimates θ_0 linearised, so an error of a few
-    mrad in ``offset.theta0_rad`` (which matters where |sin| is small) does not leak into the torque.
+    mrad in ``offset.theta0_rad`` (which matters where |sin| is small) does not leak into the torque;
+    and the same column times the electrical speed dθ_e/dt (and times t), i.e. re-estimates the clock
+    offset and drift linearised: an offset error δ of tens of µs turns the angle by p·ω·δ, which the
+    constant θ_0 cannot absorb (on a stiff plant a 39 µs residual cost K +2.7 %, J_m +4.5 %). The
+    angle's rate only corrects the angle, it never scales the torque.
+
+    The knots are 0.25 ms apart (bandwidth ≈ 2 kHz): at 0.5 ms the spline cannot follow the current
+    loop's fast content, and the part it misses, weighted by sin², folds into the band (soft plant:
+    K +4 % from a noise-free current; 0.25 ms: +0.1 %).
 
     Parameters
     ----------
@@ -221,7 +229,10 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     y, phi = i - offset.dc_a, th + offset.theta0_rad
     ones = np.ones_like(y)
     iq, _ = _spline_iq(y, -np.sin(phi), m, smoothing, [ones])
-    iq, _ = _spline_iq(y, -np.sin(phi), m, smoothing, [ones, -iq * np.cos(phi)])
+    dphi = -iq * np.cos(phi)
+    w_e = np.gradient(th) * rate_hz
+    tn = np.linspace(-1.0, 1.0, y.size)
+    iq, _ = _spline_iq(y, -np.sin(phi), m, smoothing, [ones, dphi, dphi * w_e, dphi * w_e * tn])
     return k_t_Nm_per_A * iq
 
 
