@@ -37,6 +37,7 @@ from rich.markup import escape
 
 from acq import __version__
 from acq.analyze import sha256_of
+from acq.catalogue import parse_tags
 from acq.config import load_bench, load_profile
 from acq.csvtable import CsvTable, read_csv
 from acq.session import SessionWriter, load
@@ -326,7 +327,7 @@ class ImportResult:
 
 
 def import_session(current_path: Path, encoder_path: Path, bench: Bench, profile: Profile, out: Path,
-                   current_channels: tuple[str, ...] = ()) -> ImportResult:
+                   current_channels: tuple[str, ...] = (), tags: dict[str, str | float] | None = None) -> ImportResult:
     """Turn a current file (CSV or TDMS) and an encoder CSV into the session file ``out``.
 
     Every check runs before anything is written; the file is written under a temporary name and
@@ -366,7 +367,8 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench, profile
             tmp, bench=bench, profile=profile,
             current_info=CurrentSourceInfo(cur.rate_hz, tuple(cur.phases_a), f"imported: {current_path.name}"),
             drive_info=DriveInfo(period_s, cpr, "imported", enc.timestamp_kind, f"imported: {encoder_path.name}"),
-            host_ns_at_start=int(_ns(min(float(cur.time_s(0)) + shift, float(enc.t_s[0])))), origin=origin)
+            host_ns_at_start=int(_ns(min(float(cur.time_s(0)) + shift, float(enc.t_s[0])))), origin=origin,
+            tags=tags)
         for block in _current_blocks(cur, shift):
             writer.append_current(block)
         writer.append_encoder(EncoderBlock(enc.index, enc.position_counts, _ns(enc.t_s), enc.drive_time_s))
@@ -390,13 +392,16 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench, profile
 @click.option("--profile", "profile_name", required=True, help="Profile name in configs/profiles/ or a TOML path.")
 @click.option("--joint", default=None, help="Joint name (default: the bench config's).")
 @click.option("-o", "--out", "out_path", required=True, type=click.Path(path_type=Path), help="Session file to write.")
+@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+              help="Tag the session (repeatable), e.g. --tag pose=home --tag payload_kg=2.5 --tag temperature_C=31.")
 def import_command(current_path: Path, current_channels: tuple[str, ...], encoder_path: Path, bench_path: Path,
-                   profile_name: str, joint: str | None, out_path: Path) -> int:
+                   profile_name: str, joint: str | None, out_path: Path, tags: tuple[str, ...]) -> int:
     """Turn a current file and an encoder CSV recorded by other tools into a session."""
     bench = load_bench(bench_path)
     if joint:
         bench = bench.model_copy(update={"joint": joint})
-    result = import_session(current_path, encoder_path, bench, load_profile(profile_name), out_path, current_channels)
+    result = import_session(current_path, encoder_path, bench, load_profile(profile_name), out_path, current_channels,
+                            tags=parse_tags(tags))
     console = Console()
     console.print(summary_table(summarize(load(result.path))))
     for warning in result.warnings:

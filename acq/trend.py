@@ -246,16 +246,26 @@ def trend_json(trend: Trend) -> dict[str, Any]:
 
 
 def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (1400, 900)) -> Path:
-    """Draw the trend offscreen into a PNG: K with its 95 % intervals, baseline, threshold, EWMA and its limit,
-    alarms in red (top); f_a and f_r (bottom). x is the session's place in time, labelled with its start."""
-    import numpy as np
-    import pyqtgraph as pg
+    """Draw :func:`trend_widget` offscreen into a PNG of ``size`` (width, height) px."""
     import shiboken6
-    from pyqtgraph.Qt import QtCore, QtWidgets
 
     from acq.plots import ensure_app, grab_png
 
     ensure_app(offscreen=True)
+    frame = trend_widget(trend)
+    try:
+        return grab_png(frame, path, size)
+    finally:
+        shiboken6.delete(frame)  # now, not at interpreter exit (deleteLater there crashes Qt's teardown)
+
+
+def trend_widget(trend: Trend) -> Any:
+    """The trend figure (needs a QApplication): K with its 95 % intervals, baseline, threshold, EWMA and its
+    limit, alarms in red (top); f_a and f_r (bottom). x is the session's place in time, labelled with its start."""
+    import numpy as np
+    import pyqtgraph as pg
+    from pyqtgraph.Qt import QtCore, QtWidgets
+
     frame = QtWidgets.QWidget()
     widget = pg.GraphicsLayoutWidget()
     QtWidgets.QVBoxLayout(frame).addWidget(widget)
@@ -305,10 +315,7 @@ def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (14
         plot.getAxis("bottom").setTicks([ticks])
         plot.showGrid(x=True, y=True, alpha=0.25)
     f_plot.setLabel("bottom", "session start (UTC)")
-    try:
-        return grab_png(frame, path, size)
-    finally:
-        shiboken6.delete(frame)  # now, not at interpreter exit (deleteLater there crashes Qt's teardown)
+    return frame
 
 
 def _category(p: TrendPoint) -> str:
@@ -323,6 +330,20 @@ def _catalogue_path(folder: Path | None, catalogue: Path | None) -> Path:
     if not path.is_file():
         raise ConfigError(f"{path}: no catalogue — fill one with acq analyze {folder or 'sessions'}/ first")
     return path
+
+
+def load_trend(folder: Path | None, catalogue_path: Path | None, joint: str, tags: Sequence[str] = (),
+               **options: Any) -> Trend:
+    """The trend of ``joint`` from a catalogue (``folder``/catalogue.sqlite or ``catalogue_path``), sessions
+    filtered on ``tags`` (``KEY=VALUE``); ``options`` go to :func:`compute_trend`."""
+    wanted = parse_tags(tags)
+    with Catalogue(_catalogue_path(folder, catalogue_path)) as catalogue:
+        entries = [e for e in catalogue.entries(joint) if tags_match(e.tags, wanted)]
+        if not entries:
+            tagged = f" tagged {' '.join(tags)}" if tags else ""
+            raise ConfigError(f"{catalogue.path}: no sessions of joint {joint}{tagged} "
+                              f"(joints: {', '.join(catalogue.joints()) or 'none'})")
+    return compute_trend(joint, entries, **options)
 
 
 @click.command(name="trend")
@@ -347,15 +368,8 @@ def trend_command(folder: Path | None, catalogue_path: Path | None, joint: str, 
     """K of a joint over time (± 95 %), f_a, f_r, baseline and alarms; exit code 3 while in alarm."""
     if baseline_id is not None and baseline_sessions is not None:
         raise ConfigError("--baseline and --baseline-sessions: give one of them")
-    wanted = parse_tags(tags)
-    with Catalogue(_catalogue_path(folder, catalogue_path)) as catalogue:
-        entries = [e for e in catalogue.entries(joint) if tags_match(e.tags, wanted)]
-        if not entries:
-            tagged = f" tagged {' '.join(tags)}" if tags else ""
-            raise ConfigError(f"{catalogue.path}: no sessions of joint {joint}{tagged} "
-                              f"(joints: {', '.join(catalogue.joints()) or 'none'})")
-    trend = compute_trend(joint, entries, baseline_sessions=baseline_sessions or 1, baseline_id=baseline_id,
-                          threshold_pct=threshold_pct, ewma_lambda=ewma_lambda)
+    trend = load_trend(folder, catalogue_path, joint, tags, baseline_sessions=baseline_sessions or 1,
+                       baseline_id=baseline_id, threshold_pct=threshold_pct, ewma_lambda=ewma_lambda)
     out = Console()
     if as_json:
         click.echo(json.dumps(trend_json(trend), indent=2))

@@ -63,23 +63,40 @@ def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[
 
 
 @click.command(name="view")
-@click.argument("sessions", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.argument("sessions", nargs=-1, type=click.Path(path_type=Path))
 @click.option("--screenshot", type=click.Path(path_type=Path), default=None,
               help="Draw the window offscreen into this PNG and exit (needs no display).")
 @click.option("--size", default="1600x1000", show_default=True, callback=_parse_size,
               help="Window / screenshot size WIDTHxHEIGHT, px.")
-def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tuple[int, int]) -> int:
-    """Show traces, FRF with the fitted model, coherence and identified values of SESSION(s)."""
+@click.option("--trend", "trend_joint", default=None, metavar="JOINT",
+              help="Show the stiffness trend of JOINT from the catalogue of the folder given (default sessions/).")
+@click.option("--catalogue", "catalogue_path", type=click.Path(path_type=Path), default=None,
+              help="With --trend: the catalogue (default: FOLDER/catalogue.sqlite).")
+def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tuple[int, int],
+                 trend_joint: str | None, catalogue_path: Path | None) -> int:
+    """Show traces, FRF with the fitted model, coherence and identified values of SESSION(s);
+    or, with --trend JOINT [FOLDER], the joint's stiffness over time."""
+    if trend_joint is None and not sessions:
+        raise click.UsageError("give one or more SESSION files, or --trend JOINT [FOLDER]")
+    if trend_joint is not None and len(sessions) > 1:
+        raise click.UsageError("--trend takes one FOLDER (or none for sessions/)")
     if screenshot is None and not has_display():
         click.echo(NO_DISPLAY_MESSAGE, err=True)
         return 1
-    figures = [session_figure(p) for p in sessions]
     from acq.plots import ReportView, ensure_app, grab_png
 
-    app = ensure_app(offscreen=screenshot is not None)
-    title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}" if len(figures) == 1
-             else f"{len(figures)} sessions")
-    window = ReportView(figures, title=title)
+    if trend_joint is not None:
+        from acq.trend import load_trend, trend_widget
+
+        trend = load_trend(sessions[0] if sessions else None, catalogue_path, trend_joint)
+        app = ensure_app(offscreen=screenshot is not None)
+        window = trend_widget(trend)
+    else:
+        figures = [session_figure(p) for p in sessions]
+        app = ensure_app(offscreen=screenshot is not None)
+        title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}"
+                 if len(figures) == 1 else f"{len(figures)} sessions")
+        window = ReportView(figures, title=title)
     if screenshot is not None:
         grab_png(window, screenshot, size)
         click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")

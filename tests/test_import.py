@@ -279,3 +279,14 @@ def test_simulated_session_exported_and_imported_back_gives_the_same_K(
     k_recorded = analyze_session(recorded, write=False).result.fit.values.K_Nm_per_rad
     k_imported = analyze_session(tmp_path / "imported.h5", write=False).result.fit.values.K_Nm_per_rad
     assert abs(k_imported / k_recorded - 1.0) < 1e-3
+
+
+def test_import_tags_the_session(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                 pair: tuple[Path, Path]) -> None:
+    cur, enc = pair
+    r = run_import(capsys, cur, enc, tmp_path / "t.h5", "--tag", "pose=home", "--tag", "temperature_C=31.5")
+    assert r.code == 0, r.err
+    assert load(tmp_path / "t.h5").tags == {"pose": "home", "temperature_C": 31.5}
+    bad = run_import(capsys, cur, enc, tmp_path / "u.h5", "--tag", "pose")
+    assert bad.code == 2 and bad.err.strip() == "acq: error: --tag pose: must be KEY=VALUE, e.g. payload_kg=2.5"
+    assert not (tmp_path / "u.h5").exists()

@@ -183,3 +183,20 @@ def test_an_older_catalogue_is_migrated_with_its_rows(tmp_path: Path) -> None:
         assert catalogue.schema_version == SCHEMA_VERSION > 1
         (entry,) = catalogue.entries("joint1")
     assert entry.K_Nm_per_rad == 890.0 and entry.tags == {} and entry.K_ci95 == (880.0, 900.0)
+
+
+def test_view_shows_the_trend_window(wear: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    from acq.plots import ensure_app
+    from acq.trend import load_trend, trend_widget
+
+    ensure_app(offscreen=True)
+    widget = trend_widget(load_trend(wear, None, "joint1"))
+    plots = [item for item in widget.findChildren(object) if type(item).__name__ == "GraphicsLayoutWidget"]
+    assert len(plots) == 1
+    png = tmp_path / "trend_view.png"
+    run = run_cli(capsys, "view", "--trend", "joint1", str(wear), "--screenshot", str(png), "--size", "900x600")
+    assert run.code == 0, run.err
+    assert png.read_bytes()[:4] == b"\x89PNG" and png.stat().st_size > 10_000
+    usage = run_cli(capsys, "view")
+    assert usage.code == 2 and "give one or more SESSION files, or --trend JOINT [FOLDER]" in usage.err
