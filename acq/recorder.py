@@ -213,23 +213,35 @@ class Recorder:
             self._cur_info = self.current.start()
             self._drive_info = self.drive.start()
         except BaseException:
-            self.drive.stop()
-            self.current.stop()
+            self._release_devices()
             raise
         self._started = True
+
+    def _release_devices(self) -> None:
+        self.drive.stop()
+        self.current.stop()
+
+    def _open_session(self) -> SessionWriter:
+        """Create the session file (and the drive's raw log beside it); release the devices if that fails."""
+        try:
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+            path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
+            keep_raw = getattr(self.drive, "keep_raw_frames", None)  # transports that can log their raw traffic
+            if keep_raw is not None:
+                keep_raw(path)
+            return SessionWriter(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
+                                 drive_info=self._drive_info, host_ns_at_start=time.monotonic_ns(),
+                                 operator=self.operator, tags=self.tags)
+        except BaseException:
+            self._release_devices()
+            raise
 
     def run(self) -> RecordingResult:
         """Record; always returns with the file finished (device set-up errors raise before a file exists)."""
         self.start_devices()
         cur_info, drive_info = self._cur_info, self._drive_info
-        start_ns = time.monotonic_ns()
-        path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
-        keep_raw = getattr(self.drive, "keep_raw_frames", None)  # optional: transports that can log their raw traffic
-        if keep_raw is not None:
-            keep_raw(path)
-        writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=cur_info,
-                               drive_info=drive_info, host_ns_at_start=start_ns,
-                               operator=self.operator, tags=self.tags)
+        writer = self._open_session()
+        path = writer.path
         inbox: queue.Queue[tuple[str, Any]] = queue.Queue()
         readers = {
             "current": _Reader("current", self.current, math.ceil(self.duration_s * cur_info.rate_hz), inbox),

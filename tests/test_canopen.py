@@ -81,7 +81,7 @@ def test_mapping_round_trip_position_and_velocity_on_the_chosen_tpdo() -> None:
 
 
 def test_3s_at_1kHz_loses_no_sample_and_each_sample_is_its_sync(tmp_path: Path) -> None:
-    result, s, sim, drive = _record(tmp_path, _bench(), 3.0)
+    result, s, sim, drive = _record(tmp_path / "new" / "folder", _bench(), 3.0)  # .blf and .h5 in a folder made now
     assert result.status == "complete", result.stop_reason
     idx = s.encoder.index
     assert 3000 <= idx.size <= 3000 + 100
