@@ -29,7 +29,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from acq.analyze import analyze_session, sha256_of
+from acq.analyze import SessionResult, analyze_session, sha256_of
 from acq.catalogue import Catalogue, Outcome
 from acq.session import Session, load
 from drivers.errors import AcqError, ConfigError
@@ -85,6 +85,25 @@ def _prefix(parts: Sequence[str]) -> Iterator[str]:
         if _GLOB_CHARS & set(part):
             return
         yield part
+
+
+#: What ``acq analyze`` and ``acq record`` ask for when no option is given.
+DEFAULT_REQUEST: dict[str, Any] = {"torque": None, "params": "K,Jm,Jl", "fit": "amplitude", "band_hz": None,
+                                   "pipeline": "acq"}
+
+
+def record_outcome(done: SessionResult, request: dict[str, Any], catalogue_path: Path | None, seconds: float) -> Path:
+    """Put one session's analysis (done outside a batch) into its catalogue; return the catalogue's path.
+
+    The catalogue is ``catalogue_path`` or ``catalogue.sqlite`` in the session's folder, so a later
+    ``acq analyze FOLDER`` finds the session current and ``acq trend`` sees it at once.
+    """
+    path = catalogue_path or done.session.path.parent / CATALOGUE_NAME
+    outcome = Outcome(str(done.session.path), done.json_dict["session"]["sha256"], request_key(request),
+                      session_meta(done.session), done.json_dict, None, seconds)
+    with Catalogue(path) as catalogue:
+        catalogue.record(outcome)
+    return path
 
 
 def request_key(request: dict[str, Any]) -> str:

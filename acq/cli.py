@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import json
 import sys
+import time
 from pathlib import Path
+from typing import Any
 
 import click
 from rich.console import Console
@@ -16,8 +18,8 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from acq import __version__
-from acq.analyze import analyze_session, result_table
-from acq.batch import analyze_many, is_batch
+from acq.analyze import SessionResult, analyze_session, result_table
+from acq.batch import DEFAULT_REQUEST, analyze_many, is_batch, record_outcome
 from acq.catalogue import parse_tags
 from acq.config import load_bench, load_profile
 from acq.devices import devices_command
@@ -101,16 +103,28 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     return EXIT_INTERRUPTED if result.status == "interrupted" else 1
 
 
+def _identify(path: Path, request: dict[str, Any], *, report: bool, catalogue_path: Path | None) -> SessionResult:
+    """Analyse one session with ``request`` and put the result into its folder's catalogue."""
+    start = time.perf_counter()
+    done = analyze_session(path, report=report, **request)
+    record_outcome(done, request, catalogue_path, time.perf_counter() - start)
+    return done
+
+
+def _print_result(done: SessionResult) -> None:
+    out.print(result_table(done.json_dict))
+    out.print(f"result: {done.json_path}" + (f" · report: {done.report_path}" if done.report_path else ""))
+
+
 def _analyze_after_recording(path: Path) -> None:
     """Identify the joint of a session just recorded; a failure is reported, the recording stands."""
     with err.status("identifying the joint …"):
         try:
-            done = analyze_session(path)
+            done = _identify(path, DEFAULT_REQUEST, report=True, catalogue_path=None)
         except AcqError as e:
             click.echo(f"acq: analysis: {e}", err=True)
             return
-    out.print(result_table(done.json_dict))
-    out.print(f"result: {done.json_path}" + (f" · report: {done.report_path}" if done.report_path else ""))
+    _print_result(done)
 
 
 def _parse_band(text: str | None) -> tuple[float, float] | None:
@@ -142,7 +156,7 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Folder or glob: parallel analyses (default: the CPU count).")
 @click.option("--catalogue", "catalogue_path", type=click.Path(path_type=Path), default=None,
-              help="Folder or glob: the SQLite catalogue to fill (default: catalogue.sqlite in the folder).")
+              help="The SQLite catalogue to fill (default: catalogue.sqlite in the session's folder).")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Folder or glob: run on a Dask distributed cluster (tcp://host:8786); the workers must reach "
                    "the session files at the same paths.")
@@ -154,22 +168,18 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
     SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
     (same file hash and options) is analysed in parallel and recorded there; exit code 1 if any failed.
     """
-    band_hz = _parse_band(band)
+    request = {"torque": torque, "params": params, "fit": fit_kind, "band_hz": _parse_band(band),
+               "pipeline": "paper" if paper else "acq"}
     if is_batch(session_path):
-        request = {"torque": torque, "params": params, "fit": fit_kind, "band_hz": band_hz,
-                   "pipeline": "paper" if paper else "acq"}
         return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
                             report=not no_report, as_json=as_json, out=out)
     if as_json:
-        done = analyze_session(session_path, torque=torque, params=params, fit=fit_kind, band_hz=band_hz,
-                               pipeline="paper" if paper else "acq", report=not no_report)
+        done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)
         click.echo(json.dumps(done.json_dict, indent=2))
         return 0
     with err.status(f"analysing {session_path} …"):
-        done = analyze_session(session_path, torque=torque, params=params, fit=fit_kind, band_hz=band_hz,
-                               pipeline="paper" if paper else "acq", report=not no_report)
-    out.print(result_table(done.json_dict))
-    out.print(f"result: {done.json_path}" + (f" · report: {done.report_path}" if done.report_path else ""))
+        done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)
+    _print_result(done)
     return 0
 
 

@@ -20,13 +20,13 @@ from pathlib import Path
 from rich.console import Console
 from rich.table import Table
 
-from acq.batch import find_sessions, run_batch
+from acq.batch import DEFAULT_REQUEST, find_sessions, run_batch
 from acq.catalogue import Catalogue
 from acq.config import load_bench, load_profile
 from acq.recorder import Recorder
 from drivers.registry import open_bench
 
-REQUEST = {"torque": None, "params": "K,Jm,Jl", "fit": "amplitude", "band_hz": None, "pipeline": "acq"}
+REQUEST = DEFAULT_REQUEST
 
 
 def record_sessions(out: Path, n: int, seconds: float) -> list[Path]:

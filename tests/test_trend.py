@@ -17,13 +17,13 @@ from pathlib import Path
 
 import pytest
 
-from acq.batch import find_sessions, request_key, run_batch
+from acq.batch import DEFAULT_REQUEST, find_sessions, request_key, run_batch
 from acq.catalogue import MIGRATIONS, SCHEMA_VERSION, Catalogue, Entry
 from acq.trend import compute_trend
 from tests.helpers import run_cli
 
 WEAR_K = (891.0, 853.0, 815.0, 777.0, 738.0, 700.0)
-REQUEST = {"torque": None, "params": "K,Jm,Jl", "fit": "amplitude", "band_hz": None, "pipeline": "acq"}
+REQUEST = DEFAULT_REQUEST
 SIM_TOML = Path(__file__).parents[1] / "configs" / "benches" / "sim.toml"
 ACQ = [sys.executable, "-m", "acq"]
 
@@ -200,3 +200,15 @@ def test_view_shows_the_trend_window(wear: Path, tmp_path: Path, capsys: pytest.
     assert png.read_bytes()[:4] == b"\x89PNG" and png.stat().st_size > 10_000
     usage = run_cli(capsys, "view")
     assert usage.code == 2 and "give one or more SESSION files, or --trend JOINT [FOLDER]" in usage.err
+
+
+def test_a_recorded_session_is_in_the_catalogue_at_once(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "sessions"
+    rec = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "4", "--fast", "--out", str(out))
+    assert rec.code == 0, rec.err
+    trend = run_cli(capsys, "trend", str(out), "--joint", "joint1", "--json")
+    assert trend.code == 0, trend.err
+    (point,) = json.loads(trend.out)["points"]
+    assert point["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
+    batch = run_cli(capsys, "analyze", str(out), "--no-report")
+    assert batch.code == 0 and "0 analysed (0 failed), 1 skipped" in batch.out.replace("\n", " ")
