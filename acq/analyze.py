@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from rich.markup import escape
 from rich.table import Table
 
 from acq import __version__
@@ -141,37 +142,45 @@ def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *,
     return SessionResult(session, result, doc, json_path, report_path if write else None)
 
 
-def _fmt(x: float | None) -> str:
-    return "—" if x is None or not math.isfinite(x) else f"{x:.5g}"
+def _fmt(x: float | None, spec: str = ".4g") -> str:
+    return "—" if x is None or not math.isfinite(x) else format(x, spec)
+
+
+def _scaled(x: float | None, factor: float) -> float | None:
+    return None if x is None else x * factor
 
 
 def result_table(doc: dict[str, Any]) -> Table:
-    """The identified values with 95 % intervals, frequencies, clock relation and verdict."""
-    truth = doc.get("simulated_truth")
-    quality = doc["quality"]
-    table = Table(title=f"identification — verdict [bold]{quality['verdict']}[/bold]")
-    for column in ("quantity", "value", "95 % interval", "unit", *(("sim truth", "error") if truth else ())):
-        table.add_column(column, justify="left" if column == "quantity" else "right")
+    """The identified values with 95 % intervals, frequencies, clock relation and verdict (fits 80 columns)."""
+    truth = doc.get("simulated_truth") or {}
+    quality, clock = doc["quality"], doc["clock"]
+    table = Table(title=f"identification — verdict [bold]{escape(quality['verdict'])}[/bold]")
+    for column in ("quantity", "value", "95 % interval", *(("sim truth", "error") if truth else ())):
+        table.add_column(column, justify="left" if column == "quantity" else "right", no_wrap=True)
     for key, name, unit in PARAMS:
         value, (lo, hi) = doc[key], doc["ci95"][key]
-        row = [name, _fmt(value), f"{_fmt(lo)} … {_fmt(hi)}", unit]
+        row = [escape(f"{name} [{unit}]"), _fmt(value), f"{_fmt(lo)} – {_fmt(hi)}"]
         if truth:
             err = None if value is None else 100.0 * (value - truth[key]) / truth[key]
             row += [_fmt(truth[key]), "—" if err is None else f"{err:+.2f} %"]
         table.add_row(*row)
-    clock = doc["clock"]
-    extra = [("anti-resonance f_a", doc["antiresonance_hz"], "Hz", None),
-             ("resonance f_r", doc["resonance_hz"], "Hz", None),
-             ("clock offset", None if clock["offset_s"] is None else clock["offset_s"] * 1e6, "µs",
-              None if not truth or truth["offset_s"] is None else truth["offset_s"] * 1e6),
-             ("clock drift", clock["drift_ppm"], "ppm", None if not truth else truth["drift_ppm"]),
-             ("clock residual", None if clock["residual_s"] is None else clock["residual_s"] * 1e6, "µs", None),
-             ("mean coherence in band", quality["mean_coherence"], "", None)]
-    for name, value, unit, true_value in extra:
-        row = [name, _fmt(value), "", unit]
+    offset_ms, true_offset_ms = _scaled(clock["offset_s"], 1e3), _scaled(truth.get("offset_s"), 1e3)
+    rows = [("f_a [Hz]", _fmt(doc["antiresonance_hz"]), None),
+            ("f_r [Hz]", _fmt(doc["resonance_hz"]), None),
+            ("clock offset [ms]", _fmt(offset_ms, ".3f"),
+             (true_offset_ms, None if offset_ms is None or true_offset_ms is None
+              else f"{(offset_ms - true_offset_ms) * 1e3:+.1f} µs")),
+            ("clock drift [ppm]", _fmt(clock["drift_ppm"], ".2f"),
+             (truth.get("drift_ppm"), None if clock["drift_ppm"] is None or "drift_ppm" not in truth
+              else f"{clock['drift_ppm'] - truth['drift_ppm']:+.2f} ppm")),
+            ("clock residual [µs]", _fmt(_scaled(clock["residual_s"], 1e6), ".1f"), None),
+            ("coherence in band", _fmt(quality["mean_coherence"], ".3f"), None)]
+    for name, value, compared in rows:
+        row = [escape(name), value, ""]
         if truth:
-            row += [_fmt(true_value), "" if true_value is None or value is None else f"{value - true_value:+.1f} {unit}"]
+            true_value, error = compared or (None, None)
+            row += [_fmt(true_value, ".4g"), error or ""]
         table.add_row(*row)
     if quality["reasons"]:
-        table.caption = "\n".join(quality["reasons"])
+        table.caption = escape("\n".join(quality["reasons"]))
     return table
