@@ -195,6 +195,12 @@ class _Problem:
         offsets, kernel = window_kernel(frf)
         self.kernel = kernel[sel]
         self.f_fine = self.f[:, None] + offsets[None, :]
+        self.gain = 1.0 - (frf.noise_ratio[sel] if frf.noise_ratio is not None else 0.0)
+        self.fold = []  # (f + k/T, factor·A_k, k/T − f, factor·B_k) of the fold-over terms
+        if frf.alias is not None:
+            for k, (a, b) in enumerate(frf.alias[:, :, sel], start=1):
+                up, down = k / frf.period_s + self.f, k / frf.period_s - self.f
+                self.fold.append((up, self.f / up * a, down, -self.f / down * b))
 
     def params(self, x: np.ndarray) -> TwoMassParams:
         """Model parameters from the log vector ``x`` of the free ones."""
@@ -205,9 +211,16 @@ class _Problem:
         return np.log([getattr(p, n) for n in self.free])
 
     def log_ratio(self, x: np.ndarray) -> np.ndarray:
-        """ln(H_model/H_meas) at the band's bins (complex)."""
-        h = frequency_response(self.params(x), self.f_fine)
-        return np.log(np.sum(h * self.kernel, axis=1)) - self.log_h
+        """ln(H_model/H_meas) at the band's bins (complex).
+
+        The model as H1 sees it: the plant's H through the Welch window kernel, scaled by the torque
+        noise's 1 − G_nn/G_xx, plus the encoder's fold-over terms (:mod:`analysis.frf`).
+        """
+        p = self.params(x)
+        h = self.gain * np.sum(frequency_response(p, self.f_fine) * self.kernel, axis=1)
+        for up, a, down, b in self.fold:
+            h = h + frequency_response(p, up) * a + np.conj(frequency_response(p, down)) * b
+        return np.log(h) - self.log_h
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """Weighted residual vector for ``least_squares``."""

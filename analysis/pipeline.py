@@ -142,7 +142,8 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
     else:
         sig = prepare_signals(rec, options.torque_method, align=options.align)
         weighting = "coherence"
-    frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=options.segment_s)
+    frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=options.segment_s,
+                       torque_noise_Nm=sig.torque_noise_Nm, torque_alias_Nm=sig.torque_alias_Nm)
     fit = fit_two_mass(frf, FitOptions(params=options.params, kind=options.fit, band_hz=options.band_hz,
                                        weighting=weighting), nominal=options.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None

@@ -28,6 +28,7 @@ _CHUNK_S = 20.0
 _MARGIN_S = 0.1
 _PASS_FRACTION = 0.4  # anti-alias pass edge, × encoder rate
 _STOP_FRACTION = 0.6  # anti-alias stop edge, × encoder rate
+ALIAS_ORDERS = 2  # torque near k·f_enc, k = 1 … ALIAS_ORDERS, folded by the encoder's sampling
 
 
 @dataclass(frozen=True)
@@ -99,6 +100,14 @@ class PreparedSignals:
         Electrical offset θ_0 used to demodulate, rad, sign chosen (NaN for hilbert).
     notes : list of str
         What a person should know (gaps, spans used, sign choices).
+    torque_noise_Nm : ndarray or None
+        What the torque estimator makes of white current noise of the fit's residual RMS, at ``t_s``,
+        N·m (encoder method only): its spectrum is the torque estimate's noise spectrum.
+    torque_alias_Nm : ndarray of complex or None
+        Shape (``ALIAS_ORDERS``, n): the torque shifted down by k·f_enc (k = 1, 2), anti-aliased and
+        read at ``t_s``, N·m. The encoder samples the position without an anti-alias filter, so the
+        plant's response to the torque near k·f_enc ± f folds onto f; these carry that torque
+        (:func:`analysis.frf.estimate_frf` turns them into the fold-over terms the fit models).
     """
 
     t_s: np.ndarray
@@ -110,6 +119,8 @@ class PreparedSignals:
     aligned: bool
     theta0_rad: float = np.nan
     notes: list[str] = field(default_factory=list)
+    torque_noise_Nm: np.ndarray | None = None
+    torque_alias_Nm: np.ndarray | None = None
 
 
 def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", align: bool = True,
@@ -175,6 +186,8 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
 
     sign = torque.apex_sign(speed, rec.period_s) if torque_method == "hilbert" else None
     out = np.empty(t_s.size)
+    noise = np.empty(t_s.size) if torque_method == "encoder" and resampling == "antialias" else None
+    alias = np.empty((ALIAS_ORDERS, t_s.size), complex) if sign is None and resampling == "antialias" else None
     theta0 = np.nan if sign is not None else clock.theta0_rad  # NaN: the first chunk estimates it
     for a, b, m0, m1 in _chunks(current["i_a"].size, rec.rate_hz):
         t0 = (n0 + a - m0) / rec.rate_hz
@@ -184,7 +197,18 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
         piece = {name: c[a - m0:b + m1] for name, c in current.items()}
         t_piece = t0 + np.arange(b + m1 - a + m0) / rec.rate_hz
         if sign is None:
-            tq, theta0 = _demodulated(piece, rec, angle(clock.drive_time_s(t_piece)), torque_method, theta0)
+            t_drive = clock.drive_time_s(t_piece)
+            tq, theta0 = _demodulated(piece, rec, angle(t_drive), torque_method, theta0,
+                                      noise_seed=a if noise is not None else None)
+            if noise is not None:
+                tq, tq_noise = tq
+                noise[sel] = resample.to_instants(tq_noise, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
+            if alias is not None:
+                for k in range(1, ALIAS_ORDERS + 1):
+                    z = tq * np.exp(-2j * np.pi * k * ((t_drive / rec.period_s) % 1.0))
+                    alias[k - 1, sel] = (resample.to_instants(z.real, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
+                                         + 1j * resample.to_instants(z.imag, rec.rate_hz, t0, t_daq[sel],
+                                                                     f_pass, f_stop))
         else:
             k = np.clip(np.searchsorted(t_daq, t_piece), 0, t_daq.size - 1)
             tq = torque.torque_hilbert(piece["i_a"], rec.k_t_Nm_per_A, sign[k])
@@ -192,7 +216,8 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
             out[sel] = resample.to_instants(tq, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
         else:
             out[sel] = resample.linear_at(tq, rec.rate_hz, t0, t_daq[sel])
-    prepared = PreparedSignals(t_s, out, speed, rec.period_s, clock, torque_method, align, theta0, notes)
+    prepared = PreparedSignals(t_s, out, speed, rec.period_s, clock, torque_method, align, theta0, notes,
+                               noise, alias)
     return _signed(prepared) if sign is None else prepared
 
 
@@ -257,15 +282,18 @@ def _chunks(n: int, rate_hz: float) -> Iterator[tuple[int, int, int, int]]:
 
 
 def _demodulated(piece: dict[str, np.ndarray], rec: Recording, theta_m_rad: np.ndarray, method: TorqueMethod,
-                 theta0: float) -> tuple[np.ndarray, float]:
-    """Torque of one chunk by the encoder or park method, and the θ_0 used (mod π; estimated if NaN)."""
+                 theta0: float, noise_seed: int | None = None) -> tuple[np.ndarray, float]:
+    """Torque of one chunk by the encoder or park method, and the θ_0 used (mod π; estimated if NaN).
+
+    With ``noise_seed`` (encoder method) the torque comes with a noise realisation, shape (2, n).
+    """
     theta_e = rec.pole_pairs * theta_m_rad
     if method == "encoder":
         if np.isnan(theta0):
             theta0 = torque.phase_offset(piece["i_a"], theta_e, rec.rate_hz).theta0_rad
         # the sensor DC is estimated jointly by the spline fit, θ_0 refined there
         return torque.torque_encoder(piece["i_a"], theta_e, rec.rate_hz, rec.k_t_Nm_per_A,
-                                     torque.PhaseOffset(theta0, 0.0, 0)), theta0
+                                     torque.PhaseOffset(theta0, 0.0, 0), noise_seed=noise_seed), theta0
     offsets = {name: torque.phase_offset(c, theta_e, rec.rate_hz) for name, c in piece.items()}
     theta0 = offsets["i_a"].theta0_rad if np.isnan(theta0) else theta0
     return torque.torque_park(piece, theta_e, rec.k_t_Nm_per_A, theta0, {n: o.dc_a for n, o in offsets.items()}), theta0
@@ -281,4 +309,5 @@ def _signed(p: PreparedSignals) -> PreparedSignals:
         return p
     theta0 = float(np.angle(np.exp(1j * (p.theta0_rad + np.pi))))
     return replace(p, torque_Nm=-p.torque_Nm, theta0_rad=theta0,
+                   torque_alias_Nm=None if p.torque_alias_Nm is None else -p.torque_alias_Nm,
                    notes=[*p.notes, f"torque sign from its correlation with the acceleration (θ_0 = {theta0:.3f} rad)"])

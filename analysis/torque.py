@@ -187,7 +187,8 @@ def torque_hilbert(current_a: np.ndarray, k_t_Nm_per_A: float, sign: np.ndarray)
 
 
 def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float, k_t_Nm_per_A: float,
-                   offset: PhaseOffset, knot_spacing_s: float = 2.5e-4, smoothing: float = 1e-2) -> np.ndarray:
+                   offset: PhaseOffset, knot_spacing_s: float = 2.5e-4, smoothing: float = 1e-2,
+                   noise_seed: int | None = None) -> np.ndarray:
     """Torque from one phase demodulated with the encoder angle, N·m, at the given samples.
 
     Solves min Σ_n (i_a[n] − dc + i_q(t_n)·sin(θ_e[n] + θ_0))² + λ·Σ (Δ² c)² for the coefficients c of
@@ -218,6 +219,11 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         Knot spacing of the spline, s; its bandwidth is about 1/(2·spacing).
     smoothing : float
         λ relative to the mean data weight per coefficient; only matters where |sin| is small.
+    noise_seed : int or None
+        If given, also return what the estimator makes of white noise of the fit's residual RMS
+        (drawn from this seed), N·m: shape (2, n), row 0 the torque, row 1 the noise realisation.
+        Its spectrum is the estimate's noise spectrum (the estimator is linear in the current), which
+        the FRF needs because noise on the torque biases H1 = G_xy/G_xx low where the torque is weak.
     """
     i = np.asarray(current_a, dtype=np.float64)
     th = np.asarray(theta_e_rad, dtype=np.float64)
@@ -228,12 +234,19 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         raise ValueError("record shorter than four spline knots")
     y, phi = i - offset.dc_a, th + offset.theta0_rad
     ones = np.ones_like(y)
-    iq, _ = _spline_iq(y, -np.sin(phi), m, smoothing, [ones])
-    dphi = -iq * np.cos(phi)
+    iq1, beta1 = _spline_iq(y, -np.sin(phi), m, smoothing, [ones])
+    dphi = -iq1 * np.cos(phi)
     w_e = np.gradient(th) * rate_hz
     tn = np.linspace(-1.0, 1.0, y.size)
-    iq, _ = _spline_iq(y, -np.sin(phi), m, smoothing, [ones, dphi, dphi * w_e, dphi * w_e * tn])
-    return k_t_Nm_per_A * iq
+    extra = [ones, dphi, dphi * w_e, dphi * w_e * tn]
+    if noise_seed is None:
+        iq, _ = _spline_iq(y, -np.sin(phi), m, smoothing, extra)
+        return k_t_Nm_per_A * iq
+    resid = y + np.sin(phi) * iq1 - beta1[0]
+    sigma = 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
+    noise = sigma * np.random.default_rng(noise_seed).standard_normal(y.size)
+    both, _ = _spline_iq(np.column_stack((y, noise)), -np.sin(phi), m, smoothing, extra)
+    return k_t_Nm_per_A * both.T
 
 
 def _bspline_weights(m: int) -> np.ndarray:
@@ -247,25 +260,27 @@ def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, smoothing: float,
     """Penalised LS of y ≈ g·s(t) + Σ β_k·extra_k, s a uniform cubic B-spline (knot every m samples).
 
     The global coefficients β border the banded spline system and are eliminated by their Schur
-    complement. Returns s at the samples and β.
+    complement. ``y`` may hold several right-hand sides as columns, shape (n, r): one factorisation
+    serves them all. Returns s at the samples (shape of ``y``) and β (shape (len(extra),) or
+    (len(extra), r)).
     """
-    n = y.size
+    n = y.shape[0]
     nk = -(-n // m)
-
-    def spans(x: np.ndarray) -> np.ndarray:
-        return np.concatenate((x, np.zeros(nk * m - n))).reshape(nk, m)
-
     W = _bspline_weights(m)
 
     def project(x: np.ndarray) -> np.ndarray:
-        """Bᵀ(g·x): the spline's normal-equation column of a sample vector x."""
-        out = np.zeros(nk + 3)
-        gx = spans(g * x)
+        """Bᵀ(g·x) for the columns of x, shape (n, r) → (nk + 3, r)."""
+        gx = np.zeros((nk * m, x.shape[1]))
+        gx[:n] = g[:, None] * x
+        full = np.matmul(gx.reshape(nk, m, -1).transpose(0, 2, 1), W)  # (nk, r, 4)
+        out = np.zeros((nk + 3, x.shape[1]))
         for k in range(4):
-            out[k:k + nk] += gx @ W[:, k]
+            out[k:k + nk] += full[:, :, k]
         return out
 
-    G2 = spans(g * g)
+    G2 = np.zeros(nk * m)
+    G2[:n] = g * g
+    G2 = G2.reshape(nk, m)
     ab = np.zeros((4, nk + 3))  # upper banded storage: ab[3 - d, j] = A[j - d, j]
     for k in range(4):
         for l in range(k, 4):
@@ -275,14 +290,16 @@ def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, smoothing: float,
     for a in range(3):
         for b in range(a, 3):
             ab[3 - (b - a), b:b + nk + 1] += lam * d2[a] * d2[b]
-    U = np.stack([project(u) for u in extra], axis=1)
-    X = solveh_banded(ab, np.column_stack((project(y), U)))
-    x_y, x_u = X[:, 0], X[:, 1:]
-    E = np.array([[u @ v for v in extra] for u in extra])
-    beta = np.linalg.solve(E - U.T @ x_u, np.array([u @ y for u in extra]) - U.T @ x_y)
+    Y = y.reshape(n, -1)
+    V = np.column_stack(extra)
+    U = project(V)
+    X = solveh_banded(ab, np.column_stack((project(Y), U)))
+    x_y, x_u = X[:, :Y.shape[1]], X[:, Y.shape[1]:]
+    beta = np.linalg.solve(V.T @ V - U.T @ x_u, V.T @ Y - U.T @ x_y)
     coef = x_y - x_u @ beta
-    s = sum(np.outer(coef[k:k + nk], W[:, k]) for k in range(4))
-    return s.reshape(-1)[:n], beta
+    c4 = np.stack([coef[k:k + nk] for k in range(4)], axis=2)  # (nk, r, 4)
+    s_out = np.matmul(c4, W.T).transpose(0, 2, 1).reshape(nk * m, -1)[:n]  # (nk, r, m) → samples
+    return (s_out[:, 0], beta[:, 0]) if y.ndim == 1 else (s_out, beta)
 
 
 def torque_park(currents_a: dict[str, np.ndarray], theta_e_rad: np.ndarray, k_t_Nm_per_A: float,
