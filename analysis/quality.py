@@ -30,7 +30,8 @@ class Thresholds:
     excitation_poor, excitation_failed : float
         Mean coherence γ² between f_a and f_r below which the joint counts as weakly / not excited.
     coherence_poor, coherence_failed : float
-        Mean coherence in the whole fit band.
+        Mean coherence in the whole fit band. On 10 s simulated sessions the paper's 0.5 s profile
+        gives 0.63…0.66, the 0.2 s triangle 0.78…0.96 over plants scaled 0.5…2; the limit is midway.
     misfit_ratio_poor : float
         Ratio of the fit's residual to the residual the coherence explains, above which the model
         counts as missing the data. Noise alone is judged by the coherence checks, not here.
@@ -38,7 +39,9 @@ class Thresholds:
         Weighted RMS misfit of ln|H| (≈ relative misfit of |H|) that makes such a misfit poor /
         failed.
     ci_K_poor, ci_K_failed : float
-        Relative half-width of the 95 % interval of K.
+        Relative half-width of the 95 % interval of K. The interval holds the truth in ≥ 90 % of
+        simulated runs, so its width is the precision; 10 s sessions of plants scaled 0.5…2 give
+        ±1…4 % (K) and ±1…5 % (J), which is "ok" — a tighter limit flipped good results to poor.
     ci_J_poor, ci_J_failed : float
         Relative half-width of the 95 % intervals of J_m and J_l (when fitted).
     clock_residual_amplitude_s, clock_residual_complex_s : float
@@ -49,15 +52,15 @@ class Thresholds:
 
     excitation_poor: float = 0.7
     excitation_failed: float = 0.4
-    coherence_poor: float = 0.7
+    coherence_poor: float = 0.72
     coherence_failed: float = 0.3
     misfit_ratio_poor: float = 3.0
     residual_poor: float = 0.08
     residual_failed: float = 0.30
-    ci_K_poor: float = 0.02
-    ci_K_failed: float = 0.10
-    ci_J_poor: float = 0.04
-    ci_J_failed: float = 0.20
+    ci_K_poor: float = 0.05
+    ci_K_failed: float = 0.20
+    ci_J_poor: float = 0.08
+    ci_J_failed: float = 0.30
     clock_residual_amplitude_s: float = 1e-3
     clock_residual_complex_s: float = 1e-4
 

@@ -1,7 +1,9 @@
 """Issue 4's measured criteria on simulated sessions (SimBench straight, no recorder).
 
-* accuracy: |error| ≤ 1 % on K and ≤ 2 % on J_m, J_l on the paper's plant; ≤ 2 % / 4 % on a plant
-  with K and the inertias scaled (the bench's nominal values stay the paper's);
+* accuracy: |error| ≤ 1 % on K and ≤ 2 % on J_m, J_l on the paper's plant; ≤ 2 % / 4 % on plants
+  with K and the inertias scaled, among them the stiff (K ×2, J ×0.5) and soft (K ×0.5, J ×2) ones
+  (the bench's nominal values stay the paper's);
+* honesty: every excited session here is "ok" and ≥ 90 % of the 95 % intervals hold the truth;
 * clock: offset within 50 µs and drift within 5 ppm of the truth at the extremes ±60 ms, ±60 ppm
   (every session below has one of the four sign combinations);
 * a gap in the encoder stream: the analysis uses the longest gap-free span and says so.
@@ -32,6 +34,12 @@ CASES = [
     ("paper+60ms-60ppm", 13, +0.060, -60.0, (1.0, 1.0, 1.0), 1.0, 2.0),
     ("scaled-60ms+60ppm", 14, -0.060, +60.0, (0.5, 2.0, 0.5), 2.0, 4.0),
     ("scaled+60ms+60ppm", 15, +0.060, +60.0, (0.5, 2.0, 0.5), 2.0, 4.0),
+    # stiff (f_r ≈ 204 Hz: the encoder's fold-over and the torque's bandwidth matter) and soft plants
+    ("stiff+41ms-58ppm", 2, -0.0416, -57.8, (2.0, 0.5, 0.5), 2.0, 4.0),
+    ("stiff+40ms+24ppm", 3, +0.0406, +24.1, (2.0, 0.5, 0.5), 2.0, 4.0),
+    ("stiff-60ms-60ppm", 16, -0.060, -60.0, (2.0, 0.5, 0.5), 2.0, 4.0),
+    ("soft+60ms-60ppm", 17, +0.060, -60.0, (0.5, 2.0, 2.0), 2.0, 4.0),
+    ("soft-30ms+45ppm", 18, -0.030, +45.0, (0.5, 2.0, 2.0), 2.0, 4.0),
 ]
 
 
@@ -62,12 +70,14 @@ def test_clock_recovered_at_the_extremes(label, seed, offset_s, drift_ppm, facto
     assert res.clock.drift_ppm == pytest.approx(truth["daq_drift_ppm"], abs=5.0)
 
 
-def test_most_intervals_hold_the_truth():
+def test_most_intervals_hold_the_truth_and_ok_means_it():
     held = []
-    for _, seed, offset_s, drift_ppm, factors, _, _ in CASES:
+    for label, seed, offset_s, drift_ppm, factors, _, _ in CASES:
         res, truth = _analysed(seed, offset_s, drift_ppm, factors)
-        held += [res.fit.ci95[n][0] <= truth[n] <= res.fit.ci95[n][1] for n in NAMES]
-    assert np.mean(held) >= 0.6, f"only {sum(held)} of {len(held)} 95 % intervals hold the truth"
+        inside = [res.fit.ci95[n][0] <= truth[n] <= res.fit.ci95[n][1] for n in (*NAMES, "C_Nms_per_rad")]
+        held += inside
+        assert res.quality.verdict == "ok", f"{label}: {res.quality.reasons}"
+    assert np.mean(held) >= 0.9, f"only {sum(held)} of {len(held)} 95 % intervals hold the truth"
 
 
 def test_encoder_gap_uses_the_longest_gap_free_span_and_says_so():
