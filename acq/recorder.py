@@ -30,6 +30,7 @@ from drivers.errors import AcqError, DeviceError
 FLUSH_INTERVAL_S = 0.5
 READ_TIMEOUT_S = 0.2
 STALL_TIMEOUT_S = 5.0
+SHUTDOWN_TIMEOUT_S = 5.0
 
 #: Called in the recording thread after each block is written, ``("current" | "encoder", block)``,
 #: and for each event stored, ``("event", StreamEvent)`` (gaps found from the indices, device events).
@@ -37,7 +38,7 @@ Listener = Callable[[str, Any], None]
 
 
 class Interrupted(Exception):
-    """Raised in the recording thread by Ctrl-C or SIGTERM."""
+    """Ends a recording as ``interrupted`` (a stop was requested: Ctrl-C, SIGTERM, a live window closed)."""
 
 
 @dataclass(frozen=True)
@@ -153,20 +154,21 @@ def _select(block: EncoderBlock, keep: np.ndarray) -> EncoderBlock:
 
 
 @contextmanager
-def _sigterm_interrupts() -> Iterator[None]:
-    """Treat SIGTERM like Ctrl-C while recording (main thread only)."""
+def _stop_on_signals(request_stop: Callable[[str], None]) -> Iterator[None]:
+    """While recording (main thread only), Ctrl-C and SIGTERM ask for a stop at the next safe point.
+
+    The handlers never raise: an exception in the middle of a flush could write a part twice or lose one.
+    """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-
-    def handler(signum: int, frame: object) -> None:
-        raise Interrupted("stopped by SIGTERM")
-
-    previous = signal.signal(signal.SIGTERM, handler)
+    reasons = {signal.SIGINT: "interrupted by user (Ctrl-C)", signal.SIGTERM: "stopped by SIGTERM"}
+    previous = {sig: signal.signal(sig, lambda signum, frame: request_stop(reasons[signum])) for sig in reasons}
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 class Recorder:
@@ -204,6 +206,13 @@ class Recorder:
         self.listeners = listeners or []
         self.progress = progress
         self._started = False
+        self._stop_request: str | None = None
+        self._shutting_down = False
+
+    def request_stop(self, reason: str) -> None:
+        """Ask the recording to end as ``interrupted`` with ``reason`` at the next safe point (any thread)."""
+        if self._stop_request is None:
+            self._stop_request = reason
 
     def start_devices(self) -> None:
         """Start both devices (idempotent); a set-up error raises here, before any file exists."""
@@ -251,22 +260,24 @@ class Recorder:
         counts = {"current": 0, "encoder": 0}
         status: Status = "complete"
         reason = f"recorded {self.duration_s:g} s"
-        try:
-            with _sigterm_interrupts():
+        with _stop_on_signals(self.request_stop):
+            try:
                 # Motion first: the started devices buffer their samples meanwhile, and a simulated
                 # bench then starts the motion at the same point of its record in every run.
                 self.drive.start_motion(self.profile)
                 for r in readers.values():
                     r.start()
                 self._pump(inbox, readers, writer, checker, counts)
-        except (KeyboardInterrupt, Interrupted) as e:
-            status, reason = "interrupted", "interrupted by user (Ctrl-C)" if isinstance(e, KeyboardInterrupt) else str(e)
-        except AcqError as e:
-            status, reason = "failed", str(e)
-        except Exception as e:  # noqa: BLE001 - keep the data whatever went wrong, and say what
-            status, reason = "failed", f"{type(e).__name__}: {e}"
-        finally:
-            status, reason = self._shut_down(inbox, readers, writer, checker, counts, status, reason)
+            except Interrupted as e:
+                status, reason = "interrupted", str(e)
+            except KeyboardInterrupt:  # raised by code that embeds the recorder, or where no handler could be set
+                status, reason = "interrupted", "interrupted by user (Ctrl-C)"
+            except AcqError as e:
+                status, reason = "failed", str(e)
+            except Exception as e:  # noqa: BLE001 - keep the data whatever went wrong, and say what
+                status, reason = "failed", f"{type(e).__name__}: {e}"
+            finally:
+                status, reason = self._shut_down(inbox, readers, writer, checker, counts, status, reason)
         return RecordingResult(path, status, reason, counts["current"], counts["encoder"],
                                checker.current_gaps, checker.encoder_gaps)
 
@@ -275,6 +286,8 @@ class Recorder:
         done: set[str] = set()
         last_flush = last_data = time.monotonic()
         while len(done) < len(readers):
+            if self._stop_request is not None:
+                raise Interrupted(self._stop_request)
             try:
                 kind, item = inbox.get(timeout=READ_TIMEOUT_S)
             except queue.Empty:
@@ -309,43 +322,47 @@ class Recorder:
         else:
             writer.append_encoder(block)
         counts[kind] += block.count
-        for listener in self.listeners:
-            listener(kind, block)
+        self._notify(kind, block)
         if self.progress is not None and kind == "current":
             self.progress(min(1.0, counts["current"] / (self.duration_s * self._cur_info.rate_hz)))
 
     def _event(self, writer: SessionWriter, event: StreamEvent) -> None:
         """Store an event and show it to the listeners as ``("event", event)``."""
         writer.add_event(event)
+        self._notify("event", event)
+
+    def _notify(self, kind: str, item: Any) -> None:
+        """Call the listeners; while shutting down nothing they raise may keep the file from being finished."""
         for listener in self.listeners:
-            listener("event", event)
+            try:
+                listener(kind, item)
+            except Exception:
+                if not self._shutting_down:
+                    raise
 
     def _shut_down(self, inbox: queue.Queue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
                    checker: _StreamChecker, counts: dict[str, int], status: Status, reason: str) -> tuple[Status, str]:
-        """Stop motion first (safety), then the readers; store what they still queued; finish the file."""
+        """Stop motion first (safety); store everything the readers still deliver until each has ended; then
+        stop the devices, store what is left and finish the file."""
+        self._shutting_down = True
         try:
             self.drive.stop_motion()
         except Exception as e:  # noqa: BLE001 - the file must still be finished
             writer.add_event(StreamEvent(time.monotonic_ns(), "drive", "error", f"stop motion failed: {e}"))
         for r in readers.values():
             r.stop_requested.set()
-        for r in readers.values():
-            if r.is_alive():
-                r.join(timeout=2.0)
+        deadline = time.monotonic() + SHUTDOWN_TIMEOUT_S
+        while any(r.is_alive() for r in readers.values()) and time.monotonic() < deadline:
+            status, reason = self._drain(inbox, writer, checker, counts, status, reason, wait_s=READ_TIMEOUT_S)
         for stop in (self.current.stop, self.drive.stop):
             try:
                 stop()
             except Exception as e:  # noqa: BLE001
                 writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "error", f"device stop failed: {e}"))
-        while True:
-            try:
-                kind, item = inbox.get_nowait()
-            except queue.Empty:
-                break
-            if kind in ("current", "encoder", "event"):
-                self._store(kind, item, writer, checker, counts)
-            elif kind == "error" and status == "complete":
-                status, reason = "failed", str(item)
+        for r in readers.values():
+            if r.is_alive():
+                r.join(timeout=READ_TIMEOUT_S)
+        status, reason = self._drain(inbox, writer, checker, counts, status, reason, wait_s=0.0)
         for device in (self.current, self.drive):
             for event in device.events():
                 writer.add_event(event)
@@ -353,3 +370,22 @@ class Recorder:
             writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "info", f"stopped: {reason}"))
         writer.finish(status, reason)
         return status, reason
+
+    def _drain(self, inbox: queue.Queue[tuple[str, Any]], writer: SessionWriter, checker: _StreamChecker,
+               counts: dict[str, int], status: Status, reason: str, wait_s: float) -> tuple[Status, str]:
+        """Store what the readers queued (waiting up to ``wait_s`` for the first item); a late error fails
+        a recording that was complete."""
+        try:
+            item = inbox.get(timeout=wait_s) if wait_s > 0 else inbox.get_nowait()
+        except queue.Empty:
+            return status, reason
+        while True:
+            kind, payload = item
+            if kind in ("current", "encoder", "event"):
+                self._store(kind, payload, writer, checker, counts)
+            elif kind == "error" and status == "complete":
+                status, reason = "failed", str(payload)
+            try:
+                item = inbox.get_nowait()
+            except queue.Empty:
+                return status, reason

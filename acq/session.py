@@ -87,9 +87,9 @@ class _PendingColumns:
         self._parts.setdefault(name, []).append(values)
 
     def write_to(self, f: h5py.File) -> None:
-        for name, parts in self._parts.items():
+        while self._parts:
+            name, parts = self._parts.popitem()  # taken before writing: an interrupted flush never repeats a part
             _append(f[name], np.concatenate(parts))
-        self._parts.clear()
 
 
 class SessionWriter:
@@ -200,10 +200,8 @@ class SessionWriter:
 
     def add_event(self, event: StreamEvent) -> None:
         """Append one event row."""
-        row = np.array(
-            [(event.host_ns, event.stream.encode(), event.kind.encode(), event.detail.encode()[:240])],
-            dtype=EVENT_DTYPE,
-        )
+        detail = event.detail.encode()[:240].decode("utf-8", "ignore").encode()  # never split a character
+        row = np.array([(event.host_ns, event.stream.encode(), event.kind.encode(), detail)], dtype=EVENT_DTYPE)
         self._pending.add("events", row)
 
     def flush(self) -> None:
@@ -360,7 +358,8 @@ def _read_encoder(g: h5py.Group, n: int) -> EncoderData:
 
 def _read_events(ds: h5py.Dataset) -> list[StreamEvent]:
     return [
-        StreamEvent(int(r["host_ns"]), r["stream"].decode(), r["kind"].decode(), r["detail"].decode())  # type: ignore[arg-type]
+        StreamEvent(int(r["host_ns"]), r["stream"].decode(), r["kind"].decode(),  # type: ignore[arg-type]
+                    r["detail"].decode("utf-8", "replace"))
         for r in ds[...]
     ]
 

@@ -127,3 +127,12 @@ def test_sessions_started_in_the_same_second_get_distinct_files(tmp_path: Path) 
     first.touch()
     second = new_session_path(tmp_path, "joint1", "2026-11-22T10:15:03+00:00")
     assert second.name == "2026-11-22T10-15-03_joint1_2.h5"
+
+
+def test_a_long_event_detail_is_cut_on_a_character_boundary(tmp_path: Path) -> None:
+    path = tmp_path / "ev.h5"
+    w = _writer(path)
+    w.add_event(StreamEvent(1, "drive", "error", "x" * 239 + "— and more"))
+    w.finish("failed", "test")
+    (event,) = load(path).events
+    assert event.detail == "x" * 239
