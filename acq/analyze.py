@@ -8,9 +8,11 @@ never touched). On the simulated bench the table also shows the simulated truth 
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,6 +20,7 @@ from typing import Any
 from rich.markup import escape
 from rich.table import Table
 
+import analysis
 from acq import __version__
 from acq.session import Session, load, utc_now_iso
 from analysis.model import TwoMassParams
@@ -42,6 +45,7 @@ class SessionResult:
 
 def recording_from_session(session: Session) -> Recording:
     """The session's raw streams as the analysis's plain arrays (nothing resampled or corrected)."""
+    session.require_samples()
     cur, enc, bench = session.current, session.encoder, session.bench
     return Recording(
         current_a=dict(cur.phases_a),
@@ -71,6 +75,15 @@ def options_for(session: Session, *, torque: TorqueMethod | None = None, params:
         nominal=TwoMassParams(K_Nm_per_rad=nominal.K_Nm_per_rad, Jm_kgm2=nominal.Jm_kgm2, Jl_kgm2=nominal.Jl_kgm2,
                               C_Nms_per_rad=0.0),  # the bench gives no damping; the fit always fits C
     )
+
+
+@functools.cache
+def analysis_fingerprint() -> str:
+    """SHA-256 (first 16 hex digits) of the analysis package's source: results of other code are not current."""
+    digest = hashlib.sha256()
+    for source in sorted(Path(analysis.__file__).parent.glob("*.py")):
+        digest.update(source.name.encode() + b"\0" + source.read_bytes())
+    return digest.hexdigest()[:16]
 
 
 def sha256_of(path: Path) -> str:
@@ -111,6 +124,7 @@ def result_json(session: Session, result: Result) -> dict[str, Any]:
     }
     doc["analyzed_utc"] = utc_now_iso()
     doc["acq_version"] = __version__
+    doc["analysis_fingerprint"] = analysis_fingerprint()
     truth = simulated_truth(session)
     if truth is not None:
         doc["simulated_truth"] = truth
@@ -133,7 +147,9 @@ def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *,
     json_path = session.path.with_name(session.path.stem + ".result.json")
     report_path = session.path.with_name(session.path.stem + ".report.png") if report else None
     if write:
-        json_path.write_text(json.dumps(doc, indent=2))
+        tmp = json_path.with_name(f".{json_path.name}.writing")
+        tmp.write_text(json.dumps(doc, indent=2))
+        os.replace(tmp, json_path)  # a reader never sees half a result
         if report_path is not None:
             from acq.plots import render_report_png
 

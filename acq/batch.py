@@ -29,7 +29,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
 
-from acq.analyze import SessionResult, analyze_session, sha256_of
+from acq.analyze import SessionResult, analysis_fingerprint, analyze_session, sha256_of
 from acq.catalogue import Catalogue, Outcome
 from acq.session import Session, load
 from drivers.errors import AcqError, ConfigError
@@ -107,8 +107,9 @@ def record_outcome(done: SessionResult, request: dict[str, Any], catalogue_path:
 
 
 def request_key(request: dict[str, Any]) -> str:
-    """The options asked for (keyword arguments of :func:`acq.analyze.options_for`), canonical JSON."""
-    return json.dumps(request, sort_keys=True)
+    """The options asked for (keyword arguments of :func:`acq.analyze.options_for`) and the analysis code that
+    answers them (:func:`acq.analyze.analysis_fingerprint`), canonical JSON: a change of either is not current."""
+    return json.dumps({**request, "analysis": analysis_fingerprint()}, sort_keys=True)
 
 
 def session_meta(session: Session) -> dict[str, Any]:

@@ -112,6 +112,17 @@ def test_rerun_skips_sessions_whose_result_is_current(wear: Path, tmp_path: Path
     assert len(other.outcomes) == 1 and other.outcomes[0].doc is not None
 
 
+def test_results_of_other_analysis_code_are_not_current(wear: Path, tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    import acq.batch
+
+    copy = _copy_sessions(wear, tmp_path / "copy", 1)
+    monkeypatch.setattr(acq.batch, "analysis_fingerprint", lambda: "changed-code")
+    with Catalogue(wear / "catalogue.sqlite") as catalogue:
+        rerun = run_batch(copy, catalogue, REQUEST, jobs=1)
+    assert len(rerun.outcomes) == 1 and not rerun.skipped
+
+
 def test_failed_session_is_recorded_and_the_batch_continues(wear: Path, tmp_path: Path,
                                                             capsys: pytest.CaptureFixture[str]) -> None:
     folder = tmp_path / "mixed"
