@@ -83,12 +83,12 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     duration = duration_s if duration_s is not None else profile.duration_s
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))
-    live_view = None
     if live:
-        from acq.live import LiveView  # Qt is imported only when asked for
+        from acq.live import LiveView, require_display  # Qt is imported only when asked for
 
-        live_view = LiveView(recorder)  # before the devices start: no display → one-line error
+        require_display()  # before the devices start: no display → one-line error
     recorder.start_devices()
+    live_view = LiveView(recorder) if live else None  # scaled by what the started devices report
     label = f"recording {bench.joint}"
     result = (live_view.record(lambda: _record_with_progress(recorder, duration, label)) if live_view
               else _record_with_progress(recorder, duration, label))

@@ -3,14 +3,13 @@
 Threads: Qt must own the main thread (its GUI objects live there, and the process's signals
 arrive there), so the recorder runs in a worker thread and the window in the main one.
 The recorder's listener hook (:class:`LiveFeed`, called in the recording thread after each
-block is written) only counts samples, checks the stream indices for gaps and puts a reference to
-the block into a bounded queue; when the queue is full the block is dropped *for display only*
+block is written and for each event stored) only counts samples and events and puts a reference
+to the block into a bounded queue; when the queue is full the block is dropped *for display only*
 (it is already on disk). A timer in the main thread drains the queue and redraws ~30 times a second.
 
 Stopping: Ctrl-C or SIGTERM (handled in the main thread, which Python services at each redraw) or
-closing the window asks the feed to stop; the next block's listener call raises
-:class:`acq.recorder.Interrupted` in the recording thread, which the recorder turns into a clean
-finish with status ``interrupted`` — never once the recording has all its samples.
+closing the window calls :meth:`acq.recorder.Recorder.request_stop`; the recorder ends at its next
+safe point with status ``interrupted`` — unless it already has all its samples.
 """
 
 from __future__ import annotations
@@ -31,7 +30,7 @@ import pyqtgraph as pg
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
 from acq.plots import ensure_app
-from acq.recorder import Interrupted, Recorder, RecordingResult
+from acq.recorder import Recorder, RecordingResult
 from acq.view import has_display
 from drivers.base import CurrentBlock, EncoderBlock, StreamEvent
 from drivers.errors import ConfigError
@@ -57,31 +56,31 @@ class LiveStats:
         return self.frames / self.seconds if self.seconds > 0 else 0.0
 
 
+def require_display() -> None:
+    """Raise :class:`ConfigError` (one line) when no window can be shown."""
+    if not has_display():
+        raise ConfigError(NO_DISPLAY_MESSAGE)
+
+
 class LiveFeed:
-    """The recorder's listener: counts, gap check and a bounded queue to the window (recording thread).
+    """The recorder's listener: counts, events and a bounded queue to the window (recording thread).
 
     Parameters
     ----------
-    target_current, target_encoder : int
-        Samples the recording wants per stream (no stop is raised once both are reached).
+    request_stop : callable
+        Ends the recording as ``interrupted`` with a reason (:meth:`acq.recorder.Recorder.request_stop`).
     maxsize : int
         Blocks held for display at most; more are dropped from the display, never from the file.
     """
 
-    def __init__(self, target_current: int, target_encoder: int, maxsize: int = QUEUE_BLOCKS) -> None:
+    def __init__(self, request_stop: Callable[[str], None], maxsize: int = QUEUE_BLOCKS) -> None:
         self.blocks: queue.Queue[tuple[str, Any]] = queue.Queue(maxsize=maxsize)
         self.events: deque[StreamEvent] = deque()
         self.counts = {"current": 0, "encoder": 0}
         self.gaps = {"current": 0, "encoder": 0}
         self.dropped = 0
         self.max_listener_s = 0.0
-        self._targets = {"current": target_current, "encoder": target_encoder}
-        self._stop_reason = ""
-        self._stop_raised = False
-
-    def request_stop(self, reason: str) -> None:
-        """Ask the recording to end as ``interrupted`` with ``reason`` (any thread)."""
-        self._stop_reason = self._stop_reason or reason
+        self.request_stop = request_stop
 
     def __call__(self, stream: str, block: CurrentBlock | EncoderBlock | StreamEvent) -> None:
         t0 = time.perf_counter()
@@ -96,10 +95,6 @@ class LiveFeed:
         except queue.Full:
             self.dropped += 1
         self.max_listener_s = max(self.max_listener_s, time.perf_counter() - t0)
-        unfinished = any(self.counts[s] < self._targets[s] for s in self.counts)
-        if self._stop_reason and not self._stop_raised and unfinished:
-            self._stop_raised = True
-            raise Interrupted(self._stop_reason)
 
 
 class _Trace:
@@ -223,15 +218,13 @@ class LiveView:
     """
 
     def __init__(self, recorder: Recorder) -> None:
-        if not has_display():
-            raise ConfigError(NO_DISPLAY_MESSAGE)
-        bench = recorder.bench
+        require_display()
+        current, drive = recorder.current_info, recorder.drive_info
         self.app = ensure_app()
-        self.feed = LiveFeed(math.ceil(recorder.duration_s * bench.daq.rate_hz),
-                             math.ceil(recorder.duration_s / bench.drive.period_s))
+        self.feed = LiveFeed(recorder.request_stop)
         recorder.listeners.append(self.feed)
-        self.window = LiveWindow(self.feed, bench.daq.rate_hz, bench.drive.period_s, bench.encoder.counts_per_rev,
-                                 bench.joint)
+        self.window = LiveWindow(self.feed, current.rate_hz, drive.period_s, drive.counts_per_rev,
+                                 recorder.bench.joint)
 
     def run(self, record: Callable[[], RecordingResult]) -> tuple[RecordingResult, LiveStats]:
         """Run ``record`` in a worker thread while the window draws; return its result and the view's figures."""

@@ -23,9 +23,10 @@ from typing import Any
 import numpy as np
 
 from acq.session import SessionWriter, Status, new_session_path, utc_now_iso
-from drivers.base import CurrentBlock, CurrentSource, Drive, EncoderBlock, StreamEvent
+from drivers.base import (CurrentBlock, CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock,
+                          StreamEvent)
 from drivers.config import Bench, Profile
-from drivers.errors import AcqError, DeviceError
+from drivers.errors import AcqError, ConfigError, DeviceError
 
 FLUSH_INTERVAL_S = 0.5
 READ_TIMEOUT_S = 0.2
@@ -226,6 +227,18 @@ class Recorder:
             raise
         self._started = True
 
+    @property
+    def current_info(self) -> CurrentSourceInfo:
+        """What the started current source reported (coerced rate, channels)."""
+        self.start_devices()
+        return self._cur_info
+
+    @property
+    def drive_info(self) -> DriveInfo:
+        """What the started drive reported (period, counts per revolution)."""
+        self.start_devices()
+        return self._drive_info
+
     def _release_devices(self) -> None:
         self.drive.stop()
         self.current.stop()
@@ -241,6 +254,9 @@ class Recorder:
             return SessionWriter(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
                                  drive_info=self._drive_info, host_ns_at_start=time.monotonic_ns(),
                                  operator=self.operator, tags=self.tags)
+        except OSError as e:
+            self._release_devices()
+            raise ConfigError(f"{self.out_dir}: cannot write a session there ({e.strerror or e})") from None
         except BaseException:
             self._release_devices()
             raise
