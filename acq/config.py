@@ -2,8 +2,8 @@
 
 A config error is one line, e.g.::
 
-    configs/benches/lab.toml: [daq] rate_hz = -25600: must be greater than 0
-    configs/benches/lab.toml: [motor] pole_pair: unknown key
+    configs/benches/lab_canopen.toml: [daq] rate_hz = -25600: must be greater than 0
+    configs/benches/lab_canopen.toml: [motor] pole_pair = 4: unknown key
     configs/profiles/x.toml: top_speed_rpm: missing
 """
 
@@ -79,6 +79,10 @@ def read_toml(path: Path) -> dict[str, Any]:
         raise ConfigError(f"{path}: no such file") from None
     except tomllib.TOMLDecodeError as e:
         raise ConfigError(f"{path}: not valid TOML: {e}") from None
+    except UnicodeDecodeError:
+        raise ConfigError(f"{path}: not a TOML file (not UTF-8 text)") from None
+    except IsADirectoryError:
+        raise ConfigError(f"{path}: is a folder, not a TOML file") from None
 
 
 def validate(model: type[M], data: dict[str, Any], source: Path | str) -> M:

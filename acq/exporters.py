@@ -53,6 +53,7 @@ def current_t0_s(session: Session) -> float:
 def export_csv(session_path: Path, out_dir: Path) -> tuple[Path, Path]:
     """Write the session's current and encoder CSV files into ``out_dir``; return their paths."""
     session = load(session_path)
+    session.require_samples()
     out_dir.mkdir(parents=True, exist_ok=True)
     cur, enc = session.current, session.encoder
     stem = Path(session_path).stem

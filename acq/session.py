@@ -120,7 +120,8 @@ class SessionWriter:
         origin: dict[str, Any] | None = None,
     ) -> None:
         self.path = Path(path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if not self.path.parent.is_dir():
+            raise ConfigError(f"{self.path.parent}: no such folder for the session file")
         self._channels = current_info.channels
         self._filled_optional: set[str] = set()
         self._pending = _PendingColumns()
@@ -291,6 +292,13 @@ class Session:
     def tags(self) -> dict[str, Any]:
         return json.loads(self.attrs.get("tags_json", "{}"))
 
+    def require_samples(self) -> None:
+        """Raise :class:`ConfigError` naming the stream when either stream holds too little to use."""
+        if self.current.sample_count == 0:
+            raise ConfigError(f"{self.path}: /current holds no samples (status {self.status})")
+        if self.encoder.index.size < 2:
+            raise ConfigError(f"{self.path}: /encoder holds {self.encoder.index.size} samples (status {self.status})")
+
 
 def _attr(value: Any) -> Any:
     if isinstance(value, bytes):
@@ -303,10 +311,13 @@ def _attr(value: Any) -> Any:
 def _open_for_reading(path: Path) -> h5py.File:
     if not path.exists():
         raise ConfigError(f"{path}: no such session file")
+    if path.is_dir():
+        raise ConfigError(f"{path}: is a folder, not a session file")
     try:
         return h5py.File(path, "r", swmr=True)
     except OSError as e:
-        raise ConfigError(f"{path}: not a readable HDF5 session file ({e})") from None
+        first_line = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise ConfigError(f"{path}: not a readable HDF5 session file ({first_line})") from None
 
 
 def _lengths_consistent(f: h5py.File) -> int:

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from acq.analyze import analyze_session
+from drivers.errors import ConfigError
 
 if TYPE_CHECKING:
     from acq.plots import SessionFigure
@@ -37,8 +38,12 @@ def stored_options(path: Path) -> dict[str, Any]:
     result_path = path.with_name(path.stem + ".result.json")
     if not result_path.exists():
         return {}
-    opts = json.loads(result_path.read_text()).get("options", {})
-    band = opts.get("band_hz")
+    try:
+        doc = json.loads(result_path.read_text())
+        opts = doc["options"]
+        band = opts.get("band_hz")
+    except (ValueError, KeyError, TypeError, AttributeError):
+        raise ConfigError(f"{result_path}: not a result of acq analyze (run acq analyze {path} to redo it)") from None
     return {"torque": opts.get("torque_method") if opts.get("pipeline", "acq") == "acq" else None,
             "params": opts.get("params", "K,Jm,Jl"), "fit": opts.get("fit", "amplitude"),
             "band_hz": tuple(band) if band else None, "pipeline": opts.get("pipeline", "acq")}

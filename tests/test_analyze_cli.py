@@ -90,3 +90,31 @@ def test_missing_session_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
     run = run_cli(capsys, "analyze", str(tmp_path / "nope.h5"))
     assert run.code == 2
     assert run.err.strip() == f"acq: error: {tmp_path / 'nope.h5'}: no such session file"
+
+
+def test_a_session_with_an_empty_stream_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from acq.config import load_bench, load_profile
+    from acq.session import SessionWriter
+    from drivers.base import CurrentSourceInfo, DriveInfo
+
+    path = tmp_path / "empty.h5"
+    SessionWriter(path, bench=load_bench(), profile=load_profile("triangle_0.2s"),
+                  current_info=CurrentSourceInfo(25600.0, ("i_a",), "daq"),
+                  drive_info=DriveInfo(0.001, 131072, "sim", "drive_cycle", "drive"),
+                  host_ns_at_start=0).finish("failed", "no device answered")
+    for args in (("analyze", str(path)), ("export", str(path), "--csv", str(tmp_path / "csv"))):
+        run = run_cli(capsys, *args)
+        assert run.code == 2
+        assert run.err.strip() == f"acq: error: {path}: /current holds no samples (status failed)"
+
+
+def test_a_broken_result_file_is_one_line_for_view(session_10s: Path, tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    import shutil
+
+    copy = Path(shutil.copy2(session_10s, tmp_path / "s.h5"))
+    broken = tmp_path / "s.result.json"
+    broken.write_text('{"K_Nm_per_rad": 8')
+    run = run_cli(capsys, "view", str(copy), "--screenshot", str(tmp_path / "v.png"))
+    assert run.code == 2
+    assert run.err.strip() == f"acq: error: {broken}: not a result of acq analyze (run acq analyze {copy} to redo it)"

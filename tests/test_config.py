@@ -82,3 +82,23 @@ def test_missing_bench_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(tmp_path / "nope.toml"))
     assert run.code == 2
     assert run.err.strip() == f"acq: error: {tmp_path / 'nope.toml'}: no such file"
+
+
+def test_a_binary_file_given_as_bench_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "session.h5"
+    path.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(range(256)))
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(path))
+    assert run.code == 2
+    assert run.err.strip() == f"acq: error: {path}: not a TOML file (not UTF-8 text)"
+
+
+def test_folders_where_files_are_expected_are_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = tmp_path / "x.h5"
+    folder.mkdir()
+    run = run_cli(capsys, "info", str(folder))
+    assert run.code == 2 and run.err.strip() == f"acq: error: {folder}: is a folder, not a session file"
+    out_file = tmp_path / "taken"
+    out_file.write_text("")
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--duration", "1", "--out", str(out_file))
+    assert run.code == 2
+    assert run.err.strip().splitlines()[-1] == f"acq: error: {out_file}: cannot write a session there (File exists)"
