@@ -139,6 +139,11 @@ def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *,
     """
     session = load(path)
     opts = options if options is not None else options_for(session, **option_kwargs)
+    nyquist_hz = 0.5 / session.encoder.period_s
+    if opts.band_hz is not None and opts.band_hz[1] > nyquist_hz:
+        lo, hi = opts.band_hz
+        raise ConfigError(f"--band {lo:g},{hi:g}: HI must not exceed {nyquist_hz:g} Hz, the Nyquist frequency of "
+                          f"{session.path.name}'s encoder (period {session.encoder.period_s:g} s)")
     try:
         result = analyze(recording_from_session(session), opts)
     except ValueError as e:

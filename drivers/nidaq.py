@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import importlib
 import math
+import threading
 import time
 from collections.abc import Callable
 from types import ModuleType
@@ -104,6 +105,7 @@ class NidaqCurrentSource:
         self._next_index = 0
         self._started = False
         self._events: list[StreamEvent] = []
+        self._events_lock = threading.Lock()  # read() runs in the recorder's reader thread, events() in others
         scale = settings.sensor_A_per_V if settings.measurement == "voltage" else settings.sensor_A_per_A
         self._scale_A_per_unit = float(scale)
 
@@ -223,10 +225,10 @@ class NidaqCurrentSource:
         if code in OVERFLOW_ADVICE:
             what, advice = OVERFLOW_ADVICE[code]
             advice = advice.format(buffer_s=s.buffer_s, block_s=s.block_s)
-            self._events.append(StreamEvent(time.monotonic_ns(), "current", "error",
+            self._add_event(StreamEvent(time.monotonic_ns(), "current", "error",
                                             f"DAQmx error {code}: {what}; {read} samples per channel read"))
             return DeviceError(f"NI-DAQmx buffer overflow {at}, DAQmx error {code}: {what} — {advice}")
-        self._events.append(StreamEvent(time.monotonic_ns(), "current", "error",
+        self._add_event(StreamEvent(time.monotonic_ns(), "current", "error",
                                         f"DAQmx error {code}; {read} samples per channel read"))
         return DeviceError(f"NI-DAQmx read failed {at}: {first_line(error)} (DAQmx error {code})")
 
@@ -247,7 +249,7 @@ class NidaqCurrentSource:
         try:
             action()
         except self.nidaqmx.errors.DaqError as e:
-            self._events.append(StreamEvent(time.monotonic_ns(), "current", "warning",
+            self._add_event(StreamEvent(time.monotonic_ns(), "current", "warning",
                                             f"at stop ({step}): {first_line(e)} (DAQmx error {e.error_code})"))
 
     def _cross_check(self, acquired: int) -> None:
@@ -256,19 +258,24 @@ class NidaqCurrentSource:
         unread = acquired - read
         now = time.monotonic_ns()
         if unread < 0:
-            self._events.append(StreamEvent(now, "current", "error", f"sample count mismatch at stop: card acquired "
+            self._add_event(StreamEvent(now, "current", "error", f"sample count mismatch at stop: card acquired "
                                             f"{acquired} samples per channel, {read} read"))
         elif unread > buffered:
-            self._events.append(StreamEvent(now, "current", "gap", f"sample count mismatch at stop: card acquired "
+            self._add_event(StreamEvent(now, "current", "gap", f"sample count mismatch at stop: card acquired "
                                             f"{acquired} samples per channel, {read} read, {unread} unread exceed "
                                             f"the {buffered}-sample buffer"))
         else:
-            self._events.append(StreamEvent(now, "current", "info", f"card acquired {acquired} samples per channel, "
+            self._add_event(StreamEvent(now, "current", "info", f"card acquired {acquired} samples per channel, "
                                             f"{read} read, {unread} left in the buffer at stop"))
+
+    def _add_event(self, event: StreamEvent) -> None:
+        with self._events_lock:
+            self._events.append(event)
 
     def events(self) -> list[StreamEvent]:
         """Return and forget the events noticed since the last call."""
-        events, self._events = self._events, []
+        with self._events_lock:
+            events, self._events = self._events, []
         return events
 
 

@@ -66,12 +66,14 @@ def test_papers_pipeline_is_worse_than_ours(session_10s: Path, capsys: pytest.Ca
 @pytest.mark.parametrize(("band", "message"), [
     ("500,10", "--band 500,10: must be LO,HI in Hz with 0 < LO < HI"),
     ("ten,400", "--band ten,400: must be LO,HI in Hz, e.g. 10,400"),
+    ("300,600", "--band 300,600: HI must not exceed 500 Hz, the Nyquist frequency of {name}'s encoder "
+                "(period 0.001 s)"),
 ])
 def test_bad_band_is_one_line_exit_2(session_10s: Path, capsys: pytest.CaptureFixture[str], band: str,
                                      message: str) -> None:
     run = run_cli(capsys, "analyze", str(session_10s), "--band", band)
     assert run.code == 2
-    assert run.err.strip() == f"acq: error: {message}"
+    assert run.err.strip() == f"acq: error: {message.format(name=session_10s.name)}"
 
 
 def test_record_then_too_short_session_fails_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
