@@ -163,8 +163,9 @@ def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *,
     return SessionResult(session, result, doc, json_path, report_path if write else None)
 
 
-def _fmt(x: float | None, spec: str = ".4g") -> str:
-    return "—" if x is None or not math.isfinite(x) else format(x, spec)
+def format_value(x: float | None, spec: str = ".4g", scale: float = 1.0) -> str:
+    """``x · scale`` formatted with ``spec``; "—" for a value that is missing, NaN or infinite."""
+    return "—" if x is None or not math.isfinite(x) else format(x * scale, spec)
 
 
 def _scaled(x: float | None, factor: float) -> float | None:
@@ -180,27 +181,27 @@ def result_table(doc: dict[str, Any]) -> Table:
         table.add_column(column, justify="left" if column == "quantity" else "right", no_wrap=True)
     for key, name, unit in PARAMS:
         value, (lo, hi) = doc[key], doc["ci95"][key]
-        row = [escape(f"{name} [{unit}]"), _fmt(value), f"{_fmt(lo)} – {_fmt(hi)}"]
+        row = [escape(f"{name} [{unit}]"), format_value(value), f"{format_value(lo)} – {format_value(hi)}"]
         if truth:
             err = None if value is None else 100.0 * (value - truth[key]) / truth[key]
-            row += [_fmt(truth[key]), "—" if err is None else f"{err:+.2f} %"]
+            row += [format_value(truth[key]), "—" if err is None else f"{err:+.2f} %"]
         table.add_row(*row)
     offset_ms, true_offset_ms = _scaled(clock["offset_s"], 1e3), _scaled(truth.get("offset_s"), 1e3)
-    rows = [("f_a [Hz]", _fmt(doc["antiresonance_hz"]), None),
-            ("f_r [Hz]", _fmt(doc["resonance_hz"]), None),
-            ("clock offset [ms]", _fmt(offset_ms, ".3f"),
+    rows = [("f_a [Hz]", format_value(doc["antiresonance_hz"]), None),
+            ("f_r [Hz]", format_value(doc["resonance_hz"]), None),
+            ("clock offset [ms]", format_value(offset_ms, ".3f"),
              (true_offset_ms, None if offset_ms is None or true_offset_ms is None
               else f"{(offset_ms - true_offset_ms) * 1e3:+.1f} µs")),
-            ("clock drift [ppm]", _fmt(clock["drift_ppm"], ".2f"),
+            ("clock drift [ppm]", format_value(clock["drift_ppm"], ".2f"),
              (truth.get("drift_ppm"), None if clock["drift_ppm"] is None or "drift_ppm" not in truth
               else f"{clock['drift_ppm'] - truth['drift_ppm']:+.2f} ppm")),
-            ("clock residual [µs]", _fmt(_scaled(clock["residual_s"], 1e6), ".1f"), None),
-            ("coherence in band", _fmt(quality["mean_coherence"], ".3f"), None)]
+            ("clock residual [µs]", format_value(_scaled(clock["residual_s"], 1e6), ".1f"), None),
+            ("coherence in band", format_value(quality["mean_coherence"], ".3f"), None)]
     for name, value, compared in rows:
         row = [escape(name), value, ""]
         if truth:
             true_value, error = compared or (None, None)
-            row += [_fmt(true_value, ".4g"), error or ""]
+            row += [format_value(true_value, ".4g"), error or ""]
         table.add_row(*row)
     if quality["reasons"]:
         table.caption = escape("\n".join(quality["reasons"]))

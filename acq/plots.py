@@ -29,7 +29,7 @@ import pyqtgraph as pg
 import shiboken6
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
-from acq.analyze import PARAMS
+from acq.analyze import PARAMS, format_value
 from analysis.report import FigureData
 
 pg.setConfigOptions(background="w", foreground="k", antialias=True)
@@ -199,10 +199,6 @@ def _positive(f_hz: np.ndarray, *ys: np.ndarray) -> tuple[np.ndarray, ...]:
     return (np.asarray(f_hz)[keep], *(np.asarray(y)[keep] for y in ys))
 
 
-def _fmt(x: float | None, scale: float = 1.0, digits: int = 4) -> str:
-    return "—" if x is None or not math.isfinite(x) else f"{x * scale:.{digits}g}"
-
-
 def _halfwidth(value: float | None, ci: Sequence[float | None] | None) -> str:
     """The 95 % interval as ± its half-width relative to the value, %."""
     if value is None or not ci or None in ci or value == 0:
@@ -222,20 +218,20 @@ def values_html(sessions: Sequence[SessionFigure]) -> str:
             continue
         rows = []
         for key, name, unit in PARAMS:
-            rows.append((name, _fmt(v.get(key)), _halfwidth(v.get(key), v.get("ci95", {}).get(key)), unit))
+            rows.append((name, format_value(v.get(key)), _halfwidth(v.get(key), v.get("ci95", {}).get(key)), unit))
         clock = v.get("clock", {})
-        rows += [("f_a", _fmt(v.get("antiresonance_hz")), "", "Hz"),
-                 ("f_r", _fmt(v.get("resonance_hz")), "", "Hz"),
-                 ("clock offset", _fmt(clock.get("offset_s"), 1e3), "", "ms"),
-                 ("clock drift", _fmt(clock.get("drift_ppm")), "", "ppm"),
-                 ("clock residual", _fmt(clock.get("residual_s"), 1e6), "", "µs")]
+        rows += [("f_a", format_value(v.get("antiresonance_hz")), "", "Hz"),
+                 ("f_r", format_value(v.get("resonance_hz")), "", "Hz"),
+                 ("clock offset", format_value(clock.get("offset_s"), scale=1e3), "", "ms"),
+                 ("clock drift", format_value(clock.get("drift_ppm")), "", "ppm"),
+                 ("clock residual", format_value(clock.get("residual_s"), scale=1e6), "", "µs")]
         quality = v.get("quality", {})
         table = "".join(f"<tr><td>{escape(n)}</td><td align='right'><b>{val}</b></td>"
                         f"<td align='right'>{ci}</td><td>{escape(u)}</td></tr>" for n, val, ci, u in rows)
         parts.append("<table cellspacing='0' cellpadding='2'><tr><th></th><th>value</th><th>95 % CI</th><th></th></tr>"
                      f"{table}</table>")
         parts.append(f"<p>verdict <b>{escape(str(quality.get('verdict', '—')))}</b>, mean γ² in band "
-                     f"{_fmt(quality.get('mean_coherence'), digits=3)}</p>")
+                     f"{format_value(quality.get('mean_coherence'), '.3g')}</p>")
         reasons = [r for r in quality.get("reasons", []) if not r.startswith("note: ")]
         if reasons:
             parts.append("<ul>" + "".join(f"<li>{escape(r)}</li>" for r in reasons) + "</ul>")

@@ -16,6 +16,7 @@ PLC script can act; re-pin the baseline (``--baseline``) after a repair.
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import statistics
@@ -29,6 +30,7 @@ import click
 from rich.console import Console
 from rich.table import Table
 
+from acq.analyze import format_value
 from acq.batch import CATALOGUE_NAME
 from acq.catalogue import Catalogue, Entry, parse_tags, tags_match
 from drivers.errors import ConfigError
@@ -200,10 +202,6 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
     return Trend(joint, points, base, note, sigma, threshold_pct, ewma_lambda)
 
 
-def _f(x: float | None, fmt: str = ".1f") -> str:
-    return "—" if x is None else format(x, fmt)
-
-
 def trend_table(trend: Trend) -> Table:
     """The trend as a rich table: K and its interval, change, EWMA, f_a, f_r and state per session.
 
@@ -218,20 +216,22 @@ def trend_table(trend: Trend) -> Table:
         table.add_column(c, justify="left" if c in ("started (UTC)", "tags", "state") else "right")
     styles = {"alarm": "bold red", "skipped": "dim", "before baseline": "dim", "baseline": "cyan", "ok": ""}
     notes = []
+    f1 = functools.partial(format_value, spec=".1f")
     for i, p in enumerate(trend.points, 1):
         e = p.entry
         state = {"alarm": f"ALARM {p.reason}", "skipped": "skipped ↓"}.get(p.state, p.state)
         if p.state == "skipped":
             notes.append(f"#{i} skipped: {p.reason}")
-        table.add_row(str(i), (e.created_utc or "?").replace("+00:00", "").replace("T", " "), _f(e.K_Nm_per_rad),
-                      f"{_f(e.K_ci95[0])}–{_f(e.K_ci95[1])}", _f(p.change_pct, "+.1f"), _f(p.ewma_change_pct, "+.1f"),
-                      _f(e.f_a_hz), _f(e.f_r_hz), *([_f(e.truth_K_Nm_per_rad)] if truth else []),
-                      *([" ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in e.tags.items())]
-                        if tags else []), state, style=styles[p.state])
+        tag_text = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in e.tags.items())
+        table.add_row(str(i), (e.created_utc or "?").replace("+00:00", "").replace("T", " "), f1(e.K_Nm_per_rad),
+                      f"{f1(e.K_ci95[0])}–{f1(e.K_ci95[1])}", format_value(p.change_pct, "+.1f"),
+                      format_value(p.ewma_change_pct, "+.1f"), f1(e.f_a_hz), f1(e.f_r_hz),
+                      *([f1(e.truth_K_Nm_per_rad)] if truth else []), *([tag_text] if tags else []), state,
+                      style=styles[p.state])
     base = "—" if trend.baseline_K_Nm_per_rad is None else f"{trend.baseline_K_Nm_per_rad:.1f} N·m/rad"
     table.caption = "\n".join([f"baseline {base} ({trend.baseline_note}); alarm below −{trend.threshold_pct:g} % or "
                                f"EWMA (λ = {trend.ewma_lambda:g}) below −{EWMA_L:g}σ limit, "
-                               f"σ = {_f(trend.sigma_K_Nm_per_rad)} N·m/rad", *notes])
+                               f"σ = {f1(trend.sigma_K_Nm_per_rad)} N·m/rad", *notes])
     return table
 
 
