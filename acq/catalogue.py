@@ -23,6 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import click
+
 from acq.session import utc_now_iso
 from drivers.errors import ConfigError
 
@@ -230,6 +232,12 @@ class Catalogue:
     def joints(self) -> list[str]:
         """The joints the catalogue knows."""
         return [r[0] for r in self._db.execute("SELECT DISTINCT joint FROM sessions WHERE joint IS NOT NULL")]
+
+
+#: ``--tag KEY=VALUE`` (repeatable) of the commands that make a session; :func:`parse_tags` reads it.
+tag_option = click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+                          help="Tag the session (repeatable), e.g. --tag pose=home --tag payload_kg=2.5 "
+                               "--tag temperature_C=31.")
 
 
 def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:

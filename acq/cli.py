@@ -20,7 +20,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 from acq import __version__
 from acq.analyze import SessionResult, analyze_session, result_table
 from acq.batch import DEFAULT_REQUEST, analyze_many, is_batch, record_outcome
-from acq.catalogue import parse_tags
+from acq.catalogue import parse_tags, tag_option
 from acq.config import load_bench, load_profile
 from acq.devices import devices_command
 from acq.exporters import export_command
@@ -70,8 +70,7 @@ def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> 
 @click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
 @click.option("--no-analyze", is_flag=True, help="Only record; do not identify the joint afterwards.")
 @click.option("--live", is_flag=True, help="Watch it in a live window: phase current, speed, position, counters, gaps.")
-@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
-              help="Tag the session (repeatable), e.g. --tag pose=home --tag payload_kg=2.5 --tag temperature_C=31.")
+@tag_option
 def record(profile_name: str, bench_path: Path | None, duration_s: float | None, joint: str | None,
            out_dir: Path, operator: str, fast: bool, no_analyze: bool, tags: tuple[str, ...],
            live: bool) -> int:

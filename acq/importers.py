@@ -37,7 +37,7 @@ from rich.markup import escape
 
 from acq import __version__
 from acq.analyze import sha256_of
-from acq.catalogue import parse_tags
+from acq.catalogue import parse_tags, tag_option
 from acq.config import load_bench, load_profile
 from acq.csvtable import CsvTable, read_csv
 from acq.session import SessionWriter, load
@@ -392,8 +392,7 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench, profile
 @click.option("--profile", "profile_name", required=True, help="Profile name in configs/profiles/ or a TOML path.")
 @click.option("--joint", default=None, help="Joint name (default: the bench config's).")
 @click.option("-o", "--out", "out_path", required=True, type=click.Path(path_type=Path), help="Session file to write.")
-@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
-              help="Tag the session (repeatable), e.g. --tag pose=home --tag payload_kg=2.5 --tag temperature_C=31.")
+@tag_option
 def import_command(current_path: Path, current_channels: tuple[str, ...], encoder_path: Path, bench_path: Path,
                    profile_name: str, joint: str | None, out_path: Path, tags: tuple[str, ...]) -> int:
     """Turn a current file and an encoder CSV recorded by other tools into a session."""
