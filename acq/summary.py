@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from rich.table import Table
 
+from acq.analyze import format_value
 from acq.session import Session
 
 
@@ -88,5 +89,5 @@ def summary_table(summary: SessionSummary) -> Table:
         table.add_column(column, justify="left" if column == "stream" else "right")
     for s in summary.streams:
         table.add_row(s.name, f"{s.samples}", f"{s.duration_s:.3f}", f"{s.nominal_rate_hz:.1f}",
-                      f"{s.effective_rate_hz:.2f}", f"{s.gaps}", f"{s.missing}")
+                      format_value(s.effective_rate_hz, ".2f"), f"{s.gaps}", f"{s.missing}")
     return table
