@@ -86,7 +86,7 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
         from acq.live import LiveView, require_display  # Qt is imported only when asked for
 
         require_display()  # before the devices start: no display → one-line error
-    recorder.start_devices()
+    recorder.open_session()  # devices and file ready before any progress is drawn; an error is one line
     live_view = LiveView(recorder) if live else None  # scaled by what the started devices report
     label = f"recording {bench.joint}"
     result = (live_view.record(lambda: _record_with_progress(recorder, duration, label)) if live_view

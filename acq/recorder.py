@@ -207,6 +207,7 @@ class Recorder:
         self.listeners = listeners or []
         self.progress = progress
         self._started = False
+        self._writer: SessionWriter | None = None
         self._stop_request: str | None = None
         self._shutting_down = False
 
@@ -243,17 +244,22 @@ class Recorder:
         self.drive.stop()
         self.current.stop()
 
-    def _open_session(self) -> SessionWriter:
-        """Create the session file (and the drive's raw log beside it); release the devices if that fails."""
+    def open_session(self) -> SessionWriter:
+        """Start the devices and create the session file (and the drive's raw log beside it); idempotent.
+        A failure releases the devices and raises before anything is recorded."""
+        self.start_devices()
+        if self._writer is not None:
+            return self._writer
         try:
             self.out_dir.mkdir(parents=True, exist_ok=True)
             path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
             keep_raw = getattr(self.drive, "keep_raw_frames", None)  # transports that can log their raw traffic
             if keep_raw is not None:
                 keep_raw(path)
-            return SessionWriter(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
-                                 drive_info=self._drive_info, host_ns_at_start=time.monotonic_ns(),
-                                 operator=self.operator, tags=self.tags)
+            self._writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
+                                         drive_info=self._drive_info, host_ns_at_start=time.monotonic_ns(),
+                                         operator=self.operator, tags=self.tags)
+            return self._writer
         except OSError as e:
             self._release_devices()
             raise ConfigError(f"{self.out_dir}: cannot write a session there ({e.strerror or e})") from None
@@ -263,9 +269,8 @@ class Recorder:
 
     def run(self) -> RecordingResult:
         """Record; always returns with the file finished (device set-up errors raise before a file exists)."""
-        self.start_devices()
+        writer = self.open_session()
         cur_info, drive_info = self._cur_info, self._drive_info
-        writer = self._open_session()
         path = writer.path
         inbox: queue.Queue[tuple[str, Any]] = queue.Queue()
         readers = {

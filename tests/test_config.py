@@ -101,4 +101,4 @@ def test_folders_where_files_are_expected_are_one_line(tmp_path: Path, capsys: p
     out_file.write_text("")
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--duration", "1", "--out", str(out_file))
     assert run.code == 2
-    assert run.err.strip().splitlines()[-1] == f"acq: error: {out_file}: cannot write a session there (File exists)"
+    assert run.err.strip() == f"acq: error: {out_file}: cannot write a session there (File exists)"
