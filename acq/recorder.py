@@ -181,7 +181,7 @@ class Recorder:
     current, drive : the devices (real or simulated; the recorder cannot tell).
     out_dir : folder for the session file, named ``<UTC start>_<joint>.h5``.
     duration_s : seconds of data wanted in each stream (counted in samples, not wall time).
-    listeners : called after each block is written (e.g. a live view's queue).
+    listeners : called with each block written and each event stored (see :data:`Listener`).
     progress : called with the fraction recorded (0..1) as data arrives.
     """
 
