@@ -13,6 +13,7 @@ import hashlib
 import json
 import math
 import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -152,8 +153,10 @@ def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *,
     json_path = session.path.with_name(session.path.stem + ".result.json")
     report_path = session.path.with_name(session.path.stem + ".report.png") if report else None
     if write:
-        tmp = json_path.with_name(f".{json_path.name}.writing")
-        tmp.write_text(json.dumps(doc, indent=2))
+        fd, tmp = tempfile.mkstemp(dir=json_path.parent, prefix=f".{json_path.name}.")  # one per writer
+        os.fchmod(fd, 0o644)
+        with os.fdopen(fd, "w") as f:
+            f.write(json.dumps(doc, indent=2))
         os.replace(tmp, json_path)  # a reader never sees half a result
         if report_path is not None:
             from acq.plots import render_report_png

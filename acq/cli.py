@@ -87,10 +87,15 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
 
         require_display()  # before the devices start: no display → one-line error
     recorder.open_session()  # devices and file ready before any progress is drawn; an error is one line
-    live_view = LiveView(recorder) if live else None  # scaled by what the started devices report
     label = f"recording {bench.joint}"
-    result = (live_view.record(lambda: _record_with_progress(recorder, duration, label)) if live_view
-              else _record_with_progress(recorder, duration, label))
+    try:
+        live_view = LiveView(recorder) if live else None  # scaled by what the started devices report
+        result = (live_view.record(lambda: _record_with_progress(recorder, duration, label)) if live_view
+                  else _record_with_progress(recorder, duration, label))
+    except BaseException as e:  # before the recording ran: finish its file, release the devices
+        recorder.abort("interrupted by user (Ctrl-C)" if isinstance(e, KeyboardInterrupt)
+                       else f"{type(e).__name__}: {e}")
+        raise
     out.print(summary_table(summarize(load(result.path))))
     if not no_analyze and result.current_samples and result.encoder_samples:
         _analyze_after_recording(result.path)
@@ -122,6 +127,10 @@ def _analyze_after_recording(path: Path) -> None:
             done = _identify(path, DEFAULT_REQUEST, report=True, catalogue_path=None)
         except AcqError as e:
             click.echo(f"acq: analysis: {e}", err=True)
+            return
+        except Exception as e:  # noqa: BLE001 - the recording stands whatever the analysis did
+            click.echo(f"acq: analysis failed: {type(e).__name__}: {e} (the session is kept: acq analyze {path})",
+                       err=True)
             return
     _print_result(done)
 

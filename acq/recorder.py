@@ -159,12 +159,18 @@ def _stop_on_signals(request_stop: Callable[[str], None]) -> Iterator[None]:
     """While recording (main thread only), Ctrl-C and SIGTERM ask for a stop at the next safe point.
 
     The handlers never raise: an exception in the middle of a flush could write a part twice or lose one.
+    A second Ctrl-C (SIGTERM) is the previous handler's again: it quits at once.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     reasons = {signal.SIGINT: "interrupted by user (Ctrl-C)", signal.SIGTERM: "stopped by SIGTERM"}
-    previous = {sig: signal.signal(sig, lambda signum, frame: request_stop(reasons[signum])) for sig in reasons}
+
+    def handler(signum: int, frame: object) -> None:
+        request_stop(reasons[signum])
+        signal.signal(signum, previous[signum])  # the same signal again quits at once (acq check repairs the file)
+
+    previous = {sig: signal.signal(sig, handler) for sig in reasons}
     try:
         yield
     finally:
@@ -208,6 +214,7 @@ class Recorder:
         self.progress = progress
         self._started = False
         self._writer: SessionWriter | None = None
+        self._ran = False
         self._stop_request: str | None = None
         self._shutting_down = False
 
@@ -267,9 +274,19 @@ class Recorder:
             self._release_devices()
             raise
 
+    def abort(self, reason: str) -> None:
+        """End a session that was opened but never run (e.g. Ctrl-C while a window was being built): the file is
+        finished as ``interrupted`` with ``reason`` and the devices are released. Nothing after :meth:`run`."""
+        if self._writer is None or self._ran:
+            return
+        self._ran = True
+        self._release_devices()
+        self._writer.finish("interrupted", reason)
+
     def run(self) -> RecordingResult:
         """Record; always returns with the file finished (device set-up errors raise before a file exists)."""
         writer = self.open_session()
+        self._ran = True
         cur_info, drive_info = self._cur_info, self._drive_info
         path = writer.path
         inbox: queue.Queue[tuple[str, Any]] = queue.Queue()
@@ -307,8 +324,8 @@ class Recorder:
         done: set[str] = set()
         last_flush = last_data = time.monotonic()
         while len(done) < len(readers):
-            if self._stop_request is not None:
-                raise Interrupted(self._stop_request)
+            if self._stop_request is not None and any(r.covered < r.target for r in readers.values()):
+                raise Interrupted(self._stop_request)  # a stop once both streams are complete changes nothing
             try:
                 kind, item = inbox.get(timeout=READ_TIMEOUT_S)
             except queue.Empty:
@@ -345,7 +362,7 @@ class Recorder:
         counts[kind] += block.count
         self._notify(kind, block)
         if self.progress is not None and kind == "current":
-            self.progress(min(1.0, counts["current"] / (self.duration_s * self._cur_info.rate_hz)))
+            self._call_out(self.progress, min(1.0, counts["current"] / (self.duration_s * self._cur_info.rate_hz)))
 
     def _event(self, writer: SessionWriter, event: StreamEvent) -> None:
         """Store an event and show it to the listeners as ``("event", event)``."""
@@ -353,13 +370,17 @@ class Recorder:
         self._notify("event", event)
 
     def _notify(self, kind: str, item: Any) -> None:
-        """Call the listeners; while shutting down nothing they raise may keep the file from being finished."""
         for listener in self.listeners:
-            try:
-                listener(kind, item)
-            except Exception:
-                if not self._shutting_down:
-                    raise
+            self._call_out(listener, kind, item)
+
+    def _call_out(self, callback: Callable[..., None], *args: Any) -> None:
+        """Call a listener or the progress callback; while shutting down nothing it raises may keep the file
+        from being finished."""
+        try:
+            callback(*args)
+        except Exception:
+            if not self._shutting_down:
+                raise
 
     def _shut_down(self, inbox: queue.Queue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
                    checker: _StreamChecker, counts: dict[str, int], status: Status, reason: str) -> tuple[Status, str]:
@@ -367,29 +388,34 @@ class Recorder:
         stop the devices, store what is left and finish the file."""
         self._shutting_down = True
         try:
-            self.drive.stop_motion()
-        except Exception as e:  # noqa: BLE001 - the file must still be finished
-            writer.add_event(StreamEvent(time.monotonic_ns(), "drive", "error", f"stop motion failed: {e}"))
-        for r in readers.values():
-            r.stop_requested.set()
-        deadline = time.monotonic() + SHUTDOWN_TIMEOUT_S
-        while any(r.is_alive() for r in readers.values()) and time.monotonic() < deadline:
-            status, reason = self._drain(inbox, writer, checker, counts, status, reason, wait_s=READ_TIMEOUT_S)
-        for stop in (self.current.stop, self.drive.stop):
             try:
-                stop()
-            except Exception as e:  # noqa: BLE001
-                writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "error", f"device stop failed: {e}"))
-        for r in readers.values():
-            if r.is_alive():
-                r.join(timeout=READ_TIMEOUT_S)
-        status, reason = self._drain(inbox, writer, checker, counts, status, reason, wait_s=0.0)
-        for device in (self.current, self.drive):
-            for event in device.events():
-                writer.add_event(event)
-        if status != "complete":
-            writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "info", f"stopped: {reason}"))
-        writer.finish(status, reason)
+                self.drive.stop_motion()
+            except Exception as e:  # noqa: BLE001 - the file must still be finished
+                writer.add_event(StreamEvent(time.monotonic_ns(), "drive", "error", f"stop motion failed: {e}"))
+            for r in readers.values():
+                r.stop_requested.set()
+            deadline = time.monotonic() + SHUTDOWN_TIMEOUT_S
+            while any(r.is_alive() for r in readers.values()) and time.monotonic() < deadline:
+                status, reason = self._drain(inbox, writer, checker, counts, status, reason, wait_s=READ_TIMEOUT_S)
+            for stop in (self.current.stop, self.drive.stop):
+                try:
+                    stop()
+                except Exception as e:  # noqa: BLE001
+                    writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "error", f"device stop failed: {e}"))
+            for r in readers.values():
+                if r.is_alive():
+                    r.join(timeout=READ_TIMEOUT_S)
+            status, reason = self._drain(inbox, writer, checker, counts, status, reason, wait_s=0.0)
+            for device in (self.current, self.drive):
+                for event in device.events():
+                    writer.add_event(event)
+        except Exception as e:  # noqa: BLE001 - e.g. the disk filled: the footer still says what happened
+            if status == "complete":
+                status, reason = "failed", f"{type(e).__name__}: {e}"
+        finally:
+            if status != "complete":
+                writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "info", f"stopped: {reason}"))
+            writer.finish(status, reason)
         return status, reason
 
     def _drain(self, inbox: queue.Queue[tuple[str, Any]], writer: SessionWriter, checker: _StreamChecker,

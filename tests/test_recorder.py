@@ -127,3 +127,58 @@ def test_listeners_see_blocks_and_the_recorders_gap_events(tmp_path: Path) -> No
     events = [item for stream, item in seen if stream == "event"]
     assert [(e.stream, e.kind, e.detail) for e in events] == [("encoder", "gap", "4 frames missing before cycle 304")]
     assert sum(item.count for stream, item in seen if stream == "current") == result.current_samples
+
+
+def _sim_recorder(tmp_path: Path, duration_s: float, listeners: list | None = None):
+    from acq.config import load_bench, load_profile
+    from acq.recorder import Recorder
+    from drivers.registry import open_bench
+
+    bench = load_bench()
+    current, drive = open_bench(bench, fast=True)
+    return Recorder(bench, load_profile("triangle_0.2s"), current, drive, tmp_path, duration_s,
+                    listeners=listeners or [])
+
+
+def test_a_stop_requested_from_another_thread_interrupts_and_keeps_the_data(tmp_path: Path) -> None:
+    import threading
+
+    recorder: list = []
+
+    def stop_after_a_second(stream: str, item: object) -> None:
+        if stream == "current" and item.first_index >= RATE_HZ and not recorder[1].is_set():
+            recorder[1].set()
+            threading.Thread(target=recorder[0].request_stop, args=("operator pressed stop",)).start()
+
+    rec = _sim_recorder(tmp_path, 30.0, [stop_after_a_second])
+    recorder += [rec, threading.Event()]
+    result = rec.run()
+    assert (result.status, result.stop_reason) == ("interrupted", "operator pressed stop")
+    s = load(result.path)
+    assert s.status == "interrupted" and RATE_HZ <= s.current.sample_count < 30 * RATE_HZ
+    np.testing.assert_array_equal(s.current.sample_index(), np.arange(s.current.sample_count))
+
+
+def test_a_stop_after_both_streams_are_complete_changes_nothing(tmp_path: Path) -> None:
+    rec = _sim_recorder(tmp_path, 1.0)
+    seen = {"current": 0, "encoder": 0}
+
+    def stop_once_both_are_complete(stream: str, item: object) -> None:
+        if stream in seen:
+            seen[stream] += item.count
+        if seen["current"] >= RATE_HZ and seen["encoder"] >= 1000:
+            rec.request_stop("too late")
+
+    rec.listeners.append(stop_once_both_are_complete)
+    result = rec.run()
+    assert (result.status, result.stop_reason) == ("complete", "recorded 1 s")
+
+
+def test_a_session_opened_but_never_run_is_finished_as_interrupted(tmp_path: Path) -> None:
+    rec = _sim_recorder(tmp_path, 1.0)
+    writer = rec.open_session()
+    rec.abort("interrupted by user (Ctrl-C)")
+    s = load(writer.path)
+    assert (s.status, s.attrs["stop_reason"]) == ("interrupted", "interrupted by user (Ctrl-C)")
+    rec.abort("again")  # idempotent
+    assert load(writer.path).attrs["stop_reason"] == "interrupted by user (Ctrl-C)"
