@@ -18,6 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+import numpy
+import scipy
 from rich.markup import escape
 from rich.table import Table
 
@@ -80,8 +82,9 @@ def options_for(session: Session, *, torque: TorqueMethod | None = None, params:
 
 @functools.cache
 def analysis_fingerprint() -> str:
-    """SHA-256 (first 16 hex digits) of the analysis package's source: results of other code are not current."""
-    digest = hashlib.sha256()
+    """SHA-256 (first 16 hex digits) of the analysis package's source and the numpy/scipy it runs on: results of
+    other code are not current."""
+    digest = hashlib.sha256(f"numpy {numpy.__version__} scipy {scipy.__version__}".encode())
     for source in sorted(Path(analysis.__file__).parent.glob("*.py")):
         digest.update(source.name.encode() + b"\0" + source.read_bytes())
     return digest.hexdigest()[:16]

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.linalg import solveh_banded
-from scipy.signal import find_peaks, hilbert, sosfiltfilt, butter
+from scipy.signal import butter, find_peaks, hilbert, sosfiltfilt, welch
 
 _SQRT3 = np.sqrt(3.0)
 
@@ -242,11 +242,26 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     if noise_seed is None:
         iq, _ = _spline_iq(y, -np.sin(phi), m, smoothing, extra)
         return k_t_Nm_per_A * iq
-    resid = y + np.sin(phi) * iq1 - beta1[0]
-    sigma = 1.4826 * float(np.median(np.abs(resid - np.median(resid))))
+    sigma = _broadband_noise_rms(y + np.sin(phi) * iq1 - beta1[0], rate_hz, m)
     noise = sigma * np.random.default_rng(noise_seed).standard_normal(y.size)
     both, _ = _spline_iq(np.column_stack((y, noise)), -np.sin(phi), m, smoothing, extra)
     return k_t_Nm_per_A * both.T
+
+
+def _broadband_noise_rms(resid_a: np.ndarray, rate_hz: float, m: int) -> float:
+    """RMS of white noise with the first-pass residual's broadband floor, A.
+
+    The floor is the median of the residual's Welch PSD above twice the spline's bandwidth (≈ rate/(2m)),
+    where the spline absorbs none of the noise, and where narrow lines — PWM ripple at the switching
+    frequency, which the spline filters out of the torque anyway — are outliers the median ignores. The
+    residual's RMS instead counts such ripple as broadband noise (a 3 % ripple biased K by −2…−5 %) and,
+    below the bandwidth, misses what the spline absorbed.
+    """
+    f, psd = welch(resid_a, fs=rate_hz, nperseg=min(resid_a.size, 4096))
+    floor = psd[(f >= rate_hz / m) & (f <= 0.45 * rate_hz)]
+    if floor.size < 8:
+        return 1.4826 * float(np.median(np.abs(resid_a - np.median(resid_a))))
+    return float(np.sqrt(np.median(floor) * rate_hz / 2.0))
 
 
 def _bspline_weights(m: int) -> np.ndarray:
