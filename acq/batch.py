@@ -99,11 +99,15 @@ def record_outcome(done: SessionResult, request: dict[str, Any], catalogue_path:
     ``acq analyze FOLDER`` finds the session current and ``acq trend`` sees it at once.
     """
     path = catalogue_path or done.session.path.parent / CATALOGUE_NAME
-    outcome = Outcome(str(done.session.path), done.json_dict["session"]["sha256"], request_key(request),
-                      session_meta(done.session), done.json_dict, None, seconds)
     with Catalogue(path) as catalogue:
-        catalogue.record(outcome)
+        catalogue.record(succeeded(str(done.session.path), done, request, seconds))
     return path
+
+
+def succeeded(path: str, done: SessionResult, request: dict[str, Any], seconds: float) -> Outcome:
+    """The catalogue's record of a successful analysis of the session at ``path``."""
+    return Outcome(path, done.json_dict["session"]["sha256"], request_key(request), session_meta(done.session),
+                   done.json_dict, None, seconds)
 
 
 def request_key(request: dict[str, Any]) -> str:
@@ -142,8 +146,7 @@ def analyze_one(path: str, sha256: str, request: dict[str, Any], report: bool) -
         error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
         return Outcome(path, sha256, request_key(request), _meta_if_readable(path), None, error,
                        time.perf_counter() - start)
-    return Outcome(path, done.json_dict["session"]["sha256"], request_key(request), session_meta(done.session),
-                   done.json_dict, None, time.perf_counter() - start)
+    return succeeded(path, done, request, time.perf_counter() - start)
 
 
 def _meta_if_readable(path: str) -> dict[str, Any]:
