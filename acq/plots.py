@@ -29,7 +29,7 @@ import pyqtgraph as pg
 import shiboken6
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
-from acq.analyze import PARAMS, format_value
+from acq.display import PARAMS, format_value
 from analysis.report import FigureData
 
 pg.setConfigOptions(background="w", foreground="k", antialias=True)

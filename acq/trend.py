@@ -16,7 +16,6 @@ PLC script can act; re-pin the baseline (``--baseline``) after a repair.
 
 from __future__ import annotations
 
-import functools
 import json
 import math
 import statistics
@@ -28,11 +27,10 @@ from typing import Any, Literal
 
 import click
 from rich.console import Console
-from rich.table import Table
 
-from acq.analyze import format_value
 from acq.batch import CATALOGUE_NAME
 from acq.catalogue import Catalogue, Entry, parse_tags, tags_match
+from acq.display import trend_table
 from drivers.errors import ConfigError
 
 EXIT_ALARM = 3
@@ -86,6 +84,7 @@ class Trend:
     sigma_K_Nm_per_rad: float | None
     threshold_pct: float
     ewma_lambda: float
+    ewma_L: float = EWMA_L
 
     @property
     def judged(self) -> list[TrendPoint]:
@@ -200,39 +199,6 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
         points.append(TrendPoint(e, "alarm" if rules else "ok", "+".join(rules), change,
                                  100.0 * (z / base - 1.0), -100.0 * limit / base))
     return Trend(joint, points, base, note, sigma, threshold_pct, ewma_lambda)
-
-
-def trend_table(trend: Trend) -> Table:
-    """The trend as a rich table: K and its interval, change, EWMA, f_a, f_r and state per session.
-
-    Skipped sessions are numbered; their reasons are in the caption, with the baseline and the rules.
-    """
-    truth = any(p.entry.truth_K_Nm_per_rad is not None for p in trend.points)
-    tags = any(p.entry.tags for p in trend.points)
-    table = Table(title=f"stiffness trend — {trend.joint}" + ("  [bold red]ALARM[/]" if trend.alarm else ""))
-    columns = ["#", "started (UTC)", "K N·m/rad", "95 % interval", "ΔK %", "EWMA %", "f_a Hz", "f_r Hz",
-               *(["sim K"] if truth else []), *(["tags"] if tags else []), "state"]
-    for c in columns:
-        table.add_column(c, justify="left" if c in ("started (UTC)", "tags", "state") else "right")
-    styles = {"alarm": "bold red", "skipped": "dim", "before baseline": "dim", "baseline": "cyan", "ok": ""}
-    notes = []
-    f1 = functools.partial(format_value, spec=".1f")
-    for i, p in enumerate(trend.points, 1):
-        e = p.entry
-        state = {"alarm": f"ALARM {p.reason}", "skipped": "skipped ↓"}.get(p.state, p.state)
-        if p.state == "skipped":
-            notes.append(f"#{i} skipped: {p.reason}")
-        tag_text = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in e.tags.items())
-        table.add_row(str(i), (e.created_utc or "?").replace("+00:00", "").replace("T", " "), f1(e.K_Nm_per_rad),
-                      f"{f1(e.K_ci95[0])}–{f1(e.K_ci95[1])}", format_value(p.change_pct, "+.1f"),
-                      format_value(p.ewma_change_pct, "+.1f"), f1(e.f_a_hz), f1(e.f_r_hz),
-                      *([f1(e.truth_K_Nm_per_rad)] if truth else []), *([tag_text] if tags else []), state,
-                      style=styles[p.state])
-    base = "—" if trend.baseline_K_Nm_per_rad is None else f"{trend.baseline_K_Nm_per_rad:.1f} N·m/rad"
-    table.caption = "\n".join([f"baseline {base} ({trend.baseline_note}); alarm below −{trend.threshold_pct:g} % or "
-                               f"EWMA (λ = {trend.ewma_lambda:g}) below −{EWMA_L:g}σ limit, "
-                               f"σ = {f1(trend.sigma_K_Nm_per_rad)} N·m/rad", *notes])
-    return table
 
 
 def trend_json(trend: Trend) -> dict[str, Any]:

@@ -16,6 +16,7 @@ import numpy as np
 
 from analysis.fit import COHERENCE_CLIP, FitResult, band_mask
 from analysis.frf import FrequencyResponse
+from analysis.model import PARAM_LABELS
 
 Verdict = Literal["ok", "poor", "failed"]
 _RANK: dict[Verdict, int] = {"ok": 0, "poor": 1, "failed": 2}
@@ -174,7 +175,7 @@ def assess(
         if name in ci_rel and fit.status != "failed":
             level = _grade(-ci_rel[name], -poor, -failed)
             if level != "ok":
-                findings.append((level, f"{_LABEL[name]} is known only to ±{100 * ci_rel[name]:.1f} % (95 %)"))
+                findings.append((level, f"{PARAM_LABELS[name][0]} is known only to ±{100 * ci_rel[name]:.1f} % (95 %)"))
 
     if clock_residual_s is not None:
         limit = th.clock_residual_complex_s if fit.options.kind == "complex" else th.clock_residual_amplitude_s
@@ -189,9 +190,6 @@ def assess(
         residual_rms=float(fit.residual_rms), misfit_ratio=float(ratio), ci_rel_halfwidth=ci_rel, clock_residual_s=clock_residual_s,
         reasons=tuple(text for _, text in findings),
     )
-
-
-_LABEL = {"K_Nm_per_rad": "K", "Jm_kgm2": "J_m", "Jl_kgm2": "J_l", "C_Nms_per_rad": "C"}
 
 
 def _grade(value: float, poor_below: float, failed_below: float) -> Verdict:

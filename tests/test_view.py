@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acq.analyze import analyze_session
+from acq.analyze import analyze_session, draw_report
 from acq.config import load_bench, load_profile
 from acq.recorder import Recorder
 from drivers.registry import open_bench
@@ -42,7 +42,7 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> Path:
     recorder = _recorder(tmp_path_factory.mktemp("sessions"), 3.0)
     recorder.start_devices()
     path = recorder.run().path
-    analyze_session(path)
+    draw_report(analyze_session(path))
     return path
 
 
