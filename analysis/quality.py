@@ -66,6 +66,12 @@ class Thresholds:
     clock_residual_complex_s: float = 1e-4
 
 
+def phase_is_meaningful(clock_residual_s: float | None, thresholds: Thresholds = Thresholds()) -> bool:
+    """True when the clocks were aligned to within the residual a complex fit accepts, so a measured phase is
+    the plant's and not the clock offset's (None: not aligned)."""
+    return clock_residual_s is not None and clock_residual_s <= thresholds.clock_residual_complex_s
+
+
 @dataclass(frozen=True)
 class Quality:
     """How far an identification can be trusted.
