@@ -17,6 +17,7 @@ import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from rich.console import Console, ConsoleOptions, RenderResult
@@ -335,7 +336,7 @@ def batch_table(report: BatchReport) -> FittedTable:
     outcomes = sorted(report.outcomes, key=lambda o: o.path)
     joints = [str(o.session.get("joint") or "?") for o in outcomes]
     ks = [None if o.doc is None else o.doc["K_Nm_per_rad"] for o in outcomes]
-    columns = [Column("session", [o.path.rsplit("/", 1)[-1] for o in outcomes], "left", wrap=True)]
+    columns = [Column("session", [Path(o.path).name for o in outcomes], "left")]
     one_joint = len(set(joints)) == 1
     if not one_joint:
         columns.append(Column("joint", joints, "left"))

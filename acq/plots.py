@@ -85,7 +85,8 @@ def _qt_message(mode: QtCore.QtMsgType, context: QtCore.QMessageLogContext, mess
 
 def _plot(layout: pg.GraphicsLayout, row: int, col: int, title: str | None,
           x: tuple[str, str], y: tuple[str, str], rowspan: int = 1) -> pg.PlotItem:
-    plot = layout.addPlot(row=row, col=col, rowspan=rowspan, title=title)  # unnamed: pyqtgraph's registry fails at teardown
+    # unnamed: pyqtgraph's view registry fails at teardown
+    plot = layout.addPlot(row=row, col=col, rowspan=rowspan, title=title)
     for side, (text, units) in (("bottom", x), ("left", y)):
         axis = plot.getAxis(side)
         axis.enableAutoSIPrefix(False)

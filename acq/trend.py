@@ -237,9 +237,15 @@ def trend_widget(trend: Trend) -> Any:
     QtWidgets.QVBoxLayout(frame).addWidget(widget)
     widget.ci.addLabel(f"stiffness trend — {trend.joint}" + ("  (ALARM)" if trend.alarm else ""), row=0, col=0,
                        size="14pt")
-    k_plot = widget.addPlot(row=1, col=0)
-    f_plot = widget.addPlot(row=2, col=0)
+    legend = pg.LegendItem(colCount=3, labelTextSize="10pt")  # a row of its own: it never covers a point
+    widget.ci.addItem(legend, row=1, col=0)
+    widget.ci.layout.setRowFixedHeight(1, 80)
+    k_plot = widget.addPlot(row=2, col=0)
+    f_plot = widget.addPlot(row=3, col=0)
+    widget.ci.layout.setRowStretchFactor(2, 3)
+    widget.ci.layout.setRowStretchFactor(3, 2)
     k_plot.setXLink(f_plot)
+    k_plot.getAxis("bottom").setStyle(showValues=False)  # the f plot under it names the sessions
     pts = [(i, p) for i, p in enumerate(trend.points) if p.entry.K_Nm_per_rad is not None]
     x = np.array([i for i, _ in pts], dtype=float)
     k = np.array([p.entry.K_Nm_per_rad for _, p in pts], dtype=float)
@@ -249,29 +255,40 @@ def trend_widget(trend: Trend) -> Any:
                                    pen=pg.mkPen("#555", width=1.5)))
     colors = {"baseline": "#17becf", "ok": "#1f77b4", "alarm: EWMA": "#ff7f0e", "alarm: threshold": "#d62728",
               "skipped": "#bbbbbb", "before baseline": "#bbbbbb"}
-    k_plot.addLegend(offset=(-10, 10))
     for state, color in colors.items():
         sel = [j for j, (_, p) in enumerate(pts) if _category(p) == state]
         if sel:
-            k_plot.plot(x[sel], k[sel], pen=None, symbol="o", symbolSize=11, symbolBrush=color, name=state)
+            legend.addItem(k_plot.plot(x[sel], k[sel], pen=None, symbol="o", symbolSize=11, symbolBrush=color), state)
     base = trend.baseline_K_Nm_per_rad
     if base is not None:
-        k_plot.addLine(y=base, pen=pg.mkPen("#17becf", width=2), label="baseline", labelOpts={"position": 0.05})
-        dashed = pg.mkPen("#d62728", width=2, style=QtCore.Qt.PenStyle.DashLine)
-        k_plot.addLine(y=base * (1 - trend.threshold_pct / 100), pen=dashed,
-                       label=f"−{trend.threshold_pct:g} %", labelOpts={"position": 0.05})
+        legend.addItem(k_plot.plot(x[:1], [base], pen=pg.mkPen("#17becf", width=3)), f"baseline {base:.1f} N·m/rad")
+        k_plot.addLine(y=base, pen=pg.mkPen("#17becf", width=3))
+        threshold = base * (1 - trend.threshold_pct / 100)
+        dashed_red = pg.mkPen("#d62728", width=2, style=QtCore.Qt.PenStyle.DashLine)
+        legend.addItem(k_plot.plot(x[:1], [threshold], pen=dashed_red),
+                       f"threshold −{trend.threshold_pct:g} % ({threshold:.1f})")
+        k_plot.addLine(y=threshold, pen=dashed_red)
+        levels = [base, threshold]
         judged = [(i, p) for i, p in enumerate(trend.points) if p.ewma_change_pct is not None]
         if judged:
             jx = np.array([i for i, _ in judged], dtype=float)
-            k_plot.plot(jx, [base * (1 + p.ewma_change_pct / 100) for _, p in judged],  # type: ignore[operator]
-                        pen=pg.mkPen("#ff7f0e", width=2), name=f"EWMA (λ = {trend.ewma_lambda:g})")
-            k_plot.plot(jx, [base * (1 + p.ewma_limit_pct / 100) for _, p in judged],  # type: ignore[operator]
-                        pen=pg.mkPen("#ff7f0e", width=1, style=QtCore.Qt.PenStyle.DotLine), name="EWMA limit")
-    f_plot.addLegend(offset=(-10, 10))
-    for key, color, name in (("f_a_hz", "#2ca02c", "f_a"), ("f_r_hz", "#9467bd", "f_r")):
+            ewma = [base * (1 + p.ewma_change_pct / 100) for _, p in judged]  # type: ignore[operator]
+            limit = [base * (1 + p.ewma_limit_pct / 100) for _, p in judged]  # type: ignore[operator]
+            legend.addItem(k_plot.plot(jx, ewma, pen=pg.mkPen("#ff7f0e", width=2.5), symbol="d", symbolSize=7,
+                                       symbolBrush="#ff7f0e", symbolPen=None), f"EWMA (λ = {trend.ewma_lambda:g})")
+            limit_curve = k_plot.plot(jx, limit, pen=pg.mkPen("#ff7f0e", width=2, style=QtCore.Qt.PenStyle.DashLine))
+            k_plot.addItem(pg.FillBetweenItem(limit_curve, k_plot.plot(jx, [base] * len(jx), pen=None),
+                                              brush=pg.mkBrush(255, 127, 14, 35)))
+            legend.addItem(limit_curve, f"EWMA limit −{trend.ewma_L:g}σ (latest {limit[-1]:.1f}; shaded: no alarm)")
+            levels += [*ewma, *limit]
+        values = np.concatenate([lo, hi, k, levels])
+        values = values[np.isfinite(values)]
+        pad = 0.05 * (values.max() - values.min() or values.max())
+        k_plot.setYRange(values.min() - pad, values.max() + pad, padding=0)
+    for key, color, name in (("f_a_hz", "#2ca02c", "f_a (lower plot)"), ("f_r_hz", "#9467bd", "f_r (lower plot)")):
         fx = [i for i, p in pts if getattr(p.entry, key) is not None]
-        f_plot.plot(fx, [getattr(trend.points[i].entry, key) for i in fx], pen=pg.mkPen(color, width=2), symbol="s",
-                    symbolBrush=color, name=name)
+        legend.addItem(f_plot.plot(fx, [getattr(trend.points[i].entry, key) for i in fx], pen=pg.mkPen(color, width=2),
+                                   symbol="s", symbolBrush=color), name)
     step = max(1, len(trend.points) // 10)
     ticks = [(float(i), (p.entry.created_utc or "?")[:19].replace("T", "\n"))
              for i, p in enumerate(trend.points)][::step]
