@@ -3,14 +3,19 @@
 :class:`ReportView` lays out, for one or several sessions (each its own colour):
 
 * ``torque`` and ``speed``: the time traces on the aligned (drive) time base, x axes linked;
-* ``frf``: measured |H| = |ω_m/T_e| on log–log axes with the fitted two-mass model, its 95 % band
-  and f_a/f_r marked (vertical lines), a legend naming the sessions;
-* ``coherence``: γ² under it, x axis linked to the FRF's;
-* a side panel with the identified values, their 95 % intervals, the clock relation and the verdict.
+* ``frf``: measured |H| = |ω_m/T_e| on log–log axes with the fitted two-mass model and its 95 % band
+  (shaded; the legend says its width, as it is often a line's width), f_a/f_r marked by vertical lines;
+  the legend and the f_a/f_r labels sit in strips of their own above the plot, so they never cover a
+  curve, and the labels are packed into rows so that none overlaps another;
+* ``phase``: measured and model phase, when the clocks were aligned well enough for a phase to be the
+  plant's (the residual a complex fit accepts, :func:`analysis.quality.phase_is_meaningful`);
+* ``coherence``: γ²; FRF, phase and coherence share their x axis and show the fit band shaded;
+* a side panel with the identified values, their 95 % intervals, the clock relation, the verdict and
+  the options the result came from.
 
 :func:`render_report_png` draws the same widget offscreen into an image of an exact pixel size;
 ``acq view --screenshot`` uses it too. Log axes: pyqtgraph transforms data items, not other items,
-so the f_a/f_r lines sit at log10(f) in view coordinates.
+so the f_a/f_r lines, labels and the fit band sit at log10(f) in view coordinates.
 """
 
 from __future__ import annotations
@@ -213,15 +218,12 @@ class ReportView(QtWidgets.QWidget):
 
     @staticmethod
     def _setup_marks(marks: pg.PlotItem, frf: pg.PlotItem) -> None:
-        """The f_a/f_r label strip: no axes drawn, no mouse, x linked to the FRF (a left axis of the FRF's width,
-        invisible, keeps the strip's x in line with the FRF's)."""
+        """The f_a/f_r label strip: no axes, no mouse, x linked to the FRF (pyqtgraph lines linked views up by
+        their position on the screen, so a label sits over its line)."""
         marks.hideButtons()
         marks.setMouseEnabled(x=False, y=False)
         marks.hideAxis("bottom")
-        left = marks.getAxis("left")
-        left.setWidth(70)
-        left.setStyle(showValues=False, tickLength=0)
-        left.setPen(pg.mkPen(None))
+        marks.hideAxis("left")
         marks.setLogMode(x=True, y=False)
         marks.setXLink(frf)
         marks.vb.disableAutoRange()
