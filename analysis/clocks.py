@@ -38,6 +38,7 @@ from analysis.torque import window_phasors
 _CHUNK = 1 << 20  # samples per pass over the DAQ record
 _GRID_HZ = 1000.0  # grid of the frequency stage
 _NARROW_S = 0.03  # half-range of the frequency stage's first pass around its starting relation, s
+_PIECE_S = 2.0  # current the angle stage uses to tell the wide search's candidates apart, s
 
 ClockMethod = Literal["angle", "frequency", "wide", "host", "none"]
 
@@ -407,6 +408,9 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
     together_s = float(t_enc[0]) - t0
     wide = wide_search(f_cur, f_enc_grid, 1.0 / _GRID_HZ, float(enc_grid[0]) - t0,
                        host[0] if host is not None else together_s, max_lag_s)
+    if wide is not None:
+        wide = wide.screened(lambda o: _angle_residual_s(o, current_a, rate_hz, first_index, angle, pole_pairs,
+                                                         grid, f_cur, f_enc))
     offset_s, drift_ppm, start, ambiguous_by, notes = starting_relation(host, wide, together_s, _NARROW_S)
     method: ClockMethod = start
     freq = (np.nan, np.nan)
@@ -427,3 +431,22 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
     return ClockFit(fit.offset_s, fit.drift_ppm, fit.residual_s, fit.offset_std_s, fit.drift_std_ppm,
                     fit.theta0_rad, n_windows=fit.n_windows, method="angle", **common)
 
+
+def _angle_residual_s(offset_s: float, current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline,
+                      pole_pairs: int, grid: np.ndarray, f_cur: np.ndarray,
+                      f_enc: Callable[[np.ndarray], np.ndarray]) -> float:
+    """Timing residual, s, of the frequency and angle stages started at ``offset_s`` on ``_PIECE_S`` of current in
+    the middle of the overlap there (inf when the angle stage finds too little motion)."""
+    t_enc = angle.x[[0, -1]]
+    lo, hi = max(grid[0], t_enc[0] - offset_s), min(grid[-1], t_enc[1] - offset_s)
+    a_s, b_s = max(lo, 0.5 * (lo + hi - _PIECE_S)), min(hi, 0.5 * (lo + hi + _PIECE_S))
+    sel = (grid >= a_s) & (grid < b_s)
+    drift_ppm = 0.0
+    for lag in (_NARROW_S, 0.004):
+        o, d, n = frequency_alignment(f_cur[sel], grid[sel], f_enc, offset_s, drift_ppm, lag, window_s=b_s - a_s)
+        if n:
+            offset_s, drift_ppm = o, d
+    a, b = (int(np.clip(round(x * rate_hz) - first_index, 0, current_a.size)) for x in (a_s, b_s))
+    fit = angle_alignment(current_a[a:b], rate_hz, first_index + a, angle, pole_pairs, offset_s, drift_ppm,
+                          iterations=0)
+    return fit.residual_s if fit is not None else np.inf
