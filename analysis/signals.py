@@ -274,7 +274,9 @@ def _daq_run(rec: Recording) -> tuple[int, int, int, str]:
 
 
 def _host(rec: Recording) -> tuple[float, float] | None:
-    if not rec.host_clock_shared or rec.block_host_ns is None or rec.encoder_host_ns is None or rec.block_first_index is None:
+    if not rec.host_clock_shared:
+        return None  # stamps of separate tools: their time columns relate nothing
+    if rec.block_host_ns is None or rec.encoder_host_ns is None or rec.block_first_index is None:
         return None
     last = np.asarray(rec.block_first_index) + np.asarray(rec.block_count) - 1
     return host_relation(last, rec.block_host_ns, rec.rate_hz, rec.encoder_index, rec.encoder_host_ns, rec.period_s)
