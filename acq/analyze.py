@@ -56,6 +56,7 @@ def recording_from_session(session: Session) -> Recording:
         block_count=cur.block_count,
         block_host_ns=cur.block_host_ns,
         encoder_host_ns=enc.host_ns,
+        host_clock_shared=session.host_clock_shared,
     )
 
 

@@ -107,7 +107,7 @@ class Result:
             "antiresonance_hz": _num(self.fit.f_a),
             "resonance_hz": _num(self.fit.f_r),
             "clock": {"offset_s": _num(self.clock.offset_s), "drift_ppm": _num(self.clock.drift_ppm),
-                      "residual_s": _num(self.clock.residual_s)},
+                      "residual_s": _num(self.clock.residual_s), "ambiguous_by_s": list(self.clock.ambiguous_by_s)},
             "quality": {"verdict": self.quality.verdict, "mean_coherence": _num(self.quality.mean_coherence),
                         "reasons": [*self.quality.reasons, *(f"note: {n}" for n in self.notes)]},
             "options": {**self.options.to_json_dict(), "band_hz": list(self.fit.band)},
