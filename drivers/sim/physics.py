@@ -18,8 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drivers.sim.joint_effects import JointEffects
 from drivers.sim.motion import MotionSchedule
-from drivers.sim.plant import N_INPUTS, N_STATES, SpeedPI, TwoMass, discretise
+from drivers.sim.plant import N_STATES, SpeedPI, TwoMass, discretise
 
 G_M_S2 = 9.80665
 
@@ -79,12 +80,18 @@ class JointSimulation:
     counts_per_rev : encoder resolution the speed loop sees, counts/rev.
     schedule : the speed reference.
     n_sub : fine-grid points per control period.
+    effects : optional load friction, backlash, third mass (:mod:`drivers.sim.joint_effects`); the friction
+        adds to the held load torque input, the backlash correction is a third held input, the third
+        mass's states follow the plant's five.
     """
 
     def __init__(self, plant: TwoMass, pi: SpeedPI, gravity: Gravity, counts_per_rev: int,
-                 schedule: MotionSchedule, n_sub: int = 16) -> None:
+                 schedule: MotionSchedule, n_sub: int = 16, effects: JointEffects = JointEffects()) -> None:
         self.plant, self.pi, self.gravity, self.schedule = plant, pi, gravity, schedule
-        self.A, self.B = plant.state_space()
+        self.effects = effects
+        A, B = plant.state_space()
+        self.A, self.B = effects.state_space(A, B, plant.Jm_kgm2, plant.Jl_kgm2)
+        self.n_states, self.n_inputs = self.B.shape
         self.disc = discretise(self.A, self.B, pi.period_s, n_sub)
         self.n_sub = n_sub
         self.h_s = pi.period_s / n_sub
@@ -94,7 +101,7 @@ class JointSimulation:
         self._counts_prev = math.floor(self._x[0] / self._rad_per_count)
         self._integral_Nm = self.gravity.torque_Nm(self._x[2])
         self._k = 0                      # control steps done
-        self._steps = _Rows(N_STATES + N_INPUTS)   # [x[k], u[k]] of steps k0 … k−1
+        self._steps = _Rows(self.n_states + self.n_inputs)   # [x[k], u[k]] of steps k0 … k−1
         self._k0 = 0
         # fine point j of a step (j = 0 … n_sub, n_sub being the next control instant) = Psi[j]·[x[k], u[k]]
         psi = np.concatenate([self.disc.Phi_sub, self.disc.Gam_sub], axis=2)
@@ -102,14 +109,20 @@ class JointSimulation:
         self._psi = np.concatenate([psi, last], axis=0)
 
     def _equilibrium(self) -> np.ndarray:
-        """Rest under gravity: θ_m at half a count, the shaft twisted by T_g/K, i_q carrying T_g."""
+        """Rest under gravity: θ_m at half a count, the shaft twisted by T_g/K (plus half the backlash),
+        i_q carrying T_g; a third mass rests at the load's angle."""
         p = self.plant
         theta_m = 0.5 * self._rad_per_count
         theta_l = theta_m
+        gap = 0.5 * self.effects.backlash.width_rad if self.effects.backlash is not None else 0.0
         for _ in range(5):
-            theta_l = theta_m - self.gravity.torque_Nm(theta_l) / p.K_Nm_per_rad
+            t_g = self.gravity.torque_Nm(theta_l)
+            theta_l = theta_m - t_g / p.K_Nm_per_rad - math.copysign(gap, t_g)
         iq = self.gravity.torque_Nm(theta_l) / p.kt_Nm_per_A
-        return np.array([theta_m, 0.0, theta_l, 0.0, iq])
+        x = np.zeros(self.n_states)
+        x[:N_STATES] = [theta_m, 0.0, theta_l, 0.0, iq]
+        x[N_STATES:] = [theta_l, 0.0][:self.n_states - N_STATES]
+        return x
 
     @property
     def t_end_s(self) -> float:
@@ -131,9 +144,11 @@ class JointSimulation:
         speed_ref, accel_ref = self.schedule.reference((self._k + np.arange(n)) * T)
         ff = (Jff * accel_ref).tolist()
         wref = speed_ref.tolist()
-        xs = np.empty((n, N_STATES + N_INPUTS))  # [x[k], u[k]] per step
+        ns = self.n_states
+        xs = np.empty((n, ns + self.n_inputs))  # [x[k], u[k]] per step
         AB = self._psi[-1]
-        z = np.empty(N_STATES + N_INPUTS)
+        z = np.empty(ns + self.n_inputs)
+        friction, backlash = self.effects.friction, self.effects.backlash
         x, counts_prev, integral = self._x, self._counts_prev, self._integral_Nm
         rad_per_count, q_per_T = self._rad_per_count, self._rad_per_count / T
         g = self.gravity
@@ -141,9 +156,13 @@ class JointSimulation:
         for j in range(n):
             counts = math.floor(x[0] / rad_per_count)
             err = wref[j] - (counts - counts_prev) * q_per_T
-            z[:N_STATES] = x
-            z[N_STATES] = (ff[j] + kp * err + integral) / kt             # i_q reference, A
-            z[N_STATES + 1] = g_scale * math.cos(g_start + x[2] / g_ratio)  # T_g, N·m (= Gravity.torque_Nm)
+            z[:ns] = x
+            z[ns] = (ff[j] + kp * err + integral) / kt             # i_q reference, A
+            z[ns + 1] = g_scale * math.cos(g_start + x[2] / g_ratio)  # T_g, N·m (= Gravity.torque_Nm)
+            if friction is not None:
+                z[ns + 1] += friction.torque_Nm(x[3])               # load friction, held like T_g
+            if backlash is not None:
+                z[ns + 2] = backlash.correction_Nm(x[0] - x[2])     # dead-zone torque pair
             integral += ki_T * err
             counts_prev = counts
             xs[j] = z
@@ -155,7 +174,7 @@ class JointSimulation:
     def states_at(self, t_s: np.ndarray) -> np.ndarray:
         """States (n, 5) at drive times ``t_s`` (s); rest before 0. Call :meth:`advance_to` first."""
         t = np.asarray(t_s, dtype=float).ravel()
-        out = np.empty((t.size, N_STATES))
+        out = np.empty((t.size, self.n_states))
         rest = t < 0.0
         out[rest] = self.x_rest
         tt = t[~rest]
@@ -171,7 +190,7 @@ class JointSimulation:
         z = self._steps.view[k - self._k0]
         x0 = np.einsum("nij,nj->ni", self._psi[j], z)
         x1 = np.einsum("nij,nj->ni", self._psi[j + 1], z)
-        bu = z[:, N_STATES:] @ self.B.T
+        bu = z[:, self.n_states:] @ self.B.T
         d0 = (x0 @ self.A.T + bu) * self.h_s
         d1 = (x1 @ self.A.T + bu) * self.h_s
         tau2, tau3 = tau * tau, tau * tau * tau
