@@ -42,7 +42,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.scenarios import LABEL, PARAMS, SCENARIOS, Scenario, confident_wrong, errors_pct, run_scenario  # noqa: E402
+from bench.scenarios import (LABEL, PARAMS, SCENARIOS, Scenario, confident_wrong, errors_pct,  # noqa: E402
+                             interval_holds, run_scenario)
 
 
 @dataclass
@@ -74,7 +75,7 @@ class Run:
 
 def _outcome(sc: Scenario, res, truth: dict, seconds: float, aligned: bool) -> Outcome:
     err = errors_pct(res, truth)
-    in_ci = {n: bool(res.fit.ci95[n][0] <= truth[n] <= res.fit.ci95[n][1]) for n in PARAMS}
+    in_ci = interval_holds(res, truth)
     if aligned:
         off = 1e6 * (res.clock.offset_s - truth["daq_offset_s"])
         drift = res.clock.drift_ppm - truth["daq_drift_ppm"]
@@ -191,7 +192,8 @@ def summary_table(summ: list[Summary]) -> Table:
                     "truth outside the interval)")
     for col in ("#", "scenario", "expected", "seeds", "K %", "J_m %", "J_l %", "C %", "CI holds truth\nK, J_m, J_l, C",
                 "clock worst\nµs / ppm", "verdicts ours", "verdicts paper", "confident\nwrong", "as\nexpected"):
-        t.add_column(col, justify="left" if col in ("scenario", "expected", "verdicts ours", "verdicts paper") else "right")
+        left = col in ("scenario", "expected", "verdicts ours", "verdicts paper")
+        t.add_column(col, justify="left" if left else "right")
     index = {sc.name: i + 1 for i, sc in enumerate(SCENARIOS)}
     for s in summ:
         sc = s.scenario
@@ -222,7 +224,8 @@ def confident_wrong_lines(runs: list[Run], who: str = "ours") -> list[str]:
 def markdown(summ: list[Summary]) -> str:
     """The summary as a Markdown table (for README.md)."""
     lines = ["| scenario | expected | seeds | K % ours / paper | J_m % ours / paper | J_l % ours / paper "
-             "| CI holds truth K, J_m, J_l (ours) | verdicts ours | confident wrong ours / paper | what acq says when it declines |",
+             "| CI holds truth K, J_m, J_l (ours) | verdicts ours | confident wrong ours / paper "
+             "| what acq says when it declines |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for s in summ:
         sc = s.scenario

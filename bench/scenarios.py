@@ -15,6 +15,7 @@ its resonance has J_l + J_3 (``jl_truth="load+third"``).
 from __future__ import annotations
 
 import tempfile
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -81,7 +82,8 @@ SCENARIOS: tuple[Scenario, ...] = (
     Scenario("K ×0.5, J_m ×2, J_l ×0.5", plant=(0.5, 2.0, 0.5)),
     Scenario("K ×2, J ×0.5 (stiff)", plant=(2.0, 0.5, 0.5)),
     Scenario("K ×0.5, J ×2 (soft)", plant=(0.5, 2.0, 2.0)),
-    _paper("paper plant, 0.5 s profile", expect="not ok", reason=WEAK, profile={"accel_time_s": 0.5, "decel_time_s": 0.5}),
+    _paper("paper plant, 0.5 s profile", expect="not ok", reason=WEAK,
+           profile={"accel_time_s": 0.5, "decel_time_s": 0.5}),
     # ---- plant effects ----------------------------------------------------------------------------------
     Scenario("load friction Coulomb 0.3 + Stribeck 0.2 N·m", sim={"load_coulomb_Nm": 0.3, "load_stribeck_Nm": 0.2}),
     Scenario("backlash 0.05 mrad", sim={"backlash_load_rad": 0.05e-3}),
@@ -110,11 +112,14 @@ SCENARIOS: tuple[Scenario, ...] = (
     Scenario("DAQ 51.2 kS/s, no AA filter, ripple 16 kHz", daq={"rate_hz": 51200.0}, sim=RIPPLE),
     Scenario("PWM 8 kHz ripple 50 mA, 10 kS/s no AA (folds to 2 kHz)", daq={"rate_hz": 10000.0},
              sim={"pwm_ripple_A": 0.05, "pwm_hz": 8000.0}),
+    Scenario("PWM 20 kHz ripple 100 mA, 10 kS/s no AA (folds onto DC and 2 f_e, in band)",
+             daq={"rate_hz": 10000.0}, sim={"pwm_ripple_A": 0.1, "pwm_hz": 20000.0}),
     Scenario("16-bit ADC over ±20 A", sim={"daq_bits": 16, "daq_range_A": 20.0}),
     Scenario("mains hum 20 mA, 50 Hz + harmonics", sim=HUM),
     Scenario("mains hum 20 mA, 60 Hz + harmonics", sim={**HUM, "mains_hz": 60.0}),
     Scenario("offset drift 40 mA, 20 s period", sim={"offset_drift_A": 0.04}),
     Scenario("hum 20 mA + offset drift 40 mA", sim={**HUM, "offset_drift_A": 0.04}),
+    Scenario("3 phases (park), no gain error", daq={"channels": THREE_PHASES}),
     Scenario("3 phases, gain errors +2 % / −2 % (park)", daq={"channels": THREE_PHASES},
              sim={"current_gain_errors": {"i_b": 0.02, "i_c": -0.02}}),
     # ---- encoder and streams ----------------------------------------------------------------------------
@@ -154,7 +159,8 @@ def scenario_bench(sc: Scenario, seed: int, offset_s: float, drift_ppm: float) -
         "K_Nm_per_rad": base.K_Nm_per_rad * k, "Jm_kgm2": base.Jm_kgm2 * jm, "Jl_kgm2": base.Jl_kgm2 * jl,
         **sc.sim})
     update: dict[str, Any] = {"sim": type(base).model_validate(sim.model_dump()),
-                              "daq": bench.daq.model_copy(update=sc.daq), "drive": bench.drive.model_copy(update=sc.drive)}
+                              "daq": bench.daq.model_copy(update=sc.daq),
+                              "drive": bench.drive.model_copy(update=sc.drive)}
     if sc.counts_per_rev is not None:
         update["encoder"] = bench.encoder.model_copy(update={"counts_per_rev": sc.counts_per_rev})
     bench = type(bench).model_validate(bench.model_copy(update=update).model_dump())
@@ -180,20 +186,22 @@ def record(sc: Scenario, seed: int, offset_s: float, drift_ppm: float, out_dir: 
     return result.path, truth
 
 
-def analyse_both(path: Path) -> tuple[Any, Any, tuple[float, float]]:
-    """Our analysis and the paper's chain of a session; wall seconds of each."""
-    import time
-
+def analyse(path: Path, pipeline: str = "acq") -> Any:
+    """Analyse a session file as ``acq analyze`` does (``pipeline="paper"``: the paper's chain)."""
     from acq.analyze import options_for, recording_from_session
     from acq.session import load
     from analysis.pipeline import analyze
 
     session = load(path)
-    rec = recording_from_session(session)
+    return analyze(recording_from_session(session), options_for(session, pipeline=pipeline))  # type: ignore[arg-type]
+
+
+def analyse_both(path: Path) -> tuple[Any, Any, tuple[float, float]]:
+    """Our analysis and the paper's chain of a session; wall seconds of each."""
     t0 = time.perf_counter()
-    ours = analyze(rec, options_for(session))
+    ours = analyse(path)
     t1 = time.perf_counter()
-    paper = analyze(rec, options_for(session, pipeline="paper"))
+    paper = analyse(path, pipeline="paper")
     return ours, paper, (t1 - t0, time.perf_counter() - t1)
 
 
@@ -211,6 +219,11 @@ def errors_pct(res: Any, truth: dict[str, Any]) -> dict[str, float]:
     """Relative errors (%) of K, J_m, J_l, C against the truth."""
     v = res.fit.values
     return {n: 100.0 * (getattr(v, n) - truth[n]) / truth[n] for n in PARAMS}
+
+
+def interval_holds(res: Any, truth: dict[str, Any]) -> dict[str, bool]:
+    """Whether each 95 % interval holds the truth."""
+    return {n: bool(res.fit.ci95[n][0] <= truth[n] <= res.fit.ci95[n][1]) for n in PARAMS}
 
 
 def confident_wrong(sc: Scenario, verdict: str, err_pct: dict[str, float], in_ci: dict[str, bool]) -> list[str]:

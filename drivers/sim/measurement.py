@@ -15,8 +15,9 @@ samples the ideal currents exactly as before these options existed). Per channel
   below 0.5 % of A);
 * g_x — sensor gain error (``current_gain_errors``); dc_x — the bench's DC offsets;
 * d_x — slow offset drift ``offset_drift_A``·sin(2π·t/``offset_drift_period_s`` + φ_x), every channel;
-* h_x — mains hum on ``mains_phase`` only: ``mains_hum_A``·(sin(2π·f·t + φ_1) + Σ a_h·sin(2π·h·f·t + φ_h)),
-  f = ``mains_hz``, a_h = ``mains_harmonics`` for h = 2, 3, ….
+* h_x — mains hum on ``mains_phase`` only:
+  ``mains_hum_A``·(sin(2π·f·t + φ_1) + Σ a_h·sin(2π·h·f·t + φ_h)), f = ``mains_hz``, a_h = ``mains_harmonics``
+  for h = 2, 3, ….
 
 Then the card: with ``daq_antialias`` the analog signal is evaluated at M times the sample rate and
 passed through a linear-phase (Kaiser-window FIR) low-pass — passband to 0.45·rate, 80 dB from 0.55·rate,
