@@ -274,3 +274,19 @@ def test_streamed_blocks_with_the_anti_alias_filter_equal_one_read_and_history_s
     blocks = np.concatenate([daq.read(0.1).current_a for _ in range(20)], axis=1)
     # equal to rounding: the FFT convolution's last bits depend on the block length
     np.testing.assert_allclose(blocks, whole.current_samples(0, blocks.shape[1]), rtol=0, atol=1e-12)
+
+
+def test_drives_that_cannot_carry_an_s_curve_or_a_cruise_refuse_it_in_one_line() -> None:
+    from drivers.canopen_motion import ProfilePositionMotion
+    from drivers.config import DriveCanopen, DriveSerial
+    from drivers.errors import ConfigError
+    from drivers.serial_drive import SerialDrive
+
+    s_curve = PROFILE.model_copy(update={"jerk_time_s": 0.02})
+    pp = ProfilePositionMotion(None, "drive", DriveCanopen(driver="canopen", period_s=0.001), 131072,
+                               lambda e: None, lambda s: None)
+    with pytest.raises(ConfigError, match="^profile: jerk_time_s = 0.02 s, but profile position mode"):
+        pp.start(s_curve)
+    serial = SerialDrive(DriveSerial(driver="serial", period_s=0.001, port="loop://"), 131072)
+    with pytest.raises(ConfigError, match=r"^profile: cruise_s = 0.1 s, jerk_time_s = 0 s cannot be sent"):
+        serial.start_motion(PROFILE.model_copy(update={"cruise_s": 0.1}))
