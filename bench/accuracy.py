@@ -28,6 +28,7 @@ import argparse
 import math
 import multiprocessing as mp
 import os
+import re
 import sys
 import time
 from dataclasses import dataclass, field
@@ -175,7 +176,9 @@ def summarize(runs: list[Run]) -> list[Summary]:
             wrong[who] = sum(bool(o.wrong) for o in os_)
         expected = sum((r.ours.verdict == "ok" and not r.ours.wrong) if sc.expect == "ok" else r.ours.verdict != "ok"
                        for r in rs)
-        reasons = tuple(dict.fromkeys(x for r in rs if r.ours.verdict != "ok" for x in r.ours.reasons[:1]))
+        first = {re.sub(r"[0-9.]+", "#", r.ours.reasons[0]): r.ours.reasons[0]  # one per kind, numbers aside
+                 for r in rs if r.ours.verdict != "ok" and r.ours.reasons}
+        reasons = tuple(first.values())
         out.append(Summary(sc, len(rs), worst, rms, cov, verd,
                            max(abs(r.ours.offset_err_us) for r in rs), max(abs(r.ours.drift_err_ppm) for r in rs),
                            wrong, expected, reasons))
