@@ -9,7 +9,9 @@ back — the same path as ``acq record`` — so options other parts of the simul
 SYNC-latch jitter) take effect by naming them in ``sim``.
 
 Truth: the simulator's K, J_m, J_l, C; with a third mass behind the load the two-mass equivalent below
-its resonance has J_l + J_3 (``jl_truth="load+third"``).
+its resonance has J_l + J_3 (``jl_truth="load+third"``). The clock truth (``daq_offset_s``) is relative
+to drive cycle 0 = encoder index 0, true of the ``sim`` transport; a CANopen or serial drive (``drive=``,
+``realtime=True``) numbers its frames from another origin, so its clock error column is not meaningful.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ class Scenario:
     plant : factors on the paper's K, J_m, J_l (the bench's nominal values stay the paper's).
     clock : DAQ offset (s) and drift (ppm); None: |offset| 10–60 ms, |drift| 20–60 ppm of random signs.
     jl_truth : the J_l the fit is scored against (``load+third``: J_l + J_3, the two-mass equivalent).
+    realtime : record in real time (a simulated CANopen node on the virtual bus needs it), not ``--fast``.
     """
 
     name: str
@@ -56,6 +59,7 @@ class Scenario:
     tol_J: float = 4.0
     clock: tuple[float, float] | None = None
     jl_truth: Literal["load", "load+third"] = "load"
+    realtime: bool = False
 
     @property
     def must_not_be_ok(self) -> bool:
@@ -152,33 +156,32 @@ def scenario_bench(sc: Scenario, seed: int, offset_s: float, drift_ppm: float) -
     from acq.config import load_bench, load_profile
 
     bench = load_bench()
-    base = bench.sim
+    data = bench.model_dump()
+    base = data["sim"]
     k, jm, jl = sc.plant
-    sim = base.model_copy(update={
-        "seed": seed, "daq_offset_s": offset_s, "daq_drift_ppm": drift_ppm,
-        "K_Nm_per_rad": base.K_Nm_per_rad * k, "Jm_kgm2": base.Jm_kgm2 * jm, "Jl_kgm2": base.Jl_kgm2 * jl,
-        **sc.sim})
-    update: dict[str, Any] = {"sim": type(base).model_validate(sim.model_dump()),
-                              "daq": bench.daq.model_copy(update=sc.daq),
-                              "drive": bench.drive.model_copy(update=sc.drive)}
+    base.update({"seed": seed, "daq_offset_s": offset_s, "daq_drift_ppm": drift_ppm,
+                 "K_Nm_per_rad": base["K_Nm_per_rad"] * k, "Jm_kgm2": base["Jm_kgm2"] * jm,
+                 "Jl_kgm2": base["Jl_kgm2"] * jl, **sc.sim})
+    data["daq"].update(sc.daq)
+    data["drive"].update(sc.drive)  # e.g. {"driver": "canopen", "simulated_node": True}: another transport
     if sc.counts_per_rev is not None:
-        update["encoder"] = bench.encoder.model_copy(update={"counts_per_rev": sc.counts_per_rev})
-    bench = type(bench).model_validate(bench.model_copy(update=update).model_dump())
+        data["encoder"]["counts_per_rev"] = sc.counts_per_rev
+    bench = type(bench).model_validate(data)
     profile = load_profile("triangle_0.2s")
     profile = type(profile).model_validate({**profile.model_dump(), "duration_s": sc.duration_s, **sc.profile})
     return bench, profile
 
 
 def record(sc: Scenario, seed: int, offset_s: float, drift_ppm: float, out_dir: Path) -> tuple[Path, dict[str, Any]]:
-    """Record one scenario run as a session file in ``out_dir`` (simulated drivers, ``--fast``); its truth."""
+    """Record one scenario run as a session file in ``out_dir`` (simulated drivers, ``--fast`` unless the
+    scenario needs real time); its truth."""
     from acq.recorder import Recorder
+    from drivers.registry import open_bench
     from drivers.sim.bench import SimBench
-    from drivers.sim.daq import open_current_source
-    from drivers.sim.drive import open_drive
 
     bench, profile = scenario_bench(sc, seed, offset_s, drift_ppm)
-    sim = SimBench(bench, realtime=False)
-    current, drive = open_current_source(bench, sim, True), open_drive(bench, sim, True)
+    sim = SimBench(bench, realtime=sc.realtime)
+    current, drive = open_bench(bench, fast=not sc.realtime, sim_bench=sim)
     result = Recorder(bench, profile, current, drive, out_dir, sc.duration_s).run()
     truth = dict(sim.truth)
     if sc.jl_truth == "load+third":
