@@ -63,6 +63,7 @@ def recording_from_session(session: Session) -> Recording:
         block_count=cur.block_count,
         block_host_ns=cur.block_host_ns,
         encoder_host_ns=enc.host_ns,
+        drive_time_s=enc.drive_time_s,
     )
 
 
@@ -202,7 +203,9 @@ def result_table(doc: dict[str, Any]) -> Table:
              (truth.get("drift_ppm"), None if clock["drift_ppm"] is None or "drift_ppm" not in truth
               else f"{clock['drift_ppm'] - truth['drift_ppm']:+.2f} ppm")),
             ("clock residual [µs]", format_value(_scaled(clock["residual_s"], 1e6), ".1f"), None),
-            ("coherence in band", format_value(quality["mean_coherence"], ".3f"), None)]
+            ("coherence in band", format_value(quality["mean_coherence"], ".3f"), None),
+            ("encoder jitter [µs]" + (" (stamped)" if quality.get("encoder_time_stamps") else ""),
+             format_value(quality.get("encoder_jitter_us"), ".1f"), None)]
     for name, value, compared in rows:
         row = [escape(name), value, ""]
         if truth:
