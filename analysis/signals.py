@@ -271,9 +271,10 @@ def _angle_on_grid(rec: Recording, span: encoder.Span, notes: list[str]) -> tupl
     if deviation is None:
         return theta, sample_instants.estimate_jitter(theta, rec.period_s)
     spread = float(np.sqrt(np.mean(deviation**2)))
-    theta = sample_instants.angle_at_nominal_instants(theta, cycles, rec.period_s, deviation)
-    notes.append(f"encoder: sampled at the drive's own time stamps (RMS {1e6 * spread:.1f} µs off the "
-                 "cycle grid), moved to k·T")
+    if spread > 1e-9:  # stamps on the grid (to rounding) leave the samples where they are
+        theta = sample_instants.angle_at_nominal_instants(theta, cycles, rec.period_s, deviation)
+        notes.append(f"encoder: sampled at the drive's own time stamps (RMS {1e6 * spread:.1f} µs off the "
+                     "cycle grid), moved to k·T")
     return theta, sample_instants.estimate_jitter(theta, rec.period_s, stamped=True, stamp_spread_s=spread)
 
 

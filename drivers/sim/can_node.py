@@ -26,7 +26,7 @@ A disable while moving ramps the reference to rest at the quick-stop deceleratio
 loop cannot let the motor coast).
 
 Fault switches, for tests: :meth:`~SimCanNode.drop_tpdos`, :meth:`~SimCanNode.stop_heartbeat`,
-``refuse_mode_change`` (0x6060 writes are ignored), ``has_timestamp`` (False before :meth:`~SimCanNode.start`:
+``refuse_mode_change`` (0x6060 writes are ignored), ``has_timestamp`` (set False before :meth:`~SimCanNode.start`:
 a drive without 0x1013) and ``reject_mapping`` (0x1A0x keeps its
 power-on mapping while the SDO writes succeed — a mismatch only a read-back finds).
 """
@@ -173,7 +173,8 @@ class SimCanNode:
 
     def _sample(self) -> tuple[int, float, int]:
         """Position register (counts), speed (rad/s) and 0x1013 time stamp (µs) at the present cycle, from a
-        block computed ahead (one vectorised bench query per ``CACHE_CYCLES``: a query per SYNC would cost the bus its timing)."""
+        block computed ahead (one vectorised bench query per ``CACHE_CYCLES``: a query per SYNC would cost the
+        bus its timing)."""
         cycle = self._now_cycle()
         i = cycle - self._cache_first
         if not 0 <= i < len(self._cache_counts):

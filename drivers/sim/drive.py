@@ -4,8 +4,9 @@ One frame per drive cycle k (t = k·``period_s``), index = k, position = the unw
 latched at k·period (or, with ``sim.sync_jitter_s``, when SYNC k arrives), ``drive_time_s`` = the drive's
 time stamp of that latch (:meth:`drivers.sim.bench.SimBench.stamp_times_s`). Frames arrive at the host
 in batches of ~10 ms, each with its own jittered ``host_ns``; frames listed in ``sim.drop_encoder_frames``
-as (first_cycle, count) never arrive (the recorder finds the gap from the index). ``start_motion`` begins the triangle ``sim.pre_roll_s`` after
-the drive's present cycle; ``stop_motion`` ramps to rest at the profile's deceleration.
+as (first_cycle, count) never arrive (the recorder finds the gap from the index). ``start_motion`` begins
+the triangle ``sim.pre_roll_s`` after the drive's present cycle; ``stop_motion`` ramps to rest at the
+profile's deceleration.
 """
 
 from __future__ import annotations
