@@ -204,7 +204,7 @@ def result_table(doc: dict[str, Any]) -> Table:
               else f"{clock['drift_ppm'] - truth['drift_ppm']:+.2f} ppm")),
             ("clock residual [µs]", format_value(_scaled(clock["residual_s"], 1e6), ".1f"), None),
             ("coherence in band", format_value(quality["mean_coherence"], ".3f"), None),
-            ("encoder jitter [µs]" + (" (stamped)" if quality.get("encoder_time_stamps") else ""),
+            ("jitter after stamps [µs]" if quality.get("encoder_time_stamps") else "encoder jitter [µs]",
              format_value(quality.get("encoder_jitter_us"), ".1f"), None)]
     for name, value, compared in rows:
         row = [escape(name), value, ""]

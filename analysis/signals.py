@@ -259,23 +259,30 @@ def _validate(rec: Recording, torque_method: TorqueMethod) -> None:
 
 def _angle_on_grid(rec: Recording, span: encoder.Span, notes: list[str]) -> tuple[np.ndarray, EncoderJitter]:
     """The span's motor angle at k·T, rad — moved there with the drive's time stamps when they are
-    usable — and the sample-instant jitter left in it."""
+    usable and leave less position noise than the samples taken as k·T — and the jitter left in it."""
     cycles = rec.encoder_index[span.start:span.stop]
     theta = encoder.counts_to_rad(rec.position_counts[span.start:span.stop], rec.counts_per_rev)
-    deviation = None
-    if rec.drive_time_s is not None:
-        deviation = sample_instants.stamp_deviation_s(cycles, rec.drive_time_s[span.start:span.stop], rec.period_s)
-        if deviation is None:
-            notes.append("encoder: the drive's time stamps are not a scatter around its cycle grid (missing, "
-                         "or off by half a cycle or more); sample instants taken as k·T")
+    on_grid = sample_instants.estimate_jitter(theta, rec.period_s)
+    if rec.drive_time_s is None:
+        return theta, on_grid
+    deviation = sample_instants.stamp_deviation_s(cycles, rec.drive_time_s[span.start:span.stop], rec.period_s)
     if deviation is None:
-        return theta, sample_instants.estimate_jitter(theta, rec.period_s)
+        notes.append("encoder: the drive's time stamps are not a scatter around its cycle grid (missing, "
+                     "or off by half a cycle or more); sample instants taken as k·T")
+        return theta, on_grid
     spread = float(np.sqrt(np.mean(deviation**2)))
-    if spread > 1e-9:  # stamps on the grid (to rounding) leave the samples where they are
-        theta = sample_instants.angle_at_nominal_instants(theta, cycles, rec.period_s, deviation)
-        notes.append(f"encoder: sampled at the drive's own time stamps (RMS {1e6 * spread:.1f} µs off the "
-                     "cycle grid), moved to k·T")
-    return theta, sample_instants.estimate_jitter(theta, rec.period_s, stamped=True, stamp_spread_s=spread)
+    if spread <= 1e-9:  # stamps on the grid (to rounding) leave the samples where they are
+        return theta, replace(on_grid, stamped=True, stamp_spread_s=spread)
+    moved = sample_instants.angle_at_nominal_instants(theta, cycles, rec.period_s, deviation)
+    jitter = sample_instants.estimate_jitter(moved, rec.period_s, stamped=True, stamp_spread_s=spread)
+    if not jitter.sigma_s <= on_grid.sigma_s:  # coarse or false stamps: they would add the noise they should remove
+        notes.append(f"encoder: the drive's time stamps (RMS {1e6 * spread:.1f} µs off the cycle grid) leave more "
+                     f"position noise ({1e6 * jitter.sigma_s:.1f} µs) than k·T ({1e6 * on_grid.sigma_s:.1f} µs); "
+                     "sample instants taken as k·T")
+        return theta, on_grid
+    notes.append(f"encoder: sampled at the drive's own time stamps (RMS {1e6 * spread:.1f} µs off the "
+                 "cycle grid), moved to k·T")
+    return moved, jitter
 
 
 def _daq_run(rec: Recording) -> tuple[int, int, int, str]:

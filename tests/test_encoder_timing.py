@@ -168,3 +168,13 @@ def test_recorded_sessions_carry_the_drive_time_and_analyse_on_it(capsys: pytest
     assert res.quality.encoder_time_stamps and res.quality.encoder_jitter_s < 1e-6
     doc = result_json(session, res)["quality"]
     assert doc["encoder_time_stamps"] is True and doc["encoder_jitter_us"] == pytest.approx(1e6 * res.quality.encoder_jitter_s)
+
+
+def test_coarse_stamps_that_would_add_noise_are_ignored_with_a_note() -> None:
+    rec, truth, nominal = sim_recording(duration_s=4.0, seed=10)
+    coarse = np.round((rec.encoder_index * rec.period_s + 0.00037) / 3e-4) * 3e-4  # 0.3 ms steps, no jitter
+    res = analyze(replace(rec, drive_time_s=coarse), AnalysisOptions(nominal=nominal))
+    plain = analyze(rec, AnalysisOptions(nominal=nominal))
+    assert res.fit.values.K_Nm_per_rad == plain.fit.values.K_Nm_per_rad and not res.quality.encoder_time_stamps
+    assert any(n.startswith("encoder: the drive's time stamps (RMS ") and n.endswith("sample instants taken as k·T")
+               for n in res.notes)
