@@ -40,8 +40,9 @@ from acq.analyze import sha256_of
 from acq.catalogue import parse_tags, tag_option
 from acq.config import load_bench, load_profile
 from acq.csvtable import CsvTable, read_csv
+from acq.display import summary_table
 from acq.session import SessionWriter, load
-from acq.summary import summarize, summary_table
+from acq.summary import summarize
 from drivers.base import (CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, EventKind, StreamEvent,
                           StreamName)
 from drivers.config import Bench, Profile

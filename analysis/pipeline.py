@@ -16,7 +16,7 @@ from analysis.fit import FitKind, FitOptions, FitParams, FitResult, PARAM_NAMES,
 from analysis.encoder import longest_gap_free_span
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
 from analysis.model import TwoMassParams
-from analysis.quality import Quality, assess
+from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.report import FigureData, figure_data
 from analysis.signals import Recording, TorqueMethod, prepare_signals, prepare_signals_paper
 
@@ -152,7 +152,8 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     quality = assess(frf, fit, clock_residual_s=residual, encoder_jitter=sig.encoder_jitter)
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
-                  figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit),
+                  figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
+                                      phase_valid=phase_is_meaningful(residual)),
                   options=options, notes=tuple(sig.notes))
 
 

@@ -271,8 +271,8 @@ def _angle_on_grid(rec: Recording, span: encoder.Span, notes: list[str]) -> tupl
                      "or off by half a cycle or more); sample instants taken as k·T")
         return theta, on_grid
     spread = float(np.sqrt(np.mean(deviation**2)))
-    if spread <= 1e-9:  # stamps on the grid (to rounding) leave the samples where they are
-        return theta, replace(on_grid, stamped=True, stamp_spread_s=spread)
+    if spread <= 1e-9:  # exactly k·T: no clock's reading, just the cycle count (as k·T, and said so)
+        return theta, on_grid
     moved = sample_instants.angle_at_nominal_instants(theta, cycles, rec.period_s, deviation)
     jitter = sample_instants.estimate_jitter(moved, rec.period_s, stamped=True, stamp_spread_s=spread)
     if not jitter.sigma_s <= on_grid.sigma_s:  # coarse or false stamps: they would add the noise they should remove

@@ -178,3 +178,9 @@ def test_coarse_stamps_that_would_add_noise_are_ignored_with_a_note() -> None:
     assert res.fit.values.K_Nm_per_rad == plain.fit.values.K_Nm_per_rad and not res.quality.encoder_time_stamps
     assert any(n.startswith("encoder: the drive's time stamps (RMS ") and n.endswith("sample instants taken as k·T")
                for n in res.notes)
+
+
+def test_stamps_that_are_only_the_cycle_count_do_not_hide_the_jitter() -> None:
+    rec, _, nominal = sim_recording(duration_s=4.0, seed=11, sync_jitter_s=50e-6)
+    res = analyze(replace(rec, drive_time_s=rec.encoder_index * rec.period_s), AnalysisOptions(nominal=nominal))
+    assert not res.quality.encoder_time_stamps and res.quality.reasons[0].startswith(JITTER_REASON)
