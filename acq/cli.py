@@ -24,6 +24,7 @@ from acq.catalogue import CatalogueLocation, parse_tags, tag_option
 from acq.config import load_bench, load_profile
 from acq.devices import devices_command
 from acq.exporters import export_command
+from acq.fleet import fleet_command
 from acq.importers import import_command
 from acq.recorder import Recorder, RecordingResult
 from acq.session import load, repair
@@ -226,6 +227,7 @@ def check(session_path: Path) -> int:
 
 cli.add_command(devices_command)
 cli.add_command(trend_command)
+cli.add_command(fleet_command)
 cli.add_command(import_command)
 cli.add_command(export_command)
 cli.add_command(view_command)
