@@ -154,8 +154,10 @@ class Catalogue:
         self._db.close()
 
     def _execute(self, sql: str, params: Iterable[Any] = ()) -> Any:
-        """Run one statement written with ``?`` placeholders; return the cursor."""
-        return self._db.execute(self._dialect.sql(sql), tuple(params))
+        """Run one statement written with ``?`` placeholders; return the cursor. Booleans go in as 0/1, as SQLite
+        stores them (PostgreSQL refuses a boolean for an integer column)."""
+        values = tuple(int(p) if isinstance(p, bool) else p for p in params)
+        return self._db.execute(self._dialect.sql(sql), values)
 
     @contextmanager
     def _transaction(self) -> Iterator[Any]:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import re
 import sqlite3
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -55,8 +56,12 @@ class SQLiteDialect:
         except (OSError, sqlite3.Error) as e:
             raise ConfigError(f"{path}: cannot open the catalogue ({e})") from None
         db.row_factory = sqlite3.Row
-        db.execute("PRAGMA journal_mode=WAL")
-        db.execute("PRAGMA foreign_keys=ON")
+        try:
+            _set_wal(db)
+            db.execute("PRAGMA foreign_keys=ON")
+        except sqlite3.DatabaseError as e:
+            db.close()
+            raise ConfigError(f"{path}: not a usable catalogue ({e})") from None
         return db
 
     def sql(self, text: str) -> str:
@@ -77,6 +82,21 @@ class SQLiteDialect:
     def set_schema_version(self, db: Any, version: int) -> None:
         """Store the schema version (inside the migration's transaction)."""
         db.execute(f"PRAGMA user_version = {int(version)}")
+
+
+def _set_wal(db: sqlite3.Connection) -> None:
+    """Put the database in WAL mode (persistent). Switching a fresh file needs it to itself, and SQLite reports
+    "database is locked" at once rather than waiting out the busy timeout when several processes open a new
+    catalogue together: retry until the timeout."""
+    deadline = time.monotonic() + BUSY_TIMEOUT_S
+    while True:
+        try:
+            db.execute("PRAGMA journal_mode=WAL")
+            return
+        except sqlite3.OperationalError as e:
+            if "locked" not in str(e) or time.monotonic() > deadline:
+                raise
+            time.sleep(0.02)
 
 
 class PostgreSQLDialect:
@@ -156,6 +176,10 @@ class _Row:
 
     def __getitem__(self, key: int | str) -> Any:
         return self._values[key] if isinstance(key, int) else self._values[self._names[key.lower()]]
+
+    def keys(self) -> list[str]:
+        """The column names (lower case)."""
+        return list(self._names)
 
 
 def _case_insensitive_rows(cursor: Any) -> Callable[[Sequence[Any]], _Row]:

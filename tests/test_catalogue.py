@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -75,8 +76,9 @@ def test_a_newer_catalogue_is_refused(catalogue_location: Path | str, monkeypatc
 
 
 _WRITER = """
-import sys
+import sys, time
 from acq.catalogue import Catalogue, Outcome
+time.sleep(max(0.0, float(sys.argv[3]) - time.time()))  # all open the fresh catalogue together
 with Catalogue(sys.argv[1]) as c:
     for i in range(50):
         c.record(Outcome(f"/x/{sys.argv[2]}-{i}.h5", f"h{sys.argv[2]}-{i}", "r",
@@ -86,7 +88,8 @@ with Catalogue(sys.argv[1]) as c:
 
 def test_four_processes_writing_50_sessions_each_at_once_lose_nothing(catalogue_location: Path | str) -> None:
     """All four create and migrate the fresh catalogue at once, then write: 200 rows, none twice, none lost."""
-    writers = [subprocess.Popen([sys.executable, "-c", _WRITER, str(catalogue_location), f"w{n}"],
+    start = f"{time.time() + 4.0:.3f}"  # after the writers' imports (≈ 1 s, more under load)
+    writers = [subprocess.Popen([sys.executable, "-c", _WRITER, str(catalogue_location), f"w{n}", start],
                                 stderr=subprocess.PIPE, text=True) for n in range(4)]
     errors = [w.communicate(timeout=120)[1] for w in writers]
     assert [w.returncode for w in writers] == [0] * 4, errors
