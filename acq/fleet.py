@@ -156,7 +156,8 @@ def load_fleet(folder: Path | None, catalogue_path: Path | str | None, tags: Seq
     with Catalogue(catalogue_location(folder, catalogue_path)) as catalogue:
         entries = [e for e in catalogue.entries() if tags_match(e.tags, wanted)]
         if not any(e.joint is not None for e in entries):
-            raise ConfigError(f"{catalogue.path}: no sessions of any joint{' tagged ' + ' '.join(tags) if tags else ''}")
+            tagged = f" tagged {' '.join(tags)}" if tags else ""
+            raise ConfigError(f"{catalogue.path}: no sessions of any joint{tagged}")
     return fleet_status(entries, now=now, **options)
 
 

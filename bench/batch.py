@@ -64,8 +64,8 @@ def write_sessions(location: Path | str, writer: str, n: int, start: Any) -> Non
     start.wait()
     with Catalogue(location) as c:
         for i in range(n):
-            c.record(Outcome(f"/x/{writer}-{i}.h5", f"h-{writer}-{i}", "r", {"session_id": f"{writer}-{i}", "joint": "j"},
-                             None, "synthetic", 0.0))
+            meta = {"session_id": f"{writer}-{i}", "joint": "j"}
+            c.record(Outcome(f"/x/{writer}-{i}.h5", f"h-{writer}-{i}", "r", meta, None, "synthetic", 0.0))
 
 
 def concurrent_writes(location: Path | str, writers: int, writes: int) -> tuple[float, int]:
@@ -132,8 +132,8 @@ def main() -> None:
                 table.add_row(backend, name, f"{wall:.1f}", f"{60.0 * len(paths) / wall:.1f}", str(failed))
         table.caption = "load average (1, 5, 15 min) at the end: " + ", ".join(f"{x:.1f}" for x in os.getloadavg())
         console.print(table)
-        writes = Table(title=f"{args.writers} processes × {args.writes} sessions written at once into a fresh catalogue "
-                             "(one transaction each)")
+        writes = Table(title=f"{args.writers} processes × {args.writes} sessions written at once into a fresh "
+                             "catalogue (one transaction each)")
         for column in ("catalogue", "wall s", "sessions/s", "rows", "expected"):
             writes.add_column(column, justify="left" if column == "catalogue" else "right")
         for backend, location in (("SQLite (WAL)", Path(tmp) / "writes.sqlite"), ("PostgreSQL", new_database(server))):

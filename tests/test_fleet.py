@@ -60,7 +60,7 @@ def test_fleet_table_and_the_stale_limit(catalogue_location: Path | str, capsys:
     assert [r.split("│")[1].strip() + "/" + r.split("│")[2].strip() for r in rows] == ["r3/j1", "r1/j1", "r1/j2",
                                                                                           "r2/j1"]
     assert "-28.6" in rows[0] and "ALARM threshold" in rows[0]
-    assert "-0.4" in rows[2] and rows[2].rstrip(" │").endswith("ok")  # not stale within 20 days; ok, largest drop first
+    assert "-0.4" in rows[2] and rows[2].rstrip(" │").endswith("ok")  # not stale within 20 days; largest drop first
     quiet = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--tag", "robot=r2")
     assert quiet.code == 0 and "1 joints" in quiet.out
     none = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--tag", "site=C")
