@@ -92,7 +92,8 @@ DEFAULT_REQUEST: dict[str, Any] = {"torque": None, "params": "K,Jm,Jl", "fit": "
                                    "pipeline": "acq"}
 
 
-def record_outcome(done: SessionResult, request: dict[str, Any], catalogue_path: Path | None, seconds: float) -> Path:
+def record_outcome(done: SessionResult, request: dict[str, Any], catalogue_path: Path | str | None,
+                   seconds: float) -> Path | str:
     """Put one session's analysis (done outside a batch) into its catalogue; return the catalogue's path.
 
     The catalogue is ``catalogue_path`` or ``catalogue.sqlite`` in the session's folder, so a later
@@ -242,7 +243,7 @@ def report_json(report: BatchReport) -> list[dict[str, Any]]:
     return done + [{"path": str(p.resolve()), "outcome": "skipped"} for p in report.skipped]
 
 
-def analyze_many(spec: Path, request: dict[str, Any], *, jobs: int | None, catalogue_path: Path | None,
+def analyze_many(spec: Path, request: dict[str, Any], *, jobs: int | None, catalogue_path: Path | str | None,
                  scheduler: str | None, report: bool, as_json: bool, out: Console) -> int:
     """``acq analyze FOLDER|GLOB``: the batch, its table (or JSON) on ``out``; 1 when a session failed, else 0."""
     paths, base = find_sessions(spec)

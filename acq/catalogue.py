@@ -1,22 +1,23 @@
-"""The catalogue: one SQLite database of every session analysed, the health history of the joints.
+"""The catalogue: one database of every session analysed, the health history of the joints.
 
 Two tables. ``sessions`` holds what identifies a recording (id, path, joint, start time, tags);
 ``analyses`` one row per session and analysis request: the file's SHA-256, the options asked for
 (``request_key``) and resolved, K, J_m, J_l, C with their 95 % intervals, f_a, f_r, verdict and
 reasons, clock figures, software version — or the error when the analysis failed.
 
-The schema version is SQLite's ``user_version``; :data:`MIGRATIONS` brings an older database up to
-:data:`SCHEMA_VERSION` step by step, each step in its own transaction. Every write is one
-``BEGIN IMMEDIATE`` transaction in WAL mode with a busy timeout, so several processes (two
-``acq analyze`` runs, a cron job and a technician) can share a catalogue: writers queue, readers
-never block. Keep the file on a local disk — SQLite's locking is unreliable on network shares.
+The database is a SQLite file (the default) or, for several hosts sharing one history, a
+PostgreSQL server (``--catalogue postgresql://user@host/db``); the few things that differ between
+the two are in :mod:`acq.catalogue_backends`. :data:`MIGRATIONS` brings an older database up to
+:data:`SCHEMA_VERSION` step by step, each step in its own transaction, serialised between processes
+(SQLite's write lock, PostgreSQL's advisory lock). Every write is one transaction per session, an
+upsert, so several processes on one host (SQLite, WAL mode, busy timeout) or on many (PostgreSQL)
+can share a catalogue. Keep a SQLite file on a local disk — its locking is unreliable on network shares.
 """
 
 from __future__ import annotations
 
 import json
 import math
-import sqlite3
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
@@ -25,11 +26,9 @@ from typing import Any
 
 import click
 
+from acq.catalogue_backends import is_url, open_catalogue_db
 from acq.session import utc_now_iso
 from drivers.errors import ConfigError
-
-#: Seconds a writer waits for another process's transaction before giving up.
-BUSY_TIMEOUT_S = 60.0
 
 #: Step i brings a database from version i to i + 1.
 MIGRATIONS: tuple[str, ...] = (
@@ -124,24 +123,25 @@ class Catalogue:
     Parameters
     ----------
     path : Path or str
-        The SQLite file (created with its folder if missing).
+        The SQLite file (created with its folder if missing), or a ``postgresql://`` URL.
+
+    Attributes
+    ----------
+    path : Path or str
+        The SQLite file, or the URL without its password (for messages).
     """
 
     def __init__(self, path: Path | str):
-        self.path = Path(path)
+        self.path: Path | str
+        self._dialect, self._db, self.path = open_catalogue_db(path)
         try:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
-        except (OSError, sqlite3.Error) as e:
-            raise ConfigError(f"{self.path}: cannot open the catalogue ({e})") from None
-        self._db.row_factory = sqlite3.Row
-        try:
-            self._db.execute("PRAGMA journal_mode=WAL")
-            self._db.execute("PRAGMA foreign_keys=ON")
             self._migrate()
-        except sqlite3.DatabaseError as e:
+        except self._dialect.errors as e:
             self._db.close()
             raise ConfigError(f"{self.path}: not a usable catalogue ({e})") from None
+        except BaseException:
+            self._db.close()
+            raise
 
     def __enter__(self) -> Catalogue:
         return self
@@ -153,10 +153,16 @@ class Catalogue:
         """Close the database."""
         self._db.close()
 
+    def _execute(self, sql: str, params: Iterable[Any] = ()) -> Any:
+        """Run one statement written with ``?`` placeholders; return the cursor. Booleans go in as 0/1, as SQLite
+        stores them (PostgreSQL refuses a boolean for an integer column)."""
+        values = tuple(int(p) if isinstance(p, bool) else p for p in params)
+        return self._db.execute(self._dialect.sql(sql), values)
+
     @contextmanager
-    def _transaction(self) -> Iterator[sqlite3.Connection]:
-        """One write transaction holding the database's write lock from its start (waits for others)."""
-        self._db.execute("BEGIN IMMEDIATE")
+    def _transaction(self) -> Iterator[Any]:
+        """One write transaction (on SQLite holding the write lock from its start: waits for others)."""
+        self._db.execute(self._dialect.begin)
         try:
             yield self._db
         except BaseException:
@@ -167,12 +173,13 @@ class Catalogue:
     @property
     def schema_version(self) -> int:
         """The database's schema version."""
-        return int(self._db.execute("PRAGMA user_version").fetchone()[0])
+        return self._dialect.schema_version(self._db)
 
     def _migrate(self) -> None:
         while True:
             with self._transaction() as db:
-                version = self.schema_version  # read under the write lock: another process may have migrated
+                self._dialect.lock_schema(db)
+                version = self.schema_version  # read under the lock: another process may have migrated
                 if version > SCHEMA_VERSION:
                     raise ConfigError(f"{self.path}: catalogue schema version {version} is newer than this acq "
                                       f"knows ({SCHEMA_VERSION}) — update acq")
@@ -180,12 +187,12 @@ class Catalogue:
                     return
                 for statement in MIGRATIONS[version].split(";"):
                     if statement.strip():
-                        db.execute(statement)
-                db.execute(f"PRAGMA user_version = {version + 1}")
+                        db.execute(self._dialect.ddl(statement))
+                self._dialect.set_schema_version(db, version + 1)
 
     def current(self, request_key: str) -> set[str]:
         """SHA-256 of the files already analysed successfully with this request."""
-        rows = self._db.execute("SELECT sha256 FROM analyses WHERE request_key = ? AND error IS NULL", (request_key,))
+        rows = self._execute("SELECT sha256 FROM analyses WHERE request_key = ? AND error IS NULL", (request_key,))
         return {r[0] for r in rows}
 
     def record(self, outcome: Outcome) -> None:
@@ -210,28 +217,39 @@ class Catalogue:
             values |= {name: doc.get(name), f"{short}_lo": lo, f"{short}_hi": hi}
         columns = ", ".join(values)
         updates = ", ".join(f"{c} = excluded.{c}" for c in values if c not in ("session_key", "request_key"))
-        with self._transaction() as db:
-            db.execute(
+        with self._transaction():
+            self._execute(
                 "INSERT INTO sessions (session_key, session_id, path, joint, created_utc, start_monotonic_ns, status,"
                 " tags_json) VALUES (?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (session_key) DO UPDATE SET"
                 " path = excluded.path, status = excluded.status, tags_json = excluded.tags_json",
                 (key, meta.get("session_id"), str(Path(outcome.path).resolve()), meta.get("joint"),
                  meta.get("created_utc"), meta.get("start_monotonic_ns"), meta.get("status"),
                  json.dumps(meta.get("tags", {}))))
-            db.execute(f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"
+            self._execute(f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"
                        f" ON CONFLICT (session_key, request_key) DO UPDATE SET {updates}", tuple(values.values()))
 
     def entries(self, joint: str | None = None) -> list[Entry]:
         """Every session's analyses (one per request), oldest session first (all joints when ``joint`` is None)."""
-        rows = self._db.execute(
+        rows = self._execute(
             "SELECT s.*, a.* FROM sessions s JOIN analyses a ON a.session_key = s.session_key"
-            " WHERE (? IS NULL OR s.joint = ?)"
-            " ORDER BY s.created_utc, s.start_monotonic_ns, s.path, a.analyzed_utc, a.id", (joint, joint))
+            " WHERE (CAST(? AS TEXT) IS NULL OR s.joint = ?)"
+            " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path, a.analyzed_utc, a.id",
+            (joint, joint))
         return [_entry(r) for r in rows]
 
     def joints(self) -> list[str]:
         """The joints the catalogue knows."""
-        return [r[0] for r in self._db.execute("SELECT DISTINCT joint FROM sessions WHERE joint IS NOT NULL")]
+        return [r[0] for r in self._execute("SELECT DISTINCT joint FROM sessions WHERE joint IS NOT NULL")]
+
+
+class CatalogueLocation(click.ParamType):
+    """``--catalogue``: a SQLite file (a :class:`Path`) or a ``postgresql://`` URL (kept a str)."""
+
+    name = "PATH|URL"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Path | str:
+        """The URL as given, anything else as a path."""
+        return value if is_url(value) or isinstance(value, Path) else Path(value)
 
 
 #: ``--tag KEY=VALUE`` (repeatable) of the commands that make a session; :func:`parse_tags` reads it.
@@ -267,7 +285,7 @@ def tags_match(tags: dict[str, Any], wanted: dict[str, str | float]) -> bool:
     return all(key in tags and same(tags[key], want) for key, want in wanted.items())
 
 
-def _entry(r: sqlite3.Row) -> Entry:
+def _entry(r: Any) -> Entry:
     truth = json.loads(r["truth_json"]) if r["truth_json"] else {}
     return Entry(session_key=r["session_key"], session_id=r["session_id"], path=r["path"], joint=r["joint"],
                  created_utc=r["created_utc"], tags=json.loads(r["tags_json"]), verdict=r["verdict"],

@@ -20,11 +20,12 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 from acq import __version__
 from acq.analyze import SessionResult, analyze_session, draw_report
 from acq.batch import DEFAULT_REQUEST, analyze_many, is_batch, record_outcome
-from acq.catalogue import parse_tags, tag_option
+from acq.catalogue import CatalogueLocation, parse_tags, tag_option
 from acq.config import load_bench, load_profile
 from acq.devices import devices_command
 from acq.display import result_table, summary_table
 from acq.exporters import export_command
+from acq.fleet import fleet_command
 from acq.importers import import_command
 from acq.recorder import Recorder, RecordingResult
 from acq.session import load, repair
@@ -108,7 +109,7 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     return EXIT_INTERRUPTED if result.status == "interrupted" else 1
 
 
-def _identify(path: Path, request: dict[str, Any], *, report: bool, catalogue_path: Path | None) -> SessionResult:
+def _identify(path: Path, request: dict[str, Any], *, report: bool, catalogue_path: Path | str | None) -> SessionResult:
     """Analyse one session with ``request`` and put the result into its folder's catalogue."""
     start = time.perf_counter()
     done = analyze_session(path, report=report, **request)
@@ -164,13 +165,14 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
 @click.option("--no-report", is_flag=True, help="Do not draw <session>.report.png.")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Folder or glob: parallel analyses (default: the CPU count).")
-@click.option("--catalogue", "catalogue_path", type=click.Path(path_type=Path), default=None,
-              help="The SQLite catalogue to fill (default: catalogue.sqlite in the session's folder).")
+@click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
+              help="The catalogue to fill: a SQLite file (default: catalogue.sqlite in the session's folder) or a "
+                   "postgresql://user@host/db URL shared by several hosts.")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Folder or glob: run on a Dask distributed cluster (tcp://host:8786); the workers must reach "
                    "the session files at the same paths.")
 def analyze_command(session_path: Path, torque: str | None, params: str, fit_kind: str, band: str | None,
-                    paper: bool, as_json: bool, no_report: bool, jobs: int | None, catalogue_path: Path | None,
+                    paper: bool, as_json: bool, no_report: bool, jobs: int | None, catalogue_path: Path | str | None,
                     scheduler: str | None) -> int:
     """Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png.
 
@@ -226,6 +228,7 @@ def check(session_path: Path) -> int:
 
 cli.add_command(devices_command)
 cli.add_command(trend_command)
+cli.add_command(fleet_command)
 cli.add_command(import_command)
 cli.add_command(export_command)
 cli.add_command(view_command)

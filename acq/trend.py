@@ -29,7 +29,8 @@ import click
 from rich.console import Console
 
 from acq.batch import CATALOGUE_NAME
-from acq.catalogue import Catalogue, Entry, parse_tags, tags_match
+from acq.catalogue import Catalogue, CatalogueLocation, Entry, parse_tags, tags_match
+from acq.catalogue_backends import is_url
 from acq.display import trend_table
 from drivers.errors import ConfigError
 
@@ -308,19 +309,20 @@ def _category(p: TrendPoint) -> str:
     return "alarm: threshold" if p.threshold_alarm else "alarm: EWMA"
 
 
-def _catalogue_path(folder: Path | None, catalogue: Path | None) -> Path:
+def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Path | str:
+    """The catalogue to read: ``catalogue`` (a file or URL) or FOLDER/catalogue.sqlite; an error when no file."""
     path = catalogue or (folder or Path("sessions")) / CATALOGUE_NAME
-    if not path.is_file():
+    if not is_url(path) and not Path(path).is_file():
         raise ConfigError(f"{path}: no catalogue — fill one with acq analyze {folder or 'sessions'}/ first")
     return path
 
 
-def load_trend(folder: Path | None, catalogue_path: Path | None, joint: str, tags: Sequence[str] = (),
+def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: str, tags: Sequence[str] = (),
                **options: Any) -> Trend:
     """The trend of ``joint`` from a catalogue (``folder``/catalogue.sqlite or ``catalogue_path``), sessions
     filtered on ``tags`` (``KEY=VALUE``); ``options`` go to :func:`compute_trend`."""
     wanted = parse_tags(tags)
-    with Catalogue(_catalogue_path(folder, catalogue_path)) as catalogue:
+    with Catalogue(catalogue_location(folder, catalogue_path)) as catalogue:
         entries = [e for e in catalogue.entries(joint) if tags_match(e.tags, wanted)]
         if not entries:
             tagged = f" tagged {' '.join(tags)}" if tags else ""
@@ -331,8 +333,9 @@ def load_trend(folder: Path | None, catalogue_path: Path | None, joint: str, tag
 
 @click.command(name="trend")
 @click.argument("folder", required=False, type=click.Path(path_type=Path, file_okay=False))
-@click.option("--catalogue", "catalogue_path", type=click.Path(path_type=Path), default=None,
-              help="The catalogue (default: FOLDER/catalogue.sqlite, FOLDER defaulting to sessions/).")
+@click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
+              help="The catalogue, a file or postgresql:// URL (default: FOLDER/catalogue.sqlite, FOLDER defaulting "
+                   "to sessions/).")
 @click.option("--joint", required=True, help="The joint to trend.")
 @click.option("--baseline-sessions", type=click.IntRange(min=1), default=None,
               help="Baseline = mean K of the first N good sessions (default 1).")
@@ -345,7 +348,7 @@ def load_trend(folder: Path | None, catalogue_path: Path | None, joint: str, tag
 @click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
               help="Also draw the trend into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the trend as JSON.")
-def trend_command(folder: Path | None, catalogue_path: Path | None, joint: str, baseline_sessions: int | None,
+def trend_command(folder: Path | None, catalogue_path: Path | str | None, joint: str, baseline_sessions: int | None,
                   baseline_id: str | None, threshold_pct: float, ewma_lambda: float, tags: tuple[str, ...],
                   png_path: Path | None, as_json: bool) -> int:
     """K of a joint over time (± 95 %), f_a, f_r, baseline and alarms; exit code 3 while in alarm."""

@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING, Any
 import click
 
 from acq.analyze import analyze_session
+from acq.catalogue import CatalogueLocation
 from drivers.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -75,10 +76,10 @@ def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[
               help="Window / screenshot size WIDTHxHEIGHT, px.")
 @click.option("--trend", "trend_joint", default=None, metavar="JOINT",
               help="Show the stiffness trend of JOINT from the catalogue of the folder given (default sessions/).")
-@click.option("--catalogue", "catalogue_path", type=click.Path(path_type=Path), default=None,
-              help="With --trend: the catalogue (default: FOLDER/catalogue.sqlite).")
+@click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
+              help="With --trend: the catalogue, a file or postgresql:// URL (default: FOLDER/catalogue.sqlite).")
 def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tuple[int, int],
-                 trend_joint: str | None, catalogue_path: Path | None) -> int:
+                 trend_joint: str | None, catalogue_path: Path | str | None) -> int:
     """Show traces, FRF with the fitted model, coherence and identified values of SESSION(s);
     or, with --trend JOINT [FOLDER], the joint's stiffness over time."""
     if trend_joint is None and not sessions:

@@ -1,3 +1,38 @@
 """Shared fixtures. Tests import the installed package (``pip install -e ".[test]"``)."""
 
 from __future__ import annotations
+
+import importlib.util
+import os
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from tests.pg_server import new_database, server_binaries, throwaway_server
+
+
+@pytest.fixture(scope="session")
+def postgres_server() -> Iterator[str]:
+    """A throw-away PostgreSQL server for the session (its URL, no database). Skips when Debian's ``postgresql``
+    package or psycopg is missing — except in CI (``CI=true``), where the PostgreSQL tests must run: it fails."""
+    binaries = server_binaries()
+    missing = ("no PostgreSQL server: initdb/pg_ctl not under /usr/lib/postgresql/*/bin (apt-get install postgresql)"
+               if binaries is None else None)
+    if importlib.util.find_spec("psycopg") is None:
+        missing = "no psycopg 3 (pip install 'acq[fleet]')"
+    if missing:
+        if os.environ.get("CI", "").lower() in ("true", "1"):
+            pytest.fail(f"{missing} — CI must run the PostgreSQL tests", pytrace=False)
+        pytest.skip(missing)
+    assert binaries is not None
+    with throwaway_server(binaries) as url:
+        yield url
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def catalogue_location(request: pytest.FixtureRequest, tmp_path: Path) -> Path | str:
+    """A fresh, empty catalogue on each back end: a SQLite file, or a new database on the test server."""
+    if request.param == "sqlite":
+        return tmp_path / "catalogue.sqlite"
+    return new_database(request.getfixturevalue("postgres_server"))

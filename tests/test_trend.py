@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from acq.batch import DEFAULT_REQUEST, find_sessions, request_key, run_batch
-from acq.catalogue import MIGRATIONS, SCHEMA_VERSION, Catalogue, Entry
+from acq.catalogue import SCHEMA_VERSION, Catalogue, Entry
 from acq.trend import compute_trend
 from tests.helpers import run_cli
 
@@ -129,7 +129,7 @@ def test_failed_session_is_recorded_and_the_batch_continues(wear: Path, tmp_path
     (good,) = _copy_sessions(wear, folder, 1)
     (folder / "2026-01-01T00-00-00_joint1.h5").write_bytes(b"not an HDF5 file")
     run = run_cli(capsys, "analyze", str(folder / "*.h5"), "--jobs", "2", "--no-report", "--json")
-    assert run.code == 1
+    assert run.code == 1, run.err
     outcomes = {Path(o["path"]).name: o for o in json.loads(run.out)}
     assert outcomes[good.name]["outcome"] == "analysed" and outcomes[good.name]["verdict"] == "ok"
     broken = outcomes["2026-01-01T00-00-00_joint1.h5"]
@@ -139,14 +139,21 @@ def test_failed_session_is_recorded_and_the_batch_continues(wear: Path, tmp_path
     assert len(errors) == 2 and errors[0][0] == broken["error"] and errors[1][0] is None
 
 
-def test_dask_cluster_runs_the_same_batch(wear: Path, tmp_path: Path) -> None:
+def test_dask_cluster_runs_the_same_batch(wear: Path, tmp_path: Path, catalogue_location: Path | str,
+                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """acq analyze FOLDER --scheduler tcp://… --catalogue FILE|postgresql://… (the shared catalogue)."""
     distributed = pytest.importorskip("distributed")
-    paths = _copy_sessions(wear, tmp_path / "dask", 2)
+    folder = tmp_path / "dask"
+    _copy_sessions(wear, folder, 2)
     with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=False, protocol="tcp",
-                                  dashboard_address=None) as cluster, Catalogue(tmp_path / "c.sqlite") as catalogue:
-        done = run_batch(paths, catalogue, REQUEST, scheduler=cluster.scheduler_address, report=False)
+                                  dashboard_address=None) as cluster:
+        run = run_cli(capsys, "analyze", str(folder), "--scheduler", cluster.scheduler_address, "--catalogue",
+                      str(catalogue_location), "--no-report", "--json")
+    assert run.code == 0, run.err
+    assert [o["outcome"] for o in json.loads(run.out)] == ["analysed"] * 2
+    with Catalogue(catalogue_location) as catalogue:
         found = catalogue.entries("joint1")
-    assert not done.failed and len(done.outcomes) == 2
+    assert len(found) == 2
     with Catalogue(wear / "catalogue.sqlite") as pool_catalogue:
         pool = {e.session_id: e.K_Nm_per_rad for e in pool_catalogue.entries("joint1")
                 if e.request_key == request_key(REQUEST)}
@@ -180,20 +187,6 @@ def test_two_processes_share_a_catalogue(wear: Path, tmp_path: Path) -> None:
             assert db.execute("SELECT COUNT(*) FROM analyses").fetchone()[0] == rows
             assert db.execute("SELECT COUNT(*) FROM sessions").fetchone()[0] == rows
             assert db.execute("PRAGMA user_version").fetchone()[0] == SCHEMA_VERSION
-
-
-def test_an_older_catalogue_is_migrated_with_its_rows(tmp_path: Path) -> None:
-    path = tmp_path / "v1.sqlite"
-    with sqlite3.connect(path) as db:
-        db.executescript(MIGRATIONS[0] + "PRAGMA user_version = 1;")
-        db.execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc) "
-                   "VALUES ('s1', 's1', '/a.h5', 'joint1', '2026-01-01T00:00:00+00:00')")
-        db.execute("INSERT INTO analyses (session_key, sha256, request_key, analyzed_utc, verdict, K_Nm_per_rad, K_lo,"
-                   " K_hi) VALUES ('s1', 'h', '{}', '2026-01-01T00:01:00+00:00', 'ok', 890.0, 880.0, 900.0)")
-    with Catalogue(path) as catalogue:
-        assert catalogue.schema_version == SCHEMA_VERSION > 1
-        (entry,) = catalogue.entries("joint1")
-    assert entry.K_Nm_per_rad == 890.0 and entry.tags == {} and entry.K_ci95 == (880.0, 900.0)
 
 
 def test_view_shows_the_trend_window(wear: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

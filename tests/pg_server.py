@@ -1,0 +1,81 @@
+"""A throw-away PostgreSQL server for the tests and ``bench/batch.py``: Debian's ``postgresql`` package's
+``initdb`` + ``pg_ctl`` in a temporary folder, listening on a free port of 127.0.0.1 and on a unix
+socket in that folder. PostgreSQL refuses to run as root, so as root the server runs as ``nobody``.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+import pwd
+import shutil
+import socket
+import subprocess
+import tempfile
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+
+def server_binaries() -> Path | None:
+    """The newest ``/usr/lib/postgresql/<major>/bin`` holding ``initdb`` and ``pg_ctl`` (None when absent)."""
+    found = [Path(p).parent for p in glob.glob("/usr/lib/postgresql/*/bin/initdb")
+             if Path(p).with_name("pg_ctl").exists()]
+    return max(found, key=lambda p: int(p.parent.name) if p.parent.name.isdigit() else 0, default=None)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+@contextmanager
+def throwaway_server(binaries: Path, durable: bool = False) -> Iterator[str]:
+    """Start a server, yield its URL without a database (``postgresql://acq@127.0.0.1:PORT``), then remove it.
+
+    Parameters
+    ----------
+    binaries : Path
+        The folder with ``initdb`` and ``pg_ctl`` (:func:`server_binaries`).
+    durable : bool
+        Keep ``fsync`` on (for benchmarks); the tests turn it off, as nothing must survive a crash.
+    """
+    root = Path(tempfile.mkdtemp(prefix="acq-pg-"))
+    as_user: list[str] = []
+    if os.geteuid() == 0:
+        nobody = pwd.getpwnam("nobody")
+        os.chown(root, nobody.pw_uid, nobody.pw_gid)
+        as_user = ["runuser", "-u", "nobody", "--"]
+    root.chmod(0o700)
+    data, port = root / "data", _free_port()
+    env = {**os.environ, "LC_ALL": "C"}
+    settings = (f"-c listen_addresses=127.0.0.1 -p {port} -c unix_socket_directories={root} -c max_connections=60"
+                + ("" if durable else " -c fsync=off -c synchronous_commit=off"))
+
+    def run(*args: str) -> None:
+        done = subprocess.run([*as_user, *args], cwd=root, env=env, capture_output=True, text=True, timeout=120)
+        if done.returncode != 0:
+            log = (root / "log").read_text() if (root / "log").exists() else ""
+            raise RuntimeError(f"{' '.join(args[:2])} failed ({done.returncode}): {done.stderr.strip()} {log[-2000:]}")
+
+    try:
+        run(str(binaries / "initdb"), "-D", str(data), "-U", "acq", "-A", "trust", "-E", "UTF8", "--no-sync")
+        run(str(binaries / "pg_ctl"), "-D", str(data), "-l", str(root / "log"), "-w", "-o", settings, "start")
+        try:
+            yield f"postgresql://acq@127.0.0.1:{port}"
+        finally:
+            run(str(binaries / "pg_ctl"), "-D", str(data), "-m", "immediate", "-w", "stop")
+    finally:
+        shutil.rmtree(root, ignore_errors=True)
+
+
+def new_database(server_url: str) -> str:
+    """Create an empty database on the server; return its URL."""
+    import psycopg
+
+    name = f"t_{uuid.uuid4().hex[:12]}"
+    with psycopg.connect(f"{server_url}/postgres", autocommit=True) as db:
+        db.execute(f"CREATE DATABASE {name}")
+    return f"{server_url}/{name}"

@@ -1,0 +1,111 @@
+"""The catalogue on both back ends — a SQLite file and a real PostgreSQL server (``postgres_server`` in
+conftest.py) — with the same schema, migrations, upserts, and many concurrent writers."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import acq.catalogue
+from acq.catalogue import MIGRATIONS, SCHEMA_VERSION, Catalogue, Outcome
+from tests.helpers import run_cli
+
+
+def _outcome(session_id: str, k: float | None, *, request: str = "r", joint: str = "j1",
+             error: str | None = None) -> Outcome:
+    doc = None if k is None else {
+        "options": {}, "analyzed_utc": "2026-01-02T00:00:00+00:00", "acq_version": "t", "K_Nm_per_rad": k,
+        "ci95": {"K_Nm_per_rad": [k - 5.0, k + 5.0]}, "quality": {"verdict": "ok", "reasons": []},
+        "antiresonance_hz": 55.0, "resonance_hz": 102.0}
+    meta = {"session_id": session_id, "joint": joint, "created_utc": f"2026-01-01T00:00:{session_id[-2:]}+00:00",
+            "start_monotonic_ns": 2**62 + 1, "status": "complete", "tags": {"robot": "r1", "payload_kg": 2.5}}
+    return Outcome(f"/bench/{session_id}.h5", f"sha-{session_id}", request, meta, doc, error, 1.5)
+
+
+def test_record_upserts_and_reads_back_the_same_on_both_back_ends(catalogue_location: Path | str) -> None:
+    with Catalogue(catalogue_location) as c:
+        assert c.schema_version == SCHEMA_VERSION
+        c.record(_outcome("s-01", 890.123456789))
+        c.record(_outcome("s-02", None, error="s-02.h5: too short"))
+        c.record(_outcome("s-01", 880.5))  # same session and request: replaces
+        c.record(_outcome("s-01", 870.0, request="other"))  # another request: a second analysis
+        c.record(_outcome("s-03", 860.0, joint="j2"))
+        entries = c.entries("j1")
+        assert sorted(c.joints()) == ["j1", "j2"] and len(c.entries()) == 4
+        assert c.current("r") == {"sha-s-01", "sha-s-03"} and c.current("other") == {"sha-s-01"}
+    assert [(e.session_id, e.request_key, e.K_Nm_per_rad) for e in entries] == [
+        ("s-01", "r", 880.5), ("s-01", "other", 870.0), ("s-02", "r", None)]
+    first = entries[0]
+    assert first.K_ci95 == (875.5, 885.5) and first.tags == {"robot": "r1", "payload_kg": 2.5}
+    assert first.f_a_hz == 55.0 and first.verdict == "ok" and entries[2].error == "s-02.h5: too short"
+    with Catalogue(catalogue_location) as c:  # reopened: no migration to run, doubles kept to the last bit
+        c.record(_outcome("s-04", 890.123456789))
+        assert c.entries("j1")[-1].K_Nm_per_rad == 890.123456789
+
+
+def test_an_older_catalogue_is_migrated_with_its_rows(catalogue_location: Path | str,
+                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(acq.catalogue, "SCHEMA_VERSION", 1)
+    with Catalogue(catalogue_location) as old, old._transaction():
+        assert old.schema_version == 1
+        old._execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc) "
+                     "VALUES ('s1', 's1', '/a.h5', 'joint1', '2026-01-01T00:00:00+00:00')")
+        old._execute("INSERT INTO analyses (session_key, sha256, request_key, analyzed_utc, verdict, K_Nm_per_rad,"
+                     " K_lo, K_hi) VALUES ('s1', 'h', '{}', '2026-01-01T00:01:00+00:00', 'ok', 890.0, 880.0, 900.0)")
+    monkeypatch.undo()
+    with Catalogue(catalogue_location) as catalogue:
+        assert catalogue.schema_version == SCHEMA_VERSION == len(MIGRATIONS) > 1
+        (entry,) = catalogue.entries("joint1")
+    assert entry.K_Nm_per_rad == 890.0 and entry.tags == {} and entry.K_ci95 == (880.0, 900.0)
+
+
+def test_a_newer_catalogue_is_refused(catalogue_location: Path | str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(acq.catalogue, "MIGRATIONS", (*MIGRATIONS, "CREATE TABLE later (x TEXT)"))
+    monkeypatch.setattr(acq.catalogue, "SCHEMA_VERSION", SCHEMA_VERSION + 1)
+    Catalogue(catalogue_location).close()
+    monkeypatch.undo()
+    with pytest.raises(acq.catalogue.ConfigError) as error:
+        Catalogue(catalogue_location)
+    assert str(error.value).endswith(f": catalogue schema version {SCHEMA_VERSION + 1} is newer than this acq knows "
+                                     f"({SCHEMA_VERSION}) — update acq")
+
+
+_WRITER = """
+import sys, time
+from acq.catalogue import Catalogue, Outcome
+time.sleep(max(0.0, float(sys.argv[3]) - time.time()))  # all open the fresh catalogue together
+with Catalogue(sys.argv[1]) as c:
+    for i in range(50):
+        c.record(Outcome(f"/x/{sys.argv[2]}-{i}.h5", f"h{sys.argv[2]}-{i}", "r",
+                         {"session_id": f"{sys.argv[2]}-{i}", "joint": "j"}, None, "synthetic", 0.0))
+"""
+
+
+def test_four_processes_writing_50_sessions_each_at_once_lose_nothing(catalogue_location: Path | str) -> None:
+    """All four create and migrate the fresh catalogue at once, then write: 200 rows, none twice, none lost."""
+    start = f"{time.time() + 4.0:.3f}"  # after the writers' imports (≈ 1 s, more under load)
+    writers = [subprocess.Popen([sys.executable, "-c", _WRITER, str(catalogue_location), f"w{n}", start],
+                                stderr=subprocess.PIPE, text=True) for n in range(4)]
+    errors = [w.communicate(timeout=120)[1] for w in writers]
+    assert [w.returncode for w in writers] == [0] * 4, errors
+    with Catalogue(catalogue_location) as c:
+        entries = c.entries()
+        counts = [c._execute(f"SELECT COUNT(*) FROM {table}").fetchone()[0] for table in ("sessions", "analyses")]
+        assert c.schema_version == SCHEMA_VERSION
+    assert counts == [200, 200]
+    assert sorted(e.session_id for e in entries) == sorted(f"w{n}-{i}" for n in range(4) for i in range(50))
+
+
+def test_an_unreachable_server_is_one_line(capsys: pytest.CaptureFixture[str]) -> None:
+    url = "postgresql://acq:secret@127.0.0.1:1/fleet"  # port 1: nothing listens
+    if os.environ.get("CI", "").lower() not in ("true", "1"):
+        pytest.importorskip("psycopg")
+    run = run_cli(capsys, "trend", "--catalogue", url, "--joint", "j1")
+    assert run.code == 2 and run.out == ""
+    assert run.err.startswith("acq: error: postgresql://acq:***@127.0.0.1:1/fleet: cannot open the catalogue (")
+    assert "secret" not in run.err and len(run.err.strip().splitlines()) == 1

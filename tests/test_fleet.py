@@ -1,0 +1,67 @@
+"""``acq fleet`` on a catalogue of three joints of two robots (one in alarm, one stale, one ok) plus a robot of
+another site, on both catalogue back ends."""
+
+from __future__ import annotations
+
+import json
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+
+import pytest
+
+from acq.catalogue import Catalogue, Outcome
+from tests.helpers import run_cli
+
+#: (robot, joint, site, hours before now, K N·m/rad or None for a failed analysis)
+SESSIONS = [("r1", "j1", "A", h, k) for h, k in ((50, 900.0), (40, 901.0), (30, 899.0), (3, 760.0))] + \
+           [("r1", "j2", "A", h, k) for h, k in ((260, 500.0), (250, 502.0), (240, 498.0))] + \
+           [("r2", "j1", "A", h, k) for h, k in ((30, 1000.0), (20, 1003.0), (10, 998.0), (5, None), (2, 1001.0))] + \
+           [("r3", "j1", "B", h, k) for h, k in ((30, 700.0), (1, 500.0))]
+
+
+def _fill(location: Path | str) -> None:
+    now = datetime.now(UTC)
+    with Catalogue(location) as c:
+        for n, (robot, joint, site, hours, k) in enumerate(SESSIONS):
+            doc = None if k is None else {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [k - 5, k + 5]},
+                                          "quality": {"verdict": "ok", "reasons": []}}
+            meta = {"session_id": f"s{n:02d}", "joint": joint, "tags": {"robot": robot, "site": site},
+                    "created_utc": (now - timedelta(hours=hours)).isoformat(timespec="seconds")}
+            c.record(Outcome(f"/x/s{n:02d}.h5", f"h{n}", "r", meta, doc, None if k else "s.h5: too short", 1.0))
+
+
+def test_fleet_lists_joints_worst_first_and_exits_3_on_an_alarm(catalogue_location: Path | str, tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    _fill(catalogue_location)
+    png = tmp_path / "fleet.png"
+    run = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--tag", "site=A", "--json",
+                  "--png", str(png))
+    assert run.code == 3, run.err
+    joints = json.loads(run.out)
+    assert [(j["robot"], j["joint"], j["state"]) for j in joints] == [
+        ("r1", "j1", "alarm"), ("r1", "j2", "stale"), ("r2", "j1", "ok")]
+    alarm, stale, ok = joints
+    assert alarm["change_pct"] == pytest.approx(100 * (760 / 900 - 1)) and alarm["K_ci95"] == [755.0, 765.0]
+    assert alarm["reason"].startswith("threshold") and alarm["baseline_K_Nm_per_rad"] == 900.0
+    assert (alarm["analysed_last_day"], alarm["excited_last_day"]) == (1, 1)
+    assert stale["change_pct"] == pytest.approx(100 * (498 / 500 - 1)) and stale["analysed_last_day"] == 0
+    assert ok["K_Nm_per_rad"] == 1001.0 and ok["change_pct"] == pytest.approx(0.1)
+    assert (ok["analysed_last_day"], ok["excited_last_day"]) == (4, 3)  # 20, 10, 5 (failed), 2 h ago
+    assert png.read_bytes()[:4] == b"\x89PNG" and png.stat().st_size > 10_000
+
+
+def test_fleet_table_and_the_stale_limit(catalogue_location: Path | str, capsys: pytest.CaptureFixture[str],
+                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("COLUMNS", "250")  # one line per row
+    _fill(catalogue_location)
+    run = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--stale-days", "20")
+    assert run.code == 3, run.err
+    rows = [line for line in run.out.splitlines() if line.startswith("│")]
+    assert [r.split("│")[1].strip() + "/" + r.split("│")[2].strip() for r in rows] == ["r3/j1", "r1/j1", "r1/j2",
+                                                                                          "r2/j1"]
+    assert "-28.6" in rows[0] and "ALARM threshold" in rows[0]
+    assert "-0.4" in rows[2] and rows[2].rstrip(" │").endswith("ok")  # not stale within 20 days; largest drop first
+    quiet = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--tag", "robot=r2")
+    assert quiet.code == 0 and "1 joints" in quiet.out
+    none = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--tag", "site=C")
+    assert none.code == 2 and none.err.strip().endswith(": no sessions of any joint tagged site=C")
