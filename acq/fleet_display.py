@@ -13,7 +13,7 @@ from typing import Any
 
 from rich.table import Table
 
-from acq.analyze import format_value
+from acq.display import format_value
 from acq.fleet import JointStatus
 
 _STYLES = {"alarm": "bold red", "stale": "yellow", "no baseline": "dim", "ok": ""}
