@@ -1,0 +1,123 @@
+"""Why a misfit check passes a third mode and backlash: the two-mass fit's residual, printed (issue #13).
+
+For each scenario run (bench/scenarios.py, recorded through the real recorder) it prints what the
+verdict's misfit check sees — the weighted RMS misfit of ln|H| and its ratio to what the coherence
+explains — and what a structure test would see: the number of sign runs of the weighted residual
+(per bin), its autocorrelation at lags 1, 3, 5 bins, and the mean misfit of |H| (%) with the
+coherence's predicted σ (%) in bands relative to the fitted resonance f_r. With ``--refit`` it also
+refits a three-mass model (a third inertia on a spring behind the load, seen through the same Welch
+kernel, noise gain and fold-over as the two-mass fit) and prints how far K and J_m move, where the
+third mode lands and how much of the cost it removes.
+
+    nice -n 10 python bench/misfit_structure.py --scenarios 1,10,11,12,13,14 --seeds 2 --refit
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+from pathlib import Path
+
+import numpy as np
+from scipy import optimize
+
+from analysis.fit import COHERENCE_CLIP, FitResult, _Problem, band_mask
+from analysis.frf import FrequencyResponse
+from bench.scenarios import SCENARIOS, analyse, clock_for, errors_pct, record
+
+# Bands of the residual table, as multiples of the fitted resonance f_r (the last one runs to the band's top).
+BAND_EDGES_FR = (0.0, 1.0, 1.5, 2.0, 2.5, 3.0, np.inf)
+
+
+class ThreeMassProblem(_Problem):
+    """The two-mass fit's residuals with a third mass J_3 on a spring K_3 (damping C_3) behind the load.
+
+    Free parameters (natural logs): K, J_m, J_l, C, J_3, K_3, C_3.
+    """
+
+    def response(self, x: np.ndarray, f_hz: np.ndarray) -> np.ndarray:
+        """Torque → motor speed of the three-mass chain, (rad/s)/(N·m), at ``f_hz`` (Hz)."""
+        k, jm, jl, c, j3, k3, c3 = np.exp(x)
+        s = 2j * np.pi * f_hz
+        z_third = 1.0 / (1.0 / (k3 / s + c3) + 1.0 / (s * j3))
+        return 1.0 / (s * jm + 1.0 / (1.0 / (k / s + c) + 1.0 / (s * jl + z_third)))
+
+    def log_ratio(self, x: np.ndarray) -> np.ndarray:
+        """ln(H_model/H_meas) with the Welch kernel, noise gain and fold-over of the two-mass fit."""
+        h = self.gain * np.sum(self.response(x, self.f_fine) * self.kernel, axis=1)
+        for up, a, down, b in self.fold:
+            h = h + self.response(x, up) * a + np.conj(self.response(x, down)) * b
+        return np.log(h) - self.log_h
+
+
+def refit_three_mass(frf: FrequencyResponse, fit: FitResult) -> tuple[float, float, float, float]:
+    """Best three-mass fit from third-mode starts at 20/40/60/80 % (log) of the band: (K shift, J_m shift, f_3 Hz,
+    cost ratio three/two)."""
+    v = fit.values
+    problem = ThreeMassProblem(frf, fit.band, fit.options, v)
+    lo, hi = fit.band
+    best = None
+    for pos in (0.2, 0.4, 0.6, 0.8):
+        j3 = 0.3 * v.Jl_kgm2
+        k3 = j3 * (2.0 * np.pi * lo * (hi / lo) ** pos) ** 2
+        x0 = np.log([v.K_Nm_per_rad, v.Jm_kgm2, v.Jl_kgm2, v.C_Nms_per_rad, j3, k3, 0.1 * np.sqrt(k3 * j3)])
+        res = optimize.least_squares(problem.residuals, x0, method="lm", max_nfev=400)
+        if np.isfinite(res.cost) and (best is None or res.cost < best.cost):
+            best = res
+    k, jm, _, _, j3, k3, _ = np.exp(best.x)
+    return (k / v.K_Nm_per_rad - 1.0, jm / v.Jm_kgm2 - 1.0, float(np.sqrt(k3 / j3) / (2 * np.pi)),
+            float(best.cost / fit.cost))
+
+
+def residual_structure(frf: FrequencyResponse, fit: FitResult) -> dict[str, object]:
+    """Sign runs per bin, autocorrelation at lags 1/3/5, and per band of f_r: mean misfit of |H| (%) and the
+    coherence's σ of ln|H| (%)."""
+    problem = _Problem(frf, fit.band, fit.options, fit.values)
+    z = problem.log_ratio(problem.x0(fit.values)).real
+    e = problem.sqrt_w * z
+    sign = np.sign(e)
+    r = e - e.mean()
+    g2 = np.clip(frf.coherence[band_mask(frf.f_hz, fit.band) & np.isfinite(frf.H) & (np.abs(frf.H) > 0)],
+                 0.0, COHERENCE_CLIP)
+    sigma = np.sqrt((1.0 - g2) / (2.0 * frf.n_segments * g2))
+    bands = []
+    for a, b in zip(BAND_EDGES_FR[:-1], BAND_EDGES_FR[1:]):
+        sel = (problem.f >= a * fit.f_r) & (problem.f < b * fit.f_r)
+        bands.append((100 * float(np.mean(z[sel])), 100 * float(np.sqrt(np.mean(sigma[sel] ** 2))))
+                     if np.any(sel) else (np.nan, np.nan))
+    return {"runs_per_bin": float(1 + np.sum(sign[1:] != sign[:-1])) / e.size,
+            "acf": [float(r[:-k] @ r[k:] / (r @ r)) for k in (1, 3, 5)], "bands": bands}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--scenarios", default="1,10,11,12,13,14", help="comma-separated scenario numbers 1…48")
+    ap.add_argument("--seeds", type=int, default=2, help="seeds 0 … N−1")
+    ap.add_argument("--refit", action="store_true", help="also refit a three-mass model")
+    args = ap.parse_args()
+    head = " | ".join(f"{a:g}–{b:g}" for a, b in zip(BAND_EDGES_FR[:-1], BAND_EDGES_FR[1:]))
+    print(f"mean misfit of |H| % (coherence σ %) in bands of f_r: {head}")
+    for number in (int(s) for s in args.scenarios.split(",")):
+        sc = SCENARIOS[number - 1]
+        for seed in range(args.seeds):
+            offset_s, drift_ppm = sc.clock if sc.clock is not None else clock_for(seed, number - 1)
+            with tempfile.TemporaryDirectory(prefix="acq-misfit-") as tmp:
+                path, truth = record(sc, seed, offset_s, drift_ppm, Path(tmp))
+                res = analyse(path)
+            err = errors_pct(res, truth)
+            q, fit = res.quality, res.fit
+            line = (f"{number:2d} {sc.name[:36]:36s} s{seed} {q.verdict:6s} K {err['K_Nm_per_rad']:+5.1f} % "
+                    f"J_l {err['Jl_kgm2']:+5.1f} % | rms {q.residual_rms:.3f} ratio {q.misfit_ratio:.2f}")
+            if fit.status != "failed":
+                st = residual_structure(res.frf, fit)
+                acf = " ".join(f"{a:.2f}" for a in st["acf"])  # type: ignore[union-attr]
+                bands = " ".join(f"{m:+.0f}({s:.1f})" for m, s in st["bands"])  # type: ignore[union-attr]
+                line += f" runs/bin {st['runs_per_bin']:.2f} acf1,3,5 {acf} | {bands}"
+                if args.refit:
+                    dk, djm, f3, cost = refit_three_mass(res.frf, fit)
+                    line += f" | 3-mass: K {100 * dk:+.1f} % J_m {100 * djm:+.1f} % f_3 {f3:.0f} Hz cost ×{cost:.2f}"
+            print(line, flush=True)
+
+
+if __name__ == "__main__":
+    main()
