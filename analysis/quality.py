@@ -108,6 +108,7 @@ def assess(
     fit: FitResult,
     *,
     clock_residual_s: float | None = None,
+    inseparable_hz: tuple[float, ...] = (),
     thresholds: Thresholds = Thresholds(),
 ) -> Quality:
     """Judge an identification from its FRF, its fit and the clock alignment.
@@ -120,6 +121,9 @@ def assess(
         The fit of the two-mass model to ``frf``.
     clock_residual_s : float or None, optional
         RMS residual of the clock alignment, s; None when the caller did not align (not judged).
+    inseparable_hz : tuple of float, optional
+        Lines on the phase current that the torque estimate could not tell apart from the torque
+        (:attr:`analysis.torque.Interference.inseparable_hz`), Hz; each makes the result poor.
     thresholds : Thresholds, optional
         Limits of the verdict.
 
@@ -181,6 +185,11 @@ def assess(
         if not clock_residual_s <= limit:
             findings.append(("poor", f"clock alignment residual {1e6 * clock_residual_s:.0f} µs exceeds "
                                      f"{1e6 * limit:.0f} µs for a {fit.options.kind} fit"))
+
+    for f_hz in inseparable_hz:
+        findings.append(("poor", f"a {f_hz:.1f} Hz line on the phase current cannot be told apart from the torque "
+                                 f"(the motor turns at that electrical frequency for long): remove it at its source "
+                                 f"(mains hum: grounding and shielding; PWM ripple: the DAQ's anti-alias filter)"))
 
     findings.sort(key=lambda fv: -_RANK[fv[0]])
     verdict: Verdict = findings[0][0] if findings else "ok"
