@@ -93,3 +93,20 @@ def test_an_inseparable_line_makes_the_verdict_poor_naming_its_frequency(session
     q = assess(res.frf, res.fit, clock_residual_s=res.clock.residual_s, inseparable_hz=(50.0,))
     assert res.quality.verdict == "ok" and q.verdict == "poor"
     assert q.reasons[0].startswith("a 50.0 Hz line on the phase current cannot be told apart from the torque")
+
+
+def test_intervals_from_the_session_hold_the_truth_without_being_several_times_the_error():
+    """Six short sessions: the 95 % interval holds the truth in ≥ 5 of 6 for each of K, J_m, J_l, and its
+    half-width is under 5× the RMS error over the seeds (measured: 2.4…4×, the systematic floor of 0.4 %
+    dominating; the Jacobian with that floor gave ±1.8 % at an RMS error of 0.3 %, ≈ 6×)."""
+    inside, half, err = [], [], []
+    for seed in range(6):
+        rec, truth, nominal = sim_recording(duration_s=6.0, seed=20 + seed, daq_offset_s=0.015 + 0.005 * seed,
+                                            daq_drift_ppm=30.0)
+        res = analyze(rec, AnalysisOptions(nominal=nominal))
+        inside.append([res.fit.ci95[n][0] <= truth[n] <= res.fit.ci95[n][1] for n in NAMES])
+        half.append([res.quality.ci_rel_halfwidth[n] for n in NAMES])
+        err.append([getattr(res.fit.values, n) / truth[n] - 1.0 for n in NAMES])
+    assert np.all(np.sum(inside, axis=0) >= 5)
+    rms = np.sqrt(np.mean(np.square(err), axis=0))
+    assert np.all(np.median(half, axis=0) < 5.0 * rms), (np.median(half, axis=0), rms)
