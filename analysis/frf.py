@@ -19,7 +19,7 @@ Two effects the fit models instead of ignoring (:func:`estimate_frf` measures wh
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import signal
@@ -29,6 +29,8 @@ from analysis.encoder import difference_response
 
 KERNEL_PER_BIN = 8
 KERNEL_HALF_WIDTH_BINS = 4
+# below this many blocks the jackknife variance has too few degrees of freedom to be worth its cost
+MIN_JACKKNIFE_BLOCKS = 4
 
 
 class RecordTooShortError(ValueError):
@@ -63,6 +65,9 @@ class FrequencyResponse:
         None when unknown (taken as 0).
     alias : ndarray of complex or None
         Shape (k, 2, n_bins): A_k and B_k of the fold-over terms, k = 1, 2, …; None when unknown.
+    replicates : tuple of FrequencyResponse or None
+        The same estimate with one contiguous block of segments left out, one per block (the
+        delete-one-block jackknife of :func:`analysis.fit.fit_two_mass`); None when not asked for.
     """
 
     f_hz: np.ndarray
@@ -75,6 +80,7 @@ class FrequencyResponse:
     period_s: float
     noise_ratio: np.ndarray | None = None
     alias: np.ndarray | None = None
+    replicates: tuple[FrequencyResponse, ...] | None = None
 
 
 def min_duration_s(segment_s: float, overlap: float = 0.5) -> float:
@@ -134,6 +140,7 @@ def estimate_frf(
     overlap: float = 0.5,
     torque_noise_Nm: np.ndarray | None = None,
     torque_alias_Nm: np.ndarray | None = None,
+    jackknife_blocks: int = 0,
 ) -> FrequencyResponse:
     """Estimate H1 = G_xy/G_xx and the coherence from torque and backward-difference speed.
 
@@ -153,6 +160,10 @@ def estimate_frf(
         A realisation of the torque estimate's noise on the same grid, N·m (for ``noise_ratio``).
     torque_alias_Nm : ndarray of complex or None, optional
         Shape (k, n): the torque shifted down by 1/T, 2/T, … and read on the grid, N·m (for ``alias``).
+    jackknife_blocks : int, optional
+        Also estimate the response with each of this many contiguous blocks of segments left out
+        (``replicates``, for the fit's delete-one-block jackknife). Fewer blocks when the record holds
+        fewer than two segments per block; none below :data:`MIN_JACKKNIFE_BLOCKS`.
 
     Returns
     -------
@@ -176,30 +187,46 @@ def estimate_frf(
     n_segments = 1 + (x.size - nperseg) // step
     seg = _Segments(nperseg, step, fs)
     X, Y = seg.fft(x), seg.fft(y)
-    f = np.fft.rfftfreq(nperseg, period_s)
-    gxx, gyy, gxy = seg.density(X, X).real, seg.density(Y, Y).real, seg.density(X, Y)
+    N = None if torque_noise_Nm is None else seg.fft(np.asarray(torque_noise_Nm, dtype=float))
+    U = None if torque_alias_Nm is None else [seg.fft(uk) for uk in np.atleast_2d(torque_alias_Nm)]
     n_fine = KERNEL_PER_BIN * nperseg
     _, gxx_fine = signal.welch(x, fs=fs, window="hann", nperseg=min(n_fine, x.size), nfft=n_fine,
                                detrend="linear")
+    full = _response(seg, X, Y, N, U, gxx_fine, period_s)
+    blocks = min(jackknife_blocks, n_segments // 2)
+    if blocks < MIN_JACKKNIFE_BLOCKS:
+        return full
+    # delete-one-block replicates: the segments of one contiguous stretch of the record left out
+    block = np.arange(n_segments) * blocks // n_segments
+    reps = tuple(_response(seg, X[keep], Y[keep], None if N is None else N[keep],
+                           None if U is None else [u[keep] for u in U], gxx_fine, period_s)
+                 for keep in (block != b for b in range(blocks)))
+    return replace(full, replicates=reps)
+
+
+def _response(seg: _Segments, X: np.ndarray, Y: np.ndarray, N: np.ndarray | None, U: list[np.ndarray] | None,
+              gxx_fine: np.ndarray, period_s: float) -> FrequencyResponse:
+    """H1, coherence and the noise / fold-over terms averaged over the segment FFTs given."""
+    f = np.fft.rfftfreq(seg.nperseg, period_s)
+    gxx, gyy, gxy = seg.density(X, X).real, seg.density(Y, Y).real, seg.density(X, Y)
     with np.errstate(divide="ignore", invalid="ignore"):
         h = gxy / gxx / difference_response(f, period_s)
         coh = np.abs(gxy) ** 2 / (gxx * gyy)
     coh = np.clip(np.nan_to_num(coh, nan=0.0), 0.0, 1.0)
     noise_ratio = alias = None
-    if torque_noise_Nm is not None:
-        N = seg.fft(np.asarray(torque_noise_Nm, dtype=float))
+    if N is not None:
         with np.errstate(divide="ignore", invalid="ignore"):
             noise_ratio = np.clip(np.nan_to_num(seg.density(N, N).real / gxx, nan=0.0), 0.0, 0.5)
-    if torque_alias_Nm is not None:
-        alias = _fold_over(seg, X, np.atleast_2d(torque_alias_Nm), f.size)
+    if U is not None:
+        alias = _fold_over(seg, X, U, f.size)
     return FrequencyResponse(
         f_hz=f,
         H=h,
         coherence=coh,
         torque_psd=gxx,
         torque_psd_fine=gxx_fine,
-        segment_s=nperseg * period_s,
-        n_segments=n_segments,
+        segment_s=seg.nperseg * period_s,
+        n_segments=X.shape[0],
         period_s=period_s,
         noise_ratio=noise_ratio,
         alias=alias,
@@ -234,16 +261,16 @@ class _Segments:
         return g
 
 
-def _fold_over(seg: _Segments, X: np.ndarray, u: np.ndarray, n_bins: int) -> np.ndarray:
+def _fold_over(seg: _Segments, X: np.ndarray, u_fft: list[np.ndarray], n_bins: int) -> np.ndarray:
     """A_k = G_{x u_k}/G_xx and B_k = G_{x ū_k}/G_xx at the one-sided bins, shape (k, 2, n_bins).
 
-    ``X`` is the torque's one-sided segment FFT; the FFT of conj(u) at bin f is conj(U(−f)).
+    ``X`` is the torque's one-sided segment FFT, ``u_fft`` the two-sided segment FFTs of each u_k;
+    the FFT of conj(u) at bin f is conj(U(−f)).
     """
-    out = np.zeros((u.shape[0], 2, n_bins), complex)
+    out = np.zeros((len(u_fft), 2, n_bins), complex)
     gxx = np.mean(np.abs(X) ** 2, axis=0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        for k, uk in enumerate(u):
-            U = seg.fft(uk)
+        for k, U in enumerate(u_fft):
             U_neg = np.conj(U[:, (-np.arange(n_bins)) % seg.nperseg])
             out[k, 0] = np.nan_to_num(np.mean(np.conj(X) * U[:, :n_bins], axis=0) / gxx)
             out[k, 1] = np.nan_to_num(np.mean(np.conj(X) * U_neg, axis=0) / gxx)

@@ -42,9 +42,12 @@ class Thresholds:
         Weighted RMS misfit of ln|H| (≈ relative misfit of |H|) that makes such a misfit poor /
         failed.
     ci_K_poor, ci_K_failed : float
-        Relative half-width of the 95 % interval of K. The interval holds the truth in ≥ 90 % of
-        simulated runs, so its width is the precision; 10 s sessions of plants scaled 0.5…2 give
-        ±1…4 % (K) and ±1…5 % (J), which is "ok" — a tighter limit flipped good results to poor.
+        Relative half-width of the 95 % interval of K. The interval comes from the session's own
+        scatter (jackknife over blocks of Welch segments) plus the chain's systematic floor of
+        :data:`analysis.fit.SYSTEMATIC_REL_STD`, so its width is the precision; 10 s simulated
+        sessions of plants scaled 0.5…2 give ±0.8…0.9 % on K, J_m, J_l. These limits remain
+        constants: what precision is "ok" is the user's requirement (K to a few % to see wear), not
+        something the data can tell.
     ci_J_poor, ci_J_failed : float
         Relative half-width of the 95 % intervals of J_m and J_l (when fitted).
     clock_residual_amplitude_s, clock_residual_complex_s : float
@@ -124,6 +127,7 @@ def assess(
     fit: FitResult,
     *,
     clock_residual_s: float | None = None,
+    inseparable_hz: tuple[float, ...] = (),
     thresholds: Thresholds = Thresholds(),
     encoder_jitter: EncoderJitter | None = None,
 ) -> Quality:
@@ -137,6 +141,9 @@ def assess(
         The fit of the two-mass model to ``frf``.
     clock_residual_s : float or None, optional
         RMS residual of the clock alignment, s; None when the caller did not align (not judged).
+    inseparable_hz : tuple of float, optional
+        Lines on the phase current that the torque estimate could not tell apart from the torque
+        (:attr:`analysis.torque.Interference.inseparable_hz`), Hz; each makes the result poor.
     thresholds : Thresholds, optional
         Limits of the verdict.
     encoder_jitter : EncoderJitter or None, optional
@@ -203,6 +210,10 @@ def assess(
 
     if encoder_jitter is not None and np.isfinite(encoder_jitter.sigma_s) and np.any(in_band):
         findings[:0] = _jitter_findings(frf, fit, in_band, encoder_jitter, th)  # the cause first
+    for f_hz in inseparable_hz:
+        findings.append(("poor", f"a {f_hz:.1f} Hz line on the phase current cannot be told apart from the torque "
+                                 f"(the motor turns at that electrical frequency for long): remove it at its source "
+                                 f"(mains hum: grounding and shielding; PWM ripple: the DAQ's anti-alias filter)"))
 
     findings.sort(key=lambda fv: -_RANK[fv[0]])
     verdict: Verdict = findings[0][0] if findings else "ok"

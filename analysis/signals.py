@@ -30,6 +30,9 @@ _MARGIN_S = 0.1
 _PASS_FRACTION = 0.4  # anti-alias pass edge, × encoder rate
 _STOP_FRACTION = 0.6  # anti-alias stop edge, × encoder rate
 ALIAS_ORDERS = 2  # torque near k·f_enc, k = 1 … ALIAS_ORDERS, folded by the encoder's sampling
+# lines removed from the current are listed in the notes from this amplitude on (smaller ones, often
+# the motion's own residual content at a line's frequency, are removed too but not worth a word)
+_NOTE_MIN_LINE_A = 1e-3
 
 
 @dataclass(frozen=True)
@@ -120,6 +123,9 @@ class PreparedSignals:
     encoder_jitter : EncoderJitter or None
         The encoder's sample-instant jitter left in ``speed_rad_s`` (after the drive's time stamps, if
         any), estimated from the data (:mod:`analysis.sample_instants`).
+    interference : tuple of Interference
+        What the encoder method removed from the current besides the torque, one per chunk of the
+        record (:func:`analysis.torque.torque_encoder`); empty for the other methods.
     """
 
     t_s: np.ndarray
@@ -134,6 +140,7 @@ class PreparedSignals:
     torque_noise_Nm: np.ndarray | None = None
     torque_alias_Nm: np.ndarray | None = None
     encoder_jitter: EncoderJitter | None = None
+    interference: tuple[torque.Interference, ...] = ()
 
 
 def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", align: bool = True,
@@ -205,6 +212,7 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
     noise = np.empty(t_s.size) if torque_method == "encoder" and resampling == "antialias" else None
     alias = np.empty((ALIAS_ORDERS, t_s.size), complex) if sign is None and resampling == "antialias" else None
     theta0 = np.nan if sign is not None else clock.theta0_rad  # NaN: the first chunk estimates it
+    found: list[torque.Interference] = []
     for a, b, m0, m1 in _chunks(current["i_a"].size, rec.rate_hz):
         t0 = (n0 + a - m0) / rec.rate_hz
         sel = (t_daq >= (n0 + a) / rec.rate_hz) & (t_daq < (n0 + b) / rec.rate_hz)
@@ -215,7 +223,7 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
         if sign is None:
             t_drive = clock.drive_time_s(t_piece)
             tq, theta0 = _demodulated(piece, rec, angle(t_drive), torque_method, theta0,
-                                      noise_seed=a if noise is not None else None)
+                                      noise_seed=a if noise is not None else None, found=found)
             if noise is not None:
                 tq, tq_noise = tq
                 noise[sel] = resample.to_instants(tq_noise, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
@@ -232,8 +240,9 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
             out[sel] = resample.to_instants(tq, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
         else:
             out[sel] = resample.linear_at(tq, rec.rate_hz, t0, t_daq[sel])
+    notes.extend(_interference_notes(found))
     prepared = PreparedSignals(t_s, out, speed, rec.period_s, clock, torque_method, align, theta0, notes,
-                               noise, alias, jitter)
+                               noise, alias, jitter, tuple(found))
     return _signed(prepared) if sign is None else prepared
 
 
@@ -329,8 +338,24 @@ def _chunks(n: int, rate_hz: float) -> Iterator[tuple[int, int, int, int]]:
         yield a, b, min(margin, a), min(margin, n - b)
 
 
+def _interference_notes(found: list[torque.Interference]) -> list[str]:
+    """One note on the lines and the offset drift removed from the current (strongest chunk's values)."""
+    lines: dict[float, float] = {}
+    for f in found:
+        for hz, amp in zip(f.lines_hz, f.amplitude_a):
+            if amp >= _NOTE_MIN_LINE_A:
+                key = round(hz, 1)
+                lines[key] = max(lines.get(key, 0.0), amp)
+    drift = max((f.offset_drift_a for f in found), default=0.0)
+    if not lines:
+        return [f"current: sensor offset drifted by {1e3 * drift:.0f} mA (removed)"] if drift >= 5e-3 else []
+    text = ", ".join(f"{hz:.1f} Hz ({1e3 * a:.0f} mA)" for hz, a in sorted(lines.items()))
+    return [f"current: removed interference lines at {text}; sensor offset drifted by {1e3 * drift:.0f} mA"]
+
+
 def _demodulated(piece: dict[str, np.ndarray], rec: Recording, theta_m_rad: np.ndarray, method: TorqueMethod,
-                 theta0: float, noise_seed: int | None = None) -> tuple[np.ndarray, float]:
+                 theta0: float, noise_seed: int | None = None,
+                 found: list[torque.Interference] | None = None) -> tuple[np.ndarray, float]:
     """Torque of one chunk by the encoder or park method, and the θ_0 used (mod π; estimated if NaN).
 
     With ``noise_seed`` (encoder method) the torque comes with a noise realisation, shape (2, n).
@@ -341,7 +366,7 @@ def _demodulated(piece: dict[str, np.ndarray], rec: Recording, theta_m_rad: np.n
             theta0 = torque.phase_offset(piece["i_a"], theta_e, rec.rate_hz).theta0_rad
         # the sensor DC is estimated jointly by the spline fit, θ_0 refined there
         return torque.torque_encoder(piece["i_a"], theta_e, rec.rate_hz, rec.k_t_Nm_per_A,
-                                     torque.PhaseOffset(theta0, 0.0, 0), noise_seed=noise_seed), theta0
+                                     torque.PhaseOffset(theta0, 0.0, 0), noise_seed=noise_seed, found=found), theta0
     offsets = {name: torque.phase_offset(c, theta_e, rec.rate_hz) for name, c in piece.items()}
     theta0 = offsets["i_a"].theta0_rad if np.isnan(theta0) else theta0
     return torque.torque_park(piece, theta_e, rec.k_t_Nm_per_A, theta0, {n: o.dc_a for n, o in offsets.items()}), theta0

@@ -19,11 +19,14 @@ SIM_TOML = Path(__file__).resolve().parent.parent / "configs" / "benches" / "sim
 NAMES = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")
 
 
-def sim_recording(accel_time_s: float = 0.2, duration_s: float = 10.0, **sim: object) -> tuple[Recording, dict, TwoMassParams]:
+def sim_recording(accel_time_s: float = 0.2, duration_s: float = 10.0, daq_rate_hz: float | None = None,
+                  **sim: object) -> tuple[Recording, dict, TwoMassParams]:
     """A recording of the simulated bench (blocks of 0.1 s, host stamps with jitter), its truth, nominal."""
     with SIM_TOML.open("rb") as f:
         bench = Bench.model_validate(tomllib.load(f))
     bench = bench.model_copy(update={"sim": bench.sim.model_copy(update=sim)})
+    if daq_rate_hz is not None:
+        bench = bench.model_copy(update={"daq": bench.daq.model_copy(update={"rate_hz": daq_rate_hz})})
     bench_sim = SimBench(bench, realtime=False)
     bench_sim.start_motion(Profile(kind="triangle", top_speed_rpm=1000.0, accel_time_s=accel_time_s,
                                    decel_time_s=accel_time_s, duration_s=duration_s), 0.0)
