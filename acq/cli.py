@@ -25,6 +25,7 @@ from acq.config import load_bench, load_profile
 from acq.devices import devices_command
 from acq.exporters import export_command
 from acq.importers import import_command
+from acq.monitor_cli import monitor_command
 from acq.recorder import Recorder, RecordingResult
 from acq.session import load, repair
 from acq.summary import summarize, summary_table
@@ -228,6 +229,7 @@ cli.add_command(trend_command)
 cli.add_command(import_command)
 cli.add_command(export_command)
 cli.add_command(view_command)
+cli.add_command(monitor_command)
 
 
 def main(argv: list[str] | None = None) -> None:

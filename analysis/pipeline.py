@@ -109,6 +109,7 @@ class Result:
             "clock": {"offset_s": _num(self.clock.offset_s), "drift_ppm": _num(self.clock.drift_ppm),
                       "residual_s": _num(self.clock.residual_s)},
             "quality": {"verdict": self.quality.verdict, "mean_coherence": _num(self.quality.mean_coherence),
+                        "excitation_coherence": _num(self.quality.excitation_coherence),
                         "reasons": [*self.quality.reasons, *(f"note: {n}" for n in self.notes)]},
             "options": {**self.options.to_json_dict(), "band_hz": list(self.fit.band)},
         }
