@@ -164,7 +164,7 @@ class Monitor:
         self.on_status = on_status
         self._stop: str | None = None
         self._recorder: Recorder | None = None
-        self._windows: dict[str, WindowFiles] = {}  # by resolved path
+        self._windows: dict[str, WindowFiles] = {}  # by session id (a moved folder is still the same monitor)
         self._pending: dict[Future[Outcome], str] = {}
         self._alarm_procs: list[subprocess.Popen[bytes]] = []
         self._in_alarm = False
@@ -220,8 +220,8 @@ class Monitor:
             result = recorder.run()
         finally:
             self._recorder = None
-        key = str(result.path.resolve())
-        self._windows[key] = WindowFiles(n, result.path, False, False)
+        key = str(load(result.path).attrs["session_id"])
+        self._windows[key] = WindowFiles(n, result.path, False, False, key)
         self._size = max(self._size, int(_SIZE_MARGIN * result.path.stat().st_size))
         if result.status != "complete":
             self._mark(key, "interrupted", f"window capture {result.status}: {result.stop_reason}")
@@ -233,8 +233,12 @@ class Monitor:
                                             "waiting): this window was skipped")
             self.status.skipped += 1
             return
-        self._pending[pool.submit(analyse_window, key, sha256_of(result.path), self.s.request)] = key
+        self._submit(pool, key)
         self._show()
+
+    def _submit(self, pool: Any, key: str) -> None:
+        path = self._windows[key].path
+        self._pending[pool.submit(analyse_window, str(path.resolve()), sha256_of(path), self.s.request)] = key
 
     def _collect(self, at_most: int | None) -> None:
         """Record the finished analyses; first wait until at most ``at_most`` are left (None: do not wait)."""
@@ -250,17 +254,17 @@ class Monitor:
                 try:
                     outcome = future.result()
                 except Exception as e:  # noqa: BLE001 - the worker itself died: the window is marked, not lost
-                    outcome = marked(key, sha256_of(Path(key)), self.s.request, {}, "not analysed",
-                                     [f"worker failed: {type(e).__name__}: {e}"])
+                    self._mark(key, "not analysed", f"worker failed: {type(e).__name__}: {e}")
+                    continue
                 self._record(key, outcome)
 
     def _mark(self, key: str, verdict: str, reason: str) -> None:
-        path = Path(key)
+        path = self._windows[key].path
         try:
             meta = session_meta(load(path))
         except Exception:  # noqa: BLE001 - a window too broken to read is still marked
             meta = {}
-        self._record(key, marked(key, sha256_of(path), self.s.request, meta, verdict, [reason]))
+        self._record(key, marked(str(path.resolve()), sha256_of(path), self.s.request, meta, verdict, [reason]))
 
     def _record(self, key: str, outcome: Outcome) -> None:
         """Catalogue one window, update the trend, the alarm and the figures, apply retention."""
@@ -270,8 +274,7 @@ class Monitor:
         self.status.excited += verdict in ("ok", "poor", "failed")
         self.status.not_excited += verdict == "not excited"
         self.status.interrupted += verdict == "interrupted"
-        if key in self._windows:
-            self._windows[key] = replace(self._windows[key], done=True)
+        self._windows[key] = replace(self._windows[key], done=True)
         trend = self._trend()
         self._judge(trend, key)
         self._retain(trend)
@@ -293,7 +296,7 @@ class Monitor:
             st.last_K, st.last_K_ci, st.change_pct = last.entry.K_Nm_per_rad, last.entry.K_ci95, last.change_pct
         st.state = "alarm" if trend.alarm else ("ok" if trend.judged else
                                                 "baseline" if trend.baseline_K_Nm_per_rad else "learning baseline")
-        point = next((p for p in trend.points if p.entry.path == key), None)
+        point = next((p for p in trend.points if p.entry.session_id == key), None)
         if point is None or point.state not in ("ok", "alarm"):
             return
         if point.state == "alarm" and not self._in_alarm:
@@ -329,13 +332,13 @@ class Monitor:
     # ---- retention and disk ----------------------------------------------------------------------------
     def _retain(self, trend: Trend) -> None:
         # "before baseline": good windows that will make the baseline once there are enough of them
-        protected = {p.entry.path for p in trend.points if p.state in ("baseline", "alarm", "before baseline")}
+        protected = {p.entry.session_id for p in trend.points if p.state in ("baseline", "alarm", "before baseline")}
         for key, w in self._windows.items():
             if (key in protected) != w.protected:
                 self._windows[key] = replace(w, protected=key in protected)
         for w in to_delete(self._windows.values(), self.s.keep):
             delete(w)
-            del self._windows[str(w.path.resolve())]
+            del self._windows[w.key]
         self.status.disk_bytes = folder_bytes(self.s.out_dir)
 
     def _room_for_window(self) -> bool:
@@ -345,26 +348,25 @@ class Monitor:
         if fits:
             for w in victims:
                 delete(w)
-                del self._windows[str(w.path.resolve())]
+                del self._windows[w.key]
         self.status.disk_bytes = folder_bytes(self.s.out_dir)
         return fits
 
     # ---- resume after a crash --------------------------------------------------------------------------
     def _resume(self, pool: Any) -> int:
         """Mark or analyse the windows a previous run left; return the next window's number."""
-        known = {e.path: e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags}
+        known = {e.session_id: e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags}
         numbers = [int(e.tags[WINDOW_TAG]) for e in known.values()]
         for path in sorted(self.s.out_dir.glob("*.h5")):
-            key = str(path.resolve())
             try:
                 session = load(path)
             except Exception:  # noqa: BLE001 - not a readable session: not ours to judge
                 continue
             if WINDOW_TAG not in session.tags:
                 continue
-            n = int(session.tags[WINDOW_TAG])
+            n, key = int(session.tags[WINDOW_TAG]), str(session.attrs["session_id"])
             numbers.append(n)
-            self._windows[key] = WindowFiles(n, path, key in known, False)
+            self._windows[key] = WindowFiles(n, path, key in known, False, key)
             if key in known:
                 continue
             if session.status == "recording":
@@ -373,7 +375,7 @@ class Monitor:
             elif session.status != "complete":
                 self._mark(key, "interrupted", f"window capture {session.status}: {session.attrs.get('stop_reason')}")
             else:
-                self._pending[pool.submit(analyse_window, key, sha256_of(path), self.s.request)] = key
+                self._submit(pool, key)
         self._retain(self._trend())
         self._collect(at_most=0)
         return max(numbers, default=-1) + 1

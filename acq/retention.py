@@ -25,12 +25,14 @@ class WindowFiles:
     path : its session file.
     done : analysed or marked (its catalogue row is written).
     protected : a baseline or alarming window (never deleted).
+    key : what the caller knows the window by (e.g. its session id).
     """
 
     index: int
     path: Path
     done: bool
     protected: bool
+    key: str = ""
 
 
 def raw_files(session_path: Path) -> list[Path]:

@@ -171,7 +171,7 @@ class SimSettings(Strict):
     elapsed_s: NonNegFloat = 0.0
     robot_idle_fraction: float = Field(default=0.15, ge=0.0, le=1.0)  # program cycles that are a long wait
     robot_payload_max_kg: NonNegFloat = 2.0  # payload per program cycle, uniform in 0 … this, kg at the arm's tip
-    K_decay_pct_per_hour: float = Field(default=0.0, ge=0.0, lt=100.0)  # wear: K falls linearly with elapsed_s
+    K_decay_pct_per_hour: NonNegFloat = 0.0  # wear: K falls linearly with elapsed_s
 
     def K_at_start_Nm_per_rad(self) -> float:
         """The true K at this session's start (``elapsed_s``) after the wear ``K_decay_pct_per_hour``, N·m/rad."""
