@@ -94,11 +94,13 @@ class MonitorStatus:
 
 
 def not_excited(quality: dict[str, Any]) -> bool:
-    """True when a verdict that is not ok comes from the excitation checks (coherence f_a…f_r or in band)."""
+    """True when a verdict that is not ok comes from the excitation checks: coherence between f_a and f_r, or in
+    the whole band, below the verdict's own "poor" limits (:class:`analysis.quality.Thresholds`)."""
     th = Thresholds()
     exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
-    return quality.get("verdict") != "ok" and (exc is None or not exc >= th.excitation_poor
-                                               or mean is None or not mean >= th.coherence_poor)
+    weak_between = exc is not None and not exc >= th.excitation_poor
+    weak_in_band = mean is None or not mean >= th.coherence_poor
+    return quality.get("verdict") != "ok" and (weak_between or weak_in_band)
 
 
 def marked(path: str, sha256: str, request: dict[str, Any], meta: dict[str, Any], verdict: str, reasons: list[str],
@@ -129,6 +131,7 @@ def analyse_window(path: str, sha256: str, request: dict[str, Any]) -> Outcome:
     outcome = analyze_one(path, sha256, request, False)
     if outcome.doc is not None and not_excited(outcome.doc["quality"]):
         reasons = [r for r in outcome.doc["quality"]["reasons"] if not r.startswith("note: ")]
+        reasons.sort(key=lambda r: "coherence" not in r)  # the excitation's own reasons first
         return replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
                        seconds=outcome.seconds)
     return outcome

@@ -20,6 +20,9 @@ from drivers.registry import open_bench
 from tests.helpers import run_cli
 
 ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
+#: With this seed the robot program excites the joint in each of the windows at 0, 1, … 5 min (verdict ok);
+#: with the shipped seed 0 three of them are "not excited" (measured; the analysis' coherence decides).
+EXCITING_SEED = 5
 
 
 def _bench(**sim: float) -> Bench:
@@ -97,12 +100,13 @@ def test_monitor_refuses_a_bench_that_commands_motion(capsys: pytest.CaptureFixt
 
 @pytest.fixture(scope="module")
 def four_windows(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A --fast monitor of 4 windows (seed 0: all four excite), baseline 2 windows, raw files of the last 1 kept."""
+    """A --fast monitor of 4 windows (all four excite), baseline 2 windows, raw files of the last 1 kept."""
     from acq.cli import main
 
     out = tmp_path_factory.mktemp("monitor")
+    bench = _bench_file(tmp_path_factory.mktemp("bench"), seed=EXCITING_SEED)
     with pytest.raises(SystemExit) as exc:
-        main(["monitor", "--bench", str(ROBOT), "--fast", "--window", "10", "--every", "60", "--for", "4m",
+        main(["monitor", "--bench", str(bench), "--fast", "--window", "10", "--every", "60", "--for", "4m",
               "--baseline-windows", "2", "--keep", "1", "--out", str(out)])
     assert exc.value.code == 0
     return out
@@ -128,7 +132,7 @@ def test_retention_keeps_the_baseline_and_the_last_windows_and_every_catalogue_r
 def test_restart_resumes_numbering_and_marks_an_interrupted_window(four_windows: Path, tmp_path: Path) -> None:
     out = tmp_path / "resumed"
     shutil.copytree(four_windows, out)
-    bench = _bench()
+    bench = _bench(seed=EXCITING_SEED)
     # a window whose capture was cut (the monitor killed): status stays "recording"
     writer = SessionWriter(out / "cut.h5", bench=bench, profile=None,
                            current_info=CurrentSourceInfo(rate_hz=25600.0, channels=("i_a",), device="sim-daq"),
@@ -139,8 +143,8 @@ def test_restart_resumes_numbering_and_marks_an_interrupted_window(four_windows:
     with pytest.raises(SystemExit) as exc:
         from acq.cli import main
 
-        main(["monitor", "--bench", str(ROBOT), "--fast", "--for", "1m", "--baseline-windows", "2", "--keep", "1",
-              "--out", str(out)])
+        main(["monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for", "1m",
+              "--baseline-windows", "2", "--keep", "1", "--out", str(out)])
     assert exc.value.code == 0
     rows = _rows(out)
     assert [r["window"] for r in rows] == [0, 1, 2, 3, 4, 5]
@@ -163,7 +167,7 @@ def test_a_window_of_a_paused_robot_is_not_excited_and_has_no_K(capsys: pytest.C
 def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: pytest.CaptureFixture[str],
                                                                        tmp_path: Path) -> None:
     # K falls 5 % per simulated minute: windows at 0, 1, 2, 3 min have K −0, −5, −10, −15 %
-    bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0)
+    bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0, seed=EXCITING_SEED)
     env_file = tmp_path / "alarm.env"
     run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "4m", "--baseline-windows", "2",
                   "--keep", "0", "--out", str(tmp_path / "m"),

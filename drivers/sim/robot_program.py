@@ -6,7 +6,7 @@ cycles of :data:`CYCLE_S`; cycle c is drawn from ``(seed, c)`` alone, so any cyc
 reproducible without simulating the ones before it:
 
 * with probability ``robot_idle_fraction`` the robot waits the whole cycle (no motion: nothing excites);
-* otherwise it leaves home for 2…5 targets and returns, each move a trapezoid speed profile (accelerate
+* otherwise it moves between random targets until the cycle is full and returns home, each move a trapezoid speed profile (accelerate
   in ``accel_s``, cruise, decelerate in ``accel_s``; a triangle when the move is too short to reach
   the top speed) of random length, top speed and acceleration time, with a pause after each move;
 * the payload (kg at the arm's tip) is drawn per cycle; it changes the gravity load the drive carries.
@@ -24,12 +24,12 @@ import numpy as np
 
 from drivers.motion import RPM_TO_RAD_S
 
-#: One program cycle, s: long enough for five moves and their pauses (the longest draw needs < 14 s).
+#: One program cycle, s: moves fill it (the robot returns home before its end).
 CYCLE_S = 15.0
 _TARGET_RAD = 12.0            # targets within ±12 rad of home on the motor side (±69° of arm at ratio 10)
 _SPEED_RPM = (400.0, 1500.0)  # top speed of a move
 _ACCEL_S = (0.08, 0.3)        # time to reach the top speed (sets the torque step and so the excitation)
-_PAUSE_S = (0.2, 1.2)         # pause after a move
+_PAUSE_S = (0.1, 0.8)         # pause after a move
 
 
 @dataclass(frozen=True)
@@ -96,14 +96,22 @@ class RobotProgram:
         payload = float(rng.uniform(0.0, self.payload_max_kg))
         if rng.random() < self.idle_fraction:
             return Cycle(payload, ())
-        targets = [*rng.uniform(-_TARGET_RAD, _TARGET_RAD, int(rng.integers(2, 6))), 0.0]
-        moves, t, here = [], float(rng.uniform(*_PAUSE_S)), 0.0
-        for target in targets:
-            move = Move(t, target - here, float(rng.uniform(*_SPEED_RPM)) * RPM_TO_RAD_S, float(rng.uniform(*_ACCEL_S)))
+        moves: list[Move] = []
+        t, here = float(rng.uniform(*_PAUSE_S)), 0.0
+        while True:  # moves to random targets while one more and the way home still fit in the cycle
+            target = float(rng.uniform(-_TARGET_RAD, _TARGET_RAD))
+            move, pause = self._move(rng, t, target - here), float(rng.uniform(*_PAUSE_S))
+            home = self._move(rng, t + move.duration_s + pause, -target)
+            if moves and home.t_start_s + home.duration_s > CYCLE_S:
+                break
             moves.append(move)
-            t += move.duration_s + float(rng.uniform(*_PAUSE_S))
-            here = target
+            t, here = t + move.duration_s + pause, target
+        moves.append(self._move(rng, t, -here))
         return Cycle(payload, tuple(moves))
+
+    @staticmethod
+    def _move(rng: np.random.Generator, t_start_s: float, distance_rad: float) -> Move:
+        return Move(t_start_s, distance_rad, float(rng.uniform(*_SPEED_RPM)) * RPM_TO_RAD_S, float(rng.uniform(*_ACCEL_S)))
 
     def rest_before(self, tau_s: float) -> float:
         """The latest machine time ≤ ``tau_s`` (s) at which the robot is at rest (a move's start, or itself)."""
