@@ -8,10 +8,8 @@ outcome goes into the catalogue (:mod:`acq.catalogue`, the batch's record of an 
 (:mod:`acq.trend`: baseline, threshold and EWMA rules) judges it; on entering alarm ``on_alarm`` runs
 with ``ACQ_JOINT``, ``ACQ_K``, ``ACQ_BASELINE_K``, ``ACQ_CHANGE_PCT``, ``ACQ_SESSION`` in its environment.
 
-Each window is judged for excitation: before the analysis by the joint's travel (less than half an
-electrical revolution cannot be analysed at all), after it by the coherence between f_a and f_r and in the
-band (the verdict's own excitation checks). A window that does not excite is catalogued with verdict
-``not excited`` and the reason, without K. Windows are numbered (session tag ``monitor_window``) and
+Each window is judged for excitation (:mod:`acq.window_judge`): a window that does not excite is catalogued
+with verdict ``not excited`` and the reason, without K. Windows are numbered (session tag ``monitor_window``) and
 placed in machine time (``monitor_elapsed_s`` = number × ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
 ``interrupted`` (not counted). In ``fast`` mode (simulated benches) machine time is simulated: the loop
@@ -21,11 +19,11 @@ does not sleep, and waits for the analysis instead of skipping (no real time pas
 from __future__ import annotations
 
 import fcntl
-import multiprocessing
 import os
 import shlex
 import signal
 import subprocess
+import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
@@ -35,13 +33,13 @@ from pathlib import Path
 from typing import Any
 
 from acq.analyze import sha256_of
-from acq.batch import CATALOGUE_NAME, DEFAULT_REQUEST, _executor, analyze_one, request_key, session_meta
+from acq.batch import CATALOGUE_NAME, DEFAULT_REQUEST, _executor, session_meta
 from acq.catalogue import Catalogue, Entry, Outcome
 from acq.recorder import Recorder
 from acq.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.session import load, repair
 from acq.trend import Trend, compute_trend
-from analysis.quality import Thresholds
+from acq.window_judge import analyse_window, marked
 from drivers.config import Bench
 from drivers.errors import ConfigError
 from drivers.registry import open_bench
@@ -91,50 +89,6 @@ class MonitorStatus:
     baseline_K: float | None = None
     state: str = "starting"
     message: str = ""
-
-
-def not_excited(quality: dict[str, Any]) -> bool:
-    """True when a verdict that is not ok comes from the excitation checks: coherence between f_a and f_r, or in
-    the whole band, below the verdict's own "poor" limits (:class:`analysis.quality.Thresholds`)."""
-    th = Thresholds()
-    exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
-    weak_between = exc is not None and not exc >= th.excitation_poor
-    weak_in_band = mean is None or not mean >= th.coherence_poor
-    return quality.get("verdict") != "ok" and (weak_between or weak_in_band)
-
-
-def marked(path: str, sha256: str, request: dict[str, Any], meta: dict[str, Any], verdict: str, reasons: list[str],
-           doc: dict[str, Any] | None = None) -> Outcome:
-    """A window's catalogue record without numbers: verdict ``not excited`` / ``not analysed`` / ``interrupted``."""
-    keep = {k: v for k, v in (doc or {}).items() if k in ("session", "analyzed_utc", "acq_version", "simulated_truth",
-                                                          "clock", "options")}
-    quality = {k: v for k, v in (doc or {}).get("quality", {}).items() if k.endswith("coherence")}
-    out = {"options": request, **keep, "quality": {**quality, "verdict": verdict, "reasons": reasons}}
-    return Outcome(path, sha256, request_key(request), meta, out, None, 0.0)
-
-
-def analyse_window(path: str, sha256: str, request: dict[str, Any]) -> Outcome:
-    """Judge and analyse one window (runs in a worker process); never raises."""
-    if multiprocessing.parent_process() is not None:  # a worker: Ctrl-C in the terminal is the monitor's to handle
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        session = load(path)
-        counts = session.encoder.position_counts
-        travel = float(abs(counts[1:] - counts[:-1]).sum()) if counts.size > 1 else 0.0
-        need = session.bench.encoder.counts_per_rev / (2 * session.bench.motor.pole_pairs)
-        if travel < need:
-            return marked(path, sha256, request, session_meta(session), "not excited",
-                          [f"the joint travelled {travel:.0f} counts, less than half an electrical revolution "
-                           f"({need:.0f} counts): the machine did not move it in this window"])
-    except Exception:  # noqa: BLE001 - analyze_one below records why the file cannot be read
-        pass
-    outcome = analyze_one(path, sha256, request, False)
-    if outcome.doc is not None and not_excited(outcome.doc["quality"]):
-        reasons = [r for r in outcome.doc["quality"]["reasons"] if not r.startswith("note: ")]
-        reasons.sort(key=lambda r: "coherence" not in r)  # the excitation's own reasons first
-        return replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
-                       seconds=outcome.seconds)
-    return outcome
 
 
 def expected_window_bytes(bench: Bench, window_s: float) -> int:
@@ -228,6 +182,8 @@ class Monitor:
         self._size = max(self._size, int(_SIZE_MARGIN * result.path.stat().st_size))
         if result.status != "complete":
             self._mark(key, "interrupted", f"window capture {result.status}: {result.stop_reason}")
+            if result.status == "interrupted":  # Ctrl-C / SIGTERM reached the recorder's handler: the monitor ends
+                self._stop = self._stop or result.stop_reason
             return
         self.status.captured += 1
         self._collect(at_most=self.s.jobs - 1 if self.s.fast else None)
@@ -393,8 +349,6 @@ class Monitor:
     @contextmanager
     def _signals(self) -> Iterator[None]:
         """Ctrl-C / SIGTERM end the monitor cleanly (a second one quits at once: acq check repairs the window)."""
-        import threading
-
         if threading.current_thread() is not threading.main_thread():
             yield
             return

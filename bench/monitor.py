@@ -1,7 +1,7 @@
 """Condition monitoring over simulated shifts: flat memory, bounded disk, alarms on wear and only on wear.
 
     nice -n 10 python bench/monitor.py [--hours 4] [--every 900] [--seeds 0,1,2] [--decay 3] [--decay-hours 6]
-                                       [--wear-every 600] [--no-kill]
+                                       [--wear-every 600] [--png trend.png] [--no-wear] [--no-kill]
 
 All runs use ``configs/benches/sim_robot.toml`` in ``--fast`` (machine time simulated), 10 s windows,
 a baseline of 5 good windows, the default alarm rules (−10 % threshold, EWMA λ = 0.2 at 3σ), ``--keep 3``:
@@ -41,7 +41,7 @@ from acq.catalogue import Catalogue
 from acq.config import load_bench
 from acq.monitor import ELAPSED_TAG, WINDOW_TAG, Monitor, MonitorSettings, MonitorStatus
 from acq.session import load
-from acq.trend import Trend, TrendPoint, compute_trend
+from acq.trend import Trend, TrendPoint, compute_trend, render_trend_png
 
 ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
 WINDOW_S, BASELINE, KEEP = 10.0, 5, 3
@@ -111,10 +111,13 @@ def constant_k(hours: float, every_s: float, seeds: list[int], tmp: Path, out: C
     out.print(table)
 
 
-def wear(decay_pct_h: float, hours: float, every_s: float, tmp: Path, out: Console) -> None:
+def wear(decay_pct_h: float, hours: float, every_s: float, tmp: Path, out: Console, png: Path | None) -> None:
     folder = tmp / "wear"
     rss, st = run_monitor(folder, hours, every_s, K_decay_pct_per_hour=decay_pct_h)
     trend = trend_of(folder)
+    if png is not None:
+        render_trend_png(trend, png)
+        out.print(f"trend of the wear shift: {png}")
     k0 = load_bench(ROBOT).sim.K_Nm_per_rad  # type: ignore[union-attr]
 
     def true_k(p: TrendPoint) -> float:  # the wear is known at every window, analysed or not
@@ -202,6 +205,7 @@ def main() -> None:
     parser.add_argument("--decay", type=float, default=3.0)
     parser.add_argument("--decay-hours", type=float, default=6.0)
     parser.add_argument("--no-wear", action="store_true")
+    parser.add_argument("--png", type=Path, default=None, help="draw the wear shift's trend into this PNG")
     parser.add_argument("--no-kill", action="store_true")
     args = parser.parse_args()
     out = Console(width=200)
@@ -209,7 +213,7 @@ def main() -> None:
         if args.seeds:
             constant_k(args.hours, args.every, [int(s) for s in args.seeds.split(",")], Path(tmp), out)
         if not args.no_wear:
-            wear(args.decay, args.decay_hours, args.wear_every, Path(tmp), out)
+            wear(args.decay, args.decay_hours, args.wear_every, Path(tmp), out, args.png)
         if not args.no_kill:
             kill_and_restart(Path(tmp), out)
 

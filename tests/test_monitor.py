@@ -206,3 +206,19 @@ def test_sizes_parse_and_a_bad_one_is_named() -> None:
     assert parse_size("2GB") == 2_000_000_000 and parse_size("1.5MiB") == 1_572_864
     with pytest.raises(ValueError, match="'2 parsecs' is not a size"):
         parse_size("2 parsecs")
+
+
+def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Path) -> None:
+    from acq.monitor import Monitor, MonitorSettings
+
+    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=tmp_path, window_s=10.0, every_s=60.0,
+                               for_s=3600.0, fast=True, baseline_windows=2)
+
+    def stop_after_first(status: object) -> None:
+        if monitor.status.captured == 1:
+            monitor.request_stop("interrupted by user (Ctrl-C)")
+
+    monitor = Monitor(settings, on_status=stop_after_first)
+    assert monitor.run() == 0
+    assert [r["window"] for r in _rows(tmp_path)] == [0]  # analysed before ending; no second window captured
+    assert monitor.status.message == "stopped: interrupted by user (Ctrl-C)"
