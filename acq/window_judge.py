@@ -19,14 +19,18 @@ from acq.session import load
 from analysis.quality import Thresholds
 
 
-def not_excited(quality: dict[str, Any]) -> bool:
+def not_excited(doc: dict[str, Any]) -> bool:
     """True when a verdict that is not ok comes from the excitation checks: coherence between f_a and f_r, or in
-    the whole band, below the verdict's own "poor" limits (:class:`analysis.quality.Thresholds`)."""
-    th = Thresholds()
+    the whole band, below the verdict's own "poor" limits (:class:`analysis.quality.Thresholds`), with the clocks
+    aligned (a residual above the amplitude fit's limit makes the coherence low too, but says nothing about the
+    motion: such a window keeps the analysis' own verdict and reasons)."""
+    th, quality = Thresholds(), doc["quality"]
     exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
     weak_between = exc is not None and not exc >= th.excitation_poor
     weak_in_band = mean is None or not mean >= th.coherence_poor
-    return quality.get("verdict") != "ok" and (weak_between or weak_in_band)
+    residual = doc.get("clock", {}).get("residual_s")
+    aligned = residual is None or residual <= th.clock_residual_amplitude_s
+    return quality.get("verdict") != "ok" and aligned and (weak_between or weak_in_band)
 
 
 def marked(path: str, sha256: str, request: dict[str, Any], meta: dict[str, Any], verdict: str, reasons: list[str],
@@ -55,7 +59,7 @@ def analyse_window(path: str, sha256: str, request: dict[str, Any]) -> Outcome:
     except Exception:  # noqa: BLE001 - analyze_one below records why the file cannot be read
         pass
     outcome = analyze_one(path, sha256, request, False)
-    if outcome.doc is not None and not_excited(outcome.doc["quality"]):
+    if outcome.doc is not None and not_excited(outcome.doc):
         reasons = [r for r in outcome.doc["quality"]["reasons"] if not r.startswith("note: ")]
         reasons.sort(key=lambda r: "coherence" not in r)  # the excitation's own reasons first
         return replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),

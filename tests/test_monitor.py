@@ -222,3 +222,14 @@ def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Pa
     assert monitor.run() == 0
     assert [r["window"] for r in _rows(tmp_path)] == [0]  # analysed before ending; no second window captured
     assert monitor.status.message == "stopped: interrupted by user (Ctrl-C)"
+
+
+def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None:
+    from acq.window_judge import not_excited
+
+    weak = {"verdict": "failed", "mean_coherence": 0.2, "excitation_coherence": 0.1}
+    assert not_excited({"quality": weak, "clock": {"residual_s": 20e-6}})
+    assert not not_excited({"quality": weak, "clock": {"residual_s": 3e-3}})  # misaligned: the analysis' verdict
+    assert not not_excited({"quality": {**weak, "verdict": "ok"}, "clock": {"residual_s": 20e-6}})
+    strong = {"verdict": "poor", "mean_coherence": 0.9, "excitation_coherence": 0.95}
+    assert not not_excited({"quality": strong, "clock": {"residual_s": 20e-6}})  # poor for another reason
