@@ -12,6 +12,8 @@ a baseline of 5 good windows, the default alarm rules (−10 % threshold, EWMA �
 * **wear** — K falls ``--decay`` % of its new value per simulated hour over ``--decay-hours``: the window
   at which the true K first lies 10 % below the true baseline, and the first alarming window (either
   rule, and the threshold rule alone), in windows after that crossing (negative: before it);
+* **disk budget** — 1 simulated hour under ``--budget-mb`` with ``--keep 10`` (the budget binds): the folder's
+  peak size, sampled every 20 ms from another thread, and the windows not captured;
 * **kill -9** — ``acq monitor`` in a subprocess is killed with SIGKILL after a few windows and restarted
   in the same folder: the catalogue rows and the baseline before and after, the windows marked
   interrupted.
@@ -28,6 +30,7 @@ import statistics
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -40,6 +43,7 @@ from acq.analyze import format_value
 from acq.catalogue import Catalogue
 from acq.config import load_bench
 from acq.monitor import ELAPSED_TAG, WINDOW_TAG, Monitor, MonitorSettings, MonitorStatus
+from acq.retention import folder_bytes
 from acq.session import load
 from acq.trend import Trend, TrendPoint, compute_trend, render_trend_png
 
@@ -158,6 +162,40 @@ def capturing(folder: Path) -> bool:
         return False
 
 
+def disk_budget(budget_mb: float, tmp: Path, out: Console) -> None:
+    """1 simulated hour, a window per 300 s, --keep 10 under a budget that only ~3 windows fit: the peak size
+    of the folder, sampled every 20 ms from another thread (also inside captures)."""
+    folder = tmp / "budget"
+    bench = load_bench(ROBOT)
+    settings = MonitorSettings(bench=bench, out_dir=folder, window_s=WINDOW_S, every_s=300.0, for_s=3600.0, keep=10,
+                               max_disk_bytes=int(budget_mb * 1e6), fast=True, baseline_windows=2)
+    peak, done = [0], threading.Event()
+
+    def sample() -> None:
+        while not done.is_set():
+            try:
+                peak[0] = max(peak[0], folder_bytes(folder))
+            except OSError:  # a file deleted while listed
+                pass
+            time.sleep(0.02)
+
+    sampler = threading.Thread(target=sample, daemon=True)
+    sampler.start()
+    monitor = Monitor(settings)
+    monitor.run()
+    done.set()
+    sampler.join()
+    st = monitor.status
+    table = Table(title=f"disk budget {budget_mb:g} MB, --keep 10, 1 simulated h, one 10 s window per 300 s")
+    for c in ("windows captured", "not captured (budget)", "peak folder MB", "raw windows left", "catalogue rows"):
+        table.add_column(c, justify="right")
+    with Catalogue(folder / "catalogue.sqlite") as cat:
+        rows = len(cat.entries("joint1"))
+    table.add_row(str(st.captured), str(st.skipped), f"{peak[0] / 1e6:.1f}", str(len(list(folder.glob("*.h5")))),
+                  str(rows))
+    out.print(table)
+
+
 def kill_and_restart(tmp: Path, out: Console) -> None:
     folder = tmp / "killed"
     cmd = [sys.executable, "-m", "acq", "monitor", "--bench", str(ROBOT), "--fast", "--every", "600", "--keep", "3",
@@ -207,6 +245,7 @@ def main() -> None:
     parser.add_argument("--no-wear", action="store_true")
     parser.add_argument("--png", type=Path, default=None, help="draw the wear shift's trend into this PNG")
     parser.add_argument("--no-kill", action="store_true")
+    parser.add_argument("--budget-mb", type=float, default=12.0, help="disk budget of the budget run (0: skip it)")
     args = parser.parse_args()
     out = Console(width=200)
     with tempfile.TemporaryDirectory(prefix="acq-monitor-bench-") as tmp:
@@ -214,6 +253,8 @@ def main() -> None:
             constant_k(args.hours, args.every, [int(s) for s in args.seeds.split(",")], Path(tmp), out)
         if not args.no_wear:
             wear(args.decay, args.decay_hours, args.wear_every, Path(tmp), out, args.png)
+        if args.budget_mb:
+            disk_budget(args.budget_mb, Path(tmp), out)
         if not args.no_kill:
             kill_and_restart(Path(tmp), out)
 
