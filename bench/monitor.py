@@ -1,14 +1,14 @@
 """Condition monitoring over simulated shifts: flat memory, bounded disk, alarms on wear and only on wear.
 
     nice -n 10 python bench/monitor.py [--hours 4] [--every 900] [--seeds 0,1,2] [--decay 3] [--decay-hours 6]
-                                       [--wear-every 600] [--png trend.png] [--no-wear] [--no-kill]
+                                       [--wear-every 600] [--png trend.png] [--budget-mb 12] [--no-wear] [--no-kill]
 
 All runs use ``configs/benches/sim_robot.toml`` in ``--fast`` (machine time simulated), 10 s windows,
 a baseline of 5 good windows, the default alarm rules (−10 % threshold, EWMA λ = 0.2 at 3σ), ``--keep 3``:
 
 * **constant K** — one monitor of ``--hours`` per seed: windows, excited share, alarms (any alarm is a
-  false alarm), K scatter against the truth; for the first seed the RSS of the monitor and its workers
-  after the first simulated hour and at the end, and the disk used;
+  false alarm), K scatter against the truth, the RSS of the monitor (and with its workers) after the first
+  simulated hour and at the end, and the disk used;
 * **wear** — K falls ``--decay`` % of its new value per simulated hour over ``--decay-hours``: the window
   at which the true K first lies 10 % below the true baseline, and the first alarming window (either
   rule, and the threshold rule alone), in windows after that crossing (negative: before it);
