@@ -76,6 +76,8 @@ def test_passive_capture_never_commands_motion_and_the_robot_moves_the_joint(tmp
     assert spy.motion_commands == []
     session = load(result.path)
     assert result.status == "complete" and session.profile is None
+    assert (result.current_samples, result.encoder_samples, result.current_gaps, result.encoder_gaps) == (
+        76800, 3000, 0, 0)  # 3 s of 25.6 kHz and 1 kHz, nothing lost
     counts = session.encoder.position_counts
     assert abs(counts.max() - counts.min()) > bench.encoder.counts_per_rev  # the robot program moved it > 1 rev
 
