@@ -105,7 +105,7 @@ def simulated_truth(session: Session) -> dict[str, float] | None:
     if sim is None or session.bench.daq.driver != "sim":
         return None
     offset = sim.daq_offset_s if session.encoder.transport == "sim" else None
-    return {"K_Nm_per_rad": sim.K_Nm_per_rad, "Jm_kgm2": sim.Jm_kgm2, "Jl_kgm2": sim.Jl_kgm2,
+    return {"K_Nm_per_rad": sim.K_at_start_Nm_per_rad(), "Jm_kgm2": sim.Jm_kgm2, "Jl_kgm2": sim.Jl_kgm2,
             "C_Nms_per_rad": sim.C_Nms_per_rad, "offset_s": offset, "drift_ppm": sim.daq_drift_ppm}
 
 

@@ -27,6 +27,7 @@ from acq.display import result_table, summary_table
 from acq.exporters import export_command
 from acq.fleet import fleet_command
 from acq.importers import import_command
+from acq.monitor_cli import monitor_command
 from acq.recorder import Recorder, RecordingResult
 from acq.session import load, repair
 from acq.summary import summarize
@@ -232,6 +233,7 @@ cli.add_command(fleet_command)
 cli.add_command(import_command)
 cli.add_command(export_command)
 cli.add_command(view_command)
+cli.add_command(monitor_command)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -183,7 +183,8 @@ class Recorder:
 
     Parameters
     ----------
-    bench, profile : the configs (stored in the session).
+    bench, profile : the configs (stored in the session). ``profile`` None records passively: no motion command
+        at all (``[drive] motion = "external"``: the machine's controller moves the joint); it must be None then.
     current, drive : the devices (real or simulated; the recorder cannot tell).
     out_dir : folder for the session file, named ``<UTC start>_<joint>.h5``.
     duration_s : seconds of data wanted in each stream (counted in samples, not wall time).
@@ -194,7 +195,7 @@ class Recorder:
     def __init__(
         self,
         bench: Bench,
-        profile: Profile,
+        profile: Profile | None,
         current: CurrentSource,
         drive: Drive,
         out_dir: Path,
@@ -205,6 +206,10 @@ class Recorder:
         listeners: list[Listener] | None = None,
         progress: Callable[[float], None] | None = None,
     ) -> None:
+        external = getattr(bench.drive, "motion", "commanded") == "external"
+        if external != (profile is None):
+            raise ConfigError("[drive] motion = \"external\": acq must not command motion, record without a profile"
+                              if external else "a recording without a profile needs [drive] motion = \"external\"")
         self.bench, self.profile = bench, profile
         self.current, self.drive = current, drive
         self.out_dir = Path(out_dir)
@@ -302,7 +307,8 @@ class Recorder:
             try:
                 # Motion first: the started devices buffer their samples meanwhile, and a simulated
                 # bench then starts the motion at the same point of its record in every run.
-                self.drive.start_motion(self.profile)
+                if self.profile is not None:  # None: the machine's own controller moves the joint; acq only listens
+                    self.drive.start_motion(self.profile)
                 for r in readers.values():
                     r.start()
                 self._pump(inbox, readers, writer, checker, counts)
@@ -389,7 +395,8 @@ class Recorder:
         self._shutting_down = True
         try:
             try:
-                self.drive.stop_motion()
+                if self.profile is not None:
+                    self.drive.stop_motion()
             except Exception as e:  # noqa: BLE001 - the file must still be finished
                 writer.add_event(StreamEvent(time.monotonic_ns(), "drive", "error", f"stop motion failed: {e}"))
             for r in readers.values():

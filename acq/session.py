@@ -101,7 +101,7 @@ class SessionWriter:
     ----------
     path : Path
         The ``.h5`` file to create (must not exist).
-    bench, profile : the configs as used (stored as JSON).
+    bench, profile : the configs as used (stored as JSON; profile None: the machine moved the joint, not acq).
     current_info, drive_info : what the started devices reported (coerced rate, period, ...).
     operator : optional name of the person at the bench.
     tags : optional free-form tags (pose, payload_kg, temperature_C, ...).
@@ -117,7 +117,7 @@ class SessionWriter:
         path: Path,
         *,
         bench: Bench,
-        profile: Profile,
+        profile: Profile | None,
         current_info: CurrentSourceInfo,
         drive_info: DriveInfo,
         host_ns_at_start: int,
@@ -149,7 +149,7 @@ class SessionWriter:
                 "status": "recording",
                 "stop_reason": "",
                 "bench_json": bench.model_dump_json(),
-                "profile_json": profile.model_dump_json(),
+                "profile_json": profile.model_dump_json() if profile is not None else "null",
                 "joint": bench.joint,
                 "operator": operator,
                 "tags_json": json.dumps(tags or {}),
@@ -289,7 +289,7 @@ class Session:
     path: Path
     attrs: dict[str, Any]
     bench: Bench
-    profile: Profile
+    profile: Profile | None  # None: recorded passively, the machine's own controller moved the joint
     current: CurrentData
     encoder: EncoderData
     events: list[StreamEvent] = field(default_factory=list)
@@ -403,7 +403,7 @@ def load(path: Path | str) -> Session:
             raise ConfigError(f"{p}: format_version {version} is newer than this acq reads ({FORMAT_VERSION})")
         attrs = {k: _attr(v) for k, v in f.attrs.items()}
         bench = Bench.model_validate_json(attrs["bench_json"])
-        profile = Profile.model_validate_json(attrs["profile_json"])
+        profile = None if attrs["profile_json"] == "null" else Profile.model_validate_json(attrs["profile_json"])
         return Session(
             path=p,
             attrs=attrs,

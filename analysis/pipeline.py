@@ -112,6 +112,7 @@ class Result:
             "clock": {"offset_s": _num(self.clock.offset_s), "drift_ppm": _num(self.clock.drift_ppm),
                       "residual_s": _num(self.clock.residual_s), "ambiguous_by_s": list(self.clock.ambiguous_by_s)},
             "quality": {"verdict": self.quality.verdict, "mean_coherence": _num(self.quality.mean_coherence),
+                        "excitation_coherence": _num(self.quality.excitation_coherence),
                         "reasons": [*self.quality.reasons, *(f"note: {n}" for n in self.notes)],
                         "encoder_jitter_us": None if self.quality.encoder_jitter_s is None
                         else _num(1e6 * self.quality.encoder_jitter_s),

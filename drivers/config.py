@@ -91,6 +91,9 @@ class DriveSim(Strict):
 
     driver: Literal["sim"]
     period_s: PositiveFloat
+    # "commanded": acq runs the profile; "external": the machine's own controller moves the joint (the
+    # simulated production robot of drivers.sim.robot_program) and acq only listens (acq monitor)
+    motion: Literal["commanded", "external"] = "commanded"
 
 
 class DriveCanopen(Strict):
@@ -193,6 +196,16 @@ class SimSettings(Strict):
     sync_jitter_s: NonNegFloat = 0.0
     # the sim and serial drives' time stamp is the true latch instant (False: the nominal k·T, no real stamp)
     drive_time_stamps: bool = True
+    # Condition monitoring (acq monitor). ``elapsed_s``: machine time at this session's start, s (the monitor
+    # sets it per window; the robot program's phase, the wear and the noise seed follow it).
+    elapsed_s: NonNegFloat = 0.0
+    robot_idle_fraction: float = Field(default=0.15, ge=0.0, le=1.0)  # program cycles that are a long wait
+    robot_payload_max_kg: NonNegFloat = 2.0  # payload per program cycle, uniform in 0 … this, kg at the arm's tip
+    K_decay_pct_per_hour: NonNegFloat = 0.0  # wear: K falls linearly with elapsed_s
+
+    def K_at_start_Nm_per_rad(self) -> float:
+        """The true K at this session's start (``elapsed_s``) after the wear ``K_decay_pct_per_hour``, N·m/rad."""
+        return self.K_Nm_per_rad * max(1.0 - self.K_decay_pct_per_hour * self.elapsed_s / 3600.0 / 100.0, 0.01)
 
 
 class Bench(Strict):

@@ -34,6 +34,7 @@ from drivers.sim.measurement import CurrentChain
 from drivers.sim.motion import MotionSchedule
 from drivers.sim.physics import Gravity, JointSimulation
 from drivers.sim.plant import TwoMass, tune_speed_pi
+from drivers.sim.robot_program import RobotProgram, WindowReference
 
 PHASE_SHIFT_RAD = {"i_a": 0.0, "i_b": -2.0 * np.pi / 3.0, "i_c": 2.0 * np.pi / 3.0}
 _NOISE_CHUNK = 1 << 14
@@ -64,12 +65,18 @@ class SimBench:
         self.realtime = realtime
         self.keep_history = keep_history
         s, nom = self.sim, bench.nominal
-        self.plant = TwoMass(s.K_Nm_per_rad, s.Jm_kgm2, s.Jl_kgm2, s.C_Nms_per_rad, s.bm_Nms_per_rad,
+        program = None
+        if getattr(bench.drive, "motion", "commanded") == "external":  # the machine's own robot program moves it
+            robot = RobotProgram(s.seed, s.robot_idle_fraction, s.robot_payload_max_kg)
+            program = WindowReference(robot, robot.rest_before(s.elapsed_s))
+        payload_kg = program.payload_kg() if program is not None else 0.0
+        self.plant = TwoMass(s.K_at_start_Nm_per_rad(), s.Jm_kgm2, s.Jl_kgm2, s.C_Nms_per_rad, s.bm_Nms_per_rad,
                              s.bl_Nms_per_rad, bench.motor.torque_constant_Nm_per_A, s.current_bandwidth_hz)
         self.speed_pi = tune_speed_pi(nom.Jm_kgm2 + nom.Jl_kgm2, s.speed_bandwidth_hz, 1.0 / s.speed_loop_hz)
         if not s.speed_accel_feedforward:
             self.speed_pi = dataclasses.replace(self.speed_pi, ff_inertia_kgm2=0.0)
-        gravity = Gravity(s.arm_mass_kg, s.arm_com_distance_m, math.radians(s.arm_start_deg), bench.gear.ratio)
+        # the payload sits at the arm's tip, twice the centre of mass's distance: the same torque as 2× its mass there
+        gravity = Gravity(s.arm_mass_kg + 2.0 * payload_kg, s.arm_com_distance_m, math.radians(s.arm_start_deg), bench.gear.ratio)
         self.schedule = MotionSchedule()
         self.effects = JointEffects.from_settings(s, bench.gear.ratio)
         self._physics = JointSimulation(self.plant, self.speed_pi, gravity, bench.encoder.counts_per_rev,
@@ -84,6 +91,9 @@ class SimBench:
         self._lock = threading.RLock()
         self._cursors: dict[str, float] = {}
         self._noise_cache: dict[tuple[str, int, int], np.ndarray] = {}
+        self._noise_seed = [s.seed % 2**64] + ([round(s.elapsed_s * 1e3)] if s.elapsed_s else [])  # new noise per window
+        if program is not None:
+            self.use_reference(program)
 
     # ---- truth -------------------------------------------------------------------------------------
     @property
@@ -277,7 +287,7 @@ class SimBench:
         with self._lock:
             block = self._noise_cache.get(key)
             if block is None:
-                seq = np.random.SeedSequence([self.sim.seed % 2**64, _STREAM_IDS[stream], rows, chunk])
+                seq = np.random.SeedSequence([*self._noise_seed, _STREAM_IDS[stream], rows, chunk])
                 block = np.random.default_rng(seq).standard_normal((rows, _NOISE_CHUNK))
                 # keep this chunk and its predecessor per (stream, rows): reads move forwards
                 self._noise_cache = {k: v for k, v in self._noise_cache.items()

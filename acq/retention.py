@@ -1,0 +1,110 @@
+"""Retention of a monitor's raw window files, and its disk budget.
+
+Catalogue rows are always kept; a window's raw files (``<stem>.h5``, ``.result.json``, ``.report.png``,
+a transport's raw log) are deleted once the window is done (analysed or marked), except the baseline
+windows, every alarming window and the last ``keep`` windows. A disk budget is never exceeded: before
+a window is captured the folder's size plus the window's expected size must fit, else the oldest
+unprotected raw files go first, then the oldest of the last ``keep``; when even that is not enough
+the window is not captured (and the monitor says so).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+
+@dataclass(frozen=True)
+class WindowFiles:
+    """One window's raw files as retention sees them.
+
+    Attributes
+    ----------
+    index : the window's number in the monitor (time order).
+    path : its session file.
+    done : analysed or marked (its catalogue row is written).
+    protected : a baseline or alarming window (never deleted).
+    key : what the caller knows the window by (e.g. its session id).
+    """
+
+    index: int
+    path: Path
+    done: bool
+    protected: bool
+    key: str = ""
+
+
+def raw_files(session_path: Path) -> list[Path]:
+    """The files that belong to a session: the ``.h5`` and its siblings named ``<stem>.*``."""
+    return sorted(p for p in session_path.parent.glob(f"{session_path.stem}.*") if p.is_file())
+
+
+def size_bytes(paths: Iterable[Path]) -> int:
+    """Total size of the files that exist, bytes."""
+    total = 0
+    for p in paths:
+        try:
+            total += p.stat().st_size
+        except FileNotFoundError:
+            pass
+    return total
+
+
+def folder_bytes(folder: Path) -> int:
+    """Size of every file in ``folder`` (not recursive), bytes."""
+    return size_bytes(p for p in folder.iterdir() if p.is_file()) if folder.is_dir() else 0
+
+
+def to_delete(windows: Iterable[WindowFiles], keep: int) -> list[WindowFiles]:
+    """Windows whose raw files go now: done, not protected, not among the last ``keep`` (oldest first)."""
+    ordered = sorted(windows, key=lambda w: w.index)
+    last = {w.index for w in ordered[-keep:]} if keep > 0 else set()
+    return [w for w in ordered if w.done and not w.protected and w.index not in last]
+
+
+def make_room(windows: Iterable[WindowFiles], folder: Path, need_bytes: int, budget_bytes: int) -> tuple[
+        list[WindowFiles], bool]:
+    """Windows to delete so that ``need_bytes`` more fit in ``budget_bytes``, and whether they then fit.
+
+    Unprotected done windows go oldest first, the last ``keep`` included (the budget outranks ``keep``);
+    baseline and alarming windows and windows not yet done are never chosen.
+    """
+    used = folder_bytes(folder)
+    chosen: list[WindowFiles] = []
+    for w in sorted(windows, key=lambda w: w.index):
+        if used + need_bytes <= budget_bytes:
+            break
+        if w.done and not w.protected:
+            chosen.append(w)
+            used -= size_bytes(raw_files(w.path))
+    return chosen, used + need_bytes <= budget_bytes
+
+
+def delete(window: WindowFiles) -> int:
+    """Delete a window's raw files; return the bytes freed (a file already gone counts 0)."""
+    freed = 0
+    for p in raw_files(window.path):
+        try:
+            size = p.stat().st_size
+            p.unlink()
+            freed += size
+        except FileNotFoundError:
+            pass
+    return freed
+
+
+def parse_size(text: str) -> int:
+    """``2GB``, ``500MB``, ``1.5GiB``, ``123`` (bytes) → bytes; ValueError naming the text otherwise."""
+    units = {"": 1, "B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "TB": 10**12,
+             "KIB": 2**10, "MIB": 2**20, "GIB": 2**30, "TIB": 2**40}
+    s = text.strip().upper().replace(" ", "")
+    number = s.rstrip("KMGTIB")
+    unit = s[len(number):]
+    try:
+        value = float(number)
+    except ValueError:
+        raise ValueError(f"{text!r} is not a size (e.g. 2GB, 500MB)") from None
+    if unit not in units or value <= 0:
+        raise ValueError(f"{text!r} is not a size (e.g. 2GB, 500MB)")
+    return int(value * units[unit])

@@ -1,0 +1,237 @@
+"""acq monitor: passive capture, windows catalogued, not-excited windows, retention, alarm command, resume."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from acq.config import load_bench
+from acq.recorder import Recorder
+from acq.retention import WindowFiles, make_room, parse_size, to_delete
+from acq.session import SessionWriter, load
+from drivers.base import CurrentSourceInfo, DriveInfo
+from drivers.config import Bench
+from drivers.errors import ConfigError
+from drivers.registry import open_bench
+from tests.helpers import run_cli
+
+ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
+#: With this seed the robot program excites the joint in each of the windows at 0, 1, … 5 min (verdict ok);
+#: with the shipped seed 0 three of them are "not excited" (measured; the analysis' coherence decides).
+EXCITING_SEED = 5
+
+
+def _bench(**sim: float) -> Bench:
+    bench = load_bench(ROBOT)
+    return bench.model_copy(update={"sim": bench.sim.model_copy(update=sim)})
+
+
+def _bench_file(tmp_path: Path, **sim: float) -> Path:
+    """sim_robot.toml with some of its [sim] values replaced."""
+    lines = ROBOT.read_text().splitlines()
+    for key, value in sim.items():
+        lines = [f"{key} = {value}" if line.startswith(f"{key} =") else line for line in lines]
+    path = tmp_path / "bench.toml"
+    path.write_text("\n".join(lines))
+    return path
+
+
+def _rows(folder: Path) -> list[dict[str, object]]:
+    db = sqlite3.connect(folder / "catalogue.sqlite")
+    db.row_factory = sqlite3.Row
+    rows = db.execute("SELECT s.path, s.tags_json, a.verdict, a.K_Nm_per_rad, a.reasons_json, a.truth_json FROM "
+                      "sessions s JOIN analyses a USING (session_key) ORDER BY s.created_utc, s.start_monotonic_ns")
+    out = [{**dict(r), "window": json.loads(r["tags_json"])["monitor_window"]} for r in rows]
+    db.close()
+    return sorted(out, key=lambda r: r["window"])
+
+
+class _SpyDrive:
+    """The simulated drive, counting the motion commands it receives."""
+
+    def __init__(self, drive: object) -> None:
+        self._drive, self.motion_commands = drive, []
+
+    def start_motion(self, profile: object) -> None:
+        self.motion_commands.append("start")
+        self._drive.start_motion(profile)  # type: ignore[attr-defined]
+
+    def stop_motion(self) -> None:
+        self.motion_commands.append("stop")
+        self._drive.stop_motion()  # type: ignore[attr-defined]
+
+    def __getattr__(self, name: str) -> object:
+        return getattr(self._drive, name)
+
+
+def test_passive_capture_never_commands_motion_and_the_robot_moves_the_joint(tmp_path: Path) -> None:
+    bench = _bench()
+    current, drive = open_bench(bench, fast=True)
+    spy = _SpyDrive(drive)
+    result = Recorder(bench, None, current, spy, tmp_path, 3.0).run()  # type: ignore[arg-type]
+    assert spy.motion_commands == []
+    session = load(result.path)
+    assert result.status == "complete" and session.profile is None
+    assert (result.current_samples, result.encoder_samples, result.current_gaps, result.encoder_gaps) == (
+        76800, 3000, 0, 0)  # 3 s of 25.6 kHz and 1 kHz, nothing lost
+    counts = session.encoder.position_counts
+    assert abs(counts.max() - counts.min()) > bench.encoder.counts_per_rev  # the robot program moved it > 1 rev
+
+
+def test_passive_bench_refuses_a_profile_and_a_commanded_bench_needs_one(tmp_path: Path) -> None:
+    from acq.config import load_profile
+
+    bench = _bench()
+    current, drive = open_bench(bench, fast=True)
+    with pytest.raises(ConfigError, match='motion = "external": acq must not command motion'):
+        Recorder(bench, load_profile("triangle_0.2s"), current, drive, tmp_path, 1.0)
+    commanded = load_bench(None)
+    with pytest.raises(ConfigError, match="without a profile needs"):
+        Recorder(commanded, None, current, drive, tmp_path, 1.0)
+
+
+def test_monitor_refuses_a_bench_that_commands_motion(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    sim = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim.toml"
+    run = run_cli(capsys, "monitor", "--bench", str(sim), "--fast", "--for", "1m", "--out", str(tmp_path))
+    assert run.code == 2 and 'acq monitor listens only — set [drive] motion = "external"' in run.err
+
+
+@pytest.fixture(scope="module")
+def four_windows(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A --fast monitor of 4 windows (all four excite), baseline 2 windows, raw files of the last 1 kept."""
+    from acq.cli import main
+
+    out = tmp_path_factory.mktemp("monitor")
+    bench = _bench_file(tmp_path_factory.mktemp("bench"), seed=EXCITING_SEED)
+    with pytest.raises(SystemExit) as exc:
+        main(["monitor", "--bench", str(bench), "--fast", "--window", "10", "--every", "60", "--for", "4m",
+              "--baseline-windows", "2", "--keep", "1", "--out", str(out)])
+    assert exc.value.code == 0
+    return out
+
+
+def test_a_short_fast_monitor_catalogues_every_window_with_K_near_the_truth(four_windows: Path) -> None:
+    rows = _rows(four_windows)
+    assert [r["window"] for r in rows] == [0, 1, 2, 3]
+    for r in rows:
+        assert r["verdict"] == "ok"
+        truth = json.loads(r["truth_json"])["K_Nm_per_rad"]
+        assert r["K_Nm_per_rad"] == pytest.approx(truth, rel=0.03)
+
+
+def test_retention_keeps_the_baseline_and_the_last_windows_and_every_catalogue_row(four_windows: Path) -> None:
+    rows = _rows(four_windows)
+    present = [Path(r["path"]).exists() for r in rows]
+    assert present == [True, True, False, True]  # baseline 0, 1; window 2 deleted; the last (3) kept
+    assert not Path(rows[2]["path"]).with_suffix(".result.json").exists()
+    assert len(list(four_windows.glob("*.h5"))) == 3
+
+
+def test_restart_resumes_numbering_and_marks_an_interrupted_window(four_windows: Path, tmp_path: Path) -> None:
+    out = tmp_path / "resumed"
+    shutil.copytree(four_windows, out)
+    bench = _bench(seed=EXCITING_SEED)
+    # a window whose capture was cut (the monitor killed): status stays "recording"
+    writer = SessionWriter(out / "cut.h5", bench=bench, profile=None,
+                           current_info=CurrentSourceInfo(rate_hz=25600.0, channels=("i_a",), device="sim-daq"),
+                           drive_info=DriveInfo(period_s=0.001, counts_per_rev=131072, transport="sim",
+                                                timestamp_kind="drive_cycle", device="sim-drive"),
+                           host_ns_at_start=0, tags={"monitor_window": 4, "monitor_elapsed_s": 240.0})
+    writer._file.close()  # as a kill -9 leaves it
+    with pytest.raises(SystemExit) as exc:
+        from acq.cli import main
+
+        main(["monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for", "1m",
+              "--baseline-windows", "2", "--keep", "1", "--out", str(out)])
+    assert exc.value.code == 0
+    rows = _rows(out)
+    assert [r["window"] for r in rows] == [0, 1, 2, 3, 4, 5]
+    assert rows[4]["verdict"] == "interrupted" and rows[4]["K_Nm_per_rad"] is None
+    assert "stopped during this window's capture" in rows[4]["reasons_json"]
+    assert [r["K_Nm_per_rad"] for r in rows[:4]] == [r["K_Nm_per_rad"] for r in _rows(four_windows)]
+    assert not (out / "cut.h5").exists()  # marked, then its raw file went (not baseline, not the last)
+
+
+def test_a_window_of_a_paused_robot_is_not_excited_and_has_no_K(capsys: pytest.CaptureFixture[str],
+                                                                  tmp_path: Path) -> None:
+    bench = _bench_file(tmp_path, robot_idle_fraction=1.0)
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "1m", "--out", str(tmp_path / "m"))
+    assert run.code == 0
+    (row,) = _rows(tmp_path / "m")
+    assert row["verdict"] == "not excited" and row["K_Nm_per_rad"] is None
+    assert "the joint travelled 0 counts, less than half an electrical revolution" in row["reasons_json"]
+
+
+def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: pytest.CaptureFixture[str],
+                                                                       tmp_path: Path) -> None:
+    # K falls 5 % per simulated minute: windows at 0, 1, 2, 3 min have K −0, −5, −10, −15 %
+    bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0, seed=EXCITING_SEED)
+    env_file = tmp_path / "alarm.env"
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "4m", "--baseline-windows", "2",
+                  "--keep", "0", "--out", str(tmp_path / "m"),
+                  "--on-alarm", f"sh -c 'env | grep ^ACQ_ | sort > {env_file}'")
+    assert run.code == 3
+    env = dict(line.split("=", 1) for line in env_file.read_text().splitlines())
+    assert set(env) == {"ACQ_JOINT", "ACQ_K", "ACQ_BASELINE_K", "ACQ_CHANGE_PCT", "ACQ_SESSION"}
+    rows = _rows(tmp_path / "m")
+    alarming = next(r for r in rows if r["path"] == env["ACQ_SESSION"])
+    assert env["ACQ_JOINT"] == "joint1" and float(env["ACQ_K"]) == pytest.approx(alarming["K_Nm_per_rad"], rel=1e-5)
+    baseline = (rows[0]["K_Nm_per_rad"] + rows[1]["K_Nm_per_rad"]) / 2
+    assert float(env["ACQ_BASELINE_K"]) == pytest.approx(baseline, rel=1e-5)
+    assert Path(env["ACQ_SESSION"]).exists()  # an alarming window's raw file is kept even with --keep 0
+    assert "ALARM" in run.err
+
+
+def test_retention_rules() -> None:
+    windows = [WindowFiles(i, Path(f"w{i}.h5"), done=i < 5, protected=i in (0, 3)) for i in range(6)]
+    assert [w.index for w in to_delete(windows, keep=2)] == [1, 2]  # 0, 3 protected; 4, 5 the last two
+    assert [w.index for w in to_delete(windows, keep=0)] == [1, 2, 4]  # 5 is not analysed yet
+
+
+def test_disk_budget_frees_the_oldest_unprotected_windows_or_refuses(tmp_path: Path) -> None:
+    windows = []
+    for i in range(4):
+        path = tmp_path / f"w{i}.h5"
+        path.write_bytes(b"x" * 1000)
+        windows.append(WindowFiles(i, path, done=True, protected=i == 0))
+    victims, fits = make_room(windows, tmp_path, need_bytes=1500, budget_bytes=4000)
+    assert fits and [w.index for w in victims] == [1, 2]
+    victims, fits = make_room(windows, tmp_path, need_bytes=3500, budget_bytes=4000)
+    assert not fits  # even without 1, 2, 3 the protected window 0 leaves no room
+
+
+def test_sizes_parse_and_a_bad_one_is_named() -> None:
+    assert parse_size("2GB") == 2_000_000_000 and parse_size("1.5MiB") == 1_572_864
+    with pytest.raises(ValueError, match="'2 parsecs' is not a size"):
+        parse_size("2 parsecs")
+
+
+def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Path) -> None:
+    from acq.monitor import Monitor, MonitorSettings
+
+    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=tmp_path, window_s=10.0, every_s=60.0,
+                               for_s=3600.0, fast=True, baseline_windows=2)
+
+    def stop_after_first(status: object) -> None:
+        if monitor.status.captured == 1:
+            monitor.request_stop("interrupted by user (Ctrl-C)")
+
+    monitor = Monitor(settings, on_status=stop_after_first)
+    assert monitor.run() == 0
+    assert [r["window"] for r in _rows(tmp_path)] == [0]  # analysed before ending; no second window captured
+    assert monitor.status.message == "stopped: interrupted by user (Ctrl-C)"
+
+
+def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None:
+    from acq.window_judge import not_excited
+
+    weak = {"verdict": "failed", "mean_coherence": 0.2, "excitation_coherence": 0.1}
+    assert not_excited({"quality": weak, "clock": {"residual_s": 20e-6}})
+    assert not not_excited({"quality": weak, "clock": {"residual_s": 3e-3}})  # misaligned: the analysis' verdict
+    assert not not_excited({"quality": {**weak, "verdict": "ok"}, "clock": {"residual_s": 20e-6}})
+    strong = {"verdict": "poor", "mean_coherence": 0.9, "excitation_coherence": 0.95}
+    assert not not_excited({"quality": strong, "clock": {"residual_s": 20e-6}})  # poor for another reason
