@@ -423,17 +423,31 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
         wide = wide.screened(lambda o: _angle_residual_s(o, current_a, rate_hz, first_index, angle, pole_pairs,
                                                          grid, f_cur, f_enc))
     offset_s, drift_ppm, start, ambiguous_by, notes = starting_relation(host, wide, together_s, _NARROW_S)
-    method: ClockMethod = start
-    freq = (np.nan, np.nan)
-    for lag in (_NARROW_S, 0.004):
-        o, d, n = frequency_alignment(f_cur, grid, f_enc, offset_s, drift_ppm, lag)
-        if n:
-            offset_s, drift_ppm, freq, method = o, d, (o, d), "frequency"
-    fit = angle_alignment(current_a, rate_hz, first_index, angle, pole_pairs, offset_s, drift_ppm)
+
+    def refine(offset_s: float, drift_ppm: float, method: ClockMethod
+               ) -> tuple[float, float, tuple[float, float], ClockMethod, AngleFit | None]:
+        """The frequency and angle stages from a starting relation."""
+        freq = (np.nan, np.nan)
+        for lag in (_NARROW_S, 0.004):
+            o, d, n = frequency_alignment(f_cur, grid, f_enc, offset_s, drift_ppm, lag)
+            if n:
+                offset_s, drift_ppm, freq, method = o, d, (o, d), "frequency"
+        return offset_s, drift_ppm, freq, method, angle_alignment(current_a, rate_hz, first_index, angle, pole_pairs,
+                                                                  offset_s, drift_ppm)
+
+    offset_s, drift_ppm, freq, method, fit = refine(offset_s, drift_ppm, start)
     if host is not None and start == "wide":
-        final_s = fit.offset_s if fit is not None else offset_s
-        notes.append(f"clock: the host stamps are {1e3 * (host[0] - final_s):+.0f} ms off the data's alignment (blocks "
-                     "delivered late?); the wide search's offset is used")
+        # The data overrule the shared host stamps only where the alignment they lead to fits better: on motion
+        # whose electrical frequency correlates well at a wrong lag too (a robot's repeated point-to-point
+        # moves with pauses), the wide search's best lag can be wrong while the stamps are right.
+        from_host = refine(host[0], host[1], "host")
+        if _angle_residual(from_host[4]) <= _angle_residual(fit):
+            offset_s, drift_ppm, freq, method, fit = from_host
+            start = "host"
+        else:
+            final_s = fit.offset_s if fit is not None else offset_s
+            notes.append(f"clock: the host stamps are {1e3 * (host[0] - final_s):+.0f} ms off the data's alignment "
+                         "(blocks delivered late?); the wide search's offset is used")
     common = dict(host_offset_s=host[0] if host else np.nan, host_drift_ppm=host[1] if host else np.nan,
                   frequency_offset_s=freq[0], frequency_drift_ppm=freq[1],
                   wide_offset_s=wide.offset_s if wide else np.nan, ambiguous_by_s=ambiguous_by, notes=tuple(notes))
@@ -441,6 +455,11 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
         return ClockFit(offset_s, drift_ppm, method=method, **common)
     return ClockFit(fit.offset_s, fit.drift_ppm, fit.residual_s, fit.offset_std_s, fit.drift_std_ppm,
                     fit.theta0_rad, n_windows=fit.n_windows, method="angle", **common)
+
+
+def _angle_residual(fit: AngleFit | None) -> float:
+    """Timing residual, s, of an angle-stage fit (inf without one)."""
+    return fit.residual_s if fit is not None else np.inf
 
 
 def _angle_residual_s(offset_s: float, current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline,

@@ -303,17 +303,20 @@ def fit_two_mass(
         raise FitInputError(
             f"fit band {band[0]:g}…{band[1]:g} Hz holds {problem.f.size} FRF bins; need at least {3 * n_free}"
         )
-    best = None
-    for start in starts:
-        try:
-            res = optimize.least_squares(problem.residuals, problem.x0(start), method="lm", x_scale=1.0)
-        except (ValueError, FloatingPointError):
-            continue
-        if np.isfinite(res.cost) and (best is None or res.cost < best.cost):
-            best = res
-    if best is None:
-        return _failed(problem, band, options, "no start gave a finite cost")
-    return _result(problem, best, band, options, n_res)
+    # a start or a jackknife replicate may wander to log-parameters whose exp overflows: such a solution has a
+    # non-finite cost or spread and is judged by that, so numpy's warnings about it would only reach the user
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        best = None
+        for start in starts:
+            try:
+                res = optimize.least_squares(problem.residuals, problem.x0(start), method="lm", x_scale=1.0)
+            except (ValueError, FloatingPointError):
+                continue
+            if np.isfinite(res.cost) and (best is None or res.cost < best.cost):
+                best = res
+        if best is None:
+            return _failed(problem, band, options, "no start gave a finite cost")
+        return _result(problem, best, band, options, n_res)
 
 
 def _starts_inertias_fixed(guess: TwoMassParams, nominal: TwoMassParams) -> list[TwoMassParams]:
@@ -370,7 +373,7 @@ def _jackknife(problem: _Problem, x_best: np.ndarray, options: FitOptions) -> tu
         except (ValueError, FloatingPointError):
             continue
     b = len(xs)
-    if b < 2:
+    if b < 2 or not np.all(np.isfinite(xs)):  # a replicate that diverged: the fit is not stable under the data
         return np.full((x_best.size, x_best.size), np.inf), Z95
     d = np.asarray(xs) - np.mean(xs, axis=0)
     return (b - 1) / b * (d.T @ d), float(stats.t.ppf(0.975, b - 1))
