@@ -137,6 +137,8 @@ def estimate_jitter(theta_rad: np.ndarray, period_s: float, *, stamped: bool = F
     groups = np.array_split(order, _BINS)
     x = np.array([np.mean(w2[g]) for g in groups])
     var = np.array([np.median(d3[g] ** 2) / _MEDIAN_CHI2_1 for g in groups]) / _D3_GAIN
+    if not (np.max(var) > 0.0 and np.ptp(x) > 0.0):  # a joint at rest (or at one speed): nothing to regress on
+        return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s)
     # var = σ_q² + σ_δ²·ω²; each bin's variance estimate has a relative scatter ∝ its value: weights 1/var²
     weights = 1.0 / np.maximum(var, 1e-3 * np.max(var) + np.finfo(float).tiny) ** 2
     design = np.column_stack([np.ones_like(x), x])

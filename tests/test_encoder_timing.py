@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import tomllib
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -134,6 +135,13 @@ def test_jitter_estimate_on_an_angle_without_motion_noise_is_the_truth() -> None
     got = estimate_jitter(sampled, 1e-3)
     assert got.sigma_s == pytest.approx(40e-6, rel=0.1)
     assert got.mean_speed2 == pytest.approx(np.mean(speed**2), rel=0.01)
+
+
+def test_a_joint_at_rest_gives_no_jitter_estimate_and_no_warning() -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a standstill made 1/0 weights and a LAPACK error (robot pauses)
+        got = estimate_jitter(np.full(20_000, 1.2345), 1e-3)
+    assert np.isnan(got.sigma_s) and got.mean_speed2 == 0.0
 
 
 def _bench_file(tmp_path: Path, source: str, **sim: object) -> Path:
