@@ -30,6 +30,7 @@ from scipy.interpolate import CubicSpline
 _D3 = np.array([-1.0, 3.0, -3.0, 1.0])  # third difference
 _D3_GAIN = float(np.sum(_D3**2))  # 20: variance gain of the third difference on white errors
 _BINS = 16
+_QUANTISATION_COUNTS = 2.0  # counts a cycle above which neighbouring quantisation errors count as independent
 _MEDIAN_CHI2_1 = 0.454936  # median of χ²(1): median(x²) = 0.4549·σ² for Gaussian x
 
 
@@ -113,7 +114,7 @@ def angle_at_nominal_instants(theta_rad: np.ndarray, index: np.ndarray, period_s
     return CubicSpline(t_nominal + deviation_s, theta_rad)(t_nominal)
 
 
-def estimate_jitter(theta_rad: np.ndarray, period_s: float, *, stamped: bool = False,
+def estimate_jitter(theta_rad: np.ndarray, period_s: float, *, lsb_rad: float = 0.0, stamped: bool = False,
                     stamp_spread_s: float = float("nan")) -> EncoderJitter:
     """σ_δ from the growth of the angle's high-pass noise with speed (see the module docstring).
 
@@ -123,6 +124,12 @@ def estimate_jitter(theta_rad: np.ndarray, period_s: float, *, stamped: bool = F
         Angle on the regular grid k·T, rad (gap-free).
     period_s : float
         Drive cycle T, s.
+    lsb_rad : float, optional
+        One count of the encoder, rad. Only samples where the position moves at least
+        ``_QUANTISATION_COUNTS`` counts a cycle are regressed: there the quantisation errors of
+        neighbouring samples are nearly independent (variance lsb²/12 whatever the speed), while slower
+        they are correlated and their third difference grows with speed — which would read as jitter
+        (≈ 3 µs on a 10 000-count encoder that has none). 0: every sample.
     stamped, stamp_spread_s
         Passed through to :class:`EncoderJitter`.
     """
@@ -133,6 +140,11 @@ def estimate_jitter(theta_rad: np.ndarray, period_s: float, *, stamped: bool = F
         return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s)
     d3 = np.convolve(th, _D3[::-1], mode="valid")  # d3[i] = θ[i+3] − 3θ[i+2] + 3θ[i+1] − θ[i]
     w2 = np.convolve(speed**2, _D3[::-1] ** 2, mode="valid") / _D3_GAIN  # ω² seen by each d3, weighted
+    fast = np.abs(speed) * period_s >= _QUANTISATION_COUNTS * lsb_rad
+    usable = np.flatnonzero(np.convolve(fast, np.ones(_D3.size), mode="valid") == _D3.size)
+    if usable.size < 8 * _BINS:
+        return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s)
+    d3, w2 = d3[usable], w2[usable]
     order = np.argsort(w2)
     groups = np.array_split(order, _BINS)
     x = np.array([np.mean(w2[g]) for g in groups])

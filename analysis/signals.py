@@ -278,7 +278,8 @@ def _angle_on_grid(rec: Recording, span: encoder.Span, notes: list[str]) -> tupl
     usable and leave less position noise than the samples taken as k·T — and the jitter left in it."""
     cycles = rec.encoder_index[span.start:span.stop]
     theta = encoder.counts_to_rad(rec.position_counts[span.start:span.stop], rec.counts_per_rev)
-    on_grid = sample_instants.estimate_jitter(theta, rec.period_s)
+    lsb_rad = 2.0 * np.pi / rec.counts_per_rev
+    on_grid = sample_instants.estimate_jitter(theta, rec.period_s, lsb_rad=lsb_rad)
     if rec.drive_time_s is None:
         return theta, on_grid
     deviation = sample_instants.stamp_deviation_s(cycles, rec.drive_time_s[span.start:span.stop], rec.period_s)
@@ -290,7 +291,8 @@ def _angle_on_grid(rec: Recording, span: encoder.Span, notes: list[str]) -> tupl
     if spread <= 1e-9:  # exactly k·T: no clock's reading, just the cycle count (as k·T, and said so)
         return theta, on_grid
     moved = sample_instants.angle_at_nominal_instants(theta, cycles, rec.period_s, deviation)
-    jitter = sample_instants.estimate_jitter(moved, rec.period_s, stamped=True, stamp_spread_s=spread)
+    jitter = sample_instants.estimate_jitter(moved, rec.period_s, lsb_rad=lsb_rad, stamped=True,
+                                            stamp_spread_s=spread)
     if not jitter.sigma_s <= on_grid.sigma_s:  # coarse or false stamps: they would add the noise they should remove
         notes.append(f"encoder: the drive's time stamps (RMS {1e6 * spread:.1f} µs off the cycle grid) leave more "
                      f"position noise ({1e6 * jitter.sigma_s:.1f} µs) than k·T ({1e6 * on_grid.sigma_s:.1f} µs); "
