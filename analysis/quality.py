@@ -208,8 +208,12 @@ def assess(
             findings.append(("poor", f"clock alignment residual {1e6 * clock_residual_s:.0f} µs exceeds "
                                      f"{1e6 * limit:.0f} µs for a {fit.options.kind} fit"))
 
-    if encoder_jitter is not None and np.isfinite(encoder_jitter.sigma_s) and np.any(in_band):
-        findings[:0] = _jitter_findings(frf, fit, in_band, encoder_jitter, th)  # the cause first
+    if encoder_jitter is not None and np.any(in_band):
+        found = _jitter_findings(frf, fit, in_band, encoder_jitter, th)
+        if found and found[0][1].startswith("the encoder's resolution"):
+            findings.extend(found)  # a property of the bench: after what the motion can change
+        else:
+            findings[:0] = found  # a timing defect is the cause: first
     for f_hz in inseparable_hz:
         findings.append(("poor", f"a {f_hz:.1f} Hz line on the phase current cannot be told apart from the torque "
                                  f"(the motor turns at that electrical frequency for long): remove it at its source "
@@ -228,17 +232,20 @@ def assess(
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,
                      th: Thresholds) -> list[tuple[Verdict, str]]:
-    """The verdict on the encoder's sample-instant jitter, from the session's own spectra.
+    """The verdict on the encoder's timing jitter and resolution, from the session's own spectra.
 
-    The speed noise the jitter predicts, N(f), is taken out of the measured speed PSD
-    G_yy = |H·D|²·G_xx/γ² (D the backward difference): without it the coherence would be
-    γ²·G_yy/(G_yy − N) (at most 1). The jitter limits the FRF when that would lift the grade of the
-    verdict's own coherence checks (whole band; f_a…f_r with the excitation limits) — no limit of its own.
+    The speed noise they predict, N(f) (the jitter's and the position quantisation's), is taken out of the
+    measured speed PSD G_yy = |H·D|²·G_xx/γ² (D the backward difference): without it the coherence would be
+    γ²·G_yy/(G_yy − N) (at most 1). The encoder limits the FRF when that would lift the grade of the
+    verdict's own coherence checks (whole band; f_a…f_r with the excitation limits) — no limit of its own;
+    the larger of the two noises is named.
     """
     f = frf.f_hz[in_band]
     g2 = np.clip(frf.coherence[in_band], 1e-6, 1.0)
     g_yy = np.abs(frf.H[in_band] * difference_response(f, frf.period_s)) ** 2 * frf.torque_psd[in_band] / g2
-    noise = jitter.speed_noise_psd(f, frf.period_s)
+    timing = jitter.speed_noise_psd(f, frf.period_s) if np.isfinite(jitter.sigma_s) else np.zeros_like(f)
+    resolution = jitter.quantisation_noise_psd(f, frf.period_s)
+    noise = timing + resolution
     without = g2 * g_yy / np.maximum(g_yy - noise, g2 * g_yy)
     checks = [(np.ones(f.size, dtype=bool), th.coherence_poor, th.coherence_failed)]
     if np.isfinite(fit.f_a) and np.isfinite(fit.f_r):
@@ -254,6 +261,11 @@ def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray
     sigma_us, lo, hi = 1e6 * jitter.sigma_s, *fit.band
     cost = (f"coherence {np.mean(g2):.2f} in {lo:g}…{hi:g} Hz, ≈ {np.mean(without):.2f} without the speed noise "
             "it predicts")
+    if np.sum(resolution) > np.sum(timing):
+        counts = 2.0 * np.pi / jitter.lsb_rad
+        return [(level, f"the encoder's resolution ({counts:.0f} counts/rev) leaves speed noise that limits the FRF "
+                        f"({cost}): use the drive's finer position units ([encoder] counts_per_rev) or a finer "
+                        "encoder, or longer records")]
     if jitter.stamped:
         return [(level, f"the encoder's sample instants still scatter by ≈ {sigma_us:.1f} µs after the drive's time "
                         f"stamps ({cost}): check that the drive's time stamp (0x1013 or the frame's drive time) is "

@@ -50,12 +50,15 @@ class EncoderJitter:
     stamp_spread_s : float
         RMS deviation of the drive's time stamps from the regular grid, s (NaN without stamps): the
         jitter the stamps corrected.
+    lsb_rad : float
+        One encoder count, rad (0: not known).
     """
 
     sigma_s: float
     mean_speed2: float
     stamped: bool
     stamp_spread_s: float = float("nan")
+    lsb_rad: float = 0.0
 
     def speed_noise_psd(self, f_hz: np.ndarray, period_s: float) -> np.ndarray:
         """One-sided PSD, (rad/s)²/Hz, of the backward-difference speed noise the jitter causes.
@@ -65,6 +68,15 @@ class EncoderJitter:
         """
         s = np.sin(np.pi * np.asarray(f_hz, dtype=np.float64) * period_s)
         return 8.0 * self.mean_speed2 * self.sigma_s**2 * s * s / period_s
+
+    def quantisation_noise_psd(self, f_hz: np.ndarray, period_s: float) -> np.ndarray:
+        """One-sided PSD, (rad/s)²/Hz, of the backward-difference speed noise of the position's quantisation.
+
+        White position errors of variance lsb²/12 (the position moving several counts a cycle; slower they
+        are correlated and smaller, so this is an upper bound) through (1 − z⁻¹)/T.
+        """
+        s = np.sin(np.pi * np.asarray(f_hz, dtype=np.float64) * period_s)
+        return 8.0 * self.lsb_rad**2 / 12.0 * s * s / period_s
 
 
 def stamp_deviation_s(index: np.ndarray, drive_time_s: np.ndarray, period_s: float) -> np.ndarray | None:
@@ -137,22 +149,22 @@ def estimate_jitter(theta_rad: np.ndarray, period_s: float, *, lsb_rad: float = 
     speed = np.gradient(th, period_s)
     mean_speed2 = float(np.mean(speed**2)) if th.size else float("nan")
     if th.size < 8 * _BINS:
-        return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s)
+        return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s, lsb_rad)
     d3 = np.convolve(th, _D3[::-1], mode="valid")  # d3[i] = θ[i+3] − 3θ[i+2] + 3θ[i+1] − θ[i]
     w2 = np.convolve(speed**2, _D3[::-1] ** 2, mode="valid") / _D3_GAIN  # ω² seen by each d3, weighted
     fast = np.abs(speed) * period_s >= _QUANTISATION_COUNTS * lsb_rad
     usable = np.flatnonzero(np.convolve(fast, np.ones(_D3.size), mode="valid") == _D3.size)
     if usable.size < 8 * _BINS:
-        return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s)
+        return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s, lsb_rad)
     d3, w2 = d3[usable], w2[usable]
     order = np.argsort(w2)
     groups = np.array_split(order, _BINS)
     x = np.array([np.mean(w2[g]) for g in groups])
     var = np.array([np.median(d3[g] ** 2) / _MEDIAN_CHI2_1 for g in groups]) / _D3_GAIN
     if not (np.max(var) > 0.0 and np.ptp(x) > 0.0):  # a joint at rest (or at one speed): nothing to regress on
-        return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s)
+        return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s, lsb_rad)
     # var = σ_q² + σ_δ²·ω²; each bin's variance estimate has a relative scatter ∝ its value: weights 1/var²
     weights = 1.0 / np.maximum(var, 1e-3 * np.max(var) + np.finfo(float).tiny) ** 2
     design = np.column_stack([np.ones_like(x), x])
     coef = np.linalg.lstsq(design * np.sqrt(weights)[:, None], var * np.sqrt(weights), rcond=None)[0]
-    return EncoderJitter(float(np.sqrt(max(coef[1], 0.0))), mean_speed2, stamped, stamp_spread_s)
+    return EncoderJitter(float(np.sqrt(max(coef[1], 0.0))), mean_speed2, stamped, stamp_spread_s, lsb_rad)
