@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from analysis.clocks import ClockFit
+from analysis.diagnose import recording_fault, with_fault
 from analysis.fit import FitKind, FitOptions, FitParams, FitResult, PARAM_NAMES, fit_two_mass
 from analysis.encoder import longest_gap_free_span
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
@@ -147,7 +148,7 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
     fit = fit_two_mass(frf, FitOptions(params=options.params, kind=options.fit, band_hz=options.band_hz,
                                        weighting=weighting), nominal=options.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
-    quality = assess(frf, fit, clock_residual_s=residual)
+    quality = with_fault(assess(frf, fit, clock_residual_s=residual), recording_fault(rec))  # a wrong bench constant
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit),
                   options=options, notes=tuple(sig.notes))

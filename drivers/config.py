@@ -163,6 +163,13 @@ class SimSettings(Strict):
     drop_encoder_frames: list[Annotated[tuple[Annotated[int, Field(ge=0)], PositiveInt], Field(strict=False)]] = (
         Field(default_factory=list))
     seed: int = 0
+    # The bench's physical truth where it may differ from what [motor], [encoder] and [daq] state (a bench
+    # misconfigured on purpose, for `acq selftest`); None / 1.0 / +1: the same as stated.
+    pole_pairs: PositiveInt | None = None  # the motor's real pole pairs (sets the current's electrical angle)
+    counts_per_rev: PositiveInt | None = None  # the encoder's real counts per revolution (what it streams)
+    current_sensor_gain: PositiveFloat = 1.0  # measured / true phase current (a sensor scale stated wrongly)
+    phase_order: list[PhaseName] | None = None  # the phases really wired to [daq] channels, same order
+    encoder_direction: Literal[1, -1] = 1  # −1: the encoder counts down while the motor turns forward
 
 
 class Bench(Strict):
