@@ -26,6 +26,7 @@ from acq.devices import devices_command
 from acq.exporters import export_command
 from acq.importers import import_command
 from acq.recorder import Recorder, RecordingResult
+from acq.selftest_cli import selftest_command
 from acq.session import load, repair
 from acq.summary import summarize, summary_table
 from acq.trend import trend_command
@@ -228,6 +229,7 @@ cli.add_command(trend_command)
 cli.add_command(import_command)
 cli.add_command(export_command)
 cli.add_command(view_command)
+cli.add_command(selftest_command)
 
 
 def main(argv: list[str] | None = None) -> None:

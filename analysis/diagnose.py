@@ -22,48 +22,52 @@ from analysis.encoder import longest_gap_free_span, speed_from_counts
 from analysis.quality import Quality
 from analysis.signals import Recording
 
-GRID_HZ = 200.0  # grid of the comparison, Hz: the speed's shape (≤ 20 Hz for a triangle) is well inside
+GRID_HZ = 200.0  # grid of the lag search, Hz: the speed's shape (≤ 20 Hz for a triangle) is well inside
 MAX_LAG_S = 2.0  # clock offsets searched, s: the design's plausible range of DAQ vs drive start (§4)
-WINDOW_S = 0.5  # windows of the ratio's scatter, s
-#: A ratio off 1 by less is not named. The estimate's own spread sets the bar (``RATIO_SIGMAS``), but
-#: never below 3 %: below the smallest pole-pair error of a motor with ≤ 32 pole pairs (1/33), above the
-#: zero-crossing estimator's bias seen on simulated and real-shaped records (< 1 %).
+#: A ratio off 1 by less is not named: 5 standard errors of the estimate, never below 3 % — below the
+#: smallest pole-pair error of a motor with ≤ 32 pole pairs (1/33), above the estimator's bias seen on
+#: simulated records (see tests/test_selftest.py).
 MIN_RATIO_ERROR = 0.03
 RATIO_SIGMAS = 5.0
 
 
 @dataclass(frozen=True)
 class SpeedRatio:
-    """The current's electrical frequency against p·|ω|/2π from the encoder.
+    """The current's electrical half-periods against p·(revolutions the encoder travelled meanwhile).
 
     Attributes
     ----------
     ratio : float
-        f_e / (p·|ω|/2π): 1 on a correctly configured bench.
+        Median over the current's half-periods of ½ / (p · encoder revolutions in it): 1 on a correct bench.
     spread : float
-        Standard error of ``ratio`` from its scatter between windows (NaN with one window).
+        Standard error of ``ratio`` (from the MAD of the half-periods).
     lag_s : float
-        Drive time minus DAQ time at which the two speed shapes match best, s.
-    windows : int
-        Windows with motion that entered the ratio.
+        Drive time minus DAQ time at which the two speed shapes match best, s (to the lag grid).
+    cycles : float
+        Electrical cycles (half-periods / 2) that entered the ratio.
     """
 
     ratio: float
     spread: float
     lag_s: float
-    windows: int
+    cycles: float
 
     @property
     def mismatched(self) -> bool:
-        """True when the ratio is off 1 by more than the estimate's scatter and :data:`MIN_RATIO_ERROR`."""
-        bar = max(MIN_RATIO_ERROR, RATIO_SIGMAS * (self.spread if math.isfinite(self.spread) else 0.0))
-        return abs(self.ratio - 1.0) > bar
+        """True when the ratio is off 1 by more than :data:`RATIO_SIGMAS` standard errors and :data:`MIN_RATIO_ERROR`."""
+        return abs(self.ratio - 1.0) > max(MIN_RATIO_ERROR, RATIO_SIGMAS * self.spread)
 
 
 def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index: np.ndarray,
                            position_counts: np.ndarray, period_s: float, counts_per_rev: int,
                            pole_pairs: int) -> SpeedRatio | None:
-    """Measure f_e / (p·|ω|/2π) over a record; None when it holds too little motion to tell.
+    """Measure f_e against p·|ω|/2π over a record; None when it holds too little motion to tell.
+
+    The lag between the clocks comes from the shapes of the two electrical frequencies (same shape up
+    to the ratio, :func:`analysis.clocks.current_crossings_s` and :func:`~analysis.clocks.crossing_frequency_hz`
+    as in the clock alignment); then each half-period of the current, between two zero crossings, is set
+    against the encoder's travel over the same interval (moving intervals only: faster than 20 % of the
+    peak). A lag error of a few ms shifts both ends of an interval alike, so it barely matters.
 
     Parameters
     ----------
@@ -82,43 +86,45 @@ def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index:
     if span.count < 3 or current_a.size < 3:
         return None
     cycles = np.asarray(encoder_index)[span.start:span.stop]
-    omega = speed_from_counts(np.asarray(position_counts)[span.start:span.stop], counts_per_rev, period_s)
+    counts = np.asarray(position_counts)[span.start:span.stop]
+    omega = speed_from_counts(counts, counts_per_rev, period_s)
     t_enc = cycles[1:] * period_s
     grid_enc = np.arange(t_enc[0], t_enc[-1], 1.0 / GRID_HZ)
     f_enc = _smooth(np.interp(grid_enc, t_enc, pole_pairs * np.abs(omega) / (2 * np.pi)))
     grid_daq = np.arange(0.0, current_a.size / rate_hz, 1.0 / GRID_HZ)
-    f_cur = crossing_frequency_hz(current_crossings_s(current_a, rate_hz), grid_daq)
+    crossings = current_crossings_s(current_a, rate_hz)
+    f_cur = crossing_frequency_hz(crossings, grid_daq)
     if not (np.any(f_cur > 0) and np.any(f_enc > 0)):
         return None
-    # f_cur[i] at DAQ time i/G must match r·f_enc at drive time i/G + lag: the lag where the shapes correlate
+    # f_cur[i] at DAQ time i/G matches r·f_enc at drive time i/G + lag: the lag where the shapes correlate
     xc = signal.correlate(f_enc, f_cur, mode="full", method="fft")
     shifts = np.arange(-f_cur.size + 1, f_enc.size)  # f_enc index − f_cur index
     t_lag = grid_enc[0] + shifts / GRID_HZ
     allowed = np.abs(t_lag) <= MAX_LAG_S
     if not np.any(allowed & (xc > 0)):
         return None
-    best = int(np.flatnonzero(allowed)[np.argmax(xc[allowed])])
-    shift, lag_s = int(shifts[best]), float(t_lag[best])
-    i = np.arange(max(0, -shift), min(f_cur.size, f_enc.size - shift))
-    a, b = f_cur[i], f_enc[i + shift]
-    per = max(1, int(WINDOW_S * GRID_HZ))
-    ratios = []
-    top = float(np.max(b))
-    for k in range(0, a.size - per + 1, per):
-        bw = b[k:k + per]
-        if np.mean(bw) > 0.2 * top:  # windows that move (quasi-standstill crossings chatter or vanish)
-            ratios.append(float(np.dot(a[k:k + per], bw) / np.dot(bw, bw)))
-    if not ratios:
+    lag_s = float(t_lag[np.flatnonzero(allowed)[np.argmax(xc[allowed])]])
+    # each half-period of the current (between two zero crossings) against the encoder's travel meanwhile
+    theta_rev = np.interp(crossings + lag_s, cycles * period_s, counts / counts_per_rev, left=np.nan, right=np.nan)
+    half_cycles = pole_pairs * np.abs(np.diff(theta_rev))  # electrical cycles the encoder says, per interval
+    moving = np.isfinite(half_cycles) & (np.diff(crossings) < 0.5 / (0.2 * float(np.max(f_enc))))
+    if np.count_nonzero(moving) < 8:
         return None
-    moving = b > 0.2 * top
-    ratio = float(np.dot(a[moving], b[moving]) / np.dot(b[moving], b[moving]))
-    spread = float(np.std(ratios, ddof=1) / math.sqrt(len(ratios))) if len(ratios) > 1 else float("nan")
-    return SpeedRatio(ratio, spread, lag_s, len(ratios))
+    per_interval = 0.5 / np.maximum(half_cycles[moving], 1e-12)
+    ratio = float(np.median(per_interval))  # an extra crossing where i_q changes sign is an outlier, not a bias
+    spread = float(1.4826 * np.median(np.abs(per_interval - ratio)) / math.sqrt(per_interval.size))
+    return SpeedRatio(ratio, spread, lag_s, 0.5 * per_interval.size)
 
 
 def _smooth(x: np.ndarray) -> np.ndarray:
     """The same 15-sample median the current's crossing frequency gets, so both shapes match."""
     return median_filter(x, size=15, mode="nearest")
+
+
+def likely_counts_per_rev(estimate: float, tolerance: float) -> int:
+    """``estimate`` rounded, or the power of two within ``tolerance`` (relative) of it: most encoders have one."""
+    power = 2 ** round(math.log2(max(estimate, 1.0)))
+    return power if abs(estimate / power - 1.0) < tolerance else round(estimate)
 
 
 def ratio_fault(r: SpeedRatio, pole_pairs: int, counts_per_rev: int) -> str | None:
@@ -134,9 +140,7 @@ def ratio_fault(r: SpeedRatio, pole_pairs: int, counts_per_rev: int) -> str | No
     p = pole_pairs * r.ratio
     if round(p) >= 1 and abs(p - round(p)) < 0.1:
         candidates.append(f"[motor] pole_pairs = {round(p)}")
-    cpr = counts_per_rev / r.ratio
-    power = 2 ** round(math.log2(cpr))
-    candidates.append(f"[encoder] counts_per_rev = {power if abs(cpr / power - 1) < 0.02 else round(cpr)}")
+    candidates.append(f"[encoder] counts_per_rev = {likely_counts_per_rev(counts_per_rev / r.ratio, 0.02)}")
     return (f"the current turns {word} than pole_pairs·ω (pole_pairs = {pole_pairs}, counts_per_rev = "
             f"{counts_per_rev}): check {' or '.join(candidates)}")
 
@@ -154,3 +158,108 @@ def with_fault(quality: Quality, fault: str | None) -> Quality:
     if fault is None:
         return quality
     return replace(quality, verdict="failed", reasons=(fault, *quality.reasons))
+
+
+def first_move_sign(position_counts: np.ndarray) -> int:
+    """+1 / −1: the direction of the encoder's first clear move (5 % of its largest excursion), 0 if none."""
+    x = np.asarray(position_counts, dtype=np.float64) - float(position_counts[0])
+    reach = float(np.max(np.abs(x))) if x.size else 0.0
+    if reach <= 0.0:
+        return 0
+    first = int(np.argmax(np.abs(x) > 0.05 * reach))
+    return int(np.sign(x[first]))
+
+
+#: e^{−j·s_x} for a phase at electrical shift s_x (a: 0, b: −2π/3, c: +2π/3): Σ i_x·w_x turns with +θ_e.
+_SPACE_VECTOR_WEIGHTS = {"i_a": 1.0 + 0j, "i_b": np.exp(2j * np.pi / 3), "i_c": np.exp(-2j * np.pi / 3)}
+
+
+def phase_sequence_agreement(currents_a: dict[str, np.ndarray], rate_hz: float, encoder_index: np.ndarray,
+                             position_counts: np.ndarray, period_s: float, lag_s: float,
+                             window_s: float = 0.02) -> float:
+    """Correlation (−1…1) of the current space vector's sense of rotation with the encoder's speed.
+
+    With two phases the third is −(sum) (balanced windings). +1: the phases are in the order their
+    names say and turn with the encoder; −1: the sequence is reversed (two phases swapped, or the
+    encoder counts the other way). ``lag_s`` maps DAQ time to drive time (:attr:`SpeedRatio.lag_s`).
+
+    Parameters
+    ----------
+    currents_a : dict of str → ndarray
+        Two or three phases, A, gap-free, DAQ sample 0 at t_daq = 0.
+    rate_hz, period_s : float
+        DAQ rate, Hz, and drive cycle, s.
+    encoder_index, position_counts : ndarray of int
+        Drive cycle and unwrapped position of each encoder sample.
+    lag_s : float
+        Drive time minus DAQ time, s.
+    window_s : float
+        Windows in which the rotation is summed, s (a few electrical periods at slow speed).
+    """
+    names = list(currents_a)
+    phases = {n: np.asarray(currents_a[n], dtype=np.float64) for n in names}
+    phases = {n: x - np.median(x) for n, x in phases.items()}  # sensor offsets would add a fixed vector
+    if len(phases) == 2:
+        (missing,) = set(_SPACE_VECTOR_WEIGHTS) - set(phases)
+        phases[missing] = -sum(phases.values())
+    z = sum(_SPACE_VECTOR_WEIGHTS[n] * x for n, x in phases.items())
+    turn = np.imag(np.conj(z[:-1]) * z[1:])  # ∝ |z|²·dθ per sample: positive while the vector turns forward
+    per = max(2, int(window_s * rate_hz))
+    n = turn.size // per
+    rot = turn[:n * per].reshape(n, per).sum(axis=1)
+    t_drive = (np.arange(n) + 0.5) * per / rate_hz + lag_s
+    omega = speed_from_counts(position_counts, 1, period_s)  # rev/s: only the sign and shape matter
+    w = np.interp(t_drive, np.asarray(encoder_index)[1:] * period_s, omega, left=0.0, right=0.0)
+    norm = math.sqrt(float(np.dot(rot, rot)) * float(np.dot(w, w)))
+    return float(np.dot(rot, w) / norm) if norm > 0 else float("nan")
+
+
+@dataclass(frozen=True)
+class InertiaFromTorque:
+    """The rigid-body inertia the torque implies: T = J·α + b·ω + c·sign ω + gravity + offset, low-passed.
+
+    Attributes
+    ----------
+    J_kgm2, J_std_kgm2 : float
+        Total motor-side inertia J_m + J_l and its standard error, kg·m² (scales with k_t and the
+        current sensor's scale).
+    """
+
+    J_kgm2: float
+    J_std_kgm2: float
+
+
+def inertia_from_torque(t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: np.ndarray, gear_ratio: float,
+                        cutoff_hz: float = 10.0) -> InertiaFromTorque:
+    """Fit the joint as one rigid inertia below ``cutoff_hz`` (well under the anti-resonance).
+
+    Below f_a the load follows the motor, so T_e = (J_m + J_l)·α + viscous and Coulomb friction +
+    the arm's weight (A·cos + B·sin of the arm angle θ/N) + an offset. Every regressor and the
+    torque pass the same zero-phase low-pass; the standard error counts one independent sample per
+    1/(2·cutoff).
+
+    Parameters
+    ----------
+    t_s, torque_Nm, speed_rad_s : ndarray
+        Encoder instants (regular), s; electromagnetic torque, N·m; motor speed, rad/s.
+    gear_ratio : float
+        Motor turns per arm turn.
+    cutoff_hz : float
+        Low-pass corner, Hz. 10 Hz: the rigid-body error ~ J_l/J·(f/f_a)² is ≤ 3 % for f_a ≥ 55 Hz.
+    """
+    dt = float(np.median(np.diff(t_s)))
+    theta = np.cumsum(speed_rad_s) * dt
+    arm = theta / gear_ratio
+    columns = [np.gradient(speed_rad_s, dt), speed_rad_s, np.tanh(speed_rad_s / 0.5),  # Coulomb, smoothed at 0.5 rad/s
+               np.cos(arm), np.sin(arm), np.ones_like(arm)]
+    sos = signal.butter(4, cutoff_hz, fs=1.0 / dt, output="sos")
+    X = np.column_stack([signal.sosfiltfilt(sos, c) for c in columns])
+    y = signal.sosfiltfilt(sos, torque_Nm)
+    edge = min(int(0.5 / dt), X.shape[0] // 10)  # filter transients at both ends
+    X, y = X[edge:X.shape[0] - edge], y[edge:y.size - edge]
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    resid = y - X @ coef
+    n_eff = max(X.shape[0] * 2.0 * cutoff_hz * dt, X.shape[1] + 1.0)
+    sigma2 = float(np.dot(resid, resid)) / X.shape[0] * n_eff / (n_eff - X.shape[1])
+    cov = sigma2 * np.linalg.inv(X.T @ X) * X.shape[0] / n_eff
+    return InertiaFromTorque(float(coef[0]), float(math.sqrt(max(cov[0, 0], 0.0))))

@@ -41,6 +41,7 @@ class Nominal(Strict):
     K_Nm_per_rad: PositiveFloat
     Jm_kgm2: PositiveFloat
     Jl_kgm2: PositiveFloat
+    inertia_known: bool = False  # Jm + Jl known independently (datasheet, CAD): `acq selftest` checks k_t against it
 
 
 class DaqSim(Strict):
