@@ -4,7 +4,10 @@ the stated config): each fault is named with the key to change, and ``acq analyz
 from __future__ import annotations
 
 import json
+import os
 import re
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -164,3 +167,13 @@ def test_json_document_of_a_stopped_run() -> None:
     doc = selftest_json(checks, "b.toml")
     assert doc["passed"] is False and doc["stopped_at"] == "streams · recording"
     assert doc["checks"][1]["values"] == {"v": None}
+
+
+def test_plain_pytest_collects_the_hardware_suite_and_skips_it_with_the_reason(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "ACQ_HW_BENCH"}
+    root = Path(__file__).resolve().parent.parent
+    run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-p", "no:cacheprovider", "tests/hardware"],
+                         cwd=root, env=env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert re.search(r"\b(\d+) skipped", run.stdout) and " passed" not in run.stdout
+    assert "hardware suite: set ACQ_HW_BENCH=path/to/bench.toml to run it against that bench" in run.stdout
