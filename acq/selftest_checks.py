@@ -5,7 +5,6 @@ running the devices is :mod:`acq.selftest`, drawing the lines :mod:`acq.selftest
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -16,7 +15,7 @@ import numpy as np
 from acq.session import Session
 from acq.summary import summarize
 from analysis.diagnose import (SpeedRatio, first_move_sign, inertia_from_torque, likely_counts_per_rev,
-                               phase_sequence_agreement, ratio_fault)
+                               phase_sequence_agreement, ratio_fault, sequence_fault)
 from analysis.encoder import longest_gap_free_span, speed_from_counts
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen
 
@@ -236,14 +235,15 @@ def phase_order_check(session: Session, lag_s: float) -> Check:
         return Check("motion", "phase order", "pass", "one phase recorded: no sequence to check")
     agree = phase_sequence_agreement(cur.phases_a, cur.rate_hz, enc.index, enc.position_counts, enc.period_s, lag_s)
     values = {"agreement": agree}
-    figure = f"phase sequence {'/'.join(n[2:] for n in names)} against the encoder: correlation {agree:+.2f}"
-    if not agree < 0.5:
-        return Check("motion", "phase order", "pass" if agree > 0.5 else "warn", figure,
-                     "" if agree > 0.5 else "the sequence is unclear (little motion?): repeat with a longer move",
-                     values)
-    swapped = [{"i_b": "i_c", "i_c": "i_b"}.get(n, n) for n in names]
-    return Check("motion", "phase order", "fail", figure + " — the phase sequence is reversed",
-                 f"swap two phases: set [daq] channels = {json.dumps(swapped)} (or swap the sensor wires)", values)
+    fault = sequence_fault(agree, names)
+    if fault is not None:
+        figure, fix = fault.split(": set ", 1)
+        return Check("motion", "phase order", "fail", figure, f"set {fix}", values)
+    figure = f"phase sequence {'/'.join(n[2:] for n in names)} turns with the encoder (correlation {agree:+.2f})"
+    if agree > 0.5:
+        return Check("motion", "phase order", "pass", figure, values=values)
+    return Check("motion", "phase order", "warn", figure,
+                 "the sequence is unclear (little motion?): repeat with a longer move", values)
 
 
 def torque_constant_check(t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: np.ndarray, bench: Bench) -> Check:

@@ -34,6 +34,7 @@ RATIO_SIGMAS = 5.0
 #: Cosine similarity of the two electrical-frequency shapes at the chosen lag below which the lag is not
 #: trusted (the true lag lies outside ±MAX_LAG_S, or one stream did not see the motion): no verdict then.
 MIN_SHAPE_SIMILARITY = 0.5
+SEQUENCE_MAX_S = 60.0  # the phase sequence is judged on at most the first minute, s
 
 
 @dataclass(frozen=True)
@@ -154,11 +155,29 @@ def ratio_fault(r: SpeedRatio, pole_pairs: int, counts_per_rev: int) -> str | No
             f"{counts_per_rev}): check {' or '.join(candidates)}")
 
 
+def sequence_fault(agreement: float, phases: list[str]) -> str | None:
+    """The words for a phase sequence turning against the encoder (None unless clearly reversed, < −0.5)."""
+    if not agreement < -0.5:
+        return None
+    swapped = ", ".join(f'"{ {"i_b": "i_c", "i_c": "i_b"}.get(n, n)}"' for n in phases)
+    return (f"the phase sequence {'/'.join(n[2:] for n in phases)} turns against the encoder (correlation "
+            f"{agreement:+.2f}): set [daq] channels = [{swapped}] (two phases swapped) or reverse the encoder's "
+            "counting direction")
+
+
 def recording_fault(rec: Recording) -> str | None:
-    """:func:`ratio_fault` of a raw recording's phase i_a and encoder (None if it matches or cannot tell)."""
+    """:func:`ratio_fault` of a raw recording's phase i_a and encoder, then (2–3 phases)
+    :func:`sequence_fault`; None if both match or it cannot tell."""
     r = electrical_speed_ratio(rec.current_a["i_a"], rec.rate_hz, rec.encoder_index, rec.position_counts,
                                rec.period_s, rec.counts_per_rev, rec.pole_pairs)
-    return None if r is None else ratio_fault(r, rec.pole_pairs, rec.counts_per_rev)
+    if r is None:
+        return None
+    fault = ratio_fault(r, rec.pole_pairs, rec.counts_per_rev)
+    if fault is None and len(rec.current_a) >= 2:
+        agreement = phase_sequence_agreement(rec.current_a, rec.rate_hz, rec.encoder_index, rec.position_counts,
+                                             rec.period_s, r.lag_s)
+        fault = sequence_fault(agreement, list(rec.current_a))
+    return fault
 
 
 def with_fault(quality: Quality, fault: str | None) -> Quality:
@@ -206,7 +225,8 @@ def phase_sequence_agreement(currents_a: dict[str, np.ndarray], rate_hz: float, 
         Windows in which the rotation is summed, s (a few electrical periods at slow speed).
     """
     names = list(currents_a)
-    phases = {n: np.asarray(currents_a[n], dtype=np.float64) for n in names}
+    n_max = int(SEQUENCE_MAX_S * rate_hz)  # the sequence is the same all along: bound the memory of long records
+    phases = {n: np.asarray(currents_a[n][:n_max], dtype=np.float64) for n in names}
     phases = {n: x - np.median(x) for n, x in phases.items()}  # sensor offsets would add a fixed vector
     if len(phases) == 2:
         (missing,) = set(_SPACE_VECTOR_WEIGHTS) - set(phases)

@@ -112,7 +112,19 @@ def test_swapped_phases_are_named_with_the_channels_to_set(capsys: pytest.Captur
     fail = failed_check(doc)
     assert code == 1 and doc["stopped_at"] == "motion · phase order"
     assert fail["values"]["agreement"] < -0.5
-    assert fail["fix"] == 'swap two phases: set [daq] channels = ["i_a", "i_c", "i_b"] (or swap the sensor wires)'
+    assert re.fullmatch(r"the phase sequence a/b/c turns against the encoder \(correlation -0\.\d\d\)", fail["figure"])
+    assert fail["fix"] == ('set [daq] channels = ["i_a", "i_c", "i_b"] (two phases swapped) or reverse the '
+                           "encoder's counting direction")
+
+    record = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(bench), "--fast", "--no-analyze",
+                     "--out", str(tmp_path / "s"))
+    assert record.code == 0
+    (session,) = (tmp_path / "s").glob("*.h5")
+    quality = json.loads(run_cli(capsys, "analyze", str(session), "--json", "--no-report").out)["quality"]
+    assert quality["verdict"] == "failed"
+    assert re.fullmatch(r"the phase sequence a/b/c turns against the encoder \(correlation -0\.\d\d\): set \[daq\] "
+                        r'channels = \["i_a", "i_c", "i_b"\] \(two phases swapped\) or reverse the encoder\'s counting '
+                        r"direction", quality["reasons"][0]), quality["reasons"][0]
 
 
 def test_correct_three_phases_pass_the_phase_order(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
