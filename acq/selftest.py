@@ -16,6 +16,7 @@ The simulated bench runs through the same registry; this module never imports ``
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
@@ -72,6 +73,11 @@ def run_selftest(bench: Bench, profile: Profile, work_dir: Path, *, fast: bool =
                 return
 
 
+def _toml(value: Any) -> str:
+    """A config value as it is written in the TOML file (strings quoted, lists in brackets)."""
+    return json.dumps(list(value) if isinstance(value, tuple) else value, ensure_ascii=False)
+
+
 def _listed(bench: Bench) -> Iterator[Check]:
     """What ``acq devices`` sees of the configured hardware (simulated parts are always there)."""
     daq, drive = bench.daq, bench.drive
@@ -81,20 +87,20 @@ def _listed(bench: Bench) -> Iterator[Check]:
         wanted = {c.split("/")[0] for c in daq.physical_channels}
         if ni.empty_because or not wanted <= seen:
             yield Check("devices", "acq devices", "fail", ni.empty_because or f"NI-DAQmx sees {sorted(seen)}",
-                        f"[daq] physical_channels = {daq.physical_channels}: device {sorted(wanted - seen)} not "
-                        "found — check the cable and NI MAX, or the device name")
+                        f"[daq] physical_channels = {_toml(daq.physical_channels)}: no device "
+                        f"{', '.join(sorted(wanted - seen))} — check the cable and NI MAX, or the device name")
             return
     if isinstance(drive, DriveSerial) and not drive.simulated_device:
         ports = {name for name, _, _ in serial_section().rows}
         if drive.port not in ports:
             yield Check("devices", "acq devices", "fail", f"serial ports seen: {sorted(ports) or 'none'}",
-                        f"[drive] port = {drive.port!r} is not there: set it to one of the ports listed")
+                        f"[drive] port = {_toml(drive.port)} is not there: set it to one of the ports listed")
             return
     if isinstance(drive, DriveCanopen) and not drive.simulated_node:
         channels = {name for name, _, _ in can_section().rows}
         if drive.channel not in channels:  # python-can's detection is best effort: the open decides
             yield Check("devices", "acq devices", "warn", f"python-can detects {sorted(channels) or 'no interface'}",
-                        f"[drive] channel = {drive.channel!r} not detected; bring it up "
+                        f"[drive] channel = {_toml(drive.channel)} not detected; bring it up "
                         f"(ip link set {drive.channel} up type can bitrate {drive.bitrate})")
             return
     yield Check("devices", "acq devices", "pass", "the configured devices are listed")
@@ -114,12 +120,15 @@ def _devices_and_streams(bench: Bench, profile: Profile, work_dir: Path, fast: b
         yield Check("devices", "open", "fail", str(e), "the message names the key or the device; "
                     "acq devices lists what this machine sees", {"exit_code": e.exit_code})
         return
+    result = None
     try:
         yield _daq_check(bench, recorder)
         yield _drive_check(bench, recorder)
-        result = recorder.run()
+        result = recorder.run()  # releases the devices whatever happens
     finally:
-        recorder.abort("selftest stopped")  # no-op after run(); releases the devices otherwise
+        if result is None:  # stopped at a device check (or interrupted): release the started devices
+            drive.stop()
+            current.stop()
     session = load(result.path)
     yield samples_check(session, "streams")
     if session.status != "complete":
@@ -142,8 +151,8 @@ def _daq_check(bench: Bench, recorder: Recorder) -> Check:
     values = {"device": info.device, "channels": list(info.channels), "rate_hz": info.rate_hz,
               "requested_rate_hz": bench.daq.rate_hz}
     if list(info.channels) != list(bench.daq.channels):
-        return Check("devices", "DAQ", "fail", figure, f"[daq] channels = {list(bench.daq.channels)}: the card "
-                     f"delivers {list(info.channels)}", values)
+        return Check("devices", "DAQ", "fail", figure, f"[daq] channels = {_toml(bench.daq.channels)}: the card "
+                     f"delivers {_toml(info.channels)}", values)
     if abs(info.rate_hz / bench.daq.rate_hz - 1.0) > 0.01:
         return Check("devices", "DAQ", "warn", f"{figure} (coerced from {bench.daq.rate_hz:g} Hz)",
                      f"[daq] rate_hz = {bench.daq.rate_hz:g}: the card runs {info.rate_hz:g} Hz — state that rate", values)
@@ -205,7 +214,7 @@ def _serial_check(stats: Any, bench: Bench) -> Check:
     if stats.crc_errors:
         return Check("streams", "serial link", "warn" if rate < 0.01 else "fail", figure,
                      f"CRC errors on a standing link: check the cable and its shield, [drive] baud = {bench.drive.baud}"
-                     f" and parity = {bench.drive.parity!r}", values)
+                     f" and parity = {_toml(bench.drive.parity)}", values)
     return Check("streams", "serial link", "pass", figure, values=values)
 
 

@@ -17,6 +17,8 @@ from acq.selftest_checks import Check
 from acq.selftest_cli import selftest_json
 from analysis.diagnose import SpeedRatio, likely_counts_per_rev, ratio_fault
 from tests.helpers import run_cli
+from tests.nidaqmx_standin import StandinHardware
+from tests.test_nidaq import hardware, write_bench  # noqa: F401 - the stand-in NI 9234 fixture
 
 SIM = DEFAULT_BENCH.read_text()
 
@@ -155,7 +157,7 @@ def test_a_bench_that_cannot_be_opened_fails_the_devices_stage_in_one_line(
     run = run_cli(capsys, "selftest", "--fast", "--bench", str(bench))
     assert run.code == 1
     assert "✗ devices · acq devices" in run.out
-    assert "[drive] port = '/dev/acq-none' is not there" in run.out
+    assert '[drive] port = "/dev/acq-none" is not there' in run.out
     assert "Traceback" not in run.out + run.err
 
 
@@ -189,3 +191,17 @@ def test_plain_pytest_collects_the_hardware_suite_and_skips_it_with_the_reason(t
     assert run.returncode == 0, run.stdout + run.stderr
     assert re.search(r"\b(\d+) skipped", run.stdout) and " passed" not in run.stdout
     assert "hardware suite: set ACQ_HW_BENCH=path/to/bench.toml to run it against that bench" in run.stdout
+
+
+def test_ni_daq_missing_device_and_coerced_rate_are_named(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                                          hardware: StandinHardware) -> None:
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench",
+                  str(write_bench(tmp_path, physical_channels=["cDAQ9Mod1/ai0"])))
+    fail = failed_check(json.loads(run.out))
+    assert run.code == 1 and fail["name"] == "acq devices"
+    assert fail["fix"] == ('[daq] physical_channels = ["cDAQ9Mod1/ai0"]: no device cDAQ9Mod1 — check the cable and '
+                           "NI MAX, or the device name")
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench", str(write_bench(tmp_path, rate_hz=25000)))
+    daq = next(c for c in json.loads(run.out)["checks"] if c["name"] == "DAQ")
+    assert daq["status"] == "warn" and daq["values"]["rate_hz"] == 25600.0
+    assert daq["fix"] == "[daq] rate_hz = 25000: the card runs 25600 Hz — state that rate"
