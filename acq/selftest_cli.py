@@ -65,7 +65,7 @@ def selftest_command(bench_path: Path | None, profile_name: str, fast: bool, kee
     """Check the bench and its config against the data: devices, streams, a slow move, an identification.
 
     Each check prints ✓ / ⚠ / ✗ with its figure; a ✗ says what to change in which config key and stops the
-    run. Exit code 0 when nothing failed, 1 otherwise.
+    run. Exit code 0 when nothing failed, 2 when the devices refused the config at opening, 1 otherwise.
     """
     bench = load_bench(bench_path)
     profile = load_profile(profile_name)
@@ -84,4 +84,5 @@ def selftest_command(bench_path: Path | None, profile_name: str, fast: bool, kee
         click.echo(json.dumps(selftest_json(checks, str(bench_path or "configs/benches/sim.toml")), indent=2))
     else:
         out.print(summary_table(checks))
-    return 0 if all(c.status != "fail" for c in checks) else 1
+    failed = next((c for c in checks if c.status == "fail"), None)
+    return 0 if failed is None else int(failed.values.get("exit_code", 1))  # 2: a config the devices refused

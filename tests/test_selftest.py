@@ -159,6 +159,11 @@ def test_a_bench_that_cannot_be_opened_fails_the_devices_stage_in_one_line(
     assert "✗ devices · acq devices" in run.out
     assert '[drive] port = "/dev/acq-none" is not there' in run.out
     assert "Traceback" not in run.out + run.err
+    # a config the devices refuse at opening is bad input: exit 2, the adapter's own line
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench", str(DEFAULT_BENCH.parent / "sim_canopen.toml"))
+    assert run.code == 2
+    assert failed_check(json.loads(run.out))["figure"] == ("--fast: the simulated CANopen drive runs on the bus in "
+                                                           "real time; record without --fast")
 
 
 def test_ratio_fault_words_and_suggestions() -> None:
