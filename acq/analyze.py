@@ -11,18 +11,15 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-import math
 import os
+import sys
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy
 import scipy
-from rich.markup import escape
-from rich.table import Table
-
 import analysis
 from acq import __version__
 from acq.session import Session, load, utc_now_iso
@@ -30,10 +27,6 @@ from analysis.model import TwoMassParams
 from analysis.pipeline import AnalysisOptions, Pipeline, Result, analyze
 from analysis.signals import Recording, TorqueMethod
 from drivers.errors import ConfigError
-
-PARAMS = (("K_Nm_per_rad", "K", "N·m/rad"), ("Jm_kgm2", "J_m", "kg·m²"), ("Jl_kgm2", "J_l", "kg·m²"),
-          ("C_Nms_per_rad", "C", "N·m·s/rad"))
-
 
 @dataclass(frozen=True)
 class SessionResult:
@@ -63,6 +56,7 @@ def recording_from_session(session: Session) -> Recording:
         block_count=cur.block_count,
         block_host_ns=cur.block_host_ns,
         encoder_host_ns=enc.host_ns,
+        host_clock_shared=session.host_clock_shared,
     )
 
 
@@ -137,9 +131,11 @@ def result_json(session: Session, result: Result) -> dict[str, Any]:
 
 def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *, write: bool = True,
                     report: bool = True, **option_kwargs: Any) -> SessionResult:
-    """Identify the joint of one session; write ``<session>.result.json`` (and the report PNG).
+    """Identify the joint of one session; write ``<session>.result.json``.
 
-    Bad or unusable input (too short, bad band, …) raises :class:`ConfigError` naming the session.
+    The report PNG is not drawn here: with ``report`` its path is set, and :func:`draw_report` draws it once the
+    result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
+    :class:`ConfigError` naming the session.
     """
     session = load(path)
     opts = options if options is not None else options_for(session, **option_kwargs)
@@ -154,61 +150,41 @@ def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *,
         raise ConfigError(f"{session.path}: {e}") from None
     doc = result_json(session, result)
     json_path = session.path.with_name(session.path.stem + ".result.json")
-    report_path = session.path.with_name(session.path.stem + ".report.png") if report else None
+    report_path = session.path.with_name(session.path.stem + ".report.png") if report and write else None
     if write:
-        fd, tmp = tempfile.mkstemp(dir=json_path.parent, prefix=f".{json_path.name}.")  # one per writer
-        os.fchmod(fd, 0o644)
-        with os.fdopen(fd, "w") as f:
-            f.write(json.dumps(doc, indent=2))
-        os.replace(tmp, json_path)  # a reader never sees half a result
-        if report_path is not None:
-            from acq.plots import render_report_png
-
-            render_report_png(result.figures, report_path, title=f"{session.attrs.get('joint')} · {session.path.name}",
-                              values=doc)
-    return SessionResult(session, result, doc, json_path, report_path if write else None)
+        write_json(doc, json_path)
+    return SessionResult(session, result, doc, json_path, report_path)
 
 
-def format_value(x: float | None, spec: str = ".4g", scale: float = 1.0) -> str:
-    """``x · scale`` formatted with ``spec``; "—" for a value that is missing, NaN or infinite."""
-    return "—" if x is None or not math.isfinite(x) else format(x * scale, spec)
+def write_json(doc: dict[str, Any], path: Path) -> None:
+    """Write a result document through a temporary file of this writer, so a reader never sees half of it."""
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")  # one per writer
+    os.fchmod(fd, 0o644)
+    with os.fdopen(fd, "w") as f:
+        f.write(json.dumps(doc, indent=2))
+    os.replace(tmp, path)
 
 
-def _scaled(x: float | None, factor: float) -> float | None:
-    return None if x is None else x * factor
+def draw_report(done: SessionResult) -> SessionResult:
+    """Draw ``<session>.report.png`` of an identification already written (nothing when no report was asked for).
 
+    A picture that fails is not a failed identification: the failure becomes a note on the result
+    (``quality.reasons``, "note: report not drawn: …", rewritten into the ``.result.json``) and one line on
+    stderr; the returned result then has no report path.
+    """
+    if done.report_path is None:
+        return done
+    try:
+        from acq.plots import render_report_png  # Qt only when a picture is drawn
 
-def result_table(doc: dict[str, Any]) -> Table:
-    """The identified values with 95 % intervals, frequencies, clock relation and verdict (fits 80 columns)."""
-    truth = doc.get("simulated_truth") or {}
-    quality, clock = doc["quality"], doc["clock"]
-    table = Table(title=f"identification — verdict [bold]{escape(quality['verdict'])}[/bold]")
-    for column in ("quantity", "value", "95 % interval", *(("sim truth", "error") if truth else ())):
-        table.add_column(column, justify="left" if column == "quantity" else "right", no_wrap=True)
-    for key, name, unit in PARAMS:
-        value, (lo, hi) = doc[key], doc["ci95"][key]
-        row = [escape(f"{name} [{unit}]"), format_value(value), f"{format_value(lo)} – {format_value(hi)}"]
-        if truth:
-            err = None if value is None else 100.0 * (value - truth[key]) / truth[key]
-            row += [format_value(truth[key]), "—" if err is None else f"{err:+.2f} %"]
-        table.add_row(*row)
-    offset_ms, true_offset_ms = _scaled(clock["offset_s"], 1e3), _scaled(truth.get("offset_s"), 1e3)
-    rows = [("f_a [Hz]", format_value(doc["antiresonance_hz"]), None),
-            ("f_r [Hz]", format_value(doc["resonance_hz"]), None),
-            ("clock offset [ms]", format_value(offset_ms, ".3f"),
-             (true_offset_ms, None if offset_ms is None or true_offset_ms is None
-              else f"{(offset_ms - true_offset_ms) * 1e3:+.1f} µs")),
-            ("clock drift [ppm]", format_value(clock["drift_ppm"], ".2f"),
-             (truth.get("drift_ppm"), None if clock["drift_ppm"] is None or "drift_ppm" not in truth
-              else f"{clock['drift_ppm'] - truth['drift_ppm']:+.2f} ppm")),
-            ("clock residual [µs]", format_value(_scaled(clock["residual_s"], 1e6), ".1f"), None),
-            ("coherence in band", format_value(quality["mean_coherence"], ".3f"), None)]
-    for name, value, compared in rows:
-        row = [escape(name), value, ""]
-        if truth:
-            true_value, error = compared or (None, None)
-            row += [format_value(true_value, ".4g"), error or ""]
-        table.add_row(*row)
-    if quality["reasons"]:
-        table.caption = escape("\n".join(quality["reasons"]))
-    return table
+        render_report_png(done.result.figures, done.report_path, values=done.json_dict,
+                          title=f"{done.session.attrs.get('joint')} · {done.session.path.name}")
+    except Exception as e:  # noqa: BLE001 — whatever the plotting stack does, the identification stands
+        why = f"{type(e).__name__}: {e}"
+        quality = done.json_dict["quality"]
+        reasons = [*quality["reasons"], f"note: report not drawn: {why}"]
+        doc = {**done.json_dict, "quality": {**quality, "reasons": reasons}}
+        write_json(doc, done.json_path)
+        sys.stderr.write(f"acq: {done.report_path}: report not drawn ({why}); the result stands in {done.json_path}\n")
+        return replace(done, json_dict=doc, report_path=None)
+    return done

@@ -27,10 +27,10 @@ from typing import Any
 
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-from rich.table import Table
 
-from acq.analyze import SessionResult, analysis_fingerprint, analyze_session, sha256_of
+from acq.analyze import SessionResult, analysis_fingerprint, analyze_session, draw_report, sha256_of
 from acq.catalogue import Catalogue, Outcome
+from acq.display import batch_table
 from acq.session import Session, load
 from drivers.errors import AcqError, ConfigError
 
@@ -146,6 +146,7 @@ def analyze_one(path: str, sha256: str, request: dict[str, Any], report: bool) -
         error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
         return Outcome(path, sha256, request_key(request), _meta_if_readable(path), None, error,
                        time.perf_counter() - start)
+    done = draw_report(done)  # the result is written; a picture that fails is a note on it, not a failure
     return succeeded(path, done, request, time.perf_counter() - start)
 
 
@@ -230,20 +231,6 @@ def _outcome(future: Future[Outcome], path: Path, hashes: dict[Path, str], reque
     except Exception as e:  # noqa: BLE001 — the worker never raises; this is the worker or cluster dying
         return Outcome(str(path.resolve()), hashes[path], request_key(request), {}, None,
                        f"{path}: worker failed: {type(e).__name__}: {e}", 0.0)
-
-
-def batch_table(report: BatchReport) -> Table:
-    """One row per session analysed (K, verdict or the error), a caption counting the skipped ones."""
-    table = Table(title="batch analysis")
-    for column in ("session", "joint", "K N·m/rad", "verdict", "error"):
-        table.add_column(column, justify="right" if column.startswith("K") else "left")
-    for o in sorted(report.outcomes, key=lambda o: o.path):
-        k = None if o.doc is None else o.doc["K_Nm_per_rad"]
-        table.add_row(Path(o.path).name, str(o.session.get("joint") or "?"), "—" if k is None else f"{k:.1f}",
-                      "failed" if o.doc is None else o.doc["quality"]["verdict"], o.error or "")
-    table.caption = (f"{len(report.outcomes)} analysed ({len(report.failed)} failed), {len(report.skipped)} skipped "
-                     f"as current, {report.seconds:.1f} s")
-    return table
 
 
 def report_json(report: BatchReport) -> list[dict[str, Any]]:

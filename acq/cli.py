@@ -18,17 +18,18 @@ from rich.markup import escape
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from acq import __version__
-from acq.analyze import SessionResult, analyze_session, result_table
+from acq.analyze import SessionResult, analyze_session, draw_report
 from acq.batch import DEFAULT_REQUEST, analyze_many, is_batch, record_outcome
 from acq.catalogue import parse_tags, tag_option
 from acq.config import load_bench, load_profile
 from acq.devices import devices_command
+from acq.display import result_table, summary_table
 from acq.exporters import export_command
 from acq.importers import import_command
 from acq.recorder import Recorder, RecordingResult
 from acq.selftest_cli import selftest_command
 from acq.session import load, repair
-from acq.summary import summarize, summary_table
+from acq.summary import summarize
 from acq.trend import trend_command
 from acq.view import view_command
 from drivers.errors import AcqError, ConfigError
@@ -113,7 +114,7 @@ def _identify(path: Path, request: dict[str, Any], *, report: bool, catalogue_pa
     start = time.perf_counter()
     done = analyze_session(path, report=report, **request)
     record_outcome(done, request, catalogue_path, time.perf_counter() - start)
-    return done
+    return draw_report(done)  # after the result and the catalogue entry: a picture that fails is only a note
 
 
 def _print_result(done: SessionResult) -> None:

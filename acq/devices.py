@@ -17,9 +17,9 @@ from typing import Any
 
 import click
 from rich.console import Console
-from rich.table import Table
 
 from acq.config import DEFAULT_BENCH
+from acq.display import sections_table
 from drivers.errors import DeviceError
 from drivers.nidaq import DRIVER_MISSING, first_line, import_nidaqmx
 
@@ -109,21 +109,6 @@ def sim_section() -> Section:
 def discover() -> list[Section]:
     """Every section, in display order."""
     return [ni_section(), can_section(), serial_section(), sim_section()]
-
-
-def sections_table(sections: list[Section]) -> Table:
-    """One rich table: a header row per section, then its devices or the reason it is empty."""
-    table = Table(title="What this machine can record from")
-    for column in ("device", "kind", "detail"):
-        table.add_column(column, overflow="fold")
-    for s in sections:
-        table.add_row(f"[bold]{s.title}[/]", "", "")
-        for name, kind, detail in s.rows:
-            table.add_row(name, kind, detail)
-        if s.empty_because:
-            table.add_row("[dim]none[/]", "", s.empty_because)
-        table.rows[-1].end_section = True
-    return table
 
 
 @click.command("devices")

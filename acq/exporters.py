@@ -9,6 +9,10 @@ importer can rebuild block host stamps from it. Gaps in the DAQ index are jumps 
 to the ns), ``position_counts`` (unwrapped), ``index`` (drive cycle) and ``drive_time_s`` when
 the session has it. Floats are written in their shortest exact form, so a round trip is lossless
 except for host stamps rounded to the ns.
+
+``<stem>.session.json`` (:mod:`acq.export_metadata`): the session's id, joint, start time, tags,
+bench and profile as used, and whether the two ``t_s`` columns are stamps on one host clock, so
+``acq import`` restores the session's history.
 """
 
 from __future__ import annotations
@@ -21,6 +25,7 @@ import numpy as np
 from rich.console import Console
 from rich.markup import escape
 
+from acq.export_metadata import write_metadata
 from acq.session import Session, load
 
 PHASE_COLUMNS = ("i_a", "i_b", "i_c")
@@ -50,8 +55,8 @@ def current_t0_s(session: Session) -> float:
     return float(np.min(host_s - last_index / cur.rate_hz))
 
 
-def export_csv(session_path: Path, out_dir: Path) -> tuple[Path, Path]:
-    """Write the session's current and encoder CSV files into ``out_dir``; return their paths."""
+def export_csv(session_path: Path, out_dir: Path) -> tuple[Path, Path, Path]:
+    """Write the session's current and encoder CSV files and its metadata into ``out_dir``; return their paths."""
     session = load(session_path)
     session.require_samples()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -67,15 +72,15 @@ def export_csv(session_path: Path, out_dir: Path) -> tuple[Path, Path]:
     if enc.drive_time_s is not None:
         columns["drive_time_s"] = _exact(enc.drive_time_s)
     _write_columns(encoder_path, columns)
-    return current_path, encoder_path
+    return current_path, encoder_path, write_metadata(session, current_path, encoder_path)
 
 
 @click.command("export")
 @click.argument("session_path", type=click.Path(path_type=Path))
 @click.option("--csv", "csv_dir", required=True, type=click.Path(path_type=Path, file_okay=False),
-              help="Folder for the current and encoder CSV files (the pair `acq import` reads).")
+              help="Folder for the current and encoder CSV files (the pair `acq import` reads) and the metadata.")
 def export_command(session_path: Path, csv_dir: Path) -> int:
-    """Export SESSION to a current CSV and an encoder CSV."""
+    """Export SESSION to a current CSV, an encoder CSV and the session's metadata (JSON)."""
     for path in export_csv(session_path, csv_dir):
         Console().print(f"wrote {escape(str(path))}")
     return 0

@@ -3,14 +3,19 @@
 :class:`ReportView` lays out, for one or several sessions (each its own colour):
 
 * ``torque`` and ``speed``: the time traces on the aligned (drive) time base, x axes linked;
-* ``frf``: measured |H| = |ω_m/T_e| on log–log axes with the fitted two-mass model, its 95 % band
-  and f_a/f_r marked (vertical lines), a legend naming the sessions;
-* ``coherence``: γ² under it, x axis linked to the FRF's;
-* a side panel with the identified values, their 95 % intervals, the clock relation and the verdict.
+* ``frf``: measured |H| = |ω_m/T_e| on log–log axes with the fitted two-mass model and its 95 % band
+  (shaded; the legend says its width, as it is often a line's width), f_a/f_r marked by vertical lines;
+  the legend and the f_a/f_r labels sit in strips of their own above the plot, so they never cover a
+  curve, and the labels are packed into rows so that none overlaps another;
+* ``phase``: measured and model phase, when the clocks were aligned well enough for a phase to be the
+  plant's (the residual a complex fit accepts, :func:`analysis.quality.phase_is_meaningful`);
+* ``coherence``: γ²; FRF, phase and coherence share their x axis and show the fit band shaded;
+* a side panel with the identified values, their 95 % intervals, the clock relation, the verdict and
+  the options the result came from.
 
 :func:`render_report_png` draws the same widget offscreen into an image of an exact pixel size;
 ``acq view --screenshot`` uses it too. Log axes: pyqtgraph transforms data items, not other items,
-so the f_a/f_r lines sit at log10(f) in view coordinates.
+so the f_a/f_r lines, labels and the fit band sit at log10(f) in view coordinates.
 """
 
 from __future__ import annotations
@@ -29,7 +34,8 @@ import pyqtgraph as pg
 import shiboken6
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
-from acq.analyze import PARAMS, format_value
+from acq.display import PARAMS, format_value, interval_text, options_text
+from analysis.quality import Thresholds
 from analysis.report import FigureData
 
 pg.setConfigOptions(background="w", foreground="k", antialias=True)
@@ -39,6 +45,8 @@ COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e3
 PANEL_WIDTH_PX = 360
 _LOG_TICK_DECADES = range(-6, 7)
 DEFAULT_SIZE_PX = (1600, 1000)
+LEGEND_ROW_PX = 20  # height of a legend row (9 pt text, pyqtgraph's 20 px samples)
+MARK_GAP_PX = 8  # least space between two labels in one row
 
 
 @dataclass(frozen=True)
@@ -80,9 +88,10 @@ def _qt_message(mode: QtCore.QtMsgType, context: QtCore.QMessageLogContext, mess
         sys.stderr.write(f"{message}\n")
 
 
-def _plot(layout: pg.GraphicsLayout, row: int, col: int, title: str,
-          x: tuple[str, str], y: tuple[str, str]) -> pg.PlotItem:
-    plot = layout.addPlot(row=row, col=col, title=title)  # unnamed: pyqtgraph's view registry fails at teardown
+def _plot(layout: pg.GraphicsLayout, row: int, col: int, title: str | None,
+          x: tuple[str, str], y: tuple[str, str], rowspan: int = 1) -> pg.PlotItem:
+    # unnamed: pyqtgraph's view registry fails at teardown
+    plot = layout.addPlot(row=row, col=col, rowspan=rowspan, title=title)
     for side, (text, units) in (("bottom", x), ("left", y)):
         axis = plot.getAxis(side)
         axis.enableAutoSIPrefix(False)
@@ -91,8 +100,35 @@ def _plot(layout: pg.GraphicsLayout, row: int, col: int, title: str,
     return plot
 
 
+def _with_alpha(color: str, alpha: int) -> QtGui.QColor:
+    c = QtGui.QColor(color)
+    c.setAlpha(alpha)
+    return c
+
+
+def _legend_box(brush: QtGui.QBrush, pen: QtGui.QPen | None = None) -> pg.BarGraphItem:
+    """A legend sample for a shaded region: a filled square (with a line across it when ``pen`` is given)."""
+    return pg.BarGraphItem(x=[0.0], height=[1.0], width=1.0, brush=brush, pen=pen)
+
+
+def band_width_text(fd: FigureData) -> str:
+    """The model's 95 % band as ± its relative half-width over the fit band, % (min–max): the band is often a
+    line's width on a log axis, so the legend says how wide it is."""
+    half = 50.0 * (fd.model_high - fd.model_low) / fd.model_abs
+    half = half[np.isfinite(half)]
+    if half.size == 0:
+        return "—"
+    lo, hi = float(np.min(half)), float(np.max(half))
+    return f"± {lo:.2g} %" if f"{lo:.2g}" == f"{hi:.2g}" else f"± {lo:.2g}–{hi:.2g} %"
+
+
 class ReportView(QtWidgets.QWidget):
-    """Traces, FRF with the fitted model, coherence and identified values of one or several sessions.
+    """Traces, FRF with the fitted model, phase, coherence and identified values of one or several sessions.
+
+    The right column, top to bottom: a heading, the legend and the f_a/f_r labels (each in its own strip,
+    so neither covers a curve), the FRF amplitude, the phase (only when some session's clocks are aligned
+    well enough, :attr:`analysis.report.FigureData.phase_valid`) and the coherence, x axes linked; the
+    fit band is shaded on all three.
 
     Parameters
     ----------
@@ -104,7 +140,11 @@ class ReportView(QtWidgets.QWidget):
     Attributes
     ----------
     plots : dict of str → pyqtgraph.PlotItem
-        ``torque``, ``speed``, ``frf``, ``coherence``.
+        ``torque``, ``speed``, ``frf``, (``phase``), ``coherence``; ``marks`` is the f_a/f_r label strip.
+    legend : pyqtgraph.LegendItem
+        The FRF's legend, above the plot.
+    mark_labels : list of pyqtgraph.TextItem
+        The f_a/f_r labels, placed in rows of the strip so that none overlaps another.
     panel : QLabel
         The side panel with the identified values.
     """
@@ -118,28 +158,56 @@ class ReportView(QtWidgets.QWidget):
         layout = self.graphics.ci
         if title:
             layout.addLabel(escape(title), row=0, col=0, colspan=2, size="12pt")
+        phase = any(s.figures.phase_valid for s in sessions)
+        layout.addLabel("FRF |ω_m / T_e| with the fitted two-mass model", row=1, col=1, size="11pt")
+        self.legend = pg.LegendItem(colCount=1 if len(sessions) > 1 else 3, labelTextSize="9pt")
+        layout.addItem(self.legend, row=2, col=1)
+        marks = layout.addPlot(row=3, col=1)
+        frf_row, bottom_rows = 4, (5, 6) if phase else (5,)
         self.plots = {
-            "torque": _plot(layout, 1, 0, "Electromagnetic torque", ("t (drive clock)", "s"), ("T_e", "N·m")),
-            "speed": _plot(layout, 2, 0, "Motor speed", ("t (drive clock)", "s"), ("ω_m", "rad/s")),
-            "frf": _plot(layout, 1, 1, "FRF amplitude |ω_m / T_e|", ("f", "Hz"), ("|H|", "rad/(s·N·m)")),
-            "coherence": _plot(layout, 2, 1, "Coherence", ("f", "Hz"), ("γ²", "")),
+            "torque": _plot(layout, 1, 0, "Electromagnetic torque", ("t (drive clock)", "s"), ("T_e", "N·m"),
+                            rowspan=frf_row),
+            "speed": _plot(layout, bottom_rows[0], 0, "Motor speed", ("t (drive clock)", "s"), ("ω_m", "rad/s"),
+                           rowspan=len(bottom_rows)),
+            "frf": _plot(layout, frf_row, 1, None, ("f", "Hz"), ("|H|", "rad/(s·N·m)")),
         }
+        if phase:
+            self.plots["phase"] = _plot(layout, 5, 1, None, ("f", "Hz"), ("phase of H", "°"))
+        self.plots["coherence"] = _plot(layout, bottom_rows[-1], 1, None, ("f", "Hz"), ("γ²", ""))
+        for row, stretch in ((frf_row, 3), *((r, 2) for r in bottom_rows)):
+            layout.layout.setRowStretchFactor(row, stretch)
         self.plots["speed"].setXLink(self.plots["torque"])
-        self.plots["coherence"].setXLink(self.plots["frf"])
-        self.plots["frf"].setLogMode(x=True, y=True)
-        self.plots["coherence"].setLogMode(x=True, y=False)
+        frf = self.plots["frf"]
+        frf.setLogMode(x=True, y=True)
+        for name in ("phase", "coherence"):
+            if name in self.plots:
+                self.plots[name].setLogMode(x=True, y=False)
+                self.plots[name].setXLink(frf)
         self.plots["coherence"].setYRange(0.0, 1.0)
-        for name, side in (("frf", "bottom"), ("frf", "left"), ("coherence", "bottom")):
-            self.plots[name].getAxis(side).setTicks(log_ticks())
-        self.plots["frf"].addLegend(offset=(-10, 10))
+        if phase:
+            self.plots["phase"].setYRange(-180.0, 180.0)
+            self.plots["phase"].getAxis("left").setTicks([[(float(d), f"{d}") for d in range(-180, 181, 90)], []])
+        for name in ("frf", "phase", "coherence"):
+            if name in self.plots:
+                self.plots[name].getAxis("bottom").setTicks(log_ticks())
+                self.plots[name].getAxis("left").setWidth(70)  # one width: the linked x axes line up
+        frf.getAxis("left").setTicks(log_ticks())
+        self.marks = marks
+        self._setup_marks(marks, frf)
+        self.mark_labels: list[pg.TextItem] = []
         several = len(sessions) > 1
         for i, s in enumerate(sessions):
             self._draw_session(s, i, s.name if several else "")
+        for band in dict.fromkeys(s.figures.band_hz for s in sessions):
+            self.legend.addItem(_legend_box(self._shade_band(band)), f"fit band {band[0]:g}–{band[1]:g} Hz")
+        rows = -(-len(self.legend.items) // self.legend.columnCount)
+        layout.layout.setRowFixedHeight(1, 24)
+        layout.layout.setRowFixedHeight(2, rows * LEGEND_ROW_PX + 6)
         self.panel = QtWidgets.QLabel(values_html(sessions))
         self.panel.setTextFormat(QtCore.Qt.TextFormat.RichText)
         self.panel.setAlignment(QtCore.Qt.AlignmentFlag.AlignTop | QtCore.Qt.AlignmentFlag.AlignLeft)
         self.panel.setWordWrap(True)
-        self.panel.setFixedWidth(PANEL_WIDTH_PX * (1 if len(sessions) < 3 else 2))
+        self.panel.setFixedWidth(PANEL_WIDTH_PX * (1 if len(sessions) <= 3 else 2))
         self.panel.setStyleSheet("QLabel { background: white; color: black; padding: 8px; }")
         box = QtWidgets.QHBoxLayout(self)
         box.setContentsMargins(0, 0, 0, 0)
@@ -147,6 +215,34 @@ class ReportView(QtWidgets.QWidget):
         box.addWidget(self.graphics, stretch=1)
         box.addWidget(self.panel)
         self.resize(*DEFAULT_SIZE_PX)
+
+    @staticmethod
+    def _setup_marks(marks: pg.PlotItem, frf: pg.PlotItem) -> None:
+        """The f_a/f_r label strip: no axes, no mouse, x linked to the FRF (pyqtgraph lines linked views up by
+        their position on the screen, so a label sits over its line)."""
+        marks.hideButtons()
+        marks.setMouseEnabled(x=False, y=False)
+        marks.hideAxis("bottom")
+        marks.hideAxis("left")
+        marks.setLogMode(x=True, y=False)
+        marks.setXLink(frf)
+        marks.vb.disableAutoRange()
+        marks.setContentsMargins(0, 0, 0, 0)
+        marks.vb.setFlag(QtWidgets.QGraphicsItem.GraphicsItemFlag.ItemClipsChildrenToShape, False)
+        marks.setYRange(0.0, 1.0, padding=0.0)
+        marks.vb.sigResized.connect(lambda *_: place_marks(marks))
+        marks.vb.sigXRangeChanged.connect(lambda *_: place_marks(marks))
+
+    def _shade_band(self, band_hz: tuple[float, float]) -> QtGui.QBrush:
+        """The fit band, shaded on the FRF, the phase and the coherence; returns its brush."""
+        brush = pg.mkBrush(0, 0, 0, 14)
+        for name in ("frf", "phase", "coherence"):
+            if name in self.plots:
+                region = pg.LinearRegionItem(values=[math.log10(f) for f in band_hz], movable=False, brush=brush,
+                                             pen=pg.mkPen(None))
+                region.setZValue(-20)
+                self.plots[name].addItem(region, ignoreBounds=True)
+        return brush
 
     def _draw_session(self, s: SessionFigure, index: int, name: str) -> None:
         fd = s.figures
@@ -157,31 +253,76 @@ class ReportView(QtWidgets.QWidget):
         self.plots["speed"].plot(fd.t_s, fd.speed_rad_s, pen=pen, name=f"{prefix}ω_m")
         f, h, coh = _positive(fd.f_hz, fd.H_abs, fd.coherence)
         frf, coherence = self.plots["frf"], self.plots["coherence"]
-        faint = QtGui.QColor(color)
-        faint.setAlpha(110)
-        frf.plot(f, h, pen=pg.mkPen(faint, width=1), symbol="o", symbolSize=3, symbolPen=None,
-                 symbolBrush=faint, name=f"{prefix}measured")
+        faint = _with_alpha(color, 110)
+        measured = frf.plot(f, h, pen=pg.mkPen(faint, width=1), symbol="o", symbolSize=3, symbolPen=None,
+                            symbolBrush=faint)
+        if not name:
+            self.legend.addItem(measured, "measured")
+        elif index == 0:  # several sessions: one entry for the dots of all, one per session for its model
+            self.legend.addItem(pg.PlotDataItem(pen=None, symbol="o", symbolSize=5, symbolPen=None, symbolBrush="#888"),
+                                "measured (dots in the session's colour)")
         coherence.plot(f, coh, pen=pen, name=f"{prefix}γ²")
+        phase = self.plots.get("phase") if fd.phase_valid else None
+        if phase is not None:
+            fp, ph = _positive(fd.f_hz, fd.H_phase_deg)
+            phase.plot(fp, ph, pen=None, symbol="o", symbolSize=3, symbolPen=None, symbolBrush=faint)
         mf, model, low, high = _positive(fd.model_f_hz, fd.model_abs, fd.model_low, fd.model_high)
         if mf.size == 0:  # the fit failed: no model, no band, no f_a/f_r
             return
-        edge = QtGui.QColor(color)
-        edge.setAlpha(80)
-        fill = QtGui.QColor(color)
-        fill.setAlpha(45)
-        low_curve = frf.plot(mf, low, pen=pg.mkPen(edge, width=1))
-        high_curve = frf.plot(mf, high, pen=pg.mkPen(edge, width=1))
+        fill = _with_alpha(color, 70)
+        low_curve = frf.plot(mf, low, pen=pg.mkPen(_with_alpha(color, 110), width=1))
+        high_curve = frf.plot(mf, high, pen=pg.mkPen(_with_alpha(color, 110), width=1))
         frf.addItem(pg.FillBetweenItem(low_curve, high_curve, brush=fill))
-        frf.plot(mf, model, pen=pg.mkPen(color, width=2.5), name=f"{prefix}two-mass fit, 95 % band")
+        model_pen = pg.mkPen(color, width=2)
+        frf.plot(mf, model, pen=model_pen)
+        self.legend.addItem(_legend_box(pg.mkBrush(fill), model_pen), f"{prefix}two-mass fit, 95 % band "
+                                                                      f"{band_width_text(fd)}")
+        if phase is not None:
+            mp, model_phase = _positive(fd.model_f_hz, fd.model_phase_deg)
+            phase.plot(mp, model_phase, pen=model_pen)
         for label, f_hz in (("f_a", fd.f_a_hz), ("f_r", fd.f_r_hz)):
             if math.isfinite(f_hz) and f_hz > 0:
-                line = pg.InfiniteLine(pos=math.log10(f_hz), angle=90, movable=False,
-                                       pen=pg.mkPen(color, width=1, style=QtCore.Qt.PenStyle.DashLine),
-                                       label=f"{label} {f_hz:.1f} Hz",
-                                       labelOpts={"position": min(0.9, 0.06 + 0.08 * (2 * index + (label == "f_r"))), "color": color,
-                                                  "fill": (255, 255, 255, 200)})
-                line.setObjectName(f"{prefix}{label}")
-                frf.addItem(line)
+                for plot in (frf, phase):
+                    if plot is not None:
+                        line = pg.InfiniteLine(pos=math.log10(f_hz), angle=90, movable=False,
+                                               pen=pg.mkPen(color, width=1, style=QtCore.Qt.PenStyle.DashLine))
+                        line.setObjectName(f"{prefix}{label}")
+                        plot.addItem(line)
+                text = pg.TextItem(f"{label} {f_hz:.1f} Hz", color=color, anchor=(0.5, 0.5))
+                text.setPos(math.log10(f_hz), 0.5)
+                self.marks.addItem(text, ignoreBounds=True)
+                self.mark_labels.append(text)
+        place_marks(self.marks)
+
+
+def place_marks(marks: pg.PlotItem) -> int:
+    """Put the f_a/f_r labels of the strip into rows so that no two overlap (left to right, each into the lowest
+    row where it clears the labels already there), and size the strip to hold the rows; returns the rows used.
+
+    Labels are measured in pixels, so the rows follow the window's width and the x range (zoom).
+    """
+    labels = sorted((i for i in marks.items if isinstance(i, pg.TextItem)), key=lambda t: t.pos().x())
+    x0, x1 = marks.vb.viewRange()[0]
+    width_px = marks.vb.width()
+    if not labels or width_px <= 0 or x1 <= x0:
+        return 0
+    px_per_decade = width_px / (x1 - x0)
+    ends: list[float] = []
+    rows = []
+    for t in labels:
+        w = t.textItem.boundingRect().width()
+        left = (t.pos().x() - x0) * px_per_decade - 0.5 * w
+        row = next((r for r, end in enumerate(ends) if end + MARK_GAP_PX <= left), len(ends))
+        ends[row:row + 1] = [left + w]
+        rows.append(row)
+    for t, row in zip(labels, rows):
+        t.setPos(t.pos().x(), (row + 0.5) / len(ends))
+    row_px = max(t.textItem.boundingRect().height() for t in labels)
+    height = int(len(ends) * row_px) + 4
+    if marks.minimumHeight() != height:
+        marks.setMinimumHeight(height)
+        marks.setMaximumHeight(height)
+    return len(ends)
 
 
 def log_ticks() -> list[list[tuple[float, str]]]:
@@ -199,13 +340,6 @@ def _positive(f_hz: np.ndarray, *ys: np.ndarray) -> tuple[np.ndarray, ...]:
     return (np.asarray(f_hz)[keep], *(np.asarray(y)[keep] for y in ys))
 
 
-def _halfwidth(value: float | None, ci: Sequence[float | None] | None) -> str:
-    """The 95 % interval as ± its half-width relative to the value, %."""
-    if value is None or not ci or None in ci or value == 0:
-        return "—"
-    return f"± {50.0 * (ci[1] - ci[0]) / abs(value):.2g} %"
-
-
 def values_html(sessions: Sequence[SessionFigure]) -> str:
     """The side panel: identified values with 95 % intervals, f_a, f_r, clock and verdict, one block per session."""
     parts = ["<h3>Identified two-mass model</h3>"]
@@ -218,7 +352,7 @@ def values_html(sessions: Sequence[SessionFigure]) -> str:
             continue
         rows = []
         for key, name, unit in PARAMS:
-            rows.append((name, format_value(v.get(key)), _halfwidth(v.get(key), v.get("ci95", {}).get(key)), unit))
+            rows.append((name, format_value(v.get(key)), interval_text(v, key, relative=True), unit))
         clock = v.get("clock", {})
         rows += [("f_a", format_value(v.get("antiresonance_hz")), "", "Hz"),
                  ("f_r", format_value(v.get("resonance_hz")), "", "Hz"),
@@ -232,10 +366,22 @@ def values_html(sessions: Sequence[SessionFigure]) -> str:
                      f"{table}</table>")
         parts.append(f"<p>verdict <b>{escape(str(quality.get('verdict', '—')))}</b>, mean γ² in band "
                      f"{format_value(quality.get('mean_coherence'), '.3g')}</p>")
+        parts.append(f"<p>{escape(phase_text(s))}</p><p><i>{escape(options_text(v))}</i></p>")
         reasons = [r for r in quality.get("reasons", []) if not r.startswith("note: ")]
         if reasons:
             parts.append("<ul>" + "".join(f"<li>{escape(r)}</li>" for r in reasons) + "</ul>")
     return "".join(parts)
+
+
+def phase_text(s: SessionFigure) -> str:
+    """Why the phase is shown or not: the clock residual against the limit a complex fit accepts."""
+    limit_us = 1e6 * Thresholds().clock_residual_complex_s
+    residual = s.values.get("clock", {}).get("residual_s")
+    if s.figures.phase_valid:
+        return f"phase shown: clocks aligned to {1e6 * residual:.0f} µs (limit {limit_us:.0f} µs)"
+    if residual is None:
+        return "phase not shown: the clocks were not aligned"
+    return f"phase not shown: clock residual {1e6 * residual:.0f} µs exceeds {limit_us:.0f} µs"
 
 
 def grab_png(widget: QtWidgets.QWidget, path: Path | str, size: tuple[int, int] = DEFAULT_SIZE_PX) -> Path:
@@ -248,7 +394,8 @@ def grab_png(widget: QtWidgets.QWidget, path: Path | str, size: tuple[int, int] 
     path = Path(path)
     widget.resize(*size)
     widget.show()
-    QtWidgets.QApplication.processEvents()
+    for _ in range(3):  # a layout change made while laying out (the f_a/f_r label rows) needs another pass
+        QtWidgets.QApplication.processEvents()
     image = QtGui.QImage(size[0], size[1], QtGui.QImage.Format.Format_RGB32)
     image.fill(QtGui.QColor("white"))
     widget.render(image)

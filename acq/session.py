@@ -4,7 +4,9 @@ Layout (``format = "acq-session"``, ``format_version = 1``)::
 
     /                   attrs: format, format_version, session_id, created_utc, stopped_utc,
                                host_monotonic_ns_at_start, acq_version, status, stop_reason,
-                               bench_json, profile_json, joint, operator, tags_json, origin_json
+                               bench_json, profile_json, joint, operator, tags_json, origin_json,
+                               host_clock_shared (both streams' host_ns on one host clock; absent in
+                               older files: true for recordings, false for imports)
     /current            attrs: rate_hz (coerced by the card), device, channels, units
         i_a_A [, i_b_A, i_c_A]   float64, A, one entry per stored sample
         blocks/first_index       int64, cumulative DAQ sample index of each read's first sample
@@ -104,6 +106,10 @@ class SessionWriter:
     operator : optional name of the person at the bench.
     tags : optional free-form tags (pose, payload_kg, temperature_C, ...).
     origin : optional description of where the data came from (e.g. imported files).
+    host_clock_shared : whether both streams' host stamps are arrival times on one host clock (True for a
+        recording; an import of files from separate tools is False).
+    session_id, created_utc : the identity and start time (ISO 8601, UTC) of a session recorded earlier and
+        restored by an import; by default a new UUID4 and now.
     """
 
     def __init__(
@@ -118,6 +124,9 @@ class SessionWriter:
         operator: str = "",
         tags: dict[str, Any] | None = None,
         origin: dict[str, Any] | None = None,
+        host_clock_shared: bool = True,
+        session_id: str | None = None,
+        created_utc: str | None = None,
     ) -> None:
         self.path = Path(path)
         if not self.path.parent.is_dir():
@@ -127,12 +136,12 @@ class SessionWriter:
         self._pending = _PendingColumns()
         f = h5py.File(self.path, "w-", libver=LIBVER)
         self._file = f
-        created = utc_now_iso()
+        created = created_utc or utc_now_iso()
         f.attrs.update(
             {
                 "format": FORMAT,
                 "format_version": FORMAT_VERSION,
-                "session_id": str(uuid.uuid4()),
+                "session_id": session_id or str(uuid.uuid4()),
                 "created_utc": created,
                 "stopped_utc": "",
                 "host_monotonic_ns_at_start": np.int64(host_ns_at_start),
@@ -145,6 +154,7 @@ class SessionWriter:
                 "operator": operator,
                 "tags_json": json.dumps(tags or {}),
                 "origin_json": json.dumps(origin or {"kind": "recorded"}),
+                "host_clock_shared": bool(host_clock_shared),
             }
         )
         cur = f.create_group("current")
@@ -291,6 +301,13 @@ class Session:
     @property
     def tags(self) -> dict[str, Any]:
         return json.loads(self.attrs.get("tags_json", "{}"))
+
+    @property
+    def host_clock_shared(self) -> bool:
+        """Whether both streams' host stamps are arrival times on one host clock (older files: recordings are)."""
+        if "host_clock_shared" in self.attrs:
+            return bool(self.attrs["host_clock_shared"])
+        return json.loads(self.attrs.get("origin_json", "{}")).get("kind", "recorded") != "imported"
 
     def require_samples(self) -> None:
         """Raise :class:`ConfigError` naming the stream when either stream holds too little to use."""

@@ -5,9 +5,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from rich.table import Table
 
-from acq.analyze import format_value
 from acq.session import Session
 
 
@@ -77,17 +75,3 @@ def summarize(session: Session) -> SessionSummary:
         streams=streams,
         events=len(session.events),
     )
-
-
-def summary_table(summary: SessionSummary) -> Table:
-    """A rich table of the summary, one row per stream."""
-    title = f"{summary.path}\njoint {summary.joint} · {summary.created_utc} · status [bold]{summary.status}[/bold]"
-    if summary.stop_reason:
-        title += f" ({summary.stop_reason})"
-    table = Table(title=title)
-    for column in ("stream", "samples", "duration [s]", "nominal rate [Hz]", "effective rate [Hz]", "gaps", "missing"):
-        table.add_column(column, justify="left" if column == "stream" else "right")
-    for s in summary.streams:
-        table.add_row(s.name, f"{s.samples}", f"{s.duration_s:.3f}", f"{s.nominal_rate_hz:.1f}",
-                      format_value(s.effective_rate_hz, ".2f"), f"{s.gaps}", f"{s.missing}")
-    return table

@@ -16,7 +16,6 @@ PLC script can act; re-pin the baseline (``--baseline``) after a repair.
 
 from __future__ import annotations
 
-import functools
 import json
 import math
 import statistics
@@ -28,11 +27,10 @@ from typing import Any, Literal
 
 import click
 from rich.console import Console
-from rich.table import Table
 
-from acq.analyze import format_value
 from acq.batch import CATALOGUE_NAME
 from acq.catalogue import Catalogue, Entry, parse_tags, tags_match
+from acq.display import trend_table
 from drivers.errors import ConfigError
 
 EXIT_ALARM = 3
@@ -86,6 +84,7 @@ class Trend:
     sigma_K_Nm_per_rad: float | None
     threshold_pct: float
     ewma_lambda: float
+    ewma_L: float = EWMA_L
 
     @property
     def judged(self) -> list[TrendPoint]:
@@ -202,39 +201,6 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
     return Trend(joint, points, base, note, sigma, threshold_pct, ewma_lambda)
 
 
-def trend_table(trend: Trend) -> Table:
-    """The trend as a rich table: K and its interval, change, EWMA, f_a, f_r and state per session.
-
-    Skipped sessions are numbered; their reasons are in the caption, with the baseline and the rules.
-    """
-    truth = any(p.entry.truth_K_Nm_per_rad is not None for p in trend.points)
-    tags = any(p.entry.tags for p in trend.points)
-    table = Table(title=f"stiffness trend — {trend.joint}" + ("  [bold red]ALARM[/]" if trend.alarm else ""))
-    columns = ["#", "started (UTC)", "K N·m/rad", "95 % interval", "ΔK %", "EWMA %", "f_a Hz", "f_r Hz",
-               *(["sim K"] if truth else []), *(["tags"] if tags else []), "state"]
-    for c in columns:
-        table.add_column(c, justify="left" if c in ("started (UTC)", "tags", "state") else "right")
-    styles = {"alarm": "bold red", "skipped": "dim", "before baseline": "dim", "baseline": "cyan", "ok": ""}
-    notes = []
-    f1 = functools.partial(format_value, spec=".1f")
-    for i, p in enumerate(trend.points, 1):
-        e = p.entry
-        state = {"alarm": f"ALARM {p.reason}", "skipped": "skipped ↓"}.get(p.state, p.state)
-        if p.state == "skipped":
-            notes.append(f"#{i} skipped: {p.reason}")
-        tag_text = " ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in e.tags.items())
-        table.add_row(str(i), (e.created_utc or "?").replace("+00:00", "").replace("T", " "), f1(e.K_Nm_per_rad),
-                      f"{f1(e.K_ci95[0])}–{f1(e.K_ci95[1])}", format_value(p.change_pct, "+.1f"),
-                      format_value(p.ewma_change_pct, "+.1f"), f1(e.f_a_hz), f1(e.f_r_hz),
-                      *([f1(e.truth_K_Nm_per_rad)] if truth else []), *([tag_text] if tags else []), state,
-                      style=styles[p.state])
-    base = "—" if trend.baseline_K_Nm_per_rad is None else f"{trend.baseline_K_Nm_per_rad:.1f} N·m/rad"
-    table.caption = "\n".join([f"baseline {base} ({trend.baseline_note}); alarm below −{trend.threshold_pct:g} % or "
-                               f"EWMA (λ = {trend.ewma_lambda:g}) below −{EWMA_L:g}σ limit, "
-                               f"σ = {f1(trend.sigma_K_Nm_per_rad)} N·m/rad", *notes])
-    return table
-
-
 def trend_json(trend: Trend) -> dict[str, Any]:
     """The ``--json`` document: settings, baseline, alarm and every point."""
     return {"joint": trend.joint, "alarm": trend.alarm, "baseline_K_Nm_per_rad": trend.baseline_K_Nm_per_rad,
@@ -271,9 +237,15 @@ def trend_widget(trend: Trend) -> Any:
     QtWidgets.QVBoxLayout(frame).addWidget(widget)
     widget.ci.addLabel(f"stiffness trend — {trend.joint}" + ("  (ALARM)" if trend.alarm else ""), row=0, col=0,
                        size="14pt")
-    k_plot = widget.addPlot(row=1, col=0)
-    f_plot = widget.addPlot(row=2, col=0)
+    legend = pg.LegendItem(colCount=3, labelTextSize="10pt")  # a row of its own: it never covers a point
+    widget.ci.addItem(legend, row=1, col=0)
+    widget.ci.layout.setRowFixedHeight(1, 80)
+    k_plot = widget.addPlot(row=2, col=0)
+    f_plot = widget.addPlot(row=3, col=0)
+    widget.ci.layout.setRowStretchFactor(2, 3)
+    widget.ci.layout.setRowStretchFactor(3, 2)
     k_plot.setXLink(f_plot)
+    k_plot.getAxis("bottom").setStyle(showValues=False)  # the f plot under it names the sessions
     pts = [(i, p) for i, p in enumerate(trend.points) if p.entry.K_Nm_per_rad is not None]
     x = np.array([i for i, _ in pts], dtype=float)
     k = np.array([p.entry.K_Nm_per_rad for _, p in pts], dtype=float)
@@ -283,29 +255,40 @@ def trend_widget(trend: Trend) -> Any:
                                    pen=pg.mkPen("#555", width=1.5)))
     colors = {"baseline": "#17becf", "ok": "#1f77b4", "alarm: EWMA": "#ff7f0e", "alarm: threshold": "#d62728",
               "skipped": "#bbbbbb", "before baseline": "#bbbbbb"}
-    k_plot.addLegend(offset=(-10, 10))
     for state, color in colors.items():
         sel = [j for j, (_, p) in enumerate(pts) if _category(p) == state]
         if sel:
-            k_plot.plot(x[sel], k[sel], pen=None, symbol="o", symbolSize=11, symbolBrush=color, name=state)
+            legend.addItem(k_plot.plot(x[sel], k[sel], pen=None, symbol="o", symbolSize=11, symbolBrush=color), state)
     base = trend.baseline_K_Nm_per_rad
     if base is not None:
-        k_plot.addLine(y=base, pen=pg.mkPen("#17becf", width=2), label="baseline", labelOpts={"position": 0.05})
-        dashed = pg.mkPen("#d62728", width=2, style=QtCore.Qt.PenStyle.DashLine)
-        k_plot.addLine(y=base * (1 - trend.threshold_pct / 100), pen=dashed,
-                       label=f"−{trend.threshold_pct:g} %", labelOpts={"position": 0.05})
+        legend.addItem(k_plot.plot(x[:1], [base], pen=pg.mkPen("#17becf", width=3)), f"baseline {base:.1f} N·m/rad")
+        k_plot.addLine(y=base, pen=pg.mkPen("#17becf", width=3))
+        threshold = base * (1 - trend.threshold_pct / 100)
+        dashed_red = pg.mkPen("#d62728", width=2, style=QtCore.Qt.PenStyle.DashLine)
+        legend.addItem(k_plot.plot(x[:1], [threshold], pen=dashed_red),
+                       f"threshold −{trend.threshold_pct:g} % ({threshold:.1f})")
+        k_plot.addLine(y=threshold, pen=dashed_red)
+        levels = [base, threshold]
         judged = [(i, p) for i, p in enumerate(trend.points) if p.ewma_change_pct is not None]
         if judged:
             jx = np.array([i for i, _ in judged], dtype=float)
-            k_plot.plot(jx, [base * (1 + p.ewma_change_pct / 100) for _, p in judged],  # type: ignore[operator]
-                        pen=pg.mkPen("#ff7f0e", width=2), name=f"EWMA (λ = {trend.ewma_lambda:g})")
-            k_plot.plot(jx, [base * (1 + p.ewma_limit_pct / 100) for _, p in judged],  # type: ignore[operator]
-                        pen=pg.mkPen("#ff7f0e", width=1, style=QtCore.Qt.PenStyle.DotLine), name="EWMA limit")
-    f_plot.addLegend(offset=(-10, 10))
-    for key, color, name in (("f_a_hz", "#2ca02c", "f_a"), ("f_r_hz", "#9467bd", "f_r")):
+            ewma = [base * (1 + p.ewma_change_pct / 100) for _, p in judged]  # type: ignore[operator]
+            limit = [base * (1 + p.ewma_limit_pct / 100) for _, p in judged]  # type: ignore[operator]
+            legend.addItem(k_plot.plot(jx, ewma, pen=pg.mkPen("#ff7f0e", width=2.5), symbol="d", symbolSize=7,
+                                       symbolBrush="#ff7f0e", symbolPen=None), f"EWMA (λ = {trend.ewma_lambda:g})")
+            limit_curve = k_plot.plot(jx, limit, pen=pg.mkPen("#ff7f0e", width=2, style=QtCore.Qt.PenStyle.DashLine))
+            k_plot.addItem(pg.FillBetweenItem(limit_curve, k_plot.plot(jx, [base] * len(jx), pen=None),
+                                              brush=pg.mkBrush(255, 127, 14, 35)))
+            legend.addItem(limit_curve, f"EWMA limit −{trend.ewma_L:g}σ (latest {limit[-1]:.1f}; shaded: no alarm)")
+            levels += [*ewma, *limit]
+        values = np.concatenate([lo, hi, k, levels])
+        values = values[np.isfinite(values)]
+        pad = 0.05 * (values.max() - values.min() or values.max())
+        k_plot.setYRange(values.min() - pad, values.max() + pad, padding=0)
+    for key, color, name in (("f_a_hz", "#2ca02c", "f_a (lower plot)"), ("f_r_hz", "#9467bd", "f_r (lower plot)")):
         fx = [i for i, p in pts if getattr(p.entry, key) is not None]
-        f_plot.plot(fx, [getattr(trend.points[i].entry, key) for i in fx], pen=pg.mkPen(color, width=2), symbol="s",
-                    symbolBrush=color, name=name)
+        legend.addItem(f_plot.plot(fx, [getattr(trend.points[i].entry, key) for i in fx], pen=pg.mkPen(color, width=2),
+                                   symbol="s", symbolBrush=color), name)
     step = max(1, len(trend.points) // 10)
     ticks = [(float(i), (p.entry.created_utc or "?")[:19].replace("T", "\n"))
              for i, p in enumerate(trend.points)][::step]

@@ -3,15 +3,21 @@
 Convention (shared with the simulator and the report): t_drive = offset_s + t_daq·(1 + drift_ppm·1e-6),
 with t_daq = n / rate_hz for DAQ sample n and t_drive = k·T for drive cycle k.
 
-Three stages, each narrowing the search of the next:
+Four stages, each narrowing the search of the next:
 
-1. host: the arrival stamps of DAQ blocks and encoder samples on the host's monotonic clock give the
-   relation to a few ms (latencies differ between the streams).
-2. frequency: the electrical frequency carried by the current (zero-crossing rate of i_a) must equal
+1. host: when both streams carry arrival stamps on one host clock (a recording, not two files from
+   separate tools), the stamps give the relation to a few ms — if the transfer latencies are steady.
+2. wide (:mod:`analysis.clock_search`): the current's electrical frequency against the encoder's over
+   every plausible offset (±2 s around the host relation or, without one, around "started together"),
+   one FFT correlation on a 10 ms grid. It always runs: host stamps farther from the data's alignment
+   than the frequency stage reaches (a USB DAQ delivering blocks 50–150 ms late) are overruled. Offsets
+   the data supports equally (whole periods of the motion apart) are resolved by the host stamps, or
+   reported as ambiguous.
+3. frequency: the electrical frequency carried by the current (zero-crossing rate of i_a) must equal
    p·|ω|/2π from the encoder (zero-crossing rate of sin θ_e); the lag between the two, found in
    windows along the record, gives offset and drift to a fraction of a ms. Independent of θ_0, of
    the torque's sign and of the plant.
-3. angle: in short windows the phase of i_a against the encoder's electrical angle is θ_0 + p·ω·δ(t)
+4. angle: in short windows the phase of i_a against the encoder's electrical angle is θ_0 + p·ω·δ(t)
    where δ(t) is the remaining clock error; a coherent search then weighted least squares on
    2·phase (blind to the sign of i_q) fit offset, drift and θ_0 to µs.
 """
@@ -26,10 +32,15 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import median_filter
 
+from analysis.clock_search import starting_relation, wide_search
 from analysis.torque import window_phasors
 
 _CHUNK = 1 << 20  # samples per pass over the DAQ record
 _GRID_HZ = 1000.0  # grid of the frequency stage
+_NARROW_S = 0.03  # half-range of the frequency stage's first pass around its starting relation, s
+_PIECE_S = 2.0  # current the angle stage uses to tell the wide search's candidates apart, s
+
+ClockMethod = Literal["angle", "frequency", "wide", "host", "none"]
 
 
 @dataclass(frozen=True)
@@ -51,11 +62,18 @@ class ClockFit:
     host_offset_s, host_drift_ppm : float
         Stage 1 result from the host stamps (NaN without stamps).
     frequency_offset_s, frequency_drift_ppm : float
-        Stage 2 result (NaN when the motion gave no usable window).
+        Frequency stage result (NaN when the motion gave no usable window).
     n_windows : int
         Angle windows used in the final fit.
-    method : {"angle", "frequency", "host", "none"}
+    method : {"angle", "frequency", "wide", "host", "none"}
         The last stage that succeeded ("none": streams taken as started together, no alignment).
+    wide_offset_s : float
+        The wide search's best offset, s (NaN when it found no motion on both sides).
+    ambiguous_by_s : tuple of float
+        Shifts, s, of the offset that fit the data as well (whole periods of the motion) and that no
+        shared host clock resolved; empty when the offset is unique.
+    notes : tuple of str
+        What a person should know about the alignment (host stamps overruled, ambiguity).
     """
 
     offset_s: float
@@ -69,7 +87,10 @@ class ClockFit:
     frequency_offset_s: float = np.nan
     frequency_drift_ppm: float = np.nan
     n_windows: int = 0
-    method: Literal["angle", "frequency", "host", "none"] = "none"
+    method: ClockMethod = "none"
+    wide_offset_s: float = np.nan
+    ambiguous_by_s: tuple[float, ...] = ()
+    notes: tuple[str, ...] = ()
 
     def drive_time_s(self, t_daq_s: np.ndarray | float) -> np.ndarray:
         """Drive time, s, of DAQ time ``t_daq_s``, s."""
@@ -172,7 +193,7 @@ def crossing_frequency_hz(crossings_s: np.ndarray, grid_s: np.ndarray) -> np.nda
 def frequency_alignment(f_current_hz: np.ndarray, t_daq_s: np.ndarray, f_encoder: Callable[[np.ndarray], np.ndarray],
                         offset_s: float, drift_ppm: float, max_lag_s: float,
                         window_s: float = 2.0) -> tuple[float, float, int]:
-    """Stage 2: refine ``offset_s``/``drift_ppm`` so the encoder's electrical frequency matches the current's.
+    """Stage 3: refine ``offset_s``/``drift_ppm`` so the encoder's electrical frequency matches the current's.
 
     In each window the lag τ minimising Σ (f_current(t) − f_encoder(t_drive(t) + τ))² over
     |τ| ≤ ``max_lag_s`` is found on the grid and refined by a parabola; a line through the windows'
@@ -258,7 +279,7 @@ class AngleFit:
 def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline, pole_pairs: int,
                     offset_s: float, drift_ppm: float, search_s: float = 4e-3, window_s: float = 0.02,
                     iterations: int = 2) -> AngleFit | None:
-    """Stage 3: offset, drift and θ_0 from the phase of i_a against the encoder's electrical angle.
+    """Stage 4: offset, drift and θ_0 from the phase of i_a against the encoder's electrical angle.
 
     Parameters
     ----------
@@ -353,7 +374,7 @@ def _phasors(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cub
 
 def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline, pole_pairs: int,
               host: tuple[float, float] | None, max_lag_s: float = 2.0) -> ClockFit:
-    """Align the DAQ clock to the drive clock through the three stages (module docstring).
+    """Align the DAQ clock to the drive clock through the stages of the module docstring.
 
     Parameters
     ----------
@@ -368,17 +389,12 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
     pole_pairs : int
         Pole pairs p.
     host : (offset_s, drift_ppm) or None
-        Stage 1 result (:func:`host_relation`); None when the streams carry no host stamps, in which case
-        the streams are taken as started together and the frequency stage searches ±``max_lag_s``.
+        Stage 1 result (:func:`host_relation`) when the stamps are arrival times on one host clock; None
+        otherwise. The wide search runs either way, ±``max_lag_s`` around the host relation or, without
+        it, around "both streams started together".
     max_lag_s : float
-        Search half-range without host stamps, s.
+        Half-width of the wide search, s.
     """
-    if host is not None:
-        offset_s, drift_ppm = host
-        method = "host"
-    else:
-        offset_s, drift_ppm = float(angle.x[0]) - first_index / rate_hz, 0.0
-        method = "none"
     t_enc = angle.x[[0, -1]]
     t0 = first_index / rate_hz
     grid = t0 + np.arange(int(current_a.size / rate_hz * _GRID_HZ)) / _GRID_HZ
@@ -389,19 +405,48 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
     def f_enc(t: np.ndarray) -> np.ndarray:
         return np.interp(t, enc_grid, f_enc_grid, left=0.0, right=0.0)
 
+    together_s = float(t_enc[0]) - t0
+    wide = wide_search(f_cur, f_enc_grid, 1.0 / _GRID_HZ, float(enc_grid[0]) - t0,
+                       host[0] if host is not None else together_s, max_lag_s)
+    if wide is not None:
+        wide = wide.screened(lambda o: _angle_residual_s(o, current_a, rate_hz, first_index, angle, pole_pairs,
+                                                         grid, f_cur, f_enc))
+    offset_s, drift_ppm, start, ambiguous_by, notes = starting_relation(host, wide, together_s, _NARROW_S)
+    method: ClockMethod = start
     freq = (np.nan, np.nan)
-    if host is None:
-        step = 10
-        offset_s = frequency_alignment(f_cur[::step], grid[::step], f_enc, offset_s, 0.0, max_lag_s,
-                                       window_s=grid.size / _GRID_HZ)[0]
-    for lag in (0.03, 0.004):
+    for lag in (_NARROW_S, 0.004):
         o, d, n = frequency_alignment(f_cur, grid, f_enc, offset_s, drift_ppm, lag)
         if n:
             offset_s, drift_ppm, freq, method = o, d, (o, d), "frequency"
     fit = angle_alignment(current_a, rate_hz, first_index, angle, pole_pairs, offset_s, drift_ppm)
+    if host is not None and start == "wide":
+        final_s = fit.offset_s if fit is not None else offset_s
+        notes.append(f"clock: the host stamps are {1e3 * (host[0] - final_s):+.0f} ms off the data's alignment (blocks "
+                     "delivered late?); the wide search's offset is used")
     common = dict(host_offset_s=host[0] if host else np.nan, host_drift_ppm=host[1] if host else np.nan,
-                  frequency_offset_s=freq[0], frequency_drift_ppm=freq[1])
+                  frequency_offset_s=freq[0], frequency_drift_ppm=freq[1],
+                  wide_offset_s=wide.offset_s if wide else np.nan, ambiguous_by_s=ambiguous_by, notes=tuple(notes))
     if fit is None:
         return ClockFit(offset_s, drift_ppm, method=method, **common)
     return ClockFit(fit.offset_s, fit.drift_ppm, fit.residual_s, fit.offset_std_s, fit.drift_std_ppm,
                     fit.theta0_rad, n_windows=fit.n_windows, method="angle", **common)
+
+
+def _angle_residual_s(offset_s: float, current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline,
+                      pole_pairs: int, grid: np.ndarray, f_cur: np.ndarray,
+                      f_enc: Callable[[np.ndarray], np.ndarray]) -> float:
+    """Timing residual, s, of the frequency and angle stages started at ``offset_s`` on ``_PIECE_S`` of current in
+    the middle of the overlap there (inf when the angle stage finds too little motion)."""
+    t_enc = angle.x[[0, -1]]
+    lo, hi = max(grid[0], t_enc[0] - offset_s), min(grid[-1], t_enc[1] - offset_s)
+    a_s, b_s = max(lo, 0.5 * (lo + hi - _PIECE_S)), min(hi, 0.5 * (lo + hi + _PIECE_S))
+    sel = (grid >= a_s) & (grid < b_s)
+    drift_ppm = 0.0
+    for lag in (_NARROW_S, 0.004):
+        o, d, n = frequency_alignment(f_cur[sel], grid[sel], f_enc, offset_s, drift_ppm, lag, window_s=b_s - a_s)
+        if n:
+            offset_s, drift_ppm = o, d
+    a, b = (int(np.clip(round(x * rate_hz) - first_index, 0, current_a.size)) for x in (a_s, b_s))
+    fit = angle_alignment(current_a[a:b], rate_hz, first_index + a, angle, pole_pairs, offset_s, drift_ppm,
+                          iterations=0)
+    return fit.residual_s if fit is not None else np.inf

@@ -16,6 +16,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+#: Symbol and SI unit of each parameter of :class:`TwoMassParams`, for people (tables, verdict sentences).
+PARAM_LABELS: dict[str, tuple[str, str]] = {"K_Nm_per_rad": ("K", "N·m/rad"), "Jm_kgm2": ("J_m", "kg·m²"),
+                                            "Jl_kgm2": ("J_l", "kg·m²"), "C_Nms_per_rad": ("C", "N·m·s/rad")}
+
 
 @dataclass(frozen=True)
 class TwoMassParams:

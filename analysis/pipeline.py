@@ -17,7 +17,7 @@ from analysis.fit import FitKind, FitOptions, FitParams, FitResult, PARAM_NAMES,
 from analysis.encoder import longest_gap_free_span
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
 from analysis.model import TwoMassParams
-from analysis.quality import Quality, assess
+from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.report import FigureData, figure_data
 from analysis.signals import Recording, TorqueMethod, prepare_signals, prepare_signals_paper
 
@@ -108,7 +108,7 @@ class Result:
             "antiresonance_hz": _num(self.fit.f_a),
             "resonance_hz": _num(self.fit.f_r),
             "clock": {"offset_s": _num(self.clock.offset_s), "drift_ppm": _num(self.clock.drift_ppm),
-                      "residual_s": _num(self.clock.residual_s)},
+                      "residual_s": _num(self.clock.residual_s), "ambiguous_by_s": list(self.clock.ambiguous_by_s)},
             "quality": {"verdict": self.quality.verdict, "mean_coherence": _num(self.quality.mean_coherence),
                         "reasons": [*self.quality.reasons, *(f"note: {n}" for n in self.notes)]},
             "options": {**self.options.to_json_dict(), "band_hz": list(self.fit.band)},
@@ -150,7 +150,8 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     quality = with_fault(assess(frf, fit, clock_residual_s=residual), recording_fault(rec))  # a wrong bench constant
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
-                  figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit),
+                  figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
+                                      phase_valid=phase_is_meaningful(residual)),
                   options=options, notes=tuple(sig.notes))
 
 

@@ -16,6 +16,7 @@ import numpy as np
 
 from analysis.fit import COHERENCE_CLIP, FitResult, band_mask
 from analysis.frf import FrequencyResponse
+from analysis.model import PARAM_LABELS
 
 Verdict = Literal["ok", "poor", "failed"]
 _RANK: dict[Verdict, int] = {"ok": 0, "poor": 1, "failed": 2}
@@ -63,6 +64,12 @@ class Thresholds:
     ci_J_failed: float = 0.30
     clock_residual_amplitude_s: float = 1e-3
     clock_residual_complex_s: float = 1e-4
+
+
+def phase_is_meaningful(clock_residual_s: float | None, thresholds: Thresholds = Thresholds()) -> bool:
+    """True when the clocks were aligned to within the residual a complex fit accepts, so a measured phase is
+    the plant's and not the clock offset's (None: not aligned)."""
+    return clock_residual_s is not None and clock_residual_s <= thresholds.clock_residual_complex_s
 
 
 @dataclass(frozen=True)
@@ -174,7 +181,7 @@ def assess(
         if name in ci_rel and fit.status != "failed":
             level = _grade(-ci_rel[name], -poor, -failed)
             if level != "ok":
-                findings.append((level, f"{_LABEL[name]} is known only to ±{100 * ci_rel[name]:.1f} % (95 %)"))
+                findings.append((level, f"{PARAM_LABELS[name][0]} is known only to ±{100 * ci_rel[name]:.1f} % (95 %)"))
 
     if clock_residual_s is not None:
         limit = th.clock_residual_complex_s if fit.options.kind == "complex" else th.clock_residual_amplitude_s
@@ -189,9 +196,6 @@ def assess(
         residual_rms=float(fit.residual_rms), misfit_ratio=float(ratio), ci_rel_halfwidth=ci_rel, clock_residual_s=clock_residual_s,
         reasons=tuple(text for _, text in findings),
     )
-
-
-_LABEL = {"K_Nm_per_rad": "K", "Jm_kgm2": "J_m", "Jl_kgm2": "J_l", "C_Nms_per_rad": "C"}
 
 
 def _grade(value: float, poor_below: float, failed_below: float) -> Verdict:

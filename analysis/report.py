@@ -1,7 +1,8 @@
 """The data of the report figures, as plain arrays (no plotting library here).
 
 A viewer or the PNG writer draws: the torque and speed traces (decimated), the measured |H| with
-the fitted model and its 95 % band, f_a and f_r marked, and the coherence.
+the fitted model and its 95 % band, f_a and f_r marked, the coherence, and — when the clocks are
+aligned well enough for a phase to mean something — the measured and the model's phase.
 """
 
 from __future__ import annotations
@@ -36,6 +37,14 @@ class FigureData:
         Fit band (low, high), Hz.
     f_a_hz, f_r_hz : float
         Anti-resonance and resonance of the fitted model, Hz.
+    H_phase_deg : ndarray
+        Measured phase of H at ``f_hz``, degrees (the backward difference's response is already divided out of
+        H, :func:`analysis.frf.estimate_frf`).
+    model_phase_deg : ndarray
+        The fitted model's phase at ``model_f_hz``, degrees.
+    phase_valid : bool
+        The clocks were aligned to within the residual a complex fit accepts, so the measured phase is the
+        plant's (False: unaligned or poorly aligned streams, the phase carries the clock offset).
     """
 
     t_s: np.ndarray
@@ -51,6 +60,9 @@ class FigureData:
     band_hz: tuple[float, float]
     f_a_hz: float
     f_r_hz: float
+    H_phase_deg: np.ndarray
+    model_phase_deg: np.ndarray
+    phase_valid: bool
 
 
 def decimate_trace(n: int, max_points: int = MAX_TRACE_POINTS) -> slice:
@@ -90,7 +102,8 @@ def model_band(fit: FitResult, f_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 
 def figure_data(
-    t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: np.ndarray, frf: FrequencyResponse, fit: FitResult
+    t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: np.ndarray, frf: FrequencyResponse, fit: FitResult,
+    *, phase_valid: bool = False
 ) -> FigureData:
     """Assemble the report's figure data.
 
@@ -102,6 +115,8 @@ def figure_data(
         The measured frequency response.
     fit : FitResult
         The model fitted to it.
+    phase_valid : bool, optional
+        The clocks are aligned well enough to show the phase (see :attr:`FigureData.phase_valid`).
 
     Returns
     -------
@@ -115,4 +130,7 @@ def figure_data(
         f_hz=frf.f_hz, H_abs=np.abs(frf.H), coherence=frf.coherence,
         model_f_hz=f_model, model_abs=abs_h, model_low=low, model_high=high,
         band_hz=fit.band, f_a_hz=fit.f_a, f_r_hz=fit.f_r,
+        H_phase_deg=np.degrees(np.angle(frf.H)),
+        model_phase_deg=np.degrees(np.angle(frequency_response(fit.values, f_model))),
+        phase_valid=phase_valid,
     )

@@ -57,8 +57,11 @@ class Recording:
         DAQ sample index of the first sample of each read, and its sample count. None: one gap-free
         block starting at sample 0.
     block_host_ns, encoder_host_ns : ndarray of int64 or None
-        Host monotonic arrival stamps of each DAQ read and each encoder sample, ns (None if not recorded;
-        then the frequency stage searches ±2 s around "both streams started together").
+        Host monotonic arrival stamps of each DAQ read and each encoder sample, ns (None if not recorded).
+    host_clock_shared : bool
+        True when both streams' stamps are arrival times on one host clock (a recording by ``acq record``);
+        False for files from separate tools, whose time columns relate nothing. Only shared stamps centre
+        the clock search; otherwise it runs ±2 s around "both streams started together".
     """
 
     current_a: dict[str, np.ndarray]
@@ -73,6 +76,7 @@ class Recording:
     block_count: np.ndarray | None = None
     block_host_ns: np.ndarray | None = None
     encoder_host_ns: np.ndarray | None = None
+    host_clock_shared: bool = True
 
 
 @dataclass(frozen=True)
@@ -160,6 +164,9 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
     angle = encoder.angle_spline(int(cycles[0]), rec.period_s, encoder.counts_to_rad(counts, rec.counts_per_rev))
     if align:
         clock = fit_clock(current["i_a"], rec.rate_hz, n0, angle, rec.pole_pairs, _host(rec))
+        if not rec.host_clock_shared:
+            notes.append("clock: the streams' time stamps are not on one host clock; aligned from the data alone")
+        notes.extend(clock.notes)
         if clock.method != "angle":
             notes.append(f"clock: the angle stage failed (too little motion); using the {clock.method} stage")
     else:
@@ -267,6 +274,8 @@ def _daq_run(rec: Recording) -> tuple[int, int, int, str]:
 
 
 def _host(rec: Recording) -> tuple[float, float] | None:
+    if not rec.host_clock_shared:
+        return None  # stamps of separate tools: their time columns relate nothing
     if rec.block_host_ns is None or rec.encoder_host_ns is None or rec.block_first_index is None:
         return None
     last = np.asarray(rec.block_first_index) + np.asarray(rec.block_count) - 1

@@ -24,7 +24,7 @@ from typing import Any
 
 from drivers import canopen_od as od
 from drivers.config import DriveCanopen, Profile
-from drivers.errors import AcqError, DeviceError
+from drivers.errors import AcqError, ConfigError, DeviceError
 from drivers.motion import half_swing_rad
 
 STATUS_POLL_S = 0.01
@@ -88,6 +88,9 @@ class ProfilePositionMotion:
 
     def start(self, profile: Profile) -> None:
         """Set the ramps from ``profile``, enable, and run the triangle in a thread until :meth:`stop`."""
+        if profile.jerk_time_s:
+            raise ConfigError(f"profile: jerk_time_s = {profile.jerk_time_s:g} s, but profile position mode "
+                              "(0x6083/0x6084) has no jerk limit; set jerk_time_s = 0 for a CANopen drive")
         s, node = self._s, self._node
         top_rpm = profile.top_speed_rpm
         decel = round(top_rpm / profile.decel_time_s * s.acceleration_units_per_rpm_per_s)

@@ -164,6 +164,31 @@ class SimSettings(Strict):
     drop_encoder_frames: list[Annotated[tuple[Annotated[int, Field(ge=0)], PositiveInt], Field(strict=False)]] = (
         Field(default_factory=list))
     seed: int = 0
+    # ---- effects of the scenario family (issue 13); every one is off by default -------------------
+    # plant (drivers.sim.joint_effects): load-side friction, motor-side N·m and rad/s (see friction.py)
+    load_coulomb_Nm: NonNegFloat = 0.0
+    load_stribeck_Nm: NonNegFloat = 0.0  # breakaway excess over Coulomb at rest
+    load_stribeck_speed_rad_s: PositiveFloat = 2.0
+    friction_smoothing_rad_s: PositiveFloat = 0.5  # tanh width of the sign(ω) of the Coulomb law
+    backlash_load_rad: NonNegFloat = 0.0  # gear backlash (full dead zone width) on the load side, rad
+    third_mass_Jl_fraction: NonNegFloat = 0.0  # J_3 / J_l of a third mass behind the load (0 = none)
+    third_mass_hz: PositiveFloat = 800.0  # its natural frequency on a clamped load, √(K_2/J_3)/2π, Hz
+    third_mass_damping_ratio: NonNegFloat = 0.02
+    speed_accel_feedforward: bool = True  # the speed loop adds J_nominal·α_ref
+    # measurement chain of the current (drivers.sim.measurement)
+    daq_antialias: bool = False  # True: an oversampled analog signal through a linear-phase low-pass
+    daq_bits: int = Field(default=0, ge=0, le=24)  # ADC resolution (0 = not quantised) over ±daq_range_A
+    daq_range_A: PositiveFloat = 20.0
+    pwm_ripple_A: NonNegFloat = 0.0  # peak ripple of the phase current at standstill, A
+    pwm_hz: PositiveFloat = 16000.0
+    pwm_modulation_at_top: float = Field(default=0.8, ge=0.0, le=1.0)  # modulation index at 1000 rpm
+    mains_hum_A: NonNegFloat = 0.0  # amplitude of the fundamental, A, on ``mains_phase`` only
+    mains_hz: PositiveFloat = 50.0
+    mains_harmonics: list[NonNegFloat] = Field(default_factory=lambda: [0.3, 0.15])  # 2nd, 3rd … relative
+    mains_phase: PhaseName = "i_a"
+    offset_drift_A: NonNegFloat = 0.0  # amplitude of a slow sensor offset drift, A (every channel)
+    offset_drift_period_s: PositiveFloat = 20.0
+    current_gain_errors: dict[PhaseName, float] = Field(default_factory=dict)  # relative, e.g. {i_b = 0.02}
     # The bench's physical truth where it may differ from what [motor], [encoder] and [daq] state (a bench
     # misconfigured on purpose, for `acq selftest`); None / 1.0 / +1: the same as stated.
     pole_pairs: PositiveInt | None = None  # the motor's real pole pairs (sets the current's electrical angle)
@@ -195,3 +220,5 @@ class Profile(Strict):
     decel_time_s: PositiveFloat
     dwell_s: NonNegFloat = 0.0
     duration_s: PositiveFloat
+    cruise_s: NonNegFloat = 0.0  # at top speed between the ramps (a trapezoid), s
+    jerk_time_s: NonNegFloat = 0.0  # S-curve: the acceleration ramps in this time (0: steps), s

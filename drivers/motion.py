@@ -1,8 +1,13 @@
 """The triangle speed profile of the paper, as a function of time (SI units, motor side).
 
-One cycle: speed ramps 0 → +top in ``accel_time_s``, +top → 0 in ``decel_time_s``, rests
-``dwell_s``, then the same mirrored (0 → −top → 0), rests again. The motor torque is then a
-rectangular wave (paper §3.1). The swing of one half-cycle is ``top·(accel+decel)/2`` rad.
+One cycle: speed ramps 0 → +top in ``accel_time_s``, stays at top ``cruise_s`` (a trapezoid; 0 by
+default), ramps +top → 0 in ``decel_time_s``, rests ``dwell_s``, then the same mirrored (0 → −top → 0),
+rests again. The motor torque is then a rectangular wave (paper §3.1). The swing of one half-cycle is
+``top·((accel+decel)/2 + cruise)`` rad.
+
+S-curve (``jerk_time_s`` = t_j > 0): each ramp of duration t_r keeps its duration and end speeds, but
+its acceleration rises linearly over t_j, holds A = top/(t_r − t_j) and falls linearly over t_j (jerk
+limit A/t_j); the ramp is point-symmetric, so the swing is unchanged. t_j is capped at half a ramp.
 """
 
 from __future__ import annotations
@@ -16,20 +21,34 @@ RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 
 def cycle_period_s(profile: Profile) -> float:
     """Duration of one full back-and-forth cycle, s."""
-    return 2.0 * (profile.accel_time_s + profile.decel_time_s + profile.dwell_s)
+    return 2.0 * (profile.accel_time_s + profile.cruise_s + profile.decel_time_s + profile.dwell_s)
 
 
 def half_swing_rad(profile: Profile) -> float:
-    """Motor travel of one half-cycle (one ramp up and down), rad."""
-    return profile.top_speed_rpm * RPM_TO_RAD_S * (profile.accel_time_s + profile.decel_time_s) / 2.0
+    """Motor travel of one half-cycle (one ramp up, the cruise and the ramp down), rad."""
+    ramps_s = (profile.accel_time_s + profile.decel_time_s) / 2.0 + profile.cruise_s
+    return profile.top_speed_rpm * RPM_TO_RAD_S * ramps_s
 
 
 def _phase(t_s: np.ndarray | float, profile: Profile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(t, direction ±1 of the current half-cycle, time u into that half-cycle), s."""
     t = np.asarray(t_s, dtype=float)
-    half = profile.accel_time_s + profile.decel_time_s + profile.dwell_s
+    half = profile.accel_time_s + profile.cruise_s + profile.decel_time_s + profile.dwell_s
     tau = np.mod(np.maximum(t, 0.0), 2.0 * half)
     return t, np.where(tau < half, 1.0, -1.0), np.mod(tau, half)
+
+
+def _ramp(u_s: np.ndarray, ramp_s: float, jerk_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """Fraction of the speed step (0…1) and its time derivative (1/s) at ``u_s`` into a ramp of ``ramp_s``."""
+    u = np.clip(u_s, 0.0, ramp_s)
+    tj = min(jerk_s, ramp_s / 2.0)
+    if tj <= 0.0:
+        return u / ramp_s, np.full_like(u, 1.0 / ramp_s)
+    a = 1.0 / (ramp_s - tj)
+    rest = ramp_s - u
+    frac = np.where(u < tj, a * u**2 / (2 * tj), np.where(rest < tj, 1.0 - a * rest**2 / (2 * tj), a * (u - tj / 2)))
+    rate = np.where(u < tj, a * u / tj, np.where(rest < tj, a * rest / tj, a))
+    return frac, rate
 
 
 def triangle_speed_rad_s(t_s: np.ndarray | float, profile: Profile) -> np.ndarray:
@@ -39,8 +58,14 @@ def triangle_speed_rad_s(t_s: np.ndarray | float, profile: Profile) -> np.ndarra
     """
     t, sign, u = _phase(t_s, profile)
     top = profile.top_speed_rpm * RPM_TO_RAD_S
-    ta, td = profile.accel_time_s, profile.decel_time_s
-    ramp = np.where(u < ta, u / ta, np.where(u < ta + td, 1.0 - (u - ta) / td, 0.0))
+    ta, tc, td, tj = profile.accel_time_s, profile.cruise_s, profile.decel_time_s, profile.jerk_time_s
+    if tc == 0.0 and tj == 0.0:  # the paper's triangle, exactly as before these options existed
+        ramp = np.where(u < ta, u / ta, np.where(u < ta + td, 1.0 - (u - ta) / td, 0.0))
+        return np.where(t < 0.0, 0.0, sign * top * ramp)
+    up, _ = _ramp(u, ta, tj)
+    down, _ = _ramp(u - ta - tc, td, tj)
+    ramp = np.where(u < ta + tc, up, 1.0 - down)
+    ramp = np.where(u < ta + tc + td, ramp, 0.0)
     return np.where(t < 0.0, 0.0, sign * top * ramp)
 
 
@@ -48,6 +73,11 @@ def triangle_accel_rad_s2(t_s: np.ndarray | float, profile: Profile) -> np.ndarr
     """Acceleration reference, rad/s², at times ``t_s`` (s) since the motion started (the feed-forward)."""
     t, sign, u = _phase(t_s, profile)
     top = profile.top_speed_rpm * RPM_TO_RAD_S
-    ta, td = profile.accel_time_s, profile.decel_time_s
-    acc = np.where(u < ta, top / ta, np.where(u < ta + td, -top / td, 0.0))
-    return np.where(t < 0.0, 0.0, sign * acc)
+    ta, tc, td, tj = profile.accel_time_s, profile.cruise_s, profile.decel_time_s, profile.jerk_time_s
+    if tc == 0.0 and tj == 0.0:
+        acc = np.where(u < ta, top / ta, np.where(u < ta + td, -top / td, 0.0))
+        return np.where(t < 0.0, 0.0, sign * acc)
+    _, up = _ramp(u, ta, tj)
+    _, down = _ramp(u - ta - tc, td, tj)
+    acc = np.where(u < ta, up, np.where(u < ta + tc, 0.0, np.where(u < ta + tc + td, -down, 0.0)))
+    return np.where(t < 0.0, 0.0, sign * top * acc)

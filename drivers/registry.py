@@ -44,13 +44,14 @@ def _factory(table: dict[str, tuple[str, str]], name: str) -> Any:
     return getattr(importlib.import_module(module_name), attr)
 
 
-def open_bench(bench: Bench, *, fast: bool = False) -> tuple[CurrentSource, Drive]:
+def open_bench(bench: Bench, *, fast: bool = False, sim_bench: Any = None) -> tuple[CurrentSource, Drive]:
     """Build the current source and the drive a bench config names (not started yet).
 
-    ``fast`` lets simulated parts run as fast as the machine can instead of in real time.
+    ``fast`` lets simulated parts run as fast as the machine can instead of in real time. ``sim_bench``:
+    the :class:`drivers.sim.bench.SimBench` the simulated parts share (built here if None and needed;
+    pass one to read its truth afterwards).
     """
-    sim_bench = None
-    if _needs_sim(bench):
+    if sim_bench is None and _needs_sim(bench):
         if bench.sim is None:
             raise ConfigError("bench config: a simulated part needs a [sim] section (see configs/benches/sim.toml)")
         from drivers.sim.bench import SimBench

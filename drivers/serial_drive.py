@@ -172,6 +172,9 @@ class SerialDrive:
 
     def start_motion(self, profile: Profile) -> None:
         """Send the triangle's parameters; the drive starts it and acknowledges."""
+        if profile.cruise_s or profile.jerk_time_s:
+            raise ConfigError(f"profile: cruise_s = {profile.cruise_s:g} s, jerk_time_s = {profile.jerk_time_s:g} s "
+                              "cannot be sent in the serial protocol's start_triangle; set both to 0")
         self._command(Command("start_triangle", profile))
 
     def stop_motion(self) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -33,7 +34,7 @@ def test_analyze_json_has_documented_keys_and_finds_K(session_10s: Path, capsys:
     doc = json.loads(run.out)
     assert KEYS <= set(doc)
     assert set(doc["ci95"]) == {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad"}
-    assert set(doc["clock"]) == {"offset_s", "drift_ppm", "residual_s"}
+    assert set(doc["clock"]) == {"offset_s", "drift_ppm", "residual_s", "ambiguous_by_s"}
     assert {"verdict", "mean_coherence", "reasons"} <= set(doc["quality"])
     assert doc["quality"]["verdict"] == "ok"
     truth = doc["simulated_truth"]
@@ -120,3 +121,51 @@ def test_a_broken_result_file_is_one_line_for_view(session_10s: Path, tmp_path: 
     run = run_cli(capsys, "view", str(copy), "--screenshot", str(tmp_path / "v.png"))
     assert run.code == 2
     assert run.err.strip() == f"acq: error: {broken}: not a result of acq analyze (run acq analyze {copy} to redo it)"
+
+
+def test_piped_result_tables_fit_80_columns(session_10s: Path, capsys: pytest.CaptureFixture[str],
+                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    import acq.cli
+
+    monkeypatch.setattr(acq.cli.out, "width", 80)  # what a pipe or an 80-column terminal gives
+    shown = {}
+    for option in ("", "--params=K", "--paper"):
+        run = run_cli(capsys, "analyze", str(session_10s), "--no-report", *([option] if option else []))
+        assert run.code == 0, run.err
+        assert not re.search(r"…\s*(│|┃|$)", run.out, re.M), "a cell cut to …"
+        assert max(len(line) for line in run.out.splitlines()) <= 80
+        shown[option] = run.out
+    assert "fixed (nominal)" not in shown[""] and shown["--params=K"].count("fixed (nominal)") == 2
+    assert "0.003027 – 0.003027" not in shown["--params=K"]
+    assert re.search(r"clock offset \[ms\] +│ +0\.000 │ +│ +37 │ -3[67]\.\d{3} ms", shown["--paper"])
+
+
+def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
+        session_10s: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    import shutil
+    import sys
+
+    from acq.batch import DEFAULT_REQUEST, analyze_one
+    from acq.catalogue import Catalogue
+
+    copy = Path(shutil.copy2(session_10s, tmp_path / "s.h5"))
+    expected = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report").out)
+    monkeypatch.delitem(sys.modules, "acq.plots", raising=False)
+    monkeypatch.setitem(sys.modules, "pyqtgraph", None)  # a headless worker without the Qt libraries
+    run = run_cli(capsys, "analyze", str(copy))
+    assert run.code == 0, run.err
+    why = "ModuleNotFoundError: import of pyqtgraph halted; None in sys.modules"
+    png, result = tmp_path / "s.report.png", tmp_path / "s.result.json"
+    line = f"acq: {png}: report not drawn ({why}); the result stands in {result}"
+    assert run.err.splitlines().count(line) == 1
+    doc = json.loads(result.read_text())
+    assert doc["quality"]["verdict"] == expected["quality"]["verdict"] == "ok"
+    assert doc["K_Nm_per_rad"] == expected["K_Nm_per_rad"]
+    assert doc["quality"]["reasons"][-1] == f"note: report not drawn: {why}"
+    assert not png.exists() and "report:" not in run.out
+    with Catalogue(tmp_path / "catalogue.sqlite") as catalogue:
+        (entry,) = catalogue.entries()
+    assert entry.verdict == "ok" and entry.error is None and entry.K_Nm_per_rad == expected["K_Nm_per_rad"]
+    outcome = analyze_one(str(copy), "sha", DEFAULT_REQUEST, report=True)  # what a batch worker does
+    assert outcome.error is None and outcome.doc is not None and outcome.doc["quality"]["verdict"] == "ok"
+    assert outcome.doc["quality"]["reasons"][-1].startswith("note: report not drawn: ModuleNotFoundError")

@@ -11,6 +11,7 @@ import pytest
 from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 
 from acq.analyze import analyze_session
+from acq.catalogue import Catalogue
 from acq.config import DEFAULT_BENCH
 from acq.session import load
 from tests.helpers import run_cli
@@ -69,7 +70,9 @@ def test_csv_pair_becomes_a_complete_session_with_rate_indices_host_stamps_and_o
     np.testing.assert_array_equal(s.encoder.index, k)
     assert s.encoder.period_s == PERIOD_S and s.encoder.transport == "imported"
     origin = json.loads(s.attrs["origin_json"])
-    assert origin["kind"] == "imported" and origin["host_timeline"].startswith("shared")
+    assert origin["kind"] == "imported" and origin["host_timeline"].startswith("separate: the files come from separate "
+                                                                               "tools")
+    assert s.attrs["host_clock_shared"] is False and origin["started_from"] == "the time of import"
     assert [(f["role"], f["name"], f["sha256"]) for f in origin["files"]] == [
         ("current", "cur.csv", hashlib.sha256(cur.read_bytes()).hexdigest()),
         ("encoder", "enc.csv", hashlib.sha256(enc.read_bytes()).hexdigest())]
@@ -149,8 +152,8 @@ BAD_ENCODER = [
     pytest.param(lambda p: p.write_text(p.read_text().replace("position_counts", "position", 1)),
                  "line 1, column position: unknown column (did you mean position_counts? expected t_s, "
                  "position_counts, index, drive_time_s)", id="misspelt-header"),
-    pytest.param(lambda p: _with_row_changed(p, 40, "0.030000000,19000,38"),
-                 "line 40, column t_s: 0.03 does not increase (previous row: 0.038105718)", id="non-monotonic-t"),
+    pytest.param(lambda p: _with_row_changed(p, 1000, "0.300000000,499000,998"),
+                 "line 1000, column t_s: 0.3 does not increase (previous row: 0.998003753)", id="non-monotonic-t"),
     pytest.param(lambda p: _with_row_changed(p, 30, "0.029100000,1000.5,28"),
                  "line 30, column position_counts: 1000.5 is not an integer", id="fractional-counts"),
     pytest.param(lambda p: _with_row_changed(p, 30, "0.029100000,3000000000,28"),
@@ -160,8 +163,8 @@ BAD_ENCODER = [
                  "line 30, column position_counts: inf is not finite", id="infinite"),
     pytest.param(lambda p: _with_row_changed(p, 30, "0.029100000,14000,27"),
                  "line 30, column index: 27 does not increase (previous row: 27)", id="index-repeated"),
-    pytest.param(lambda p: write_csv(p, "t_s,position_counts,index", encoder_columns(1.9), ["%.9f", "%d", "%d"]),
-                 "line 1902, column t_s: only 1.900 s of data (at least 2 s needed)", id="too-short"),
+    pytest.param(lambda p: write_csv(p, "t_s,position_counts,index", encoder_columns(1.899), ["%.9f", "%d", "%d"]),
+                 "line 1901, column t_s: only 1.900 s of data (at least 2 s needed)", id="too-short"),
 ]
 
 
@@ -261,24 +264,43 @@ def test_tdms_with_several_channels_and_none_picked_names_them(
 # ------------------------------------------------------------------------------------ round trip
 
 
-def test_simulated_session_exported_and_imported_back_gives_the_same_K(
+def test_simulated_session_exported_and_imported_back_keeps_its_history_and_K(
         capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     r = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "10", "--fast", "--no-analyze",
-                "--out", str(tmp_path / "rec"))
+                "--out", str(tmp_path / "rec"), "--tag", "pose=home", "--tag", "payload_kg=2.5")
     assert r.code == 0, r.err
     (recorded,) = (tmp_path / "rec").glob("*.h5")
     assert run_cli(capsys, "export", str(recorded), "--csv", str(tmp_path / "csv")).code == 0
     cur, enc = (tmp_path / "csv" / f"{recorded.stem}.{kind}.csv" for kind in ("current", "encoder"))
-    r = run_import(capsys, cur, enc, tmp_path / "imported.h5")
+    assert (tmp_path / "csv" / f"{recorded.stem}.session.json").is_file()
+    r = run_cli(capsys, "import", "--current", str(cur), "--encoder", str(enc), "-o", str(tmp_path / "imported.h5"),
+                "--tag", "temperature_C=31")  # bench and profile from the metadata
     assert r.code == 0, r.err
     original, imported = load(recorded), load(tmp_path / "imported.h5")
     np.testing.assert_array_equal(imported.current.phases_a["i_a"], original.current.phases_a["i_a"])
     np.testing.assert_array_equal(imported.encoder.position_counts, original.encoder.position_counts)
     np.testing.assert_allclose(imported.encoder.host_ns,
                                original.encoder.host_ns - original.attrs["host_monotonic_ns_at_start"], atol=1)
+    for key in ("session_id", "created_utc", "joint", "bench_json", "profile_json"):
+        assert imported.attrs[key] == original.attrs[key], key
+    assert original.tags == {"pose": "home", "payload_kg": 2.5}
+    assert imported.tags == {**original.tags, "temperature_C": 31}
+    assert imported.host_clock_shared is True
+    origin = json.loads(imported.attrs["origin_json"])
+    assert origin["started_from"] == "acq export metadata"
+    assert origin["host_timeline"].startswith(f"shared ({recorded.stem}.session.json)")
     k_recorded = analyze_session(recorded, write=False).result.fit.values.K_Nm_per_rad
     k_imported = analyze_session(tmp_path / "imported.h5", write=False).result.fit.values.K_Nm_per_rad
-    assert abs(k_imported / k_recorded - 1.0) < 1e-3
+    assert abs(k_imported / k_recorded - 1.0) < 1e-9
+    # a file changed since export is not the pair the metadata describes: nothing restored, no shared clock
+    enc.write_text(enc.read_text() + "\n")
+    r = run_import(capsys, cur, enc, tmp_path / "edited.h5")
+    assert r.code == 0, r.err
+    edited = load(tmp_path / "edited.h5")
+    assert edited.host_clock_shared is False and edited.attrs["session_id"] != original.attrs["session_id"]
+    assert (f"warning: {recorded.stem}.session.json describes another encoder file than {enc.name} (SHA-256 "
+            "differs): its metadata is not used, the time columns are not taken as one host clock") in " ".join(
+        r.err.split())
 
 
 def test_import_tags_the_session(capsys: pytest.CaptureFixture[str], tmp_path: Path,
@@ -290,3 +312,138 @@ def test_import_tags_the_session(capsys: pytest.CaptureFixture[str], tmp_path: P
     bad = run_import(capsys, cur, enc, tmp_path / "u.h5", "--tag", "pose")
     assert bad.code == 2 and bad.err.strip() == "acq: error: --tag pose: must be KEY=VALUE, e.g. payload_kg=2.5"
     assert not (tmp_path / "u.h5").exists()
+
+
+# ------------------------------------------------------------------------------------ files as real tools write them
+
+
+def test_jittered_encoder_stamps_that_step_back_are_taken_in_row_order_with_a_warning(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    cur, _ = pair
+    t, counts, k = encoder_columns()
+    t[[100, 1700]] -= [1.2e-3, 1.5e-3]  # stamped before the row above: 0.21 ms and 0.52 ms back
+    enc = write_csv(tmp_path / "enc.csv", "t_s,position_counts,index", [t, counts, k], ["%.9f", "%d", "%d"])
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5")
+    assert r.code == 0, r.err
+    s = load(tmp_path / "s.h5")
+    np.testing.assert_array_equal(s.encoder.index, k)
+    detail = ("enc.csv: host stamps t_s step back 2 time(s), by up to 0.524 ms (first at line 102); rows taken in "
+              "file order as the drive cycle order")
+    assert [(e.stream, e.kind, e.detail) for e in s.events] == [("encoder", "warning", detail)]
+    assert f"warning: {detail}" in " ".join(r.err.split())
+
+
+def test_without_an_index_column_the_host_stamps_show_the_gaps(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    cur, _ = pair
+    t, counts, k = encoder_columns()
+    keep = np.ones(k.size, dtype=bool)
+    keep[1000:1050] = False  # 50 rows lost
+    keep[2000] = False  # and one
+    t_batched = t.copy()
+    t_batched[300:310] = t[309]  # ten rows stamped together, as a USB adapter delivers them: no gap
+    enc = write_csv(tmp_path / "enc.csv", "t_s,position_counts", [t_batched[keep], counts[keep]], ["%.9f", "%d"])
+    assert run_import(capsys, cur, enc, tmp_path / "s.h5").code == 0
+    s = load(tmp_path / "s.h5")
+    np.testing.assert_array_equal(s.encoder.index, k[keep])
+    assert [(e.stream, e.kind, e.detail) for e in s.events] == [
+        ("encoder", "warning", "enc.csv: no index or drive_time_s column; drive cycles taken as row numbers, gaps "
+                               "found where the host stamps step by 1.5 periods or more"),
+        ("encoder", "gap", "50 drive cycles missing before index 1050"),
+        ("encoder", "gap", "1 drive cycles missing before index 2001")]
+
+
+def test_a_file_of_exactly_2s_is_long_enough_and_a_shorter_one_says_by_how_much(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    t, i_a, _ = current_columns(2.0)
+    exact = write_csv(tmp_path / "cur.csv", "t_s,i_a_A", [t[:-1], i_a[:-1]], ["%.9f", "%r"])  # 51 200 samples
+    t_e, counts, k = encoder_columns(2.0)
+    enc = write_csv(tmp_path / "enc.csv", "t_s,position_counts,index", [t_e[:-1], counts[:-1], k[:-1]],
+                    ["%.9f", "%d", "%d"])  # 2000 drive cycles
+    assert run_import(capsys, exact, enc, tmp_path / "s.h5").code == 0
+    short = write_csv(tmp_path / "short.csv", "t_s,i_a_A", [t[:-2], i_a[:-2]], ["%.9f", "%r"])
+    r = run_import(capsys, short, enc, tmp_path / "u.h5")
+    assert (r.code, r.err) == (2, f"acq: error: {short}: line 51200, column t_s: only 1.99996 s of data (at least 2 s "
+                                  "needed)\n")
+
+
+# ------------------------------------------------------------------------------------ clocks of separate tools
+
+
+def write_pair(folder: Path, rec, enc_rows: np.ndarray | None = None, index: bool = True) -> tuple[Path, Path]:
+    """The recording as two tools write it: each file's t_s its own time from 0 (current: its sample clock)."""
+    folder.mkdir(exist_ok=True)
+    i_a = rec.current_a["i_a"]
+    cur = write_csv(folder / "cur.csv", "t_s,i_a_A", [np.arange(i_a.size) / rec.rate_hz, i_a], ["%.9f", "%r"])
+    rows = np.arange(rec.encoder_index.size) if enc_rows is None else enc_rows
+    t = (rec.encoder_host_ns[rows] - rec.encoder_host_ns[0]) * 1e-9
+    columns = [t, rec.position_counts[rows], rec.encoder_index[rows]]
+    header = "t_s,position_counts,index" if index else "t_s,position_counts"
+    enc = write_csv(folder / "enc.csv", header, columns if index else columns[:2], ["%.9f", "%d", "%d"])
+    return cur, enc
+
+
+@pytest.fixture(scope="module")
+def separate_tools():
+    """10 s simulated; DAQ sample 0 at drive time 0.7 s, 40 ppm drift; K = 891 N·m/rad."""
+    from tests.test_clocks import separate_records
+    return separate_records(0.7, 40.0, duration_s=10.0)
+
+
+def test_two_files_from_separate_tools_both_starting_at_0_align_from_the_data(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, separate_tools) -> None:
+    cur, enc = write_pair(tmp_path / "csv", separate_tools)
+    assert run_import(capsys, cur, enc, tmp_path / "s.h5").code == 0
+    assert load(tmp_path / "s.h5").host_clock_shared is False
+    doc = analyze_session(tmp_path / "s.h5", write=False).json_dict
+    assert doc["quality"]["verdict"] == "ok"
+    assert doc["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.01)
+    assert doc["clock"]["offset_s"] == pytest.approx(0.7, abs=50e-6)
+    assert doc["clock"]["drift_ppm"] == pytest.approx(40.0, abs=5.0)
+
+
+def test_a_gap_seen_only_in_the_host_stamps_leaves_the_longest_span_analysed(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, separate_tools) -> None:
+    rows = np.setdiff1d(np.arange(separate_tools.encoder_index.size), np.arange(3000, 3050))
+    cur, enc = write_pair(tmp_path / "csv", separate_tools, rows, index=False)
+    assert run_import(capsys, cur, enc, tmp_path / "s.h5").code == 0
+    doc = analyze_session(tmp_path / "s.h5", write=False).json_dict
+    assert "note: encoder: 1 gap(s), first after cycle 2999: using the longest gap-free span 3.050–9.999 s" in \
+        doc["quality"]["reasons"]
+    assert doc["quality"]["verdict"] == "ok"
+    assert doc["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.01)
+
+
+# ------------------------------------------------------------------------------------ history through export/import
+
+
+def test_started_dates_an_import_so_the_catalogue_sorts_by_recording_time(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    cur, enc = pair
+    folder = tmp_path / "sessions"
+    folder.mkdir()
+    for name, started in (("later.h5", "2026-03-02T09:00:00+01:00"), ("earlier.h5", "2026-03-01T10:15:03")):
+        r = run_import(capsys, cur, enc, folder / name, "--started", started)
+        assert r.code == 0, r.err
+    assert load(folder / "later.h5").attrs["created_utc"] == "2026-03-02T08:00:00+00:00"
+    assert json.loads(load(folder / "later.h5").attrs["origin_json"])["started_from"] == "--started"
+    run_cli(capsys, "analyze", str(folder), "--no-report")
+    with Catalogue(folder / "catalogue.sqlite") as catalogue:
+        assert [Path(e.path).name for e in catalogue.entries()] == ["earlier.h5", "later.h5"]
+    bad = run_import(capsys, cur, enc, tmp_path / "x.h5", "--started", "yesterday")
+    assert (bad.code, bad.err) == (2, "acq: error: --started yesterday: not an ISO 8601 time (e.g. "
+                                      "2026-11-20T10:15:03Z)\n")
+
+
+def test_a_tdms_wf_start_time_dates_the_import(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                               pair: tuple[Path, Path]) -> None:
+    _, enc = pair
+    _, i_a, _ = current_columns()
+    props = {"wf_increment": 1.0 / RATE_HZ, "wf_start_offset": 0.0,
+             "wf_start_time": np.datetime64("2026-02-03T04:05:06.789")}
+    with TdmsWriter(tmp_path / "cur.tdms") as w:
+        w.write_segment([RootObject(), GroupObject("DAQ"), ChannelObject("DAQ", "ai0", i_a, properties=props)])
+    assert run_import(capsys, tmp_path / "cur.tdms", enc, tmp_path / "s.h5").code == 0
+    s = load(tmp_path / "s.h5")
+    assert s.attrs["created_utc"] == "2026-02-03T04:05:06+00:00"
+    assert json.loads(s.attrs["origin_json"])["started_from"] == "TDMS wf_start_time"

@@ -3,17 +3,20 @@
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import signal
 import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
+from pyqtgraph.Qt import QtCore
 
-from acq.analyze import analyze_session
+from acq.analyze import analyze_session, draw_report
 from acq.config import load_bench, load_profile
 from acq.recorder import Recorder
 from drivers.registry import open_bench
@@ -42,7 +45,7 @@ def session(tmp_path_factory: pytest.TempPathFactory) -> Path:
     recorder = _recorder(tmp_path_factory.mktemp("sessions"), 3.0)
     recorder.start_devices()
     path = recorder.run().path
-    analyze_session(path)
+    draw_report(analyze_session(path))
     return path
 
 
@@ -71,7 +74,7 @@ def test_window_holds_traces_frf_coherence_and_values(session: Path) -> None:
     ensure_app()
     view = ReportView([session_figure(session)], title="test")
     plots = view.plots
-    assert list(plots) == ["torque", "speed", "frf", "coherence"]
+    assert list(plots) == ["torque", "speed", "frf", "phase", "coherence"]
     labels = {name: {side: (p.getAxis(side).labelText, p.getAxis(side).labelUnits) for side in ("bottom", "left")}
               for name, p in plots.items()}
     assert labels["torque"] == {"bottom": ("t (drive clock)", "s"), "left": ("T_e", "N·m")}
@@ -81,14 +84,20 @@ def test_window_holds_traces_frf_coherence_and_values(session: Path) -> None:
     assert plots["speed"].getViewBox().linkedView(pg.ViewBox.XAxis) is plots["torque"].getViewBox()
     assert plots["coherence"].getViewBox().linkedView(pg.ViewBox.XAxis) is plots["frf"].getViewBox()
     assert plots["frf"].getAxis("bottom").logMode and plots["frf"].getAxis("left").logMode
-    assert [len(plots[n].listDataItems()) for n in plots] == [1, 1, 4, 1]  # |H|, band low/high, model
+    assert plots["phase"].getViewBox().linkedView(pg.ViewBox.XAxis) is plots["frf"].getViewBox()
+    assert [len(plots[n].listDataItems()) for n in plots] == [1, 1, 4, 2, 1]  # |H|, band low/high, model; phase
     items = plots["frf"].items
     assert sum(isinstance(i, pg.FillBetweenItem) for i in items) == 1
     lines = [i for i in items if isinstance(i, pg.InfiniteLine)]
     assert sorted(line.objectName() for line in lines) == ["f_a", "f_r"]
     f_a, f_r = sorted(10 ** line.value() for line in lines)
     assert 45 < f_a < 65 and 90 < f_r < 115  # the simulated plant: 55 Hz, 102 Hz
-    assert [label.text for _, label in plots["frf"].legend.items] == ["measured", "two-mass fit, 95 % band"]
+    names = [label.text for _, label in view.legend.items]
+    assert names[0] == "measured" and names[1].startswith("two-mass fit, 95 % band ± ")
+    assert names[2] == "fit band 10–400 Hz"
+    regions = [i for i in items if isinstance(i, pg.LinearRegionItem)]  # the fit band, shaded
+    assert [tuple(round(10 ** v) for v in r.getRegion()) for r in regions] == [(10, 400)]
+    assert all(any(isinstance(i, pg.LinearRegionItem) for i in plots[n].items) for n in ("phase", "coherence"))
     panel = view.panel.text()
     assert all(s in panel for s in ("K", "J_m", "J_l", "N·m/rad", "kg·m²", "f_a", "f_r", "verdict"))
 
@@ -102,9 +111,74 @@ def test_several_sessions_overlay_their_frfs_with_a_legend(session: Path, tmp_pa
     ensure_app()
     view = ReportView([session_figure(session), session_figure(later)])
     assert len(view.plots["frf"].listDataItems()) == 8
-    names = [label.text for _, label in view.plots["frf"].legend.items]
-    assert names == [f"{session.stem}: measured", f"{session.stem}: two-mass fit, 95 % band",
-                     "later_joint1: measured", "later_joint1: two-mass fit, 95 % band"]
+    names = [label.text for _, label in view.legend.items]
+    assert names[0] == "measured (dots in the session's colour)" and names[-1] == "fit band 10–400 Hz"
+    assert [n.split(" ± ")[0] for n in names[1:3]] == [f"{session.stem}: two-mass fit, 95 % band",
+                                                       "later_joint1: two-mass fit, 95 % band"]
+    assert re.fullmatch(r".*95 % band ± \d(\.\d)?(–\d+(\.\d)?)? %", names[1])
+
+
+def _laid_out(view: Any, tmp_path: Path) -> None:
+    """Show and render the view offscreen, so that its layout (and the f_a/f_r label rows) is final."""
+    from acq.plots import grab_png
+
+    grab_png(view, tmp_path / "layout.png")
+
+
+def _scene_box(item: Any) -> Any:
+    return item.mapRectToScene(item.boundingRect())
+
+
+def test_legend_and_frequency_labels_cover_no_curve_and_no_label_overlaps(session: Path, tmp_path: Path) -> None:
+    from acq.plots import ReportView, ensure_app
+    from acq.view import session_figure
+
+    ensure_app()
+    later = Path(shutil.copy(session, tmp_path / "later_joint1.h5"))  # same f_a and f_r: labels at the same place
+    one, two = session_figure(session), session_figure(later)
+    for figures in ([one], [one, two]):
+        view = ReportView(figures)
+        _laid_out(view, tmp_path)
+        frf = view.plots["frf"]
+        fd = figures[0].figures
+        peak = int(np.argmax(fd.model_abs))
+        peak_px = frf.vb.mapViewToScene(QtCore.QPointF(np.log10(fd.model_f_hz[peak]), np.log10(fd.model_abs[peak])))
+        plot_area = frf.vb.sceneBoundingRect()
+        assert plot_area.contains(peak_px)
+        legend = view.legend.sceneBoundingRect()
+        assert not legend.contains(peak_px) and not legend.intersects(plot_area)
+        boxes = [_scene_box(t) for t in view.mark_labels]
+        assert len(boxes) == 2 * len(figures)
+        for i, a in enumerate(boxes):
+            assert not a.intersects(plot_area) and not a.intersects(legend)
+            assert not any(a.intersects(b) for b in boxes[i + 1:])
+        for text, f_hz in zip(view.mark_labels, (fd.f_a_hz, fd.f_r_hz)):  # each label is centred on its line
+            x_px = frf.vb.mapViewToScene(QtCore.QPointF(np.log10(f_hz), 0.0)).x()
+            assert abs(_scene_box(text).center().x() - x_px) < 2.0
+
+
+def test_phase_panel_when_the_clocks_are_aligned_and_none_when_not(session: Path, tmp_path: Path) -> None:
+    from acq.plots import ReportView, SessionFigure, ensure_app
+    from acq.view import session_figure
+
+    ensure_app()
+    aligned = session_figure(session)
+    assert aligned.figures.phase_valid and aligned.values["clock"]["residual_s"] < 100e-6
+    view = ReportView([aligned])
+    assert list(view.plots) == ["torque", "speed", "frf", "phase", "coherence"]
+    assert view.plots["phase"].getAxis("left").labelText == "phase of H"
+    fd = aligned.figures
+    in_band = (fd.f_hz >= fd.band_hz[0]) & (fd.f_hz <= fd.band_hz[1]) & (fd.coherence > 0.9)
+    model_phase = np.interp(fd.f_hz[in_band], fd.model_f_hz, fd.model_phase_deg)
+    assert np.median(np.abs(fd.H_phase_deg[in_band] - model_phase)) < 5.0  # measured and model phase agree, degrees
+    assert "phase shown: clocks aligned to" in view.panel.text()
+    assert "torque encoder · params K,Jm,Jl · fit amplitude · band 10–400 Hz" in view.panel.text()
+    paper = analyze_session(session, write=False, pipeline="paper")  # the paper's chain: clocks not aligned
+    assert not paper.result.figures.phase_valid
+    unaligned = ReportView([SessionFigure("paper", paper.result.figures, paper.json_dict)])
+    assert "phase" not in unaligned.plots
+    assert "phase not shown: the clocks were not aligned" in unaligned.panel.text()
+    assert "chain (--paper) · torque hilbert" in unaligned.panel.text()
 
 
 def test_screenshot_and_report_are_real_images_of_the_asked_size(session: Path, tmp_path: Path,

@@ -20,6 +20,7 @@ is dropped unless ``keep_history``. With no consumer registered nothing is dropp
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import threading
 import time
@@ -29,6 +30,8 @@ import numpy as np
 
 from drivers.config import Bench, Profile, SimSettings
 from drivers.errors import ConfigError
+from drivers.sim.joint_effects import JointEffects
+from drivers.sim.measurement import CurrentChain
 from drivers.sim.motion import MotionSchedule
 from drivers.sim.physics import Gravity, JointSimulation
 from drivers.sim.plant import TwoMass, tune_speed_pi
@@ -63,12 +66,16 @@ class SimBench:
         self.plant = TwoMass(s.K_Nm_per_rad, s.Jm_kgm2, s.Jl_kgm2, s.C_Nms_per_rad, s.bm_Nms_per_rad,
                              s.bl_Nms_per_rad, bench.motor.torque_constant_Nm_per_A, s.current_bandwidth_hz)
         self.speed_pi = tune_speed_pi(nom.Jm_kgm2 + nom.Jl_kgm2, s.speed_bandwidth_hz, 1.0 / s.speed_loop_hz)
+        if not s.speed_accel_feedforward:
+            self.speed_pi = dataclasses.replace(self.speed_pi, ff_inertia_kgm2=0.0)
         gravity = Gravity(s.arm_mass_kg, s.arm_com_distance_m, math.radians(s.arm_start_deg), bench.gear.ratio)
         self.schedule = MotionSchedule()
+        self.effects = JointEffects.from_settings(s, bench.gear.ratio)
         self._physics = JointSimulation(self.plant, self.speed_pi, gravity, bench.encoder.counts_per_rev,
-                                        self.schedule)
+                                        self.schedule, effects=self.effects)
         self.channels: tuple[str, ...] = tuple(bench.daq.channels)
         self.daq_rate_hz = float(bench.daq.rate_hz)
+        self.chain = CurrentChain(s, self.channels, self.daq_rate_hz)
         self.drive_period_s = float(bench.drive.period_s)
         self.counts_per_rev = int(bench.encoder.counts_per_rev)
         self.dc_offset_A = np.array([s.current_dc_offsets_A.get(c, s.current_dc_offset_A) for c in self.channels])
@@ -114,6 +121,7 @@ class SimBench:
             "speed_kp_Nms_per_rad": self.speed_pi.kp_Nms_per_rad, "speed_ki_Nm_per_rad": self.speed_pi.ki_Nm_per_rad,
             "speed_loop_hz": s.speed_loop_hz, "current_bandwidth_hz": s.current_bandwidth_hz,
             "motions": motions,
+            "joint_effects": dataclasses.asdict(self.effects), "current_chain": self.chain.describe(),
         }
 
     # ---- clocks ------------------------------------------------------------------------------------
@@ -206,12 +214,29 @@ class SimBench:
 
         i_x = −i_q·sin(p·θ_m + θ0 + shift_x) + dc_x + noise, shift = 0, −2π/3, +2π/3 for a, b, c.
         """
+        if self.chain.active:
+            return self._measured_currents(first_index, count)
         x = self._states(self.daq_time_s(np.arange(first_index, first_index + count)))
         theta_e = self._true_pole_pairs * x[:, 0] + self.sim.theta0_rad
         shifts = np.array([PHASE_SHIFT_RAD[c] for c in self._wired])[:, None]
         clean = -x[:, 4][None, :] * np.sin(theta_e[None, :] + shifts) * self.sim.current_sensor_gain
         noise = self._normal("current", first_index, count, len(self.channels)) * self.sim.current_noise_A
         return clean + self.dc_offset_A[:, None] + noise
+
+    def _measured_currents(self, first_index: int, count: int) -> np.ndarray:
+        """Phase currents through the measurement chain's effects (:mod:`drivers.sim.measurement`)."""
+        t = self.daq_time_s(self.chain.analog_indices(first_index, count))
+        x = self._states(t)
+        angle = (self._true_pole_pairs * x[:, 0] + self.sim.theta0_rad)[None, :] + np.array(
+            [PHASE_SHIFT_RAD[c] for c in self._wired])[:, None]
+        torque_current = -x[:, 4][None, :] * np.sin(angle) * self.sim.current_sensor_gain
+        analog = self.chain.analog(t, torque_current, angle, x[:, 1]) + self.dc_offset_A[:, None]
+        noise = self._normal("current", first_index, count, len(self.channels)) * self.sim.current_noise_A
+        return self.chain.digitise(self.chain.acquire(analog) + noise)
+
+    def daq_history_from_s(self, next_index: int) -> float:
+        """Earliest drive time (s) that DAQ samples from ``next_index`` on depend on (the AA filter looks back)."""
+        return float(self.daq_time_s(next_index - self.chain.lookback_samples))
 
     def encoder_counts(self, first_cycle: int, count: int) -> np.ndarray:
         """Unwrapped position (int64 counts) at drive cycles ``first_cycle …``: floor(θ_m/2π·cpr) + start."""

@@ -23,7 +23,7 @@ class SimCurrentSource:
         self._last_host_ns = 0
         self._running = False
         self._consumer = f"sim-daq@{id(self):x}"  # its history cursor in the SimBench
-        self._sim.hold_history(self._consumer, float(self._sim.daq_time_s(self._next)))
+        self._sim.hold_history(self._consumer, self._sim.daq_history_from_s(self._next))
 
     def start(self) -> CurrentSourceInfo:
         """Start acquiring at sample 0 (drive time ``daq_offset_s``)."""
@@ -41,7 +41,7 @@ class SimCurrentSource:
             return None
         current_a = self._sim.current_samples(first, n)
         self._next, self._last_host_ns = first + n, host_ns
-        self._sim.hold_history(self._consumer, float(self._sim.daq_time_s(self._next)))
+        self._sim.hold_history(self._consumer, self._sim.daq_history_from_s(self._next))
         return CurrentBlock(first_index=first, current_a=current_a, host_ns=host_ns)
 
     def stop(self) -> None:

@@ -2,8 +2,10 @@
 
 Per control period T (``speed_loop_hz``) the drive reads its encoder (quantised to counts), runs the PI
 with acceleration feed-forward, and holds the current reference i_q,ref and the gravity torque T_g over
-the period; the plant + current lag then advance by the exact ZOH map. Only [x[k], u[k]] per control
-step is stored; the state at any instant comes from the fine sub-grid (n_sub points per period, exact
+the period; the plant + current lag then advance by the exact ZOH map. With backlash the period is cut
+into :data:`BACKLASH_SUBSTEPS` physics steps (the controller still runs once per period; the load-side
+torques are re-evaluated every step). Only [x[k], u[k]] per physics step is stored; the state at any
+instant comes from the fine sub-grid (n_sub points per step, exact
 through precomputed stacked matrices) and cubic Hermite interpolation between two fine points with the
 exact derivative A·x + B·u (error ~1e-6 of a current step).
 
@@ -18,10 +20,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from drivers.sim.joint_effects import JointEffects
 from drivers.sim.motion import MotionSchedule
-from drivers.sim.plant import N_INPUTS, N_STATES, SpeedPI, TwoMass, discretise
+from drivers.sim.plant import N_STATES, SpeedPI, TwoMass, discretise
 
 G_M_S2 = 9.80665
+#: physics steps per control period with backlash: the load-side torques are re-evaluated every
+#: 250 µs/16 ≈ 16 µs, so a gap of 0.5 mrad (motor side) crossed at a few rad/s takes tens of steps
+BACKLASH_SUBSTEPS = 16
 
 
 @dataclass(frozen=True)
@@ -79,22 +85,32 @@ class JointSimulation:
     counts_per_rev : encoder resolution the speed loop sees, counts/rev.
     schedule : the speed reference.
     n_sub : fine-grid points per control period.
+    effects : optional load friction, backlash, third mass (:mod:`drivers.sim.joint_effects`); the friction
+        adds to the held load torque input, the backlash correction is a third held input, the third
+        mass's states follow the plant's five.
     """
 
     def __init__(self, plant: TwoMass, pi: SpeedPI, gravity: Gravity, counts_per_rev: int,
-                 schedule: MotionSchedule, n_sub: int = 16) -> None:
+                 schedule: MotionSchedule, n_sub: int = 16, effects: JointEffects = JointEffects()) -> None:
         self.plant, self.pi, self.gravity, self.schedule = plant, pi, gravity, schedule
-        self.A, self.B = plant.state_space()
-        self.disc = discretise(self.A, self.B, pi.period_s, n_sub)
+        self.effects = effects
+        A, B = plant.state_space()
+        self.A, self.B = effects.state_space(A, B, plant.Jm_kgm2, plant.Jl_kgm2)
+        self.n_states, self.n_inputs = self.B.shape
+        # the backlash's held correction needs steps much shorter than the gap's crossing (~1 control period)
+        self.n_inner = BACKLASH_SUBSTEPS if effects.backlash is not None else 1
+        self.step_s = pi.period_s / self.n_inner
+        self.disc = discretise(self.A, self.B, self.step_s, n_sub)
         self.n_sub = n_sub
-        self.h_s = pi.period_s / n_sub
+        self.h_s = self.step_s / n_sub
         self._rad_per_count = 2.0 * math.pi / counts_per_rev
         self.x_rest = self._equilibrium()
         self._x = self.x_rest.copy()
         self._counts_prev = math.floor(self._x[0] / self._rad_per_count)
         self._integral_Nm = self.gravity.torque_Nm(self._x[2])
+        self._iq_ref_A = 0.0
         self._k = 0                      # control steps done
-        self._steps = _Rows(N_STATES + N_INPUTS)   # [x[k], u[k]] of steps k0 … k−1
+        self._steps = _Rows(self.n_states + self.n_inputs)   # [x[k], u[k]] of steps k0 … k−1
         self._k0 = 0
         # fine point j of a step (j = 0 … n_sub, n_sub being the next control instant) = Psi[j]·[x[k], u[k]]
         psi = np.concatenate([self.disc.Phi_sub, self.disc.Gam_sub], axis=2)
@@ -102,60 +118,76 @@ class JointSimulation:
         self._psi = np.concatenate([psi, last], axis=0)
 
     def _equilibrium(self) -> np.ndarray:
-        """Rest under gravity: θ_m at half a count, the shaft twisted by T_g/K, i_q carrying T_g."""
+        """Rest under gravity: θ_m at half a count, the shaft twisted by T_g/K (plus half the backlash),
+        i_q carrying T_g; a third mass rests at the load's angle."""
         p = self.plant
         theta_m = 0.5 * self._rad_per_count
         theta_l = theta_m
+        gap = 0.5 * self.effects.backlash.width_rad if self.effects.backlash is not None else 0.0
         for _ in range(5):
-            theta_l = theta_m - self.gravity.torque_Nm(theta_l) / p.K_Nm_per_rad
+            t_g = self.gravity.torque_Nm(theta_l)
+            theta_l = theta_m - t_g / p.K_Nm_per_rad - math.copysign(gap, t_g)
         iq = self.gravity.torque_Nm(theta_l) / p.kt_Nm_per_A
-        return np.array([theta_m, 0.0, theta_l, 0.0, iq])
+        x = np.zeros(self.n_states)
+        x[:N_STATES] = [theta_m, 0.0, theta_l, 0.0, iq]
+        x[N_STATES:] = [theta_l, 0.0][:self.n_states - N_STATES]
+        return x
 
     @property
     def t_end_s(self) -> float:
         """Drive time up to which states are known, s."""
-        return self._k * self.pi.period_s
+        return self._k * self.step_s
 
     @property
     def t_begin_s(self) -> float:
         """Earliest drive time still held (before t = 0 the joint is at rest), s."""
-        return self._k0 * self.pi.period_s if self._k0 > 0 else -math.inf
+        return self._k0 * self.step_s if self._k0 > 0 else -math.inf
 
     def advance_to(self, t_s: float) -> None:
         """Simulate until the known span covers ``t_s`` (s, drive clock), i.e. :attr:`t_end_s` > ``t_s``."""
-        n = math.floor(t_s / self.pi.period_s) + 1 - self._k
+        n = math.floor(t_s / self.step_s) + 1 - self._k
         if n <= 0:
             return
         T, kt = self.pi.period_s, self.plant.kt_Nm_per_A
         kp, ki_T, Jff = self.pi.kp_Nms_per_rad, self.pi.ki_Nm_per_rad * T, self.pi.ff_inertia_kgm2
-        speed_ref, accel_ref = self.schedule.reference((self._k + np.arange(n)) * T)
+        speed_ref, accel_ref = self.schedule.reference((self._k + np.arange(n)) * self.step_s)
+        n_inner, k0 = self.n_inner, self._k
+        iq_ref = self._iq_ref_A
         ff = (Jff * accel_ref).tolist()
         wref = speed_ref.tolist()
-        xs = np.empty((n, N_STATES + N_INPUTS))  # [x[k], u[k]] per step
+        ns = self.n_states
+        xs = np.empty((n, ns + self.n_inputs))  # [x[k], u[k]] per step
         AB = self._psi[-1]
-        z = np.empty(N_STATES + N_INPUTS)
+        z = np.empty(ns + self.n_inputs)
+        friction, backlash = self.effects.friction, self.effects.backlash
         x, counts_prev, integral = self._x, self._counts_prev, self._integral_Nm
         rad_per_count, q_per_T = self._rad_per_count, self._rad_per_count / T
         g = self.gravity
         g_scale, g_start, g_ratio = g.mass_kg * G_M_S2 * g.com_distance_m / g.ratio, g.start_rad, g.ratio
         for j in range(n):
-            counts = math.floor(x[0] / rad_per_count)
-            err = wref[j] - (counts - counts_prev) * q_per_T
-            z[:N_STATES] = x
-            z[N_STATES] = (ff[j] + kp * err + integral) / kt             # i_q reference, A
-            z[N_STATES + 1] = g_scale * math.cos(g_start + x[2] / g_ratio)  # T_g, N·m (= Gravity.torque_Nm)
-            integral += ki_T * err
-            counts_prev = counts
+            if (k0 + j) % n_inner == 0:                             # a control instant
+                counts = math.floor(x[0] / rad_per_count)
+                err = wref[j] - (counts - counts_prev) * q_per_T
+                iq_ref = (ff[j] + kp * err + integral) / kt         # i_q reference, A
+                integral += ki_T * err
+                counts_prev = counts
+            z[:ns] = x
+            z[ns] = iq_ref
+            z[ns + 1] = g_scale * math.cos(g_start + x[2] / g_ratio)  # T_g, N·m (= Gravity.torque_Nm)
+            if friction is not None:
+                z[ns + 1] += friction.torque_Nm(x[3])               # load friction, held like T_g
+            if backlash is not None:
+                z[ns + 2] = backlash.correction_Nm(x[0] - x[2])     # dead-zone torque pair
             xs[j] = z
             x = AB @ z
-        self._x, self._counts_prev, self._integral_Nm = x, counts_prev, integral
+        self._x, self._counts_prev, self._integral_Nm, self._iq_ref_A = x, counts_prev, integral, iq_ref
         self._steps.append(xs)
         self._k += n
 
     def states_at(self, t_s: np.ndarray) -> np.ndarray:
         """States (n, 5) at drive times ``t_s`` (s); rest before 0. Call :meth:`advance_to` first."""
         t = np.asarray(t_s, dtype=float).ravel()
-        out = np.empty((t.size, N_STATES))
+        out = np.empty((t.size, self.n_states))
         rest = t < 0.0
         out[rest] = self.x_rest
         tt = t[~rest]
@@ -164,14 +196,14 @@ class JointSimulation:
         if tt.max() > self.t_end_s + 1e-12 or tt.min() < self.t_begin_s - 1e-12:
             raise ValueError(f"state requested at {tt.min():.6f}…{tt.max():.6f} s outside the simulated span "
                              f"{max(self.t_begin_s, 0.0):.6f}…{self.t_end_s:.6f} s")
-        T = self.pi.period_s
+        T = self.step_s
         k = np.clip(np.floor(tt / T).astype(np.int64), self._k0, self._k - 1)
         j = np.clip(np.floor((tt - k * T) / self.h_s).astype(np.int64), 0, self.n_sub - 1)
         tau = ((tt - k * T - j * self.h_s) / self.h_s)[:, None]
         z = self._steps.view[k - self._k0]
         x0 = np.einsum("nij,nj->ni", self._psi[j], z)
         x1 = np.einsum("nij,nj->ni", self._psi[j + 1], z)
-        bu = z[:, N_STATES:] @ self.B.T
+        bu = z[:, self.n_states:] @ self.B.T
         d0 = (x0 @ self.A.T + bu) * self.h_s
         d1 = (x1 @ self.A.T + bu) * self.h_s
         tau2, tau3 = tau * tau, tau * tau * tau
@@ -181,7 +213,7 @@ class JointSimulation:
 
     def forget_before(self, t_s: float) -> None:
         """Drop history older than ``t_s`` (s); later reads before it raise ValueError."""
-        k_cut = min(math.floor(t_s / self.pi.period_s), self._k - 1)
+        k_cut = min(math.floor(t_s / self.step_s), self._k - 1)
         if k_cut > self._k0:
             self._steps.drop_front(k_cut - self._k0)
             self._k0 = k_cut
@@ -189,4 +221,4 @@ class JointSimulation:
     @property
     def held_s(self) -> float:
         """Span of history in memory, s (for tests of the history bound)."""
-        return len(self._steps) * self.pi.period_s
+        return len(self._steps) * self.step_s

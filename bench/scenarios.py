@@ -1,0 +1,239 @@
+"""The scenario family of issue 13: simulated benches the identification was not tuned on, as data.
+
+A scenario is the bench's ``[sim]``/``[daq]``/``[drive]``/``[encoder]`` settings, the profile, the record
+length and the outcome **expected before running**: ``ok`` within K ±2 %, J ±4 % (the plain paper plant
+±1 % / ±2 %), or ``not ok`` with the reason the analysis should give. Adding a scenario is one line of
+:data:`SCENARIOS`. A run records a real session through :class:`acq.recorder.Recorder` from the simulated
+drivers (``--fast``) into an HDF5 file and analyses what :func:`acq.analyze.recording_from_session` reads
+back — the same path as ``acq record`` — so options other parts of the simulator add (e.g. the drive's
+SYNC-latch jitter) take effect by naming them in ``sim``.
+
+Truth: the simulator's K, J_m, J_l, C; with a third mass behind the load the two-mass equivalent below
+its resonance has J_l + J_3 (``jl_truth="load+third"``). The clock truth (``daq_offset_s``) is relative
+to drive cycle 0 = encoder index 0, true of the ``sim`` transport; a CANopen or serial drive (``drive=``,
+``realtime=True``) numbers its frames from another origin, so its clock error column is not meaningful.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+
+PARAMS = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")
+LABEL = {"K_Nm_per_rad": "K", "Jm_kgm2": "J_m", "Jl_kgm2": "J_l", "C_Nms_per_rad": "C"}
+THREE_PHASES = ["i_a", "i_b", "i_c"]
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One simulated bench and the outcome expected of it (written down before running).
+
+    Attributes
+    ----------
+    name : what is special about this bench.
+    expect : ``ok`` (within ``tol_K``/``tol_J``, %) or ``not ok`` (``reason`` says why the data cannot tell).
+    sim, profile, daq, drive : overrides of ``[sim]``, the 0.2 s triangle profile, ``[daq]``, ``[drive]``.
+    counts_per_rev : encoder resolution (None: the bench's 2^17).
+    plant : factors on the paper's K, J_m, J_l (the bench's nominal values stay the paper's).
+    clock : DAQ offset (s) and drift (ppm); None: |offset| 10–60 ms, |drift| 20–60 ppm of random signs.
+    jl_truth : the J_l the fit is scored against (``load+third``: J_l + J_3, the two-mass equivalent).
+    realtime : record in real time (a simulated CANopen node on the virtual bus needs it), not ``--fast``.
+    """
+
+    name: str
+    expect: Literal["ok", "not ok"] = "ok"
+    reason: str = ""
+    sim: dict[str, Any] = field(default_factory=dict)
+    profile: dict[str, Any] = field(default_factory=dict)
+    daq: dict[str, Any] = field(default_factory=dict)
+    drive: dict[str, Any] = field(default_factory=dict)
+    counts_per_rev: int | None = None
+    duration_s: float = 10.0
+    plant: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    tol_K: float = 2.0
+    tol_J: float = 4.0
+    clock: tuple[float, float] | None = None
+    jl_truth: Literal["load", "load+third"] = "load"
+    realtime: bool = False
+
+    @property
+    def must_not_be_ok(self) -> bool:
+        return self.expect == "not ok"
+
+
+def _paper(name: str, **kw: Any) -> Scenario:
+    return Scenario(name, tol_K=1.0, tol_J=2.0, **kw)
+
+
+RIPPLE = {"pwm_ripple_A": 0.025, "pwm_hz": 16000.0}  # a drive's PWM ripple on the phase current, 25 mA at 16 kHz
+HUM = {"mains_hum_A": 0.02, "mains_hz": 50.0}
+THIRD_ABOVE = {"third_mass_Jl_fraction": 0.2, "third_mass_hz": 800.0}
+THIRD_INSIDE = {"third_mass_Jl_fraction": 0.5, "third_mass_hz": 150.0}
+WEAK = "weak excitation between f_a and f_r (coherence)"
+
+SCENARIOS: tuple[Scenario, ...] = (
+    # ---- plants (issue 4), the paper's chain side by side --------------------------------------------
+    _paper("paper plant"),
+    Scenario("K ×0.5", plant=(0.5, 1.0, 1.0)),
+    Scenario("K ×2", plant=(2.0, 1.0, 1.0)),
+    Scenario("J_m ×2, J_l ×0.5", plant=(1.0, 2.0, 0.5)),
+    Scenario("J_m ×0.5, J_l ×2", plant=(1.0, 0.5, 2.0)),
+    Scenario("K ×0.5, J_m ×2, J_l ×0.5", plant=(0.5, 2.0, 0.5)),
+    Scenario("K ×2, J ×0.5 (stiff)", plant=(2.0, 0.5, 0.5)),
+    Scenario("K ×0.5, J ×2 (soft)", plant=(0.5, 2.0, 2.0)),
+    _paper("paper plant, 0.5 s profile", expect="not ok", reason=WEAK,
+           profile={"accel_time_s": 0.5, "decel_time_s": 0.5}),
+    # ---- plant effects ----------------------------------------------------------------------------------
+    Scenario("load friction Coulomb 0.3 + Stribeck 0.2 N·m", sim={"load_coulomb_Nm": 0.3, "load_stribeck_Nm": 0.2}),
+    Scenario("backlash 0.05 mrad", sim={"backlash_load_rad": 0.05e-3}),
+    Scenario("backlash 0.2 mrad", expect="not ok", reason="dead zone ≈ 1/3 of the twist: nonlinear, misfit",
+             sim={"backlash_load_rad": 0.2e-3}),
+    Scenario("third mass 800 Hz (above band), J_3 = 0.2 J_l", sim=THIRD_ABOVE, jl_truth="load+third"),
+    Scenario("third mass 150 Hz (inside band), J_3 = 0.5 J_l", expect="not ok", reason="three-mass FRF: misfit",
+             sim=THIRD_INSIDE),
+    Scenario("heavy arm 20 kg", sim={"arm_mass_kg": 20.0}),
+    # ---- motion and speed loop ----------------------------------------------------------------------------
+    Scenario("trapezoid: 0.1 s cruise, 0.1 s dwell", profile={"cruise_s": 0.1, "dwell_s": 0.1}),
+    Scenario("S-curve, jerk time 10 ms", profile={"jerk_time_s": 0.01}),
+    Scenario("S-curve, jerk time 50 ms", expect="not ok", reason=WEAK + ": smooth torque steps",
+             profile={"jerk_time_s": 0.05}),
+    Scenario("speed loop 10 Hz, accel. feed-forward", sim={"speed_bandwidth_hz": 10.0}),
+    Scenario("speed loop 60 Hz, accel. feed-forward", sim={"speed_bandwidth_hz": 60.0}),
+    Scenario("speed loop 10 Hz, no feed-forward", expect="not ok", reason=WEAK + ": torque only from the loop error",
+             sim={"speed_bandwidth_hz": 10.0, "speed_accel_feedforward": False}),
+    Scenario("speed loop 60 Hz, no feed-forward", sim={"speed_bandwidth_hz": 60.0, "speed_accel_feedforward": False}),
+    # ---- current measurement ----------------------------------------------------------------------------
+    Scenario("DAQ 10 kS/s, AA filter, ripple", daq={"rate_hz": 10000.0}, sim={**RIPPLE, "daq_antialias": True}),
+    Scenario("DAQ 10 kS/s, no AA filter, ripple folds to 4 kHz", daq={"rate_hz": 10000.0}, sim=RIPPLE),
+    Scenario("DAQ 25.6 kS/s, AA filter, ripple", sim={**RIPPLE, "daq_antialias": True}),
+    Scenario("DAQ 25.6 kS/s, no AA filter, ripple folds to 9.6 kHz", sim=RIPPLE),
+    Scenario("DAQ 51.2 kS/s, AA filter, ripple", daq={"rate_hz": 51200.0}, sim={**RIPPLE, "daq_antialias": True}),
+    Scenario("DAQ 51.2 kS/s, no AA filter, ripple 16 kHz", daq={"rate_hz": 51200.0}, sim=RIPPLE),
+    Scenario("PWM 8 kHz ripple 50 mA, 10 kS/s no AA (folds to 2 kHz)", daq={"rate_hz": 10000.0},
+             sim={"pwm_ripple_A": 0.05, "pwm_hz": 8000.0}),
+    Scenario("PWM 20 kHz ripple 100 mA, 10 kS/s no AA (folds onto DC and 2 f_e, in band)",
+             daq={"rate_hz": 10000.0}, sim={"pwm_ripple_A": 0.1, "pwm_hz": 20000.0}),
+    Scenario("16-bit ADC over ±20 A", sim={"daq_bits": 16, "daq_range_A": 20.0}),
+    Scenario("mains hum 20 mA, 50 Hz + harmonics", sim=HUM),
+    Scenario("mains hum 20 mA, 60 Hz + harmonics", sim={**HUM, "mains_hz": 60.0}),
+    Scenario("offset drift 40 mA, 20 s period", sim={"offset_drift_A": 0.04}),
+    Scenario("hum 20 mA + offset drift 40 mA", sim={**HUM, "offset_drift_A": 0.04}),
+    Scenario("3 phases (park), no gain error", daq={"channels": THREE_PHASES}),
+    Scenario("3 phases, gain errors +2 % / −2 % (park)", daq={"channels": THREE_PHASES},
+             sim={"current_gain_errors": {"i_b": 0.02, "i_c": -0.02}}),
+    # ---- encoder and streams ----------------------------------------------------------------------------
+    Scenario("encoder 500 Hz", drive={"period_s": 0.002}),
+    Scenario("encoder 4 kHz", drive={"period_s": 0.00025}),
+    Scenario("encoder 10 000 counts/rev", counts_per_rev=10_000),
+    Scenario("encoder 2^20 counts/rev", counts_per_rev=2**20),
+    Scenario("encoder gap of 50 frames (with index)", sim={"drop_encoder_frames": [(4000, 50)]}),
+    # SYNC-latch jitter (the "enctiming" options of drivers/sim/drive.py) is one line each here, e.g.
+    # Scenario("SYNC jitter 50 µs, no drive time stamps", expect="not ok", reason="encoder timing", sim={...}),
+    # ---- clocks and record length -------------------------------------------------------------------------
+    Scenario("clock offset +2 s", clock=(2.0, 40.0)),
+    Scenario("clock offset −2 s", clock=(-2.0, -40.0)),
+    Scenario("clock drift +100 ppm", clock=(0.03, 100.0)),
+    Scenario("clock drift −100 ppm", clock=(-0.03, -100.0)),
+    Scenario("record 3 s", duration_s=3.0),
+    Scenario("record 60 s", duration_s=60.0),
+)
+
+
+def clock_for(seed: int, scenario_index: int) -> tuple[float, float]:
+    """DAQ offset (s) and drift (ppm) of a run: |offset| 10–60 ms, |drift| 20–60 ppm, random signs."""
+    rng = np.random.default_rng([seed, scenario_index, 4])
+    sign = rng.choice([-1.0, 1.0], size=2)
+    return float(sign[0] * rng.uniform(0.010, 0.060)), float(sign[1] * rng.uniform(20.0, 60.0))
+
+
+def scenario_bench(sc: Scenario, seed: int, offset_s: float, drift_ppm: float) -> tuple[Any, Any]:
+    """The bench config and profile of a scenario run (the default simulated bench, changed)."""
+    from acq.config import load_bench, load_profile
+
+    bench = load_bench()
+    data = bench.model_dump()
+    base = data["sim"]
+    k, jm, jl = sc.plant
+    base.update({"seed": seed, "daq_offset_s": offset_s, "daq_drift_ppm": drift_ppm,
+                 "K_Nm_per_rad": base["K_Nm_per_rad"] * k, "Jm_kgm2": base["Jm_kgm2"] * jm,
+                 "Jl_kgm2": base["Jl_kgm2"] * jl, **sc.sim})
+    data["daq"].update(sc.daq)
+    data["drive"].update(sc.drive)  # e.g. {"driver": "canopen", "simulated_node": True}: another transport
+    if sc.counts_per_rev is not None:
+        data["encoder"]["counts_per_rev"] = sc.counts_per_rev
+    bench = type(bench).model_validate(data)
+    profile = load_profile("triangle_0.2s")
+    profile = type(profile).model_validate({**profile.model_dump(), "duration_s": sc.duration_s, **sc.profile})
+    return bench, profile
+
+
+def record(sc: Scenario, seed: int, offset_s: float, drift_ppm: float, out_dir: Path) -> tuple[Path, dict[str, Any]]:
+    """Record one scenario run as a session file in ``out_dir`` (simulated drivers, ``--fast`` unless the
+    scenario needs real time); its truth."""
+    from acq.recorder import Recorder
+    from drivers.registry import open_bench
+    from drivers.sim.bench import SimBench
+
+    bench, profile = scenario_bench(sc, seed, offset_s, drift_ppm)
+    sim = SimBench(bench, realtime=sc.realtime)
+    current, drive = open_bench(bench, fast=not sc.realtime, sim_bench=sim)
+    result = Recorder(bench, profile, current, drive, out_dir, sc.duration_s).run()
+    truth = dict(sim.truth)
+    if sc.jl_truth == "load+third":
+        truth["Jl_kgm2"] = truth["Jl_kgm2"] * (1.0 + bench.sim.third_mass_Jl_fraction)
+    return result.path, truth
+
+
+def analyse(path: Path, pipeline: str = "acq") -> Any:
+    """Analyse a session file as ``acq analyze`` does (``pipeline="paper"``: the paper's chain)."""
+    from acq.analyze import options_for, recording_from_session
+    from acq.session import load
+    from analysis.pipeline import analyze
+
+    session = load(path)
+    return analyze(recording_from_session(session), options_for(session, pipeline=pipeline))  # type: ignore[arg-type]
+
+
+def analyse_both(path: Path) -> tuple[Any, Any, tuple[float, float]]:
+    """Our analysis and the paper's chain of a session; wall seconds of each."""
+    t0 = time.perf_counter()
+    ours = analyse(path)
+    t1 = time.perf_counter()
+    paper = analyse(path, pipeline="paper")
+    return ours, paper, (t1 - t0, time.perf_counter() - t1)
+
+
+def run_scenario(sc: Scenario, seed: int, scenario_index: int) -> tuple[Any, Any, dict[str, Any], tuple[float, float],
+                                                                        tuple[float, float]]:
+    """Record and analyse one run: (ours, paper, truth, (offset s, drift ppm), analysis seconds)."""
+    offset_s, drift_ppm = sc.clock if sc.clock is not None else clock_for(seed, scenario_index)
+    with tempfile.TemporaryDirectory(prefix="acq-scenario-") as tmp:
+        path, truth = record(sc, seed, offset_s, drift_ppm, Path(tmp))
+        ours, paper, seconds = analyse_both(path)
+    return ours, paper, truth, (offset_s, drift_ppm), seconds
+
+
+def errors_pct(res: Any, truth: dict[str, Any]) -> dict[str, float]:
+    """Relative errors (%) of K, J_m, J_l, C against the truth."""
+    v = res.fit.values
+    return {n: 100.0 * (getattr(v, n) - truth[n]) / truth[n] for n in PARAMS}
+
+
+def interval_holds(res: Any, truth: dict[str, Any]) -> dict[str, bool]:
+    """Whether each 95 % interval holds the truth."""
+    return {n: bool(res.fit.ci95[n][0] <= truth[n] <= res.fit.ci95[n][1]) for n in PARAMS}
+
+
+def confident_wrong(sc: Scenario, verdict: str, err_pct: dict[str, float], in_ci: dict[str, bool]) -> list[str]:
+    """Why an ``ok`` result is confidently wrong: errors beyond the tolerance, truth outside the interval."""
+    if verdict != "ok":
+        return []
+    tol = {"K_Nm_per_rad": sc.tol_K, "Jm_kgm2": sc.tol_J, "Jl_kgm2": sc.tol_J}
+    out = [f"{LABEL[p]} {err_pct[p]:+.2f} % (tol ±{tol[p]:g} %)" for p in tol if abs(err_pct[p]) > tol[p]]
+    out += [f"truth of {LABEL[p]} outside the 95 % interval" for p in tol if not in_ci[p]]
+    return out

@@ -1,0 +1,104 @@
+"""Clock alignment from the data alone: offsets to ±2 s and drifts to ±100 ppm, late host stamps, ambiguity."""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from analysis.clock_search import overlap_correlation
+from analysis.signals import Recording, prepare_signals
+from drivers.config import Bench, Profile
+from drivers.sim.bench import SimBench
+
+SIM_TOML = Path(__file__).resolve().parent.parent / "configs" / "benches" / "sim.toml"
+PROFILE = Profile(kind="triangle", top_speed_rpm=1000.0, accel_time_s=0.2, decel_time_s=0.2, duration_s=30.0)
+BLOCK = 2560
+
+
+def separate_records(offset_s: float, drift_ppm: float, duration_s: float = 6.0, t_motion_s: float | None = None,
+                     seed: int = 3) -> Recording:
+    """The current over DAQ time 0…``duration_s`` and the encoder over drive time 0…``duration_s``, each
+    stamped on one host clock by the simulator (arrival latency and jitter). DAQ sample 0 is at drive time
+    ``offset_s``; the motion starts 0.5 s into the later record unless ``t_motion_s`` (drive time) says."""
+    with SIM_TOML.open("rb") as f:
+        bench = Bench.model_validate(tomllib.load(f))
+    assert bench.sim is not None
+    bench = bench.model_copy(update={"sim": bench.sim.model_copy(
+        update={"daq_offset_s": offset_s, "daq_drift_ppm": drift_ppm, "seed": seed})})
+    sim = SimBench(bench, realtime=False, keep_history=True)
+    sim.start_motion(PROFILE, max(0.0, offset_s) + 0.5 if t_motion_s is None else t_motion_s)
+    n = int(duration_s * sim.daq_rate_hz)
+    first = np.arange(0, n, BLOCK, dtype=np.int64)
+    count = np.minimum(BLOCK, n - first)
+    block_host = sim.host_ns_at(sim.daq_time_s(first + count - 1), sim.host_jitter_s("daq_host", 0, first.size))
+    T = sim.drive_period_s
+    k = np.arange(int(duration_s / T), dtype=np.int64)
+    enc_host = sim.host_ns_at(k * T, sim.host_jitter_s("drive_host", 0, k.size))
+    return Recording({"i_a": sim.current_samples(0, n)[0]}, sim.daq_rate_hz, k, sim.encoder_counts(0, k.size), T,
+                     sim.counts_per_rev, bench.motor.pole_pairs, bench.motor.torque_constant_Nm_per_A, first, count,
+                     block_host, enc_host)
+
+
+def own_time_columns(rec: Recording) -> Recording:
+    """The stamps two separate tools would write: each stream's own time from 0, on no shared clock."""
+    assert rec.block_first_index is not None and rec.block_count is not None
+    last = rec.block_first_index + rec.block_count - 1
+    return replace(rec, block_host_ns=np.rint(last / rec.rate_hz * 1e9).astype(np.int64),
+                   encoder_host_ns=np.rint(rec.encoder_index * rec.period_s * 1e9).astype(np.int64),
+                   host_clock_shared=False)
+
+
+def test_overlap_correlation_is_the_pearson_correlation_over_each_lags_overlap() -> None:
+    rng = np.random.default_rng(0)
+    x, y = rng.standard_normal(40), rng.standard_normal(55)
+    lags, rho, overlap = overlap_correlation(x, y)
+    for L in (-39, -12, 0, 7, 30, 54):
+        i = int(np.flatnonzero(lags == L)[0])
+        a, b = x[max(0, -L):min(x.size, y.size - L)], y[max(0, L):min(y.size, x.size + L)]
+        assert overlap[i] == a.size == b.size
+        if a.size > 1:
+            assert rho[i] == pytest.approx(np.corrcoef(a, b)[0, 1], abs=1e-9)
+
+
+@pytest.mark.parametrize("offset_s, drift_ppm", [(-2.0, 100.0), (-1.3, -100.0), (-0.2, 100.0), (0.05, -100.0),
+                                                 (1.9, 100.0)])
+def test_clock_from_the_data_alone_over_2s_and_100ppm(offset_s: float, drift_ppm: float) -> None:
+    rec = separate_records(offset_s, drift_ppm)
+    for untrusted in (own_time_columns(rec), replace(rec, block_host_ns=None, encoder_host_ns=None)):
+        prep = prepare_signals(untrusted)
+        clock = prep.clock
+        assert clock.method == "angle"
+        assert abs(clock.offset_s - offset_s) <= 50e-6
+        assert abs(clock.drift_ppm - drift_ppm) <= 5.0
+        assert np.isnan(clock.host_offset_s) and clock.ambiguous_by_s == ()
+    assert "clock: the streams' time stamps are not on one host clock; aligned from the data alone" in prep.notes or \
+        untrusted.block_host_ns is None
+
+
+def test_host_stamps_of_a_daq_delivering_120ms_late_are_overruled_by_the_data() -> None:
+    rec = separate_records(-0.3, 60.0)
+    late = replace(rec, block_host_ns=rec.block_host_ns + 120_000_000)
+    clock = prepare_signals(late).clock
+    assert abs(clock.host_offset_s - (-0.3)) > 0.1  # the stamps alone are 120 ms off
+    assert abs(clock.offset_s - (-0.3)) <= 50e-6 and abs(clock.drift_ppm - 60.0) <= 5.0
+    (note,) = [n for n in clock.notes if "host stamps" in n]
+    assert note == ("clock: the host stamps are +120 ms off the data's alignment (blocks delivered late?); the wide "
+                    "search's offset is used")
+
+
+def test_an_offset_the_periodic_motion_leaves_open_is_reported_or_resolved_by_the_host_stamps() -> None:
+    # the motion runs before either record starts: over the overlap the streams repeat every 0.4 s
+    rec = separate_records(1.9, -20.0, t_motion_s=-1.0)
+    alone = prepare_signals(replace(rec, block_host_ns=None, encoder_host_ns=None)).clock
+    assert len(alone.ambiguous_by_s) >= 2
+    truth_shift = 1.9 - alone.offset_s
+    assert min(abs(d - truth_shift) for d in alone.ambiguous_by_s) < 0.005  # the truth is among the alternatives
+    # whole cycles of 0.8 s: the half cycles, where |ω| repeats too, the angle stage tells apart (a mirrored angle)
+    assert all(abs(d / 0.8 - round(d / 0.8)) < 0.0125 for d in alone.ambiguous_by_s)
+    assert any(n.startswith("clock: offset ambiguous by repeats of the motion: shifted by ") for n in alone.notes)
+    shared = prepare_signals(rec).clock
+    assert abs(shared.offset_s - 1.9) <= 50e-6 and shared.ambiguous_by_s == ()

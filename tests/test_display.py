@@ -1,0 +1,131 @@
+"""Every rich table is readable at 80 columns: drawn on Console(width=80), each key value appears whole, no cell is cut
+to "…" and no line is wider than the terminal."""
+
+from __future__ import annotations
+
+import io
+import re
+from typing import Any
+
+from rich.console import Console
+
+from acq.batch import BatchReport
+from acq.catalogue import Entry, Outcome
+from acq.devices import Section
+from acq.display import batch_table, result_table, sections_table, summary_table, trend_table
+from acq.summary import SessionSummary, StreamSummary
+from acq.trend import compute_trend
+
+TRUTH = {"K_Nm_per_rad": 891.0, "Jm_kgm2": 0.003027, "Jl_kgm2": 0.00748, "C_Nms_per_rad": 0.1, "offset_s": 0.037,
+         "drift_ppm": 40.0}
+
+
+def render(renderable: Any, width: int = 80) -> str:
+    """What a terminal (or a pipe) of ``width`` columns shows."""
+    console = Console(width=width, file=io.StringIO(), color_system=None)
+    console.print(renderable)
+    text = console.file.getvalue()  # type: ignore[attr-defined]
+    assert not re.search(r"…\s*(│|┃|$)", text, re.M), "a cell cut to …"
+    assert max(console.measure(line).maximum for line in text.splitlines()) <= width
+    return text
+
+
+def _doc(**changes: Any) -> dict[str, Any]:
+    """A result document as acq analyze writes it (values of a 10 s simulated session)."""
+    doc = {"K_Nm_per_rad": 895.1, "Jm_kgm2": 0.003045, "Jl_kgm2": 0.007509, "C_Nms_per_rad": 0.09554,
+           "ci95": {"K_Nm_per_rad": [879.4, 911.1], "Jm_kgm2": [0.003001, 0.00309], "Jl_kgm2": [0.00734, 0.007683],
+                    "C_Nms_per_rad": [0.07691, 0.1187]},
+           "antiresonance_hz": 54.95, "resonance_hz": 102.3,
+           "clock": {"offset_s": 0.03699852, "drift_ppm": 40.13, "residual_s": 13.3e-6},
+           "quality": {"verdict": "ok", "mean_coherence": 0.907,
+                       "reasons": ["note: using 0.064–9.972 s, where both streams have data"]},
+           "options": {"pipeline": "acq", "torque_method": "encoder", "params": "K,Jm,Jl", "fit": "amplitude",
+                       "band_hz": [10.0, 400.0], "align": True, "segment_s": 0.5,
+                       "nominal": {"K_Nm_per_rad": 891.0, "Jm_kgm2": 0.003027, "Jl_kgm2": 0.00748}},
+           "simulated_truth": TRUTH}
+    doc.update(changes)
+    return doc
+
+
+def test_result_table_shows_every_value_whole_at_80_columns() -> None:
+    text = render(result_table(_doc()))
+    for value in ("895.1", "879.4 – 911.1", "0.003045", "0.003001 – 0.00309", "0.00734 – 0.007683", "+0.46 %",
+                  "54.95", "102.3", "36.999", "-1.5 µs", "+0.13 ppm", "13.3", "0.907", "verdict ok",
+                  "options: torque encoder · params K,Jm,Jl · fit amplitude · band 10–400 Hz"):
+        assert value in text, value
+
+
+def test_params_K_shows_the_inertias_as_fixed_nominal() -> None:
+    doc = _doc(K_Nm_per_rad=890.7, Jm_kgm2=0.003027, Jl_kgm2=0.00748,
+               ci95={"K_Nm_per_rad": [881.8, 899.6], "Jm_kgm2": [0.003027, 0.003027],
+                     "Jl_kgm2": [0.00748, 0.00748], "C_Nms_per_rad": [0.07948, 0.1206]})
+    doc["options"]["params"] = "K"
+    text = render(result_table(doc))
+    assert text.count("fixed (nominal)") == 2 and "0.003027 – 0.003027" not in text
+    assert "881.8 – 899.6" in text
+
+
+def test_papers_table_cuts_no_value() -> None:
+    doc = _doc(K_Nm_per_rad=1569.0, C_Nms_per_rad=0.7324, clock={"offset_s": 0.0, "drift_ppm": 0.0, "residual_s": None})
+    doc["options"] |= {"pipeline": "paper", "torque_method": "hilbert", "align": False}
+    doc["quality"] = {"verdict": "poor", "mean_coherence": 0.69, "reasons": [
+        "the two-mass model misses |H| by 29 % RMS, 5.3× what noise explains — another mode or a nonlinearity in "
+        "the band; try --band", "note: clock: not aligned (streams taken as started together, no drift)"]}
+    text = render(result_table(doc))
+    for value in ("1569", "+76.09 %", "+632.40 %", "-37.000 ms", "-40.00 ppm", "paper's chain (--paper)",
+                  "nonlinearity"):
+        assert value in text, value
+
+
+def _entry(i: int, k: float, truth: float) -> Entry:
+    return Entry(f"id{i}", f"id{i}", f"/s/{i}.h5", "joint1", f"2026-11-29T19:5{i}:02.5+00:00",
+                 {"pose": "home", "payload_kg": 2.0}, "ok", [], None, k, (k * 0.982, k * 1.018),
+                 54.9 * (k / 891) ** 0.5, 102.3 * (k / 891) ** 0.5, "{}", "2026-11-30T00:00:00+00:00", truth)
+
+
+def test_trend_table_at_80_columns_keeps_K_change_and_spelled_out_states() -> None:
+    ks = (894.7, 856.8, 816.5, 742.7, 700.8)
+    trend = compute_trend("joint1", [_entry(i, k, t) for i, (k, t) in enumerate(zip(ks, (891, 853, 815, 740, 700)))])
+    text = render(trend_table(trend))
+    for value in ("894.7", "742.7", "700.8", "-17.0", "-21.7", "baseline", "ALARM: EWMA", "ALARM:", "threshold",
+                  "11-29 19:53", "11-29 19:54", "(UTC 2026)", "every session tagged pose=home payload_kg=2"):
+        assert value in text, value
+    assert "not shown at this width: sim K N·m/rad" in text
+    wide = render(trend_table(trend), width=160)
+    for value in ("2026-11-29 19:50:02", "878.6–910.8", "ALARM: threshold + EWMA", "891.0"):
+        assert value in wide, value
+    assert "not shown" not in wide
+
+
+def test_batch_table_wraps_a_long_error_and_keeps_K_whole() -> None:
+    done = {"K_Nm_per_rad": 893.41, "quality": {"verdict": "ok"}}
+    error = ("/srv/sessions/2026-11-29T19-55-04_joint1.h5: signals last 0.600 s; the FRF needs at least 0.750 s "
+             "(two 0.5 s Welch segments)")
+    report = BatchReport([Outcome("/srv/sessions/2026-11-29T19-55-02_joint1.h5", "a", "{}", {"joint": "joint1"}, done,
+                                  None, 1.0),
+                          Outcome("/srv/sessions/2026-11-29T19-55-04_joint1.h5", "b", "{}", {"joint": "joint1"}, None,
+                                  error, 0.1)], [], 1.4)
+    text = render(batch_table(report))
+    for value in ("2026-11-29T19-55-02_joint1.h5", "893.4", "failed", "Welch", "joint joint1", "2 analysed (1 failed)"):
+        assert value in text, value
+
+
+def test_summary_table_at_80_columns() -> None:
+    summary = SessionSummary("/tmp/disp/2026-11-29T19-54-08_joint1.h5", "joint1", "complete", "recorded 10 s",
+                             "2026-11-29T19:54:08.123+00:00",
+                             (StreamSummary("current", 256000, 10.0, 25600.0, 25599.04, 0, 0),
+                              StreamSummary("encoder", 10000, 10.0, 1000.0, 999.96, 3, 12)), 0)
+    text = render(summary_table(summary))
+    for value in ("256000", "25600.0", "25599.04", "999.96", "12", "missing", "2026-11-29 19:54:08 UTC",
+                  "recorded 10 s"):
+        assert value in text, value
+
+
+def test_devices_table_at_80_columns_wraps_reasons_at_spaces() -> None:
+    sections = [Section("NI-DAQmx devices", [("cDAQ1Mod1", "NI 9234", "cDAQ1Mod1/ai0, cDAQ1Mod1/ai1, cDAQ1Mod1/ai2")]),
+                Section("CAN interfaces (python-can)", empty_because="python-can detects no CAN interface (no adapter "
+                                                                     "plugged in, or its driver is missing)"),
+                Section("Simulated bench", [("sim", "simulated DAQ + drive", "configs/benches/sim.toml")])]
+    text = render(sections_table(sections))
+    for value in ("cDAQ1Mod1/ai0,", "NI 9234", "Simulated bench", "configs/benches/sim.toml", "adapter"):
+        assert value in text, value
