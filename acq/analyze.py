@@ -57,6 +57,7 @@ def recording_from_session(session: Session) -> Recording:
         block_host_ns=cur.block_host_ns,
         encoder_host_ns=enc.host_ns,
         host_clock_shared=session.host_clock_shared,
+        drive_time_s=enc.drive_time_s,
     )
 
 

@@ -49,6 +49,7 @@ RESULT_ROWS: tuple[tuple[str, str, tuple[str, ...], float, str, str | None], ...
     ("clock drift", "ppm", ("clock", "drift_ppm"), 1.0, ".2f", "drift_ppm"),
     ("clock residual", "µs", ("clock", "residual_s"), 1e6, ".1f", None),
     ("coherence in band", "", ("quality", "mean_coherence"), 1.0, ".3f", None),
+    ("encoder jitter", "µs", ("quality", "encoder_jitter_us"), 1.0, ".1f", None),  # left after any drive stamps
 )
 
 #: Spelled-out trend states (the alarm's rules are appended).

@@ -115,6 +115,17 @@ def speed_from_counts(position_counts: np.ndarray, counts_per_rev: int, period_s
     return counts_to_rad(np.diff(counts), counts_per_rev) / period_s
 
 
+def speed_from_angle(theta_rad: np.ndarray, period_s: float) -> np.ndarray:
+    """Motor speed, rad/s, by backward difference of an angle on the drive's grid k·T (as
+    :func:`speed_from_counts`, for an angle that is no longer whole counts, e.g. moved to k·T)."""
+    if period_s <= 0:
+        raise ValueError(f"period_s must be positive, got {period_s}")
+    theta = np.asarray(theta_rad, dtype=np.float64)
+    if theta.size < 2:
+        raise ValueError("need at least two encoder samples for a speed")
+    return np.diff(theta) / period_s
+
+
 def difference_response(f_hz: np.ndarray, period_s: float) -> np.ndarray:
     """Complex response (1 − e^{−jωT})/(jωT) of the backward difference against d/dt (1 at 0 Hz).
 

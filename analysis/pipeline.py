@@ -110,7 +110,10 @@ class Result:
             "clock": {"offset_s": _num(self.clock.offset_s), "drift_ppm": _num(self.clock.drift_ppm),
                       "residual_s": _num(self.clock.residual_s), "ambiguous_by_s": list(self.clock.ambiguous_by_s)},
             "quality": {"verdict": self.quality.verdict, "mean_coherence": _num(self.quality.mean_coherence),
-                        "reasons": [*self.quality.reasons, *(f"note: {n}" for n in self.notes)]},
+                        "reasons": [*self.quality.reasons, *(f"note: {n}" for n in self.notes)],
+                        "encoder_jitter_us": None if self.quality.encoder_jitter_s is None
+                        else _num(1e6 * self.quality.encoder_jitter_s),
+                        "encoder_time_stamps": self.quality.encoder_time_stamps},
             "options": {**self.options.to_json_dict(), "band_hz": list(self.fit.band)},
         }
 
@@ -148,7 +151,8 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
     fit = fit_two_mass(frf, FitOptions(params=options.params, kind=options.fit, band_hz=options.band_hz,
                                        weighting=weighting), nominal=options.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
-    quality = with_fault(assess(frf, fit, clock_residual_s=residual), recording_fault(rec))  # a wrong bench constant
+    quality = with_fault(assess(frf, fit, clock_residual_s=residual, encoder_jitter=sig.encoder_jitter),
+                         recording_fault(rec))  # a wrong bench constant
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual)),

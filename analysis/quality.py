@@ -14,9 +14,11 @@ from typing import Literal
 
 import numpy as np
 
+from analysis.encoder import difference_response
 from analysis.fit import COHERENCE_CLIP, FitResult, band_mask
 from analysis.frf import FrequencyResponse
 from analysis.model import PARAM_LABELS
+from analysis.sample_instants import EncoderJitter
 
 Verdict = Literal["ok", "poor", "failed"]
 _RANK: dict[Verdict, int] = {"ok": 0, "poor": 1, "failed": 2}
@@ -97,6 +99,11 @@ class Quality:
         Clock-alignment residual as given, s.
     reasons : tuple of str
         One sentence per check that is not ok, worst first; empty when ok.
+    encoder_jitter_s : float or None
+        The encoder's sample-instant jitter left in the speed, s (:mod:`analysis.sample_instants`);
+        None when not estimated.
+    encoder_time_stamps : bool
+        True when the drive's own time stamps moved the samples to their nominal instants.
     """
 
     verdict: Verdict
@@ -108,6 +115,8 @@ class Quality:
     ci_rel_halfwidth: dict[str, float]
     clock_residual_s: float | None
     reasons: tuple[str, ...]
+    encoder_jitter_s: float | None = None
+    encoder_time_stamps: bool = False
 
 
 def assess(
@@ -116,6 +125,7 @@ def assess(
     *,
     clock_residual_s: float | None = None,
     thresholds: Thresholds = Thresholds(),
+    encoder_jitter: EncoderJitter | None = None,
 ) -> Quality:
     """Judge an identification from its FRF, its fit and the clock alignment.
 
@@ -129,6 +139,8 @@ def assess(
         RMS residual of the clock alignment, s; None when the caller did not align (not judged).
     thresholds : Thresholds, optional
         Limits of the verdict.
+    encoder_jitter : EncoderJitter or None, optional
+        The encoder's sample-instant jitter estimated from the data (not judged if None).
 
     Returns
     -------
@@ -189,13 +201,54 @@ def assess(
             findings.append(("poor", f"clock alignment residual {1e6 * clock_residual_s:.0f} µs exceeds "
                                      f"{1e6 * limit:.0f} µs for a {fit.options.kind} fit"))
 
+    if encoder_jitter is not None and np.isfinite(encoder_jitter.sigma_s) and np.any(in_band):
+        findings[:0] = _jitter_findings(frf, fit, in_band, encoder_jitter, th)  # the cause first
+
     findings.sort(key=lambda fv: -_RANK[fv[0]])
     verdict: Verdict = findings[0][0] if findings else "ok"
     return Quality(
         verdict=verdict, mean_coherence=mean_coh, excitation_coherence=exc_coh, excitation_torque_db=exc_db,
         residual_rms=float(fit.residual_rms), misfit_ratio=float(ratio), ci_rel_halfwidth=ci_rel, clock_residual_s=clock_residual_s,
         reasons=tuple(text for _, text in findings),
+        encoder_jitter_s=None if encoder_jitter is None else float(encoder_jitter.sigma_s),
+        encoder_time_stamps=encoder_jitter is not None and encoder_jitter.stamped,
     )
+
+
+def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,
+                     th: Thresholds) -> list[tuple[Verdict, str]]:
+    """The verdict on the encoder's sample-instant jitter, from the session's own spectra.
+
+    The speed noise the jitter predicts, N(f), is taken out of the measured speed PSD
+    G_yy = |H·D|²·G_xx/γ² (D the backward difference): without it the coherence would be
+    γ²·G_yy/(G_yy − N) (at most 1). The jitter limits the FRF when that would lift the grade of the
+    verdict's own coherence checks (whole band; f_a…f_r with the excitation limits) — no limit of its own.
+    """
+    f = frf.f_hz[in_band]
+    g2 = np.clip(frf.coherence[in_band], 1e-6, 1.0)
+    g_yy = np.abs(frf.H[in_band] * difference_response(f, frf.period_s)) ** 2 * frf.torque_psd[in_band] / g2
+    noise = jitter.speed_noise_psd(f, frf.period_s)
+    without = g2 * g_yy / np.maximum(g_yy - noise, g2 * g_yy)
+    checks = [(np.ones(f.size, dtype=bool), th.coherence_poor, th.coherence_failed)]
+    if np.isfinite(fit.f_a) and np.isfinite(fit.f_r):
+        checks.append((band_mask(f, (fit.f_a, fit.f_r)), th.excitation_poor, th.excitation_failed))
+    level: Verdict = "ok"
+    for sel, poor, failed in checks:
+        if np.any(sel):
+            now = _grade(float(np.mean(g2[sel])), poor, failed)
+            if _RANK[now] > _RANK[_grade(float(np.mean(without[sel])), poor, failed)]:
+                level = max(level, now, key=_RANK.__getitem__)
+    if level == "ok":
+        return []
+    sigma_us, lo, hi = 1e6 * jitter.sigma_s, *fit.band
+    cost = (f"coherence {np.mean(g2):.2f} in {lo:g}…{hi:g} Hz, ≈ {np.mean(without):.2f} without the speed noise "
+            "it predicts")
+    if jitter.stamped:
+        return [(level, f"the encoder's sample instants still scatter by ≈ {sigma_us:.1f} µs after the drive's time "
+                        f"stamps ({cost}): check that the drive's time stamp (0x1013 or the frame's drive time) is "
+                        "taken when the position is latched")]
+    return [(level, f"the drive samples at SYNC arrival with ≈ {sigma_us:.0f} µs jitter ({cost}): use a hardware "
+                    "SYNC or map the drive's time stamp (0x1013, [drive] map_timestamp = true)")]
 
 
 def _grade(value: float, poor_below: float, failed_below: float) -> Verdict:

@@ -18,8 +18,9 @@ from typing import Literal
 
 import numpy as np
 
-from analysis import encoder, resample, torque
+from analysis import encoder, resample, sample_instants, torque
 from analysis.clocks import ClockFit, fit_clock, host_relation
+from analysis.sample_instants import EncoderJitter
 
 TorqueMethod = Literal["hilbert", "encoder", "park"]
 Resampling = Literal["antialias", "linear"]
@@ -62,6 +63,9 @@ class Recording:
         True when both streams' stamps are arrival times on one host clock (a recording by ``acq record``);
         False for files from separate tools, whose time columns relate nothing. Only shared stamps centre
         the clock search; otherwise it runs ±2 s around "both streams started together".
+    drive_time_s : ndarray of float64 or None
+        The drive's own time stamp of each encoder sample, s (serial frame drive time, CANopen 0x1013):
+        the instant it really sampled; its origin and 1 µs quantisation do not matter. None: not recorded.
     """
 
     current_a: dict[str, np.ndarray]
@@ -77,6 +81,7 @@ class Recording:
     block_host_ns: np.ndarray | None = None
     encoder_host_ns: np.ndarray | None = None
     host_clock_shared: bool = True
+    drive_time_s: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -112,6 +117,9 @@ class PreparedSignals:
         read at ``t_s``, N·m. The encoder samples the position without an anti-alias filter, so the
         plant's response to the torque near k·f_enc ± f folds onto f; these carry that torque
         (:func:`analysis.frf.estimate_frf` turns them into the fold-over terms the fit models).
+    encoder_jitter : EncoderJitter or None
+        The encoder's sample-instant jitter left in ``speed_rad_s`` (after the drive's time stamps, if
+        any), estimated from the data (:mod:`analysis.sample_instants`).
     """
 
     t_s: np.ndarray
@@ -125,6 +133,7 @@ class PreparedSignals:
     notes: list[str] = field(default_factory=list)
     torque_noise_Nm: np.ndarray | None = None
     torque_alias_Nm: np.ndarray | None = None
+    encoder_jitter: EncoderJitter | None = None
 
 
 def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", align: bool = True,
@@ -151,7 +160,6 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
     notes: list[str] = []
     span = encoder.longest_gap_free_span(rec.encoder_index)
     cycles = rec.encoder_index[span.start:span.stop]
-    counts = rec.position_counts[span.start:span.stop]
     if span.gaps:
         notes.append(f"encoder: {len(span.gaps)} gap(s), first after cycle {span.gaps[0][0]}: using the longest "
                      f"gap-free span {cycles[0] * rec.period_s:.3f}–{cycles[-1] * rec.period_s:.3f} s")
@@ -161,7 +169,8 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
     if daq_note:
         notes.append(daq_note)
     current = {name: a[lo:hi] for name, a in rec.current_a.items()}
-    angle = encoder.angle_spline(int(cycles[0]), rec.period_s, encoder.counts_to_rad(counts, rec.counts_per_rev))
+    theta, jitter = _angle_on_grid(rec, span, notes)
+    angle = encoder.angle_spline(int(cycles[0]), rec.period_s, theta)
     if align:
         clock = fit_clock(current["i_a"], rec.rate_hz, n0, angle, rec.pole_pairs, _host(rec))
         if not rec.host_clock_shared:
@@ -179,7 +188,7 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
     current = {name: c[first:last] for name, c in current.items()}
     n0, lo, hi = n0 + first, lo + first, lo + last
 
-    speed = encoder.speed_from_counts(counts, rec.counts_per_rev, rec.period_s)
+    speed = encoder.speed_from_angle(theta, rec.period_s)
     t_s = cycles[1:] * rec.period_s
     f_pass, f_stop = _PASS_FRACTION / rec.period_s, _STOP_FRACTION / rec.period_s
     t_daq = clock.daq_time_s(t_s)
@@ -224,7 +233,7 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
         else:
             out[sel] = resample.linear_at(tq, rec.rate_hz, t0, t_daq[sel])
     prepared = PreparedSignals(t_s, out, speed, rec.period_s, clock, torque_method, align, theta0, notes,
-                               noise, alias)
+                               noise, alias, jitter)
     return _signed(prepared) if sign is None else prepared
 
 
@@ -251,6 +260,36 @@ def _validate(rec: Recording, torque_method: TorqueMethod) -> None:
         raise ValueError(f"rate_hz and period_s must be positive, got {rec.rate_hz}, {rec.period_s}")
     if rec.encoder_index.size != rec.position_counts.size:
         raise ValueError("encoder_index and position_counts differ in length")
+    if rec.drive_time_s is not None and rec.drive_time_s.size != rec.encoder_index.size:
+        raise ValueError("drive_time_s and encoder_index differ in length")
+
+
+def _angle_on_grid(rec: Recording, span: encoder.Span, notes: list[str]) -> tuple[np.ndarray, EncoderJitter]:
+    """The span's motor angle at k·T, rad — moved there with the drive's time stamps when they are
+    usable and leave less position noise than the samples taken as k·T — and the jitter left in it."""
+    cycles = rec.encoder_index[span.start:span.stop]
+    theta = encoder.counts_to_rad(rec.position_counts[span.start:span.stop], rec.counts_per_rev)
+    on_grid = sample_instants.estimate_jitter(theta, rec.period_s)
+    if rec.drive_time_s is None:
+        return theta, on_grid
+    deviation = sample_instants.stamp_deviation_s(cycles, rec.drive_time_s[span.start:span.stop], rec.period_s)
+    if deviation is None:
+        notes.append("encoder: the drive's time stamps are not a scatter around its cycle grid (missing, "
+                     "or off by half a cycle or more); sample instants taken as k·T")
+        return theta, on_grid
+    spread = float(np.sqrt(np.mean(deviation**2)))
+    if spread <= 1e-9:  # exactly k·T: no clock's reading, just the cycle count (as k·T, and said so)
+        return theta, on_grid
+    moved = sample_instants.angle_at_nominal_instants(theta, cycles, rec.period_s, deviation)
+    jitter = sample_instants.estimate_jitter(moved, rec.period_s, stamped=True, stamp_spread_s=spread)
+    if not jitter.sigma_s <= on_grid.sigma_s:  # coarse or false stamps: they would add the noise they should remove
+        notes.append(f"encoder: the drive's time stamps (RMS {1e6 * spread:.1f} µs off the cycle grid) leave more "
+                     f"position noise ({1e6 * jitter.sigma_s:.1f} µs) than k·T ({1e6 * on_grid.sigma_s:.1f} µs); "
+                     "sample instants taken as k·T")
+        return theta, on_grid
+    notes.append(f"encoder: sampled at the drive's own time stamps (RMS {1e6 * spread:.1f} µs off the "
+                 "cycle grid), moved to k·T")
+    return moved, jitter
 
 
 def _daq_run(rec: Recording) -> tuple[int, int, int, str]:

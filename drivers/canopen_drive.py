@@ -5,7 +5,8 @@ canopen and python-can are needed only then. :meth:`CanopenDrive.start` (drive d
 open the bus (own frames echoed, to pair TPDOs with SYNC), check the node is a CiA 402 device, NMT
 PRE-OPERATIONAL, producer heartbeat (0x1017), SYNC counter (0x1019 = 240, or plain SYNC if the drive
 has no 0x1019), TPDO ``tpdo`` mapped to 0x6064 position actual (+ 0x606C velocity actual) with
-transmission type 1 and **read back** (a differing mapping refuses to record), mode of operation
+transmission type 1 and **read back** (a differing mapping refuses to record) — with ``map_timestamp``
+also 0x1013, the high-resolution time stamp of the sample (µs, refused if the drive lacks it), mode of operation
 Profile Position **verified** on 0x6061 (canopen's own setter only logs a refusal), then NMT
 OPERATIONAL and the SYNC producer. Motion (enable, the triangle by Profile Position, quick stop and
 disable) is :mod:`drivers.canopen_motion`; the encoder stream (SYNC counter, notifier-side capture,
@@ -64,9 +65,18 @@ def bus_load(bitrate: float, period_s: float, tpdo_bytes: Sequence[int], *, sync
     return bits_per_s / bitrate
 
 
+def tpdo_bytes(s: DriveCanopen) -> int:
+    """Payload of the TPDO ``[drive]`` asks for, bytes: position, [velocity], [0x1013 time stamp], 4 each."""
+    return 4 * (1 + s.map_velocity + s.map_timestamp)
+
+
 def check_bus_load(s: DriveCanopen) -> float:
-    """The load ``[drive]`` asks for; :class:`ConfigError` naming the figure if above ``max_bus_load``."""
-    tpdo = [8 if s.map_velocity else 4]
+    """The load ``[drive]`` asks for; :class:`ConfigError` naming the figure if above ``max_bus_load``, or
+    if the TPDO would exceed the 8 bytes of a CAN frame."""
+    if tpdo_bytes(s) > 8:
+        raise ConfigError(f"[drive] map_velocity = true and map_timestamp = true need a TPDO of {tpdo_bytes(s)} "
+                          "bytes, a CAN frame carries 8 — set one of them to false")
+    tpdo = [tpdo_bytes(s)]
     load = bus_load(s.bitrate, s.period_s, tpdo, heartbeat_period_s=s.heartbeat_period_s)
     if load > s.max_bus_load:
         raise ConfigError(
@@ -145,7 +155,8 @@ class CanopenDrive:
                 self._sync.start()
                 self._wait_first_sync()
             unwrapper = SyncUnwrapper(overflow or None, s.period_s, first_sync_ns)
-            self._decoder = TpdoDecoder(unwrapper, s.map_velocity, self._cpr / 60.0 / s.velocity_units_per_rpm)
+            self._decoder = TpdoDecoder(unwrapper, s.map_velocity, self._cpr / 60.0 / s.velocity_units_per_rpm,
+                                        with_timestamp=s.map_timestamp)
         except BaseException:
             self.stop()
             raise
@@ -246,6 +257,9 @@ class CanopenDrive:
         """Map the TPDO (CiA 301 sequence via canopen), read it back, refuse a difference; its COB-ID."""
         s, node = self._s, self._node
         wanted = [od.map_entry(od.POSITION_ACTUAL, 32)] + ([od.map_entry(od.VELOCITY_ACTUAL, 32)] if s.map_velocity else [])
+        if s.map_timestamp:
+            self._require_timestamp()
+            wanted.append(od.map_entry(od.HIGH_RES_TIMESTAMP, 32))
         cob_id = od.tpdo_cob_id(s.tpdo, s.node_id)
         pdo = node.tpdo[s.tpdo]
         with device_step(self.name, f"writing the TPDO{s.tpdo} mapping failed"):
@@ -264,6 +278,15 @@ class CanopenDrive:
                 f"{self.name}: TPDO{s.tpdo} read back differs from what was written — wrote {_entries(wanted)} "
                 f"type 1 COB-ID 0x{cob_id:X}, read {_entries(got)} type {got_type} COB-ID 0x{got_cob:X}")
         return cob_id
+
+    def _require_timestamp(self) -> None:
+        """0x1013 must exist on the drive (an SDO upload of it must succeed) before it is mapped."""
+        with device_step(self.name, "reading 0x1013 high-resolution time stamp failed"):
+            try:
+                self._node.sdo[od.HIGH_RES_TIMESTAMP].raw
+            except SdoAbortedError as e:
+                raise DeviceError(f"{self.name}: the drive has no 0x1013 high-resolution time stamp (SDO abort "
+                                  f"0x{e.code:08X}) — set [drive] map_timestamp = false") from None
 
     def _set_profile_position(self) -> None:
         """Mode of operation 1 (0x6060), verified on 0x6061 within ``state_timeout_s``."""

@@ -16,6 +16,7 @@ from canopen.objectdictionary import (INTEGER8, INTEGER32, UNSIGNED8, UNSIGNED16
 DEVICE_TYPE = 0x1000
 HEARTBEAT_TIME = 0x1017
 SYNC_OVERFLOW = 0x1019
+HIGH_RES_TIMESTAMP = 0x1013
 TPDO_COMM = 0x1800
 TPDO_MAP = 0x1A00
 CONTROLWORD = 0x6040
@@ -84,6 +85,7 @@ def drive_object_dictionary(node_id: int) -> ObjectDictionary:
         _var("Device type", DEVICE_TYPE, UNSIGNED32, "ro", 0x00020192),  # CiA 402 servo drive
         _var("Producer heartbeat time", HEARTBEAT_TIME, UNSIGNED16, "rw", 0),
         _var("Synchronous counter overflow value", SYNC_OVERFLOW, UNSIGNED8, "rw", 0),
+        _var("High resolution time stamp", HIGH_RES_TIMESTAMP, UNSIGNED32, "rw", 0, mappable=True),  # µs
         _var("Controlword", CONTROLWORD, UNSIGNED16, "rw", 0, mappable=True),
         _var("Statusword", STATUSWORD, UNSIGNED16, "ro", 0, mappable=True),
         _var("Modes of operation", MODE, INTEGER8, "rw", 0, mappable=True),

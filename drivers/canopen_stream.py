@@ -123,18 +123,25 @@ class SyncUnwrapper:
 
 
 class TpdoDecoder:
-    """Raw TPDO payloads (int32 position [, int32 velocity], little endian) → an :class:`EncoderBlock`.
+    """Raw TPDO payloads (int32 position [, int32 velocity] [, uint32 0x1013 time stamp µs], little endian)
+    → an :class:`EncoderBlock`.
 
     The int32 position register is unwrapped to int64; velocity (drive units) is scaled to counts/s
-    by ``counts_per_s_per_unit``. Frames of the wrong length are counted and skipped.
+    by ``counts_per_s_per_unit``; the time stamp (wrapping every 2³² µs ≈ 71.6 min) is unwrapped into
+    ``drive_time_s`` (s of the drive's clock, its origin the drive's). Frames of the wrong length are
+    counted and skipped.
     """
 
-    def __init__(self, unwrapper: SyncUnwrapper, with_velocity: bool, counts_per_s_per_unit: float) -> None:
+    def __init__(self, unwrapper: SyncUnwrapper, with_velocity: bool, counts_per_s_per_unit: float,
+                 with_timestamp: bool = False) -> None:
         self._unwrapper = unwrapper
-        self._fields = 2 if with_velocity else 1
+        self._fields = 1 + with_velocity + with_timestamp
+        self._with_velocity, self._with_timestamp = with_velocity, with_timestamp
         self._scale = counts_per_s_per_unit
         self._last_raw: int | None = None
         self._last_counts = 0
+        self._last_stamp_raw: int | None = None
+        self._last_stamp_us = 0
         self.bad_length = 0
         self.before_first_sync = 0
 
@@ -154,8 +161,19 @@ class TpdoDecoder:
         steps = (np.diff(np.r_[prev, raw]) + 2**31) % 2**32 - 2**31
         counts = self._last_counts + np.cumsum(steps) + (raw[0] if self._last_raw is None else 0)
         self._last_raw, self._last_counts = int(raw[-1]), int(counts[-1])
-        velocity = values[:, 1] * self._scale if self._fields == 2 else None
-        return EncoderBlock(index=index, position_counts=counts, host_ns=host_ns, velocity_counts_per_s=velocity)
+        velocity = values[:, 1] * self._scale if self._with_velocity else None
+        drive_time_s = self._unwrap_stamps(values[:, -1].view("<u4")) if self._with_timestamp else None
+        return EncoderBlock(index=index, position_counts=counts, host_ns=host_ns, drive_time_s=drive_time_s,
+                            velocity_counts_per_s=velocity)
+
+    def _unwrap_stamps(self, raw_us: np.ndarray) -> np.ndarray:
+        """uint32 µs stamps → cumulative drive time, s (a step is taken modulo 2³²: frames come in order)."""
+        raw = raw_us.astype(np.int64)
+        prev = raw[0] if self._last_stamp_raw is None else self._last_stamp_raw
+        start = raw[0] if self._last_stamp_raw is None else self._last_stamp_us
+        us = start + np.cumsum(np.diff(np.r_[prev, raw]) % 2**32)
+        self._last_stamp_raw, self._last_stamp_us = int(raw[-1]), int(us[-1])
+        return us * 1e-6
 
 
 class RawFrameLog(can.Listener):

@@ -114,6 +114,7 @@ class DriveCanopen(Strict):
     heartbeat_period_s: PositiveFloat = 0.1  # the drive's producer heartbeat time (0x1017)
     max_bus_load: float = Field(default=0.7, gt=0.0, le=1.0)  # refuse settings whose traffic needs more
     simulated_node: bool = False
+    map_timestamp: bool = False  # map the drive's 0x1013 high-resolution time stamp (µs) into the TPDO
 
 
 class DriveSerial(Strict):
@@ -189,6 +190,10 @@ class SimSettings(Strict):
     offset_drift_A: NonNegFloat = 0.0  # amplitude of a slow sensor offset drift, A (every channel)
     offset_drift_period_s: PositiveFloat = 20.0
     current_gain_errors: dict[PhaseName, float] = Field(default_factory=dict)  # relative, e.g. {i_b = 0.02}
+    # the drive latches the position when SYNC arrives: std of that instant around k·T, s (0 = exactly k·T)
+    sync_jitter_s: NonNegFloat = 0.0
+    # the sim and serial drives' time stamp is the true latch instant (False: the nominal k·T, no real stamp)
+    drive_time_stamps: bool = True
     # The bench's physical truth where it may differ from what [motor], [encoder] and [daq] state (a bench
     # misconfigured on purpose, for `acq selftest`); None / 1.0 / +1: the same as stated.
     pole_pairs: PositiveInt | None = None  # the motor's real pole pairs (sets the current's electrical angle)

@@ -15,11 +15,14 @@ import can
 import numpy as np
 import pytest
 
+from acq.analyze import options_for, recording_from_session
 from acq.config import load_bench, load_profile
 from acq.recorder import Recorder
 from acq.session import load
 from drivers.canopen_drive import CanopenDrive, bus_load, check_bus_load, open_drive
-from drivers.canopen_od import POSITION_ACTUAL, TPDO_COMM, TPDO_MAP, VELOCITY_ACTUAL, map_entry
+from analysis.pipeline import analyze
+from analysis.sample_instants import stamp_deviation_s
+from drivers.canopen_od import HIGH_RES_TIMESTAMP, POSITION_ACTUAL, TPDO_COMM, TPDO_MAP, VELOCITY_ACTUAL, map_entry
 from drivers.canopen_stream import SYNC_COB_ID, FrameCapture, SyncUnwrapper, TpdoDecoder
 from drivers.config import Bench, DriveCanopen
 from drivers.errors import ConfigError, DeviceError
@@ -211,3 +214,67 @@ def test_capture_counts_overruns_and_callback_errors_instead_of_raising() -> Non
     capture.on_sync(0x80, bytearray(), 0.0)  # a SYNC without its counter byte: logged and counted
     assert (capture.frames.qsize(), capture.overruns, capture.errors) == (2, 1, 1)
     assert capture.frames.get_nowait()[:2] == (7, bytes(8))
+
+
+def _jittered(bench: Bench, sync_jitter_s: float) -> Bench:
+    return bench.model_copy(update={"sim": bench.sim.model_copy(update={"sync_jitter_s": sync_jitter_s})})
+
+
+def test_timestamp_0x1013_mapped_carries_the_latch_instant_and_the_analysis_uses_it(tmp_path: Path) -> None:
+    bench = _jittered(_bench(map_velocity=False, map_timestamp=True), 50e-6)
+    result, s, sim, drive = _record(tmp_path, bench, 3.5)
+    assert result.status == "complete", result.stop_reason
+    node = drive.sim_node.node
+    assert [node.sdo[TPDO_MAP][i].raw for i in range(1, node.sdo[TPDO_MAP][0].raw + 1)] == [
+        map_entry(POSITION_ACTUAL, 32), map_entry(HIGH_RES_TIMESTAMP, 32)]
+    idx, stamps = s.encoder.index, s.encoder.drive_time_s
+    latch = sim.latch_times_s(drive.sim_node.first_cycle + int(idx[0]), int(idx[-1] - idx[0]) + 1)[idx - idx[0]]
+    np.testing.assert_allclose(stamps, np.round(latch * 1e6) * 1e-6, atol=1e-9)  # the drive's clock, µs
+    assert np.std(stamp_deviation_s(idx, stamps, 0.001)) == pytest.approx(50e-6, rel=0.15)
+    res = analyze(recording_from_session(s), options_for(s))  # with the bus's real arrival stamps
+    for name, tol in (("K_Nm_per_rad", 0.01), ("Jm_kgm2", 0.02), ("Jl_kgm2", 0.02)):
+        assert getattr(res.fit.values, name) == pytest.approx(getattr(bench.sim, name), rel=tol), name
+    assert res.quality.verdict == "ok", res.quality.reasons
+    assert res.quality.encoder_time_stamps and res.quality.encoder_jitter_s < 1e-6
+
+
+def test_a_drive_without_0x1013_is_refused_when_the_timestamp_is_asked_for() -> None:
+    bench = _bench(map_velocity=False, map_timestamp=True)
+    _, _, drive = _parts(bench)
+    drive.sim_node.has_timestamp = False
+    with pytest.raises(DeviceError) as err:
+        drive.start()
+    assert str(err.value) == (f"CANopen node 1 on virtual:{bench.drive.channel}: the drive has no 0x1013 "
+                              "high-resolution time stamp (SDO abort 0x06020000) — set [drive] map_timestamp = false")
+
+
+def test_a_timestamp_mapping_that_reads_back_different_is_refused() -> None:
+    bench = _bench(map_velocity=False, map_timestamp=True)
+    _, _, drive = _parts(bench)
+    drive.sim_node.reject_mapping = True
+    with pytest.raises(DeviceError) as err:
+        drive.start()
+    assert str(err.value) == (f"CANopen node 1 on virtual:{bench.drive.channel}: TPDO1 read back differs from what "
+                              "was written — wrote [0x6064:00/32, 0x1013:00/32] type 1 COB-ID 0x181, "
+                              "read [0x6041:00/16] type 1 COB-ID 0x40000181")
+
+
+def test_position_velocity_and_timestamp_do_not_fit_one_tpdo() -> None:
+    settings = DriveCanopen(driver="canopen", period_s=0.001, map_velocity=True, map_timestamp=True)
+    with pytest.raises(ConfigError) as err:
+        check_bus_load(settings)
+    assert str(err.value) == ("[drive] map_velocity = true and map_timestamp = true need a TPDO of 12 bytes, a CAN "
+                              "frame carries 8 — set one of them to false")
+    with_stamp = check_bus_load(DriveCanopen(driver="canopen", period_s=0.001, map_timestamp=True))
+    assert with_stamp == pytest.approx(bus_load(1_000_000, 0.001, [8]))  # the load counts the 8-byte TPDO
+
+
+def test_timestamp_unwraps_across_the_32_bit_microsecond_wrap() -> None:
+    decoder = TpdoDecoder(SyncUnwrapper(240, 0.001, first_sync_ns=0), False, 1.0, with_timestamp=True)
+    stamps_us = [2**32 - 1500, 2**32 - 480, 530, 1470]
+    frames = [(c + 1, np.array([100 * c, s], dtype="<u4").tobytes(), c * 1_000_000) for c, s in enumerate(stamps_us)]
+    first = decoder.decode(frames[:2])
+    second = decoder.decode(frames[2:])
+    np.testing.assert_allclose(np.r_[first.drive_time_s, second.drive_time_s] * 1e6,
+                               [2**32 - 1500, 2**32 - 480, 2**32 + 530, 2**32 + 1470])
+    np.testing.assert_array_equal(second.position_counts, [200, 300])

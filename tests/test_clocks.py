@@ -90,6 +90,17 @@ def test_host_stamps_of_a_daq_delivering_120ms_late_are_overruled_by_the_data() 
                     "search's offset is used")
 
 
+def test_a_burst_of_late_encoder_stamps_does_not_tilt_the_host_relation() -> None:
+    # a reader thread held off by the GIL for the first 0.4 s of a 4 s record stamps those frames 20 ms late:
+    # a least-squares slope through every stamp read that as a drift of thousands of ppm (a failed serial session)
+    rec = separate_records(0.037, 40.0, duration_s=4.0)
+    late = rec.encoder_host_ns.copy()
+    late[:400] += np.linspace(20_000_000, 0, 400).astype(np.int64)
+    clock = prepare_signals(replace(rec, encoder_host_ns=late)).clock
+    assert abs(clock.host_drift_ppm - 40.0) <= 100.0
+    assert abs(clock.offset_s - 0.037) <= 50e-6 and abs(clock.drift_ppm - 40.0) <= 5.0
+
+
 def test_an_offset_the_periodic_motion_leaves_open_is_reported_or_resolved_by_the_host_stamps() -> None:
     # the motion runs before either record starts: over the overlap the streams repeat every 0.4 s
     rec = separate_records(1.9, -20.0, t_motion_s=-1.0)

@@ -54,6 +54,9 @@ class Ramp:
         c = self.counts(np.arange(first_cycle, first_cycle + count))
         return ((c + 2**31) % 2**32 - 2**31).astype(np.int32)
 
+    def stamp_times_s(self, first_cycle: int, count: int) -> np.ndarray:
+        return np.arange(first_cycle, first_cycle + count) * PERIOD_S
+
     def start_motion(self, profile: Profile, t_start_s: float) -> float:
         self.motions.append((f"start {profile.top_speed_rpm:g} rpm {profile.accel_time_s:g} s", t_start_s))
         return t_start_s

@@ -38,8 +38,10 @@ from drivers.sim.plant import TwoMass, tune_speed_pi
 
 PHASE_SHIFT_RAD = {"i_a": 0.0, "i_b": -2.0 * np.pi / 3.0, "i_c": 2.0 * np.pi / 3.0}
 _NOISE_CHUNK = 1 << 14
-NoiseStream = Literal["current", "daq_host", "drive_host"]
-_STREAM_IDS = {"current": 1, "daq_host": 2, "drive_host": 3}
+NoiseStream = Literal["current", "daq_host", "drive_host", "sync_latch"]
+_STREAM_IDS = {"current": 1, "daq_host": 2, "drive_host": 3, "sync_latch": 4}
+# SYNC k+1 is sent only after SYNC k arrived, so latch instants stay in order: the jitter is clipped here (× T)
+LATCH_CLIP = 0.45
 
 
 def _int32(counts: np.ndarray) -> np.ndarray:
@@ -179,7 +181,7 @@ class SimBench:
     def hold_history(self, consumer: str, from_t_s: float) -> None:
         """Declare that ``consumer`` will still read states at drive times ≥ ``from_t_s`` (s)."""
         with self._lock:
-            self._cursors[consumer] = from_t_s
+            self._cursors[consumer] = from_t_s - LATCH_CLIP * self.drive_period_s * (self.sim.sync_jitter_s > 0)
             if not self.keep_history:
                 self._physics.forget_before(min(self._cursors.values()))
 
@@ -238,9 +240,29 @@ class SimBench:
         """Earliest drive time (s) that DAQ samples from ``next_index`` on depend on (the AA filter looks back)."""
         return float(self.daq_time_s(next_index - self.chain.lookback_samples))
 
-    def encoder_counts(self, first_cycle: int, count: int) -> np.ndarray:
-        """Unwrapped position (int64 counts) at drive cycles ``first_cycle …``: floor(θ_m/2π·cpr) + start."""
+    def latch_times_s(self, first_cycle: int, count: int) -> np.ndarray:
+        """Drive time (s) at which the drive latches the position of cycles ``first_cycle …``.
+
+        k·T, or with ``sync_jitter_s`` the instant SYNC k arrives: k·T + δ_k, δ_k ~ N(0, sync_jitter_s)
+        clipped to ±``LATCH_CLIP``·T (a function of the cycle and the seed only).
+        """
         t = np.arange(first_cycle, first_cycle + count) * self.drive_period_s
+        if self.sim.sync_jitter_s == 0:
+            return t
+        clip = LATCH_CLIP * self.drive_period_s
+        return t + np.clip(self._normal("sync_latch", first_cycle, count, 1)[0] * self.sim.sync_jitter_s, -clip, clip)
+
+    def stamp_times_s(self, first_cycle: int, count: int) -> np.ndarray:
+        """The drive's own time stamp (s) of cycles ``first_cycle …``: the latch instant, or k·T without
+        ``drive_time_stamps``."""
+        if self.sim.drive_time_stamps:
+            return self.latch_times_s(first_cycle, count)
+        return np.arange(first_cycle, first_cycle + count) * self.drive_period_s
+
+    def encoder_counts(self, first_cycle: int, count: int) -> np.ndarray:
+        """Unwrapped position (int64 counts) latched at drive cycles ``first_cycle …`` (at
+        :meth:`latch_times_s`): floor(θ_m/2π·cpr) + start."""
+        t = self.latch_times_s(first_cycle, count)
         theta_m = self._states(t)[:, 0]
         theta_enc = self.sim.encoder_direction * theta_m  # the encoder's true counting direction and resolution
         return np.floor(theta_enc / (2 * np.pi) * self._encoder_cpr).astype(np.int64) + self.sim.encoder_start_counts

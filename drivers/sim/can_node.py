@@ -18,12 +18,16 @@ and NMT go through the LocalNode's own notifier thread as usual. The host's bus 
 (the controller's queue is the last one of the channel, so the SYNC reaches the host before the TPDO).
 
 Drive clock: one drive cycle per SYNC received (the first SYNC is the cycle the host clock says it
-is); a TPDO carries the bench's int32 position register (0x6064) and velocity (0x606C) at its cycle.
+is); a TPDO carries the bench's int32 position register (0x6064) and velocity (0x606C) at its cycle,
+and the high-resolution time stamp 0x1013 (µs of the drive clock, wrapping at 2³²) of the instant the
+position was latched: k·T, or the SYNC's arrival with ``[sim] sync_jitter_s`` (drawn from the bench's
+seed — the virtual bus's own timing is not reproducible, see :meth:`~drivers.sim.bench.SimBench.latch_times_s`).
 A disable while moving ramps the reference to rest at the quick-stop deceleration (the bench's speed
 loop cannot let the motor coast).
 
 Fault switches, for tests: :meth:`~SimCanNode.drop_tpdos`, :meth:`~SimCanNode.stop_heartbeat`,
-``refuse_mode_change`` (0x6060 writes are ignored) and ``reject_mapping`` (0x1A0x keeps its
+``refuse_mode_change`` (0x6060 writes are ignored), ``has_timestamp`` (set False before :meth:`~SimCanNode.start`:
+a drive without 0x1013) and ``reject_mapping`` (0x1A0x keeps its
 power-on mapping while the SDO writes succeed — a mismatch only a read-back finds).
 """
 
@@ -41,8 +45,8 @@ import canopen
 import numpy as np
 from can.interfaces.virtual import VirtualBus, channels_lock
 
-from drivers.canopen_od import (MODE_PROFILE_POSITION, N_TPDO, PDO_INVALID, TPDO_COMM, TPDO_MAP,
-                                 drive_object_dictionary)
+from drivers.canopen_od import (HIGH_RES_TIMESTAMP, MODE_PROFILE_POSITION, N_TPDO, PDO_INVALID, TPDO_COMM,
+                                 TPDO_MAP, drive_object_dictionary)
 from drivers.config import Bench, DriveCanopen
 from drivers.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
@@ -108,7 +112,9 @@ class SimCanNode:
         self._cache_first = 0
         self._cache_counts = np.zeros(0, dtype=np.int32)
         self._cache_omega = np.zeros(0)
+        self._cache_stamp_us = np.zeros(0, dtype=np.int64)
         self.refuse_mode_change = False
+        self.has_timestamp = True
         self.reject_mapping = False
         self.first_cycle: int | None = None  # drive cycle of the first SYNC (SYNC index 0)
         sim_bench.hold_history(self._consumer, 0.0)
@@ -128,7 +134,10 @@ class SimCanNode:
         self._bench.use_reference(self.generator)
         self.network = canopen.Network(_ControllerBus(self._s.channel, self._on_sync))
         self.network.connect()
-        self.node = canopen.LocalNode(self._s.node_id, drive_object_dictionary(self._s.node_id))
+        dictionary = drive_object_dictionary(self._s.node_id)
+        if not self.has_timestamp:
+            del dictionary[HIGH_RES_TIMESTAMP]
+        self.node = canopen.LocalNode(self._s.node_id, dictionary)
         self.network.add_node(self.node)
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
@@ -162,9 +171,10 @@ class SimCanNode:
         t_host_s = (time.monotonic_ns() - self._bench.host_t0_ns) * 1e-9 - self._bench.sim.host_latency_s
         return max(self._now_cycle() * self._period_s, t_host_s)
 
-    def _sample(self) -> tuple[int, float]:
-        """Position register (counts) and speed (rad/s) at the present cycle, from a block computed ahead
-        (one vectorised bench query per ``CACHE_CYCLES``: a query per SYNC would cost the bus its timing)."""
+    def _sample(self) -> tuple[int, float, int]:
+        """Position register (counts), speed (rad/s) and 0x1013 time stamp (µs) at the present cycle, from a
+        block computed ahead (one vectorised bench query per ``CACHE_CYCLES``: a query per SYNC would cost the
+        bus its timing)."""
         cycle = self._now_cycle()
         i = cycle - self._cache_first
         if not 0 <= i < len(self._cache_counts):
@@ -172,7 +182,8 @@ class SimCanNode:
             self._cache_counts = self._bench.encoder_register(cycle, CACHE_CYCLES)
             t_s = (cycle + np.arange(CACHE_CYCLES)) * self._period_s
             self._cache_omega = self._bench.true_state_at(t_s)["omega_m_rad_s"]
-        return int(self._cache_counts[i]), float(self._cache_omega[i])
+            self._cache_stamp_us = np.round(self._bench.latch_times_s(cycle, CACHE_CYCLES) * 1e6).astype(np.int64)
+        return int(self._cache_counts[i]), float(self._cache_omega[i]), int(self._cache_stamp_us[i]) % 2**32
 
     def _theta_rad(self) -> float:
         return float(self._bench.true_state_at(self._now_s())["theta_m_rad"])
@@ -195,6 +206,8 @@ class SimCanNode:
             return self._sample()[0]
         if index == 0x606C:
             return round(self._sample()[1] / RPM_TO_RAD_S * self._s.velocity_units_per_rpm)
+        if index == HIGH_RES_TIMESTAMP:
+            return self._sample()[2]
         if self.reject_mapping and TPDO_MAP <= index < TPDO_MAP + N_TPDO:
             return od.default
         return None

@@ -1,10 +1,12 @@
 """The simulated servo drive: a :class:`drivers.base.Drive` streaming the encoder of a SimBench.
 
-One frame per drive cycle k (t = k·``period_s``), index = k, position = the unwrapped encoder counts,
-``drive_time_s`` = k·period. Frames arrive at the host in batches of ~10 ms, each with its own jittered
-``host_ns``; frames listed in ``sim.drop_encoder_frames`` as (first_cycle, count) never arrive (the
-recorder finds the gap from the index). ``start_motion`` begins the triangle ``sim.pre_roll_s`` after
-the drive's present cycle; ``stop_motion`` ramps to rest at the profile's deceleration.
+One frame per drive cycle k (t = k·``period_s``), index = k, position = the unwrapped encoder counts
+latched at k·period (or, with ``sim.sync_jitter_s``, when SYNC k arrives), ``drive_time_s`` = the drive's
+time stamp of that latch (:meth:`drivers.sim.bench.SimBench.stamp_times_s`). Frames arrive at the host
+in batches of ~10 ms, each with its own jittered ``host_ns``; frames listed in ``sim.drop_encoder_frames``
+as (first_cycle, count) never arrive (the recorder finds the gap from the index). ``start_motion`` begins
+the triangle ``sim.pre_roll_s`` after the drive's present cycle; ``stop_motion`` ramps to rest at the
+profile's deceleration.
 """
 
 from __future__ import annotations
@@ -82,7 +84,7 @@ class SimDrive:
         if not keep.any():
             return None
         return EncoderBlock(index=cycles[keep], position_counts=counts[keep], host_ns=host_ns[keep],
-                            drive_time_s=cycles[keep] * self._period_s)
+                            drive_time_s=self._sim.stamp_times_s(first, n)[keep])
 
     def stop(self) -> None:
         """Stop streaming (brings the motor to rest first). Idempotent."""

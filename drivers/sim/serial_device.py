@@ -4,7 +4,8 @@
 (``port_name``, e.g. ``/dev/pts/7``) to :mod:`drivers.serial_drive`, which opens it like any port.
 Its thread answers the host's command frames (stream on/off, start triangle, stop) and, while
 streaming, sends one telemetry frame per drive cycle k, encoded by the same codec class the host
-decodes with: sequence k, drive time k·period (µs), the source's int32 position register at cycle k.
+decodes with: sequence k, the drive's time stamp of cycle k (µs: k·period, or the instant the position was
+latched when the source's SYNC latch jitters), the source's int32 position register at cycle k.
 
 Pacing: frame k is ready at the source's ``host_ns_at(k·period)`` and the bytes leave at the
 configured baud rate — a pty ignores baud, so the device models the UART itself: each byte occupies
@@ -54,6 +55,10 @@ class FrameSource(Protocol):
 
     def encoder_register(self, first_cycle: int, count: int) -> np.ndarray:
         """int32 position register, counts, at drive cycles ``first_cycle …``."""
+        ...
+
+    def stamp_times_s(self, first_cycle: int, count: int) -> np.ndarray:
+        """The drive's time stamp, s, of drive cycles ``first_cycle …``."""
         ...
 
     def start_motion(self, profile: Profile, t_start_s: float) -> float:
@@ -238,6 +243,7 @@ class SimSerialDevice:
             return
         first = self._next_cycle
         positions = self.source.encoder_register(first, count)
+        stamps_us = np.round(self.source.stamp_times_s(first, count) * 1e6).astype(np.int64)
         ready = self.source.host_ns_at(np.arange(first, first + count) * self.period_s)
         for i in range(count):
             k, t_ns = first + i, int(ready[i])
@@ -252,8 +258,7 @@ class SimSerialDevice:
                 self._drops.discard(k)
                 self.log.dropped_frames += 1
                 continue
-            frame = self.codec.encode(Telemetry(k & 0xFFFF, round(k * self.period_s * 1e6) & 0xFFFFFFFF,
-                                                int(positions[i])))
+            frame = self.codec.encode(Telemetry(k & 0xFFFF, int(stamps_us[i]) & 0xFFFFFFFF, int(positions[i])))
             if k in self._flips:
                 frame = self._flipped(frame, self._flips.pop(k))
                 self.log.flipped_frames += 1
