@@ -28,13 +28,15 @@ GRID_HZ = 200.0  # grid of the lag search, Hz: the speed's shape (≤ 20 Hz for 
 MAX_LAG_S = 2.0  # clock offsets searched, s: the design's plausible range of DAQ vs drive start (§4)
 #: A ratio off 1 by less is not named: 5 standard errors of the estimate, never below 3 % — below the
 #: smallest pole-pair error of a motor with ≤ 32 pole pairs (1/33), above the estimator's bias on
-#: simulated records (1.002 ± 0.001 on a 10 s 1000 rpm session, 1.007 ± 0.010 on a 200 rpm move; over the
-#: 48 correctly configured scenarios of bench/scenarios.py, seed 0: 0.9997 … 1.020, the trapezoid profile).
+#: simulated records (1.005 ± 0.001 on a 10 s 1000 rpm session, 1.019 ± 0.004 on the selftest's 200 rpm move;
+#: over the 48 correctly configured scenarios of bench/scenarios.py, seed 0: 0.9997 … 1.010).
 MIN_RATIO_ERROR = 0.03
 RATIO_SIGMAS = 5.0
 #: Cosine similarity of the two electrical-frequency shapes at the chosen lag below which the lag is not
 #: trusted (the true lag lies outside ±MAX_LAG_S, or one stream did not see the motion): no verdict then.
 MIN_SHAPE_SIMILARITY = 0.5
+REFINE_LAG_S, REFINE_STEP_S = 0.015, 0.0005  # lag refinement ±, step, s: three grid steps of the search, 0.5 ms
+REFINE_SPAN_S = 20.0  # record span the ratio uses, s: 100 ppm of clock drift moves the lag ≤ 2 ms over it
 SEQUENCE_MAX_S = 60.0  # the phase sequence is judged on at most the first minute, s
 
 
@@ -115,16 +117,34 @@ def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index:
     lag_s = float(t_lag[best])
     if xc[best] < MIN_SHAPE_SIMILARITY * math.sqrt(float(np.dot(f_enc, f_enc)) * float(np.dot(f_cur, f_cur))):
         return None
-    # each half-period of the current (between two zero crossings) against the encoder's travel meanwhile
-    theta_rev = np.interp(crossings + lag_s, cycles * period_s, counts / counts_per_rev, left=np.nan, right=np.nan)
-    half_cycles = pole_pairs * np.abs(np.diff(theta_rev))  # electrical cycles the encoder says, per interval
-    moving = np.isfinite(half_cycles) & (np.diff(crossings) < 0.5 / (0.2 * float(np.max(f_enc))))
-    if np.count_nonzero(moving) < 8:
+    # each half-period of the current (between two zero crossings) against the encoder's travel meanwhile;
+    # the lag is refined to the one that makes the half-periods agree best (a lag error τ scatters them by
+    # ±τ·α/ω, accelerating against decelerating), on the first REFINE_SPAN_S (a clock drift bends it later)
+    early = crossings < crossings[0] + REFINE_SPAN_S
+    best_lag, best_scatter = lag_s, math.inf
+    for tau in lag_s + np.arange(-REFINE_LAG_S, REFINE_LAG_S + 1e-12, REFINE_STEP_S):
+        per_interval = _half_periods(crossings[early], tau, cycles, counts, period_s, counts_per_rev, pole_pairs,
+                                     float(np.max(f_enc)))
+        if per_interval.size >= 8:
+            scatter = float(np.median(np.abs(per_interval - np.median(per_interval))))
+            if scatter < best_scatter:
+                best_lag, best_scatter = float(tau), scatter
+    per_interval = _half_periods(crossings[early], best_lag, cycles, counts, period_s, counts_per_rev, pole_pairs,
+                                 float(np.max(f_enc)))
+    if per_interval.size < 8:
         return None
-    per_interval = 0.5 / np.maximum(half_cycles[moving], 1e-12)
     ratio = float(np.median(per_interval))  # an extra crossing where i_q changes sign is an outlier, not a bias
     spread = float(1.4826 * np.median(np.abs(per_interval - ratio)) / math.sqrt(per_interval.size))
-    return SpeedRatio(ratio, spread, lag_s, 0.5 * per_interval.size)
+    return SpeedRatio(ratio, spread, best_lag, 0.5 * per_interval.size)
+
+
+def _half_periods(crossings: np.ndarray, lag_s: float, cycles: np.ndarray, counts: np.ndarray, period_s: float,
+                  counts_per_rev: int, pole_pairs: int, f_enc_max_hz: float) -> np.ndarray:
+    """½ / (electrical cycles the encoder travelled) for each moving half-period of the current (1 if consistent)."""
+    theta_rev = np.interp(crossings + lag_s, cycles * period_s, counts / counts_per_rev, left=np.nan, right=np.nan)
+    half_cycles = pole_pairs * np.abs(np.diff(theta_rev))
+    moving = np.isfinite(half_cycles) & (np.diff(crossings) < 0.5 / (0.2 * f_enc_max_hz))
+    return 0.5 / np.maximum(half_cycles[moving], 1e-12)
 
 
 def _smooth(x: np.ndarray) -> np.ndarray:
@@ -182,9 +202,10 @@ def recording_fault(rec: Recording) -> str | None:
 
 
 def with_fault(quality: Quality, fault: str | None) -> Quality:
-    """``quality`` failed with ``fault`` as its first reason (unchanged when there is no fault): a wrong
-    bench constant makes every number wrong, whatever the fit's own checks say."""
-    if fault is None:
+    """A poor / failed ``quality`` becomes failed with ``fault`` as its first reason, so it says why instead of
+    a bare failed. An ``ok`` verdict (the data hold together: clocks aligned, model fits) or no fault:
+    unchanged — the diagnosis explains failures, it never overrules a consistent identification."""
+    if fault is None or quality.verdict == "ok":
         return quality
     return replace(quality, verdict="failed", reasons=(fault, *quality.reasons))
 
