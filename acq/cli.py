@@ -29,6 +29,7 @@ from acq.fleet import fleet_command
 from acq.importers import import_command
 from acq.monitor_cli import monitor_command
 from acq.recorder import Recorder, RecordingResult
+from acq.selftest_cli import selftest_command
 from acq.session import load, repair
 from acq.summary import summarize
 from acq.trend import trend_command
@@ -234,6 +235,7 @@ cli.add_command(import_command)
 cli.add_command(export_command)
 cli.add_command(view_command)
 cli.add_command(monitor_command)
+cli.add_command(selftest_command)
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from typing import Any, Literal
 
 from analysis.clocks import ClockFit
+from analysis.diagnose import recording_fault, with_fault
 from analysis.fit import FitKind, FitOptions, FitParams, FitResult, PARAM_NAMES, fit_two_mass
 from analysis.encoder import longest_gap_free_span
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
@@ -156,8 +157,8 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
                                        weighting=weighting), nominal=options.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
-    quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
-                     encoder_jitter=sig.encoder_jitter)
+    quality = with_fault(assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
+                                encoder_jitter=sig.encoder_jitter), recording_fault(rec))  # a wrong bench constant
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual)),

@@ -103,4 +103,18 @@ def drive_object_dictionary(node_id: int) -> ObjectDictionary:
     for n in range(1, N_TPDO + 1):
         for record in _tpdo_objects(n, node_id):
             od.add_object(record)
+    od.add_object(_identity())
     return od
+
+
+#: 0x1018 identity of the simulated drive (CiA 301 mandatory object; vendor ID 0: none registered)
+SIM_IDENTITY = {"Vendor-ID": 0x00000000, "Product code": 0x00000402, "Revision number": 0x00010000,
+                "Serial number": 0x00000001}
+
+
+def _identity() -> ODRecord:
+    record = ODRecord("Identity object", 0x1018)
+    record.add_member(_var("Highest sub-index", 0x1018, UNSIGNED8, "const", len(SIM_IDENTITY)))
+    for sub, (name, value) in enumerate(SIM_IDENTITY.items(), start=1):
+        record.add_member(_var(name, 0x1018, UNSIGNED32, "ro", value, sub))
+    return record

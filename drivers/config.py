@@ -41,6 +41,7 @@ class Nominal(Strict):
     K_Nm_per_rad: PositiveFloat
     Jm_kgm2: PositiveFloat
     Jl_kgm2: PositiveFloat
+    inertia_known: bool = False  # Jm + Jl known independently (datasheet, CAD): `acq selftest` checks k_t against it
 
 
 class DaqSim(Strict):
@@ -202,6 +203,13 @@ class SimSettings(Strict):
     robot_idle_fraction: float = Field(default=0.15, ge=0.0, le=1.0)  # program cycles that are a long wait
     robot_payload_max_kg: NonNegFloat = 2.0  # payload per program cycle, uniform in 0 … this, kg at the arm's tip
     K_decay_pct_per_hour: NonNegFloat = 0.0  # wear: K falls linearly with elapsed_s
+    # The bench's physical truth where it may differ from what [motor], [encoder] and [daq] state (a bench
+    # misconfigured on purpose, for `acq selftest`); None / 1.0 / +1: the same as stated.
+    pole_pairs: PositiveInt | None = None  # the motor's real pole pairs (sets the current's electrical angle)
+    counts_per_rev: PositiveInt | None = None  # the encoder's real counts per revolution (what it streams)
+    current_sensor_gain: PositiveFloat = 1.0  # measured / true phase current (a sensor scale stated wrongly)
+    phase_order: list[PhaseName] | None = None  # the phases really wired to [daq] channels, same order
+    encoder_direction: Literal[1, -1] = 1  # −1: the encoder counts down while the motor turns forward
 
     def K_at_start_Nm_per_rad(self) -> float:
         """The true K at this session's start (``elapsed_s``) after the wear ``K_decay_pct_per_hour``, N·m/rad."""

@@ -29,6 +29,7 @@ from typing import Any, Literal
 import numpy as np
 
 from drivers.config import Bench, Profile, SimSettings
+from drivers.errors import ConfigError
 from drivers.sim.joint_effects import JointEffects
 from drivers.sim.measurement import CurrentChain
 from drivers.sim.motion import MotionSchedule
@@ -87,6 +88,15 @@ class SimBench:
         self.drive_period_s = float(bench.drive.period_s)
         self.counts_per_rev = int(bench.encoder.counts_per_rev)
         self.dc_offset_A = np.array([s.current_dc_offsets_A.get(c, s.current_dc_offset_A) for c in self.channels])
+        # A bench misconfigured on purpose ([sim] truth differing from the stated config, for `acq selftest`):
+        # only what the sensors deliver changes (the drive's own loop and units stay consistent); all
+        # default to "as stated", which leaves every other session unchanged.
+        if s.phase_order is not None and len(s.phase_order) != len(self.channels):
+            raise ConfigError(f"[sim] phase_order = {s.phase_order}: needs one phase per [daq] channels "
+                              f"{list(self.channels)}")
+        self._wired = tuple(s.phase_order or self.channels)  # the phase each DAQ channel really measures
+        self._true_pole_pairs = s.pole_pairs or bench.motor.pole_pairs
+        self._encoder_cpr = s.counts_per_rev or self.counts_per_rev
         self.host_t0_ns = time.monotonic_ns()
         self._lock = threading.RLock()
         self._cursors: dict[str, float] = {}
@@ -219,9 +229,9 @@ class SimBench:
         if self.chain.active:
             return self._measured_currents(first_index, count)
         x = self._states(self.daq_time_s(np.arange(first_index, first_index + count)))
-        theta_e = self.bench.motor.pole_pairs * x[:, 0] + self.sim.theta0_rad
-        shifts = np.array([PHASE_SHIFT_RAD[c] for c in self.channels])[:, None]
-        clean = -x[:, 4][None, :] * np.sin(theta_e[None, :] + shifts)
+        theta_e = self._true_pole_pairs * x[:, 0] + self.sim.theta0_rad
+        shifts = np.array([PHASE_SHIFT_RAD[c] for c in self._wired])[:, None]
+        clean = -x[:, 4][None, :] * np.sin(theta_e[None, :] + shifts) * self.sim.current_sensor_gain
         noise = self._normal("current", first_index, count, len(self.channels)) * self.sim.current_noise_A
         return clean + self.dc_offset_A[:, None] + noise
 
@@ -229,9 +239,10 @@ class SimBench:
         """Phase currents through the measurement chain's effects (:mod:`drivers.sim.measurement`)."""
         t = self.daq_time_s(self.chain.analog_indices(first_index, count))
         x = self._states(t)
-        angle = (self.bench.motor.pole_pairs * x[:, 0] + self.sim.theta0_rad)[None, :] + np.array(
-            [PHASE_SHIFT_RAD[c] for c in self.channels])[:, None]
-        analog = self.chain.analog(t, -x[:, 4][None, :] * np.sin(angle), angle, x[:, 1]) + self.dc_offset_A[:, None]
+        angle = (self._true_pole_pairs * x[:, 0] + self.sim.theta0_rad)[None, :] + np.array(
+            [PHASE_SHIFT_RAD[c] for c in self._wired])[:, None]
+        torque_current = -x[:, 4][None, :] * np.sin(angle) * self.sim.current_sensor_gain
+        analog = self.chain.analog(t, torque_current, angle, x[:, 1]) + self.dc_offset_A[:, None]
         noise = self._normal("current", first_index, count, len(self.channels)) * self.sim.current_noise_A
         return self.chain.digitise(self.chain.acquire(analog) + noise)
 
@@ -263,7 +274,8 @@ class SimBench:
         :meth:`latch_times_s`): floor(θ_m/2π·cpr) + start."""
         t = self.latch_times_s(first_cycle, count)
         theta_m = self._states(t)[:, 0]
-        return np.floor(theta_m / (2 * np.pi) * self.counts_per_rev).astype(np.int64) + self.sim.encoder_start_counts
+        theta_enc = self.sim.encoder_direction * theta_m  # the encoder's true counting direction and resolution
+        return np.floor(theta_enc / (2 * np.pi) * self._encoder_cpr).astype(np.int64) + self.sim.encoder_start_counts
 
     def encoder_register(self, first_cycle: int, count: int) -> np.ndarray:
         """The drive's position register (int32 counts, wraps like CiA 402 0x6064) at drive cycles."""

@@ -1,0 +1,317 @@
+"""Bench-config faults read from the data (used by ``acq selftest`` and by the analysis's verdict).
+
+Chiefly: does the current turn as fast as the encoder says it should? The current's electrical
+frequency f_e (zero crossings of i_a) must equal p·|ω|/2π with p the stated ``pole_pairs`` and ω the
+speed from the encoder counts scaled by the stated ``counts_per_rev``. A wrong constant makes the ratio
+r = f_e / (p·|ω|/2π) = (p_true/p)·(counts_per_rev/counts_per_rev_true) differ from 1 — the clock
+alignment then fails without saying why. :func:`electrical_speed_ratio` measures r (the clock lag is
+searched) and :func:`ratio_fault` words it; the selftest and ``acq analyze`` print the same text.
+Also here: the encoder's first move direction, the phase sequence of 2–3 phases against the encoder,
+and the rigid-body inertia the torque implies (k_t and the sensor scale against a known inertia).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy import signal
+from scipy.ndimage import median_filter
+
+from analysis.clocks import crossing_frequency_hz, current_crossings_s
+from analysis.encoder import longest_gap_free_span, speed_from_counts
+from analysis.quality import Quality
+from analysis.signals import Recording
+
+GRID_HZ = 200.0  # grid of the lag search, Hz: the speed's shape (≤ 20 Hz for a triangle) is well inside
+MAX_LAG_S = 2.0  # clock offsets searched, s: the design's plausible range of DAQ vs drive start (§4)
+#: A ratio off 1 by less is not named: 5 standard errors of the estimate, never below 3 % — below the
+#: smallest pole-pair error of a motor with ≤ 32 pole pairs (1/33), above the estimator's bias on
+#: simulated records (1.005 ± 0.001 on a 10 s 1000 rpm session, 1.019 ± 0.004 on the selftest's 200 rpm move;
+#: over the 48 correctly configured scenarios of bench/scenarios.py, seed 0: 0.9997 … 1.010).
+MIN_RATIO_ERROR = 0.03
+RATIO_SIGMAS = 5.0
+#: Cosine similarity of the two electrical-frequency shapes at the chosen lag below which the lag is not
+#: trusted (the true lag lies outside ±MAX_LAG_S, or one stream did not see the motion): no verdict then.
+MIN_SHAPE_SIMILARITY = 0.5
+REFINE_LAG_S, REFINE_STEP_S = 0.015, 0.0005  # lag refinement ±, step, s: three grid steps of the search, 0.5 ms
+REFINE_SPAN_S = 20.0  # record span the ratio uses, s: 100 ppm of clock drift moves the lag ≤ 2 ms over it
+SEQUENCE_MAX_S = 60.0  # the phase sequence is judged on at most the first minute, s
+
+
+@dataclass(frozen=True)
+class SpeedRatio:
+    """The current's electrical half-periods against p·(revolutions the encoder travelled meanwhile).
+
+    Attributes
+    ----------
+    ratio : float
+        Median over the current's half-periods of ½ / (p · encoder revolutions in it): 1 on a correct bench.
+    spread : float
+        Standard error of ``ratio`` (from the MAD of the half-periods).
+    lag_s : float
+        Time since the first encoder sample minus time since DAQ sample 0 at which the two speed shapes
+        match best, s (to the lag grid; searched ±``MAX_LAG_S`` around "both streams started together").
+    cycles : float
+        Electrical cycles (half-periods / 2) that entered the ratio.
+    """
+
+    ratio: float
+    spread: float
+    lag_s: float
+    cycles: float
+
+    @property
+    def mismatched(self) -> bool:
+        """True when the ratio is off 1 by more than :data:`RATIO_SIGMAS` standard errors and :data:`MIN_RATIO_ERROR`."""
+        return abs(self.ratio - 1.0) > max(MIN_RATIO_ERROR, RATIO_SIGMAS * self.spread)
+
+
+def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index: np.ndarray,
+                           position_counts: np.ndarray, period_s: float, counts_per_rev: int,
+                           pole_pairs: int) -> SpeedRatio | None:
+    """Measure f_e against p·|ω|/2π over a record; None when it holds too little motion to tell.
+
+    The lag between the clocks comes from the shapes of the two electrical frequencies (same shape up
+    to the ratio, :func:`analysis.clocks.current_crossings_s` and :func:`~analysis.clocks.crossing_frequency_hz`
+    as in the clock alignment); then each half-period of the current, between two zero crossings, is set
+    against the encoder's travel over the same interval (moving intervals only: faster than 20 % of the
+    peak). A lag error of a few ms shifts both ends of an interval alike, so it barely matters.
+
+    Parameters
+    ----------
+    current_a : ndarray
+        One phase current, A, gap-free, DAQ sample 0 at t_daq = 0.
+    rate_hz : float
+        DAQ rate, Hz.
+    encoder_index, position_counts : ndarray of int
+        Drive cycle and unwrapped position, counts, of each encoder sample.
+    period_s : float
+        Drive cycle, s.
+    counts_per_rev, pole_pairs : int
+        The bench's stated encoder resolution and pole pairs.
+    """
+    span = longest_gap_free_span(np.asarray(encoder_index))
+    if span.count < 3 or current_a.size < 3:
+        return None
+    cycles = np.asarray(encoder_index)[span.start:span.stop] - int(encoder_index[0])  # both streams from their start
+    counts = np.asarray(position_counts)[span.start:span.stop]
+    omega = speed_from_counts(counts, counts_per_rev, period_s)
+    t_enc = cycles[1:] * period_s
+    grid_enc = np.arange(t_enc[0], t_enc[-1], 1.0 / GRID_HZ)
+    f_enc = _smooth(np.interp(grid_enc, t_enc, pole_pairs * np.abs(omega) / (2 * np.pi)))
+    grid_daq = np.arange(0.0, current_a.size / rate_hz, 1.0 / GRID_HZ)
+    crossings = current_crossings_s(current_a, rate_hz)
+    f_cur = crossing_frequency_hz(crossings, grid_daq)
+    if not (np.any(f_cur > 0) and np.any(f_enc > 0)):
+        return None
+    # f_cur[i] at DAQ time i/G matches r·f_enc at drive time i/G + lag: the lag where the shapes correlate
+    xc = signal.correlate(f_enc, f_cur, mode="full", method="fft")
+    shifts = np.arange(-f_cur.size + 1, f_enc.size)  # f_enc index − f_cur index
+    t_lag = grid_enc[0] + shifts / GRID_HZ
+    allowed = np.abs(t_lag) <= MAX_LAG_S
+    if not np.any(allowed & (xc > 0)):
+        return None
+    best = int(np.flatnonzero(allowed)[np.argmax(xc[allowed])])
+    lag_s = float(t_lag[best])
+    if xc[best] < MIN_SHAPE_SIMILARITY * math.sqrt(float(np.dot(f_enc, f_enc)) * float(np.dot(f_cur, f_cur))):
+        return None
+    # each half-period of the current (between two zero crossings) against the encoder's travel meanwhile;
+    # the lag is refined to the one that makes the half-periods agree best (a lag error τ scatters them by
+    # ±τ·α/ω, accelerating against decelerating), on the first REFINE_SPAN_S (a clock drift bends it later)
+    early = crossings < crossings[0] + REFINE_SPAN_S
+    best_lag, best_scatter = lag_s, math.inf
+    for tau in lag_s + np.arange(-REFINE_LAG_S, REFINE_LAG_S + 1e-12, REFINE_STEP_S):
+        per_interval = _half_periods(crossings[early], tau, cycles, counts, period_s, counts_per_rev, pole_pairs,
+                                     float(np.max(f_enc)))
+        if per_interval.size >= 8:
+            scatter = float(np.median(np.abs(per_interval - np.median(per_interval))))
+            if scatter < best_scatter:
+                best_lag, best_scatter = float(tau), scatter
+    per_interval = _half_periods(crossings[early], best_lag, cycles, counts, period_s, counts_per_rev, pole_pairs,
+                                 float(np.max(f_enc)))
+    if per_interval.size < 8:
+        return None
+    ratio = float(np.median(per_interval))  # an extra crossing where i_q changes sign is an outlier, not a bias
+    spread = float(1.4826 * np.median(np.abs(per_interval - ratio)) / math.sqrt(per_interval.size))
+    return SpeedRatio(ratio, spread, best_lag, 0.5 * per_interval.size)
+
+
+def _half_periods(crossings: np.ndarray, lag_s: float, cycles: np.ndarray, counts: np.ndarray, period_s: float,
+                  counts_per_rev: int, pole_pairs: int, f_enc_max_hz: float) -> np.ndarray:
+    """½ / (electrical cycles the encoder travelled) for each moving half-period of the current (1 if consistent)."""
+    theta_rev = np.interp(crossings + lag_s, cycles * period_s, counts / counts_per_rev, left=np.nan, right=np.nan)
+    half_cycles = pole_pairs * np.abs(np.diff(theta_rev))
+    moving = np.isfinite(half_cycles) & (np.diff(crossings) < 0.5 / (0.2 * f_enc_max_hz))
+    return 0.5 / np.maximum(half_cycles[moving], 1e-12)
+
+
+def _smooth(x: np.ndarray) -> np.ndarray:
+    """The same 15-sample median the current's crossing frequency gets, so both shapes match."""
+    return median_filter(x, size=15, mode="nearest")
+
+
+def likely_counts_per_rev(estimate: float, tolerance: float) -> int:
+    """``estimate`` rounded, or the power of two within ``tolerance`` (relative) of it: most encoders have one."""
+    power = 2 ** round(math.log2(max(estimate, 1.0)))
+    return power if abs(estimate / power - 1.0) < tolerance else round(estimate)
+
+
+def ratio_fault(r: SpeedRatio, pole_pairs: int, counts_per_rev: int) -> str | None:
+    """The words for a mismatched ratio (None when it matches): what turns faster, and the values to check.
+
+    The suggested ``pole_pairs`` is given only when p·r is near a whole number; ``counts_per_rev`` is
+    counts_per_rev/r (snapped to a power of two within 2 %, as most encoders are).
+    """
+    if not r.mismatched:
+        return None
+    word = f"{r.ratio:.2f}× faster" if r.ratio > 1 else f"{1 / r.ratio:.2f}× slower"
+    candidates = []
+    p = pole_pairs * r.ratio
+    if round(p) >= 1 and abs(p - round(p)) < 0.1:
+        candidates.append(f"[motor] pole_pairs = {round(p)}")
+    candidates.append(f"[encoder] counts_per_rev = {likely_counts_per_rev(counts_per_rev / r.ratio, 0.02)}")
+    return (f"the current turns {word} than pole_pairs·ω (pole_pairs = {pole_pairs}, counts_per_rev = "
+            f"{counts_per_rev}): check {' or '.join(candidates)}")
+
+
+def sequence_fault(agreement: float, phases: list[str]) -> str | None:
+    """The words for a phase sequence turning against the encoder (None unless clearly reversed, < −0.5)."""
+    if not agreement < -0.5:
+        return None
+    swapped = ", ".join(f'"{ {"i_b": "i_c", "i_c": "i_b"}.get(n, n)}"' for n in phases)
+    return (f"the phase sequence {'/'.join(n[2:] for n in phases)} turns against the encoder (correlation "
+            f"{agreement:+.2f}): set [daq] channels = [{swapped}] (two phases swapped) or reverse the encoder's "
+            "counting direction")
+
+
+def recording_fault(rec: Recording) -> str | None:
+    """:func:`ratio_fault` of a raw recording's phase i_a and encoder, then (2–3 phases)
+    :func:`sequence_fault`; None if both match or it cannot tell."""
+    r = electrical_speed_ratio(rec.current_a["i_a"], rec.rate_hz, rec.encoder_index, rec.position_counts,
+                               rec.period_s, rec.counts_per_rev, rec.pole_pairs)
+    if r is None:
+        return None
+    fault = ratio_fault(r, rec.pole_pairs, rec.counts_per_rev)
+    if fault is None and len(rec.current_a) >= 2:
+        agreement = phase_sequence_agreement(rec.current_a, rec.rate_hz, rec.encoder_index, rec.position_counts,
+                                             rec.period_s, r.lag_s)
+        fault = sequence_fault(agreement, list(rec.current_a))
+    return fault
+
+
+def with_fault(quality: Quality, fault: str | None) -> Quality:
+    """A poor / failed ``quality`` becomes failed with ``fault`` as its first reason, so it says why instead of
+    a bare failed. An ``ok`` verdict (the data hold together: clocks aligned, model fits) or no fault:
+    unchanged — the diagnosis explains failures, it never overrules a consistent identification."""
+    if fault is None or quality.verdict == "ok":
+        return quality
+    return replace(quality, verdict="failed", reasons=(fault, *quality.reasons))
+
+
+def first_move_sign(position_counts: np.ndarray) -> int:
+    """+1 / −1: the direction of the encoder's first clear move (5 % of its largest excursion), 0 if none."""
+    x = np.asarray(position_counts, dtype=np.float64) - float(position_counts[0])
+    reach = float(np.max(np.abs(x))) if x.size else 0.0
+    if reach <= 0.0:
+        return 0
+    first = int(np.argmax(np.abs(x) > 0.05 * reach))
+    return int(np.sign(x[first]))
+
+
+#: e^{−j·s_x} for a phase at electrical shift s_x (a: 0, b: −2π/3, c: +2π/3): Σ i_x·w_x turns with +θ_e.
+_SPACE_VECTOR_WEIGHTS = {"i_a": 1.0 + 0j, "i_b": np.exp(2j * np.pi / 3), "i_c": np.exp(-2j * np.pi / 3)}
+
+
+def phase_sequence_agreement(currents_a: dict[str, np.ndarray], rate_hz: float, encoder_index: np.ndarray,
+                             position_counts: np.ndarray, period_s: float, lag_s: float,
+                             window_s: float = 0.02) -> float:
+    """Correlation (−1…1) of the current space vector's sense of rotation with the encoder's speed.
+
+    With two phases the third is −(sum) (balanced windings). +1: the phases are in the order their
+    names say and turn with the encoder; −1: the sequence is reversed (two phases swapped, or the
+    encoder counts the other way). ``lag_s`` maps DAQ time to drive time (:attr:`SpeedRatio.lag_s`).
+
+    Parameters
+    ----------
+    currents_a : dict of str → ndarray
+        Two or three phases, A, gap-free, DAQ sample 0 at t_daq = 0.
+    rate_hz, period_s : float
+        DAQ rate, Hz, and drive cycle, s.
+    encoder_index, position_counts : ndarray of int
+        Drive cycle and unwrapped position of each encoder sample.
+    lag_s : float
+        Time since the first encoder sample minus DAQ time, s (:attr:`SpeedRatio.lag_s`).
+    window_s : float
+        Windows in which the rotation is summed, s (a few electrical periods at slow speed).
+    """
+    names = list(currents_a)
+    n_max = int(SEQUENCE_MAX_S * rate_hz)  # the sequence is the same all along: bound the memory of long records
+    phases = {n: np.asarray(currents_a[n][:n_max], dtype=np.float64) for n in names}
+    phases = {n: x - np.median(x) for n, x in phases.items()}  # sensor offsets would add a fixed vector
+    if len(phases) == 2:
+        (missing,) = set(_SPACE_VECTOR_WEIGHTS) - set(phases)
+        phases[missing] = -sum(phases.values())
+    z = sum(_SPACE_VECTOR_WEIGHTS[n] * x for n, x in phases.items())
+    turn = np.imag(np.conj(z[:-1]) * z[1:])  # ∝ |z|²·dθ per sample: positive while the vector turns forward
+    per = max(2, int(window_s * rate_hz))
+    n = turn.size // per
+    rot = turn[:n * per].reshape(n, per).sum(axis=1)
+    t_drive = (np.arange(n) + 0.5) * per / rate_hz + lag_s
+    omega = speed_from_counts(position_counts, 1, period_s)  # rev/s: only the sign and shape matter
+    t_enc = (np.asarray(encoder_index)[1:] - int(encoder_index[0])) * period_s
+    w = np.interp(t_drive, t_enc, omega, left=0.0, right=0.0)
+    norm = math.sqrt(float(np.dot(rot, rot)) * float(np.dot(w, w)))
+    return float(np.dot(rot, w) / norm) if norm > 0 else float("nan")
+
+
+@dataclass(frozen=True)
+class InertiaFromTorque:
+    """The rigid-body inertia the torque implies: T = J·α + b·ω + c·sign ω + gravity + offset, low-passed.
+
+    Attributes
+    ----------
+    J_kgm2, J_std_kgm2 : float
+        Total motor-side inertia J_m + J_l and its standard error, kg·m² (scales with k_t and the
+        current sensor's scale).
+    """
+
+    J_kgm2: float
+    J_std_kgm2: float
+
+
+def inertia_from_torque(t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: np.ndarray, gear_ratio: float,
+                        cutoff_hz: float = 10.0) -> InertiaFromTorque:
+    """Fit the joint as one rigid inertia below ``cutoff_hz`` (well under the anti-resonance).
+
+    Below f_a the load follows the motor, so T_e = (J_m + J_l)·α + viscous and Coulomb friction +
+    the arm's weight (A·cos + B·sin of the arm angle θ/N) + an offset. Every regressor and the
+    torque pass the same zero-phase low-pass; the standard error counts one independent sample per
+    1/(2·cutoff).
+
+    Parameters
+    ----------
+    t_s, torque_Nm, speed_rad_s : ndarray
+        Encoder instants (regular), s; electromagnetic torque, N·m; motor speed, rad/s.
+    gear_ratio : float
+        Motor turns per arm turn.
+    cutoff_hz : float
+        Low-pass corner, Hz. 10 Hz: the rigid-body error ~ J_l/J·(f/f_a)² is ≤ 3 % for f_a ≥ 55 Hz.
+    """
+    dt = float(np.median(np.diff(t_s)))
+    theta = np.cumsum(speed_rad_s) * dt
+    arm = theta / gear_ratio
+    columns = [np.gradient(speed_rad_s, dt), speed_rad_s, np.tanh(speed_rad_s / 0.5),  # Coulomb, smoothed at 0.5 rad/s
+               np.cos(arm), np.sin(arm), np.ones_like(arm)]
+    sos = signal.butter(4, cutoff_hz, fs=1.0 / dt, output="sos")
+    X = np.column_stack([signal.sosfiltfilt(sos, c) for c in columns])
+    y = signal.sosfiltfilt(sos, torque_Nm)
+    edge = min(int(0.5 / dt), X.shape[0] // 10)  # filter transients at both ends
+    X, y = X[edge:X.shape[0] - edge], y[edge:y.size - edge]
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    resid = y - X @ coef
+    n_eff = max(X.shape[0] * 2.0 * cutoff_hz * dt, X.shape[1] + 1.0)
+    sigma2 = float(np.dot(resid, resid)) / X.shape[0] * n_eff / (n_eff - X.shape[1])
+    cov = sigma2 * np.linalg.inv(X.T @ X) * X.shape[0] / n_eff
+    return InertiaFromTorque(float(coef[0]), float(math.sqrt(max(cov[0, 0], 0.0))))

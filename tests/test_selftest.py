@@ -1,0 +1,212 @@
+"""``acq selftest`` on the simulated bench, correct and misconfigured on purpose ([sim] truth differing from
+the stated config): each fault is named with the key to change, and ``acq analyze`` says the same."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from acq.config import DEFAULT_BENCH
+from acq.selftest_checks import Check
+from acq.selftest_cli import selftest_json
+from analysis.diagnose import SpeedRatio, likely_counts_per_rev, ratio_fault
+from tests.helpers import run_cli
+from tests.nidaqmx_standin import StandinHardware
+from tests.test_nidaq import hardware, write_bench  # noqa: F401 - the stand-in NI 9234 fixture
+
+SIM = DEFAULT_BENCH.read_text()
+
+
+def bench_file(tmp_path: Path, sim_lines: str = "", *, channels: str = '["i_a"]', inertia_known: bool = False) -> Path:
+    """The default simulated bench with extra ``[sim]`` truth lines (appended: [sim] is the last table)."""
+    text = SIM.replace('channels = ["i_a"]', f"channels = {channels}")
+    if inertia_known:
+        text = text.replace("[nominal]", "[nominal]\ninertia_known = true", 1)
+    path = tmp_path / "bench.toml"
+    path.write_text(text + "\n" + sim_lines + "\n")
+    return path
+
+
+def selftest(capsys: pytest.CaptureFixture[str], bench: Path) -> tuple[int, dict]:
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench", str(bench))
+    return run.code, json.loads(run.out)
+
+
+def failed_check(doc: dict) -> dict:
+    (fail,) = [c for c in doc["checks"] if c["status"] == "fail"]
+    assert doc["checks"][-1] == fail, "the selftest stops at the first failed check"
+    return fail
+
+
+def test_correct_bench_passes_every_check_in_order_with_figures(capsys: pytest.CaptureFixture[str]) -> None:
+    code, doc = selftest(capsys, DEFAULT_BENCH)
+    assert code == 0 and doc["passed"] and doc["stopped_at"] is None
+    names = [(c["stage"], c["name"]) for c in doc["checks"]]
+    assert names == [("devices", "acq devices"), ("devices", "DAQ"), ("devices", "drive"), ("streams", "recording"),
+                     ("streams", "DAQ blocks"), ("streams", "drive period"), ("streams", "current at standstill"),
+                     ("motion", "encoder speed"), ("motion", "electrical speed"), ("motion", "direction"),
+                     ("motion", "phase order"), ("identification", "identification (10 s)"),
+                     ("identification", "torque constant")]
+    by = {c["name"]: c for c in doc["checks"]}
+    assert by["recording"]["values"]["current_lost"] == 0 and by["recording"]["values"]["encoder_lost"] == 0
+    assert by["DAQ"]["values"]["rate_hz"] == 25600.0
+    assert by["drive period"]["values"]["period_host_s"] == pytest.approx(1e-3, rel=1e-3)
+    noise = by["current at standstill"]["values"]["i_a"]["white_noise_A"]
+    assert noise == pytest.approx(0.01, rel=0.1)  # [sim] current_noise_A
+    assert by["electrical speed"]["values"]["ratio"] == pytest.approx(1.0, abs=0.02)
+    assert by["encoder speed"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
+    assert by["identification (10 s)"]["values"]["verdict"] == "ok"
+    assert by["identification (10 s)"]["values"]["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
+    # no known inertia on the default bench: k_t is not checked, and the line says why
+    assert by["torque constant"]["status"] == "warn"
+    assert "inertia_known = true" in by["torque constant"]["fix"]
+    assert by["torque constant"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
+
+
+@pytest.mark.parametrize("sim_line", ["pole_pairs = 8", "counts_per_rev = 65536"])
+def test_wrong_pole_pairs_or_counts_is_named_by_selftest_and_by_analyze(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, sim_line: str) -> None:
+    code, doc = selftest(capsys, bench_file(tmp_path, sim_line))
+    fail = failed_check(doc)
+    assert code == 1 and not doc["passed"]
+    if sim_line.startswith("pole_pairs"):
+        # the encoder matches the commanded speed, the current turns twice as fast
+        assert doc["stopped_at"] == "motion · electrical speed"
+        assert fail["values"]["ratio"] == pytest.approx(2.0, abs=0.04)
+        assert re.fullmatch(r"the current turns (1\.9\d|2\.0\d)× faster than pole_pairs·ω \(pole_pairs = 4, "
+                            r"counts_per_rev = 131072\)", fail["figure"]), fail["figure"]
+        assert fail["fix"] == "check [motor] pole_pairs = 8 or [encoder] counts_per_rev = 65536"
+    else:
+        # the encoder reports half the commanded speed: the counts per revolution are wrong
+        assert doc["stopped_at"] == "motion · encoder speed"
+        assert fail["fix"] == "check [encoder] counts_per_rev = 65536"
+        assert fail["values"]["ratio"] == pytest.approx(0.5, abs=0.03)
+
+    record = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(bench_file(tmp_path, sim_line)),
+                     "--fast", "--no-analyze", "--out", str(tmp_path / "s"))
+    assert record.code == 0
+    (session,) = (tmp_path / "s").glob("*.h5")
+    analyzed = run_cli(capsys, "analyze", str(session), "--json", "--no-report")
+    quality = json.loads(analyzed.out)["quality"]
+    assert quality["verdict"] == "failed"
+    assert re.fullmatch(r"the current turns 2\.0\d× faster than pole_pairs·ω \(pole_pairs = 4, counts_per_rev = "
+                        r"131072\): check \[motor\] pole_pairs = 8 or \[encoder\] counts_per_rev = 65536",
+                        quality["reasons"][0]), quality["reasons"][0]
+
+
+def test_reversed_encoder_is_named(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    code, doc = selftest(capsys, bench_file(tmp_path, "encoder_direction = -1"))
+    fail = failed_check(doc)
+    assert code == 1 and doc["stopped_at"] == "motion · direction"
+    assert fail["figure"] == "the encoder counts down while the drive moves forward"
+    assert fail["fix"].startswith("reverse the encoder's counting direction in the drive (CiA 402 polarity 0x607E")
+
+
+def test_swapped_phases_are_named_with_the_channels_to_set(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    bench = bench_file(tmp_path, 'phase_order = ["i_a", "i_c", "i_b"]', channels='["i_a", "i_b", "i_c"]')
+    code, doc = selftest(capsys, bench)
+    fail = failed_check(doc)
+    assert code == 1 and doc["stopped_at"] == "motion · phase order"
+    assert fail["values"]["agreement"] < -0.5
+    assert re.fullmatch(r"the phase sequence a/b/c turns against the encoder \(correlation -0\.\d\d\)", fail["figure"])
+    assert fail["fix"] == ('set [daq] channels = ["i_a", "i_c", "i_b"] (two phases swapped) or reverse the '
+                           "encoder's counting direction")
+
+    record = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(bench), "--fast", "--no-analyze",
+                     "--out", str(tmp_path / "s"))
+    assert record.code == 0
+    (session,) = (tmp_path / "s").glob("*.h5")
+    quality = json.loads(run_cli(capsys, "analyze", str(session), "--json", "--no-report").out)["quality"]
+    assert quality["verdict"] == "failed"
+    assert re.fullmatch(r"the phase sequence a/b/c turns against the encoder \(correlation -0\.\d\d\): set \[daq\] "
+                        r'channels = \["i_a", "i_c", "i_b"\] \(two phases swapped\) or reverse the encoder\'s counting '
+                        r"direction", quality["reasons"][0]), quality["reasons"][0]
+
+
+def test_correct_three_phases_pass_the_phase_order(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    code, doc = selftest(capsys, bench_file(tmp_path, channels='["i_a", "i_b"]', inertia_known=True))
+    by = {c["name"]: c for c in doc["checks"]}
+    assert code == 0, doc["stopped_at"]
+    assert by["phase order"]["status"] == "pass" and by["phase order"]["values"]["agreement"] > 0.5
+    assert by["torque constant"]["status"] == "pass"  # two phases, Park torque, known inertia
+
+
+def test_wrong_sensor_scale_is_named_against_a_known_inertia(capsys: pytest.CaptureFixture[str],
+                                                             tmp_path: Path) -> None:
+    code, doc = selftest(capsys, bench_file(tmp_path, "current_sensor_gain = 2.0", inertia_known=True))
+    fail = failed_check(doc)
+    assert code == 1 and doc["stopped_at"] == "identification · torque constant"
+    assert fail["values"]["ratio"] == pytest.approx(2.0, rel=0.05)
+    assert re.search(r", 2\.0\d× \[nominal\] Jm \+ Jl = 0\.01051: the torque reads 2\.0\d× too high$", fail["figure"]), \
+        fail["figure"]
+    assert re.fullmatch(r"check \[motor\] torque_constant_Nm_per_A = 1\.[45]\d* or the current sensor's scale",
+                        fail["fix"]), fail["fix"]
+
+
+def test_a_bench_that_cannot_be_opened_fails_the_devices_stage_in_one_line(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    text = SIM.replace('driver = "sim"\nperiod_s = 0.001', 'driver = "serial"\nperiod_s = 0.001\nport = "/dev/acq-none"')
+    bench = tmp_path / "serial.toml"
+    bench.write_text(text)
+    run = run_cli(capsys, "selftest", "--fast", "--bench", str(bench))
+    assert run.code == 1
+    assert "✗ devices · acq devices" in run.out
+    assert '[drive] port = "/dev/acq-none" is not there' in run.out
+    assert "Traceback" not in run.out + run.err
+    # a config the devices refuse at opening is bad input: exit 2, the adapter's own line
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench", str(DEFAULT_BENCH.parent / "sim_canopen.toml"))
+    assert run.code == 2
+    assert failed_check(json.loads(run.out))["figure"] == ("--fast: the simulated CANopen drive runs on the bus in "
+                                                           "real time; record without --fast")
+
+
+def test_ratio_fault_words_and_suggestions() -> None:
+    assert ratio_fault(SpeedRatio(1.01, 0.001, 0.0, 100.0), 4, 131072) is None
+    assert ratio_fault(SpeedRatio(0.5, 0.001, 0.0, 100.0), 4, 131072) == (
+        "the current turns 2.00× slower than pole_pairs·ω (pole_pairs = 4, counts_per_rev = 131072): check "
+        "[motor] pole_pairs = 2 or [encoder] counts_per_rev = 262144")
+    # 4 → 5 pole pairs: no whole-number counts_per_rev nearby a power of two, so the rounded value
+    assert ratio_fault(SpeedRatio(1.25, 0.001, 0.0, 100.0), 4, 10000) == (
+        "the current turns 1.25× faster than pole_pairs·ω (pole_pairs = 4, counts_per_rev = 10000): check "
+        "[motor] pole_pairs = 5 or [encoder] counts_per_rev = 8000")
+    # a scattered estimate is not named even if its value is off
+    assert ratio_fault(SpeedRatio(1.2, 0.05, 0.0, 3.0), 4, 131072) is None
+    assert likely_counts_per_rev(64470.0, 0.05) == 65536 and likely_counts_per_rev(10000.0, 0.02) == 10000
+
+
+def test_json_document_of_a_stopped_run() -> None:
+    checks = [Check("devices", "DAQ", "pass", "ok"), Check("streams", "recording", "fail", "x", "fix it",
+                                                            {"v": float("nan")})]
+    doc = selftest_json(checks, "b.toml")
+    assert doc["passed"] is False and doc["stopped_at"] == "streams · recording"
+    assert doc["checks"][1]["values"] == {"v": None}
+
+
+def test_plain_pytest_collects_the_hardware_suite_and_skips_it_with_the_reason(tmp_path: Path) -> None:
+    env = {k: v for k, v in os.environ.items() if k != "ACQ_HW_BENCH"}
+    root = Path(__file__).resolve().parent.parent
+    run = subprocess.run([sys.executable, "-m", "pytest", "-q", "-rs", "-p", "no:cacheprovider", "tests/hardware"],
+                         cwd=root, env=env, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert re.search(r"\b(\d+) skipped", run.stdout) and " passed" not in run.stdout
+    assert "hardware suite: set ACQ_HW_BENCH=path/to/bench.toml to run it against that bench" in run.stdout
+
+
+def test_ni_daq_missing_device_and_coerced_rate_are_named(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                                          hardware: StandinHardware) -> None:
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench",
+                  str(write_bench(tmp_path, physical_channels=["cDAQ9Mod1/ai0"])))
+    fail = failed_check(json.loads(run.out))
+    assert run.code == 1 and fail["name"] == "acq devices"
+    assert fail["fix"] == ('[daq] physical_channels = ["cDAQ9Mod1/ai0"]: no device cDAQ9Mod1 — check the cable and '
+                           "NI MAX, or the device name")
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench", str(write_bench(tmp_path, rate_hz=25000)))
+    daq = next(c for c in json.loads(run.out)["checks"] if c["name"] == "DAQ")
+    assert daq["status"] == "warn" and daq["values"]["rate_hz"] == 25600.0
+    assert daq["fix"] == "[daq] rate_hz = 25000: the card runs 25600 Hz — state that rate"
