@@ -12,8 +12,6 @@ import functools
 import hashlib
 import json
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,6 +24,7 @@ from rich.table import Table
 import analysis
 from acq import __version__
 from acq.session import Session, load, utc_now_iso
+from acq.storage import atomic_path, write_text_atomically
 from analysis.model import TwoMassParams
 from analysis.pipeline import AnalysisOptions, Pipeline, Result, analyze
 from analysis.signals import Recording, TorqueMethod
@@ -136,12 +135,15 @@ def result_json(session: Session, result: Result) -> dict[str, Any]:
 
 
 def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *, write: bool = True,
-                    report: bool = True, **option_kwargs: Any) -> SessionResult:
+                    report: bool = True, partial: bool = False, **option_kwargs: Any) -> SessionResult:
     """Identify the joint of one session; write ``<session>.result.json`` (and the report PNG).
 
-    Bad or unusable input (too short, bad band, …) raises :class:`ConfigError` naming the session.
+    Bad or unusable input (too short, bad band, …) raises :class:`ConfigError` naming the session; so does a
+    session still ``recording`` or damaged unless ``partial`` (then its intact part is analysed and the result
+    says ``"partial": true``). A failed write raises :class:`StorageError` naming the file, leaving no temp file.
     """
     session = load(path)
+    session.require_usable(partial=partial)
     opts = options if options is not None else options_for(session, **option_kwargs)
     nyquist_hz = 0.5 / session.encoder.period_s
     if opts.band_hz is not None and opts.band_hz[1] > nyquist_hz:
@@ -153,19 +155,18 @@ def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *,
     except ValueError as e:
         raise ConfigError(f"{session.path}: {e}") from None
     doc = result_json(session, result)
+    doc["partial"] = bool(session.damage) or session.status == "recording"
+    doc["session"]["damage"] = list(session.damage)
     json_path = session.path.with_name(session.path.stem + ".result.json")
     report_path = session.path.with_name(session.path.stem + ".report.png") if report else None
     if write:
-        fd, tmp = tempfile.mkstemp(dir=json_path.parent, prefix=f".{json_path.name}.")  # one per writer
-        os.fchmod(fd, 0o644)
-        with os.fdopen(fd, "w") as f:
-            f.write(json.dumps(doc, indent=2))
-        os.replace(tmp, json_path)  # a reader never sees half a result
+        write_text_atomically(json_path, json.dumps(doc, indent=2))  # a reader never sees half a result
         if report_path is not None:
             from acq.plots import render_report_png
 
-            render_report_png(result.figures, report_path, title=f"{session.attrs.get('joint')} · {session.path.name}",
-                              values=doc)
+            with atomic_path(report_path) as tmp_png:
+                render_report_png(result.figures, tmp_png, title=f"{session.attrs.get('joint')} · {session.path.name}",
+                                  values=doc)
     return SessionResult(session, result, doc, json_path, report_path if write else None)
 
 

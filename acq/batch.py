@@ -13,15 +13,18 @@ that fails is recorded with its error and the batch goes on.
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import json
 import multiprocessing
 import os
+import signal
+import threading
 import time
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +34,7 @@ from rich.table import Table
 
 from acq.analyze import SessionResult, analysis_fingerprint, analyze_session, sha256_of
 from acq.catalogue import Catalogue, Outcome
-from acq.session import Session, load
+from acq.session import Session, load, read_status
 from drivers.errors import AcqError, ConfigError
 
 CATALOGUE_NAME = "catalogue.sqlite"
@@ -46,6 +49,8 @@ class BatchReport:
     outcomes: list[Outcome]
     skipped: list[Path]
     seconds: float
+    not_ready: list[Path] = field(default_factory=list)  # status recording: skipped (unless the request is partial)
+    interrupted: bool = False  # Ctrl-C: queued analyses cancelled; every outcome received is in the catalogue
 
     @property
     def failed(self) -> list[Outcome]:
@@ -166,8 +171,13 @@ def _executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
             os.environ.setdefault(var, "1")
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["acq.batch"])
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
+        try:
             yield pool
+        except BaseException:
+            pool.shutdown(wait=False, cancel_futures=True)  # the caller stopped the workers already
+            raise
+        pool.shutdown(wait=True)
         return
     try:
         from distributed import Client
@@ -181,6 +191,11 @@ def _executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
         yield client.get_executor(pure=False)
 
 
+#: Seconds a Ctrl-C'd batch gives running workers to end (SIGINT: their temp files are removed) before they are
+#: killed; with the bookkeeping after it, a batch stops within 2 s.
+STOP_GRACE_S = 1.0
+
+
 def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, Any], *, jobs: int | None = None,
               scheduler: str | None = None, report: bool = True, console: Console | None = None) -> BatchReport:
     """Analyse the sessions not yet current in ``catalogue``, recording each outcome as it arrives.
@@ -192,7 +207,8 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, An
     catalogue : Catalogue
         Where the outcomes go (and what decides which sessions are current).
     request : dict
-        Keyword arguments of :func:`acq.analyze.options_for` (torque, params, fit, band_hz, pipeline).
+        Keyword arguments of :func:`acq.analyze.analyze_session` (torque, params, fit, band_hz, pipeline,
+        optional partial). Without ``partial``, sessions still ``recording`` are skipped (:attr:`BatchReport.not_ready`).
     jobs : int, optional
         Worker processes of the local pool (default: the CPU count); ignored with ``scheduler``.
     scheduler : str, optional
@@ -201,12 +217,18 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, An
         Also draw each session's report PNG.
     console : rich.console.Console, optional
         Where the progress bar goes (default: stderr).
+
+    Ctrl-C cancels the queued analyses, stops the running ones (a result file a stopped worker wrote without its
+    catalogue row is removed), records every outcome received and returns with ``interrupted`` set.
     """
     start = time.perf_counter()
+    started_at = time.time()
     current = catalogue.current(request_key(request))
     hashes = {p: sha256_of(p) for p in paths}
-    todo = [p for p in paths if hashes[p] not in current]
+    not_ready = [] if request.get("partial") else [p for p in paths if _status(p) == "recording"]
+    todo = [p for p in paths if hashes[p] not in current and p not in not_ready]
     outcomes: list[Outcome] = []
+    interrupted = False
     if todo:
         with _executor(jobs or os.cpu_count() or 1, scheduler) as executor:
             futures: dict[Future[Outcome], Path] = {
@@ -215,12 +237,73 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, An
                        TextColumn("{task.fields[failed]} failed"), TimeElapsedColumn(), TimeRemainingColumn())
             with Progress(*columns, console=console or Console(stderr=True)) as progress:
                 task = progress.add_task("analysing", total=len(todo), failed=0)
-                for future in as_completed(futures):
-                    outcome = _outcome(future, futures[future], hashes, request)
-                    catalogue.record(outcome)
-                    outcomes.append(outcome)
-                    progress.update(task, advance=1, failed=sum(o.error is not None for o in outcomes))
-    return BatchReport(outcomes, [p for p in paths if p not in todo], time.perf_counter() - start)
+                try:
+                    for future in as_completed(futures):
+                        outcome = _outcome(future, futures[future], hashes, request)
+                        catalogue.record(outcome)
+                        outcomes.append(outcome)
+                        progress.update(task, advance=1, failed=sum(o.error is not None for o in outcomes))
+                except KeyboardInterrupt:
+                    interrupted = True
+                    with _signals_ignored():
+                        _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at)
+                    raise
+    return BatchReport(outcomes, [p for p in paths if p not in todo and p not in not_ready],
+                       time.perf_counter() - start, not_ready, interrupted)
+
+
+def _status(path: Path) -> str:
+    try:
+        return read_status(path)
+    except AcqError:
+        return ""  # unreadable: the analysis reports why
+
+
+@contextmanager
+def _signals_ignored() -> Iterator[None]:
+    """While a stopped batch tidies up (≤ 2 s), a second Ctrl-C does not cut it short."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outcomes: list[Outcome],
+                  catalogue: Catalogue, hashes: dict[Path, str], request: dict[str, Any], started_at: float) -> None:
+    """Cancel what is queued, interrupt what runs, record what finished; no result file is left without its row."""
+    for future in futures:
+        future.cancel()
+    processes = list(getattr(executor, "_processes", None) or {})  # the local pool's worker pids (Dask: none)
+    for pid in processes:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGINT)
+    recorded = {o.path for o in outcomes}
+    deadline = time.monotonic() + STOP_GRACE_S
+    for future, path in futures.items():
+        if future.cancelled():
+            continue
+        try:
+            outcome = future.result(timeout=max(0.0, deadline - time.monotonic()))
+        except BaseException:  # noqa: BLE001 - interrupted or still running: no outcome
+            continue
+        if outcome.path not in recorded:
+            catalogue.record(outcome)
+            outcomes.append(outcome)
+            recorded.add(outcome.path)
+    for pid in processes:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    for path in futures.values():  # a worker stopped after writing its result but before the row: remove it
+        if str(path.resolve()) in recorded:
+            continue
+        result = path.with_name(path.stem + ".result.json")
+        with contextlib.suppress(OSError):
+            if result.stat().st_mtime >= started_at:
+                result.unlink()
 
 
 def _outcome(future: Future[Outcome], path: Path, hashes: dict[Path, str], request: dict[str, Any]) -> Outcome:
@@ -243,6 +326,9 @@ def batch_table(report: BatchReport) -> Table:
                       "failed" if o.doc is None else o.doc["quality"]["verdict"], o.error or "")
     table.caption = (f"{len(report.outcomes)} analysed ({len(report.failed)} failed), {len(report.skipped)} skipped "
                      f"as current, {report.seconds:.1f} s")
+    if report.not_ready:
+        table.caption += (f"; {len(report.not_ready)} skipped as still recording (acq check repairs a killed "
+                          "recorder's session; --partial analyses it as it is)")
     return table
 
 
@@ -252,7 +338,8 @@ def report_json(report: BatchReport) -> list[dict[str, Any]]:
              "K_Nm_per_rad": None if o.doc is None else o.doc["K_Nm_per_rad"],
              "verdict": None if o.doc is None else o.doc["quality"]["verdict"], "error": o.error}
             for o in report.outcomes]
-    return done + [{"path": str(p.resolve()), "outcome": "skipped"} for p in report.skipped]
+    return (done + [{"path": str(p.resolve()), "outcome": "skipped"} for p in report.skipped]
+            + [{"path": str(p.resolve()), "outcome": "skipped: status recording"} for p in report.not_ready])
 
 
 def analyze_many(spec: Path, request: dict[str, Any], *, jobs: int | None, catalogue_path: Path | None,

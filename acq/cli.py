@@ -26,7 +26,7 @@ from acq.devices import devices_command
 from acq.exporters import export_command
 from acq.importers import import_command
 from acq.recorder import Recorder, RecordingResult
-from acq.session import load, repair
+from acq.session import Session, load, repair
 from acq.summary import summarize, summary_table
 from acq.trend import trend_command
 from acq.view import view_command
@@ -96,6 +96,10 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
         recorder.abort("interrupted by user (Ctrl-C)" if isinstance(e, KeyboardInterrupt)
                        else f"{type(e).__name__}: {e}")
         raise
+    if result.write_failed:  # nothing more is written to that disk: no summary read back, no analysis
+        click.echo(f"acq: failed: {result.stop_reason} ({result.current_samples} current and "
+                   f"{result.encoder_samples} encoder samples stored in {result.path})", err=True)
+        return 1
     out.print(summary_table(summarize(load(result.path))))
     if not no_analyze and result.current_samples and result.encoder_samples:
         _analyze_after_recording(result.path)
@@ -165,12 +169,14 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
               help="Folder or glob: parallel analyses (default: the CPU count).")
 @click.option("--catalogue", "catalogue_path", type=click.Path(path_type=Path), default=None,
               help="The SQLite catalogue to fill (default: catalogue.sqlite in the session's folder).")
+@click.option("--partial", is_flag=True, help="Also analyse a session still being recorded (status recording) or "
+                                              "damaged: its intact part, the result marked partial.")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Folder or glob: run on a Dask distributed cluster (tcp://host:8786); the workers must reach "
                    "the session files at the same paths.")
 def analyze_command(session_path: Path, torque: str | None, params: str, fit_kind: str, band: str | None,
                     paper: bool, as_json: bool, no_report: bool, jobs: int | None, catalogue_path: Path | None,
-                    scheduler: str | None) -> int:
+                    partial: bool, scheduler: str | None) -> int:
     """Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png.
 
     SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
@@ -178,6 +184,8 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
     """
     request = {"torque": torque, "params": params, "fit": fit_kind, "band_hz": _parse_band(band),
                "pipeline": "paper" if paper else "acq"}
+    if partial:  # only when asked: the request (and so the catalogue's key) of a normal analysis is unchanged
+        request["partial"] = True
     if is_batch(session_path):
         return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
                             report=not no_report, as_json=as_json, out=out)
@@ -196,30 +204,54 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def info(session_path: Path, as_json: bool) -> int:
     """Summarise a session: samples, durations, effective rates, gaps."""
-    summary = summarize(load(session_path))
+    session = load(session_path)
+    summary = summarize(session)
+    warning = _integrity_warning(session)
     if as_json:
-        click.echo(json.dumps(summary.to_json_dict(), indent=2))
+        doc = summary.to_json_dict()
+        doc["damage"] = list(session.damage)
+        click.echo(json.dumps(doc, indent=2))
     else:
         out.print(summary_table(summary))
+    if warning:
+        click.echo(f"acq: warning: {warning}", err=True)
     return 0
+
+
+def _integrity_warning(session: Session) -> str | None:
+    """One line when a session is damaged or still ``recording`` (killed recorder), saying to run acq check."""
+    if session.damage:
+        return f"{session.path}: damaged ({'; '.join(session.damage)}) — run acq check {session.path}"
+    if session.status == "recording":
+        return (f"{session.path}: status recording (still being recorded, or the recorder was killed) — "
+                f"run acq check {session.path}")
+    return None
 
 
 @cli.command()
 @click.argument("session_path", type=click.Path(path_type=Path))
 def check(session_path: Path) -> int:
-    """Check a session's integrity; mark one left by a killed recorder as interrupted and repair it."""
+    """Verify a session's checksums and committed counts; repair one left by a killed recorder.
+
+    Exit 0 when the session is intact (or was repaired), 1 when damage remains (each damaged span is listed).
+    """
     session = load(session_path)
-    summary = summarize(session)
     if session.status == "recording":
-        repair(session_path, "recorder stopped without finishing the file (found by acq check)")
-        summary = summarize(load(session_path))
-        out.print(summary_table(summary))
+        session = repair(session_path, "recorder stopped without finishing the file (found by acq check)")
+        out.print(summary_table(summarize(session)))
         out.print(f"{session_path}: interrupted — the recorder stopped without finishing the file; repaired: "
-                  f"status = interrupted, {summary.streams[0].samples} current and {summary.streams[1].samples} "
+                  f"status = interrupted, {session.current.sample_count} current and {session.encoder.index.size} "
                   "encoder samples kept")
         return 0
-    out.print(summary_table(summary))
-    out.print(f"{session_path}: {session.status}, nothing to repair")
+    out.print(summary_table(summarize(session)))
+    if session.damage:
+        for line in session.damage:
+            out.print(f"{session_path}: {line}")
+        out.print(f"{session_path}: damaged — the intact part holds {session.current.sample_count} current and "
+                  f"{session.encoder.index.size} encoder samples (acq analyze --partial uses it)")
+        return 1
+    out.print(f"{session_path}: {session.status}, checksums and counts verified ({session.current.sample_count} "
+              f"current, {session.encoder.index.size} encoder samples), nothing to repair")
     return 0
 
 
