@@ -21,6 +21,7 @@ import os
 import signal
 import threading
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -28,6 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
@@ -130,6 +132,15 @@ def session_meta(session: Session) -> dict[str, Any]:
             "tags": session.tags}
 
 
+@contextmanager
+def quiet_numerics() -> Iterator[None]:
+    """No numpy floating-point warning (divide by zero, invalid value, overflow) reaches the person: the analysis
+    reports unusable data through its errors and verdict, and a warning line before them only confuses."""
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield
+
+
 def analyze_one(path: str, sha256: str, request: dict[str, Any], report: bool) -> Outcome:
     """Analyse one session (runs in a worker process or on a Dask worker); never raises.
 
@@ -146,7 +157,8 @@ def analyze_one(path: str, sha256: str, request: dict[str, Any], report: bool) -
     """
     start = time.perf_counter()
     try:
-        done = analyze_session(path, report=report, **request)
+        with quiet_numerics():
+            done = analyze_session(path, report=report, **request)
     except Exception as e:  # noqa: BLE001 — a batch records any session's failure and goes on
         error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
         return Outcome(path, sha256, request_key(request), _meta_if_readable(path), None, error,

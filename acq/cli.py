@@ -1,7 +1,8 @@
 """The ``acq`` command line: record, info, check (more commands register themselves below).
 
 Errors for people: an :class:`~drivers.errors.AcqError` anywhere becomes one line on stderr and
-exit code 2 (bad input) or 1 (device); a usage error is click's own (exit 2); Ctrl-C is exit 130.
+exit code 2 (bad input) or 1 (device, failed write); a usage error is one line too (exit 2); Ctrl-C is
+exit 130.
 """
 
 from __future__ import annotations
@@ -19,9 +20,9 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from acq import __version__
 from acq.analyze import SessionResult, analyze_session, result_table
-from acq.batch import DEFAULT_REQUEST, analyze_many, is_batch, record_outcome
+from acq.batch import DEFAULT_REQUEST, analyze_many, is_batch, quiet_numerics, record_outcome
 from acq.catalogue import parse_tags, tag_option
-from acq.config import load_bench, load_profile
+from acq.config import check_duration, check_memory, load_bench, load_profile, with_joint
 from acq.devices import devices_command
 from acq.exporters import export_command
 from acq.importers import import_command
@@ -61,7 +62,7 @@ def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> 
 @click.option("--profile", "profile_name", required=True, help="Profile name in configs/profiles/ or a TOML path.")
 @click.option("--bench", "bench_path", type=click.Path(path_type=Path), default=None,
               help="Bench TOML (default: the simulated bench configs/benches/sim.toml).")
-@click.option("--duration", "duration_s", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--duration", "duration_s", type=float, default=None,
               help="Seconds to record (default: the profile's duration_s).")
 @click.option("--joint", default=None, help="Joint name (default: the bench config's).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("sessions"), show_default=True,
@@ -75,11 +76,10 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
            out_dir: Path, operator: str, fast: bool, no_analyze: bool, tags: tuple[str, ...],
            live: bool) -> int:
     """Swing the joint on PROFILE, record current and encoder, write one session file."""
-    bench = load_bench(bench_path)
-    if joint:
-        bench = bench.model_copy(update={"joint": joint})
+    bench = with_joint(load_bench(bench_path), joint)
     profile = load_profile(profile_name)
-    duration = duration_s if duration_s is not None else profile.duration_s
+    duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
+    check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))
     if live:
@@ -265,7 +265,8 @@ cli.add_command(view_command)
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acq`` console script."""
     try:
-        code = cli.main(args=argv, prog_name="acq", standalone_mode=False)
+        with quiet_numerics():
+            code = cli.main(args=argv, prog_name="acq", standalone_mode=False)
     except AcqError as e:
         click.echo(f"acq: error: {e}", err=True)
         sys.exit(e.exit_code)
@@ -275,6 +276,9 @@ def main(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:
         click.echo("acq: interrupted", err=True)
         sys.exit(EXIT_INTERRUPTED)
+    except click.UsageError as e:  # one line, like every other error (click's own adds usage and a hint)
+        click.echo(f"acq: error: {e.format_message()}", err=True)
+        sys.exit(e.exit_code)
     except click.ClickException as e:
         e.show()
         sys.exit(e.exit_code)

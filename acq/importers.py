@@ -38,14 +38,15 @@ from rich.markup import escape
 from acq import __version__
 from acq.analyze import sha256_of
 from acq.catalogue import parse_tags, tag_option
-from acq.config import load_bench, load_profile
+from acq.config import load_bench, load_profile, with_joint
 from acq.csvtable import CsvTable, read_csv
 from acq.session import SessionWriter, load
+from acq.storage import storage_error
 from acq.summary import summarize, summary_table
 from drivers.base import (CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, EventKind, StreamEvent,
                           StreamName)
 from drivers.config import Bench, Profile
-from drivers.errors import ConfigError
+from drivers.errors import ConfigError, StorageError
 
 PHASES = ("i_a", "i_b", "i_c")
 MIN_DURATION_S = 2.0
@@ -102,6 +103,11 @@ class EncoderTable:
 
 
 # ------------------------------------------------------------------------------------ checks
+
+#: Physical bounds of imported CSV values (magnitudes): times up to ~300 years (Unix epoch stamps fit), phase
+#: currents up to 10 kA (robot joint motors draw < 1 kA), counters within int64 with headroom.
+CSV_BOUNDS = {"t_s": 1e10, "drive_time_s": 1e10, "i_a_A": 1e4, "i_b_A": 1e4, "i_c_A": 1e4,
+              "position_counts": 2.0**62, "index": 2.0**62}
 
 
 def _check_increasing(table: CsvTable, column: str, values: np.ndarray, *, strict: bool) -> None:
@@ -182,7 +188,7 @@ def _regular_clock(table: CsvTable) -> tuple[np.ndarray, float]:
 
 def read_current_csv(path: Path, bench: Bench) -> CurrentTable:
     """Read and check a current CSV (``t_s`` and phase columns ``i_a_A`` ...)."""
-    table = read_csv(path, ("t_s",), tuple(f"{p}_A" for p in PHASES))
+    table = read_csv(path, ("t_s",), tuple(f"{p}_A" for p in PHASES), bounds=CSV_BOUNDS)
     _nonempty(table)
     t = table.columns["t_s"]
     _check_increasing(table, "t_s", t, strict=True)
@@ -259,7 +265,7 @@ def read_current_tdms(path: Path, bench: Bench, channels: tuple[str, ...] = ()) 
 
 def read_encoder_csv(path: Path, period_s: float) -> EncoderTable:
     """Read and check an encoder CSV (``t_s, position_counts[, index][, drive_time_s]``)."""
-    table = read_csv(path, ("t_s", "position_counts"), ("index", "drive_time_s"))
+    table = read_csv(path, ("t_s", "position_counts"), ("index", "drive_time_s"), bounds=CSV_BOUNDS)
     _nonempty(table)
     t = table.columns["t_s"]
     _check_increasing(table, "t_s", t, strict=False)  # host stamps: several samples may arrive at once
@@ -375,7 +381,13 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench, profile
         for event in events:
             writer.add_event(event)
         writer.finish("complete", f"imported from {current_path.name} and {encoder_path.name}")
+        if writer.failure is not None:
+            raise writer.failure
         os.replace(tmp, out)
+    except StorageError as e:  # named by the file asked for; the half-written temp file is removed below
+        raise StorageError(str(e).split(" — ")[0].replace(str(tmp), str(out))) from None
+    except OSError as e:
+        raise storage_error(e, out) from None
     finally:
         tmp.unlink(missing_ok=True)
     return ImportResult(out, [n.detail for n in notes if n.kind == "warning"])
@@ -397,8 +409,7 @@ def import_command(current_path: Path, current_channels: tuple[str, ...], encode
                    profile_name: str, joint: str | None, out_path: Path, tags: tuple[str, ...]) -> int:
     """Turn a current file and an encoder CSV recorded by other tools into a session."""
     bench = load_bench(bench_path)
-    if joint:
-        bench = bench.model_copy(update={"joint": joint})
+    bench = with_joint(bench, joint)
     result = import_session(current_path, encoder_path, bench, load_profile(profile_name), out_path, current_channels,
                             tags=parse_tags(tags))
     console = Console()

@@ -48,6 +48,7 @@ from typing import Any, Literal
 
 import h5py
 import numpy as np
+from pydantic import ValidationError
 
 from acq import __version__
 from acq.h5safe import abandon, open_read, superblock_eof
@@ -80,6 +81,8 @@ def new_session_path(out_dir: Path, joint: str, created_utc: str) -> Path:
     """``<out_dir>/<UTC start>_<joint>.h5`` (file-system safe), ``_2``, ``_3`` … if taken."""
     stamp = created_utc.replace("+00:00", "").replace(":", "-")
     path = Path(out_dir) / f"{stamp}_{joint}.h5"
+    if path.resolve().parent != Path(out_dir).resolve() or "/" in joint or "\0" in joint:
+        raise ConfigError(f"joint {joint!r}: not usable in a file name (the session must stay in {out_dir})")
     n = 2
     while path.exists():
         path = Path(out_dir) / f"{stamp}_{joint}_{n}.h5"
@@ -654,9 +657,10 @@ def _config_attr(p: Path, attrs: dict[str, Any], name: str, model: type[Bench] |
         raise ConfigError(f"{p}: malformed session: attribute {name} is missing")
     try:
         return model.model_validate_json(text)
-    except ValueError as e:
-        first = str(e).splitlines()
-        detail = first[1].strip() + ": " + first[2].strip().split(" [")[0] if len(first) > 2 else first[0]
+    except ValidationError as e:
+        err = e.errors()[0]
+        where = ".".join(str(part) for part in err["loc"])
+        detail = f"{where}: {err['msg']}" if where else err["msg"]
         raise ConfigError(f"{p}: malformed session: attribute {name} is not a valid {model.__name__.lower()} "
                           f"({detail})") from None
 
