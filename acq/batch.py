@@ -37,6 +37,7 @@ from rich.table import Table
 from acq.analyze import SessionResult, analysis_fingerprint, analyze_session, sha256_of
 from acq.catalogue import Catalogue, Outcome
 from acq.session import Session, load, read_status
+from acq.storage import remove_temp_files
 from drivers.errors import AcqError, ConfigError
 
 CATALOGUE_NAME = "catalogue.sqlite"
@@ -187,7 +188,7 @@ def _executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
         try:
             yield pool
         except BaseException:
-            pool.shutdown(wait=False, cancel_futures=True)  # the caller stopped the workers already
+            pool.shutdown(wait=True, cancel_futures=True)  # the caller stopped the workers: quick, frees the pool's locks
             raise
         pool.shutdown(wait=True)
         return
@@ -203,9 +204,9 @@ def _executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
         yield client.get_executor(pure=False)
 
 
-#: Seconds a Ctrl-C'd batch gives running workers to end (SIGINT: their temp files are removed) before they are
-#: killed; with the bookkeeping after it, a batch stops within 2 s.
-STOP_GRACE_S = 1.0
+#: Seconds a Ctrl-C'd batch gives running workers to finish before they are killed (what they wrote without a
+#: catalogue row is then removed); with the bookkeeping after it, a batch stops within 2 s.
+STOP_GRACE_S = 0.5
 
 
 def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, Any], *, jobs: int | None = None,
@@ -286,13 +287,11 @@ def _signals_ignored() -> Iterator[None]:
 
 def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outcomes: list[Outcome],
                   catalogue: Catalogue, hashes: dict[Path, str], request: dict[str, Any], started_at: float) -> None:
-    """Cancel what is queued, interrupt what runs, record what finished; no result file is left without its row."""
+    """Cancel what is queued, give what runs :data:`STOP_GRACE_S` to finish, kill the rest, record what finished;
+    no result file (nor a temp file) is left without its catalogue row."""
     for future in futures:
         future.cancel()
     processes = list(getattr(executor, "_processes", None) or {})  # the local pool's worker pids (Dask: none)
-    for pid in processes:
-        with contextlib.suppress(OSError):
-            os.kill(pid, signal.SIGINT)
     recorded = {o.path for o in outcomes}
     deadline = time.monotonic() + STOP_GRACE_S
     for future, path in futures.items():
@@ -309,13 +308,14 @@ def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outc
     for pid in processes:
         with contextlib.suppress(OSError):
             os.kill(pid, signal.SIGKILL)
-    for path in futures.values():  # a worker stopped after writing its result but before the row: remove it
+    for path in futures.values():  # a worker killed after writing its result but before the row: remove it
         if str(path.resolve()) in recorded:
             continue
-        result = path.with_name(path.stem + ".result.json")
-        with contextlib.suppress(OSError):
-            if result.stat().st_mtime >= started_at:
-                result.unlink()
+        for output in (path.with_name(path.stem + ".result.json"), path.with_name(path.stem + ".report.png")):
+            remove_temp_files(output)
+            with contextlib.suppress(OSError):
+                if output.stat().st_mtime >= started_at:
+                    output.unlink()
 
 
 def _outcome(future: Future[Outcome], path: Path, hashes: dict[Path, str], request: dict[str, Any]) -> Outcome:

@@ -8,7 +8,9 @@ exit 130.
 from __future__ import annotations
 
 import json
+import os
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -262,6 +264,17 @@ cli.add_command(export_command)
 cli.add_command(view_command)
 
 
+def _exit_now(code: int) -> None:
+    """Exit at once after a Ctrl-C: every file and the catalogue were closed on the way out (context managers);
+    the interpreter's own teardown of scipy/h5py/Qt and a process pool takes 1–2 s more, which a person who
+    pressed Ctrl-C should not wait for. In-process callers (tests) get the usual SystemExit."""
+    if threading.current_thread() is not threading.main_thread() or "pytest" in sys.modules:
+        sys.exit(code)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acq`` console script."""
     try:
@@ -270,12 +283,12 @@ def main(argv: list[str] | None = None) -> None:
     except AcqError as e:
         click.echo(f"acq: error: {e}", err=True)
         sys.exit(e.exit_code)
-    except click.exceptions.Abort:
+    except click.exceptions.Abort:  # click's name for a KeyboardInterrupt inside a command
         click.echo("acq: interrupted", err=True)
-        sys.exit(EXIT_INTERRUPTED)
+        _exit_now(EXIT_INTERRUPTED)
     except KeyboardInterrupt:
         click.echo("acq: interrupted", err=True)
-        sys.exit(EXIT_INTERRUPTED)
+        _exit_now(EXIT_INTERRUPTED)
     except click.UsageError as e:  # one line, like every other error (click's own adds usage and a hint)
         click.echo(f"acq: error: {e.format_message()}", err=True)
         sys.exit(e.exit_code)

@@ -9,6 +9,7 @@ the destination and the cause ("disk full: /data/x.result.json").
 from __future__ import annotations
 
 import errno
+import glob
 import os
 import tempfile
 from collections.abc import Iterator
@@ -86,6 +87,13 @@ def atomic_path(path: Path | str) -> Iterator[Path]:
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+def remove_temp_files(path: Path | str) -> None:
+    """Remove temp files :func:`atomic_path` left for ``path`` (its writer was killed before it could)."""
+    target = Path(path)
+    for tmp in target.parent.glob(f".{glob.escape(target.name)}.*.tmp{target.suffix}"):
+        tmp.unlink(missing_ok=True)
 
 
 def write_text_atomically(path: Path | str, text: str) -> None:
