@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import sys
 import threading
 import time
@@ -249,8 +250,9 @@ def check(session_path: Path) -> int:
     if session.damage:
         for line in session.damage:
             out.print(f"{session_path}: {line}")
-        out.print(f"{session_path}: damaged — the intact part holds {session.current.sample_count} current and "
-                  f"{session.encoder.index.size} encoder samples (acq analyze --partial uses it)")
+        click.echo(f"acq: damaged: {session_path} ({'; '.join(session.damage)}) — the intact part holds "
+                   f"{session.current.sample_count} current and {session.encoder.index.size} encoder samples "
+                   "(acq analyze --partial uses it)", err=True)
         return 1
     out.print(f"{session_path}: {session.status}, checksums and counts verified ({session.current.sample_count} "
               f"current, {session.encoder.index.size} encoder samples), nothing to repair")
@@ -275,8 +277,23 @@ def _exit_now(code: int) -> None:
     os._exit(code)
 
 
+def _sigterm_as_ctrl_c(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acq`` console script."""
+    in_main = threading.current_thread() is threading.main_thread()
+    # SIGTERM stops acq as Ctrl-C does (a batch cancels and tidies up, a recording finishes its file)
+    previous = signal.signal(signal.SIGTERM, _sigterm_as_ctrl_c) if in_main else None
+    try:
+        _run(argv)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _run(argv: list[str] | None) -> None:
     try:
         with quiet_numerics():
             code = cli.main(args=argv, prog_name="acq", standalone_mode=False)

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from acq.session import SessionWriter, Status, new_session_path, utc_now_iso
+from acq.session import SessionExists, SessionWriter, Status, new_session_path, utc_now_iso
 from drivers.base import (CurrentBlock, CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock,
                           StreamEvent)
 from drivers.config import Bench, Profile
@@ -265,13 +265,21 @@ class Recorder:
             return self._writer
         try:
             self.out_dir.mkdir(parents=True, exist_ok=True)
-            path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
+            for _ in range(100):  # another recorder may take the name between the check and the create
+                path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
+                try:
+                    writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
+                                           drive_info=self._drive_info, host_ns_at_start=time.monotonic_ns(),
+                                           operator=self.operator, tags=self.tags)
+                except SessionExists:
+                    continue
+                break
+            else:
+                raise ConfigError(f"{self.out_dir}: no free session file name for joint {self.bench.joint}")
             keep_raw = getattr(self.drive, "keep_raw_frames", None)  # transports that can log their raw traffic
             if keep_raw is not None:
                 keep_raw(path)
-            self._writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
-                                         drive_info=self._drive_info, host_ns_at_start=time.monotonic_ns(),
-                                         operator=self.operator, tags=self.tags)
+            self._writer = writer
             return self._writer
         except OSError as e:
             self._release_devices()

@@ -100,6 +100,10 @@ def _append(ds: h5py.Dataset, values: np.ndarray) -> None:
     ds[n:] = values
 
 
+class SessionExists(ConfigError):
+    """The session file to create exists (another writer took the name first)."""
+
+
 class _PendingColumns:
     """Appends held in memory until the next flush, so each dataset grows once per flush."""
 
@@ -168,7 +172,7 @@ class SessionWriter:
         try:
             f = h5py.File(self.path, "w-", libver=LIBVER)
         except FileExistsError:
-            raise ConfigError(f"{self.path}: a file of that name exists") from None
+            raise SessionExists(f"{self.path}: a file of that name exists") from None
         except OSError as e:
             raise storage_error(e, self.path) from None
         self._file = f
@@ -685,37 +689,46 @@ def load(path: Path | str) -> Session:
     """
     p = Path(path)
     f, notes = _open_for_reading(p)
-    with f:
-        try:
-            raw = dict(f.attrs.items())
-        except (OSError, RuntimeError):
-            why = f"{notes[0]}, root attributes lost" if notes else "root attributes unreadable"
-            raise ConfigError(f"{p}: not a readable HDF5 session file ({why})") from None
-        attrs = {k: _attr(v) for k, v in raw.items()}
-        if attrs.get("format") != FORMAT:
-            raise ConfigError(f"{p}: not an acq session (format attribute is {attrs.get('format')!r})")
-        try:
-            version = int(attrs.get("format_version", 0))
-        except (TypeError, ValueError):
-            raise ConfigError(f"{p}: malformed session: format_version {attrs.get('format_version')!r}") from None
-        if version > FORMAT_VERSION:
-            raise ConfigError(f"{p}: format_version {version} is newer than this acq reads ({FORMAT_VERSION})")
-        try:
-            json.loads(attrs.get("tags_json", "{}"))
-        except (TypeError, ValueError):
-            raise ConfigError(f"{p}: malformed session: attribute tags_json is not JSON") from None
-        bench = _config_attr(p, attrs, "bench_json", Bench)
-        profile = _config_attr(p, attrs, "profile_json", Profile)
-        reader = _Reader(f, p, notes)
-        committed = _committed(f, reader)
-        damage: list[str] = []
-        current = _read_current(reader, committed, damage)
-        encoder = _read_encoder(reader, committed, damage)
-        events = _read_events(reader, committed, damage)
-        if notes and not damage:
-            damage.extend(notes)
-        return Session(path=p, attrs=attrs, bench=bench, profile=profile, current=current, encoder=encoder,
-                       events=events, damage=tuple(damage))
+    try:
+        with f:
+            return _load_open(p, f, notes)
+    except (OSError, RuntimeError, KeyError, ValueError) as e:  # h5py's errors for metadata it cannot read
+        first = (str(e).splitlines() or [type(e).__name__])[0].strip("'\"")
+        why = f"{notes[0]}: {first}" if notes else first
+        raise ConfigError(f"{p}: damaged, cannot be read ({why})") from None
+
+
+def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
+    try:
+        raw = dict(f.attrs.items())
+    except (OSError, RuntimeError, KeyError):
+        why = f"{notes[0]}, root attributes lost" if notes else "root attributes unreadable"
+        raise ConfigError(f"{p}: not a readable HDF5 session file ({why})") from None
+    attrs = {k: _attr(v) for k, v in raw.items()}
+    if attrs.get("format") != FORMAT:
+        raise ConfigError(f"{p}: not an acq session (format attribute is {attrs.get('format')!r})")
+    try:
+        version = int(attrs.get("format_version", 0))
+    except (TypeError, ValueError):
+        raise ConfigError(f"{p}: malformed session: format_version {attrs.get('format_version')!r}") from None
+    if version > FORMAT_VERSION:
+        raise ConfigError(f"{p}: format_version {version} is newer than this acq reads ({FORMAT_VERSION})")
+    try:
+        json.loads(attrs.get("tags_json", "{}"))
+    except (TypeError, ValueError):
+        raise ConfigError(f"{p}: malformed session: attribute tags_json is not JSON") from None
+    bench = _config_attr(p, attrs, "bench_json", Bench)
+    profile = _config_attr(p, attrs, "profile_json", Profile)
+    reader = _Reader(f, p, notes)
+    committed = _committed(f, reader)
+    damage: list[str] = []
+    current = _read_current(reader, committed, damage)
+    encoder = _read_encoder(reader, committed, damage)
+    events = _read_events(reader, committed, damage)
+    if notes and not damage:
+        damage.extend(notes)
+    return Session(path=p, attrs=attrs, bench=bench, profile=profile, current=current, encoder=encoder,
+                   events=events, damage=tuple(damage))
 
 
 def repair(path: Path | str, stop_reason: str) -> Session:
