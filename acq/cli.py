@@ -249,13 +249,13 @@ def check(session_path: Path) -> int:
     out.print(summary_table(summarize(session)))
     if session.damage:
         for line in session.damage:
-            out.print(f"{session_path}: {line}")
+            click.echo(f"{session_path}: {line}")  # plain lines (no wrapping): scripts grep them
         click.echo(f"acq: damaged: {session_path} ({'; '.join(session.damage)}) — the intact part holds "
                    f"{session.current.sample_count} current and {session.encoder.index.size} encoder samples "
                    "(acq analyze --partial uses it)", err=True)
         return 1
-    out.print(f"{session_path}: {session.status}, checksums and counts verified ({session.current.sample_count} "
-              f"current, {session.encoder.index.size} encoder samples), nothing to repair")
+    click.echo(f"{session_path}: {session.status}, checksums and counts verified ({session.current.sample_count} "
+               f"current, {session.encoder.index.size} encoder samples), nothing to repair")
     return 0
 
 

@@ -37,6 +37,7 @@ vanished) stops the writer at once: nothing after it is written or counted
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import time
@@ -361,17 +362,30 @@ class SessionWriter:
             self._file.close()
         if self._abandoned:
             return
-        try:
+        with contextlib.suppress(OSError):
             if free_bytes(self.path.parent) < RESERVE_BYTES // 4:
-                return
-            f = h5py.File(self.path, "r+", libver=LIBVER)
-        except OSError:
-            return
+                return  # no room for a footer: the /flushes rows say what is stored
+        f = self._reopen()
         try:
             _write_footer(f, status, stop_reason, self._filled_optional, self.committed)
             f.close()
-        except Exception:  # noqa: BLE001 - the footer could not be written: the flush rows still hold
+        except Exception as e:  # noqa: BLE001 - the footer could not be written: the flush rows still hold
             abandon(f)
+            self.failure = storage_error(e, self.path)
+            raise StorageError(f"{self.failure} (footer not written; the samples are stored, acq check repairs "
+                               "the file)") from None
+
+    def _reopen(self) -> h5py.File:
+        """The closed file opened for the footer; a reader holding it open briefly is waited for (2 s)."""
+        cause = ""
+        for _ in range(10):
+            try:
+                return h5py.File(self.path, "r+", libver=LIBVER)
+            except OSError as e:
+                cause = cause_of(e)
+                time.sleep(0.2)
+        raise StorageError(f"{self.path}: cannot reopen it to write the footer ({cause}); the samples are stored, "
+                           "acq check repairs the file")
 
 
 def _datasets(f: h5py.File) -> list[h5py.Dataset]:
