@@ -24,15 +24,18 @@ from rich.table import Table
 import analysis
 from acq import __version__
 from acq.session import Session, load, utc_now_iso
-from acq.storage import atomic_path, write_text_atomically
+from acq.storage import atomic_path, free_bytes, write_text_atomically
 from analysis.model import TwoMassParams
 from analysis.pipeline import AnalysisOptions, Pipeline, Result, analyze
 from analysis.signals import Recording, TorqueMethod
-from drivers.errors import ConfigError
+from drivers.errors import ConfigError, StorageError
 
 PARAMS = (("K_Nm_per_rad", "K", "N·m/rad"), ("Jm_kgm2", "J_m", "kg·m²"), ("Jl_kgm2", "J_l", "kg·m²"),
           ("C_Nms_per_rad", "C", "N·m·s/rad"))
 
+
+#: Free bytes needed before drawing a report PNG: the reports are 0.2–0.6 MB (1600×1000 px); ×4 margin.
+REPORT_ROOM_BYTES = 4 << 20
 
 @dataclass(frozen=True)
 class SessionResult:
@@ -160,6 +163,10 @@ def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *,
     json_path = session.path.with_name(session.path.stem + ".result.json")
     report_path = session.path.with_name(session.path.stem + ".report.png") if report else None
     if write:
+        if report_path is not None and free_bytes(report_path.parent) < REPORT_ROOM_BYTES:
+            # before anything is written (no result without its report) and before Qt's PNG writer, whose libpng
+            # prints its own line on stderr when the disk fills under it
+            raise StorageError(f"disk full: {report_path}")
         write_text_atomically(json_path, json.dumps(doc, indent=2))  # a reader never sees half a result
         if report_path is not None:
             from acq.plots import render_report_png

@@ -14,6 +14,7 @@ never block. Keep the file on a local disk — SQLite's locking is unreliable on
 
 from __future__ import annotations
 
+import errno
 import json
 import math
 import sqlite3
@@ -138,7 +139,7 @@ class Catalogue:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._db = sqlite3.connect(self.path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
         except (OSError, sqlite3.Error) as e:
-            raise ConfigError(f"{self.path}: cannot open the catalogue ({e})") from None
+            raise _open_error(self.path, e, "cannot open the catalogue") from None
         self._db.row_factory = sqlite3.Row
         try:
             self._db.execute("PRAGMA journal_mode=WAL")
@@ -146,7 +147,7 @@ class Catalogue:
             self._migrate()
         except sqlite3.DatabaseError as e:
             self._db.close()
-            raise ConfigError(f"{self.path}: not a usable catalogue ({e})") from None
+            raise _open_error(self.path, e, "not a usable catalogue") from None
 
     def __enter__(self) -> Catalogue:
         return self
@@ -244,6 +245,13 @@ class Catalogue:
     def joints(self) -> list[str]:
         """The joints the catalogue knows."""
         return [r[0] for r in self._db.execute("SELECT DISTINCT joint FROM sessions WHERE joint IS NOT NULL")]
+
+
+def _open_error(path: Path, e: BaseException, what: str) -> ConfigError | StorageError:
+    """A full disk is a failed write (exit 1), anything else bad input naming the catalogue (exit 2)."""
+    if "full" in str(e) or getattr(e, "errno", None) == errno.ENOSPC:
+        return StorageError(f"disk full: {path} ({e})")
+    return ConfigError(f"{path}: {what} ({e})")
 
 
 #: ``--tag KEY=VALUE`` (repeatable) of the commands that make a session; :func:`parse_tags` reads it.

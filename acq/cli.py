@@ -108,9 +108,9 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
         _analyze_after_recording(result.path)
     if result.status == "complete":
         return 0
-    err.print(f"[bold red]{result.status}[/]: {escape(result.stop_reason)} — everything recorded up to the stop is "
-              f"kept in {escape(str(result.path))} ({result.current_samples} current samples, "
-              f"{result.encoder_samples} encoder samples)")
+    click.echo(f"acq: {result.status}: {result.stop_reason} — everything recorded up to the stop is kept in "
+               f"{result.path} ({result.current_samples} current samples, {result.encoder_samples} encoder samples)",
+               err=True)  # one plain line (rich would wrap it)
     return EXIT_INTERRUPTED if result.status == "interrupted" else 1
 
 
