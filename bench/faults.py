@@ -436,14 +436,15 @@ def signal_analyze(lab: Lab, sig: signal.Signals) -> Row:
     path = lab.copy()
     p = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(path)], stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True)
-    time.sleep(4.0)  # start-up and loading: the analysis is under way
+    time.sleep(5.0)  # start-up and loading: the analysis is under way (or, on a loaded machine, the imports)
     p.send_signal(sig)
     o, e = p.communicate(timeout=30)
     run = Run(p.returncode, o, e, 0.0)
     results = sorted(q.name for q in path.parent.glob("*.result.json"))
-    problem = None if run.code == 0 else clean(run, (130,) if sig != signal.SIGKILL else (-9,))
-    if sig == signal.SIGKILL:
-        problem = None if run.code == -9 else problem
+    # 130 from acq; -SIG when the signal came during the interpreter's imports, before acq could catch it: the
+    # process ends quietly by that signal (a shell shows 128 + SIG), nothing written yet
+    quiet_death = run.code == -sig and "Traceback" not in run.err
+    problem = None if run.code == 0 or quiet_death else clean(run, (130,))
     rows = 0
     if (path.parent / "catalogue.sqlite").exists():
         with sqlite3.connect(path.parent / "catalogue.sqlite") as db:
