@@ -118,7 +118,13 @@ def _identify(path: Path, request: dict[str, Any], *, report: bool, catalogue_pa
     """Analyse one session with ``request`` and put the result into its folder's catalogue."""
     start = time.perf_counter()
     done = analyze_session(path, report=report, **request)
-    record_outcome(done, request, catalogue_path, time.perf_counter() - start)
+    try:
+        record_outcome(done, request, catalogue_path, time.perf_counter() - start)
+    except BaseException:  # no result without its catalogue row (a later batch analyses the session again)
+        for written in (done.json_path, done.report_path):
+            if written is not None:
+                written.unlink(missing_ok=True)
+        raise
     return done
 
 

@@ -236,6 +236,9 @@ def disk_full_output(lab: Lab, what: str) -> Row:
             problem = f"the error does not name {target}: {run.lines}"
         if problem is None and temp_files(disk):
             problem = f"temp files left: {temp_files(disk)}"
+        if problem is None and what in ("result JSON", "report PNG", "catalogue") and \
+                list(session.parent.glob("*.result.json")):
+            problem = "a result file without its catalogue row"
         return row(case, run, problem)
 
 
