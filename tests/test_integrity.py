@@ -175,3 +175,39 @@ def test_cut_file_is_found_in_bounded_time(recorded: Path, tmp_path: Path, capsy
         assert s.damage and all("unreadable" in d or d.startswith("file cut") for d in s.damage)
         assert s.current.sample_count < 10 * RATE_HZ
         assert not np.any(s.current.phases_a["i_a"] == 0.0)
+
+
+def test_writer_stops_when_its_file_vanishes(tmp_path: Path) -> None:
+    from acq.config import load_bench, load_profile
+    from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo
+    from drivers.errors import StorageError
+
+    path = tmp_path / "s.h5"
+    w = acq.session.SessionWriter(path, bench=load_bench(), profile=load_profile("triangle_0.2s"),
+                                  current_info=CurrentSourceInfo(1000.0, ("i_a",), "test"),
+                                  drive_info=DriveInfo(0.001, 4096, "sim", "cycle", "test"), host_ns_at_start=0)
+    w.append_current(CurrentBlock(0, np.ones((1, 100)), 1))
+    w.flush()
+    path.unlink()
+    w.append_current(CurrentBlock(100, np.ones((1, 100)), 2))
+    with pytest.raises(StorageError) as e:
+        w.flush()
+    assert str(e.value) == f"session file vanished: {path}"
+    assert w.committed["current_samples"] == 100 and w.failure is e.value
+    w.finish("complete", "recorded")  # nothing more is written, nothing raised: the recorder reports the failure
+    assert not path.exists()
+
+
+def test_atomic_write_on_a_full_disk_names_the_file_and_leaves_no_temp(tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    from acq.storage import write_text_atomically
+    from drivers.errors import StorageError
+
+    disk = tmp_path / "disk"
+    with small_disk(disk, "1m", monkeypatch) as kind:
+        if kind != "tmpfs":
+            pytest.skip("needs a real full file system (mount a tmpfs as root)")
+        with pytest.raises(StorageError) as e:
+            write_text_atomically(disk / "x.result.json", "x" * (2 << 20))
+        assert str(e.value) == f"disk full: {disk / 'x.result.json'}"
+        assert list(disk.iterdir()) == []
