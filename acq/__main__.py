@@ -1,5 +1,5 @@
 """``python -m acq`` runs the command line."""
 
-from acq.cli import main
+from acq.entry import main
 
 main()

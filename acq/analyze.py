@@ -11,9 +11,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-import os
 import sys
-import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -23,10 +21,15 @@ import scipy
 import analysis
 from acq import __version__
 from acq.session import Session, load, utc_now_iso
+from acq.storage import atomic_path, free_bytes, write_text_atomically
 from analysis.model import TwoMassParams
 from analysis.pipeline import AnalysisOptions, Pipeline, Result, analyze
 from analysis.signals import Recording, TorqueMethod
-from drivers.errors import ConfigError
+from drivers.errors import ConfigError, StorageError
+
+#: Free bytes needed before drawing a report PNG: the reports are 0.2–0.6 MB (1600×1000 px); ×4 margin.
+REPORT_ROOM_BYTES = 4 << 20
+
 
 @dataclass(frozen=True)
 class SessionResult:
@@ -131,14 +134,17 @@ def result_json(session: Session, result: Result) -> dict[str, Any]:
 
 
 def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *, write: bool = True,
-                    report: bool = True, **option_kwargs: Any) -> SessionResult:
+                    report: bool = True, partial: bool = False, **option_kwargs: Any) -> SessionResult:
     """Identify the joint of one session; write ``<session>.result.json``.
 
     The report PNG is not drawn here: with ``report`` its path is set, and :func:`draw_report` draws it once the
     result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
-    :class:`ConfigError` naming the session.
+    :class:`ConfigError` naming the session; so does a session still ``recording`` or damaged unless ``partial``
+    (then its intact part is analysed and the result says ``"partial": true``). A failed write raises
+    :class:`StorageError` naming the file, leaving no temp file.
     """
     session = load(path)
+    session.require_usable(partial=partial)
     opts = options if options is not None else options_for(session, **option_kwargs)
     nyquist_hz = 0.5 / session.encoder.period_s
     if opts.band_hz is not None and opts.band_hz[1] > nyquist_hz:
@@ -150,20 +156,22 @@ def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *,
     except ValueError as e:
         raise ConfigError(f"{session.path}: {e}") from None
     doc = result_json(session, result)
+    doc["partial"] = bool(session.damage) or session.status == "recording"
+    doc["session"]["damage"] = list(session.damage)
     json_path = session.path.with_name(session.path.stem + ".result.json")
     report_path = session.path.with_name(session.path.stem + ".report.png") if report and write else None
     if write:
+        if report_path is not None and free_bytes(report_path.parent) < REPORT_ROOM_BYTES:
+            # before anything is written (no result without its report) and before Qt's PNG writer, whose libpng
+            # prints its own line on stderr when the disk fills under it
+            raise StorageError(f"disk full: {report_path}")
         write_json(doc, json_path)
     return SessionResult(session, result, doc, json_path, report_path)
 
 
 def write_json(doc: dict[str, Any], path: Path) -> None:
     """Write a result document through a temporary file of this writer, so a reader never sees half of it."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")  # one per writer
-    os.fchmod(fd, 0o644)
-    with os.fdopen(fd, "w") as f:
-        f.write(json.dumps(doc, indent=2))
-    os.replace(tmp, path)
+    write_text_atomically(path, json.dumps(doc, indent=2))
 
 
 def draw_report(done: SessionResult) -> SessionResult:
@@ -178,8 +186,11 @@ def draw_report(done: SessionResult) -> SessionResult:
     try:
         from acq.plots import render_report_png  # Qt only when a picture is drawn
 
-        render_report_png(done.result.figures, done.report_path, values=done.json_dict,
-                          title=f"{done.session.attrs.get('joint')} · {done.session.path.name}")
+        with atomic_path(done.report_path) as tmp_png:
+            render_report_png(done.result.figures, tmp_png, values=done.json_dict,
+                              title=f"{done.session.attrs.get('joint')} · {done.session.path.name}")
+    except StorageError:
+        raise  # a write that failed (disk full, I/O error) is a failure, named by the file
     except Exception as e:  # noqa: BLE001 — whatever the plotting stack does, the identification stands
         why = f"{type(e).__name__}: {e}"
         quality = done.json_dict["quality"]

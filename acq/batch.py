@@ -13,25 +13,31 @@ that fails is recorded with its error and the batch goes on.
 
 from __future__ import annotations
 
+import contextlib
 import glob
 import json
 import multiprocessing
 import os
+import signal
+import threading
 import time
+import warnings
 from collections.abc import Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from acq.analyze import SessionResult, analysis_fingerprint, analyze_session, draw_report, sha256_of
 from acq.catalogue import Catalogue, Outcome
 from acq.display import batch_table
-from acq.session import Session, load
+from acq.session import Session, load, read_status
+from acq.storage import remove_temp_files
 from drivers.errors import AcqError, ConfigError
 
 CATALOGUE_NAME = "catalogue.sqlite"
@@ -46,6 +52,8 @@ class BatchReport:
     outcomes: list[Outcome]
     skipped: list[Path]
     seconds: float
+    not_ready: list[Path] = field(default_factory=list)  # status recording: skipped (unless the request is partial)
+    interrupted: bool = False  # Ctrl-C: queued analyses cancelled; every outcome received is in the catalogue
 
     @property
     def failed(self) -> list[Outcome]:
@@ -126,6 +134,15 @@ def session_meta(session: Session) -> dict[str, Any]:
             "tags": session.tags}
 
 
+@contextmanager
+def quiet_numerics() -> Iterator[None]:
+    """No numpy floating-point warning (divide by zero, invalid value, overflow) reaches the person: the analysis
+    reports unusable data through its errors and verdict, and a warning line before them only confuses."""
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield
+
+
 def analyze_one(path: str, sha256: str, request: dict[str, Any], report: bool) -> Outcome:
     """Analyse one session (runs in a worker process or on a Dask worker); never raises.
 
@@ -142,7 +159,8 @@ def analyze_one(path: str, sha256: str, request: dict[str, Any], report: bool) -
     """
     start = time.perf_counter()
     try:
-        done = analyze_session(path, report=report, **request)
+        with quiet_numerics():
+            done = analyze_session(path, report=report, **request)
     except Exception as e:  # noqa: BLE001 — a batch records any session's failure and goes on
         error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
         return Outcome(path, sha256, request_key(request), _meta_if_readable(path), None, error,
@@ -168,8 +186,13 @@ def _executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
             os.environ.setdefault(var, "1")
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["acq.batch"])
-        with ProcessPoolExecutor(max_workers=jobs, mp_context=context) as pool:
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
+        try:
             yield pool
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)  # the caller stopped the workers: quick, frees the pool's locks
+            raise
+        pool.shutdown(wait=True)
         return
     try:
         from distributed import Client
@@ -183,6 +206,11 @@ def _executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
         yield client.get_executor(pure=False)
 
 
+#: Seconds a Ctrl-C'd batch gives running workers to finish before they are killed (what they wrote without a
+#: catalogue row is then removed); with the bookkeeping after it, a batch stops within 2 s.
+STOP_GRACE_S = 0.5
+
+
 def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, Any], *, jobs: int | None = None,
               scheduler: str | None = None, report: bool = True, console: Console | None = None) -> BatchReport:
     """Analyse the sessions not yet current in ``catalogue``, recording each outcome as it arrives.
@@ -194,7 +222,8 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, An
     catalogue : Catalogue
         Where the outcomes go (and what decides which sessions are current).
     request : dict
-        Keyword arguments of :func:`acq.analyze.options_for` (torque, params, fit, band_hz, pipeline).
+        Keyword arguments of :func:`acq.analyze.analyze_session` (torque, params, fit, band_hz, pipeline,
+        optional partial). Without ``partial``, sessions still ``recording`` are skipped (:attr:`BatchReport.not_ready`).
     jobs : int, optional
         Worker processes of the local pool (default: the CPU count); ignored with ``scheduler``.
     scheduler : str, optional
@@ -203,12 +232,18 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, An
         Also draw each session's report PNG.
     console : rich.console.Console, optional
         Where the progress bar goes (default: stderr).
+
+    Ctrl-C cancels the queued analyses, stops the running ones (a result file a stopped worker wrote without its
+    catalogue row is removed), records every outcome received and returns with ``interrupted`` set.
     """
     start = time.perf_counter()
+    started_at = time.time()
     current = catalogue.current(request_key(request))
     hashes = {p: sha256_of(p) for p in paths}
-    todo = [p for p in paths if hashes[p] not in current]
+    not_ready = [] if request.get("partial") else [p for p in paths if _status(p) == "recording"]
+    todo = [p for p in paths if hashes[p] not in current and p not in not_ready]
     outcomes: list[Outcome] = []
+    interrupted = False
     if todo:
         with _executor(jobs or os.cpu_count() or 1, scheduler) as executor:
             futures: dict[Future[Outcome], Path] = {
@@ -217,12 +252,72 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, An
                        TextColumn("{task.fields[failed]} failed"), TimeElapsedColumn(), TimeRemainingColumn())
             with Progress(*columns, console=console or Console(stderr=True)) as progress:
                 task = progress.add_task("analysing", total=len(todo), failed=0)
-                for future in as_completed(futures):
-                    outcome = _outcome(future, futures[future], hashes, request)
-                    catalogue.record(outcome)
-                    outcomes.append(outcome)
-                    progress.update(task, advance=1, failed=sum(o.error is not None for o in outcomes))
-    return BatchReport(outcomes, [p for p in paths if p not in todo], time.perf_counter() - start)
+                try:
+                    for future in as_completed(futures):
+                        outcome = _outcome(future, futures[future], hashes, request)
+                        catalogue.record(outcome)
+                        outcomes.append(outcome)
+                        progress.update(task, advance=1, failed=sum(o.error is not None for o in outcomes))
+                except KeyboardInterrupt:
+                    interrupted = True
+                    with _signals_ignored():
+                        _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at)
+                    raise
+    return BatchReport(outcomes, [p for p in paths if p not in todo and p not in not_ready],
+                       time.perf_counter() - start, not_ready, interrupted)
+
+
+def _status(path: Path) -> str:
+    try:
+        return read_status(path)
+    except AcqError:
+        return ""  # unreadable: the analysis reports why
+
+
+@contextmanager
+def _signals_ignored() -> Iterator[None]:
+    """While a stopped batch tidies up (≤ 2 s), a second Ctrl-C does not cut it short."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outcomes: list[Outcome],
+                  catalogue: Catalogue, hashes: dict[Path, str], request: dict[str, Any], started_at: float) -> None:
+    """Cancel what is queued, give what runs :data:`STOP_GRACE_S` to finish, kill the rest, record what finished;
+    no result file (nor a temp file) is left without its catalogue row."""
+    for future in futures:
+        future.cancel()
+    processes = list(getattr(executor, "_processes", None) or {})  # the local pool's worker pids (Dask: none)
+    recorded = {o.path for o in outcomes}
+    deadline = time.monotonic() + STOP_GRACE_S
+    for future, path in futures.items():
+        if future.cancelled():
+            continue
+        try:
+            outcome = future.result(timeout=max(0.0, deadline - time.monotonic()))
+        except BaseException:  # noqa: BLE001 - interrupted or still running: no outcome
+            continue
+        if outcome.path not in recorded:
+            catalogue.record(outcome)
+            outcomes.append(outcome)
+            recorded.add(outcome.path)
+    for pid in processes:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    for path in futures.values():  # a worker killed after writing its result but before the row: remove it
+        if str(path.resolve()) in recorded:
+            continue
+        for output in (path.with_name(path.stem + ".result.json"), path.with_name(path.stem + ".report.png")):
+            remove_temp_files(output)
+            with contextlib.suppress(OSError):
+                if output.stat().st_mtime >= started_at:
+                    output.unlink()
 
 
 def _outcome(future: Future[Outcome], path: Path, hashes: dict[Path, str], request: dict[str, Any]) -> Outcome:
@@ -240,7 +335,8 @@ def report_json(report: BatchReport) -> list[dict[str, Any]]:
              "K_Nm_per_rad": None if o.doc is None else o.doc["K_Nm_per_rad"],
              "verdict": None if o.doc is None else o.doc["quality"]["verdict"], "error": o.error}
             for o in report.outcomes]
-    return done + [{"path": str(p.resolve()), "outcome": "skipped"} for p in report.skipped]
+    return (done + [{"path": str(p.resolve()), "outcome": "skipped"} for p in report.skipped]
+            + [{"path": str(p.resolve()), "outcome": "skipped: status recording"} for p in report.not_ready])
 
 
 def analyze_many(spec: Path, request: dict[str, Any], *, jobs: int | None, catalogue_path: Path | str | None,

@@ -26,9 +26,10 @@ from typing import Any
 
 import click
 
-from acq.catalogue_backends import is_url, open_catalogue_db
+from acq.catalogue_backends import is_url, open_catalogue_db, open_error
 from acq.session import utc_now_iso
-from drivers.errors import ConfigError
+from acq.storage import cause_of
+from drivers.errors import ConfigError, StorageError
 
 #: Step i brings a database from version i to i + 1.
 MIGRATIONS: tuple[str, ...] = (
@@ -56,6 +57,10 @@ MIGRATIONS: tuple[str, ...] = (
     """
     ALTER TABLE sessions ADD COLUMN tags_json TEXT NOT NULL DEFAULT '{}';
     CREATE INDEX sessions_joint ON sessions (joint, created_utc);
+    """,
+    # 2 → 3: results of a session's intact part only (damaged, or still recording; acq analyze --partial)
+    """
+    ALTER TABLE analyses ADD COLUMN partial INTEGER NOT NULL DEFAULT 0;
     """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
@@ -138,7 +143,7 @@ class Catalogue:
             self._migrate()
         except self._dialect.errors as e:
             self._db.close()
-            raise ConfigError(f"{self.path}: not a usable catalogue ({e})") from None
+            raise open_error(self.path, e, "not a usable catalogue") from None
         except BaseException:
             self._db.close()
             raise
@@ -211,10 +216,17 @@ class Catalogue:
             "clock_residual_s": doc.get("clock", {}).get("residual_s"),
             "mean_coherence": doc.get("quality", {}).get("mean_coherence"),
             "truth_json": json.dumps(doc["simulated_truth"]) if "simulated_truth" in doc else None,
+            "partial": int(bool(doc.get("partial"))),
         }
         for name, short in _PARAM_COLUMNS:
             lo, hi = doc.get("ci95", {}).get(name, (None, None))
             values |= {name: doc.get(name), f"{short}_lo": lo, f"{short}_hi": hi}
+        try:
+            self._write_outcome(key, meta, outcome, values)
+        except self._dialect.errors as e:  # e.g. "database or disk is full": the row is not there, say which catalogue
+            raise StorageError(f"{cause_of(e) if 'full' not in str(e) else 'disk full'}: {self.path} ({e})") from None
+
+    def _write_outcome(self, key: str, meta: dict[str, Any], outcome: Outcome, values: dict[str, Any]) -> None:
         columns = ", ".join(values)
         updates = ", ".join(f"{c} = excluded.{c}" for c in values if c not in ("session_key", "request_key"))
         with self._transaction():

@@ -14,6 +14,7 @@ lives and how migrations are serialised between processes.
 
 from __future__ import annotations
 
+import errno
 import re
 import sqlite3
 import time
@@ -21,7 +22,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from drivers.errors import ConfigError
+from drivers.errors import ConfigError, StorageError
 
 #: Seconds a writer waits for another process's lock (SQLite's busy timeout, PostgreSQL's lock_timeout).
 BUSY_TIMEOUT_S = 60.0
@@ -34,6 +35,13 @@ _URL_SCHEMES = ("postgresql://", "postgres://")
 def is_url(location: Path | str) -> bool:
     """True when ``location`` is a PostgreSQL URL rather than a SQLite file."""
     return isinstance(location, str) and location.startswith(_URL_SCHEMES)
+
+
+def open_error(path: Path | str, e: BaseException, what: str) -> ConfigError | StorageError:
+    """A full disk is a failed write (exit 1), anything else bad input naming the catalogue (exit 2)."""
+    if "full" in str(e) or getattr(e, "errno", None) == errno.ENOSPC:
+        return StorageError(f"disk full: {path} ({e})")
+    return ConfigError(f"{path}: {what} ({e})")
 
 
 def redacted(url: str) -> str:
@@ -54,14 +62,14 @@ class SQLiteDialect:
             path.parent.mkdir(parents=True, exist_ok=True)
             db = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
         except (OSError, sqlite3.Error) as e:
-            raise ConfigError(f"{path}: cannot open the catalogue ({e})") from None
+            raise open_error(path, e, "cannot open the catalogue") from None
         db.row_factory = sqlite3.Row
         try:
             _set_wal(db)
             db.execute("PRAGMA foreign_keys=ON")
         except sqlite3.DatabaseError as e:
             db.close()
-            raise ConfigError(f"{path}: not a usable catalogue ({e})") from None
+            raise open_error(path, e, "not a usable catalogue") from None
         return db
 
     def sql(self, text: str) -> str:

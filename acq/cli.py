@@ -1,13 +1,17 @@
 """The ``acq`` command line: record, info, check (more commands register themselves below).
 
 Errors for people: an :class:`~drivers.errors.AcqError` anywhere becomes one line on stderr and
-exit code 2 (bad input) or 1 (device); a usage error is click's own (exit 2); Ctrl-C is exit 130.
+exit code 2 (bad input) or 1 (device, failed write); a usage error is one line too (exit 2); Ctrl-C is
+exit 130.
 """
 
 from __future__ import annotations
 
 import json
+import os
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -19,9 +23,9 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from acq import __version__
 from acq.analyze import SessionResult, analyze_session, draw_report
-from acq.batch import DEFAULT_REQUEST, analyze_many, is_batch, record_outcome
+from acq.batch import DEFAULT_REQUEST, analyze_many, is_batch, quiet_numerics, record_outcome
 from acq.catalogue import CatalogueLocation, parse_tags, tag_option
-from acq.config import load_bench, load_profile
+from acq.config import check_duration, check_memory, load_bench, load_profile, with_joint
 from acq.devices import devices_command
 from acq.display import result_table, summary_table
 from acq.exporters import export_command
@@ -30,7 +34,7 @@ from acq.importers import import_command
 from acq.monitor_cli import monitor_command
 from acq.recorder import Recorder, RecordingResult
 from acq.selftest_cli import selftest_command
-from acq.session import load, repair
+from acq.session import Session, load, repair
 from acq.summary import summarize
 from acq.trend import trend_command
 from acq.view import view_command
@@ -65,7 +69,7 @@ def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> 
 @click.option("--profile", "profile_name", required=True, help="Profile name in configs/profiles/ or a TOML path.")
 @click.option("--bench", "bench_path", type=click.Path(path_type=Path), default=None,
               help="Bench TOML (default: the simulated bench configs/benches/sim.toml).")
-@click.option("--duration", "duration_s", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--duration", "duration_s", type=float, default=None,
               help="Seconds to record (default: the profile's duration_s).")
 @click.option("--joint", default=None, help="Joint name (default: the bench config's).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("sessions"), show_default=True,
@@ -79,11 +83,10 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
            out_dir: Path, operator: str, fast: bool, no_analyze: bool, tags: tuple[str, ...],
            live: bool) -> int:
     """Swing the joint on PROFILE, record current and encoder, write one session file."""
-    bench = load_bench(bench_path)
-    if joint:
-        bench = bench.model_copy(update={"joint": joint})
+    bench = with_joint(load_bench(bench_path), joint)
     profile = load_profile(profile_name)
-    duration = duration_s if duration_s is not None else profile.duration_s
+    duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
+    check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))
     if live:
@@ -100,14 +103,18 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
         recorder.abort("interrupted by user (Ctrl-C)" if isinstance(e, KeyboardInterrupt)
                        else f"{type(e).__name__}: {e}")
         raise
+    if result.write_failed:  # nothing more is written to that disk: no summary read back, no analysis
+        click.echo(f"acq: failed: {result.stop_reason} ({result.current_samples} current and "
+                   f"{result.encoder_samples} encoder samples stored in {result.path})", err=True)
+        return 1
     out.print(summary_table(summarize(load(result.path))))
     if not no_analyze and result.current_samples and result.encoder_samples:
         _analyze_after_recording(result.path)
     if result.status == "complete":
         return 0
-    err.print(f"[bold red]{result.status}[/]: {escape(result.stop_reason)} — everything recorded up to the stop is "
-              f"kept in {escape(str(result.path))} ({result.current_samples} current samples, "
-              f"{result.encoder_samples} encoder samples)")
+    click.echo(f"acq: {result.status}: {result.stop_reason} — everything recorded up to the stop is kept in "
+               f"{result.path} ({result.current_samples} current samples, {result.encoder_samples} encoder samples)",
+               err=True)  # one plain line (rich would wrap it)
     return EXIT_INTERRUPTED if result.status == "interrupted" else 1
 
 
@@ -115,7 +122,11 @@ def _identify(path: Path, request: dict[str, Any], *, report: bool, catalogue_pa
     """Analyse one session with ``request`` and put the result into its folder's catalogue."""
     start = time.perf_counter()
     done = analyze_session(path, report=report, **request)
-    record_outcome(done, request, catalogue_path, time.perf_counter() - start)
+    try:
+        record_outcome(done, request, catalogue_path, time.perf_counter() - start)
+    except BaseException:  # no result without its catalogue row (a later batch analyses the session again)
+        done.json_path.unlink(missing_ok=True)
+        raise
     return draw_report(done)  # after the result and the catalogue entry: a picture that fails is only a note
 
 
@@ -170,12 +181,14 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
 @click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
               help="The catalogue to fill: a SQLite file (default: catalogue.sqlite in the session's folder) or a "
                    "postgresql://user@host/db URL shared by several hosts.")
+@click.option("--partial", is_flag=True, help="Also analyse a session still being recorded (status recording) or "
+                                              "damaged: its intact part, the result marked partial.")
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Folder or glob: run on a Dask distributed cluster (tcp://host:8786); the workers must reach "
                    "the session files at the same paths.")
 def analyze_command(session_path: Path, torque: str | None, params: str, fit_kind: str, band: str | None,
                     paper: bool, as_json: bool, no_report: bool, jobs: int | None, catalogue_path: Path | str | None,
-                    scheduler: str | None) -> int:
+                    partial: bool, scheduler: str | None) -> int:
     """Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png.
 
     SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
@@ -183,6 +196,8 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
     """
     request = {"torque": torque, "params": params, "fit": fit_kind, "band_hz": _parse_band(band),
                "pipeline": "paper" if paper else "acq"}
+    if partial:  # only when asked: the request (and so the catalogue's key) of a normal analysis is unchanged
+        request["partial"] = True
     if is_batch(session_path):
         return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
                             report=not no_report, as_json=as_json, out=out)
@@ -201,30 +216,55 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def info(session_path: Path, as_json: bool) -> int:
     """Summarise a session: samples, durations, effective rates, gaps."""
-    summary = summarize(load(session_path))
+    session = load(session_path)
+    summary = summarize(session)
+    warning = _integrity_warning(session)
     if as_json:
-        click.echo(json.dumps(summary.to_json_dict(), indent=2))
+        doc = summary.to_json_dict()
+        doc["damage"] = list(session.damage)
+        click.echo(json.dumps(doc, indent=2))
     else:
         out.print(summary_table(summary))
+    if warning:
+        click.echo(f"acq: warning: {warning}", err=True)
     return 0
+
+
+def _integrity_warning(session: Session) -> str | None:
+    """One line when a session is damaged or still ``recording`` (killed recorder), saying to run acq check."""
+    if session.damage:
+        return f"{session.path}: damaged ({'; '.join(session.damage)}) — run acq check {session.path}"
+    if session.status == "recording":
+        return (f"{session.path}: status recording (still being recorded, or the recorder was killed) — "
+                f"run acq check {session.path}")
+    return None
 
 
 @cli.command()
 @click.argument("session_path", type=click.Path(path_type=Path))
 def check(session_path: Path) -> int:
-    """Check a session's integrity; mark one left by a killed recorder as interrupted and repair it."""
+    """Verify a session's checksums and committed counts; repair one left by a killed recorder.
+
+    Exit 0 when the session is intact (or was repaired), 1 when damage remains (each damaged span is listed).
+    """
     session = load(session_path)
-    summary = summarize(session)
     if session.status == "recording":
-        repair(session_path, "recorder stopped without finishing the file (found by acq check)")
-        summary = summarize(load(session_path))
-        out.print(summary_table(summary))
+        session = repair(session_path, "recorder stopped without finishing the file (found by acq check)")
+        out.print(summary_table(summarize(session)))
         out.print(f"{session_path}: interrupted — the recorder stopped without finishing the file; repaired: "
-                  f"status = interrupted, {summary.streams[0].samples} current and {summary.streams[1].samples} "
+                  f"status = interrupted, {session.current.sample_count} current and {session.encoder.index.size} "
                   "encoder samples kept")
         return 0
-    out.print(summary_table(summary))
-    out.print(f"{session_path}: {session.status}, nothing to repair")
+    out.print(summary_table(summarize(session)))
+    if session.damage:
+        for line in session.damage:
+            click.echo(f"{session_path}: {line}")  # plain lines (no wrapping): scripts grep them
+        click.echo(f"acq: damaged: {session_path} ({'; '.join(session.damage)}) — the intact part holds "
+                   f"{session.current.sample_count} current and {session.encoder.index.size} encoder samples "
+                   "(acq analyze --partial uses it)", err=True)
+        return 1
+    click.echo(f"{session_path}: {session.status}, checksums and counts verified ({session.current.sample_count} "
+               f"current, {session.encoder.index.size} encoder samples), nothing to repair")
     return 0
 
 
@@ -238,19 +278,49 @@ cli.add_command(monitor_command)
 cli.add_command(selftest_command)
 
 
+def _exit_now(code: int) -> None:
+    """Exit at once after a Ctrl-C: every file and the catalogue were closed on the way out (context managers);
+    the interpreter's own teardown of scipy/h5py/Qt and a process pool takes 1–2 s more, which a person who
+    pressed Ctrl-C should not wait for. In-process callers (tests) get the usual SystemExit."""
+    if threading.current_thread() is not threading.main_thread() or "pytest" in sys.modules:
+        sys.exit(code)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
+def _sigterm_as_ctrl_c(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acq`` console script."""
+    in_main = threading.current_thread() is threading.main_thread()
+    # SIGTERM stops acq as Ctrl-C does (a batch cancels and tidies up, a recording finishes its file)
+    previous = signal.signal(signal.SIGTERM, _sigterm_as_ctrl_c) if in_main else None
     try:
-        code = cli.main(args=argv, prog_name="acq", standalone_mode=False)
+        _run(argv)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _run(argv: list[str] | None) -> None:
+    try:
+        with quiet_numerics():
+            code = cli.main(args=argv, prog_name="acq", standalone_mode=False)
     except AcqError as e:
         click.echo(f"acq: error: {e}", err=True)
         sys.exit(e.exit_code)
-    except click.exceptions.Abort:
+    except click.exceptions.Abort:  # click's name for a KeyboardInterrupt inside a command
         click.echo("acq: interrupted", err=True)
-        sys.exit(EXIT_INTERRUPTED)
+        _exit_now(EXIT_INTERRUPTED)
     except KeyboardInterrupt:
         click.echo("acq: interrupted", err=True)
-        sys.exit(EXIT_INTERRUPTED)
+        _exit_now(EXIT_INTERRUPTED)
+    except click.UsageError as e:  # one line, like every other error (click's own adds usage and a hint)
+        click.echo(f"acq: error: {e.format_message()}", err=True)
+        sys.exit(e.exit_code)
     except click.ClickException as e:
         e.show()
         sys.exit(e.exit_code)

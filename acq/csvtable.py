@@ -51,7 +51,8 @@ class CsvTable:
         return ConfigError(f"{self.path}: line {self.line(row)}, column {column}: {what}")
 
 
-def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> CsvTable:
+def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = (),
+             bounds: dict[str, float] | None = None) -> CsvTable:
     """Read a comma-separated file whose header names its columns.
 
     Parameters
@@ -62,6 +63,8 @@ def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = 
         Column names that must be present.
     optional : tuple of str
         Column names that may be present; any other name is an error (a misspelt header).
+    bounds : dict of str to float, optional
+        Physical bound per column: a cell whose magnitude exceeds it is an error.
 
     Returns
     -------
@@ -89,6 +92,10 @@ def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = 
         row, col = np.unravel_index(int(np.argmax(bad)), data.shape)
         value = data[row, col]
         raise table.error(int(row), names[int(col)], "NaN" if np.isnan(value) else f"{value} is not finite")
+    for name, limit in (bounds or {}).items():
+        if name in table.columns and (over := np.abs(table.columns[name]) > limit).any():
+            row = int(np.argmax(over))
+            raise table.error(row, name, f"{table.columns[name][row]:g} is beyond the physical bound ±{limit:g}")
     return table
 
 

@@ -348,6 +348,9 @@ def batch_table(report: BatchReport) -> FittedTable:
         columns.append(Column("error", [o.error or "" for o in outcomes], "left", wrap=True))
     caption = [f"{len(report.outcomes)} analysed ({len(report.failed)} failed), {len(report.skipped)} skipped as "
                f"current, {report.seconds:.1f} s"]
+    if report.not_ready:
+        caption.append(f"{len(report.not_ready)} skipped as still recording (acq check repairs a killed recorder's "
+                       "session; --partial analyses it as it is)")
     return FittedTable("batch analysis" + (f" — joint {escape(joints[0])}" if one_joint and joints else ""),
                        columns, caption)
 

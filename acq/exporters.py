@@ -17,7 +17,6 @@ bench and profile as used, and whether the two ``t_s`` columns are stamps on one
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import click
@@ -27,6 +26,7 @@ from rich.markup import escape
 
 from acq.export_metadata import write_metadata
 from acq.session import Session, load
+from acq.storage import write_text_atomically
 
 PHASE_COLUMNS = ("i_a", "i_b", "i_c")
 
@@ -40,11 +40,9 @@ def _exact(values: np.ndarray) -> list[str]:
 
 
 def _write_columns(path: Path, columns: dict[str, list[str]]) -> None:
-    """Write ``name -> formatted cells`` as a CSV under a temporary name, then rename."""
-    tmp = path.with_name(f".{path.name}.writing")
+    """Write ``name -> formatted cells`` as a CSV under a temporary name, then rename (no temp file left on error)."""
     body = "\n".join(map(",".join, zip(*columns.values())))
-    tmp.write_text(",".join(columns) + "\n" + body + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    write_text_atomically(path, ",".join(columns) + "\n" + body + "\n")
 
 
 def current_t0_s(session: Session) -> float:

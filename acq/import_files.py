@@ -96,6 +96,11 @@ class EncoderTable:
 
 # ------------------------------------------------------------------------------------ checks
 
+#: Physical bounds of imported CSV values (magnitudes): times up to ~300 years (Unix epoch stamps fit), phase
+#: currents up to 10 kA (robot joint motors draw < 1 kA), counters within int64 with headroom.
+CSV_BOUNDS = {"t_s": 1e10, "drive_time_s": 1e10, "i_a_A": 1e4, "i_b_A": 1e4, "i_c_A": 1e4,
+              "position_counts": 2.0**62, "index": 2.0**62}
+
 
 def _check_increasing(table: CsvTable, column: str, values: np.ndarray, *, strict: bool) -> None:
     step = np.diff(values)
@@ -178,7 +183,7 @@ def _regular_clock(table: CsvTable) -> tuple[np.ndarray, float]:
 
 def read_current_csv(path: Path, bench: Bench) -> CurrentTable:
     """Read and check a current CSV (``t_s`` and phase columns ``i_a_A`` ...)."""
-    table = read_csv(path, ("t_s",), tuple(f"{p}_A" for p in PHASES))
+    table = read_csv(path, ("t_s",), tuple(f"{p}_A" for p in PHASES), bounds=CSV_BOUNDS)
     _nonempty(table)
     t = table.columns["t_s"]
     _check_increasing(table, "t_s", t, strict=True)
@@ -310,7 +315,7 @@ def _cycles_from_stamps(t: np.ndarray, period_s: float) -> np.ndarray:
 
 def read_encoder_csv(path: Path, period_s: float) -> EncoderTable:
     """Read and check an encoder CSV (``t_s, position_counts[, index][, drive_time_s]``)."""
-    table = read_csv(path, ("t_s", "position_counts"), ("index", "drive_time_s"))
+    table = read_csv(path, ("t_s", "position_counts"), ("index", "drive_time_s"), bounds=CSV_BOUNDS)
     _nonempty(table)
     t = table.columns["t_s"]
     notes = _stamps_stepping_back(table, t)  # host stamps: several samples may arrive at once, or jitter

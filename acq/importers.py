@@ -30,16 +30,17 @@ from rich.markup import escape
 from acq import __version__
 from acq.analyze import sha256_of
 from acq.catalogue import parse_tags, tag_option
-from acq.config import load_bench, load_profile
+from acq.config import load_bench, load_profile, with_joint
 from acq.display import summary_table
 from acq.export_metadata import ExportMetadata, read_metadata
 from acq.import_files import (CurrentTable, EncoderTable, host_ns, read_current_csv, read_current_tdms,
                               read_encoder_csv)
 from acq.session import SessionWriter, load
+from acq.storage import storage_error
 from acq.summary import summarize
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock
 from drivers.config import Bench, Profile
-from drivers.errors import ConfigError
+from drivers.errors import ConfigError, StorageError
 
 BLOCK_S = 0.1
 
@@ -105,7 +106,7 @@ def _configs(meta: ExportMetadata | None, bench: Bench | None, profile: Profile 
     if bench is None or profile is None:
         option = "--bench" if bench is None else "--profile"
         raise ConfigError(f"{option}: needed (no acq export metadata beside {current_path.name})")
-    return (bench.model_copy(update={"joint": joint}) if joint else bench), profile
+    return with_joint(bench, joint), profile
 
 
 def _start_time(started_utc: str | None, meta: ExportMetadata | None, cur: CurrentTable) -> tuple[str | None, str]:
@@ -198,7 +199,13 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
         for event in events:
             writer.add_event(event)
         writer.finish("complete", f"imported from {current_path.name} and {encoder_path.name}")
+        if writer.failure is not None:
+            raise writer.failure
         os.replace(tmp, out)
+    except StorageError as e:  # named by the file asked for; the half-written temp file is removed below
+        raise StorageError(str(e).split(" — ")[0].replace(str(tmp), str(out))) from None
+    except OSError as e:
+        raise storage_error(e, out) from None
     finally:
         tmp.unlink(missing_ok=True)
     return ImportResult(out, [*([meta_warning] if meta_warning else []), *(n.detail for n in notes

@@ -4,7 +4,9 @@ One reader thread per stream only reads its device and queues what it got; the c
 checks stream indices (gaps by counters, never by timing), writes through
 :class:`acq.session.SessionWriter`, flushes at least every 0.5 s and always finishes the file:
 ``complete`` when both streams have the requested duration, ``interrupted`` on Ctrl-C / SIGTERM,
-``failed`` on a device error. Timestamps are never altered: raw indices and host stamps go to disk.
+``failed`` on a device error or a failed write (disk full, I/O error: the drive is stopped at once and
+only the samples committed before the failure count). Timestamps are never altered: raw indices and
+host stamps go to disk.
 """
 
 from __future__ import annotations
@@ -22,13 +24,16 @@ from typing import Any
 
 import numpy as np
 
-from acq.session import SessionWriter, Status, new_session_path, utc_now_iso
+from acq.session import SessionExists, SessionWriter, Status, new_session_path, utc_now_iso
 from drivers.base import (CurrentBlock, CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock,
                           StreamEvent)
 from drivers.config import Bench, Profile
 from drivers.errors import AcqError, ConfigError, DeviceError
 
 FLUSH_INTERVAL_S = 0.5
+#: Also flush once this much is pending (a --fast simulated bench delivers seconds of data per 0.5 s): bounds
+#: the memory held and what a failed write can lose. 1 MiB ≈ 1.7 s of 3 × 25.6 kS/s float64.
+FLUSH_BYTES = 1 << 20
 READ_TIMEOUT_S = 0.2
 STALL_TIMEOUT_S = 5.0
 SHUTDOWN_TIMEOUT_S = 5.0
@@ -53,6 +58,7 @@ class RecordingResult:
     encoder_samples: int
     current_gaps: int
     encoder_gaps: int
+    write_failed: bool = False  # a write to the session file failed (disk full, I/O error): nothing more is stored
 
 
 class _Reader(threading.Thread):
@@ -264,13 +270,21 @@ class Recorder:
             return self._writer
         try:
             self.out_dir.mkdir(parents=True, exist_ok=True)
-            path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
+            for _ in range(100):  # another recorder may take the name between the check and the create
+                path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
+                try:
+                    writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
+                                           drive_info=self._drive_info, host_ns_at_start=time.monotonic_ns(),
+                                           operator=self.operator, tags=self.tags)
+                except SessionExists:
+                    continue
+                break
+            else:
+                raise ConfigError(f"{self.out_dir}: no free session file name for joint {self.bench.joint}")
             keep_raw = getattr(self.drive, "keep_raw_frames", None)  # transports that can log their raw traffic
             if keep_raw is not None:
                 keep_raw(path)
-            self._writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
-                                         drive_info=self._drive_info, host_ns_at_start=time.monotonic_ns(),
-                                         operator=self.operator, tags=self.tags)
+            self._writer = writer
             return self._writer
         except OSError as e:
             self._release_devices()
@@ -322,8 +336,9 @@ class Recorder:
                 status, reason = "failed", f"{type(e).__name__}: {e}"
             finally:
                 status, reason = self._shut_down(inbox, readers, writer, checker, counts, status, reason)
-        return RecordingResult(path, status, reason, counts["current"], counts["encoder"],
-                               checker.current_gaps, checker.encoder_gaps)
+        stored = writer.committed  # only what is on disk is reported, never what was received
+        return RecordingResult(path, status, reason, stored["current_samples"], stored["encoder_samples"],
+                               checker.current_gaps, checker.encoder_gaps, writer.failure is not None)
 
     def _pump(self, inbox: queue.Queue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
               checker: _StreamChecker, counts: dict[str, int]) -> None:
@@ -347,7 +362,7 @@ class Recorder:
             if now - last_data > STALL_TIMEOUT_S:
                 silent = [n for n, r in readers.items() if n not in done]
                 raise DeviceError(f"no data from {', '.join(silent)} for {STALL_TIMEOUT_S:g} s")
-            if now - last_flush >= FLUSH_INTERVAL_S:
+            if now - last_flush >= FLUSH_INTERVAL_S or writer.pending_bytes >= FLUSH_BYTES:
                 writer.flush()
                 last_flush = now
 
@@ -423,6 +438,8 @@ class Recorder:
             if status != "complete":
                 writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "info", f"stopped: {reason}"))
             writer.finish(status, reason)
+            if writer.failure is not None:  # a write failed (now or earlier): the recording failed, whatever else
+                status, reason = "failed", f"{writer.failure} — {writer.seconds_kept:.1f} s kept"
         return status, reason
 
     def _drain(self, inbox: queue.Queue[tuple[str, Any]], writer: SessionWriter, checker: _StreamChecker,

@@ -7,40 +7,75 @@ Every model forbids unknown keys, so a misspelt key is an error, never silently 
 
 from __future__ import annotations
 
+import unicodedata
 from typing import Annotated, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt, field_validator
 
 
 class Strict(BaseModel):
     """Base for all config sections: unknown keys are errors, values are not coerced from strings."""
 
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True)
+    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, allow_inf_nan=False)
 
 
 NonNegFloat = Annotated[float, Field(ge=0.0)]
 PhaseName = Literal["i_a", "i_b", "i_c"]
 
+# Physical bounds: generous for any bench we can imagine, tight enough that a typo (1e12 for 1e4) is refused
+# before anything is allocated or sent to a device.
+MAX_RATE_HZ = 10e6  # fastest current sampling any supported card offers (NI PXIe-6124: 4 MS/s; margin ×2.5)
+MAX_DURATION_S = 24 * 3600.0  # one day: a session file of ~17 GB per phase at 25.6 kS/s
+Seconds = Annotated[float, Field(gt=0.0, le=MAX_DURATION_S)]
+RateHz = Annotated[float, Field(gt=0.0, le=MAX_RATE_HZ)]
+PeriodS = Annotated[float, Field(ge=1e-6, le=10.0)]  # an encoder sample every 1 µs … 10 s
+Timeout = Annotated[float, Field(gt=0.0, le=600.0)]
+Stiffness = Annotated[float, Field(gt=0.0, le=1e8)]  # N·m/rad: stiffest harmonic drives are ~1e6
+Inertia = Annotated[float, Field(gt=0.0, le=1e3)]  # kg·m²
+Damping = Annotated[float, Field(ge=0.0, le=1e6)]  # N·m·s/rad
+MAX_JOINT_NAME = 64
+
+
+def check_joint_name(name: str) -> str:
+    """Return ``name`` if it is a safe joint name, else raise ValueError saying why.
+
+    Safe: 1–64 characters, each a letter or digit (any script) or one of ``-``, ``_``, ``.``; no leading dot;
+    already in Unicode NFC form (so two spellings of one name cannot make two joints). It becomes part of a
+    file name, so nothing that a file system or a shell treats specially gets through.
+    """
+    if not name:
+        raise ValueError("must not be empty")
+    if len(name) > MAX_JOINT_NAME:
+        raise ValueError(f"must be at most {MAX_JOINT_NAME} characters")
+    if name.startswith("."):
+        raise ValueError("must not start with a dot")
+    bad = next((ch for ch in name if not (ch.isalnum() or ch in "-_.")), None)
+    if bad is not None:
+        raise ValueError(f"may hold only letters, digits, '-', '_' and '.' (not {ascii(bad)})")
+    if unicodedata.normalize("NFC", name) != name:
+        raise ValueError("must be in Unicode NFC form")
+    return name
+
 
 class Motor(Strict):
-    torque_constant_Nm_per_A: PositiveFloat
-    pole_pairs: PositiveInt
+    torque_constant_Nm_per_A: float = Field(gt=0.0, le=1000.0)
+    pole_pairs: int = Field(gt=0, le=1000)
 
 
 class Encoder(Strict):
-    counts_per_rev: PositiveInt
+    counts_per_rev: int = Field(gt=0, le=2**31)
 
 
 class Gear(Strict):
-    ratio: PositiveFloat
+    ratio: float = Field(gt=0.0, le=1e5)
 
 
 class Nominal(Strict):
     """Nominal plant: the fit's starting point and the fixed inertias for ``--params K``."""
 
-    K_Nm_per_rad: PositiveFloat
-    Jm_kgm2: PositiveFloat
-    Jl_kgm2: PositiveFloat
+    K_Nm_per_rad: Stiffness
+    Jm_kgm2: Inertia
+    Jl_kgm2: Inertia
     inertia_known: bool = False  # Jm + Jl known independently (datasheet, CAD): `acq selftest` checks k_t against it
 
 
@@ -48,9 +83,9 @@ class DaqSim(Strict):
     """Current from the simulated bench."""
 
     driver: Literal["sim"]
-    rate_hz: PositiveFloat
+    rate_hz: RateHz
     channels: list[PhaseName] = Field(min_length=1, max_length=3)
-    block_s: PositiveFloat = 0.1
+    block_s: float = Field(default=0.1, gt=0.0, le=10.0)
 
 
 class DaqNidaqmx(Strict):
@@ -69,17 +104,17 @@ class DaqNidaqmx(Strict):
     """
 
     driver: Literal["nidaqmx"]
-    rate_hz: PositiveFloat
+    rate_hz: RateHz
     channels: list[PhaseName] = Field(min_length=1, max_length=3)
     physical_channels: list[str] = Field(min_length=1, max_length=3)
-    block_s: PositiveFloat = 0.1
-    buffer_s: PositiveFloat = 5.0
+    block_s: float = Field(default=0.1, gt=0.0, le=10.0)
+    buffer_s: float = Field(default=5.0, gt=0.0, le=600.0)
     measurement: Literal["voltage", "current"] = "voltage"
-    sensor_A_per_V: PositiveFloat = 1.0
-    range_V: PositiveFloat = 5.0
-    sensor_A_per_A: PositiveFloat = 1.0
-    range_A: PositiveFloat = 0.02
-    iepe_excitation_A: NonNegFloat = 0.0
+    sensor_A_per_V: float = Field(default=1.0, gt=0.0, le=1e4)
+    range_V: float = Field(default=5.0, gt=0.0, le=1000.0)
+    sensor_A_per_A: float = Field(default=1.0, gt=0.0, le=1e5)
+    range_A: float = Field(default=0.02, gt=0.0, le=100.0)
+    iepe_excitation_A: float = Field(default=0.0, ge=0.0, le=0.1)
     coupling: Literal["dc", "ac"] = "dc"
     terminal: Literal["default", "differential", "pseudo_differential", "rse", "nrse"] = "default"
 
@@ -91,7 +126,7 @@ class DriveSim(Strict):
     """Encoder and motion from the simulated bench's drive (transport ``sim``)."""
 
     driver: Literal["sim"]
-    period_s: PositiveFloat
+    period_s: PeriodS
     # "commanded": acq runs the profile; "external": the machine's own controller moves the joint (the
     # simulated production robot of drivers.sim.robot_program) and acq only listens (acq monitor)
     motion: Literal["commanded", "external"] = "commanded"
@@ -101,20 +136,20 @@ class DriveCanopen(Strict):
     """A CiA 402 drive over CANopen (see ``drivers.canopen_drive``)."""
 
     driver: Literal["canopen"]
-    period_s: PositiveFloat
+    period_s: PeriodS
     interface: str = "socketcan"
     channel: str = "can0"
-    bitrate: PositiveInt = 1_000_000
+    bitrate: int = Field(default=1_000_000, gt=0, le=1_000_000)  # classic CAN's maximum
     node_id: int = Field(default=1, ge=1, le=127)
     tpdo: int = Field(default=1, ge=1, le=4)
     map_velocity: bool = False
-    sdo_timeout_s: PositiveFloat = 0.5
-    state_timeout_s: PositiveFloat = 2.0
-    heartbeat_timeout_s: PositiveFloat = 0.5
-    velocity_units_per_rpm: PositiveFloat = 1.0
-    acceleration_units_per_rpm_per_s: PositiveFloat = 1.0
-    counts_per_rev: PositiveInt | None = None  # position units (0x6064, 0x607A) per motor rev; None: [encoder]'s
-    heartbeat_period_s: PositiveFloat = 0.1  # the drive's producer heartbeat time (0x1017)
+    sdo_timeout_s: Timeout = 0.5
+    state_timeout_s: Timeout = 2.0
+    heartbeat_timeout_s: Timeout = 0.5
+    velocity_units_per_rpm: float = Field(default=1.0, gt=0.0, le=1e9)
+    acceleration_units_per_rpm_per_s: float = Field(default=1.0, gt=0.0, le=1e9)
+    counts_per_rev: Annotated[int, Field(gt=0, le=2**31)] | None = None  # position units (0x6064, 0x607A) per motor rev; None: [encoder]'s
+    heartbeat_period_s: Timeout = 0.1  # the drive's producer heartbeat time (0x1017)
     max_bus_load: float = Field(default=0.7, gt=0.0, le=1.0)  # refuse settings whose traffic needs more
     simulated_node: bool = False
     map_timestamp: bool = False  # map the drive's 0x1013 high-resolution time stamp (µs) into the TPDO
@@ -124,12 +159,12 @@ class DriveSerial(Strict):
     """A drive streaming framed encoder telemetry over a serial link (see ``drivers.serial_drive``)."""
 
     driver: Literal["serial"]
-    period_s: PositiveFloat
+    period_s: PeriodS
     port: str = "/dev/ttyUSB0"
-    baud: PositiveInt = 921_600
+    baud: int = Field(default=921_600, gt=0, le=20_000_000)
     parity: Literal["N", "E", "O"] = "N"
     codec: str = "acq1"
-    read_timeout_s: PositiveFloat = 0.5
+    read_timeout_s: Timeout = 0.5
     simulated_device: bool = False
 
 
@@ -142,28 +177,28 @@ class SimSettings(Strict):
     Defaults are the paper's bench (Xu et al. 2021, Table 2) reflected to the motor side.
     """
 
-    K_Nm_per_rad: PositiveFloat = 891.0
-    Jm_kgm2: PositiveFloat = 0.003027
-    Jl_kgm2: PositiveFloat = 0.00748
-    C_Nms_per_rad: NonNegFloat = 0.1
-    bm_Nms_per_rad: NonNegFloat = 0.002
-    bl_Nms_per_rad: NonNegFloat = 0.002
-    arm_mass_kg: NonNegFloat = 5.0
-    arm_com_distance_m: NonNegFloat = 0.375
-    arm_start_deg: float = -60.0
-    speed_loop_hz: PositiveFloat = 4000.0
-    speed_bandwidth_hz: PositiveFloat = 15.0
-    current_bandwidth_hz: PositiveFloat = 1500.0
-    theta0_rad: float = 0.3
-    daq_offset_s: float = 0.037
-    daq_drift_ppm: float = 40.0
-    host_latency_s: NonNegFloat = 0.002
-    host_jitter_s: NonNegFloat = 0.0002
-    current_noise_A: NonNegFloat = 0.01
-    current_dc_offset_A: float = 0.005
+    K_Nm_per_rad: Stiffness = 891.0
+    Jm_kgm2: Inertia = 0.003027
+    Jl_kgm2: Inertia = 0.00748
+    C_Nms_per_rad: Damping = 0.1
+    bm_Nms_per_rad: Damping = 0.002
+    bl_Nms_per_rad: Damping = 0.002
+    arm_mass_kg: float = Field(default=5.0, ge=0.0, le=1e4)
+    arm_com_distance_m: float = Field(default=0.375, ge=0.0, le=100.0)
+    arm_start_deg: float = Field(default=-60.0, ge=-360.0, le=360.0)
+    speed_loop_hz: float = Field(default=4000.0, gt=0.0, le=MAX_RATE_HZ)
+    speed_bandwidth_hz: float = Field(default=15.0, gt=0.0, le=1e5)
+    current_bandwidth_hz: float = Field(default=1500.0, gt=0.0, le=1e6)
+    theta0_rad: float = Field(default=0.3, ge=-1e3, le=1e3)
+    daq_offset_s: float = Field(default=0.037, ge=-3600.0, le=3600.0)
+    daq_drift_ppm: float = Field(default=40.0, ge=-1000.0, le=1000.0)  # quartz: ±100 ppm; cheap RC clocks ±1000
+    host_latency_s: float = Field(default=0.002, ge=0.0, le=10.0)
+    host_jitter_s: float = Field(default=0.0002, ge=0.0, le=10.0)
+    current_noise_A: float = Field(default=0.01, ge=0.0, le=1e3)
+    current_dc_offset_A: float = Field(default=0.005, ge=-1e3, le=1e3)
     current_dc_offsets_A: dict[PhaseName, float] = Field(default_factory=dict)  # per phase, overrides the above
     encoder_start_counts: int = 0  # position register at θ_m = 0 (near ±2**31 to exercise the int32 wrap)
-    pre_roll_s: NonNegFloat = 0.2
+    pre_roll_s: float = Field(default=0.2, ge=0.0, le=3600.0)
     # (first_cycle, count) frames the sim drive never delivers; a TOML array of pairs becomes tuples
     drop_encoder_frames: list[Annotated[tuple[Annotated[int, Field(ge=0)], PositiveInt], Field(strict=False)]] = (
         Field(default_factory=list))
@@ -219,7 +254,7 @@ class SimSettings(Strict):
 class Bench(Strict):
     """A whole bench: joint name, motor, encoder, gear, nominal plant, DAQ, drive, optional sim truth."""
 
-    joint: str = Field(min_length=1)
+    joint: str = Field(min_length=1)  # see check_joint_name
     motor: Motor
     encoder: Encoder
     gear: Gear
@@ -228,15 +263,20 @@ class Bench(Strict):
     drive: DriveSettings
     sim: SimSettings | None = None
 
+    @field_validator("joint")
+    @classmethod
+    def _safe_joint(cls, name: str) -> str:
+        return check_joint_name(name)
+
 
 class Profile(Strict):
     """A motion: the triangle speed profile of the paper (speed up, down, reverse, back)."""
 
     kind: Literal["triangle"]
-    top_speed_rpm: PositiveFloat
-    accel_time_s: PositiveFloat
-    decel_time_s: PositiveFloat
-    dwell_s: NonNegFloat = 0.0
-    duration_s: PositiveFloat
-    cruise_s: NonNegFloat = 0.0  # at top speed between the ramps (a trapezoid), s
-    jerk_time_s: NonNegFloat = 0.0  # S-curve: the acceleration ramps in this time (0: steps), s
+    top_speed_rpm: float = Field(gt=0.0, le=100_000.0)  # fastest servo motors run ~60 000 rpm
+    accel_time_s: Seconds
+    decel_time_s: Seconds
+    dwell_s: float = Field(default=0.0, ge=0.0, le=MAX_DURATION_S)
+    duration_s: Seconds
+    cruise_s: float = Field(default=0.0, ge=0.0, le=MAX_DURATION_S)  # at top speed between the ramps (a trapezoid), s
+    jerk_time_s: float = Field(default=0.0, ge=0.0, le=MAX_DURATION_S)  # S-curve: acceleration ramp time (0: steps), s

@@ -4,7 +4,8 @@ Exception tree (each kind maps to a process exit code in ``acq.cli``)::
 
     AcqError                      one line for people; ``kind`` selects the exit code
      ├── ConfigError              bad input: config file, option, session file  -> exit 2
-     └── DeviceError              a device failed, is missing or timed out      -> exit 1
+     ├── DeviceError              a device failed, is missing or timed out      -> exit 1
+     └── StorageError             a file could not be written (disk full, I/O)  -> exit 1
 
 Drivers raise these with a message that names the device, channel, file, key or value.
 """
@@ -13,7 +14,7 @@ from __future__ import annotations
 
 from typing import Literal
 
-ErrorKind = Literal["input", "device"]
+ErrorKind = Literal["input", "device", "storage"]
 
 
 class AcqError(Exception):
@@ -23,7 +24,7 @@ class AcqError(Exception):
 
     @property
     def exit_code(self) -> int:
-        """Process exit code: 2 for bad input, 1 for a failed device."""
+        """Process exit code: 2 for bad input, 1 for a failed device or write."""
         return 2 if self.kind == "input" else 1
 
 
@@ -37,3 +38,9 @@ class DeviceError(AcqError):
     """A device is missing, refused a setting, stopped answering or reported an error."""
 
     kind: ErrorKind = "device"
+
+
+class StorageError(AcqError):
+    """A write failed (disk full, I/O error, the folder vanished); the message names the file."""
+
+    kind: ErrorKind = "storage"

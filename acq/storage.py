@@ -1,0 +1,105 @@
+"""Writing files so that a failed write is a failure: named, one line, no temp file left behind.
+
+Every output of acq (result JSON, report PNG, CSV export, imported session) is written to a temp
+file in the destination folder and renamed over the destination only when complete, so a reader
+never sees half a file; on any error the temp file is removed and a :class:`StorageError` names
+the destination and the cause ("disk full: /data/x.result.json").
+"""
+
+from __future__ import annotations
+
+import errno
+import glob
+import os
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from drivers.errors import StorageError
+
+_CAUSES = {
+    errno.ENOSPC: "disk full",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EIO: "I/O error",
+    errno.EROFS: "read-only file system",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+    errno.ENOENT: "folder vanished",
+}
+
+
+def cause_of(e: BaseException) -> str:
+    """A short cause for an OS error ("disk full", "I/O error", …), else its first line."""
+    code = getattr(e, "errno", None)
+    if code in _CAUSES:
+        return _CAUSES[code]
+    full = str(e)
+    if "No space left" in full or "errno = 28" in full:  # HDF5 reports the errno inside its (multi-line) message
+        return "disk full"
+    if "errno = 5," in full or "Input/output error" in full:
+        return "I/O error"
+    return full.splitlines()[0] if full else type(e).__name__
+
+
+def storage_error(e: BaseException, path: Path | str) -> StorageError:
+    """The one-line error for a failed write of ``path``: ``<cause>: <path>``."""
+    return StorageError(f"{cause_of(e)}: {path}")
+
+
+def free_bytes(folder: Path | str) -> int:
+    """Bytes an unprivileged writer can still put into the file system holding ``folder``."""
+    st = os.statvfs(folder)
+    return st.f_bavail * st.f_frsize
+
+
+def _nearly_full(folder: Path) -> bool:
+    try:
+        return free_bytes(folder) < 1 << 16
+    except OSError:
+        return False
+
+
+@contextmanager
+def atomic_path(path: Path | str) -> Iterator[Path]:
+    """Yield a temp path beside ``path``; rename it to ``path`` when the block succeeds.
+
+    On any exception the temp file is removed; an :class:`OSError` becomes a :class:`StorageError`
+    naming ``path``. The temp name is unique per writer (two writers never share one).
+    """
+    target = Path(path)
+    try:
+        fd, name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.",
+                                   suffix=f".tmp{target.suffix}")  # the suffix kept: writers infer the format
+    except OSError as e:
+        raise storage_error(e, target) from None
+    os.close(fd)
+    tmp = Path(name)
+    try:
+        yield tmp
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, target)
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        if e.errno is None:  # a library's own "could not write" (e.g. Qt's image writer): say why if the disk is full
+            e = OSError(errno.ENOSPC, "") if _nearly_full(target.parent) else OSError(errno.EIO, "write failed")
+        raise storage_error(e, target) from None
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def remove_temp_files(path: Path | str) -> None:
+    """Remove temp files :func:`atomic_path` left for ``path`` (its writer was killed before it could)."""
+    target = Path(path)
+    for tmp in target.parent.glob(f".{glob.escape(target.name)}.*.tmp{target.suffix}"):
+        tmp.unlink(missing_ok=True)
+
+
+def write_text_atomically(path: Path | str, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` through a temp file; see :func:`atomic_path`."""
+    with atomic_path(path) as tmp:
+        with tmp.open("w", encoding="utf-8") as f:
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())

@@ -1,0 +1,103 @@
+"""Batch and catalogue stay consistent: Ctrl-C stops a batch with every result written catalogued; a session still
+being recorded is skipped by a batch and refused by acq analyze unless --partial."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+import uuid
+from pathlib import Path
+
+import h5py
+import pytest
+
+from tests.helpers import run_cli
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("rec")
+    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.2s", "--fast",
+                           "--duration", "10", "--no-analyze", "--out", str(out)],
+                          capture_output=True, text=True, timeout=180)
+    assert proc.returncode == 0, proc.stderr
+    (path,) = out.glob("*.h5")
+    return path
+
+
+def copy_session(src: Path, dst: Path, *, status: str | None = None) -> Path:
+    """A copy with its own session id (and so its own hash); ``status`` rewrites the status attribute."""
+    shutil.copyfile(src, dst)
+    with h5py.File(dst, "r+") as f:
+        f.attrs["session_id"] = str(uuid.uuid4())
+        if status is not None:
+            f.attrs["status"] = status  # as a killed recorder leaves it: the /flushes rows say what is stored
+    return dst
+
+
+def catalogue_rows(path: Path) -> list[sqlite3.Row]:
+    with sqlite3.connect(path) as db:
+        db.row_factory = sqlite3.Row
+        return db.execute("SELECT s.path, a.verdict, a.error, a.partial FROM sessions s "
+                          "JOIN analyses a ON a.session_key = s.session_key ORDER BY s.path").fetchall()
+
+
+def test_recording_session_is_refused_unless_partial(recorded: Path, tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    path = copy_session(recorded, tmp_path / "live.h5", status="recording")
+    run = run_cli(capsys, "analyze", str(path), "--no-report")
+    assert (run.code, run.err) == (2, f"acq: error: {path}: status recording (still being recorded, or the recorder "
+                                      "was killed) — run acq check, or use --partial to analyse what is stored\n")
+    assert not path.with_name("live.result.json").exists()
+    run = run_cli(capsys, "analyze", str(path), "--no-report", "--partial", "--json")
+    assert run.code == 0, run.err
+    doc = json.loads(run.out)
+    assert doc["partial"] is True and doc["session"]["status"] == "recording"
+    assert json.loads(path.with_name("live.result.json").read_text())["partial"] is True
+    rows = catalogue_rows(tmp_path / "catalogue.sqlite")
+    assert [(Path(r["path"]).name, r["partial"]) for r in rows] == [("live.h5", 1)]
+
+
+def test_batch_skips_a_session_still_recording(recorded: Path, tmp_path: Path,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    copy_session(recorded, tmp_path / "a_done.h5")
+    copy_session(recorded, tmp_path / "b_live.h5", status="recording")
+    run = run_cli(capsys, "analyze", str(tmp_path), "--no-report", "--jobs", "1", "--json")
+    assert run.code == 0, run.err
+    outcomes = {Path(d["path"]).name: d["outcome"] for d in json.loads(run.out)}
+    assert outcomes == {"a_done.h5": "analysed", "b_live.h5": "skipped: status recording"}
+    rows = catalogue_rows(tmp_path / "catalogue.sqlite")
+    assert [(Path(r["path"]).name, r["partial"]) for r in rows] == [("a_done.h5", 0)]
+    assert not (tmp_path / "b_live.result.json").exists()
+
+
+def test_ctrl_c_stops_a_batch_and_every_result_written_is_catalogued(recorded: Path, tmp_path: Path) -> None:
+    folder = tmp_path / "many"
+    folder.mkdir()
+    for i in range(8):
+        copy_session(recorded, folder / f"s{i}.h5")
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(folder), "--jobs", "2", "--no-report"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 120
+    while not list(folder.glob("*.result.json")) and time.monotonic() < deadline:  # at least one result done
+        time.sleep(0.05)
+    assert proc.poll() is None, proc.communicate()
+    sent = time.monotonic()
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)
+    stopped_s = time.monotonic() - sent
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "acq: interrupted"
+    assert stopped_s < 10.0  # a bound (it took 11 s for 80); bench/faults.py measures the real figure
+    rows = catalogue_rows(folder / "catalogue.sqlite")
+    results = sorted(p.name.replace(".result.json", ".h5") for p in folder.glob("*.result.json"))
+    assert sorted(Path(r["path"]).name for r in rows if r["error"] is None) == results
+    assert 1 <= len(results) < 8  # the result seen was catalogued; stopped part-way: queued work was cancelled
+    assert [p.name for p in folder.iterdir() if p.name.startswith(".")] == []  # no temp file left
+    os.sync()

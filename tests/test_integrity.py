@@ -1,0 +1,213 @@
+"""Nothing lost, nothing silently wrong: failed writes fail the recording, damaged files are found with their span."""
+
+from __future__ import annotations
+
+import contextlib
+import shutil
+import subprocess
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+import acq.session
+from acq.session import load
+from tests.helpers import run_cli
+
+RATE_HZ = 25600
+
+
+def _only_session(folder: Path) -> Path:
+    files = sorted(folder.glob("*.h5"))
+    assert len(files) == 1, files
+    return files[0]
+
+
+@contextlib.contextmanager
+def small_disk(folder: Path, size: str, monkeypatch: pytest.MonkeyPatch) -> Iterator[str]:
+    """A ``size`` tmpfs at ``folder`` when this process may mount one (root), else a disk whose free space,
+    as the writer sees it, ends after a few flushes (ENOSPC injected at the storage layer). Yields which."""
+    folder.mkdir(parents=True, exist_ok=True)
+    mounted = shutil.which("mount") is not None and subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)], capture_output=True).returncode == 0
+    if not mounted:
+        calls = {"n": 0}
+
+        def shrinking_free(_: object) -> int:
+            calls["n"] += 1
+            return 1 << 40 if calls["n"] <= 4 else 0
+
+        monkeypatch.setattr(acq.session, "free_bytes", shrinking_free)
+    try:
+        yield "tmpfs" if mounted else "injected"
+    finally:
+        if mounted:
+            subprocess.run(["umount", "-l", str(folder)], check=False)
+
+
+def _assert_counts_are_stored(path: Path, current: int, encoder: int) -> None:
+    s = load(path)
+    assert s.damage == ()
+    assert s.current.sample_count == current and s.encoder.index.size == encoder
+    np.testing.assert_array_equal(s.current.sample_index(), np.arange(current))  # no gap, nothing repeated
+    assert not np.any(s.current.phases_a["i_a"] == 0.0)  # sim noise: an exact 0.0 is an unwritten sample
+    np.testing.assert_array_equal(np.diff(s.encoder.index), 1)
+
+
+def test_disk_full_while_recording_fails_with_what_is_stored(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    out = tmp_path / "disk"
+    with small_disk(out, "8m", monkeypatch):
+        run = run_cli(capsys, "record", "--profile", "triangle_0.5s", "--fast", "--duration", "120", "--out", str(out))
+        path = _only_session(out)
+        assert run.code == 1
+        lines = run.err.strip().splitlines()
+        error = lines[-1]
+        assert error.startswith(f"acq: failed: disk full: {path} — ") and "Traceback" not in run.err
+        assert [ln for ln in lines if ln.startswith("acq:")] == [error]
+        s = load(path)
+        assert s.status == "failed"
+        kept = s.current.sample_count
+        assert 0 < kept < 120 * RATE_HZ
+        assert error == (f"acq: failed: disk full: {path} — {kept / RATE_HZ:.1f} s kept ({kept} current and "
+                         f"{s.encoder.index.size} encoder samples stored in {path})")
+        assert s.attrs["stop_reason"] == f"disk full: {path} — {kept / RATE_HZ:.1f} s kept"
+        assert int(s.attrs["current_samples"]) == kept
+        _assert_counts_are_stored(path, kept, s.encoder.index.size)
+
+
+def test_write_error_inside_hdf5_keeps_only_committed_samples(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """The free-space guard off: ENOSPC reaches HDF5 mid-flush; the process neither crashes nor counts that flush."""
+    out = tmp_path / "disk"
+    with small_disk(out, "3m", monkeypatch) as kind:
+        if kind != "tmpfs":
+            pytest.skip("needs a real full file system (mount a tmpfs as root)")
+        monkeypatch.setattr(acq.session, "RESERVE_BYTES", -(1 << 40))
+        run = run_cli(capsys, "record", "--profile", "triangle_0.5s", "--fast", "--duration", "120", "--out", str(out))
+        path = _only_session(out)
+        assert run.code == 1
+        assert run.err.strip().splitlines()[-1].startswith(f"acq: failed: disk full: {path} — ")
+        s = load(path)
+        assert s.status == "recording"  # no room for a footer: the /flushes rows say what is stored
+        assert f"({s.current.sample_count} current and {s.encoder.index.size} encoder samples" in run.err
+        _assert_counts_are_stored(path, s.current.sample_count, s.encoder.index.size)
+
+
+# ------------------------------------------------------------------------------------------ damage
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("rec")
+    proc = subprocess.run(["python", "-m", "acq", "record", "--profile", "triangle_0.2s", "--fast", "--duration", "10",
+                           "--no-analyze", "--out", str(out)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    return _only_session(out)
+
+
+def _copy(src: Path, dst: Path) -> Path:
+    shutil.copyfile(src, dst)
+    return dst
+
+
+def test_intact_session_checks_clean(recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    path = _copy(recorded, tmp_path / "ok.h5")
+    with h5py.File(path, "r") as f:
+        assert f["current/i_a_A"].fletcher32 and f["encoder/index"].fletcher32
+        assert f["flushes"].shape[0] >= 1
+    run = run_cli(capsys, "check", str(path))
+    assert run.code == 0
+    assert (f"{path}: complete, checksums and counts verified ({10 * RATE_HZ} current, 10000 encoder samples), "
+            "nothing to repair") in run.out.replace("\n", "")
+
+
+def test_flipped_byte_in_a_chunk_is_reported_with_its_span(recorded: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    path = _copy(recorded, tmp_path / "flip.h5")
+    with h5py.File(path, "r") as f:
+        ds = f["current/i_a_A"]
+        chunk = ds.chunks[0]
+        info = ds.id.get_chunk_info(40)
+        first_bad = int(info.chunk_offset[0])
+    with path.open("r+b") as fh:
+        fh.seek(info.byte_offset + 100)
+        byte = fh.read(1)
+        fh.seek(info.byte_offset + 100)
+        fh.write(bytes([byte[0] ^ 0x40]))
+    assert first_bad == 40 * chunk
+    s = load(path)
+    span = f"current: samples {first_bad:,}–{10 * RATE_HZ - 1:,} unreadable".replace(",", " ")
+    assert s.damage == (span,)
+    assert s.current.sample_count == first_bad
+    run = run_cli(capsys, "check", str(path))
+    assert run.code == 1
+    assert f"{path}: {span}" in run.out.replace("\n", "")
+    analyze = run_cli(capsys, "analyze", str(path), "--no-report")
+    assert analyze.code == 2
+    assert analyze.err.strip() == (f"acq: error: {path}: damaged ({span}) — run acq check, or use --partial to "
+                                   "analyse the intact part")
+    info_run = run_cli(capsys, "info", str(path))
+    assert info_run.err.strip() == f"acq: warning: {path}: damaged ({span}) — run acq check {path}"
+
+
+@pytest.mark.parametrize("percent", [10, 30, 50, 90])
+def test_cut_file_is_found_in_bounded_time(recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                           percent: int) -> None:
+    path = _copy(recorded, tmp_path / f"cut{percent}.h5")
+    size = path.stat().st_size
+    with path.open("r+b") as fh:
+        fh.truncate(size * percent // 100)
+    start = time.monotonic()
+    run = run_cli(capsys, "check", str(path))
+    elapsed = time.monotonic() - start
+    assert elapsed < 5.0  # a bound, not a speed target: it hung for minutes before
+    assert run.code in (1, 2)
+    cut = f"file cut: {size * percent // 100:,} of {size:,} bytes".replace(",", " ")
+    if run.code == 2:  # the metadata needed to read it is gone: one line naming the file and the cut
+        assert run.err.count("\n") == 1 and run.err.startswith(f"acq: error: {path}: ")
+        assert f"({cut}" in run.err
+    else:
+        s = load(path)
+        assert s.damage and all("unreadable" in d or d.startswith("file cut") for d in s.damage)
+        assert s.current.sample_count < 10 * RATE_HZ
+        assert not np.any(s.current.phases_a["i_a"] == 0.0)
+
+
+def test_writer_stops_when_its_file_vanishes(tmp_path: Path) -> None:
+    from acq.config import load_bench, load_profile
+    from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo
+    from drivers.errors import StorageError
+
+    path = tmp_path / "s.h5"
+    w = acq.session.SessionWriter(path, bench=load_bench(), profile=load_profile("triangle_0.2s"),
+                                  current_info=CurrentSourceInfo(1000.0, ("i_a",), "test"),
+                                  drive_info=DriveInfo(0.001, 4096, "sim", "cycle", "test"), host_ns_at_start=0)
+    w.append_current(CurrentBlock(0, np.ones((1, 100)), 1))
+    w.flush()
+    path.unlink()
+    w.append_current(CurrentBlock(100, np.ones((1, 100)), 2))
+    with pytest.raises(StorageError) as e:
+        w.flush()
+    assert str(e.value) == f"session file vanished: {path}"
+    assert w.committed["current_samples"] == 100 and w.failure is e.value
+    w.finish("complete", "recorded")  # nothing more is written, nothing raised: the recorder reports the failure
+    assert not path.exists()
+
+
+def test_atomic_write_on_a_full_disk_names_the_file_and_leaves_no_temp(tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    from acq.storage import write_text_atomically
+    from drivers.errors import StorageError
+
+    disk = tmp_path / "disk"
+    with small_disk(disk, "1m", monkeypatch) as kind:
+        if kind != "tmpfs":
+            pytest.skip("needs a real full file system (mount a tmpfs as root)")
+        with pytest.raises(StorageError) as e:
+            write_text_atomically(disk / "x.result.json", "x" * (2 << 20))
+        assert str(e.value) == f"disk full: {disk / 'x.result.json'}"
+        assert list(disk.iterdir()) == []
