@@ -115,7 +115,7 @@ def test_several_sessions_overlay_their_frfs_with_a_legend(session: Path, tmp_pa
     assert names[0] == "measured (dots in the session's colour)" and names[-1] == "fit band 10–400 Hz"
     assert [n.split(" ± ")[0] for n in names[1:3]] == [f"{session.stem}: two-mass fit, 95 % band",
                                                        "later_joint1: two-mass fit, 95 % band"]
-    assert re.fullmatch(r".*95 % band ± \d(\.\d)?(–\d+(\.\d)?)? %", names[1])
+    assert re.fullmatch(r".*95 % band ± \d+(\.\d+)?(–\d+(\.\d+)?)? %", names[1])  # 2 significant digits
 
 
 def _laid_out(view: Any, tmp_path: Path) -> None:
