@@ -34,8 +34,7 @@ CASES = [
         "one-phase offset drift not separated: K +3.4 %, J_m +9.7 % under an ok verdict")),
     pytest.param("mains hum 20 mA, 50 Hz + harmonics", 4, marks=_xfail(
         "one-phase mains hum not separated: K +2.0 %, J_m +5.1 % under an ok verdict")),
-    pytest.param("3 phases, gain errors +2 % / −2 % (park)", 0, marks=_xfail(
-        "per-phase gain error: J_m +2 % with the truth outside its 95 % interval (interval too narrow)")),
+    pytest.param("3 phases, gain errors +2 % / −2 % (park)", 0),
 ]
 
 
