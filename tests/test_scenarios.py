@@ -30,10 +30,8 @@ CASES = [
         "dead zone: K −6.6 %, J_l +6 % under an ok verdict; the misfit/nonlinearity is not detected")),
     pytest.param("third mass 150 Hz (inside band), J_3 = 0.5 J_l", 0, marks=_xfail(
         "third mode in the band: K −3.8 %, J_l +49 % (vs J_l alone) under an ok verdict; the misfit is not named")),
-    pytest.param("offset drift 40 mA, 20 s period", 1, marks=_xfail(
-        "one-phase offset drift not separated: K +3.4 %, J_m +9.7 % under an ok verdict")),
-    pytest.param("mains hum 20 mA, 50 Hz + harmonics", 4, marks=_xfail(
-        "one-phase mains hum not separated: K +2.0 %, J_m +5.1 % under an ok verdict")),
+    pytest.param("offset drift 40 mA, 20 s period", 1),
+    pytest.param("mains hum 20 mA, 50 Hz + harmonics", 4),
     pytest.param("3 phases, gain errors +2 % / −2 % (park)", 0),
 ]
 
