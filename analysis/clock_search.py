@@ -30,7 +30,8 @@ COARSE_STEP_S = 0.01  # grid of the wide search; the frequency stage's first pas
 #: A lag is as good as the best when (1) its misfit 1 − ρ is at most this many times the best one's — the
 #: misfit of an equally good lag scatters by ~√(2/N) relative, N the independent samples of the overlap
 #: (≥ ~40 for 2 s of a signal correlated over ~50 ms), so 1.5 is several of those — and (2) its residual
-#: has no longer stretch of mismatch (see :data:`MISMATCH_FRACTION`) than the best one's or a spike's.
+#: has no stretch of mismatch (see :data:`MISMATCH_FRACTION`) longer than the best one's by more than a
+#: spike's length (the frequency track's time resolution, :data:`SPIKE_SAMPLES`).
 #: (1) alone is diluted on long records: a minute of periodic motion hides a mismatched start of 0.2 s.
 EQUALLY_GOOD = 1.5
 #: The frequencies disagree where they differ by more than this fraction of the top electrical frequency
@@ -174,7 +175,10 @@ def wide_search(f_current_hz: np.ndarray, f_encoder_hz: np.ndarray, grid_step_s:
     misfit = 1.0 - score[peaks]
     runs = {int(i): _longest_mismatch(x, y, int(lags[i]), MISMATCH_FRACTION * float(np.percentile(y, 99)))
             for i in peaks[misfit <= EQUALLY_GOOD * max(misfit[0], 0.0)]}
-    limit = max(runs[int(peaks[0])], SPIKE_SAMPLES)
+    # a stretch "longer than the best one's" by more than the frequency track's resolution: a mismatch that
+    # every lag shares (the motor at rest, where the current's crossings are noise) measures a sample or two
+    # longer or shorter from lag to lag, as its edges fall on the coarse grid and through the median filter
+    limit = max(runs[int(peaks[0])], 0) + SPIKE_SAMPLES
     refined = tuple(_parabola_peak(score, i, offsets, step) for i, run in runs.items() if run <= limit)
     searched = offsets[inside]
     return WideSearch(refined[0], refined, float(misfit[0]), (float(searched.min()), float(searched.max())))

@@ -213,6 +213,7 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
     alias = np.empty((ALIAS_ORDERS, t_s.size), complex) if sign is None and resampling == "antialias" else None
     theta0 = np.nan if sign is not None else clock.theta0_rad  # NaN: the first chunk estimates it
     found: list[torque.Interference] = []
+    gains: list[torque.PhaseGains] = []
     for a, b, m0, m1 in _chunks(current["i_a"].size, rec.rate_hz):
         t0 = (n0 + a - m0) / rec.rate_hz
         sel = (t_daq >= (n0 + a) / rec.rate_hz) & (t_daq < (n0 + b) / rec.rate_hz)
@@ -223,7 +224,7 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
         if sign is None:
             t_drive = clock.drive_time_s(t_piece)
             tq, theta0 = _demodulated(piece, rec, angle(t_drive), torque_method, theta0,
-                                      noise_seed=a if noise is not None else None, found=found)
+                                      noise_seed=a if noise is not None else None, found=found, gains_found=gains)
             if noise is not None:
                 tq, tq_noise = tq
                 noise[sel] = resample.to_instants(tq_noise, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
@@ -240,7 +241,7 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
             out[sel] = resample.to_instants(tq, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
         else:
             out[sel] = resample.linear_at(tq, rec.rate_hz, t0, t_daq[sel])
-    notes.extend(_interference_notes(found))
+    notes.extend(_interference_notes(found) + _gain_notes(gains))
     prepared = PreparedSignals(t_s, out, speed, rec.period_s, clock, torque_method, align, theta0, notes,
                                noise, alias, jitter, tuple(found))
     return _signed(prepared) if sign is None else prepared
@@ -355,10 +356,26 @@ def _interference_notes(found: list[torque.Interference]) -> list[str]:
     return [f"current: removed interference lines at {text}; sensor offset drifted by {1e3 * drift:.0f} mA"]
 
 
+def _gain_notes(found: list[torque.PhaseGains]) -> list[str]:
+    """One note on the phases' relative sensor gains (divided out) when one differs from 1 beyond its 95 %
+    interval (in the longest chunk)."""
+    if not found:
+        return []
+    g = max(found, key=lambda x: x.n_samples)
+    if all(abs(v - 1.0) <= 1.96 * g.sigma[n] for n, v in g.gain.items()):
+        return []
+    text = ", ".join(f"{n} {v:.4f} ± {1.96 * g.sigma[n]:.1g}" for n, v in g.gain.items())
+    return [f"current: phase sensor gains differ (relative to their mean: {text}); divided out"]
+
+
 def _demodulated(piece: dict[str, np.ndarray], rec: Recording, theta_m_rad: np.ndarray, method: TorqueMethod,
                  theta0: float, noise_seed: int | None = None,
-                 found: list[torque.Interference] | None = None) -> tuple[np.ndarray, float]:
+                 found: list[torque.Interference] | None = None,
+                 gains_found: list[torque.PhaseGains] | None = None) -> tuple[np.ndarray, float]:
     """Torque of one chunk by the encoder or park method, and the θ_0 used (mod π; estimated if NaN).
+
+    The park method divides three phases by their relative sensor gains, estimated from the chunk itself
+    (appended to ``gains_found``).
 
     With ``noise_seed`` (encoder method) the torque comes with a noise realisation, shape (2, n).
     """
@@ -371,7 +388,11 @@ def _demodulated(piece: dict[str, np.ndarray], rec: Recording, theta_m_rad: np.n
                                      torque.PhaseOffset(theta0, 0.0, 0), noise_seed=noise_seed, found=found), theta0
     offsets = {name: torque.phase_offset(c, theta_e, rec.rate_hz) for name, c in piece.items()}
     theta0 = offsets["i_a"].theta0_rad if np.isnan(theta0) else theta0
-    return torque.torque_park(piece, theta_e, rec.k_t_Nm_per_A, theta0, {n: o.dc_a for n, o in offsets.items()}), theta0
+    gains = torque.phase_gains(piece)
+    if gains is not None and gains_found is not None:
+        gains_found.append(gains)
+    return torque.torque_park(piece, theta_e, rec.k_t_Nm_per_A, theta0, {n: o.dc_a for n, o in offsets.items()},
+                              None if gains is None else gains.gain), theta0
 
 
 def _signed(p: PreparedSignals) -> PreparedSignals:

@@ -161,6 +161,24 @@ def test_park_torque_is_exact_with_three_and_with_two_phases(synth: dict[str, np
     assert rms_pct(in_band(two), in_band(true)) < 0.3
 
 
+def test_park_divides_out_per_phase_gain_errors_estimated_from_the_zero_sum(synth: dict[str, np.ndarray]) -> None:
+    rng = np.random.default_rng(3)
+    truth = {"i_a": 1.0, "i_b": 1.02, "i_c": 0.98}  # mean 1: the common scale is k_t's, not observable
+    dc = {"i_a": DC, "i_b": -DC, "i_c": 0.0}
+    measured = {k: truth[k] * (synth[k] - dc[k]) + dc[k] + 2e-3 * rng.standard_normal(synth[k].size) for k in truth}
+    est = torque.phase_gains(measured)
+    assert est is not None
+    for k, g in truth.items():
+        assert abs(est.gain[k] - g) < max(3 * est.sigma[k], 2e-4)
+        assert 0 < est.sigma[k] < 1e-3
+    true = K_T * synth["iq"]
+    raw = torque.torque_park(measured, synth["theta_e"], K_T, THETA0, dc)
+    fixed = torque.torque_park(measured, synth["theta_e"], K_T, THETA0, dc, est.gain)
+    assert rms_pct(in_band(raw), in_band(true)) > 0.8  # the 2·f_e ripple of the unequal gains
+    assert rms_pct(in_band(fixed), in_band(true)) < 0.3
+    assert torque.phase_gains({k: measured[k] for k in ("i_a", "i_b")}) is None
+
+
 def test_hilbert_envelope_is_the_current_amplitude_at_constant_speed() -> None:
     t = np.arange(int(RATE_HZ)) / RATE_HZ
     i_a = -1.8 * np.sin(2 * np.pi * 60.0 * t + 0.4)

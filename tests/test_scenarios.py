@@ -32,8 +32,7 @@ CASES = [
         "third mode in the band: K −3.8 %, J_l +49 % (vs J_l alone) under an ok verdict; the misfit is not named")),
     pytest.param("offset drift 40 mA, 20 s period", 1),
     pytest.param("mains hum 20 mA, 50 Hz + harmonics", 4),
-    pytest.param("3 phases, gain errors +2 % / −2 % (park)", 0, marks=_xfail(
-        "per-phase gain error: J_m +2 % with the truth outside its 95 % interval (interval too narrow)")),
+    pytest.param("3 phases, gain errors +2 % / −2 % (park)", 0),
 ]
 
 
