@@ -29,7 +29,7 @@ from acq.config import check_duration, check_memory, load_bench, load_profile, w
 from acq.devices import devices_command
 from acq.display import result_table, summary_table
 from acq.exporters import export_command
-from acq.fleet import fleet_command
+from acq.fleet_display import fleet_command
 from acq.importers import import_command
 from acq.monitor_cli import monitor_command
 from acq.recorder import Recorder, RecordingResult

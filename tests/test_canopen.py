@@ -19,7 +19,8 @@ from acq.analyze import options_for, recording_from_session
 from acq.config import load_bench, load_profile
 from acq.recorder import Recorder
 from acq.session import load
-from drivers.canopen_drive import CanopenDrive, bus_load, check_bus_load, open_drive
+from drivers.canopen_drive import CanopenDrive, bus_load, check_bus_load
+from drivers.sim.peers import open_canopen_with_sim_node as open_drive
 from analysis.pipeline import analyze
 from analysis.sample_instants import stamp_deviation_s
 from drivers.canopen_od import HIGH_RES_TIMESTAMP, POSITION_ACTUAL, TPDO_COMM, TPDO_MAP, VELOCITY_ACTUAL, map_entry
