@@ -25,7 +25,7 @@ from acq.storage import atomic_path, free_bytes, write_text_atomically
 from analysis.model import TwoMassParams
 from analysis.pipeline import AnalysisOptions, Pipeline, Result, analyze
 from analysis.signals import Recording, TorqueMethod
-from drivers.errors import ConfigError, StorageError
+from acqcore.errors import ConfigError, StorageError
 
 #: Free bytes needed before drawing a report PNG: the reports are 0.2–0.6 MB (1600×1000 px); ×4 margin.
 REPORT_ROOM_BYTES = 4 << 20

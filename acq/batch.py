@@ -38,7 +38,7 @@ from acq.catalogue import Catalogue, Outcome
 from acq.display import batch_table
 from acq.session import Session, load, read_status
 from acq.storage import remove_temp_files
-from drivers.errors import AcqError, ConfigError
+from acqcore.errors import AcqError, ConfigError
 
 CATALOGUE_NAME = "catalogue.sqlite"
 _GLOB_CHARS = frozenset("*?[")

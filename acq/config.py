@@ -17,7 +17,7 @@ from typing import Any, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from drivers.config import MAX_DURATION_S, Bench, Profile, check_joint_name
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
 DEFAULT_BENCH = CONFIG_DIR / "benches" / "sim.toml"

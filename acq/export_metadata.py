@@ -18,7 +18,7 @@ from typing import Any
 from acq import __version__
 from acq.analyze import sha256_of
 from acq.session import Session, utc_now_iso
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 FORMAT = "acq-export-metadata"
 FORMAT_VERSION = 1

@@ -25,7 +25,7 @@ from typing import Any, Literal
 
 from acq.catalogue import Catalogue, Entry, parse_tags, tags_match
 from acq.trend import Trend, TrendPoint, catalogue_location, compute_trend
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 FleetState = Literal["alarm", "stale", "no baseline", "ok"]
 STATE_ORDER: dict[FleetState, int] = {"alarm": 0, "stale": 1, "no baseline": 2, "ok": 3}

@@ -41,7 +41,7 @@ from acq.session import load, repair
 from acq.trend import Trend, compute_trend
 from acq.window_judge import analyse_window, marked
 from drivers.config import Bench
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 from drivers.registry import open_bench
 
 WINDOW_TAG, ELAPSED_TAG = "monitor_window", "monitor_elapsed_s"

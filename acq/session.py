@@ -58,7 +58,7 @@ from acq.h5safe import abandon, open_read, superblock_eof
 from acq.storage import atomic_path, cause_of, free_bytes, storage_error
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
-from drivers.errors import ConfigError, StorageError
+from acqcore.errors import ConfigError, StorageError
 
 FORMAT = "acq-session"
 FORMAT_VERSION = 1

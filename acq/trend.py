@@ -32,7 +32,7 @@ from acq.batch import CATALOGUE_NAME
 from acq.catalogue import Catalogue, CatalogueLocation, Entry, parse_tags, tags_match
 from acq.catalogue_backends import is_url
 from acq.display import trend_table
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 EXIT_ALARM = 3
 EWMA_L = 3.0

@@ -37,7 +37,7 @@ from drivers.canopen_motion import STATUS_POLL_S, ProfilePositionMotion, device_
 from drivers.canopen_stream import (SYNC_COB_ID, SYNC_COUNTER_OVERFLOW, FrameCapture, RawFrameLog, SyncProducer,
                                     SyncUnwrapper, TpdoDecoder)
 from drivers.config import Bench, DriveCanopen, Profile
-from drivers.errors import AcqError, ConfigError, DeviceError
+from acqcore.errors import AcqError, ConfigError, DeviceError
 
 QUEUE_FRAMES = 20_000
 BATCH_S = 0.05

@@ -33,7 +33,7 @@ import numpy as np
 
 from drivers.base import CurrentBlock, CurrentSourceInfo, StreamEvent
 from drivers.config import Bench, DaqNidaqmx
-from drivers.errors import ConfigError, DeviceError
+from acqcore.errors import ConfigError, DeviceError
 
 DRIVER_MISSING = "NI-DAQmx driver not installed — install it or use configs/benches/sim.toml"
 SAMPLES_NOT_YET_AVAILABLE = -200284

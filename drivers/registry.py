@@ -16,7 +16,7 @@ from typing import Any
 
 from drivers.base import CurrentSource, Drive
 from drivers.config import Bench
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 #: driver name in ``[daq]`` → (module, factory). The factory takes (bench, sim_bench_or_None, fast).
 CURRENT_SOURCES: dict[str, tuple[str, str]] = {

@@ -34,7 +34,7 @@ import numpy as np
 
 from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent
 from drivers.config import Bench, DriveSerial, Profile
-from drivers.errors import ConfigError, DeviceError
+from acqcore.errors import ConfigError, DeviceError
 from drivers.serial_codec import (CODECS, Ack, Codec, Command, ParserStats, StreamParser, Telemetry, bits_per_byte,
                                   required_baud)
 

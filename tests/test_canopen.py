@@ -26,7 +26,7 @@ from analysis.sample_instants import stamp_deviation_s
 from drivers.canopen_od import HIGH_RES_TIMESTAMP, POSITION_ACTUAL, TPDO_COMM, TPDO_MAP, VELOCITY_ACTUAL, map_entry
 from drivers.canopen_stream import SYNC_COB_ID, FrameCapture, SyncUnwrapper, TpdoDecoder
 from drivers.config import Bench, DriveCanopen
-from drivers.errors import ConfigError, DeviceError
+from acqcore.errors import ConfigError, DeviceError
 from drivers.sim.bench import SimBench
 from drivers.sim.daq import open_current_source
 

@@ -2,7 +2,9 @@
 
 - the simulator depends on the real code, never the reverse: no module outside ``drivers/sim`` imports
   ``drivers.sim`` (tests and ``bench/`` may; the registry names it only as strings, imported when chosen);
-- ``analysis`` imports neither ``acq`` nor ``drivers``;
+- ``analysis`` imports neither ``acq`` nor ``drivers``; ``drivers`` does not import ``acq``;
+- ``acqcore`` (the ground floor: errors) imports nothing of ours, and the catalogue and the CSV reader
+  need no ``drivers`` for it;
 - no import cycles among the packages' modules (imports that run; annotations-only imports under
   ``if TYPE_CHECKING:`` are not counted).
 """
@@ -13,7 +15,7 @@ import ast
 from pathlib import Path
 
 ROOT = Path(__file__).parents[1]
-PACKAGES = ("acq", "analysis", "drivers")
+PACKAGES = ("acq", "acqcore", "analysis", "drivers")
 
 
 def _module_name(path: Path) -> str:
@@ -104,6 +106,20 @@ def test_analysis_imports_neither_acq_nor_drivers() -> None:
     offenders = {m: sorted(i for i in deps if i.split(".")[0] in ("acq", "drivers"))
                  for m, deps in import_graph().items() if m.startswith("analysis")}
     assert {m: d for m, d in offenders.items() if d} == {}
+
+
+def test_drivers_do_not_import_acq_and_the_ground_floor_imports_nothing_of_ours() -> None:
+    graph = import_graph()
+    assert {m: sorted(d) for m, d in graph.items() if m.startswith("drivers") and any(
+        i.split(".")[0] == "acq" for i in d)} == {}
+    assert {m: sorted(d) for m, d in graph.items() if m.startswith("acqcore") and any(
+        i.split(".")[0] != "acqcore" for i in d)} == {}
+
+
+def test_the_catalogue_and_the_csv_reader_do_not_import_drivers() -> None:
+    graph = import_graph()
+    users = ("acq.catalogue", "acq.catalogue_backends", "acq.csvtable")
+    assert {m: sorted(i for i in graph[m] if i.startswith("drivers")) for m in users} == {m: [] for m in users}
 
 
 def test_no_import_cycles() -> None:

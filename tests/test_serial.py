@@ -19,7 +19,7 @@ import pytest
 
 from acq.session import load
 from drivers.config import DriveSerial, Profile
-from drivers.errors import ConfigError, DeviceError
+from acqcore.errors import ConfigError, DeviceError
 from drivers.serial_codec import Ack, Acq1Codec, Command, StreamParser, Telemetry
 from drivers.serial_drive import FrameUnwrapper, LinkStats, SerialDrive
 from drivers.sim.serial_device import FaultLog, SimSerialDevice

@@ -49,7 +49,7 @@ from can.interfaces.virtual import VirtualBus, channels, channels_lock
 from drivers.canopen_od import (HIGH_RES_TIMESTAMP, MODE_PROFILE_POSITION, N_TPDO, PDO_INVALID, TPDO_COMM,
                                  TPDO_MAP, drive_object_dictionary)
 from drivers.config import Bench, DriveCanopen
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
 from drivers.sim.bench import SimBench
 from drivers.sim.pp_generator import ProfileGenerator

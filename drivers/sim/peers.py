@@ -15,7 +15,7 @@ from typing import Any, Protocol
 from drivers import canopen_drive, serial_drive
 from drivers.base import Drive, DriveInfo
 from drivers.config import Bench, DriveCanopen, DriveSerial
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 from drivers.sim.bench import SimBench
 from drivers.sim.can_node import SimCanNode
 from drivers.sim.serial_device import SimSerialDevice, open_simulated_device
