@@ -131,3 +131,10 @@ def test_the_checker_finds_a_cycle_and_a_reverse_import() -> None:
     graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert _cycles(graph) == [["a", "b", "c"]]
     assert "drivers.sim.bench" in _imports(ROOT / "tests" / "test_canopen.py")
+
+
+def test_only_the_session_module_reads_root_attributes() -> None:
+    """Outside ``acq/session.py`` session metadata is read through the typed ``Session.meta``."""
+    readers = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "acq").rglob("*.py") if p.name != "session.py"
+                     and any(isinstance(n, ast.Attribute) and n.attr == "attrs" for n in ast.walk(ast.parse(p.read_text()))))
+    assert readers == []
