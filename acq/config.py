@@ -5,6 +5,7 @@ A config error is one line, e.g.::
     configs/benches/lab_canopen.toml: [daq] rate_hz = -25600: must be greater than 0
     configs/benches/lab_canopen.toml: [motor] pole_pair = 4: unknown key
     configs/profiles/x.toml: top_speed_rpm: missing
+    configs/benches/lab.toml: [daq] block_s = 3 must be at most half of buffer_s = 5   (a rule between keys)
 """
 
 from __future__ import annotations
@@ -59,6 +60,10 @@ def _message(error: dict[str, Any]) -> str:
 
 
 def _format(path: Path, error: dict[str, Any], data: dict[str, Any]) -> str:
+    if error["type"] == "value_error" and "error" in error.get("ctx", {}):
+        loc = tuple(error["loc"])
+        if not loc or (loc[0] in _DISCRIMINATED and len(loc) <= 2):  # a section's validator: it names its keys
+            return f"{path}: {error['ctx']['error']}"
     loc = tuple(error["loc"])
     if error["type"].startswith("union_tag"):
         loc = (*loc, "driver")

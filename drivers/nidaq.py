@@ -79,19 +79,14 @@ class NidaqCurrentSource:
 
     Raises
     ------
-    ConfigError
-        If channels and physical channels differ in number, or a read would not fit the buffer twice.
     DeviceError
         If the NI-DAQmx driver is not installed.
+
+    The rules between keys (channels vs physical_channels, block_s vs buffer_s) are validators of
+    :class:`drivers.config.DaqNidaqmx`.
     """
 
     def __init__(self, settings: DaqNidaqmx, lib: ModuleType | None = None) -> None:
-        if len(settings.channels) != len(settings.physical_channels):
-            raise ConfigError(f"[daq] channels {settings.channels} and physical_channels "
-                              f"{settings.physical_channels} must have the same length")
-        if settings.block_s * 2 > settings.buffer_s:
-            raise ConfigError(f"[daq] block_s = {settings.block_s:g} must be at most half of "
-                              f"buffer_s = {settings.buffer_s:g}")
         self.settings = settings
         self.nidaqmx = lib if lib is not None else import_nidaqmx()
         try:

@@ -39,7 +39,7 @@ import struct
 from dataclasses import dataclass, field
 from typing import ClassVar, Protocol
 
-from drivers.config import Profile
+from drivers.profile import Profile
 
 
 @dataclass(frozen=True)

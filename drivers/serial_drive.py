@@ -35,25 +35,16 @@ import numpy as np
 from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent
 from drivers.config import Bench, DriveSerial, Profile
 from acqcore.errors import ConfigError, DeviceError
-from drivers.serial_codec import (CODECS, Ack, Codec, Command, ParserStats, StreamParser, Telemetry, bits_per_byte,
-                                  required_baud)
+from drivers.serial_codec import CODECS, Ack, Codec, Command, ParserStats, StreamParser, Telemetry
 
 WARNING_INTERVAL_S = 1.0
 READ_CHUNK_BYTES = 4096
 
 
 def codec_for(settings: DriveSerial) -> Codec:
-    """The codec ``[drive] codec`` names, checked against the baud rate and the frame period."""
-    if settings.codec not in CODECS:
-        raise ConfigError(f'[drive] codec = "{settings.codec}": unknown codec (known: {", ".join(sorted(CODECS))})')
-    codec = CODECS[settings.codec]()
-    need = required_baud(codec, settings.period_s, settings.parity)
-    if settings.baud < need:
-        raise ConfigError(
-            f"[drive] baud = {settings.baud}: too low for one {codec.telemetry_bytes}-byte {codec.name} frame every "
-            f"{settings.period_s:g} s; needs at least {need:.0f} baud ({codec.telemetry_bytes} bytes × "
-            f"{bits_per_byte(settings.parity)} bits / {settings.period_s:g} s)")
-    return codec
+    """The codec ``[drive] codec`` names (its name and the baud rate it needs are validators of
+    :class:`DriveSerial`)."""
+    return CODECS[settings.codec]()
 
 
 @dataclass(frozen=True)
@@ -299,7 +290,6 @@ def open_drive(bench: Bench, sim_bench: object, fast: bool) -> SerialDrive:
     """
     settings = bench.drive
     assert isinstance(settings, DriveSerial)
-    codec_for(settings)
     if settings.port.startswith("/") and not os.path.exists(settings.port):  # a device path (not a URL, not COM3)
         raise DeviceError(f"serial port {settings.port}: no such device (is the drive connected and powered?)")
     return SerialDrive(settings, bench.encoder.counts_per_rev)

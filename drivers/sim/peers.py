@@ -85,12 +85,11 @@ class _ClosingDevice:
 def open_canopen_with_sim_node(bench: Bench, sim_bench: SimBench | None, fast: bool) -> CanopenWithSimNode:
     """Registry factory for ``[drive] driver = "canopen"`` with ``simulated_node = true``.
 
-    Refuses (``ConfigError``) ``--fast`` (a CAN bus runs in real time) and interfaces other than ``virtual``.
+    Refuses (``ConfigError``) ``--fast``: a CAN bus runs in real time (``interface = "virtual"`` is a
+    validator of :class:`DriveCanopen`).
     """
     s = bench.drive
     assert isinstance(s, DriveCanopen) and sim_bench is not None
-    if s.interface != "virtual":
-        raise ConfigError(f"[drive] simulated_node = true needs interface = \"virtual\", not {s.interface!r}")
     if fast:
         raise ConfigError("--fast: the simulated CANopen drive runs on the bus in real time; record without --fast")
     adapter = canopen_drive.open_drive(bench, None, fast)
@@ -102,7 +101,6 @@ def open_serial_with_sim_device(bench: Bench, sim_bench: SimBench | None, fast: 
     :class:`~drivers.serial_drive.SerialDrive` on the pty of a :class:`SimSerialDevice` streaming ``sim_bench``."""
     s = bench.drive
     assert isinstance(s, DriveSerial)
-    serial_drive.codec_for(s)  # refuse a bad codec or baud before a pty is opened
     device = open_simulated_device(bench, sim_bench)
     try:
         on_pty = bench.model_copy(update={"drive": s.model_copy(update={"port": device.port_name})})
