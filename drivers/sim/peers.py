@@ -21,32 +21,38 @@ from drivers.sim.can_node import SimCanNode
 from drivers.sim.serial_device import SimSerialDevice, open_simulated_device
 
 
-class _Peer(Protocol):
-    def stop(self) -> None: ...
+class SimulatedPeer(Protocol):
+    """The simulated drive on the other end of the wire."""
+
+    def start(self) -> None:
+        """Join the channel / start serving the port."""
+        ...
+
+    def stop(self) -> None:
+        """Leave / close. Idempotent."""
+        ...
 
 
 class DriveWithPeer:
     """A real drive adapter and the simulated device it talks to, started and stopped together.
 
     Implements :class:`drivers.base.Drive` by delegating to ``adapter`` (any other attribute too, e.g.
-    ``keep_raw_frames`` or ``stats``); :meth:`start` starts the peer first (if it has a ``start``),
-    :meth:`stop` stops it after the adapter, also when the adapter's start fails.
+    ``keep_raw_frames`` or ``stats``); :meth:`start` starts the peer first, :meth:`stop` stops it after
+    the adapter, also when the adapter's start fails.
 
     Parameters
     ----------
     adapter : the plain adapter, pointed at the peer's channel or port.
-    peer : the simulated drive on the other end (``start`` optional, ``stop`` idempotent).
+    peer : the simulated drive on the other end.
     """
 
-    def __init__(self, adapter: Drive, peer: _Peer) -> None:
+    def __init__(self, adapter: Drive, peer: SimulatedPeer) -> None:
         self.adapter, self.peer = adapter, peer
 
     def start(self) -> DriveInfo:
         """Start the peer, then the adapter; on any failure stop both and re-raise."""
         try:
-            start_peer = getattr(self.peer, "start", None)
-            if start_peer is not None:
-                start_peer()
+            self.peer.start()
             return self.adapter.start()
         except BaseException:
             self.stop()
@@ -72,11 +78,15 @@ class CanopenWithSimNode(DriveWithPeer):
         return self.peer  # type: ignore[return-value]
 
 
-class _ClosingDevice:
-    """Adapts :class:`SimSerialDevice` (``close``) to the peer's ``stop``."""
+class _PtyPeer:
+    """A :class:`SimSerialDevice` as a :class:`SimulatedPeer`: it serves its pty from construction on, and
+    ``stop`` closes it."""
 
     def __init__(self, device: SimSerialDevice) -> None:
         self.device = device
+
+    def start(self) -> None:
+        """Nothing to do: the device's thread runs since it opened the pty."""
 
     def stop(self) -> None:
         self.device.close()
@@ -108,4 +118,4 @@ def open_serial_with_sim_device(bench: Bench, sim_bench: SimBench | None, fast: 
     except BaseException:
         device.close()
         raise
-    return DriveWithPeer(adapter, _ClosingDevice(device))
+    return DriveWithPeer(adapter, _PtyPeer(device))
