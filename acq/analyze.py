@@ -25,7 +25,7 @@ from acq.storage import atomic_path, free_bytes, write_text_atomically
 from analysis.model import TwoMassParams
 from analysis.pipeline import AnalysisOptions, Pipeline, Result, analyze
 from analysis.signals import Recording, TorqueMethod
-from drivers.errors import ConfigError, StorageError
+from acqcore.errors import ConfigError, StorageError
 
 #: Free bytes needed before drawing a report PNG: the reports are 0.2–0.6 MB (1600×1000 px); ×4 margin.
 REPORT_ROOM_BYTES = 4 << 20
@@ -117,9 +117,9 @@ def result_json(session: Session, result: Result) -> dict[str, Any]:
     doc = result.to_json_dict()
     doc["session"] = {
         "path": str(session.path),
-        "session_id": session.attrs.get("session_id"),
-        "joint": session.attrs.get("joint"),
-        "created_utc": session.attrs.get("created_utc"),
+        "session_id": session.meta.session_id,
+        "joint": session.meta.joint,
+        "created_utc": session.meta.created_utc,
         "status": session.status,
         "sha256": sha256_of(session.path),
         "tags": session.tags,
@@ -188,7 +188,7 @@ def draw_report(done: SessionResult) -> SessionResult:
 
         with atomic_path(done.report_path) as tmp_png:
             render_report_png(done.result.figures, tmp_png, values=done.json_dict,
-                              title=f"{done.session.attrs.get('joint')} · {done.session.path.name}")
+                              title=f"{done.session.meta.joint} · {done.session.path.name}")
     except StorageError:
         raise  # a write that failed (disk full, I/O error) is a failure, named by the file
     except Exception as e:  # noqa: BLE001 — whatever the plotting stack does, the identification stands

@@ -38,7 +38,7 @@ from acq.catalogue import Catalogue, Outcome
 from acq.display import batch_table
 from acq.session import Session, load, read_status
 from acq.storage import remove_temp_files
-from drivers.errors import AcqError, ConfigError
+from acqcore.errors import AcqError, ConfigError
 
 CATALOGUE_NAME = "catalogue.sqlite"
 _GLOB_CHARS = frozenset("*?[")
@@ -127,11 +127,9 @@ def request_key(request: dict[str, Any]) -> str:
 
 def session_meta(session: Session) -> dict[str, Any]:
     """What the catalogue keeps of a session's root attributes."""
-    attrs = session.attrs
-    return {"session_id": attrs.get("session_id"), "joint": attrs.get("joint"),
-            "created_utc": attrs.get("created_utc"),
-            "start_monotonic_ns": int(attrs.get("host_monotonic_ns_at_start", 0)), "status": session.status,
-            "tags": session.tags}
+    meta = session.meta
+    return {"session_id": meta.session_id, "joint": meta.joint, "created_utc": meta.created_utc,
+            "start_monotonic_ns": meta.host_ns_at_start or 0, "status": meta.status, "tags": meta.tags}
 
 
 @contextmanager

@@ -29,7 +29,7 @@ import click
 from acq.catalogue_backends import is_url, open_catalogue_db, open_error
 from acq.session import utc_now_iso
 from acq.storage import cause_of
-from drivers.errors import ConfigError, StorageError
+from acqcore.errors import ConfigError, StorageError
 
 #: Step i brings a database from version i to i + 1.
 MIGRATIONS: tuple[str, ...] = (

@@ -22,7 +22,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
-from drivers.errors import ConfigError, StorageError
+from acqcore.errors import ConfigError, StorageError
 
 #: Seconds a writer waits for another process's lock (SQLite's busy timeout, PostgreSQL's lock_timeout).
 BUSY_TIMEOUT_S = 60.0

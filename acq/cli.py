@@ -1,6 +1,6 @@
 """The ``acq`` command line: record, info, check (more commands register themselves below).
 
-Errors for people: an :class:`~drivers.errors.AcqError` anywhere becomes one line on stderr and
+Errors for people: an :class:`~acqcore.errors.AcqError` anywhere becomes one line on stderr and
 exit code 2 (bad input) or 1 (device, failed write); a usage error is one line too (exit 2); Ctrl-C is
 exit 130.
 """
@@ -29,7 +29,7 @@ from acq.config import check_duration, check_memory, load_bench, load_profile, w
 from acq.devices import devices_command
 from acq.display import result_table, summary_table
 from acq.exporters import export_command
-from acq.fleet import fleet_command
+from acq.fleet_display import fleet_command
 from acq.importers import import_command
 from acq.monitor_cli import monitor_command
 from acq.recorder import Recorder, RecordingResult
@@ -38,7 +38,7 @@ from acq.session import Session, load, repair
 from acq.summary import summarize
 from acq.trend import trend_command
 from acq.view import view_command
-from drivers.errors import AcqError, ConfigError
+from acqcore.errors import AcqError, ConfigError
 from drivers.registry import open_bench
 
 EXIT_INTERRUPTED = 130

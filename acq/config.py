@@ -5,6 +5,7 @@ A config error is one line, e.g.::
     configs/benches/lab_canopen.toml: [daq] rate_hz = -25600: must be greater than 0
     configs/benches/lab_canopen.toml: [motor] pole_pair = 4: unknown key
     configs/profiles/x.toml: top_speed_rpm: missing
+    configs/benches/lab.toml: [daq] block_s = 3 must be at most half of buffer_s = 5   (a rule between keys)
 """
 
 from __future__ import annotations
@@ -17,12 +18,13 @@ from typing import Any, TypeVar
 from pydantic import BaseModel, ValidationError
 
 from drivers.config import MAX_DURATION_S, Bench, Profile, check_joint_name
-from drivers.errors import ConfigError
+from drivers.registry import CURRENT_SOURCES, DRIVES
+from acqcore.errors import ConfigError
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / "configs"
 DEFAULT_BENCH = CONFIG_DIR / "benches" / "sim.toml"
-_DISCRIMINATED = {"daq", "drive"}
-_DRIVER_TAGS = {"sim", "nidaqmx", "canopen", "serial"}
+#: sections whose model is chosen by their ``driver`` key → the driver names (the registry's tables)
+_DRIVERS_OF = {"daq": set(CURRENT_SOURCES), "drive": set(DRIVES)}
 
 M = TypeVar("M", bound=BaseModel)
 
@@ -32,7 +34,7 @@ def _key_path(loc: tuple[Any, ...], data: dict[str, Any]) -> tuple[str, Any]:
     parts: list[str] = []
     node: Any = data
     for i, element in enumerate(loc):
-        if i == 1 and loc[0] in _DISCRIMINATED and element in _DRIVER_TAGS:
+        if i == 1 and element in _DRIVERS_OF.get(loc[0], ()):
             continue  # the discriminated union's tag (e.g. "nidaqmx") is not a key in the file
         if isinstance(element, str) and element.endswith("]"):
             continue
@@ -59,6 +61,10 @@ def _message(error: dict[str, Any]) -> str:
 
 
 def _format(path: Path, error: dict[str, Any], data: dict[str, Any]) -> str:
+    if error["type"] == "value_error" and "error" in error.get("ctx", {}):
+        loc = tuple(error["loc"])
+        if not loc or (loc[0] in _DRIVERS_OF and len(loc) <= 2):  # a section's validator: it names its keys
+            return f"{path}: {error['ctx']['error']}"
     loc = tuple(error["loc"])
     if error["type"].startswith("union_tag"):
         loc = (*loc, "driver")

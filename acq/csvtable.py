@@ -2,7 +2,7 @@
 
 The body is parsed by numpy's C reader (:func:`numpy.loadtxt`, ~0.5 s for 1.5 M rows × 2 columns);
 only when it refuses the file is the file scanned again line by line to find the first bad cell, so
-valid files pay nothing for the diagnosis. Errors are :class:`~drivers.errors.ConfigError` s of the
+valid files pay nothing for the diagnosis. Errors are :class:`~acqcore.errors.ConfigError` s of the
 form ``FILE: line L, column NAME: what`` (line 1 is the header).
 """
 
@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,7 @@ from rich.console import Console
 
 from acq.config import DEFAULT_BENCH
 from acq.display import sections_table
-from drivers.errors import DeviceError
+from acqcore.errors import DeviceError
 from drivers.nidaq import DRIVER_MISSING, first_line, import_nidaqmx
 
 #: python-can interfaces that are software buses, not something a drive can be wired to.

@@ -18,7 +18,7 @@ from typing import Any
 from acq import __version__
 from acq.analyze import sha256_of
 from acq.session import Session, utc_now_iso
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 FORMAT = "acq-export-metadata"
 FORMAT_VERSION = 1
@@ -67,14 +67,14 @@ def write_metadata(session: Session, current_path: Path, encoder_path: Path) -> 
     """Write the metadata of ``session`` beside its exported ``current_path`` / ``encoder_path``; return its path."""
     path = metadata_path(current_path)
     assert path is not None, current_path
-    attrs = session.attrs
+    meta = session.meta
     doc = {
         "format": FORMAT, "format_version": FORMAT_VERSION, "exported_utc": utc_now_iso(), "acq_version": __version__,
-        "session_id": attrs.get("session_id"), "joint": attrs.get("joint"), "created_utc": attrs.get("created_utc"),
-        "operator": attrs.get("operator", ""), "tags": session.tags,
-        "origin": json.loads(attrs.get("origin_json", "{}")),
-        "bench": json.loads(attrs["bench_json"]), "profile": json.loads(attrs["profile_json"]),
-        "host_clock_shared": session.host_clock_shared,
+        "session_id": meta.session_id, "joint": meta.joint, "created_utc": meta.created_utc,
+        "operator": meta.operator, "tags": meta.tags, "origin": meta.origin,
+        "bench": session.bench.model_dump(mode="json"),
+        "profile": session.profile.model_dump(mode="json") if session.profile is not None else None,
+        "host_clock_shared": meta.host_clock_shared,
         "files": {"current": {"name": current_path.name, "sha256": sha256_of(current_path)},
                   "encoder": {"name": encoder_path.name, "sha256": sha256_of(encoder_path)}},
     }

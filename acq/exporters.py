@@ -27,6 +27,7 @@ from rich.markup import escape
 from acq.export_metadata import write_metadata
 from acq.session import Session, load
 from acq.storage import write_text_atomically
+from acqcore.errors import ConfigError
 
 PHASE_COLUMNS = ("i_a", "i_b", "i_c")
 
@@ -45,11 +46,18 @@ def _write_columns(path: Path, columns: dict[str, list[str]]) -> None:
     write_text_atomically(path, ",".join(columns) + "\n" + body + "\n")
 
 
+def _host_ns_at_start(session: Session) -> int:
+    """The host clock at the session's start, ns; :class:`ConfigError` naming the file when it lacks it."""
+    if session.meta.host_ns_at_start is None:
+        raise ConfigError(f"{session.path}: malformed session: no host_monotonic_ns_at_start attribute")
+    return session.meta.host_ns_at_start
+
+
 def current_t0_s(session: Session) -> float:
     """Host time, s after ``host_monotonic_ns_at_start``, of DAQ sample 0 (least-delayed block)."""
     cur = session.current
     last_index = cur.block_first_index + cur.block_count - 1
-    host_s = (cur.block_host_ns - int(session.attrs["host_monotonic_ns_at_start"])) * 1e-9
+    host_s = (cur.block_host_ns - _host_ns_at_start(session)) * 1e-9
     return float(np.min(host_s - last_index / cur.rate_hz))
 
 
@@ -64,7 +72,7 @@ def export_csv(session_path: Path, out_dir: Path) -> tuple[Path, Path, Path]:
     t_cur = current_t0_s(session) + cur.sample_index() / cur.rate_hz
     phases = {f"{p}_A": _exact(cur.phases_a[p]) for p in PHASE_COLUMNS if p in cur.phases_a}
     _write_columns(current_path, {"t_s": _seconds(t_cur), **phases})
-    t_enc = (enc.host_ns - int(session.attrs["host_monotonic_ns_at_start"])) * 1e-9
+    t_enc = (enc.host_ns - _host_ns_at_start(session)) * 1e-9
     columns = {"t_s": _seconds(t_enc), "position_counts": [str(v) for v in enc.position_counts.tolist()],
                "index": [str(v) for v in enc.index.tolist()]}
     if enc.drive_time_s is not None:

@@ -1,4 +1,5 @@
-"""How ``acq fleet`` shows the fleet: a rich table, and a PNG with ΔK over time as one heat strip per joint.
+"""How ``acq fleet`` shows the fleet: the click command, a rich table, and a PNG with ΔK over time as one
+heat strip per joint.
 
 The numbers come from :mod:`acq.fleet`; nothing here judges a joint.
 """
@@ -6,15 +7,20 @@ The numbers come from :mod:`acq.fleet`; nothing here judges a joint.
 from __future__ import annotations
 
 import functools
+import json
 from collections.abc import Sequence
-from datetime import datetime, timedelta
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
+import click
+from rich.console import Console
 from rich.table import Table
 
+from acq.catalogue import CatalogueLocation
 from acq.display import format_value
-from acq.fleet import JointStatus
+from acq.fleet import JointStatus, fleet_json, load_fleet
+from acq.trend import EXIT_ALARM
 
 _STYLES = {"alarm": "bold red", "stale": "yellow", "no baseline": "dim", "ok": ""}
 #: Time bins of the PNG's heat strips (the width of a strip is the time since the oldest session).
@@ -102,3 +108,41 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
     plot.setYRange(0.0, float(len(statuses)), padding=0.0)
     plot.showGrid(x=True, y=False, alpha=0.25)
     return frame
+
+
+@click.command(name="fleet")
+@click.argument("folder", required=False, type=click.Path(path_type=Path, file_okay=False))
+@click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
+              help="The catalogue, a file or postgresql:// URL (default: FOLDER/catalogue.sqlite, FOLDER defaulting "
+                   "to sessions/).")
+@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+              help="Only sessions with this tag (repeatable), e.g. --tag site=plant2.")
+@click.option("--stale-days", type=click.FloatRange(0, min_open=True), default=7.0, show_default=True,
+              help="A joint with no session for this many days is stale.")
+@click.option("--baseline-sessions", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Baseline = mean K of each joint's first N good sessions.")
+@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=10.0, show_default=True,
+              help="Alarm when K is this many % below the baseline.")
+@click.option("--ewma-lambda", type=click.FloatRange(0, 1, min_open=True), default=0.2, show_default=True,
+              help="EWMA weight of the newest session (alarm at the 3σ control limit).")
+@click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
+              help="Also draw the fleet (ΔK over time, one row per joint) into this PNG.")
+@click.option("--json", "as_json", is_flag=True, help="Print the fleet as JSON.")
+def fleet_command(folder: Path | None, catalogue_path: Path | str | None, tags: tuple[str, ...], stale_days: float,
+                  baseline_sessions: int, threshold_pct: float, ewma_lambda: float, png_path: Path | None,
+                  as_json: bool) -> int:
+    """Every joint (by robot tag): latest K ± 95 %, ΔK to its baseline, sessions of the last day, state
+    (alarm / stale / no baseline / ok), worst first; exit code 3 if any joint is in alarm."""
+    now = datetime.now(UTC)
+    statuses = load_fleet(folder, catalogue_path, tags, now=now, stale_days=stale_days,
+                          baseline_sessions=baseline_sessions, threshold_pct=threshold_pct, ewma_lambda=ewma_lambda)
+    out = Console()
+    if as_json:
+        click.echo(json.dumps(fleet_json(statuses), indent=2))
+    else:
+        out.print(fleet_table(statuses, stale_days))
+    if png_path is not None:
+        render_fleet_png(statuses, png_path, now=now, threshold_pct=threshold_pct, stale_days=stale_days)
+        if not as_json:
+            out.print(f"plot: {png_path}")
+    return EXIT_ALARM if any(s.state == "alarm" for s in statuses) else 0

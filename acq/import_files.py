@@ -30,7 +30,7 @@ import numpy as np
 from acq.csvtable import CsvTable, read_csv
 from drivers.base import EventKind, StreamEvent, StreamName
 from drivers.config import Bench
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 PHASES = ("i_a", "i_b", "i_c")
 MIN_DURATION_S = 2.0

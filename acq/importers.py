@@ -40,7 +40,7 @@ from acq.storage import storage_error
 from acq.summary import summarize
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock
 from drivers.config import Bench, Profile
-from drivers.errors import ConfigError, StorageError
+from acqcore.errors import ConfigError, StorageError
 
 BLOCK_S = 0.1
 

@@ -33,7 +33,7 @@ from acq.plots import ensure_app
 from acq.recorder import Recorder, RecordingResult
 from acq.view import has_display
 from drivers.base import CurrentBlock, EncoderBlock, StreamEvent
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 QUEUE_BLOCKS = 512
 FRAME_INTERVAL_MS = 33
@@ -214,7 +214,7 @@ class LiveWindow(QtWidgets.QWidget):
 class LiveView:
     """Attach a live window to a recorder; :meth:`run` records in a worker thread under the Qt loop.
 
-    Raises :class:`~drivers.errors.ConfigError` when there is no display (checked before any device starts).
+    Raises :class:`~acqcore.errors.ConfigError` when there is no display (checked before any device starts).
     """
 
     def __init__(self, recorder: Recorder) -> None:

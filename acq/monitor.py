@@ -41,7 +41,7 @@ from acq.session import load, repair
 from acq.trend import Trend, compute_trend
 from acq.window_judge import analyse_window, marked
 from drivers.config import Bench
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 from drivers.registry import open_bench
 
 WINDOW_TAG, ELAPSED_TAG = "monitor_window", "monitor_elapsed_s"
@@ -177,7 +177,7 @@ class Monitor:
             result = recorder.run()
         finally:
             self._recorder = None
-        key = str(load(result.path).attrs["session_id"])
+        key = str(load(result.path).meta.session_id)
         self._windows[key] = WindowFiles(n, result.path, False, False, key)
         self._size = max(self._size, int(_SIZE_MARGIN * result.path.stat().st_size))
         if result.status != "complete":
@@ -323,7 +323,7 @@ class Monitor:
                 continue
             if WINDOW_TAG not in session.tags:
                 continue
-            n, key = int(session.tags[WINDOW_TAG]), str(session.attrs["session_id"])
+            n, key = int(session.tags[WINDOW_TAG]), str(session.meta.session_id)
             numbers.append(n)
             self._windows[key] = WindowFiles(n, path, key in known, False, key)
             if key in known:
@@ -332,7 +332,7 @@ class Monitor:
                 repair(path, "the monitor stopped during this window's capture (found on restart)")
                 self._mark(key, "interrupted", "the monitor stopped during this window's capture (found on restart)")
             elif session.status != "complete":
-                self._mark(key, "interrupted", f"window capture {session.status}: {session.attrs.get('stop_reason')}")
+                self._mark(key, "interrupted", f"window capture {session.status}: {session.meta.stop_reason}")
             else:
                 self._submit(pool, key)
         self._retain(self._trend())

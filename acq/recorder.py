@@ -28,7 +28,7 @@ from acq.session import SessionExists, SessionWriter, Status, new_session_path, 
 from drivers.base import (CurrentBlock, CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock,
                           StreamEvent)
 from drivers.config import Bench, Profile
-from drivers.errors import AcqError, ConfigError, DeviceError
+from acqcore.errors import AcqError, ConfigError, DeviceError
 
 FLUSH_INTERVAL_S = 0.5
 #: Also flush once this much is pending (a --fast simulated bench delivers seconds of data per 0.5 s): bounds

@@ -31,7 +31,7 @@ from acq.session import load
 from analysis.diagnose import electrical_speed_ratio
 from analysis.signals import prepare_signals
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen, DriveSerial, Profile
-from drivers.errors import AcqError
+from acqcore.errors import AcqError
 from drivers.registry import open_bench
 
 STANDSTILL_S = 3.0

@@ -61,7 +61,7 @@ def samples_check(session: Session, stage: str) -> Check:
     values = {"current_samples": cur.samples, "encoder_samples": enc.samples, "current_lost": cur.missing,
               "encoder_lost": enc.missing, "status": session.status}
     if session.status != "complete":
-        return Check(stage, "recording", "fail", f"{session.status}: {session.attrs.get('stop_reason', '')}",
+        return Check(stage, "recording", "fail", f"{session.status}: {session.meta.stop_reason}",
                      "see the reason; acq devices lists what this machine sees", values)
     if cur.missing:
         daq = session.bench.daq

@@ -44,6 +44,7 @@ import json
 import os
 import time
 import uuid
+import functools
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -58,7 +59,7 @@ from acq.h5safe import abandon, open_read, superblock_eof
 from acq.storage import atomic_path, cause_of, free_bytes, storage_error
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
-from drivers.errors import ConfigError, StorageError
+from acqcore.errors import ConfigError, StorageError
 
 FORMAT = "acq-session"
 FORMAT_VERSION = 1
@@ -471,6 +472,50 @@ class EncoderData:
 
 
 @dataclass(frozen=True)
+class SessionMeta:
+    """What a session file says about itself (its root attributes), typed: the one way other modules read them.
+
+    ``session_id``, ``joint``, ``created_utc`` (ISO 8601 UTC of the start) are None only in a file that lacks
+    them; ``host_ns_at_start`` (host monotonic clock at the start, ns) likewise; ``stopped_utc``,
+    ``status``, ``stop_reason`` and ``operator`` are ``""`` when absent; ``origin`` is where the data came
+    from (``{"kind": "recorded"}``, or the imported files; ``{}`` when absent); ``tags`` the free-form tags;
+    ``host_clock_shared`` whether both streams' host stamps are arrival times on one host clock.
+    """
+
+    session_id: str | None
+    joint: str | None
+    created_utc: str | None
+    host_ns_at_start: int | None
+    stopped_utc: str
+    status: str
+    stop_reason: str
+    operator: str
+    origin: dict[str, Any]
+    tags: dict[str, Any]
+    host_clock_shared: bool
+
+    @classmethod
+    def from_attrs(cls, attrs: dict[str, Any]) -> SessionMeta:
+        """From the root attributes as read (``load`` has checked that ``tags_json`` is JSON)."""
+        origin = json.loads(attrs.get("origin_json", "{}"))
+        if "host_clock_shared" in attrs:
+            shared = bool(attrs["host_clock_shared"])
+        else:  # older files: recordings are, imports are not
+            shared = origin.get("kind", "recorded") != "imported"
+        start = attrs.get("host_monotonic_ns_at_start")
+
+        def text(name: str) -> str | None:
+            value = attrs.get(name)
+            return None if value is None else str(value)
+
+        return cls(session_id=text("session_id"), joint=text("joint"), created_utc=text("created_utc"),
+                   host_ns_at_start=None if start is None else int(start),
+                   stopped_utc=str(attrs.get("stopped_utc", "")), status=str(attrs.get("status", "")),
+                   stop_reason=str(attrs.get("stop_reason", "")), operator=str(attrs.get("operator", "")),
+                   origin=origin, tags=json.loads(attrs.get("tags_json", "{}")), host_clock_shared=shared)
+
+
+@dataclass(frozen=True)
 class Session:
     """A session file read back: root attributes, configs as used, both streams and the events."""
 
@@ -485,9 +530,14 @@ class Session:
     #: above hold the intact part before the first damaged sample.
     damage: tuple[str, ...] = ()
 
+    @functools.cached_property
+    def meta(self) -> SessionMeta:
+        """The root attributes, typed (the way to read them outside this module)."""
+        return SessionMeta.from_attrs(self.attrs)
+
     @property
     def status(self) -> str:
-        return str(self.attrs.get("status", ""))
+        return self.meta.status
 
     def require_usable(self, *, partial: bool = False) -> None:
         """Raise :class:`ConfigError` for a session still ``recording`` or damaged, unless ``partial``.
@@ -505,14 +555,12 @@ class Session:
 
     @property
     def tags(self) -> dict[str, Any]:
-        return json.loads(self.attrs.get("tags_json", "{}"))
+        return self.meta.tags
 
     @property
     def host_clock_shared(self) -> bool:
         """Whether both streams' host stamps are arrival times on one host clock (older files: recordings are)."""
-        if "host_clock_shared" in self.attrs:
-            return bool(self.attrs["host_clock_shared"])
-        return json.loads(self.attrs.get("origin_json", "{}")).get("kind", "recorded") != "imported"
+        return self.meta.host_clock_shared
 
     def require_samples(self) -> None:
         """Raise :class:`ConfigError` naming the stream when either stream holds too little to use."""

@@ -16,7 +16,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from drivers.errors import StorageError
+from acqcore.errors import StorageError
 
 _CAUSES = {
     errno.ENOSPC: "disk full",

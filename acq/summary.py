@@ -68,10 +68,10 @@ def summarize(session: Session) -> SessionSummary:
     )
     return SessionSummary(
         path=str(session.path),
-        joint=str(session.attrs.get("joint", "")),
+        joint=session.meta.joint or "",
         status=session.status,
-        stop_reason=str(session.attrs.get("stop_reason", "")),
-        created_utc=str(session.attrs.get("created_utc", "")),
+        stop_reason=session.meta.stop_reason,
+        created_utc=session.meta.created_utc or "",
         streams=streams,
         events=len(session.events),
     )

@@ -32,11 +32,11 @@ from acq.batch import CATALOGUE_NAME
 from acq.catalogue import Catalogue, CatalogueLocation, Entry, parse_tags, tags_match
 from acq.catalogue_backends import is_url
 from acq.display import trend_table
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
+from analysis.fit import Z95
 
 EXIT_ALARM = 3
 EWMA_L = 3.0
-_Z95 = 1.959964
 
 State = Literal["baseline", "ok", "alarm", "skipped", "before baseline"]
 
@@ -129,7 +129,7 @@ def _skip_reason(e: Entry) -> str | None:
 
 def _sigma(baseline: Sequence[Entry]) -> float:
     """Session-to-session standard deviation of K: the larger of the intervals' and the baseline's scatter."""
-    widths = [(hi - lo) / (2 * _Z95) for lo, hi in (e.K_ci95 for e in baseline) if lo is not None and hi is not None]
+    widths = [(hi - lo) / (2 * Z95) for lo, hi in (e.K_ci95 for e in baseline) if lo is not None and hi is not None]
     from_ci = math.sqrt(statistics.fmean(w * w for w in widths)) if widths else 0.0
     scatter = statistics.stdev(e.K_Nm_per_rad for e in baseline) if len(baseline) > 1 else 0.0  # type: ignore[misc]
     return max(from_ci, scatter)

@@ -19,7 +19,7 @@ import click
 
 from acq.analyze import analyze_session
 from acq.catalogue import CatalogueLocation
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 if TYPE_CHECKING:
     from acq.plots import SessionFigure

@@ -11,7 +11,7 @@ Two roles meet on a bench, each on its own clock:
 Host times are ``time.monotonic_ns()`` values (simulated benches running ``--fast`` use a virtual
 host clock that starts at the real one). Nothing here resamples or corrects a timestamp: raw stream
 indices go to disk, alignment is the analysis's job. Gaps are found by the recorder from the
-indices, never from timing. Adapters raise :class:`drivers.errors.DeviceError` on device failure.
+indices, never from timing. Adapters raise :class:`acqcore.errors.DeviceError` on device failure.
 """
 
 from __future__ import annotations

@@ -28,8 +28,6 @@ import threading
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
-
 import canopen
 from canopen.sdo import SdoAbortedError
 
@@ -39,11 +37,7 @@ from drivers.canopen_motion import STATUS_POLL_S, ProfilePositionMotion, device_
 from drivers.canopen_stream import (SYNC_COB_ID, SYNC_COUNTER_OVERFLOW, FrameCapture, RawFrameLog, SyncProducer,
                                     SyncUnwrapper, TpdoDecoder)
 from drivers.config import Bench, DriveCanopen, Profile
-from drivers.errors import AcqError, ConfigError, DeviceError
-
-if TYPE_CHECKING:
-    from drivers.sim.bench import SimBench
-    from drivers.sim.can_node import SimCanNode
+from acqcore.errors import AcqError, ConfigError, DeviceError
 
 QUEUE_FRAMES = 20_000
 BATCH_S = 0.05
@@ -65,18 +59,10 @@ def bus_load(bitrate: float, period_s: float, tpdo_bytes: Sequence[int], *, sync
     return bits_per_s / bitrate
 
 
-def tpdo_bytes(s: DriveCanopen) -> int:
-    """Payload of the TPDO ``[drive]`` asks for, bytes: position, [velocity], [0x1013 time stamp], 4 each."""
-    return 4 * (1 + s.map_velocity + s.map_timestamp)
-
-
 def check_bus_load(s: DriveCanopen) -> float:
-    """The load ``[drive]`` asks for; :class:`ConfigError` naming the figure if above ``max_bus_load``, or
-    if the TPDO would exceed the 8 bytes of a CAN frame."""
-    if tpdo_bytes(s) > 8:
-        raise ConfigError(f"[drive] map_velocity = true and map_timestamp = true need a TPDO of {tpdo_bytes(s)} "
-                          "bytes, a CAN frame carries 8 — set one of them to false")
-    tpdo = [tpdo_bytes(s)]
+    """The load ``[drive]`` asks for; :class:`ConfigError` naming the figure if above ``max_bus_load`` (the
+    TPDO's size within a CAN frame is a validator of :class:`DriveCanopen`)."""
+    tpdo = [s.tpdo_bytes]
     load = bus_load(s.bitrate, s.period_s, tpdo, heartbeat_period_s=s.heartbeat_period_s)
     if load > s.max_bus_load:
         raise ConfigError(
@@ -93,11 +79,10 @@ class CanopenDrive:
     ----------
     settings : the bench's ``[drive]`` section.
     counts_per_rev : drive position units per motor revolution.
-    sim_node : the simulated drive to start and stop with this adapter (``simulated_node = true``).
     """
 
-    def __init__(self, settings: DriveCanopen, counts_per_rev: int, sim_node: SimCanNode | None = None) -> None:
-        self._s, self._cpr, self.sim_node = settings, counts_per_rev, sim_node
+    def __init__(self, settings: DriveCanopen, counts_per_rev: int) -> None:
+        self._s, self._cpr = settings, counts_per_rev
         self.name = f"CANopen node {settings.node_id} on {settings.interface}:{settings.channel}"
         self._network: canopen.Network | None = None
         self._node: canopen.profiles.p402.BaseNode402 | None = None
@@ -123,8 +108,6 @@ class CanopenDrive:
                 self._network.listeners.append(self._raw)
                 self._network.connect(interface=s.interface, channel=s.channel, bitrate=s.bitrate,
                                       receive_own_messages=True)
-            if self.sim_node is not None:
-                self.sim_node.start()
             node = node402(s.node_id)
             self._network.add_node(node)
             self._node = node
@@ -213,8 +196,6 @@ class CanopenDrive:
             self._network.disconnect()
             self._network = None
         self._raw.stop()
-        if self.sim_node is not None:
-            self.sim_node.stop()
         for e in errors:
             self._event("error", e)
 
@@ -374,23 +355,12 @@ def _entries(entries: list[int]) -> str:
     return "[" + ", ".join(f"0x{e >> 16:04X}:{(e >> 8) & 0xFF:02X}/{e & 0xFF}" for e in entries) + "]"
 
 
-def open_drive(bench: Bench, sim_bench: SimBench | None, fast: bool) -> CanopenDrive:
-    """Registry factory. Refuses (``ConfigError``) a bus load above ``max_bus_load`` and, for the
-    simulated node, ``--fast`` (a CAN bus runs in real time) and interfaces other than ``virtual``."""
+def open_drive(bench: Bench, sim_bench: object, fast: bool) -> CanopenDrive:
+    """Registry factory: a CANopen drive on ``[drive] interface``/``channel`` (``sim_bench`` and ``fast``
+    unused: a simulated node is put on the bus by :mod:`drivers.sim.peers`, chosen by the registry).
+    Refuses (``ConfigError``) a bus load above ``max_bus_load`` (the rules between keys are validators of
+    :class:`DriveCanopen`)."""
     s = bench.drive
     assert isinstance(s, DriveCanopen)
     check_bus_load(s)
-    if s.heartbeat_timeout_s <= s.heartbeat_period_s:
-        raise ConfigError(f"[drive] heartbeat_timeout_s = {s.heartbeat_timeout_s:g} must exceed heartbeat_period_s "
-                          f"= {s.heartbeat_period_s:g}")
-    cpr = s.counts_per_rev or bench.encoder.counts_per_rev
-    if not s.simulated_node:
-        return CanopenDrive(s, cpr)
-    if s.interface != "virtual":
-        raise ConfigError(f"[drive] simulated_node = true needs interface = \"virtual\", not {s.interface!r}")
-    if fast:
-        raise ConfigError("--fast: the simulated CANopen drive runs on the bus in real time; record without --fast")
-    from drivers.sim.can_node import SimCanNode
-
-    assert sim_bench is not None
-    return CanopenDrive(s, cpr, SimCanNode(bench, sim_bench))
+    return CanopenDrive(s, s.counts_per_rev or bench.encoder.counts_per_rev)

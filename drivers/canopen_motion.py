@@ -24,7 +24,7 @@ from typing import Any
 
 from drivers import canopen_od as od
 from drivers.config import DriveCanopen, Profile
-from drivers.errors import AcqError, ConfigError, DeviceError
+from acqcore.errors import AcqError, ConfigError, DeviceError
 from drivers.motion import half_swing_rad
 
 STATUS_POLL_S = 0.01

@@ -2,7 +2,10 @@
 
 These models only describe; they import no vendor library. ``acq.config`` loads TOML files into them
 and turns validation failures into one-line errors naming the file, the key and the value.
-Every model forbids unknown keys, so a misspelt key is an error, never silently ignored.
+Every model forbids unknown keys, so a misspelt key is an error, never silently ignored. A rule that
+involves two keys of a section is a ``model_validator`` of that section, its message naming both keys
+(``[daq] block_s = 3 must be at most half of buffer_s = 5``), so ``acq record`` and ``acq import`` refuse
+it alike, before anything starts.
 """
 
 from __future__ import annotations
@@ -10,13 +13,11 @@ from __future__ import annotations
 import unicodedata
 from typing import Annotated, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt, field_validator
+from pydantic import Field, PositiveFloat, PositiveInt, field_validator, model_validator
 
-
-class Strict(BaseModel):
-    """Base for all config sections: unknown keys are errors, values are not coerced from strings."""
-
-    model_config = ConfigDict(extra="forbid", strict=True, frozen=True, allow_inf_nan=False)
+# Profile (and the Strict base, MAX_DURATION_S, Seconds) are defined in drivers.profile and used from here
+from drivers.profile import MAX_DURATION_S, Profile, Seconds, Strict
+from drivers.serial_codec import CODECS, bits_per_byte, required_baud
 
 
 NonNegFloat = Annotated[float, Field(ge=0.0)]
@@ -25,8 +26,6 @@ PhaseName = Literal["i_a", "i_b", "i_c"]
 # Physical bounds: generous for any bench we can imagine, tight enough that a typo (1e12 for 1e4) is refused
 # before anything is allocated or sent to a device.
 MAX_RATE_HZ = 10e6  # fastest current sampling any supported card offers (NI PXIe-6124: 4 MS/s; margin ×2.5)
-MAX_DURATION_S = 24 * 3600.0  # one day: a session file of ~17 GB per phase at 25.6 kS/s
-Seconds = Annotated[float, Field(gt=0.0, le=MAX_DURATION_S)]
 RateHz = Annotated[float, Field(gt=0.0, le=MAX_RATE_HZ)]
 PeriodS = Annotated[float, Field(ge=1e-6, le=10.0)]  # an encoder sample every 1 µs … 10 s
 Timeout = Annotated[float, Field(gt=0.0, le=600.0)]
@@ -118,6 +117,15 @@ class DaqNidaqmx(Strict):
     coupling: Literal["dc", "ac"] = "dc"
     terminal: Literal["default", "differential", "pseudo_differential", "rse", "nrse"] = "default"
 
+    @model_validator(mode="after")
+    def _channels_and_buffer(self) -> DaqNidaqmx:
+        if len(self.channels) != len(self.physical_channels):
+            raise ValueError(f"[daq] channels {self.channels} and physical_channels {self.physical_channels} "
+                             "must have the same length")
+        if self.block_s * 2 > self.buffer_s:  # the card fills one half of the host buffer while the host reads the other
+            raise ValueError(f"[daq] block_s = {self.block_s:g} must be at most half of buffer_s = {self.buffer_s:g}")
+        return self
+
 
 DaqSettings = Annotated[Union[DaqSim, DaqNidaqmx], Field(discriminator="driver")]
 
@@ -154,6 +162,23 @@ class DriveCanopen(Strict):
     simulated_node: bool = False
     map_timestamp: bool = False  # map the drive's 0x1013 high-resolution time stamp (µs) into the TPDO
 
+    @property
+    def tpdo_bytes(self) -> int:
+        """Payload of the TPDO asked for, bytes: position, [velocity], [0x1013 time stamp], 4 each."""
+        return 4 * (1 + self.map_velocity + self.map_timestamp)
+
+    @model_validator(mode="after")
+    def _two_key_rules(self) -> DriveCanopen:
+        if self.tpdo_bytes > 8:
+            raise ValueError(f"[drive] map_velocity = true and map_timestamp = true need a TPDO of {self.tpdo_bytes} "
+                             "bytes, a CAN frame carries 8 — set one of them to false")
+        if self.heartbeat_timeout_s <= self.heartbeat_period_s:
+            raise ValueError(f"[drive] heartbeat_timeout_s = {self.heartbeat_timeout_s:g} must exceed "
+                             f"heartbeat_period_s = {self.heartbeat_period_s:g}")
+        if self.simulated_node and self.interface != "virtual":
+            raise ValueError(f"[drive] simulated_node = true needs interface = \"virtual\", not {self.interface!r}")
+        return self
+
 
 class DriveSerial(Strict):
     """A drive streaming framed encoder telemetry over a serial link (see ``drivers.serial_drive``)."""
@@ -166,6 +191,19 @@ class DriveSerial(Strict):
     codec: str = "acq1"
     read_timeout_s: Timeout = 0.5
     simulated_device: bool = False
+
+    @model_validator(mode="after")
+    def _codec_carries_the_frame_rate(self) -> DriveSerial:
+        if self.codec not in CODECS:
+            raise ValueError(f'[drive] codec = "{self.codec}": unknown codec (known: {", ".join(sorted(CODECS))})')
+        codec = CODECS[self.codec]()
+        need = required_baud(codec, self.period_s, self.parity)
+        if self.baud < need:
+            raise ValueError(
+                f"[drive] baud = {self.baud}: too low for one {codec.telemetry_bytes}-byte {codec.name} frame every "
+                f"{self.period_s:g} s; needs at least {need:.0f} baud ({codec.telemetry_bytes} bytes × "
+                f"{bits_per_byte(self.parity)} bits / {self.period_s:g} s)")
+        return self
 
 
 DriveSettings = Annotated[Union[DriveSim, DriveCanopen, DriveSerial], Field(discriminator="driver")]
@@ -268,15 +306,3 @@ class Bench(Strict):
     def _safe_joint(cls, name: str) -> str:
         return check_joint_name(name)
 
-
-class Profile(Strict):
-    """A motion: the triangle speed profile of the paper (speed up, down, reverse, back)."""
-
-    kind: Literal["triangle"]
-    top_speed_rpm: float = Field(gt=0.0, le=100_000.0)  # fastest servo motors run ~60 000 rpm
-    accel_time_s: Seconds
-    decel_time_s: Seconds
-    dwell_s: float = Field(default=0.0, ge=0.0, le=MAX_DURATION_S)
-    duration_s: Seconds
-    cruise_s: float = Field(default=0.0, ge=0.0, le=MAX_DURATION_S)  # at top speed between the ramps (a trapezoid), s
-    jerk_time_s: float = Field(default=0.0, ge=0.0, le=MAX_DURATION_S)  # S-curve: acceleration ramp time (0: steps), s

@@ -19,11 +19,6 @@ from drivers.config import Profile
 RPM_TO_RAD_S = 2.0 * np.pi / 60.0
 
 
-def cycle_period_s(profile: Profile) -> float:
-    """Duration of one full back-and-forth cycle, s."""
-    return 2.0 * (profile.accel_time_s + profile.cruise_s + profile.decel_time_s + profile.dwell_s)
-
-
 def half_swing_rad(profile: Profile) -> float:
     """Motor travel of one half-cycle (one ramp up, the cruise and the ramp down), rad."""
     ramps_s = (profile.accel_time_s + profile.decel_time_s) / 2.0 + profile.cruise_s

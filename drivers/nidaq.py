@@ -33,7 +33,7 @@ import numpy as np
 
 from drivers.base import CurrentBlock, CurrentSourceInfo, StreamEvent
 from drivers.config import Bench, DaqNidaqmx
-from drivers.errors import ConfigError, DeviceError
+from acqcore.errors import ConfigError, DeviceError
 
 DRIVER_MISSING = "NI-DAQmx driver not installed — install it or use configs/benches/sim.toml"
 SAMPLES_NOT_YET_AVAILABLE = -200284
@@ -79,19 +79,14 @@ class NidaqCurrentSource:
 
     Raises
     ------
-    ConfigError
-        If channels and physical channels differ in number, or a read would not fit the buffer twice.
     DeviceError
         If the NI-DAQmx driver is not installed.
+
+    The rules between keys (channels vs physical_channels, block_s vs buffer_s) are validators of
+    :class:`drivers.config.DaqNidaqmx`.
     """
 
     def __init__(self, settings: DaqNidaqmx, lib: ModuleType | None = None) -> None:
-        if len(settings.channels) != len(settings.physical_channels):
-            raise ConfigError(f"[daq] channels {settings.channels} and physical_channels "
-                              f"{settings.physical_channels} must have the same length")
-        if settings.block_s * 2 > settings.buffer_s:
-            raise ConfigError(f"[daq] block_s = {settings.block_s:g} must be at most half of "
-                              f"buffer_s = {settings.buffer_s:g}")
         self.settings = settings
         self.nidaqmx = lib if lib is not None else import_nidaqmx()
         try:

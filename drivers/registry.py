@@ -3,7 +3,10 @@
 As python-can's ``can.interfaces`` does: the bench config names a driver, this module imports the
 module that implements it and builds it. A bench that uses any simulated part builds one
 :class:`drivers.sim.bench.SimBench` and hands it to every simulated part, so current and encoder
-come from the same physics.
+come from the same physics. A real adapter with ``simulated_node`` / ``simulated_device`` is built by
+the simulator's own factory (:data:`SIMULATED_PEERS`): the plain adapter pointed at a virtual channel or
+pty with the simulated drive on the other end. ``drivers.sim`` is named here only as strings, imported
+when chosen, so no module outside it imports it.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ from typing import Any
 
 from drivers.base import CurrentSource, Drive
 from drivers.config import Bench
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 
 #: driver name in ``[daq]`` → (module, factory). The factory takes (bench, sim_bench_or_None, fast).
 CURRENT_SOURCES: dict[str, tuple[str, str]] = {
@@ -28,20 +31,33 @@ DRIVES: dict[str, tuple[str, str]] = {
     "serial": ("drivers.serial_drive", "open_drive"),
 }
 
+#: drive driver → (module, factory) of the adapter with its simulated peer, used when ``[drive]`` has
+#: ``simulated_node`` (CANopen) or ``simulated_device`` (serial) set. Same factory signature.
+SIMULATED_PEERS: dict[str, tuple[str, str]] = {
+    "canopen": ("drivers.sim.peers", "open_canopen_with_sim_node"),
+    "serial": ("drivers.sim.peers", "open_serial_with_sim_device"),
+}
+
+#: (module, class) of the simulated bench all simulated parts share.
+SIM_BENCH: tuple[str, str] = ("drivers.sim.bench", "SimBench")
+
+
+def _has_simulated_peer(bench: Bench) -> bool:
+    drive = bench.drive
+    return bool(getattr(drive, "simulated_node", False)) or bool(getattr(drive, "simulated_device", False))
+
 
 def _needs_sim(bench: Bench) -> bool:
-    drive = bench.drive
-    return (
-        bench.daq.driver == "sim"
-        or drive.driver == "sim"
-        or bool(getattr(drive, "simulated_node", False))
-        or bool(getattr(drive, "simulated_device", False))
-    )
+    return bench.daq.driver == "sim" or bench.drive.driver == "sim" or _has_simulated_peer(bench)
+
+
+def _load(entry: tuple[str, str]) -> Any:
+    module_name, attr = entry
+    return getattr(importlib.import_module(module_name), attr)
 
 
 def _factory(table: dict[str, tuple[str, str]], name: str) -> Any:
-    module_name, attr = table[name]
-    return getattr(importlib.import_module(module_name), attr)
+    return _load(table[name])
 
 
 def open_bench(bench: Bench, *, fast: bool = False, sim_bench: Any = None) -> tuple[CurrentSource, Drive]:
@@ -54,9 +70,8 @@ def open_bench(bench: Bench, *, fast: bool = False, sim_bench: Any = None) -> tu
     if sim_bench is None and _needs_sim(bench):
         if bench.sim is None:
             raise ConfigError("bench config: a simulated part needs a [sim] section (see configs/benches/sim.toml)")
-        from drivers.sim.bench import SimBench
-
-        sim_bench = SimBench(bench, realtime=not fast)
+        sim_bench = _load(SIM_BENCH)(bench, realtime=not fast)
     current = _factory(CURRENT_SOURCES, bench.daq.driver)(bench, sim_bench, fast)
-    drive = _factory(DRIVES, bench.drive.driver)(bench, sim_bench, fast)
+    drives = SIMULATED_PEERS if _has_simulated_peer(bench) else DRIVES
+    drive = _factory(drives, bench.drive.driver)(bench, sim_bench, fast)
     return current, drive

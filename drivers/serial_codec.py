@@ -39,7 +39,7 @@ import struct
 from dataclasses import dataclass, field
 from typing import ClassVar, Protocol
 
-from drivers.config import Profile
+from drivers.profile import Profile
 
 
 @dataclass(frozen=True)
@@ -178,6 +178,16 @@ class Acq1Codec:
 
 #: codec name in ``[drive] codec`` → class
 CODECS: dict[str, type[Codec]] = {"acq1": Acq1Codec}
+
+
+def bits_per_byte(parity: str) -> int:
+    """Bits on the line per byte: start + 8 data + parity (if any) + 1 stop."""
+    return 10 if parity == "N" else 11
+
+
+def required_baud(codec: Codec, period_s: float, parity: str) -> float:
+    """Lowest baud rate (bit/s) that carries one telemetry frame every ``period_s`` (s)."""
+    return codec.telemetry_bytes * bits_per_byte(parity) / period_s
 
 
 @dataclass

@@ -28,45 +28,23 @@ import queue
 import threading
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent
 from drivers.config import Bench, DriveSerial, Profile
-from drivers.errors import ConfigError, DeviceError
+from acqcore.errors import ConfigError, DeviceError
 from drivers.serial_codec import CODECS, Ack, Codec, Command, ParserStats, StreamParser, Telemetry
-
-if TYPE_CHECKING:
-    from drivers.sim.bench import SimBench
-    from drivers.sim.serial_device import SimSerialDevice
 
 WARNING_INTERVAL_S = 1.0
 READ_CHUNK_BYTES = 4096
 
 
-def bits_per_byte(parity: str) -> int:
-    """Bits on the line per byte: start + 8 data + parity (if any) + 1 stop."""
-    return 10 if parity == "N" else 11
-
-
-def required_baud(codec: Codec, period_s: float, parity: str) -> float:
-    """Lowest baud rate (bit/s) that carries one telemetry frame every ``period_s`` (s)."""
-    return codec.telemetry_bytes * bits_per_byte(parity) / period_s
-
-
 def codec_for(settings: DriveSerial) -> Codec:
-    """The codec ``[drive] codec`` names, checked against the baud rate and the frame period."""
-    if settings.codec not in CODECS:
-        raise ConfigError(f'[drive] codec = "{settings.codec}": unknown codec (known: {", ".join(sorted(CODECS))})')
-    codec = CODECS[settings.codec]()
-    need = required_baud(codec, settings.period_s, settings.parity)
-    if settings.baud < need:
-        raise ConfigError(
-            f"[drive] baud = {settings.baud}: too low for one {codec.telemetry_bytes}-byte {codec.name} frame every "
-            f"{settings.period_s:g} s; needs at least {need:.0f} baud ({codec.telemetry_bytes} bytes × "
-            f"{bits_per_byte(settings.parity)} bits / {settings.period_s:g} s)")
-    return codec
+    """The codec ``[drive] codec`` names (its name and the baud rate it needs are validators of
+    :class:`DriveSerial`)."""
+    return CODECS[settings.codec]()
 
 
 @dataclass(frozen=True)
@@ -128,15 +106,13 @@ class SerialDrive:
     ----------
     settings : the ``[drive]`` section (``driver = "serial"``).
     counts_per_rev : encoder resolution, counts per motor revolution.
-    device : the simulated device behind a pseudo-terminal, owned and closed by this drive, or None.
     """
 
-    def __init__(self, settings: DriveSerial, counts_per_rev: int, device: SimSerialDevice | None = None) -> None:
+    def __init__(self, settings: DriveSerial, counts_per_rev: int) -> None:
         self.settings = settings
         self.codec = codec_for(settings)
-        self.port_name = device.port_name if device is not None else settings.port
+        self.port_name = settings.port
         self.counts_per_rev = counts_per_rev
-        self._device = device
         self._port: Any = None
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
@@ -198,7 +174,7 @@ class SerialDrive:
         return EncoderBlock(index=a[:, 0], position_counts=a[:, 2], host_ns=a[:, 3], drive_time_s=a[:, 1] * 1e-6)
 
     def stop(self) -> None:
-        """Switch the stream off, stop the reader, close the port (and a simulated device). Idempotent."""
+        """Switch the stream off, stop the reader, close the port. Idempotent."""
         if self._port is not None:
             if self._failure is None:
                 try:
@@ -213,8 +189,6 @@ class SerialDrive:
             self._port.close()
             self._port = None
             self._event("info", f"serial link {self.port_name}: {self.stats().describe()}")
-        if self._device is not None:
-            self._device.close()
 
     def events(self) -> list[StreamEvent]:
         """Return and forget the gap, warning and error events noticed since the last call."""
@@ -308,18 +282,14 @@ class SerialDrive:
         return True
 
 
-def open_drive(bench: Bench, sim_bench: SimBench | None, fast: bool) -> SerialDrive:
-    """Registry factory: a serial drive, behind a simulated pty device if ``simulated_device``.
+def open_drive(bench: Bench, sim_bench: object, fast: bool) -> SerialDrive:
+    """Registry factory: a serial drive on ``[drive] port`` (``sim_bench`` and ``fast`` unused: a
+    simulated device is put behind the port by :mod:`drivers.sim.peers`, chosen by the registry).
 
     A missing port path is refused here, before anything starts (:class:`DeviceError`, exit code 1).
     """
     settings = bench.drive
     assert isinstance(settings, DriveSerial)
-    codec_for(settings)
-    if not settings.simulated_device:
-        if settings.port.startswith("/") and not os.path.exists(settings.port):  # a device path (not a URL, not COM3)
-            raise DeviceError(f"serial port {settings.port}: no such device (is the drive connected and powered?)")
-        return SerialDrive(settings, bench.encoder.counts_per_rev)
-    from drivers.sim.serial_device import open_simulated_device
-
-    return SerialDrive(settings, bench.encoder.counts_per_rev, open_simulated_device(bench, sim_bench))
+    if settings.port.startswith("/") and not os.path.exists(settings.port):  # a device path (not a URL, not COM3)
+        raise DeviceError(f"serial port {settings.port}: no such device (is the drive connected and powered?)")
+    return SerialDrive(settings, bench.encoder.counts_per_rev)

@@ -16,16 +16,17 @@ import numpy as np
 import pytest
 
 from acq.analyze import options_for, recording_from_session
-from acq.config import load_bench, load_profile
+from acq.config import load_bench, load_profile, validate
 from acq.recorder import Recorder
 from acq.session import load
-from drivers.canopen_drive import CanopenDrive, bus_load, check_bus_load, open_drive
+from drivers.canopen_drive import CanopenDrive, bus_load, check_bus_load
+from drivers.sim.peers import open_canopen_with_sim_node as open_drive
 from analysis.pipeline import analyze
 from analysis.sample_instants import stamp_deviation_s
 from drivers.canopen_od import HIGH_RES_TIMESTAMP, POSITION_ACTUAL, TPDO_COMM, TPDO_MAP, VELOCITY_ACTUAL, map_entry
 from drivers.canopen_stream import SYNC_COB_ID, FrameCapture, SyncUnwrapper, TpdoDecoder
 from drivers.config import Bench, DriveCanopen
-from drivers.errors import ConfigError, DeviceError
+from acqcore.errors import ConfigError, DeviceError
 from drivers.sim.bench import SimBench
 from drivers.sim.daq import open_current_source
 
@@ -260,10 +261,10 @@ def test_a_timestamp_mapping_that_reads_back_different_is_refused() -> None:
 
 
 def test_position_velocity_and_timestamp_do_not_fit_one_tpdo() -> None:
-    settings = DriveCanopen(driver="canopen", period_s=0.001, map_velocity=True, map_timestamp=True)
+    settings = {"driver": "canopen", "period_s": 0.001, "map_velocity": True, "map_timestamp": True}
     with pytest.raises(ConfigError) as err:
-        check_bus_load(settings)
-    assert str(err.value) == ("[drive] map_velocity = true and map_timestamp = true need a TPDO of 12 bytes, a CAN "
+        validate(DriveCanopen, settings, "bench.toml")
+    assert str(err.value) == ("bench.toml: [drive] map_velocity = true and map_timestamp = true need a TPDO of 12 bytes, a CAN "
                               "frame carries 8 — set one of them to false")
     with_stamp = check_bus_load(DriveCanopen(driver="canopen", period_s=0.001, map_timestamp=True))
     assert with_stamp == pytest.approx(bus_load(1_000_000, 0.001, [8]))  # the load counts the 8-byte TPDO
@@ -278,3 +279,19 @@ def test_timestamp_unwraps_across_the_32_bit_microsecond_wrap() -> None:
     np.testing.assert_allclose(np.r_[first.drive_time_s, second.drive_time_s] * 1e6,
                                [2**32 - 1500, 2**32 - 480, 2**32 + 530, 2**32 + 1470])
     np.testing.assert_array_equal(second.position_counts, [200, 300])
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (("heartbeat_period_s = 0.1", "heartbeat_period_s = 0.5"),
+     "[drive] heartbeat_timeout_s = 0.5 must exceed heartbeat_period_s = 0.5"),
+    (('interface = "virtual"', 'interface = "socketcan"'),
+     "[drive] simulated_node = true needs interface = \"virtual\", not 'socketcan'"),
+])
+def test_rules_between_drive_keys_name_the_bench_file(tmp_path: Path, edit: tuple[str, str], message: str) -> None:
+    text = BENCH_TOML.read_text()
+    assert edit[0] in text
+    bench = tmp_path / "bench.toml"
+    bench.write_text(text.replace(*edit))
+    with pytest.raises(ConfigError) as err:
+        load_bench(bench)
+    assert str(err.value) == f"{bench}: {message}"

@@ -4,10 +4,13 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
+from typing import get_args
 
 import pytest
 
 from acq.config import DEFAULT_BENCH, load_bench, load_profile
+from drivers.config import DaqSettings, DriveSettings
+from drivers.registry import CURRENT_SOURCES, DRIVES
 from tests.helpers import run_cli
 
 SIM_TOML = DEFAULT_BENCH.read_text()
@@ -102,3 +105,11 @@ def test_folders_where_files_are_expected_are_one_line(tmp_path: Path, capsys: p
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--duration", "1", "--out", str(out_file))
     assert run.code == 2
     assert run.err.strip() == f"acq: error: {out_file}: cannot write a session there (File exists)"
+
+
+def test_every_driver_the_config_accepts_has_an_adapter_in_the_registry() -> None:
+    def tags(union: object) -> set[str]:
+        models = get_args(get_args(union)[0])
+        return {get_args(m.model_fields["driver"].annotation)[0] for m in models}
+
+    assert (tags(DaqSettings), tags(DriveSettings)) == (set(CURRENT_SOURCES), set(DRIVES))

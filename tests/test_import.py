@@ -447,3 +447,16 @@ def test_a_tdms_wf_start_time_dates_the_import(capsys: pytest.CaptureFixture[str
     s = load(tmp_path / "s.h5")
     assert s.attrs["created_utc"] == "2026-02-03T04:05:06+00:00"
     assert json.loads(s.attrs["origin_json"])["started_from"] == "TDMS wf_start_time"
+
+
+def test_acq_import_applies_the_rules_between_config_keys(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                                          pair: tuple[Path, Path]) -> None:
+    serial = DEFAULT_BENCH.parent / "sim_serial.toml"
+    bench = tmp_path / "slow.toml"
+    bench.write_text(serial.read_text().replace("baud = 921600", "baud = 115200"))
+    cur, enc = pair
+    run = run_cli(capsys, "import", "--current", str(cur), "--encoder", str(enc), "--bench", str(bench),
+                  "--profile", "triangle_0.2s", "-o", str(tmp_path / "imported.h5"))
+    assert (run.code, run.err) == (2, f"acq: error: {bench}: [drive] baud = 115200: too low for one 16-byte acq1 "
+                                      "frame every 0.001 s; needs at least 160000 baud (16 bytes × 10 bits / 0.001 s)\n")
+    assert not (tmp_path / "imported.h5").exists()

@@ -180,7 +180,7 @@ def test_cut_file_is_found_in_bounded_time(recorded: Path, tmp_path: Path, capsy
 def test_writer_stops_when_its_file_vanishes(tmp_path: Path) -> None:
     from acq.config import load_bench, load_profile
     from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo
-    from drivers.errors import StorageError
+    from acqcore.errors import StorageError
 
     path = tmp_path / "s.h5"
     w = acq.session.SessionWriter(path, bench=load_bench(), profile=load_profile("triangle_0.2s"),
@@ -201,7 +201,7 @@ def test_writer_stops_when_its_file_vanishes(tmp_path: Path) -> None:
 def test_atomic_write_on_a_full_disk_names_the_file_and_leaves_no_temp(tmp_path: Path,
                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     from acq.storage import write_text_atomically
-    from drivers.errors import StorageError
+    from acqcore.errors import StorageError
 
     disk = tmp_path / "disk"
     with small_disk(disk, "1m", monkeypatch) as kind:

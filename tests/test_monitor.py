@@ -15,7 +15,7 @@ from acq.retention import WindowFiles, make_room, parse_size, to_delete
 from acq.session import SessionWriter, load
 from drivers.base import CurrentSourceInfo, DriveInfo
 from drivers.config import Bench
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 from drivers.registry import open_bench
 from tests.helpers import run_cli
 

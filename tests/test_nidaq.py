@@ -201,8 +201,9 @@ def test_card_count_cross_checked_at_stop(tmp_path: Path, hardware: StandinHardw
 def test_inconsistent_daq_settings_are_input_errors(tmp_path: Path, hardware: StandinHardware,
                                                     capsys: pytest.CaptureFixture[str], daq: dict[str, object],
                                                     message: str) -> None:
-    run = record(capsys, write_bench(tmp_path, **daq), tmp_path / "s")
-    assert (run.code, last_line(run.err)) == (2, f"acq: error: {message}")
+    bench = write_bench(tmp_path, **daq)
+    run = record(capsys, bench, tmp_path / "s")
+    assert (run.code, last_line(run.err)) == (2, f"acq: error: {bench}: {message}")
 
 
 @pytest.mark.skipif(real_driver_installed(), reason="the NI-DAQmx driver is installed here")

@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from acq.config import validate
 from acq.session import load
 from drivers.config import DriveSerial, Profile
-from drivers.errors import ConfigError, DeviceError
+from acqcore.errors import ConfigError, DeviceError
 from drivers.serial_codec import Ack, Acq1Codec, Command, StreamParser, Telemetry
 from drivers.serial_drive import FrameUnwrapper, LinkStats, SerialDrive
 from drivers.sim.serial_device import FaultLog, SimSerialDevice
@@ -146,8 +147,9 @@ def test_unwrapper_carries_sequence_time_and_position_across_their_wraps() -> No
 
 def test_baud_below_the_frame_rate_is_refused_with_the_required_rate() -> None:
     with pytest.raises(ConfigError) as e:
-        SerialDrive(DriveSerial(driver="serial", period_s=0.001, port="loop://", baud=115_200, parity="E"), 131072)
-    assert str(e.value) == ("[drive] baud = 115200: too low for one 16-byte acq1 frame every 0.001 s; needs at least "
+        validate(DriveSerial, {"driver": "serial", "period_s": 0.001, "port": "loop://", "baud": 115_200, "parity": "E"},
+                 "bench.toml")
+    assert str(e.value) == ("bench.toml: [drive] baud = 115200: too low for one 16-byte acq1 frame every 0.001 s; needs at least "
                             "176000 baud (16 bytes × 11 bits / 0.001 s)")
 
 
@@ -238,7 +240,7 @@ def test_a_baud_too_low_in_the_bench_is_refused_by_acq_record(capsys: pytest.Cap
     bench.write_text(SIM_SERIAL.read_text().replace("baud = 921600", "baud = 115200"))
     run = run_cli(capsys, "record", "--bench", str(bench), "--profile", "triangle_0.2s", "--out", str(tmp_path))
     assert run.code == 2
-    assert run.err == ("acq: error: [drive] baud = 115200: too low for one 16-byte acq1 frame every 0.001 s; "
+    assert run.err == (f"acq: error: {bench}: [drive] baud = 115200: too low for one 16-byte acq1 frame every 0.001 s; "
                        "needs at least 160000 baud (16 bytes × 10 bits / 0.001 s)\n")
 
 

@@ -105,7 +105,7 @@ def test_killed_writer_leaves_readable_file_and_repair_keeps_all_flushed(tmp_pat
 
 
 def test_not_a_session(tmp_path: Path) -> None:
-    from drivers.errors import ConfigError
+    from acqcore.errors import ConfigError
 
     other = tmp_path / "other.h5"
     with h5py.File(other, "w", libver=("v110", "latest")) as f:

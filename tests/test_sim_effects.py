@@ -279,7 +279,7 @@ def test_streamed_blocks_with_the_anti_alias_filter_equal_one_read_and_history_s
 def test_drives_that_cannot_carry_an_s_curve_or_a_cruise_refuse_it_in_one_line() -> None:
     from drivers.canopen_motion import ProfilePositionMotion
     from drivers.config import DriveCanopen, DriveSerial
-    from drivers.errors import ConfigError
+    from acqcore.errors import ConfigError
     from drivers.serial_drive import SerialDrive
 
     s_curve = PROFILE.model_copy(update={"jerk_time_s": 0.02})

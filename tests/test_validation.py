@@ -12,7 +12,7 @@ import pytest
 
 from acq.config import DEFAULT_BENCH, check_memory, load_bench
 from acq.session import new_session_path
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 from tests.helpers import run_cli
 from tests.test_import import _with_row_changed, pair, run_import  # noqa: F401 - the fixture is used below
 

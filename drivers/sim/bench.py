@@ -29,7 +29,7 @@ from typing import Any, Literal
 import numpy as np
 
 from drivers.config import Bench, Profile, SimSettings
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 from drivers.sim.joint_effects import JointEffects
 from drivers.sim.measurement import CurrentChain
 from drivers.sim.motion import MotionSchedule

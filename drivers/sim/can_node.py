@@ -14,8 +14,9 @@ The drive's CAN controller answers SYNC "in hardware": :class:`_ControllerBus` q
 TPDOs on the virtual bus right behind the SYNC that triggers them, in the sender's thread, as a real
 controller does within microseconds — a Python thread could not keep the CiA 301 synchronous window
 (TPDO k before SYNC k+1) on a loaded host, and the host pairs each TPDO with the SYNC before it. SDO
-and NMT go through the LocalNode's own notifier thread as usual. The host's bus must be opened first
-(the controller's queue is the last one of the channel, so the SYNC reaches the host before the TPDO).
+and NMT go through the LocalNode's own notifier thread as usual. The controller's queue stays the last
+one of the channel whichever bus joins first (:class:`_ControllerLastChannel`), so the SYNC reaches the
+host before the TPDO.
 
 Drive clock: one drive cycle per SYNC received (the first SYNC is the cycle the host clock says it
 is); a TPDO carries the bench's int32 position register (0x6064) and velocity (0x606C) at its cycle,
@@ -43,12 +44,12 @@ from typing import Any
 import can
 import canopen
 import numpy as np
-from can.interfaces.virtual import VirtualBus, channels_lock
+from can.interfaces.virtual import VirtualBus, channels, channels_lock
 
 from drivers.canopen_od import (HIGH_RES_TIMESTAMP, MODE_PROFILE_POSITION, N_TPDO, PDO_INVALID, TPDO_COMM,
                                  TPDO_MAP, drive_object_dictionary)
 from drivers.config import Bench, DriveCanopen
-from drivers.errors import ConfigError
+from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
 from drivers.sim.bench import SimBench
 from drivers.sim.pp_generator import ProfileGenerator
@@ -72,17 +73,25 @@ class _TriggerQueue(queue.Queue):
             self._on_sync()
 
 
+class _ControllerLastChannel(list):
+    """A virtual channel's receive queues, kept with the drive controller's queue last: a bus that joins
+    after the drive is inserted before it, so a SYNC is delivered to it before the TPDOs it triggers."""
+
+    def append(self, item: queue.Queue) -> None:
+        first_controller = next((i for i, q in enumerate(self) if isinstance(q, _TriggerQueue)), len(self))
+        self.insert(first_controller, item)
+
+
 class _ControllerBus(VirtualBus):
     """The drive's end of a python-can ``virtual`` channel, answering SYNC at delivery (see module doc)."""
 
     def __init__(self, channel: str, on_sync: Callable[[], None]) -> None:
-        super().__init__(channel=channel)
-        with channels_lock:
+        with channels_lock:  # python-can's lock is re-entrant; the channel list must be ours before it is used
+            channels.setdefault(channel, _ControllerLastChannel())
+            super().__init__(channel=channel)
             self.channel.remove(self.queue)
             self.queue = _TriggerQueue(on_sync)
             self.channel.append(self.queue)
-            if len(self.channel) < 2:
-                raise RuntimeError("open the host's bus before the simulated drive's (SYNC must reach it first)")
 
 
 class SimCanNode:

@@ -35,8 +35,7 @@ from typing import Protocol
 import numpy as np
 
 from drivers.config import Bench, DriveSerial, Profile, SimSettings
-from drivers.serial_codec import CODECS, Ack, Codec, Command, StreamParser, Telemetry
-from drivers.serial_drive import bits_per_byte
+from drivers.serial_codec import CODECS, Ack, Codec, Command, StreamParser, Telemetry, bits_per_byte
 
 MAX_WAIT_S = 0.02
 MAX_BATCH_FRAMES = 1000

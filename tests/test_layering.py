@@ -1,0 +1,140 @@
+"""The house's layering, read from the source with :mod:`ast` (every import, also those inside functions).
+
+- the simulator depends on the real code, never the reverse: no module outside ``drivers/sim`` imports
+  ``drivers.sim`` (tests and ``bench/`` may; the registry names it only as strings, imported when chosen);
+- ``analysis`` imports neither ``acq`` nor ``drivers``; ``drivers`` does not import ``acq``;
+- ``acqcore`` (the ground floor: errors) imports nothing of ours, and the catalogue and the CSV reader
+  need no ``drivers`` for it;
+- no import cycles among the packages' modules (imports that run; annotations-only imports under
+  ``if TYPE_CHECKING:`` are not counted).
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).parents[1]
+PACKAGES = ("acq", "acqcore", "analysis", "drivers")
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _type_only(tree: ast.Module) -> set[ast.AST]:
+    """The import statements under ``if TYPE_CHECKING:`` (never executed)."""
+    guarded: set[ast.AST] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            guarded.update(n for stmt in node.body for n in ast.walk(stmt))
+    return guarded
+
+
+def _imports(path: Path, *, type_only: bool = True) -> set[str]:
+    """Absolute names of the modules ``path`` imports (``from a.b import c`` gives ``a.b`` and ``a.b.c``),
+    with or without those under ``if TYPE_CHECKING:``."""
+    package = _module_name(path) if path.name == "__init__.py" else _module_name(path).rpartition(".")[0]
+    names: set[str] = set()
+    tree = ast.parse(path.read_text(), str(path))
+    skip = set() if type_only else _type_only(tree)
+    for node in ast.walk(tree):
+        if node in skip:
+            continue
+        if isinstance(node, ast.Import):
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(anchor + ([base] if base else []))
+            names.add(base)
+            names.update(f"{base}.{alias.name}" for alias in node.names)
+    return names
+
+
+def import_graph(*, type_only: bool = True) -> dict[str, set[str]]:
+    """Module → the modules of our packages it imports (also inside functions; type-only ones if asked)."""
+    files = {_module_name(p): p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")}
+    return {name: {m for m in _imports(path, type_only=type_only) if m in files and m != name}
+            for name, path in files.items()}
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """One cycle per strongly connected component of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_module_outside_the_simulator_imports_it() -> None:
+    offenders = {m: sorted(i for i in deps if i.startswith("drivers.sim"))
+                 for m, deps in import_graph().items() if not m.startswith("drivers.sim")}
+    assert {m: d for m, d in offenders.items() if d} == {}
+
+
+def test_analysis_imports_neither_acq_nor_drivers() -> None:
+    offenders = {m: sorted(i for i in deps if i.split(".")[0] in ("acq", "drivers"))
+                 for m, deps in import_graph().items() if m.startswith("analysis")}
+    assert {m: d for m, d in offenders.items() if d} == {}
+
+
+def test_drivers_do_not_import_acq_and_the_ground_floor_imports_nothing_of_ours() -> None:
+    graph = import_graph()
+    assert {m: sorted(d) for m, d in graph.items() if m.startswith("drivers") and any(
+        i.split(".")[0] == "acq" for i in d)} == {}
+    assert {m: sorted(d) for m, d in graph.items() if m.startswith("acqcore") and any(
+        i.split(".")[0] != "acqcore" for i in d)} == {}
+
+
+def test_the_catalogue_and_the_csv_reader_do_not_import_drivers() -> None:
+    graph = import_graph()
+    users = ("acq.catalogue", "acq.catalogue_backends", "acq.csvtable")
+    assert {m: sorted(i for i in graph[m] if i.startswith("drivers")) for m in users} == {m: [] for m in users}
+
+
+def test_no_import_cycles() -> None:
+    """Imports that run (at module level or inside functions); ``if TYPE_CHECKING:`` ones never execute."""
+    assert _cycles(import_graph(type_only=False)) == []
+
+
+def test_the_checker_finds_a_cycle_and_a_reverse_import() -> None:
+    graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
+    assert _cycles(graph) == [["a", "b", "c"]]
+    assert "drivers.sim.bench" in _imports(ROOT / "tests" / "test_canopen.py")
+
+
+def test_only_the_session_module_reads_root_attributes() -> None:
+    """Outside ``acq/session.py`` session metadata is read through the typed ``Session.meta``."""
+    readers = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "acq").rglob("*.py") if p.name != "session.py"
+                     and any(isinstance(n, ast.Attribute) and n.attr == "attrs" for n in ast.walk(ast.parse(p.read_text()))))
+    assert readers == []
