@@ -21,13 +21,11 @@ from __future__ import annotations
 import fcntl
 import os
 import shlex
-import signal
 import subprocess
-import threading
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -35,13 +33,13 @@ from typing import Any
 from acq.analyze import sha256_of
 from acq.batch import CATALOGUE_NAME, DEFAULT_REQUEST, _executor, session_meta
 from acq.catalogue import Catalogue, Entry, Outcome
-from acq.recorder import Recorder
+from acq.recorder import Recorder, stop_on_signals
 from acq.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.session import load, repair
 from acq.trend import Trend, compute_trend
 from acq.window_judge import analyse_window, marked
-from drivers.config import Bench
 from acqcore.errors import ConfigError
+from drivers.config import Bench
 from drivers.registry import open_bench
 
 WINDOW_TAG, ELAPSED_TAG = "monitor_window", "monitor_elapsed_s"
@@ -346,24 +344,9 @@ class Monitor:
             self._reap_alarms(wait=False)
             time.sleep(min(0.2, max(deadline - time.monotonic(), 0.0)))
 
-    @contextmanager
-    def _signals(self) -> Iterator[None]:
+    def _signals(self) -> AbstractContextManager[None]:
         """Ctrl-C / SIGTERM end the monitor cleanly (a second one quits at once: acq check repairs the window)."""
-        if threading.current_thread() is not threading.main_thread():
-            yield
-            return
-        reasons = {signal.SIGINT: "interrupted by user (Ctrl-C)", signal.SIGTERM: "stopped by SIGTERM"}
-
-        def handler(signum: int, frame: object) -> None:
-            self.request_stop(reasons[signum])
-            signal.signal(signum, previous[signum])
-
-        previous = {sig: signal.signal(sig, handler) for sig in reasons}
-        try:
-            yield
-        finally:
-            for sig, h in previous.items():
-                signal.signal(sig, h)
+        return stop_on_signals(self.request_stop)
 
     def _show(self) -> None:
         if self.on_status is not None:

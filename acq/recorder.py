@@ -161,7 +161,7 @@ def _select(block: EncoderBlock, keep: np.ndarray) -> EncoderBlock:
 
 
 @contextmanager
-def _stop_on_signals(request_stop: Callable[[str], None]) -> Iterator[None]:
+def stop_on_signals(request_stop: Callable[[str], None]) -> Iterator[None]:
     """While recording (main thread only), Ctrl-C and SIGTERM ask for a stop at the next safe point.
 
     The handlers never raise: an exception in the middle of a flush could write a part twice or lose one.
@@ -317,7 +317,7 @@ class Recorder:
         counts = {"current": 0, "encoder": 0}
         status: Status = "complete"
         reason = f"recorded {self.duration_s:g} s"
-        with _stop_on_signals(self.request_stop):
+        with stop_on_signals(self.request_stop):
             try:
                 # Motion first: the started devices buffer their samples meanwhile, and a simulated
                 # bench then starts the motion at the same point of its record in every run.
