@@ -175,7 +175,9 @@ def _meta_if_readable(path: str) -> dict[str, Any]:
 
 
 @contextmanager
-def _executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
+def analysis_executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
+    """Workers for analyses: a process pool of ``jobs`` (one BLAS thread each), or a Dask cluster's executor at
+    ``scheduler`` (tcp://host:port); used by the batch and by ``acq monitor``."""
     if scheduler is None:
         # forkserver: workers fork from a clean single-threaded server that has imported acq once (a plain fork
         # of this process inherits the locks its threads — recorder, progress, BLAS — may hold, and can hang);
@@ -243,7 +245,7 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, An
     outcomes: list[Outcome] = []
     interrupted = False
     if todo:
-        with _executor(jobs or os.cpu_count() or 1, scheduler) as executor:
+        with analysis_executor(jobs or os.cpu_count() or 1, scheduler) as executor:
             futures: dict[Future[Outcome], Path] = {
                 executor.submit(analyze_one, str(p.resolve()), hashes[p], request, report): p for p in todo}
             columns = (TextColumn("[bold]analysing"), BarColumn(), MofNCompleteColumn(),

@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.analyze import sha256_of
-from acq.batch import CATALOGUE_NAME, DEFAULT_REQUEST, _executor, session_meta
+from acq.batch import CATALOGUE_NAME, DEFAULT_REQUEST, analysis_executor, session_meta
 from acq.catalogue import Catalogue, Entry, Outcome
 from acq.recorder import Recorder, stop_on_signals
 from acq.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
@@ -135,7 +135,7 @@ class Monitor:
     def run(self) -> int:
         """Monitor until ``for_s`` has passed or a stop is requested; always leaves the catalogue consistent."""
         with _folder_lock(self.s.out_dir), Catalogue(self.s.out_dir / CATALOGUE_NAME) as catalogue, \
-                _executor(self.s.jobs, None) as pool, self._signals():
+                analysis_executor(self.s.jobs, None) as pool, self._signals():
             self.catalogue = catalogue
             first = self._resume(pool)
             wall0 = time.monotonic()
