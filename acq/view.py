@@ -10,8 +10,10 @@ Qt is imported only when a window or a screenshot is drawn, so the rest of the C
 
 from __future__ import annotations
 
+import functools
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -19,10 +21,11 @@ import click
 
 from acq.analyze import analyze_session
 from acq.catalogue import CatalogueLocation
-from acqcore.errors import ConfigError
+from acqcore.errors import AcqError, ConfigError
 
 if TYPE_CHECKING:
     from acq.plots import SessionFigure
+    from acq.trend import Trend
 
 NO_DISPLAY_MESSAGE = ("acq view: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window as an image "
                       "instead: acq view SESSION --screenshot out.png")
@@ -78,8 +81,10 @@ def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[
               help="Show the stiffness trend of JOINT from the catalogue of the folder given (default sessions/).")
 @click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
               help="With --trend: the catalogue, a file or postgresql:// URL (default: FOLDER/catalogue.sqlite).")
+@click.option("--refresh", "refresh_s", type=click.FloatRange(0.5, 3600), default=5.0, show_default=True,
+              help="With --trend: re-read the catalogue every this many s (a monitor may be writing to it).")
 def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tuple[int, int],
-                 trend_joint: str | None, catalogue_path: Path | str | None) -> int:
+                 trend_joint: str | None, catalogue_path: Path | str | None, refresh_s: float) -> int:
     """Show traces, FRF with the fitted model, coherence and identified values of SESSION(s);
     or, with --trend JOINT [FOLDER], the joint's stiffness over time."""
     if trend_joint is None and not sessions:
@@ -92,11 +97,14 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
     from acq.plots import ReportView, ensure_app, grab_png
 
     if trend_joint is not None:
-        from acq.trend import load_trend, trend_widget
+        from acq.trend import load_trend
 
-        trend = load_trend(sessions[0] if sessions else None, catalogue_path, trend_joint)
+        folder = sessions[0] if sessions else None
+        load = functools.partial(load_trend, folder, catalogue_path, trend_joint)
+        first = load()  # a catalogue without the joint is one line before any window opens
         app = ensure_app(offscreen=screenshot is not None)
-        window = trend_widget(trend)
+        live = LiveTrend(load, first, refresh_s)  # kept alive with the window: its timer redraws it
+        window = live.frame
     else:
         figures = [session_figure(p) for p in sessions]
         app = ensure_app(offscreen=screenshot is not None)
@@ -111,3 +119,45 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
     window.show()
     app.exec()
     return 0
+
+
+class LiveTrend:
+    """The trend window of ``acq view --trend``, redrawn when the catalogue has new sessions of the joint.
+
+    ``load`` re-reads the catalogue (SQLite in WAL mode or PostgreSQL: reading does not block a monitor that
+    writes); a failed re-read (the catalogue busy, a server away) keeps the figure shown and says why in the
+    title. The figure itself is :func:`acq.trend.trend_widget`.
+    """
+
+    def __init__(self, load: Callable[[], Trend], first: Trend, refresh_s: float) -> None:
+        from pyqtgraph.Qt import QtCore, QtWidgets
+
+        from acq.trend import trend_widget
+
+        self._load, self._draw = load, trend_widget
+        self.frame = QtWidgets.QWidget()
+        self._layout = QtWidgets.QVBoxLayout(self.frame)
+        self._figure = trend_widget(first)
+        self._layout.addWidget(self._figure)
+        self.shown = first
+        self.frame.setWindowTitle(f"acq trend — {first.joint}")
+        self._timer = QtCore.QTimer(self.frame)
+        self._timer.timeout.connect(self.refresh)
+        self._timer.start(int(refresh_s * 1000))
+
+    def refresh(self) -> bool:
+        """Re-read the catalogue; redraw when the joint's sessions changed. True when redrawn."""
+        try:
+            trend = self._load()
+        except AcqError as e:
+            self.frame.setWindowTitle(f"acq trend — {self.shown.joint} (not refreshed: {e})")
+            return False
+        if [p.entry for p in trend.points] == [p.entry for p in self.shown.points]:
+            return False
+        figure = self._draw(trend)
+        self._layout.replaceWidget(self._figure, figure)
+        self._figure.deleteLater()
+        self._figure, self.shown = figure, trend
+        self.frame.setWindowTitle(f"acq trend — {trend.joint}")
+        return True
+

@@ -216,3 +216,34 @@ def test_a_recorded_session_is_in_the_catalogue_at_once(tmp_path: Path, capsys: 
     assert point["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
     batch = run_cli(capsys, "analyze", str(out), "--no-report")
     assert batch.code == 0 and "0 analysed (0 failed), 1 skipped" in batch.out.replace("\n", " ")
+
+
+def test_the_trend_window_redraws_when_a_writer_adds_sessions(tmp_path: Path) -> None:
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    import functools
+
+    from acq.catalogue import Catalogue, Outcome
+    from acq.plots import ensure_app
+    from acq.trend import load_trend
+    from acq.view import LiveTrend
+
+    path = tmp_path / "catalogue.sqlite"
+
+    def write(n: int, k: float) -> None:  # what a monitor's window outcome puts into the catalogue
+        doc = {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [k - 4, k + 4]},
+               "quality": {"verdict": "ok", "reasons": []}}
+        meta = {"session_id": f"w{n}", "joint": "joint1", "tags": {}, "created_utc": f"2026-11-29T10:0{n}:00+00:00"}
+        with Catalogue(path) as c:
+            c.record(Outcome(f"/m/w{n}.h5", f"h{n}", "r", meta, doc, None, 1.0))
+
+    for n, k in enumerate((890.0, 891.0)):
+        write(n, k)
+    ensure_app(offscreen=True)
+    load = functools.partial(load_trend, None, path, "joint1")
+    live = LiveTrend(load, load(), refresh_s=3600)
+    assert len(live.shown.points) == 2 and live.refresh() is False  # nothing new: the figure stays
+    write(2, 700.0)
+    assert live.refresh() is True and len(live.shown.points) == 3 and live.shown.alarm
+    path.write_bytes(b"not a database")  # the catalogue unreadable: the last figure stays, the title says why
+    assert live.refresh() is False and len(live.shown.points) == 3
+    assert "not refreshed" in live.frame.windowTitle()
