@@ -15,6 +15,9 @@ the estimated torque is within 0.4 % of the true one (coherence ≥ 0.99), but t
 profile period, so the quantisation error repeats too (correlation 0.67–0.77 one period later) and is
 coherent with the torque's lines; it does not average out over segments or longer records, while the
 coherence's random σ (3–8 % at 350–400 Hz) shrinks. 2^20 counts/rev: +1.4 %; 10 000: +260 %.
+The white-quantisation bound √(G_qq/G_yy) (58 % at 350–400 Hz on scenario 1, 30 % on the stiff plant 7,
+whose bias there is −0.5 %) overstates the coherent part 3…60×: as a per-bin σ in the fit's weights it
+helped scenarios 1/2/3/48 but cost the stiff plant its resonance (a new confident wrong), so not applied.
 
     nice -n 5 python bench/hf_bias.py --seeds 1
 """
