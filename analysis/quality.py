@@ -209,11 +209,11 @@ def assess(
                                      f"{1e6 * limit:.0f} µs for a {fit.options.kind} fit"))
 
     if encoder_jitter is not None and np.any(in_band):
-        found = _jitter_findings(frf, fit, in_band, encoder_jitter, th)
-        if found and found[0][1].startswith("the encoder's resolution"):
-            findings.extend(found)  # a property of the bench: after what the motion can change
-        else:
+        found, timing_defect = _jitter_findings(frf, fit, in_band, encoder_jitter, th)
+        if timing_defect:
             findings[:0] = found  # a timing defect is the cause: first
+        else:
+            findings.extend(found)  # the encoder's resolution: a property of the bench, after the motion's reasons
     for f_hz in inseparable_hz:
         findings.append(("poor", f"a {f_hz:.1f} Hz line on the phase current cannot be told apart from the torque "
                                  f"(the motor turns at that electrical frequency for long): remove it at its source "
@@ -231,14 +231,14 @@ def assess(
 
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,
-                     th: Thresholds) -> list[tuple[Verdict, str]]:
+                     th: Thresholds) -> tuple[list[tuple[Verdict, str]], bool]:
     """The verdict on the encoder's timing jitter and resolution, from the session's own spectra.
 
     The speed noise they predict, N(f) (the jitter's and the position quantisation's), is taken out of the
     measured speed PSD G_yy = |H·D|²·G_xx/γ² (D the backward difference): without it the coherence would be
     γ²·G_yy/(G_yy − N) (at most 1). The encoder limits the FRF when that would lift the grade of the
     verdict's own coherence checks (whole band; f_a…f_r with the excitation limits) — no limit of its own;
-    the larger of the two noises is named.
+    the larger of the two noises is named. Returns the findings and whether they name a timing defect.
     """
     f = frf.f_hz[in_band]
     g2 = np.clip(frf.coherence[in_band], 1e-6, 1.0)
@@ -257,7 +257,7 @@ def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray
             if _RANK[now] > _RANK[_grade(float(np.mean(without[sel])), poor, failed)]:
                 level = max(level, now, key=_RANK.__getitem__)
     if level == "ok":
-        return []
+        return [], False
     sigma_us, lo, hi = 1e6 * jitter.sigma_s, *fit.band
     cost = (f"coherence {np.mean(g2):.2f} in {lo:g}…{hi:g} Hz, ≈ {np.mean(without):.2f} without the speed noise "
             "it predicts")
@@ -265,13 +265,13 @@ def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray
         counts = 2.0 * np.pi / jitter.lsb_rad
         return [(level, f"the encoder's resolution ({counts:.0f} counts/rev) leaves speed noise that limits the FRF "
                         f"({cost}): use the drive's finer position units ([encoder] counts_per_rev) or a finer "
-                        "encoder, or longer records")]
+                        "encoder, or longer records")], False
     if jitter.stamped:
         return [(level, f"the encoder's sample instants still scatter by ≈ {sigma_us:.1f} µs after the drive's time "
                         f"stamps ({cost}): check that the drive's time stamp (0x1013 or the frame's drive time) is "
-                        "taken when the position is latched")]
+                        "taken when the position is latched")], True
     return [(level, f"the drive samples at SYNC arrival with ≈ {sigma_us:.0f} µs jitter ({cost}): use a hardware "
-                    "SYNC or map the drive's time stamp (0x1013, [drive] map_timestamp = true)")]
+                    "SYNC or map the drive's time stamp (0x1013, [drive] map_timestamp = true)")], True
 
 
 def _grade(value: float, poor_below: float, failed_below: float) -> Verdict:
