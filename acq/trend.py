@@ -282,14 +282,22 @@ def trend_widget(trend: Trend) -> Any:
                                               brush=pg.mkBrush(255, 127, 14, 35)))
             legend.addItem(limit_curve, f"EWMA limit −{trend.ewma_L:g}σ (latest {limit[-1]:.1f}; shaded: no alarm)")
             levels += [*ewma, *limit]
-        values = np.concatenate([lo, hi, k, levels])
+        # the range of what is judged (and its limits): a skipped session's K — often wild, that is why it was
+        # skipped — must not squash the trend into a line; it is listed in the table and the legend says so
+        judged_pts = np.array([_category(p) not in ("skipped", "before baseline") for _, p in pts], dtype=bool)
+        values = np.concatenate([lo[judged_pts], hi[judged_pts], k[judged_pts], levels])
         values = values[np.isfinite(values)]
         pad = 0.05 * (values.max() - values.min() or values.max())
         k_plot.setYRange(values.min() - pad, values.max() + pad, padding=0)
+        outside = int(np.sum(~judged_pts & ((k < values.min() - pad) | (k > values.max() + pad))))
+        if outside:
+            # a legend line only: an empty curve in the plot would upset its x range
+            legend.addItem(pg.PlotDataItem(pen=None), f"{outside} skipped session(s) outside the range shown")
     for key, color, name in (("f_a_hz", "#2ca02c", "f_a (lower plot)"), ("f_r_hz", "#9467bd", "f_r (lower plot)")):
         fx = [i for i, p in pts if getattr(p.entry, key) is not None]
         legend.addItem(f_plot.plot(fx, [getattr(trend.points[i].entry, key) for i in fx], pen=pg.mkPen(color, width=2),
                                    symbol="s", symbolBrush=color), name)
+    k_plot.setXRange(-0.5, len(trend.points) - 0.5, padding=0.02)  # every session, whatever the curves hold
     step = max(1, len(trend.points) // 10)
     ticks = [(float(i), (p.entry.created_utc or "?")[:19].replace("T", "\n"))
              for i, p in enumerate(trend.points)][::step]

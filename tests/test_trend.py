@@ -247,3 +247,29 @@ def test_the_trend_window_redraws_when_a_writer_adds_sessions(tmp_path: Path) ->
     path.write_bytes(b"not a database")  # the catalogue unreadable: the last figure stays, the title says why
     assert live.refresh() is False and len(live.shown.points) == 3
     assert "not refreshed" in live.frame.windowTitle()
+
+
+def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> None:
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    import pyqtgraph as pg
+
+    from acq.catalogue import Catalogue, Outcome
+    from acq.plots import ensure_app
+    from acq.trend import load_trend, trend_widget
+
+    path = tmp_path / "catalogue.sqlite"
+    with Catalogue(path) as c:  # five good windows, then one whose fit went wild (verdict poor: skipped)
+        for n, (k, verdict) in enumerate([(890.0, "ok"), (891.0, "ok"), (889.0, "ok"), (860.0, "ok"),
+                                          (13_000.0, "poor"), (850.0, "ok")]):
+            doc = {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [0.9 * k, 1.1 * k]},
+                   "quality": {"verdict": verdict, "reasons": []}}
+            meta = {"session_id": f"w{n}", "joint": "joint1", "tags": {}, "created_utc": f"2026-11-29T10:0{n}:00+00:00"}
+            c.record(Outcome(f"/m/w{n}.h5", f"h{n}", "r", meta, doc, None, 1.0))
+    ensure_app(offscreen=True)
+    widget = trend_widget(load_trend(None, path, "joint1"))
+    (layout,) = [item for item in widget.findChildren(object) if type(item).__name__ == "GraphicsLayoutWidget"]
+    k_plot = next(item for item in layout.ci.items if isinstance(item, pg.PlotItem))
+    low, high = k_plot.viewRange()[1]
+    assert 700.0 < low < 850.0 and 890.0 < high < 1100.0  # the judged points and their limits, not 13 000
+    legend = next(item for item in layout.ci.items if isinstance(item, pg.LegendItem))
+    assert "1 skipped session(s) outside the range shown" in [label.text for _, label in legend.items]
