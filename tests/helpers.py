@@ -1,8 +1,11 @@
-"""Small helpers shared by tests: run the CLI in-process and capture its exit code and output."""
+"""Small helpers shared by tests: run the CLI in-process and capture its exit code and output; record a session."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from dataclasses import dataclass
+from pathlib import Path
 
 import pytest
 
@@ -23,3 +26,14 @@ def run_cli(capsys: pytest.CaptureFixture[str], *args: str) -> CliRun:
         main(list(args))
     captured = capsys.readouterr()
     return CliRun(int(exc.value.code or 0), captured.out, captured.err)
+
+
+def record_session_in_subprocess(out: Path, duration_s: float) -> Path:
+    """``acq record --profile triangle_0.2s --fast`` of ``duration_s`` into ``out`` in a child process (nothing of
+    the recording stays in the test process); the one session file it wrote."""
+    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.2s", "--fast", "--duration",
+                           f"{duration_s:g}", "--no-analyze", "--out", str(out)], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    (path,) = out.glob("*.h5")
+    return path

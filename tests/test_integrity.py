@@ -15,7 +15,7 @@ import pytest
 
 import acq.session
 from acq.session import load
-from tests.helpers import run_cli
+from tests.helpers import record_session_in_subprocess, run_cli
 
 RATE_HZ = 25600
 
@@ -102,11 +102,7 @@ def test_write_error_inside_hdf5_keeps_only_committed_samples(tmp_path: Path, ca
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("rec")
-    proc = subprocess.run(["python", "-m", "acq", "record", "--profile", "triangle_0.2s", "--fast", "--duration", "10",
-                           "--no-analyze", "--out", str(out)], capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    return _only_session(out)
+    return record_session_in_subprocess(tmp_path_factory.mktemp("rec"), 10.0)
 
 
 def _copy(src: Path, dst: Path) -> Path:

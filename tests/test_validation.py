@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
 from pathlib import Path
 
 import h5py
@@ -13,7 +12,7 @@ import pytest
 from acq.config import DEFAULT_BENCH, check_memory, load_bench
 from acq.session import new_session_path
 from acqcore.errors import ConfigError
-from tests.helpers import run_cli
+from tests.helpers import record_session_in_subprocess, run_cli
 from tests.test_import import _with_row_changed, pair, run_import  # noqa: F401 - the fixture is used below
 
 
@@ -125,12 +124,7 @@ def test_csv_value_beyond_a_physical_bound_is_refused_with_file_line_column(
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    out = tmp_path_factory.mktemp("rec")
-    proc = subprocess.run(["python", "-m", "acq", "record", "--profile", "triangle_0.2s", "--fast", "--duration", "3",
-                           "--no-analyze", "--out", str(out)], capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    (path,) = out.glob("*.h5")
-    return path
+    return record_session_in_subprocess(tmp_path_factory.mktemp("rec"), 3.0)
 
 
 def _spoilt(recorded: Path, tmp_path: Path, spoil) -> Path:
