@@ -10,7 +10,6 @@ not used (the import says so).
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,6 +17,7 @@ from typing import Any
 from acq import __version__
 from acq.analyze import sha256_of
 from acq.session import Session, utc_now_iso
+from acq.storage import write_text_atomically
 from acqcore.errors import ConfigError
 
 FORMAT = "acq-export-metadata"
@@ -78,9 +78,7 @@ def write_metadata(session: Session, current_path: Path, encoder_path: Path) -> 
         "files": {"current": {"name": current_path.name, "sha256": sha256_of(current_path)},
                   "encoder": {"name": encoder_path.name, "sha256": sha256_of(encoder_path)}},
     }
-    tmp = path.with_name(f".{path.name}.writing")
-    tmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    os.replace(tmp, path)
+    write_text_atomically(path, json.dumps(doc, indent=1) + "\n")  # a failed write names the file, leaves no temp
     return path
 
 
