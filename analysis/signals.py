@@ -20,6 +20,7 @@ import numpy as np
 
 from analysis import encoder, resample, sample_instants, torque
 from analysis.clocks import ClockFit, fit_clock, host_relation
+from analysis.fit import Z95
 from analysis.sample_instants import EncoderJitter
 
 TorqueMethod = Literal["hilbert", "encoder", "park"]
@@ -362,9 +363,9 @@ def _gain_notes(found: list[torque.PhaseGains]) -> list[str]:
     if not found:
         return []
     g = max(found, key=lambda x: x.n_samples)
-    if all(abs(v - 1.0) <= 1.96 * g.sigma[n] for n, v in g.gain.items()):
+    if all(abs(v - 1.0) <= Z95 * g.sigma[n] for n, v in g.gain.items()):
         return []
-    text = ", ".join(f"{n} {v:.4f} ± {1.96 * g.sigma[n]:.1g}" for n, v in g.gain.items())
+    text = ", ".join(f"{n} {v:.4f} ± {Z95 * g.sigma[n]:.1g}" for n, v in g.gain.items())
     return [f"current: phase sensor gains differ (relative to their mean: {text}); divided out"]
 
 
