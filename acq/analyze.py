@@ -1,14 +1,13 @@
 """Analyse a session file: session → :mod:`analysis` → result table, ``.result.json``, ``.report.png``.
 
 The only place where the application meets the analysis: it turns an :class:`acq.session.Session`
-into the plain arrays of :class:`analysis.signals.Recording`, runs
-:func:`analysis.pipeline.analyze`, and writes the results beside the session (the raw groups are
+into the plain arrays of :class:`analysis.Recording`, runs :func:`analysis.analyze` with an
+:class:`analysis.AnalysisRequest`, and writes the results beside the session (the raw groups are
 never touched). On the simulated bench the table also shows the simulated truth and the error.
 """
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import sys
@@ -16,15 +15,10 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-import numpy
-import scipy
-import analysis
 from acq import __version__
 from acq.session import Session, load, utc_now_iso
 from acq.storage import atomic_path, free_bytes, write_text_atomically
-from analysis.model import TwoMassParams
-from analysis.pipeline import AnalysisOptions, Pipeline, Result, analyze
-from analysis.signals import Recording, TorqueMethod
+from analysis import AnalysisRequest, Recording, Result, TwoMassParams, analyze, code_fingerprint
 from acqcore.errors import ConfigError, StorageError
 
 #: Free bytes needed before drawing a report PNG: the reports are 0.2–0.6 MB (1600×1000 px); ×4 margin.
@@ -64,28 +58,14 @@ def recording_from_session(session: Session) -> Recording:
     )
 
 
-def options_for(session: Session, *, torque: TorqueMethod | None = None, params: str = "K,Jm,Jl",
-                fit: str = "amplitude", band_hz: tuple[float, float] | None = None,
-                pipeline: Pipeline = "acq") -> AnalysisOptions:
-    """Analysis options with the bench's nominal plant; torque defaults to park with ≥ 2 phases."""
+def request_for(session: Session, request: AnalysisRequest = AnalysisRequest()) -> AnalysisRequest:
+    """``request`` with the bench's nominal plant when it names none."""
+    if request.nominal is not None:
+        return request
     nominal = session.bench.nominal
-    if torque is None:
-        torque = "park" if len(session.current.phases_a) >= 2 else "encoder"
-    return AnalysisOptions(
-        torque_method=torque, params=params, fit=fit, band_hz=band_hz, pipeline=pipeline,  # type: ignore[arg-type]
-        nominal=TwoMassParams(K_Nm_per_rad=nominal.K_Nm_per_rad, Jm_kgm2=nominal.Jm_kgm2, Jl_kgm2=nominal.Jl_kgm2,
-                              C_Nms_per_rad=0.0),  # the bench gives no damping; the fit always fits C
-    )
-
-
-@functools.cache
-def analysis_fingerprint() -> str:
-    """SHA-256 (first 16 hex digits) of the analysis package's source and the numpy/scipy it runs on: results of
-    other code are not current."""
-    digest = hashlib.sha256(f"numpy {numpy.__version__} scipy {scipy.__version__}".encode())
-    for source in sorted(Path(analysis.__file__).parent.glob("*.py")):
-        digest.update(source.name.encode() + b"\0" + source.read_bytes())
-    return digest.hexdigest()[:16]
+    return replace(request, nominal=TwoMassParams(K_Nm_per_rad=nominal.K_Nm_per_rad, Jm_kgm2=nominal.Jm_kgm2,
+                                                  Jl_kgm2=nominal.Jl_kgm2,
+                                                  C_Nms_per_rad=0.0))  # the bench gives no damping; C is always fitted
 
 
 def sha256_of(path: Path) -> str:
@@ -126,33 +106,34 @@ def result_json(session: Session, result: Result) -> dict[str, Any]:
     }
     doc["analyzed_utc"] = utc_now_iso()
     doc["acq_version"] = __version__
-    doc["analysis_fingerprint"] = analysis_fingerprint()
+    doc["analysis_fingerprint"] = code_fingerprint()
     truth = simulated_truth(session)
     if truth is not None:
         doc["simulated_truth"] = truth
     return doc
 
 
-def analyze_session(path: Path | str, options: AnalysisOptions | None = None, *, write: bool = True,
-                    report: bool = True, partial: bool = False, **option_kwargs: Any) -> SessionResult:
-    """Identify the joint of one session; write ``<session>.result.json``.
+def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest(), *, write: bool = True,
+                    report: bool = True) -> SessionResult:
+    """Identify the joint of one session as ``request`` asks (with the bench's nominal plant unless it names one);
+    write ``<session>.result.json``.
 
     The report PNG is not drawn here: with ``report`` its path is set, and :func:`draw_report` draws it once the
     result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
-    :class:`ConfigError` naming the session; so does a session still ``recording`` or damaged unless ``partial``
+    :class:`ConfigError` naming the session; so does a session still ``recording`` or damaged unless ``request.partial``
     (then its intact part is analysed and the result says ``"partial": true``). A failed write raises
     :class:`StorageError` naming the file, leaving no temp file.
     """
     session = load(path)
-    session.require_usable(partial=partial)
-    opts = options if options is not None else options_for(session, **option_kwargs)
+    session.require_usable(partial=request.partial)
+    request = request_for(session, request)
     nyquist_hz = 0.5 / session.encoder.period_s
-    if opts.band_hz is not None and opts.band_hz[1] > nyquist_hz:
-        lo, hi = opts.band_hz
+    if request.band_hz is not None and request.band_hz[1] > nyquist_hz:
+        lo, hi = request.band_hz
         raise ConfigError(f"--band {lo:g},{hi:g}: HI must not exceed {nyquist_hz:g} Hz, the Nyquist frequency of "
                           f"{session.path.name}'s encoder (period {session.encoder.period_s:g} s)")
     try:
-        result = analyze(recording_from_session(session), opts)
+        result = analyze(recording_from_session(session), request)
     except ValueError as e:
         raise ConfigError(f"{session.path}: {e}") from None
     doc = result_json(session, result)

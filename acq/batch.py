@@ -33,12 +33,13 @@ import numpy as np
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
-from acq.analyze import SessionResult, analysis_fingerprint, analyze_session, draw_report, sha256_of
+from acq.analyze import SessionResult, analyze_session, draw_report, sha256_of
 from acq.catalogue import Catalogue, Outcome
 from acq.display import batch_table
 from acq.session import Session, load, read_status
 from acq.storage import remove_temp_files
 from acqcore.errors import AcqError, ConfigError
+from analysis import AnalysisRequest
 
 CATALOGUE_NAME = "catalogue.sqlite"
 _GLOB_CHARS = frozenset("*?[")
@@ -95,12 +96,7 @@ def _prefix(parts: Sequence[str]) -> Iterator[str]:
         yield part
 
 
-#: What ``acq analyze`` and ``acq record`` ask for when no option is given.
-DEFAULT_REQUEST: dict[str, Any] = {"torque": None, "params": "K,Jm,Jl", "fit": "amplitude", "band_hz": None,
-                                   "pipeline": "acq"}
-
-
-def record_outcome(done: SessionResult, request: dict[str, Any], catalogue_path: Path | str | None,
+def record_outcome(done: SessionResult, request: AnalysisRequest, catalogue_path: Path | str | None,
                    seconds: float) -> Path | str:
     """Put one session's analysis (done outside a batch) into its catalogue; return the catalogue's path.
 
@@ -113,16 +109,10 @@ def record_outcome(done: SessionResult, request: dict[str, Any], catalogue_path:
     return path
 
 
-def succeeded(path: str, done: SessionResult, request: dict[str, Any], seconds: float) -> Outcome:
+def succeeded(path: str, done: SessionResult, request: AnalysisRequest, seconds: float) -> Outcome:
     """The catalogue's record of a successful analysis of the session at ``path``."""
-    return Outcome(path, done.json_dict["session"]["sha256"], request_key(request), session_meta(done.session),
+    return Outcome(path, done.json_dict["session"]["sha256"], request.key(), session_meta(done.session),
                    done.json_dict, None, seconds)
-
-
-def request_key(request: dict[str, Any]) -> str:
-    """The options asked for (keyword arguments of :func:`acq.analyze.options_for`) and the analysis code that
-    answers them (:func:`acq.analyze.analysis_fingerprint`), canonical JSON: a change of either is not current."""
-    return json.dumps({**request, "analysis": analysis_fingerprint()}, sort_keys=True)
 
 
 def session_meta(session: Session) -> dict[str, Any]:
@@ -141,7 +131,7 @@ def quiet_numerics() -> Iterator[None]:
         yield
 
 
-def analyze_one(path: str, sha256: str, request: dict[str, Any], report: bool) -> Outcome:
+def analyze_one(path: str, sha256: str, request: AnalysisRequest, report: bool) -> Outcome:
     """Analyse one session (runs in a worker process or on a Dask worker); never raises.
 
     Parameters
@@ -150,18 +140,18 @@ def analyze_one(path: str, sha256: str, request: dict[str, Any], report: bool) -
         Absolute path of the session file, as the worker sees it.
     sha256 : str
         The file's hash when the batch looked at it (kept when the analysis fails).
-    request : dict
-        Keyword arguments of :func:`acq.analyze.options_for`.
+    request : AnalysisRequest
+        What is asked (its key files the outcome in the catalogue).
     report : bool
         Also draw ``<session>.report.png``.
     """
     start = time.perf_counter()
     try:
         with quiet_numerics():
-            done = analyze_session(path, report=report, **request)
+            done = analyze_session(path, request, report=report)
     except Exception as e:  # noqa: BLE001 — a batch records any session's failure and goes on
         error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
-        return Outcome(path, sha256, request_key(request), _meta_if_readable(path), None, error,
+        return Outcome(path, sha256, request.key(), _meta_if_readable(path), None, error,
                        time.perf_counter() - start)
     done = draw_report(done)  # the result is written; a picture that fails is a note on it, not a failure
     return succeeded(path, done, request, time.perf_counter() - start)
@@ -211,7 +201,7 @@ def analysis_executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
 STOP_GRACE_S = 0.5
 
 
-def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, Any], *, jobs: int | None = None,
+def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequest, *, jobs: int | None = None,
               scheduler: str | None = None, report: bool = True, console: Console | None = None) -> BatchReport:
     """Analyse the sessions not yet current in ``catalogue``, recording each outcome as it arrives.
 
@@ -221,9 +211,9 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, An
         Session files.
     catalogue : Catalogue
         Where the outcomes go (and what decides which sessions are current).
-    request : dict
-        Keyword arguments of :func:`acq.analyze.analyze_session` (torque, params, fit, band_hz, pipeline,
-        optional partial). Without ``partial``, sessions still ``recording`` are skipped (:attr:`BatchReport.not_ready`).
+    request : AnalysisRequest
+        What is asked. Without ``request.partial``, sessions still ``recording`` are skipped
+        (:attr:`BatchReport.not_ready`).
     jobs : int, optional
         Worker processes of the local pool (default: the CPU count); ignored with ``scheduler``.
     scheduler : str, optional
@@ -238,9 +228,9 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: dict[str, An
     """
     start = time.perf_counter()
     started_at = time.time()
-    current = catalogue.current(request_key(request))
+    current = catalogue.current(request.key())
     hashes = {p: sha256_of(p) for p in paths}
-    not_ready = [] if request.get("partial") else [p for p in paths if _status(p) == "recording"]
+    not_ready = [] if request.partial else [p for p in paths if _status(p) == "recording"]
     todo = [p for p in paths if hashes[p] not in current and p not in not_ready]
     outcomes: list[Outcome] = []
     interrupted = False
@@ -288,7 +278,7 @@ def _signals_ignored() -> Iterator[None]:
 
 
 def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outcomes: list[Outcome],
-                  catalogue: Catalogue, hashes: dict[Path, str], request: dict[str, Any], started_at: float) -> None:
+                  catalogue: Catalogue, hashes: dict[Path, str], request: AnalysisRequest, started_at: float) -> None:
     """Cancel what is queued, give what runs :data:`STOP_GRACE_S` to finish, kill the rest, record what finished;
     no result file (nor a temp file) is left without its catalogue row."""
     for future in futures:
@@ -320,12 +310,12 @@ def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outc
                     output.unlink()
 
 
-def _outcome(future: Future[Outcome], path: Path, hashes: dict[Path, str], request: dict[str, Any]) -> Outcome:
+def _outcome(future: Future[Outcome], path: Path, hashes: dict[Path, str], request: AnalysisRequest) -> Outcome:
     """The worker's outcome, or a failure when the worker itself died (pool broken, cluster lost)."""
     try:
         return future.result()
     except Exception as e:  # noqa: BLE001 — the worker never raises; this is the worker or cluster dying
-        return Outcome(str(path.resolve()), hashes[path], request_key(request), {}, None,
+        return Outcome(str(path.resolve()), hashes[path], request.key(), {}, None,
                        f"{path}: worker failed: {type(e).__name__}: {e}", 0.0)
 
 
@@ -339,7 +329,7 @@ def report_json(report: BatchReport) -> list[dict[str, Any]]:
             + [{"path": str(p.resolve()), "outcome": "skipped: status recording"} for p in report.not_ready])
 
 
-def analyze_many(spec: Path, request: dict[str, Any], *, jobs: int | None, catalogue_path: Path | str | None,
+def analyze_many(spec: Path, request: AnalysisRequest, *, jobs: int | None, catalogue_path: Path | str | None,
                  scheduler: str | None, report: bool, as_json: bool, out: Console) -> int:
     """``acq analyze FOLDER|GLOB``: the batch, its table (or JSON) on ``out``; 1 when a session failed, else 0."""
     paths, base = find_sessions(spec)

@@ -14,7 +14,6 @@ import sys
 import threading
 import time
 from pathlib import Path
-from typing import Any
 
 import click
 from rich.console import Console
@@ -23,7 +22,7 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from acq import __version__
 from acq.analyze import SessionResult, analyze_session, draw_report
-from acq.batch import DEFAULT_REQUEST, analyze_many, is_batch, quiet_numerics, record_outcome
+from acq.batch import analyze_many, is_batch, quiet_numerics, record_outcome
 from acq.catalogue import CatalogueLocation, parse_tags, tag_option
 from acq.config import check_duration, check_memory, load_bench, load_profile, with_joint
 from acq.devices import devices_command
@@ -39,6 +38,7 @@ from acq.summary import summarize
 from acq.trend import trend_command
 from acq.view import view_command
 from acqcore.errors import AcqError, ConfigError
+from analysis import AnalysisRequest
 from drivers.registry import open_bench
 
 EXIT_INTERRUPTED = 130
@@ -118,10 +118,10 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     return EXIT_INTERRUPTED if result.status == "interrupted" else 1
 
 
-def _identify(path: Path, request: dict[str, Any], *, report: bool, catalogue_path: Path | str | None) -> SessionResult:
+def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_path: Path | str | None) -> SessionResult:
     """Analyse one session with ``request`` and put the result into its folder's catalogue."""
     start = time.perf_counter()
-    done = analyze_session(path, report=report, **request)
+    done = analyze_session(path, request, report=report)
     try:
         record_outcome(done, request, catalogue_path, time.perf_counter() - start)
     except BaseException:  # no result without its catalogue row (a later batch analyses the session again)
@@ -139,7 +139,7 @@ def _analyze_after_recording(path: Path) -> None:
     """Identify the joint of a session just recorded; a failure is reported, the recording stands."""
     with err.status("identifying the joint …"):
         try:
-            done = _identify(path, DEFAULT_REQUEST, report=True, catalogue_path=None)
+            done = _identify(path, AnalysisRequest(), report=True, catalogue_path=None)
         except AcqError as e:
             click.echo(f"acq: analysis: {e}", err=True)
             return
@@ -194,10 +194,8 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
     SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
     (same file hash and options) is analysed in parallel and recorded there; exit code 1 if any failed.
     """
-    request = {"torque": torque, "params": params, "fit": fit_kind, "band_hz": _parse_band(band),
-               "pipeline": "paper" if paper else "acq"}
-    if partial:  # only when asked: the request (and so the catalogue's key) of a normal analysis is unchanged
-        request["partial"] = True
+    request = AnalysisRequest(torque_method=torque, params=params, fit=fit_kind,  # type: ignore[arg-type]
+                              band_hz=_parse_band(band), pipeline="paper" if paper else "acq", partial=partial)
     if is_batch(session_path):
         return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
                             report=not no_report, as_json=as_json, out=out)

@@ -27,8 +27,7 @@ from rich.measure import Measurement
 from rich.table import Table
 from rich.text import Text
 
-from analysis.fit import PARAM_NAMES
-from analysis.model import PARAM_LABELS
+from analysis import PARAM_LABELS, PARAM_NAMES
 
 if TYPE_CHECKING:
     from acq.batch import BatchReport

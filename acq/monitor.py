@@ -26,12 +26,12 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from contextlib import AbstractContextManager, contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from acq.analyze import sha256_of
-from acq.batch import CATALOGUE_NAME, DEFAULT_REQUEST, analysis_executor, session_meta
+from acq.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.catalogue import Catalogue, Entry, Outcome
 from acq.recorder import Recorder, stop_on_signals
 from acq.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
@@ -39,6 +39,7 @@ from acq.session import load, repair
 from acq.trend import Trend, compute_trend
 from acq.window_judge import analyse_window, marked
 from acqcore.errors import ConfigError
+from analysis import AnalysisRequest
 from drivers.config import Bench
 from drivers.registry import open_bench
 
@@ -64,7 +65,7 @@ class MonitorSettings:
     baseline_windows: int = 5
     threshold_pct: float = 10.0
     ewma_lambda: float = 0.2
-    request: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_REQUEST))
+    request: AnalysisRequest = AnalysisRequest()
 
 
 @dataclass

@@ -35,8 +35,7 @@ import shiboken6
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
 from acq.display import PARAMS, format_value, interval_text, options_text
-from analysis.quality import Thresholds
-from analysis.report import FigureData
+from analysis import FigureData, Thresholds
 
 pg.setConfigOptions(background="w", foreground="k", antialias=True)
 

@@ -28,8 +28,7 @@ from acq.selftest_checks import (Check, blf_check, daq_blocks_check, direction_c
                                  encoder_speed_check, phase_order_check, samples_check, speed_ratio_check,
                                  standstill_current_check, torque_constant_check)
 from acq.session import load
-from analysis.diagnose import electrical_speed_ratio
-from analysis.signals import prepare_signals
+from analysis import AnalysisRequest, electrical_speed_ratio, prepare_signals
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen, DriveSerial, Profile
 from acqcore.errors import AcqError
 from drivers.registry import open_bench
@@ -262,6 +261,6 @@ def _identification(bench: Bench, profile: Profile, work_dir: Path, fast: bool) 
     if status == "fail":
         return
     session = done.session
-    torque = "park" if len(session.current.phases_a) >= 2 else "encoder"
-    sig = prepare_signals(recording_from_session(session), torque)
+    rec = recording_from_session(session)
+    sig = prepare_signals(rec, AnalysisRequest().chain(rec))
     yield torque_constant_check(sig.t_s, sig.torque_Nm, sig.speed_rad_s, bench)

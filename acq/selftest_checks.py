@@ -14,9 +14,8 @@ import numpy as np
 
 from acq.session import Session
 from acq.summary import summarize
-from analysis.diagnose import (SpeedRatio, first_move_sign, inertia_from_torque, likely_counts_per_rev,
-                               phase_sequence_agreement, ratio_fault, sequence_fault)
-from analysis.encoder import longest_gap_free_span, speed_from_counts
+from analysis import (SpeedRatio, first_move_sign, inertia_from_torque, likely_counts_per_rev, longest_gap_free_span,
+                      phase_sequence_agreement, ratio_fault, sequence_fault, speed_from_counts)
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen
 
 CheckStatus = Literal["pass", "warn", "fail"]

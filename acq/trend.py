@@ -33,7 +33,7 @@ from acq.catalogue import Catalogue, CatalogueLocation, Entry, parse_tags, tags_
 from acq.catalogue_backends import is_url
 from acq.display import trend_table
 from acqcore.errors import ConfigError
-from analysis.fit import Z95
+from analysis import Z95
 
 EXIT_ALARM = 3
 EWMA_L = 3.0

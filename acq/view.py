@@ -15,13 +15,14 @@ import json
 import os
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import click
 
 from acq.analyze import analyze_session
 from acq.catalogue import CatalogueLocation
 from acqcore.errors import AcqError, ConfigError
+from analysis import AnalysisRequest
 
 if TYPE_CHECKING:
     from acq.plots import SessionFigure
@@ -37,27 +38,22 @@ def has_display() -> bool:
                 or os.environ.get("QT_QPA_PLATFORM", "").startswith("offscreen"))
 
 
-def stored_options(path: Path) -> dict[str, Any]:
-    """The analysis options recorded in ``<session>.result.json``, as :func:`analyze_session` keywords ({} if none)."""
+def stored_request(path: Path) -> AnalysisRequest:
+    """The analysis request recorded in ``<session>.result.json`` (the default request if there is none)."""
     result_path = path.with_name(path.stem + ".result.json")
     if not result_path.exists():
-        return {}
+        return AnalysisRequest()
     try:
-        doc = json.loads(result_path.read_text())
-        opts = doc["options"]
-        band = opts.get("band_hz")
+        return AnalysisRequest.from_json_dict(json.loads(result_path.read_text())["options"])
     except (ValueError, KeyError, TypeError, AttributeError):
         raise ConfigError(f"{result_path}: not a result of acq analyze (run acq analyze {path} to redo it)") from None
-    return {"torque": opts.get("torque_method") if opts.get("pipeline", "acq") == "acq" else None,
-            "params": opts.get("params", "K,Jm,Jl"), "fit": opts.get("fit", "amplitude"),
-            "band_hz": tuple(band) if band else None, "pipeline": opts.get("pipeline", "acq")}
 
 
 def session_figure(path: Path) -> SessionFigure:
     """Identify one session (with its stored options, if any) and wrap what the figure needs."""
     from acq.plots import SessionFigure
 
-    done = analyze_session(path, write=False, **stored_options(Path(path)))
+    done = analyze_session(path, stored_request(Path(path)), write=False)
     return SessionFigure(Path(path).stem, done.result.figures, done.json_dict)
 
 

@@ -13,10 +13,10 @@ import signal
 from dataclasses import replace
 from typing import Any
 
-from acq.batch import analyze_one, request_key, session_meta
+from acq.batch import analyze_one, session_meta
 from acq.catalogue import Outcome
 from acq.session import load
-from analysis.quality import Thresholds
+from analysis import AnalysisRequest, Thresholds
 
 
 def not_excited(doc: dict[str, Any]) -> bool:
@@ -33,17 +33,17 @@ def not_excited(doc: dict[str, Any]) -> bool:
     return quality.get("verdict") != "ok" and aligned and (weak_between or weak_in_band)
 
 
-def marked(path: str, sha256: str, request: dict[str, Any], meta: dict[str, Any], verdict: str, reasons: list[str],
+def marked(path: str, sha256: str, request: AnalysisRequest, meta: dict[str, Any], verdict: str, reasons: list[str],
            doc: dict[str, Any] | None = None) -> Outcome:
     """A window's catalogue record without numbers: verdict ``not excited`` / ``not analysed`` / ``interrupted``."""
     keep = {k: v for k, v in (doc or {}).items() if k in ("session", "analyzed_utc", "acq_version", "simulated_truth",
                                                           "clock", "options")}
     quality = {k: v for k, v in (doc or {}).get("quality", {}).items() if k.endswith("coherence")}
-    out = {"options": request, **keep, "quality": {**quality, "verdict": verdict, "reasons": reasons}}
-    return Outcome(path, sha256, request_key(request), meta, out, None, 0.0)
+    out = {"options": request.to_json_dict(), **keep, "quality": {**quality, "verdict": verdict, "reasons": reasons}}
+    return Outcome(path, sha256, request.key(), meta, out, None, 0.0)
 
 
-def analyse_window(path: str, sha256: str, request: dict[str, Any]) -> Outcome:
+def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
     """Judge and analyse one window (runs in a worker process); never raises."""
     if multiprocessing.parent_process() is not None:  # a worker: Ctrl-C in the terminal is the monitor's to handle
         signal.signal(signal.SIGINT, signal.SIG_IGN)

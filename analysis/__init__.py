@@ -1,0 +1,38 @@
+"""Identification of a robot joint from a raw recording: the package's public face.
+
+Everything outside ``analysis/`` (the application ``acq``) imports from here only; ``bench/`` and
+``tests/`` may reach into the modules.
+
+- :func:`analyze` — a :class:`Recording` and an :class:`AnalysisRequest` → :class:`Result`.
+- :class:`AnalysisRequest` — what is asked (torque method, free parameters, fit, band, chain, …) and
+  :meth:`AnalysisRequest.key`, the catalogue's key; :func:`code_fingerprint` is the code part of it.
+- :class:`SignalChain`, :func:`our_chain`, :data:`PAPER_CHAIN` — the signal chain as a strategy.
+- :class:`Recording` — one session's raw arrays; :func:`prepare_signals` — its torque and speed on the
+  encoder instants (:class:`PreparedSignals`).
+- :class:`Result`, :class:`FigureData`, :class:`TwoMassParams`, :data:`PARAM_NAMES`,
+  :data:`PARAM_LABELS`, :data:`Z95`, :class:`Thresholds` — what a result holds and how it is judged.
+- The bench checks of ``acq selftest`` (:mod:`analysis.diagnose`, :mod:`analysis.encoder`).
+"""
+
+from __future__ import annotations
+
+from analysis.chain import PAPER_CHAIN, Pipeline, SignalChain, TorqueMethod, our_chain
+from analysis.diagnose import (SpeedRatio, electrical_speed_ratio, first_move_sign, inertia_from_torque,
+                               likely_counts_per_rev, phase_sequence_agreement, ratio_fault, sequence_fault)
+from analysis.encoder import longest_gap_free_span, speed_from_counts
+from analysis.fit import PARAM_NAMES, Z95
+from analysis.model import PARAM_LABELS, TwoMassParams
+from analysis.pipeline import Result, analyze
+from analysis.quality import Thresholds
+from analysis.recording import Recording
+from analysis.report import FigureData
+from analysis.request import AnalysisRequest, code_fingerprint
+from analysis.signals import PreparedSignals, prepare_signals
+
+__all__ = [
+    "PAPER_CHAIN", "PARAM_LABELS", "PARAM_NAMES", "AnalysisRequest", "FigureData", "Pipeline", "PreparedSignals",
+    "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TorqueMethod", "TwoMassParams", "Z95",
+    "analyze", "code_fingerprint", "electrical_speed_ratio", "first_move_sign", "inertia_from_torque",
+    "likely_counts_per_rev", "longest_gap_free_span", "our_chain", "phase_sequence_agreement", "prepare_signals",
+    "ratio_fault", "sequence_fault", "speed_from_counts",
+]

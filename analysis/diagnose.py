@@ -22,7 +22,7 @@ from scipy.ndimage import median_filter
 from analysis.clocks import crossing_frequency_hz, current_crossings_s
 from analysis.encoder import longest_gap_free_span, speed_from_counts
 from analysis.quality import Quality
-from analysis.signals import Recording
+from analysis.recording import Recording
 
 GRID_HZ = 200.0  # grid of the lag search, Hz: the speed's shape (≤ 20 Hz for a triangle) is well inside
 MAX_LAG_S = 2.0  # clock offsets searched, s: the design's plausible range of DAQ vs drive start (§4)

@@ -1,71 +1,32 @@
 """A raw recording → identified joint: signals → FRF → fit → quality → result (design §5).
 
-``pipeline="acq"`` is our chain (clock alignment, the chosen torque estimator, anti-alias
-resampling, coherence-weighted fit). ``pipeline="paper"`` is Xu et al.'s, kept for comparison:
-Hilbert torque, no alignment, linear interpolation to the encoder rate, uniform weights.
+The :class:`analysis.request.AnalysisRequest` chooses the signal chain (:mod:`analysis.chain`):
+``pipeline="acq"`` is ours (clock alignment, the chosen torque estimator, anti-alias resampling,
+coherence-weighted fit), ``pipeline="paper"`` is Xu et al.'s, kept for comparison: Hilbert torque,
+no alignment, linear interpolation to the encoder rate, uniform weights.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Literal
+from typing import Any
 
+from analysis.chain import SignalChain
 from analysis.clocks import ClockFit
 from analysis.diagnose import recording_fault, with_fault
-from analysis.fit import FitKind, FitOptions, FitParams, FitResult, PARAM_NAMES, fit_two_mass
+from analysis.fit import FitOptions, FitResult, PARAM_NAMES, fit_two_mass
 from analysis.encoder import longest_gap_free_span
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
-from analysis.model import TwoMassParams
 from analysis.quality import Quality, assess, phase_is_meaningful
+from analysis.recording import Recording
 from analysis.report import FigureData, figure_data
-from analysis.signals import Recording, TorqueMethod, prepare_signals, prepare_signals_paper
+from analysis.request import AnalysisRequest
+from analysis.signals import prepare_signals
 
-Pipeline = Literal["acq", "paper"]
 # blocks of the delete-one-block jackknife behind the intervals: 10 gives 9 degrees of freedom
 # (t = 2.26) at a cost of ten one-start refits; fewer when the record holds fewer than 20 segments
 JACKKNIFE_BLOCKS = 10
-
-
-@dataclass(frozen=True)
-class AnalysisOptions:
-    """What the analysis does.
-
-    Attributes
-    ----------
-    torque_method : {"encoder", "hilbert", "park"}
-        Torque estimator (ignored by ``pipeline="paper"``, which uses hilbert).
-    params : {"K,Jm,Jl", "K"}
-        Free parameters besides C; ``"K"`` fixes J_m, J_l to ``nominal``.
-    fit : {"amplitude", "complex"}
-        Fit |H| or the complex H.
-    band_hz : tuple of float or None
-        Fit band (low, high), Hz; None for 10 Hz … min(0.4·f_enc, 500 Hz).
-    align : bool
-        Align the clocks from the data (ignored by ``pipeline="paper"``, which does not).
-    segment_s : float
-        Welch segment length, s.
-    nominal : TwoMassParams or None
-        The bench's nominal values (needed for ``params="K"``; otherwise one extra fit start).
-    pipeline : {"acq", "paper"}
-        Our chain or the paper's.
-    """
-
-    torque_method: TorqueMethod = "encoder"
-    params: FitParams = "K,Jm,Jl"
-    fit: FitKind = "amplitude"
-    band_hz: tuple[float, float] | None = None
-    align: bool = True
-    segment_s: float = 0.5
-    nominal: TwoMassParams | None = None
-    pipeline: Pipeline = "acq"
-
-    def to_json_dict(self) -> dict[str, Any]:
-        """The options as JSON-ready values."""
-        nominal = None if self.nominal is None else {n: getattr(self.nominal, n) for n in PARAM_NAMES[:3]}
-        return {"pipeline": self.pipeline, "torque_method": self.torque_method if self.pipeline == "acq" else "hilbert",
-                "params": self.params, "fit": self.fit, "band_hz": None if self.band_hz is None else list(self.band_hz),
-                "align": self.align and self.pipeline == "acq", "segment_s": self.segment_s, "nominal": nominal}
 
 
 @dataclass(frozen=True)
@@ -84,8 +45,10 @@ class Result:
         The measured frequency response.
     figures : FigureData
         Data of the report figures.
-    options : AnalysisOptions
-        Options as given.
+    request : AnalysisRequest
+        The request as given.
+    chain : SignalChain
+        The signal chain it chose for the recording (the torque method resolved).
     notes : tuple of str
         What the signal chain reports (gaps and spans used, clock stage, torque sign).
     """
@@ -95,7 +58,8 @@ class Result:
     clock: ClockFit
     frf: FrequencyResponse
     figures: FigureData
-    options: AnalysisOptions
+    request: AnalysisRequest
+    chain: SignalChain
     notes: tuple[str, ...]
 
     def to_json_dict(self) -> dict[str, Any]:
@@ -118,18 +82,18 @@ class Result:
                         "encoder_jitter_us": None if self.quality.encoder_jitter_s is None
                         else _num(1e6 * self.quality.encoder_jitter_s),
                         "encoder_time_stamps": self.quality.encoder_time_stamps},
-            "options": {**self.options.to_json_dict(), "band_hz": list(self.fit.band)},
+            "options": {**self.request.to_json_dict(self.chain), "band_hz": list(self.fit.band)},
         }
 
 
-def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Result:
+def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Result:
     """Identify K, J_m, J_l, C of a joint from a raw recording.
 
     Parameters
     ----------
     rec : Recording
         Phase current(s), encoder positions and their indices/stamps, as recorded.
-    options : AnalysisOptions, optional
+    request : AnalysisRequest, optional
         Torque method, free parameters, fit kind, band, alignment, chain.
 
     Returns
@@ -143,18 +107,14 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
         holds fewer than two Welch segments and :class:`analysis.fit.FitInputError` for a bad band
         or ``params="K"`` without nominal values. Messages are one line.
     """
-    require_two_segments(longest_gap_free_span(rec.encoder_index).count, rec.period_s, options.segment_s)
-    if options.pipeline == "paper":
-        sig = prepare_signals_paper(rec)
-        weighting = "uniform"
-    else:
-        sig = prepare_signals(rec, options.torque_method, align=options.align)
-        weighting = "coherence"
-    frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=options.segment_s,
+    require_two_segments(longest_gap_free_span(rec.encoder_index).count, rec.period_s, request.segment_s)
+    chain = request.chain(rec)
+    sig = prepare_signals(rec, chain)
+    frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=request.segment_s,
                        torque_noise_Nm=sig.torque_noise_Nm, torque_alias_Nm=sig.torque_alias_Nm,
                        jackknife_blocks=JACKKNIFE_BLOCKS)
-    fit = fit_two_mass(frf, FitOptions(params=options.params, kind=options.fit, band_hz=options.band_hz,
-                                       weighting=weighting), nominal=options.nominal)
+    fit = fit_two_mass(frf, FitOptions(params=request.params, kind=request.fit, band_hz=request.band_hz,
+                                       weighting=chain.weighting), nominal=request.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
     quality = with_fault(assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
@@ -162,7 +122,7 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual)),
-                  options=options, notes=tuple(sig.notes))
+                  request=request, chain=chain, notes=tuple(sig.notes))
 
 
 def _num(x: float) -> float | None:

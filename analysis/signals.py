@@ -1,30 +1,30 @@
 """The signal chain: a raw recording → torque and speed on the encoder's own instants (design §4, §5.1–5.3).
 
-:func:`prepare_signals` is our chain: gap-free spans, clock fit (:mod:`analysis.clocks`), torque by
-the chosen method at the DAQ samples (:mod:`analysis.torque`), moved to the encoder instants after a
-zero-phase anti-alias filter (:mod:`analysis.resample`), speed by backward difference on k·T
-(:mod:`analysis.encoder`). Long records are processed in chunks of ~20 s with overlapping margins,
-so memory stays a few times one chunk whatever the length.
+:func:`prepare_signals` runs it in two stages. :func:`spans_and_clock`: gap-free spans, clock fit
+(:mod:`analysis.clocks`), speed by backward difference on k·T (:mod:`analysis.encoder`).
+:func:`torque_on_instants`: torque by the chosen method at the DAQ samples (:mod:`analysis.torque`),
+moved to the encoder instants after a zero-phase anti-alias filter (:mod:`analysis.resample`); long
+records are processed in chunks of ~20 s with overlapping margins, so memory stays a few times one
+chunk whatever the length.
 
-:func:`prepare_signals_paper` is the paper's chain for comparison: Hilbert torque, no alignment (both
-streams taken as started together, no drift) and linear interpolation onto the common 1/T grid.
+The :class:`analysis.chain.SignalChain` given decides the differences between our chain and the
+paper's (:data:`analysis.chain.PAPER_CHAIN`: Hilbert torque, no alignment — both streams taken as
+started together, no drift — and linear interpolation onto the common 1/T grid).
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field, replace
-from typing import Literal
 
 import numpy as np
 
 from analysis import encoder, resample, sample_instants, torque
+from analysis.chain import SignalChain, TorqueMethod
 from analysis.clocks import ClockFit, fit_clock, host_relation
+from analysis.recording import Recording
 from analysis.fit import Z95
 from analysis.sample_instants import EncoderJitter
-
-TorqueMethod = Literal["hilbert", "encoder", "park"]
-Resampling = Literal["antialias", "linear"]
 
 _CHUNK_S = 20.0
 _MARGIN_S = 0.1
@@ -34,58 +34,6 @@ ALIAS_ORDERS = 2  # torque near k·f_enc, k = 1 … ALIAS_ORDERS, folded by the 
 # lines removed from the current are listed in the notes from this amplitude on (smaller ones, often
 # the motion's own residual content at a line's frequency, are removed too but not worth a word)
 _NOTE_MIN_LINE_A = 1e-3
-
-
-@dataclass(frozen=True)
-class Recording:
-    """One session's raw data as plain arrays (what ``acq.session`` reads; nothing resampled).
-
-    Attributes
-    ----------
-    current_a : dict of str → ndarray
-        Phase currents, A (``"i_a"`` required; ``"i_b"``, ``"i_c"`` optional), all blocks concatenated.
-    rate_hz : float
-        DAQ sample rate as coerced by the card, Hz; DAQ sample n is at t_daq = n / rate_hz.
-    encoder_index : ndarray of int64
-        Cumulative drive cycle k of each encoder sample (at drive time k·period_s).
-    position_counts : ndarray of int64
-        Unwrapped position, counts.
-    period_s : float
-        Drive cycle, s.
-    counts_per_rev : int
-        Encoder counts per mechanical revolution.
-    pole_pairs : int
-        Motor pole pairs p.
-    k_t_Nm_per_A : float
-        Torque constant, N·m/A.
-    block_first_index, block_count : ndarray of int64 or None
-        DAQ sample index of the first sample of each read, and its sample count. None: one gap-free
-        block starting at sample 0.
-    block_host_ns, encoder_host_ns : ndarray of int64 or None
-        Host monotonic arrival stamps of each DAQ read and each encoder sample, ns (None if not recorded).
-    host_clock_shared : bool
-        True when both streams' stamps are arrival times on one host clock (a recording by ``acq record``);
-        False for files from separate tools, whose time columns relate nothing. Only shared stamps centre
-        the clock search; otherwise it runs ±2 s around "both streams started together".
-    drive_time_s : ndarray of float64 or None
-        The drive's own time stamp of each encoder sample, s (serial frame drive time, CANopen 0x1013):
-        the instant it really sampled; its origin and 1 µs quantisation do not matter. None: not recorded.
-    """
-
-    current_a: dict[str, np.ndarray]
-    rate_hz: float
-    encoder_index: np.ndarray
-    position_counts: np.ndarray
-    period_s: float
-    counts_per_rev: int
-    pole_pairs: int
-    k_t_Nm_per_A: float
-    block_first_index: np.ndarray | None = None
-    block_count: np.ndarray | None = None
-    block_host_ns: np.ndarray | None = None
-    encoder_host_ns: np.ndarray | None = None
-    host_clock_shared: bool = True
-    drive_time_s: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -144,27 +92,74 @@ class PreparedSignals:
     interference: tuple[torque.Interference, ...] = ()
 
 
-def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", align: bool = True,
-                    resampling: Resampling = "antialias") -> PreparedSignals:
-    """Torque and speed on the encoder instants from a raw recording.
+@dataclass(frozen=True)
+class Spans:
+    """Stage one of the chain: the gap-free spans of both streams, the clock relating them, the speed.
+
+    Attributes
+    ----------
+    t_s : ndarray
+        Drive time of each encoder instant used, s (k·period_s, where both streams have data).
+    t_daq_s : ndarray
+        The same instants on the DAQ clock, s.
+    speed_rad_s : ndarray
+        Motor speed at ``t_s``, rad/s (backward difference).
+    current_a : dict of str → ndarray
+        The phase currents of the longest gap-free DAQ run within the encoder span, A.
+    n0 : int
+        DAQ sample index of the first sample of ``current_a``.
+    angle : callable
+        Motor angle, rad, at a drive time, s (spline through the span's samples).
+    clock : ClockFit
+        The DAQ → drive clock relation.
+    encoder_jitter : EncoderJitter
+        The encoder's sample-instant jitter left in the speed.
+    notes : list of str
+        What a person should know (gaps, spans used, clock stage).
+    """
+
+    t_s: np.ndarray
+    t_daq_s: np.ndarray
+    speed_rad_s: np.ndarray
+    current_a: dict[str, np.ndarray]
+    n0: int
+    angle: Callable[[np.ndarray], np.ndarray]
+    clock: ClockFit
+    encoder_jitter: EncoderJitter
+    notes: list[str]
+
+
+def prepare_signals(rec: Recording, chain: SignalChain = SignalChain()) -> PreparedSignals:
+    """Torque and speed on the encoder instants from a raw recording: :func:`spans_and_clock`, then
+    :func:`torque_on_instants`.
 
     Parameters
     ----------
     rec : Recording
         The raw session.
-    torque_method : {"encoder", "hilbert", "park"}
-        Torque estimator (:mod:`analysis.torque`); ``park`` needs ``i_a`` and ``i_b``.
-    align : bool
-        Fit the clock relation from the data (True) or take both streams as started together (False).
-    resampling : {"antialias", "linear"}
-        Zero-phase anti-alias filter then spline read (ours) or the paper's plain linear interpolation.
+    chain : SignalChain, optional
+        Torque estimator, clock alignment and resampling: :func:`analysis.chain.our_chain` (default, encoder
+        torque) or :data:`analysis.chain.PAPER_CHAIN`.
 
     Raises
     ------
     ValueError
         Bad or too short input, or no overlap between the current and the encoder records.
     """
-    _validate(rec, torque_method)
+    return torque_on_instants(rec, spans_and_clock(rec, chain), chain)
+
+
+def spans_and_clock(rec: Recording, chain: SignalChain = SignalChain()) -> Spans:
+    """The longest gap-free spans of both streams, the clock relating them (fitted from the data when
+    ``chain.align``, else both streams taken as started together), and the speed on the encoder instants
+    where the current covers them (away from the ends by what ``chain``'s resampling needs).
+
+    Raises
+    ------
+    ValueError
+        Bad or too short input, or no overlap between the current and the encoder records.
+    """
+    _validate(rec, chain.torque_method)
     notes: list[str] = []
     span = encoder.longest_gap_free_span(rec.encoder_index)
     cycles = rec.encoder_index[span.start:span.stop]
@@ -179,7 +174,7 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
     current = {name: a[lo:hi] for name, a in rec.current_a.items()}
     theta, jitter = _angle_on_grid(rec, span, notes)
     angle = encoder.angle_spline(int(cycles[0]), rec.period_s, theta)
-    if align:
+    if chain.align:
         clock = fit_clock(current["i_a"], rec.rate_hz, n0, angle, rec.pole_pairs, _host(rec))
         if not rec.host_clock_shared:
             notes.append("clock: the streams' time stamps are not on one host clock; aligned from the data alone")
@@ -198,20 +193,29 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
 
     speed = encoder.speed_from_angle(theta, rec.period_s)
     t_s = cycles[1:] * rec.period_s
-    f_pass, f_stop = _PASS_FRACTION / rec.period_s, _STOP_FRACTION / rec.period_s
+    f_pass, f_stop = _band_edges_hz(rec)
     t_daq = clock.daq_time_s(t_s)
-    edge = resample.edge_s(rec.rate_hz, f_pass, f_stop) + 0.01 if resampling == "antialias" else 1.0 / rec.rate_hz
+    edge = chain.edge_s(rec.rate_hz, f_pass, f_stop)
     inside = (t_daq >= n0 / rec.rate_hz + edge) & (t_daq <= (n0 + hi - lo - 1) / rec.rate_hz - edge)
     if inside.sum() < 8:
         raise ValueError("the current and encoder records do not overlap in time")
     if not inside.all():
         notes.append(f"using {t_s[inside][0]:.3f}–{t_s[inside][-1]:.3f} s, where both streams have data")
-    t_s, speed, t_daq = t_s[inside], speed[inside], t_daq[inside]
+    return Spans(t_s[inside], t_daq[inside], speed[inside], current, n0, angle, clock, jitter, notes)
 
-    sign = torque.apex_sign(speed, rec.period_s) if torque_method == "hilbert" else None
+
+def torque_on_instants(rec: Recording, spans: Spans, chain: SignalChain = SignalChain()) -> PreparedSignals:
+    """Torque by ``chain.torque_method`` at the DAQ samples, moved onto the encoder instants of ``spans`` by
+    ``chain``'s resampling, in chunks of ~20 s with overlapping margins; its sign fixed by the acceleration
+    (demodulating methods) or by the speed's apexes (hilbert)."""
+    t_s, speed, t_daq, current, n0, clock = (spans.t_s, spans.speed_rad_s, spans.t_daq_s, spans.current_a,
+                                             spans.n0, spans.clock)
+    f_pass, f_stop = _band_edges_hz(rec)
+    antialias = chain.resampling == "antialias"
+    sign = torque.apex_sign(speed, rec.period_s) if chain.torque_method == "hilbert" else None
     out = np.empty(t_s.size)
-    noise = np.empty(t_s.size) if torque_method == "encoder" and resampling == "antialias" else None
-    alias = np.empty((ALIAS_ORDERS, t_s.size), complex) if sign is None and resampling == "antialias" else None
+    noise = np.empty(t_s.size) if chain.torque_method == "encoder" and antialias else None
+    alias = np.empty((ALIAS_ORDERS, t_s.size), complex) if sign is None and antialias else None
     theta0 = np.nan if sign is not None else clock.theta0_rad  # NaN: the first chunk estimates it
     found: list[torque.Interference] = []
     gains: list[torque.PhaseGains] = []
@@ -224,7 +228,7 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
         t_piece = t0 + np.arange(b + m1 - a + m0) / rec.rate_hz
         if sign is None:
             t_drive = clock.drive_time_s(t_piece)
-            tq, theta0 = _demodulated(piece, rec, angle(t_drive), torque_method, theta0,
+            tq, theta0 = _demodulated(piece, rec, spans.angle(t_drive), chain.torque_method, theta0,
                                       noise_seed=a if noise is not None else None, found=found, gains_found=gains)
             if noise is not None:
                 tq, tq_noise = tq
@@ -238,23 +242,16 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
         else:
             k = np.clip(np.searchsorted(t_daq, t_piece), 0, t_daq.size - 1)
             tq = torque.torque_hilbert(piece["i_a"], rec.k_t_Nm_per_A, sign[k])
-        if resampling == "antialias":
-            out[sel] = resample.to_instants(tq, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
-        else:
-            out[sel] = resample.linear_at(tq, rec.rate_hz, t0, t_daq[sel])
-    notes.extend(_interference_notes(found) + _gain_notes(gains))
-    prepared = PreparedSignals(t_s, out, speed, rec.period_s, clock, torque_method, align, theta0, notes,
-                               noise, alias, jitter, tuple(found))
+        out[sel] = chain.to_instants(tq, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
+    notes = [*spans.notes, *_interference_notes(found), *_gain_notes(gains)]
+    prepared = PreparedSignals(t_s, out, speed, rec.period_s, clock, chain.torque_method, chain.align, theta0, notes,
+                               noise, alias, spans.encoder_jitter, tuple(found))
     return _signed(prepared) if sign is None else prepared
 
 
-def prepare_signals_paper(rec: Recording) -> PreparedSignals:
-    """The paper's chain: Hilbert torque, no clock alignment, linear interpolation to the encoder rate.
-
-    The common grid is the encoder's (1/T), so the speed keeps its samples and only the torque is
-    interpolated — linearly, without anti-alias filter.
-    """
-    return prepare_signals(rec, "hilbert", align=False, resampling="linear")
+def _band_edges_hz(rec: Recording) -> tuple[float, float]:
+    """Pass and stop edges of the anti-alias filter, Hz."""
+    return _PASS_FRACTION / rec.period_s, _STOP_FRACTION / rec.period_s
 
 
 def _validate(rec: Recording, torque_method: TorqueMethod) -> None:

@@ -11,7 +11,7 @@ Each scenario states the outcome expected *before* running: ``ok`` within its to
 with a reason. Every run records a 10 s (unless the scenario is about length) simulated session through
 the real recorder (``--fast``) with the seed's noise and, unless the scenario fixes the clock, a DAQ
 offset of 10–60 ms and a drift of 20–60 ppm of random signs; the same session is analysed twice:
-``options_for(session)`` (ours: clock alignment, encoder-demodulated or Park torque, anti-alias
+``request_for(session)`` (ours: clock alignment, encoder-demodulated or Park torque, anti-alias
 resampling, coherence weights) and ``pipeline="paper"`` (Hilbert torque, no alignment, linear
 resampling, uniform weights).
 

@@ -58,7 +58,7 @@ def child(path: str, repeat: int, trace: bool, profile: bool) -> None:
     """Run in a fresh process: load and analyse ``path``; print one JSON line of figures."""
     import tracemalloc
 
-    from acq.analyze import options_for, recording_from_session
+    from acq.analyze import request_for, recording_from_session
     from acq.session import load
     from analysis.pipeline import analyze
 
@@ -66,7 +66,7 @@ def child(path: str, repeat: int, trace: bool, profile: bool) -> None:
     t0 = time.perf_counter()
     session = load(path)
     rec = recording_from_session(session)
-    options = options_for(session)
+    options = request_for(session)
     load_s = time.perf_counter() - t0
     samples = sum(a.size for a in rec.current_a.values()) + rec.position_counts.size
     out: dict = {"load_s": load_s, "samples": samples, "rss_after_load_mb": resource.getrusage(

@@ -30,7 +30,7 @@ STAMP_ORIGIN_S = 42.5  # the drive clock's own origin: must not matter
 
 def run(jitter_s: float, seed: int, duration_s: float) -> list[str]:
     """One session: realised jitter, then (estimate, verdict, errors) without and with stamps."""
-    from analysis.pipeline import AnalysisOptions, analyze
+    from analysis import AnalysisRequest, analyze
     from drivers.sim.bench import SimBench
     from tests.test_analysis_pipeline import SIM_TOML, sim_recording
     from acq.config import load_bench
@@ -45,7 +45,7 @@ def run(jitter_s: float, seed: int, duration_s: float) -> list[str]:
     row = [f"{1e6 * jitter_s:g}", str(seed), f"{1e6 * realised:.1f}"]
     stamps = np.round((latch + STAMP_ORIGIN_S) * 1e6) * 1e-6
     for r in (rec, replace(rec, drive_time_s=stamps)):
-        res = analyze(r, AnalysisOptions(nominal=nominal))
+        res = analyze(r, AnalysisRequest(nominal=nominal))
         err = [100.0 * (getattr(res.fit.values, n) / truth[n] - 1.0) for n in NAMES]
         row += [f"{1e6 * res.quality.encoder_jitter_s:.2f}", res.quality.verdict, *(f"{e:+.2f}" for e in err)]
     return row

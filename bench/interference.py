@@ -36,7 +36,7 @@ CASES: tuple[tuple[str, float | None, dict], ...] = (
 
 
 def run_one(task: tuple[int, int]) -> tuple[int, int, list[float], list[bool], list[float], str, tuple[str, ...]]:
-    from analysis.pipeline import AnalysisOptions, analyze
+    from analysis import AnalysisRequest, analyze
     from bench.accuracy import clock_for
     from tests.interference import with_interference
     from tests.test_analysis_pipeline import sim_recording
@@ -48,7 +48,7 @@ def run_one(task: tuple[int, int]) -> tuple[int, int, list[float], list[bool], l
                                         host_jitter_s=0.0002, current_noise_A=0.01, daq_rate_hz=rate)
     if kw:
         rec = with_interference(rec, seed, **kw)
-    res = analyze(rec, AnalysisOptions(nominal=nominal))
+    res = analyze(rec, AnalysisRequest(nominal=nominal))
     err = [100.0 * (getattr(res.fit.values, n) / truth[n] - 1.0) for n in PARAMS]
     inside = [bool(res.fit.ci95[n][0] <= truth[n] <= res.fit.ci95[n][1]) for n in PARAMS]
     half = [100.0 * res.quality.ci_rel_halfwidth.get(n, np.nan) for n in PARAMS]

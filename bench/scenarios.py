@@ -191,12 +191,13 @@ def record(sc: Scenario, seed: int, offset_s: float, drift_ppm: float, out_dir: 
 
 def analyse(path: Path, pipeline: str = "acq") -> Any:
     """Analyse a session file as ``acq analyze`` does (``pipeline="paper"``: the paper's chain)."""
-    from acq.analyze import options_for, recording_from_session
+    from acq.analyze import request_for, recording_from_session
     from acq.session import load
-    from analysis.pipeline import analyze
+    from analysis import AnalysisRequest, analyze
 
     session = load(path)
-    return analyze(recording_from_session(session), options_for(session, pipeline=pipeline))  # type: ignore[arg-type]
+    return analyze(recording_from_session(session),
+                   request_for(session, AnalysisRequest(pipeline=pipeline)))  # type: ignore[arg-type]
 
 
 def analyse_both(path: Path) -> tuple[Any, Any, tuple[float, float]]:

@@ -10,7 +10,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from analysis.signals import Recording
+from analysis.recording import Recording
 
 
 def with_interference(rec: Recording, seed: int, *, hum_A: float = 0.0, mains_hz: float = 50.0,

@@ -20,7 +20,7 @@ from functools import lru_cache
 import numpy as np
 import pytest
 
-from analysis.pipeline import AnalysisOptions, Result, analyze
+from analysis import AnalysisRequest, Result, analyze
 from drivers.config import SimSettings
 from tests.test_analysis_pipeline import sim_recording
 
@@ -50,7 +50,7 @@ def _analysed(seed: int, offset_s: float, drift_ppm: float, factors: tuple[float
     rec, truth, nominal = sim_recording(
         seed=seed, daq_offset_s=offset_s, daq_drift_ppm=drift_ppm, host_jitter_s=0.0002, current_noise_A=0.01,
         K_Nm_per_rad=PAPER.K_Nm_per_rad * k, Jm_kgm2=PAPER.Jm_kgm2 * jm, Jl_kgm2=PAPER.Jl_kgm2 * jl)
-    return analyze(rec, AnalysisOptions(nominal=nominal)), truth
+    return analyze(rec, AnalysisRequest(nominal=nominal)), truth
 
 
 @pytest.mark.parametrize("label, seed, offset_s, drift_ppm, factors, tol_k, tol_j", CASES, ids=[c[0] for c in CASES])
@@ -88,7 +88,7 @@ def test_encoder_gap_uses_the_longest_gap_free_span_and_says_so():
     keep = ~((rec.encoder_index >= drop[0]) & (rec.encoder_index < drop[0] + drop[1]))
     rec = replace(rec, encoder_index=rec.encoder_index[keep], position_counts=rec.position_counts[keep],
                   encoder_host_ns=rec.encoder_host_ns[keep])
-    res = analyze(rec, AnalysisOptions(nominal=nominal))
+    res = analyze(rec, AnalysisRequest(nominal=nominal))
     note = next((n for n in res.notes if "gap" in n), None)
     assert note is not None and "longest gap-free span" in note, res.notes
     span = re.search(r"span ([\d.]+)–([\d.]+) s", note)
@@ -111,7 +111,7 @@ def test_pwm_ripple_on_the_current_does_not_bias_the_plant() -> None:
                                             Jm_kgm2=PAPER.Jm_kgm2 * 0.5, Jl_kgm2=PAPER.Jl_kgm2 * 0.5)
         t_s = np.arange(rec.current_a["i_a"].size) / rec.rate_hz
         rec.current_a["i_a"] = rec.current_a["i_a"] + ripple_a * np.sin(2 * np.pi * 10_000.0 * t_s + 0.7)
-        results.append(analyze(rec, AnalysisOptions(nominal=nominal)))
+        results.append(analyze(rec, AnalysisRequest(nominal=nominal)))
     clean, rippled = results
     for name in NAMES:
         assert getattr(rippled.fit.values, name) == pytest.approx(truth[name], rel=0.01)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from analysis import torque
-from analysis.pipeline import AnalysisOptions, analyze
+from analysis import AnalysisRequest, analyze
 from analysis.quality import assess
 from tests.interference import with_interference
 from tests.test_analysis_pipeline import sim_recording
@@ -32,8 +32,8 @@ def session_10k():
 
 def test_hum_with_harmonics_and_a_drifting_offset_are_removed_k_within_1_percent(session_25k):
     rec, truth, nominal = session_25k
-    clean = analyze(rec, AnalysisOptions(nominal=nominal))
-    res = analyze(with_interference(rec, 4, hum_A=0.020, drift_A=0.040), AnalysisOptions(nominal=nominal))
+    clean = analyze(rec, AnalysisRequest(nominal=nominal))
+    res = analyze(with_interference(rec, 4, hum_A=0.020, drift_A=0.040), AnalysisRequest(nominal=nominal))
     err, err_clean = _errors_pct(res, truth), _errors_pct(clean, truth)
     assert res.quality.verdict == "ok"
     assert abs(err[0]) < 1.0 and max(abs(err[1]), abs(err[2])) < 2.0
@@ -46,8 +46,8 @@ def test_hum_with_harmonics_and_a_drifting_offset_are_removed_k_within_1_percent
 
 def test_aliased_pwm_tones_on_a_10ks_current_are_removed_k_within_2_percent(session_10k):
     rec, truth, nominal = session_10k
-    clean = analyze(rec, AnalysisOptions(nominal=nominal))
-    res = analyze(with_interference(rec, 5, tones_A=0.025, tone_hz=(2350.0, 3720.0)), AnalysisOptions(nominal=nominal))
+    clean = analyze(rec, AnalysisRequest(nominal=nominal))
+    res = analyze(with_interference(rec, 5, tones_A=0.025, tone_hz=(2350.0, 3720.0)), AnalysisRequest(nominal=nominal))
     err, err_clean = _errors_pct(res, truth), _errors_pct(clean, truth)
     assert res.quality.verdict == "ok"
     assert abs(err[0]) < 2.0 and max(abs(err[1]), abs(err[2])) < 4.0
@@ -58,7 +58,7 @@ def test_aliased_pwm_tones_on_a_10ks_current_are_removed_k_within_2_percent(sess
 
 def test_no_interference_finds_no_line_and_keeps_the_paper_accuracy(session_25k):
     rec, truth, nominal = session_25k
-    res = analyze(rec, AnalysisOptions(nominal=nominal))
+    res = analyze(rec, AnalysisRequest(nominal=nominal))
     assert not any(n.startswith("current: removed interference lines") for n in res.notes)
     err = _errors_pct(res, truth)
     assert res.quality.verdict == "ok" and abs(err[0]) < 1.0 and max(abs(err[1]), abs(err[2])) < 2.0
@@ -89,7 +89,7 @@ def test_a_tone_at_an_electrical_frequency_the_motor_dwells_at_is_inseparable_an
 
 def test_an_inseparable_line_makes_the_verdict_poor_naming_its_frequency(session_25k):
     rec, _, nominal = session_25k
-    res = analyze(rec, AnalysisOptions(nominal=nominal))
+    res = analyze(rec, AnalysisRequest(nominal=nominal))
     q = assess(res.frf, res.fit, clock_residual_s=res.clock.residual_s, inseparable_hz=(50.0,))
     assert res.quality.verdict == "ok" and q.verdict == "poor"
     assert q.reasons[0].startswith("a 50.0 Hz line on the phase current cannot be told apart from the torque")
@@ -103,7 +103,7 @@ def test_intervals_from_the_session_hold_the_truth_without_being_several_times_t
     for seed in range(6):
         rec, truth, nominal = sim_recording(duration_s=6.0, seed=20 + seed, daq_offset_s=0.015 + 0.005 * seed,
                                             daq_drift_ppm=30.0)
-        res = analyze(rec, AnalysisOptions(nominal=nominal))
+        res = analyze(rec, AnalysisRequest(nominal=nominal))
         inside.append([res.fit.ci95[n][0] <= truth[n] <= res.fit.ci95[n][1] for n in NAMES])
         half.append([res.quality.ci_rel_halfwidth[n] for n in NAMES])
         err.append([getattr(res.fit.values, n) / truth[n] - 1.0 for n in NAMES])

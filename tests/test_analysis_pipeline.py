@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 from analysis.model import TwoMassParams
-from analysis.pipeline import AnalysisOptions, analyze
-from analysis.signals import Recording
+from analysis import AnalysisRequest, analyze
+from analysis.recording import Recording
 from drivers.config import Bench, Profile
 from drivers.sim.bench import SimBench
 
@@ -56,7 +56,7 @@ def paper_session() -> tuple[Recording, dict, TwoMassParams]:
 
 def test_default_analysis_of_a_simulated_session_is_accurate_and_ok(paper_session):
     rec, truth, nominal = paper_session
-    res = analyze(rec, AnalysisOptions(nominal=nominal))
+    res = analyze(rec, AnalysisRequest(nominal=nominal))
     for name, tol in zip(NAMES[:3], (0.01, 0.02, 0.02)):
         assert getattr(res.fit.values, name) == pytest.approx(truth[name], rel=tol)
         low, high = res.fit.ci95[name]
@@ -67,7 +67,7 @@ def test_default_analysis_of_a_simulated_session_is_accurate_and_ok(paper_sessio
 
 def test_json_has_exactly_the_documented_keys_and_is_valid_json(paper_session):
     rec, _, nominal = paper_session
-    d = analyze(rec, AnalysisOptions(nominal=nominal, params="K")).to_json_dict()
+    d = analyze(rec, AnalysisRequest(nominal=nominal, params="K")).to_json_dict()
     assert set(d) == {*NAMES, "ci95", "antiresonance_hz", "resonance_hz", "clock", "quality", "options"}
     assert set(d["ci95"]) == set(NAMES) and all(len(v) == 2 for v in d["ci95"].values())
     assert set(d["clock"]) == {"offset_s", "drift_ppm", "residual_s", "ambiguous_by_s"}
@@ -80,7 +80,7 @@ def test_json_has_exactly_the_documented_keys_and_is_valid_json(paper_session):
 
 def test_figure_data_brackets_the_measurement_with_the_model_band(paper_session):
     rec, _, nominal = paper_session
-    fig = analyze(rec, AnalysisOptions(nominal=nominal)).figures
+    fig = analyze(rec, AnalysisRequest(nominal=nominal)).figures
     assert fig.t_s.size <= 5000 and fig.t_s.size == fig.torque_Nm.size == fig.speed_rad_s.size
     assert np.all(fig.model_low <= fig.model_abs) and np.all(fig.model_abs <= fig.model_high)
     assert fig.band_hz[0] <= fig.f_a_hz < fig.f_r_hz <= fig.band_hz[1]
@@ -88,6 +88,6 @@ def test_figure_data_brackets_the_measurement_with_the_model_band(paper_session)
 
 def test_the_papers_slow_profile_is_not_reported_as_ok():
     rec, _, nominal = sim_recording(accel_time_s=0.5, seed=1)
-    q = analyze(rec, AnalysisOptions(nominal=nominal)).quality
+    q = analyze(rec, AnalysisRequest(nominal=nominal)).quality
     assert q.verdict in ("poor", "failed")
     assert "shorten the acceleration time" in q.reasons[0]

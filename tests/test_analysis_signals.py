@@ -11,7 +11,9 @@ import pytest
 
 from analysis import encoder, resample, torque
 from analysis.clocks import ClockFit
-from analysis.signals import Recording, prepare_signals, prepare_signals_paper
+from analysis.chain import PAPER_CHAIN, our_chain
+from analysis.recording import Recording
+from analysis.signals import prepare_signals
 from drivers.config import Bench, Profile
 from drivers.sim.bench import SimBench
 
@@ -237,9 +239,9 @@ def test_clock_without_host_stamps_and_with_a_standstill_and_biased_stamps() -> 
 
 def test_chain_torque_methods_against_the_simulated_truth(session3: tuple[Recording, SimBench]) -> None:
     rec, sim = session3
-    enc = prepare_signals(rec, "encoder")
-    park = prepare_signals(rec, "park")
-    hil = prepare_signals(rec, "hilbert")
+    enc = prepare_signals(rec, our_chain("encoder"))
+    park = prepare_signals(rec, our_chain("park"))
+    hil = prepare_signals(rec, our_chain("hilbert"))
     assert np.array_equal(enc.t_s, park.t_s) and np.array_equal(enc.t_s, hil.t_s)
     ref = band_limited_truth(sim, rec, enc.t_s)
     assert rms_pct(enc.torque_Nm, ref) < 1.0
@@ -259,10 +261,10 @@ def test_chain_speed_is_the_backward_difference_of_the_true_angle(session3: tupl
 
 def test_paper_chain_is_unaligned_hilbert_with_linear_resampling(session3: tuple[Recording, SimBench]) -> None:
     rec, sim = session3
-    paper = prepare_signals_paper(rec)
+    paper = prepare_signals(rec, PAPER_CHAIN)
     assert (paper.torque_method, paper.aligned, paper.clock.method) == ("hilbert", False, "none")
     assert any("not aligned" in n for n in paper.notes)
-    ours = prepare_signals(rec, "hilbert")
+    ours = prepare_signals(rec, our_chain("hilbert"))
     true = sim.true_state_at(paper.t_s)["torque_Nm"]
     assert rms_pct(paper.torque_Nm, true) > rms_pct(ours.torque_Nm, sim.true_state_at(ours.t_s)["torque_Nm"])
 
@@ -304,7 +306,7 @@ def test_bad_input_is_refused_with_a_clear_message(session3: tuple[Recording, Si
     rec, _ = session3
     one_phase = replace(rec, current_a={"i_a": rec.current_a["i_a"]})
     with pytest.raises(ValueError, match="park"):
-        prepare_signals(one_phase, "park")
+        prepare_signals(one_phase, our_chain("park"))
     with pytest.raises(ValueError, match="i_a"):
         prepare_signals(replace(rec, current_a={"i_b": rec.current_a["i_b"]}))
     late = rec.encoder_index * rec.period_s > 3.0  # encoder from 3 s on, current only its first 2 s

@@ -145,7 +145,8 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     import shutil
     import sys
 
-    from acq.batch import DEFAULT_REQUEST, analyze_one
+    from acq.batch import analyze_one
+    from analysis import AnalysisRequest
     from acq.catalogue import Catalogue
 
     copy = Path(shutil.copy2(session_10s, tmp_path / "s.h5"))
@@ -166,6 +167,6 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     with Catalogue(tmp_path / "catalogue.sqlite") as catalogue:
         (entry,) = catalogue.entries()
     assert entry.verdict == "ok" and entry.error is None and entry.K_Nm_per_rad == expected["K_Nm_per_rad"]
-    outcome = analyze_one(str(copy), "sha", DEFAULT_REQUEST, report=True)  # what a batch worker does
+    outcome = analyze_one(str(copy), "sha", AnalysisRequest(), report=True)  # what a batch worker does
     assert outcome.error is None and outcome.doc is not None and outcome.doc["quality"]["verdict"] == "ok"
     assert outcome.doc["quality"]["reasons"][-1].startswith("note: report not drawn: ModuleNotFoundError")

@@ -15,7 +15,7 @@ import can
 import numpy as np
 import pytest
 
-from acq.analyze import options_for, recording_from_session
+from acq.analyze import request_for, recording_from_session
 from acq.config import load_bench, load_profile, validate
 from acq.recorder import Recorder
 from acq.session import load
@@ -234,7 +234,7 @@ def test_timestamp_0x1013_mapped_carries_the_latch_instant_and_the_analysis_uses
     latch = sim.latch_times_s(drive.sim_node.first_cycle + int(idx[0]), int(idx[-1] - idx[0]) + 1)[idx - idx[0]]
     np.testing.assert_allclose(stamps, np.round(latch * 1e6) * 1e-6, atol=1e-9)  # the drive's clock, µs
     assert np.std(stamp_deviation_s(idx, stamps, 0.001)) == pytest.approx(50e-6, rel=0.15)
-    res = analyze(recording_from_session(s), options_for(s))  # with the bus's real arrival stamps
+    res = analyze(recording_from_session(s), request_for(s))  # with the bus's real arrival stamps
     for name, tol in (("K_Nm_per_rad", 0.01), ("Jm_kgm2", 0.02), ("Jl_kgm2", 0.02)):
         assert getattr(res.fit.values, name) == pytest.approx(getattr(bench.sim, name), rel=tol), name
     assert res.quality.verdict == "ok", res.quality.reasons

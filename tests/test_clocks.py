@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from analysis.clock_search import overlap_correlation
-from analysis.signals import Recording, prepare_signals
+from analysis.recording import Recording
+from analysis.signals import prepare_signals
 from drivers.config import Bench, Profile
 from drivers.sim.bench import SimBench
 

@@ -18,9 +18,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acq.analyze import options_for, recording_from_session, result_json, simulated_truth
+from acq.analyze import request_for, recording_from_session, result_json, simulated_truth
 from acq.session import load
-from analysis.pipeline import AnalysisOptions, analyze
+from analysis import AnalysisRequest, analyze
 from analysis.sample_instants import angle_at_nominal_instants, estimate_jitter, stamp_deviation_s
 from drivers.config import Bench, Profile
 from drivers.sim.bench import LATCH_CLIP, SimBench
@@ -93,7 +93,7 @@ def test_a_sample_moved_to_its_nominal_instant_is_the_angle_there() -> None:
 def test_without_time_stamps_the_jitter_is_estimated_and_named_in_the_verdict(jitter_s: float) -> None:
     rec, truth, nominal = sim_recording(duration_s=4.0, seed=7, sync_jitter_s=jitter_s)
     _, realised = _realised_jitter_s(7, jitter_s, rec.encoder_index.size)
-    res = analyze(rec, AnalysisOptions(nominal=nominal))
+    res = analyze(rec, AnalysisRequest(nominal=nominal))
     assert res.quality.encoder_jitter_s == pytest.approx(realised, rel=0.3)
     assert not res.quality.encoder_time_stamps
     assert res.quality.verdict == "failed"  # at 1000 rpm 20 µs and more wreck the speed spectrum
@@ -107,7 +107,7 @@ def test_with_the_drives_time_stamps_the_identification_is_accurate_and_ok(jitte
     rec, truth, nominal = sim_recording(duration_s=4.0, seed=8, sync_jitter_s=jitter_s)
     latch, _ = _realised_jitter_s(8, jitter_s, rec.encoder_index.size)
     stamps = np.round((latch + 42.5) * 1e6) * 1e-6  # the drive's own origin, 1 µs resolution
-    res = analyze(replace(rec, drive_time_s=stamps), AnalysisOptions(nominal=nominal))
+    res = analyze(replace(rec, drive_time_s=stamps), AnalysisRequest(nominal=nominal))
     err = _errors_pct(res.fit.values, truth)
     assert abs(err["K_Nm_per_rad"]) <= 1.0 and abs(err["Jm_kgm2"]) <= 2.0 and abs(err["Jl_kgm2"]) <= 2.0, err
     assert res.quality.verdict == "ok", res.quality.reasons
@@ -116,9 +116,9 @@ def test_with_the_drives_time_stamps_the_identification_is_accurate_and_ok(jitte
 
 def test_without_jitter_time_stamps_and_the_estimate_change_nothing() -> None:
     rec, truth, nominal = sim_recording(duration_s=4.0, seed=9)
-    plain = analyze(rec, AnalysisOptions(nominal=nominal))
+    plain = analyze(rec, AnalysisRequest(nominal=nominal))
     on_grid = rec.encoder_index * rec.period_s + 5.0  # stamps of a drive without jitter, its own origin
-    stamped = analyze(replace(rec, drive_time_s=on_grid), AnalysisOptions(nominal=nominal))
+    stamped = analyze(replace(rec, drive_time_s=on_grid), AnalysisRequest(nominal=nominal))
     for name in (*NAMES, "C_Nms_per_rad"):
         assert getattr(stamped.fit.values, name) == getattr(plain.fit.values, name)
     assert plain.quality.verdict == stamped.quality.verdict == "ok"
@@ -164,7 +164,7 @@ def test_recorded_sessions_carry_the_drive_time_and_analyse_on_it(capsys: pytest
     enc = session.encoder
     dev = stamp_deviation_s(enc.index, enc.drive_time_s, enc.period_s)
     assert np.sqrt(np.mean(dev**2)) == pytest.approx(100e-6, rel=0.15)
-    res = analyze(recording_from_session(session), options_for(session))  # with the pty's real arrival stamps
+    res = analyze(recording_from_session(session), request_for(session))  # with the pty's real arrival stamps
     err = _errors_pct(res.fit.values, simulated_truth(session))
     assert abs(err["K_Nm_per_rad"]) <= 1.0 and abs(err["Jm_kgm2"]) <= 2.0 and abs(err["Jl_kgm2"]) <= 2.0, err
     assert res.quality.verdict == "ok", res.quality.reasons
@@ -176,8 +176,8 @@ def test_recorded_sessions_carry_the_drive_time_and_analyse_on_it(capsys: pytest
 def test_coarse_stamps_that_would_add_noise_are_ignored_with_a_note() -> None:
     rec, truth, nominal = sim_recording(duration_s=4.0, seed=10)
     coarse = np.round((rec.encoder_index * rec.period_s + 0.00037) / 3e-4) * 3e-4  # 0.3 ms steps, no jitter
-    res = analyze(replace(rec, drive_time_s=coarse), AnalysisOptions(nominal=nominal))
-    plain = analyze(rec, AnalysisOptions(nominal=nominal))
+    res = analyze(replace(rec, drive_time_s=coarse), AnalysisRequest(nominal=nominal))
+    plain = analyze(rec, AnalysisRequest(nominal=nominal))
     assert res.fit.values.K_Nm_per_rad == plain.fit.values.K_Nm_per_rad and not res.quality.encoder_time_stamps
     assert any(n.startswith("encoder: the drive's time stamps (RMS ") and n.endswith("sample instants taken as k·T")
                for n in res.notes)
@@ -185,5 +185,5 @@ def test_coarse_stamps_that_would_add_noise_are_ignored_with_a_note() -> None:
 
 def test_stamps_that_are_only_the_cycle_count_do_not_hide_the_jitter() -> None:
     rec, _, nominal = sim_recording(duration_s=4.0, seed=11, sync_jitter_s=50e-6)
-    res = analyze(replace(rec, drive_time_s=rec.encoder_index * rec.period_s), AnalysisOptions(nominal=nominal))
+    res = analyze(replace(rec, drive_time_s=rec.encoder_index * rec.period_s), AnalysisRequest(nominal=nominal))
     assert not res.quality.encoder_time_stamps and res.quality.reasons[0].startswith(JITTER_REASON)

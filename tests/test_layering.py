@@ -3,6 +3,8 @@
 - the simulator depends on the real code, never the reverse: no module outside ``drivers/sim`` imports
   ``drivers.sim`` (tests and ``bench/`` may; the registry names it only as strings, imported when chosen);
 - ``analysis`` imports neither ``acq`` nor ``drivers``; ``drivers`` does not import ``acq``;
+- outside ``analysis/`` the analysis is reached through its face, the package ``analysis`` (its
+  ``__init__``), never a module of it (tests and ``bench/`` may);
 - ``acqcore`` (the ground floor: errors) imports nothing of ours, and the catalogue and the CSV reader
   need no ``drivers`` for it;
 - no import cycles among the packages' modules (imports that run; annotations-only imports under
@@ -21,6 +23,13 @@ PACKAGES = ("acq", "acqcore", "analysis", "drivers")
 def _module_name(path: Path) -> str:
     parts = list(path.relative_to(ROOT).with_suffix("").parts)
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _is_module(name: str) -> bool:
+    """True when ``name`` is one of our modules or packages (``from pkg import submodule`` runs the submodule
+    only, not ``pkg``'s ``__init__`` beyond what importing anything in ``pkg`` runs)."""
+    path = ROOT.joinpath(*name.split("."))
+    return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
 
 
 def _type_only(tree: ast.Module) -> set[ast.AST]:
@@ -49,8 +58,10 @@ def _imports(path: Path, *, type_only: bool = True) -> set[str]:
             if node.level:
                 anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
                 base = ".".join(anchor + ([base] if base else []))
-            names.add(base)
-            names.update(f"{base}.{alias.name}" for alias in node.names)
+            submodules = {f"{base}.{alias.name}" for alias in node.names if _is_module(f"{base}.{alias.name}")}
+            if len(submodules) < len(node.names):  # names defined by the module ``base`` itself
+                names.add(base)
+            names.update(submodules | {f"{base}.{alias.name}" for alias in node.names})
     return names
 
 
@@ -122,6 +133,12 @@ def test_the_catalogue_and_the_csv_reader_do_not_import_drivers() -> None:
     assert {m: sorted(i for i in graph[m] if i.startswith("drivers")) for m in users} == {m: [] for m in users}
 
 
+def test_outside_analysis_only_its_face_is_imported() -> None:
+    offenders = {m: sorted(i for i in deps if i.startswith("analysis."))
+                 for m, deps in import_graph().items() if not m.startswith("analysis")}
+    assert {m: d for m, d in offenders.items() if d} == {}
+
+
 def test_no_import_cycles() -> None:
     """Imports that run (at module level or inside functions); ``if TYPE_CHECKING:`` ones never execute."""
     assert _cycles(import_graph(type_only=False)) == []
@@ -131,6 +148,9 @@ def test_the_checker_finds_a_cycle_and_a_reverse_import() -> None:
     graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert _cycles(graph) == [["a", "b", "c"]]
     assert "drivers.sim.bench" in _imports(ROOT / "tests" / "test_canopen.py")
+    signals = _imports(ROOT / "analysis" / "signals.py")  # from analysis import encoder: the module, not the face
+    assert "analysis.encoder" in signals and "analysis" not in signals
+    assert "acq.batch" in _imports(ROOT / "acq" / "display.py")  # under if TYPE_CHECKING
 
 
 def test_only_the_session_module_reads_root_attributes() -> None:

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from analysis.pipeline import analyze
-from analysis.signals import Recording
+from analysis.recording import Recording
 from drivers.config import Bench, Profile
 from drivers.sim.bench import SimBench
 

@@ -13,17 +13,19 @@ import shutil
 import sqlite3
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
 
-from acq.batch import DEFAULT_REQUEST, find_sessions, request_key, run_batch
+from acq.batch import find_sessions, run_batch
 from acq.catalogue import SCHEMA_VERSION, Catalogue, Entry
 from acq.trend import compute_trend
+from analysis import AnalysisRequest
 from tests.helpers import run_cli
 
 WEAR_K = (891.0, 853.0, 815.0, 777.0, 738.0, 700.0)
-REQUEST = DEFAULT_REQUEST
+REQUEST = AnalysisRequest()
 SIM_TOML = Path(__file__).parents[1] / "configs" / "benches" / "sim.toml"
 ACQ = [sys.executable, "-m", "acq"]
 
@@ -108,16 +110,16 @@ def test_rerun_skips_sessions_whose_result_is_current(wear: Path, tmp_path: Path
     copy = _copy_sessions(wear, tmp_path / "copy", 1)  # same file elsewhere: current; other options: not
     with Catalogue(wear / "catalogue.sqlite") as catalogue:
         assert run_batch(copy, catalogue, REQUEST, jobs=1).skipped == copy
-        other = run_batch(copy, catalogue, {**REQUEST, "params": "K"}, jobs=1)
+        other = run_batch(copy, catalogue, replace(REQUEST, params="K"), jobs=1)
     assert len(other.outcomes) == 1 and other.outcomes[0].doc is not None
 
 
 def test_results_of_other_analysis_code_are_not_current(wear: Path, tmp_path: Path,
                                                         monkeypatch: pytest.MonkeyPatch) -> None:
-    import acq.batch
+    import analysis.request
 
     copy = _copy_sessions(wear, tmp_path / "copy", 1)
-    monkeypatch.setattr(acq.batch, "analysis_fingerprint", lambda: "changed-code")
+    monkeypatch.setattr(analysis.request, "code_fingerprint", lambda: "changed-code")
     with Catalogue(wear / "catalogue.sqlite") as catalogue:
         rerun = run_batch(copy, catalogue, REQUEST, jobs=1)
     assert len(rerun.outcomes) == 1 and not rerun.skipped
@@ -156,7 +158,7 @@ def test_dask_cluster_runs_the_same_batch(wear: Path, tmp_path: Path, catalogue_
     assert len(found) == 2
     with Catalogue(wear / "catalogue.sqlite") as pool_catalogue:
         pool = {e.session_id: e.K_Nm_per_rad for e in pool_catalogue.entries("joint1")
-                if e.request_key == request_key(REQUEST)}
+                if e.request_key == REQUEST.key()}
     for e in found:
         assert e.K_Nm_per_rad == pytest.approx(pool[e.session_id], rel=1e-9)
 

@@ -19,6 +19,7 @@ from pyqtgraph.Qt import QtCore
 from acq.analyze import analyze_session, draw_report
 from acq.config import load_bench, load_profile
 from acq.recorder import Recorder
+from analysis import AnalysisRequest
 from drivers.registry import open_bench
 from tests.helpers import run_cli
 
@@ -173,7 +174,7 @@ def test_phase_panel_when_the_clocks_are_aligned_and_none_when_not(session: Path
     assert np.median(np.abs(fd.H_phase_deg[in_band] - model_phase)) < 5.0  # measured and model phase agree, degrees
     assert "phase shown: clocks aligned to" in view.panel.text()
     assert "torque encoder · params K,Jm,Jl · fit amplitude · band 10–400 Hz" in view.panel.text()
-    paper = analyze_session(session, write=False, pipeline="paper")  # the paper's chain: clocks not aligned
+    paper = analyze_session(session, AnalysisRequest(pipeline="paper"), write=False)  # the paper's chain: clocks not aligned
     assert not paper.result.figures.phase_valid
     unaligned = ReportView([SessionFigure("paper", paper.result.figures, paper.json_dict)])
     assert "phase" not in unaligned.plots

@@ -1,0 +1,103 @@
+"""What an analysis is asked to do: one frozen :class:`AnalysisRequest`, and the key its results are kept under.
+
+The request is the only shape of an analysis's options: the command line builds it, a batch or the
+monitor hands it to its workers, the catalogue files a result under :meth:`AnalysisRequest.key` (the
+request as asked plus :func:`code_fingerprint`: a result of other options or other code is not current).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+from dataclasses import asdict, dataclass, fields
+from pathlib import Path
+from typing import Any
+
+import numpy
+import scipy
+
+from analysis.chain import PAPER_CHAIN, Pipeline, SignalChain, TorqueMethod, our_chain
+from analysis.fit import PARAM_NAMES, FitKind, FitParams
+from analysis.model import TwoMassParams
+from analysis.recording import Recording
+
+
+@dataclass(frozen=True)
+class AnalysisRequest:
+    """What the analysis does.
+
+    Attributes
+    ----------
+    torque_method : {"encoder", "hilbert", "park"} or None
+        Torque estimator; None: park with two or more phases, else encoder (ignored by ``pipeline="paper"``,
+        which uses hilbert).
+    params : {"K,Jm,Jl", "K"}
+        Free parameters besides C; ``"K"`` fixes J_m, J_l to ``nominal``.
+    fit : {"amplitude", "complex"}
+        Fit |H| or the complex H.
+    band_hz : tuple of float or None
+        Fit band (low, high), Hz; None for 10 Hz … min(0.4·f_enc, 500 Hz).
+    align : bool
+        Align the clocks from the data (ignored by ``pipeline="paper"``, which does not).
+    segment_s : float
+        Welch segment length, s.
+    nominal : TwoMassParams or None
+        The bench's nominal values (needed for ``params="K"``; otherwise one extra fit start). None: the
+        application fills in the bench's (:func:`acq.analyze.analyze_session`).
+    pipeline : {"acq", "paper"}
+        Our chain or the paper's (:mod:`analysis.chain`).
+    partial : bool
+        Also analyse the intact part of a session still being recorded or damaged (read by the application
+        that turns a session file into a :class:`Recording`; the analysis of a recording ignores it).
+    """
+
+    torque_method: TorqueMethod | None = None
+    params: FitParams = "K,Jm,Jl"
+    fit: FitKind = "amplitude"
+    band_hz: tuple[float, float] | None = None
+    align: bool = True
+    segment_s: float = 0.5
+    nominal: TwoMassParams | None = None
+    pipeline: Pipeline = "acq"
+    partial: bool = False
+
+    def chain(self, rec: Recording) -> SignalChain:
+        """The signal chain this request asks for on ``rec`` (the torque method resolved by its phases)."""
+        if self.pipeline == "paper":
+            return PAPER_CHAIN
+        method = self.torque_method or ("park" if len(rec.current_a) >= 2 else "encoder")
+        return our_chain(method, self.align)
+
+    def key(self) -> str:
+        """The catalogue's key of this request: its fields as asked and the analysis code that answers them
+        (:func:`code_fingerprint`), canonical JSON — a change of either is not current."""
+        return json.dumps({**asdict(self), "analysis": code_fingerprint()}, sort_keys=True)
+
+    def to_json_dict(self, chain: SignalChain | None = None) -> dict[str, Any]:
+        """The options as JSON-ready values: as asked, or with what ``chain`` (this request's) really did."""
+        nominal = None if self.nominal is None else {n: getattr(self.nominal, n) for n in PARAM_NAMES[:3]}
+        return {"pipeline": self.pipeline, "torque_method": self.torque_method if chain is None else chain.torque_method,
+                "params": self.params, "fit": self.fit, "band_hz": None if self.band_hz is None else list(self.band_hz),
+                "align": self.align if chain is None else chain.align, "segment_s": self.segment_s, "nominal": nominal}
+
+    @classmethod
+    def from_json_dict(cls, options: dict[str, Any]) -> AnalysisRequest:
+        """The request a result's ``options`` document came from (the torque method as it was resolved, the
+        nominal values left to the application). Raises ValueError or TypeError for a document that is none."""
+        known = {f.name for f in fields(cls)} - {"nominal", "partial"}
+        values = {k: v for k, v in options.items() if k in known}
+        if values.get("pipeline", "acq") != "acq":
+            values.pop("torque_method", None)
+        band = values.pop("band_hz", None)
+        return cls(**values, band_hz=(float(band[0]), float(band[1])) if band else None)
+
+
+@functools.cache
+def code_fingerprint() -> str:
+    """SHA-256 (first 16 hex digits) of the analysis package's source and the numpy/scipy it runs on: results of
+    other code are not current."""
+    digest = hashlib.sha256(f"numpy {numpy.__version__} scipy {scipy.__version__}".encode())
+    for source in sorted(Path(__file__).parent.glob("*.py")):
+        digest.update(source.name.encode() + b"\0" + source.read_bytes())
+    return digest.hexdigest()[:16]
