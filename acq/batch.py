@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import glob
-import json
 import multiprocessing
 import os
 import signal
@@ -35,7 +34,6 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from acq.analyze import SessionResult, analyze_session, draw_report, sha256_of
 from acq.catalogue import Catalogue, Outcome
-from acq.display import batch_table
 from acq.session import Session, load, read_status
 from acq.storage import remove_temp_files
 from acqcore.errors import AcqError, ConfigError
@@ -327,17 +325,3 @@ def report_json(report: BatchReport) -> list[dict[str, Any]]:
             for o in report.outcomes]
     return (done + [{"path": str(p.resolve()), "outcome": "skipped"} for p in report.skipped]
             + [{"path": str(p.resolve()), "outcome": "skipped: status recording"} for p in report.not_ready])
-
-
-def analyze_many(spec: Path, request: AnalysisRequest, *, jobs: int | None, catalogue_path: Path | str | None,
-                 scheduler: str | None, report: bool, as_json: bool, out: Console) -> int:
-    """``acq analyze FOLDER|GLOB``: the batch, its table (or JSON) on ``out``; 1 when a session failed, else 0."""
-    paths, base = find_sessions(spec)
-    with Catalogue(catalogue_path or base / CATALOGUE_NAME) as catalogue:
-        done = run_batch(paths, catalogue, request, jobs=jobs, scheduler=scheduler, report=report)
-    if as_json:
-        out.print_json(json.dumps(report_json(done)))
-    else:
-        out.print(batch_table(done))
-        out.print(f"catalogue: {catalogue.path}")
-    return 1 if done.failed else 0

@@ -22,10 +22,11 @@ from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, Ti
 
 from acq import __version__
 from acq.analyze import SessionResult, analyze_session, draw_report
-from acq.batch import analyze_many, is_batch, quiet_numerics, record_outcome
+from acq.batch import is_batch, quiet_numerics, record_outcome
+from acq.batch_cli import analyze_many
 from acq.catalogue import CatalogueLocation, parse_tags, tag_option
 from acq.config import check_duration, check_memory, load_bench, load_profile, with_joint
-from acq.devices import devices_command
+from acq.devices_cli import devices_command
 from acq.display import result_table, summary_table
 from acq.exporters import export_command
 from acq.fleet_display import fleet_command
@@ -35,7 +36,7 @@ from acq.recorder import Recorder, RecordingResult
 from acq.selftest_cli import selftest_command
 from acq.session import Session, load, repair
 from acq.summary import summarize
-from acq.trend import trend_command
+from acq.trend_cli import trend_command
 from acq.view import view_command
 from acqcore.errors import AcqError, ConfigError
 from analysis import AnalysisRequest

@@ -8,18 +8,13 @@ returns a :class:`Section`; a library or driver that is missing empties its sect
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
-import click
-from rich.console import Console
-
 from acq.config import DEFAULT_BENCH
-from acq.display import sections_table
 from acqcore.errors import DeviceError
 from drivers.nidaq import DRIVER_MISSING, first_line, import_nidaqmx
 
@@ -109,15 +104,3 @@ def sim_section() -> Section:
 def discover() -> list[Section]:
     """Every section, in display order."""
     return [ni_section(), can_section(), serial_section(), sim_section()]
-
-
-@click.command("devices")
-@click.option("--json", "as_json", is_flag=True, help="Print the sections as JSON.")
-def devices_command(as_json: bool) -> int:
-    """List NI devices and AI channels, CAN interfaces, serial ports and the simulated bench."""
-    sections = discover()
-    if as_json:
-        click.echo(json.dumps([s.to_json_dict() for s in sections], indent=2))
-    else:
-        Console().print(sections_table(sections))
-    return 0

@@ -1,4 +1,4 @@
-"""What a technician reads in a terminal: value formatting and the rich tables of every command.
+"""What a technician reads in a terminal: the rich tables of every command (values formatted by :mod:`acq.values`).
 
 Each table is a :class:`FittedTable`: it knows its columns with a wide and, where useful, a narrow form
 and which columns may be left out, and chooses them when it is drawn, by the width the console
@@ -13,7 +13,6 @@ make them; this module only turns their values into text.
 from __future__ import annotations
 
 import functools
-import math
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, replace
 from datetime import datetime
@@ -27,16 +26,13 @@ from rich.measure import Measurement
 from rich.table import Table
 from rich.text import Text
 
-from analysis import PARAM_LABELS, PARAM_NAMES
+from acq.values import PARAMS, format_value, interval_text, options_text
 
 if TYPE_CHECKING:
     from acq.batch import BatchReport
     from acq.devices import Section
     from acq.summary import SessionSummary
     from acq.trend import Trend
-
-#: (key in the result document, symbol, SI unit) of each two-mass parameter, in table order.
-PARAMS: tuple[tuple[str, str, str], ...] = tuple((key, *PARAM_LABELS[key]) for key in PARAM_NAMES)
 
 #: The result table's rows below the parameters: label, unit, path in the result document, scale from SI to the
 #: unit, format, and the key of the simulated truth to compare with (or None). A row whose path the document
@@ -55,40 +51,6 @@ RESULT_ROWS: tuple[tuple[str, str, tuple[str, ...], float, str, str | None], ...
 TREND_STATES = {"baseline": "baseline", "ok": "ok", "alarm": "ALARM", "skipped": "skipped",
                 "before baseline": "before baseline"}
 _TREND_STYLES = {"alarm": "bold red", "skipped": "dim", "before baseline": "dim", "baseline": "cyan", "ok": ""}
-
-
-def format_value(x: float | None, spec: str = ".4g", scale: float = 1.0) -> str:
-    """``x · scale`` formatted with ``spec``; "—" for a value that is missing, NaN or infinite."""
-    return "—" if x is None or not math.isfinite(x) else format(x * scale, spec)
-
-
-def interval_text(doc: dict[str, Any], key: str, *, relative: bool = False) -> str:
-    """The 95 % interval of parameter ``key`` of a result document: "lo – hi", or "± x %" with ``relative``;
-    "fixed (nominal)" for a parameter the fit held at the bench's nominal value (a zero-width interval)."""
-    value = doc.get(key)
-    lo, hi = (doc.get("ci95", {}).get(key) or (None, None))
-    if lo is not None and lo == hi:
-        nominal = (doc.get("options", {}).get("nominal") or {}).get(key)
-        return "fixed (nominal)" if nominal == value else "fixed"
-    if not relative:
-        return f"{format_value(lo)} – {format_value(hi)}"
-    if value is None or lo is None or hi is None or value == 0:
-        return "—"
-    return f"± {50.0 * (hi - lo) / abs(value):.2g} %"
-
-
-def options_text(doc: dict[str, Any]) -> str:
-    """The analysis options a result came from, in one line (torque method, free parameters, fit, band)."""
-    opts = doc.get("options", {})
-    band = opts.get("band_hz")
-    parts = ["paper's chain (--paper)"] if opts.get("pipeline") == "paper" else []
-    parts += [f"torque {opts.get('torque_method', '?')}", f"params {opts.get('params', '?')}",
-              f"fit {opts.get('fit', '?')}"]
-    if band:
-        parts.append(f"band {band[0]:g}–{band[1]:g} Hz")
-    if opts.get("pipeline") != "paper" and opts.get("align") is False:
-        parts.append("clocks not aligned")
-    return " · ".join(parts)
 
 
 def _signed_seconds(x_s: float) -> str:

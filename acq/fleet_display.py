@@ -18,9 +18,9 @@ from rich.console import Console
 from rich.table import Table
 
 from acq.catalogue import CatalogueLocation
-from acq.display import format_value
 from acq.fleet import JointStatus, fleet_json, load_fleet
 from acq.trend import EXIT_ALARM
+from acq.values import format_value
 
 _STYLES = {"alarm": "bold red", "stale": "yellow", "no baseline": "dim", "ok": ""}
 #: Time bins of the PNG's heat strips (the width of a strip is the time since the oldest session).

@@ -10,10 +10,10 @@ from rich.console import Console
 from rich.live import Live
 from rich.table import Table
 
-from acq.display import format_value
 from acq.config import load_bench
 from acq.monitor import Monitor, MonitorSettings, MonitorStatus
 from acq.retention import parse_size
+from acq.values import format_value
 from acqcore.errors import ConfigError
 
 _UNITS_S = {"": 1.0, "s": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}

@@ -34,7 +34,7 @@ import pyqtgraph as pg
 import shiboken6
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
-from acq.display import PARAMS, format_value, interval_text, options_text
+from acq.values import PARAMS, format_value, interval_text, options_text
 from analysis import FigureData, Thresholds
 
 pg.setConfigOptions(background="w", foreground="k", antialias=True)

@@ -39,7 +39,7 @@ import psutil
 from rich.console import Console
 from rich.table import Table
 
-from acq.display import format_value
+from acq.values import format_value
 from acq.catalogue import Catalogue
 from acq.config import load_bench
 from acq.monitor import ELAPSED_TAG, WINDOW_TAG, Monitor, MonitorSettings, MonitorStatus
