@@ -23,16 +23,16 @@ import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
 from acq.csvtable import CsvTable, read_csv
-from drivers.base import EventKind, StreamEvent, StreamName
-from drivers.config import Bench
 from acqcore.errors import ConfigError
 
 PHASES = ("i_a", "i_b", "i_c")
+#: The streams an input file holds (a subset of the session's event streams, :data:`drivers.base.StreamName`).
+FileStream = Literal["current", "encoder"]
 MIN_DURATION_S = 2.0
 RATE_TOLERANCE = 0.01
 #: Jittered host stamps may step back (a later row stamped earlier); transfer latencies of 50–150 ms
@@ -49,16 +49,13 @@ WRAP_STEP_LIMIT = REGISTER_RANGE // 4
 
 @dataclass(frozen=True)
 class Note:
-    """An event found in an input file, at time ``t_s`` of that file's time column."""
+    """An event found in an input file, at time ``t_s`` of that file's time column (:mod:`acq.importers` makes it
+    a session event)."""
 
     t_s: float
-    stream: StreamName
-    kind: EventKind
+    stream: FileStream
+    kind: Literal["gap", "warning"]
     detail: str
-
-    def event(self, shift_s: float) -> StreamEvent:
-        """The session event, its file time moved onto the host timeline by ``shift_s``."""
-        return StreamEvent(int(host_ns(self.t_s + shift_s)), self.stream, self.kind, self.detail)
 
 
 @dataclass(frozen=True)
@@ -119,8 +116,7 @@ def _check_duration(path: Path, where: Callable[[], str], duration_s: float) -> 
                           f"(at least {MIN_DURATION_S:g} s needed)")
 
 
-def _check_rate(path: Path, where: Callable[[], str], rate_hz: float, bench: Bench) -> None:
-    expected = bench.daq.rate_hz
+def _check_rate(path: Path, where: Callable[[], str], rate_hz: float, expected: float) -> None:
     deviation = abs(rate_hz / expected - 1.0)
     if deviation > RATE_TOLERANCE:
         raise ConfigError(f"{path}: {where()}: sample rate {rate_hz:.6g} Hz disagrees with the bench's [daq] rate_hz = "
@@ -156,7 +152,7 @@ def _register_column(table: CsvTable, column: str) -> np.ndarray:
     return v + np.cumsum(correction)
 
 
-def _gap_notes(stream: StreamName, index: np.ndarray, t_s: np.ndarray, unit: str) -> list[Note]:
+def _gap_notes(stream: FileStream, index: np.ndarray, t_s: np.ndarray, unit: str) -> list[Note]:
     missing = np.diff(index) - 1
     return [Note(float(t_s[i + 1]), stream, "gap", f"{missing[i]} {unit} missing before index {index[i + 1]}")
             for i in np.flatnonzero(missing > 0)]
@@ -181,8 +177,9 @@ def _regular_clock(table: CsvTable) -> tuple[np.ndarray, float]:
     return index, 1.0 / step
 
 
-def read_current_csv(path: Path, bench: Bench) -> CurrentTable:
-    """Read and check a current CSV (``t_s`` and phase columns ``i_a_A`` ...)."""
+def read_current_csv(path: Path, bench_rate_hz: float) -> CurrentTable:
+    """Read and check a current CSV (``t_s`` and phase columns ``i_a_A`` ...); its rate must be the bench's
+    ``[daq] rate_hz`` (``bench_rate_hz``) within :data:`RATE_TOLERANCE`."""
     table = read_csv(path, ("t_s",), tuple(f"{p}_A" for p in PHASES), bounds=CSV_BOUNDS)
     _nonempty(table)
     t = table.columns["t_s"]
@@ -195,7 +192,7 @@ def read_current_csv(path: Path, bench: Bench) -> CurrentTable:
         _check_duration(path, where, 0.0)
     index, rate = _regular_clock(table)
     _check_duration(path, where, float(index[-1] + 1) / rate)
-    _check_rate(path, lambda: f"lines 2–{table.line(-1)}, column t_s", rate, bench)
+    _check_rate(path, lambda: f"lines 2–{table.line(-1)}, column t_s", rate, bench_rate_hz)
     phases = {p: table.columns[f"{p}_A"] for p in PHASES if f"{p}_A" in table.columns}
     if not phases:
         raise ConfigError(f"{path}: line 1: no phase column (expected one or more of i_a_A, i_b_A, i_c_A)")
@@ -219,8 +216,9 @@ def _tdms_channels(tdms: Any, path: Path, wanted: tuple[str, ...]) -> list[tuple
     return [(name, available[name]) for name in wanted]
 
 
-def read_current_tdms(path: Path, bench: Bench, channels: tuple[str, ...] = ()) -> CurrentTable:
-    """Read and check a current TDMS file; ``channels`` are ``GROUP/CHANNEL`` names, phases a, b, c."""
+def read_current_tdms(path: Path, bench_rate_hz: float, channels: tuple[str, ...] = ()) -> CurrentTable:
+    """Read and check a current TDMS file; ``channels`` are ``GROUP/CHANNEL`` names, phases a, b, c; its rate must be
+    the bench's ``[daq] rate_hz`` (``bench_rate_hz``) within :data:`RATE_TOLERANCE`."""
     from nptdms import TdmsFile  # only imports of TDMS files need it
 
     if not path.exists():
@@ -253,7 +251,7 @@ def read_current_tdms(path: Path, bench: Bench, channels: tuple[str, ...] = ()) 
             raise ConfigError(f"{path}: channel {name}, sample {bad[0]}: {what}")
     rate = 1.0 / increments[0]
     _check_duration(path, lambda: f"channel {first}, sample {n - 1}", n / rate)
-    _check_rate(path, lambda: f"channel {first}, wf_increment", rate, bench)
+    _check_rate(path, lambda: f"channel {first}, wf_increment", rate, bench_rate_hz)
     t0 = float(picked[0][1].properties.get("wf_start_offset", 0.0))
     info = {"format": "tdms", "rate_from": "wf_increment", "channels": [name for name, _ in picked]}
     notes = [Note(t0 + (n - 1) / rate, "current", "warning", f"{path.name}: truncated last segment; read {n} samples "

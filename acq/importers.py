@@ -38,7 +38,7 @@ from acq.import_files import (CurrentTable, EncoderTable, host_ns, read_current_
 from acq.session import SessionWriter, load
 from acq.storage import storage_error
 from acq.summary import summarize
-from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock
+from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from acqcore.errors import ConfigError, StorageError
 
@@ -155,11 +155,11 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
     meta, meta_warning = read_metadata(current_path, encoder_path)
     bench, profile = _configs(meta, bench, profile, joint, current_path)
     if current_path.suffix.lower() == ".tdms":
-        cur = read_current_tdms(current_path, bench, current_channels)
+        cur = read_current_tdms(current_path, bench.daq.rate_hz, current_channels)
     else:
         if current_channels:
             raise ConfigError(f"--current-channel: only for TDMS files, not {current_path}")
-        cur = read_current_csv(current_path, bench)
+        cur = read_current_csv(current_path, bench.daq.rate_hz)
     period_s = bench.drive.period_s
     enc = read_encoder_csv(encoder_path, period_s)
     shared_by = "--same-clock" if same_clock else (
@@ -180,7 +180,8 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
     if meta_warning:
         origin["metadata_not_used"] = meta_warning
     notes = [*cur.notes, *enc.notes]
-    events = sorted((n.event(shift if n.stream == "current" else 0.0) for n in notes), key=lambda e: e.host_ns)
+    events = sorted((StreamEvent(int(host_ns(n.t_s + (shift if n.stream == "current" else 0.0))), n.stream, n.kind,
+                                 n.detail) for n in notes), key=lambda e: e.host_ns)  # file times onto the host timeline
     cpr = getattr(bench.drive, "counts_per_rev", None) or bench.encoder.counts_per_rev
     tmp = out.with_name(f".{out.name}.importing")
     tmp.unlink(missing_ok=True)

@@ -5,8 +5,8 @@
 - ``analysis`` imports neither ``acq`` nor ``drivers``; ``drivers`` does not import ``acq``;
 - outside ``analysis/`` the analysis is reached through its face, the package ``analysis`` (its
   ``__init__``), never a module of it (tests and ``bench/`` may);
-- ``acqcore`` (the ground floor: errors) imports nothing of ours, and the catalogue and the CSV reader
-  need no ``drivers`` for it;
+- ``acqcore`` (the ground floor: errors) imports nothing of ours, and the catalogue and the readers of
+  other tools' files need no ``drivers`` for it;
 - no import cycles among the packages' modules, counting annotations-only imports under
   ``if TYPE_CHECKING:`` too (a cycle there is a cycle of the design, even when it never runs).
 """
@@ -127,9 +127,9 @@ def test_drivers_do_not_import_acq_and_the_ground_floor_imports_nothing_of_ours(
         i.split(".")[0] != "acqcore" for i in d)} == {}
 
 
-def test_the_catalogue_and_the_csv_reader_do_not_import_drivers() -> None:
+def test_the_catalogue_and_the_file_readers_do_not_import_drivers() -> None:
     graph = import_graph()
-    users = ("acq.catalogue", "acq.catalogue_backends", "acq.csvtable")
+    users = ("acq.catalogue", "acq.catalogue_backends", "acq.csvtable", "acq.import_files")
     assert {m: sorted(i for i in graph[m] if i.startswith("drivers")) for m in users} == {m: [] for m in users}
 
 
