@@ -53,13 +53,6 @@ def counts_to_rad(position_counts: np.ndarray, counts_per_rev: int) -> np.ndarra
     return np.asarray(position_counts, dtype=np.float64) * (2.0 * np.pi / counts_per_rev)
 
 
-def electrical_angle_rad(position_counts: np.ndarray, counts_per_rev: int, pole_pairs: int) -> np.ndarray:
-    """Electrical angle θ_e = p·θ_m, rad (without the motor's electrical offset θ_0)."""
-    if pole_pairs <= 0:
-        raise ValueError(f"pole_pairs must be positive, got {pole_pairs}")
-    return pole_pairs * counts_to_rad(position_counts, counts_per_rev)
-
-
 def unwrap_int32(raw_counts: np.ndarray) -> np.ndarray:
     """Undo the int32 wrap of a position register, counts (int64).
 
