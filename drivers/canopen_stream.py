@@ -17,10 +17,13 @@ the SYNC frames itself.
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import threading
 import time
 from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import can
@@ -33,6 +36,43 @@ log = logging.getLogger(__name__)
 SYNC_COB_ID = 0x80
 SYNC_COUNTER_OVERFLOW = 240
 RAW_PRE_LOG_MAX = 100_000  # frames kept while no raw log file is open yet
+WRAP_MARGIN = 0.25  # a silence of (1 - this) SYNC counter wraps or more counts as a wrap (see SyncUnwrapper)
+POSITION_ACTUAL, VELOCITY_ACTUAL, HIGH_RES_TIMESTAMP = 0x6064, 0x606C, 0x1013
+
+
+@dataclass(frozen=True)
+class TpdoLayout:
+    """Where the recorded objects sit in a TPDO's payload (byte offsets; None: not mapped).
+
+    ``position`` is 0x6064 (int32), ``velocity`` 0x606C (int32), ``timestamp`` 0x1013 (uint32 µs); any other
+    mapped object (a statusword, say) is skipped. ``size`` is the payload's length, bytes.
+    """
+
+    size: int
+    position: int
+    velocity: int | None = None
+    timestamp: int | None = None
+
+    @classmethod
+    def from_entries(cls, entries: Sequence[int]) -> TpdoLayout:
+        """The layout of CiA 301 mapping ``entries`` (index << 16 | subindex << 8 | bits), in mapping order."""
+        offsets: dict[int, int] = {}
+        at = 0
+        for e in entries:
+            if e & 0xFF == 32 and (e >> 8) & 0xFF == 0:
+                offsets.setdefault(e >> 16, at // 8)
+            at += e & 0xFF
+        if POSITION_ACTUAL not in offsets:
+            raise ValueError("the TPDO does not map 0x6064 position actual value (32 bit)")
+        return cls(at // 8, offsets[POSITION_ACTUAL], offsets.get(VELOCITY_ACTUAL), offsets.get(HIGH_RES_TIMESTAMP))
+
+    def dtype(self) -> np.dtype:
+        """A numpy structured dtype reading the mapped fields of one payload (little endian, CiA 301)."""
+        fields = {"position": (self.position, "<i4"), "velocity": (self.velocity, "<i4"),
+                  "timestamp": (self.timestamp, "<u4")}
+        used = {k: v for k, v in fields.items() if v[0] is not None}
+        return np.dtype({"names": list(used), "formats": [f for _, f in used.values()],
+                         "offsets": [o for o, _ in used.values()], "itemsize": self.size})
 
 
 class SyncProducer:
@@ -71,12 +111,16 @@ class FrameCapture:
         self.frames: queue.Queue[tuple[int, bytes, int]] = queue.Queue(max_frames)
         self._with_counter = with_counter
         self.syncs = 0
+        self.first_sync_ns = 0  # host arrival of the first SYNC seen, ns
+        self.first_sync_bytes = 0  # its data length: 1 if the SYNC carries a counter
         self._counter = 0
         self.overruns = 0
         self.errors = 0
 
     def on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         try:
+            if self.syncs == 0:
+                self.first_sync_ns, self.first_sync_bytes = time.monotonic_ns(), len(data)
             self.syncs += 1
             self._counter = data[0] if self._with_counter else self.syncs
         except Exception:  # noqa: BLE001 - canopen would only log it; count it too
@@ -116,15 +160,18 @@ class SyncUnwrapper:
         else:
             step = (counter - self._counter) % self._modulus
             elapsed = (host_ns - self._ns) / self._period_ns
-            step += self._modulus * max(0, round((elapsed - step) / self._modulus))
+            # whole wraps hidden by a silence; a silence counts as a wrap from 3/4 of one on (not from 1/2): a host
+            # that stalls (a loaded machine, a SYNC master's late thread) bunches the arrival stamps of frames
+            # that came in order, and must not invent 240 lost cycles
+            step += self._modulus * max(0, math.floor((elapsed - step) / self._modulus + WRAP_MARGIN))
             self._index += step
         self._counter, self._ns = counter, host_ns
         return self._index
 
 
 class TpdoDecoder:
-    """Raw TPDO payloads (int32 position [, int32 velocity] [, uint32 0x1013 time stamp µs], little endian)
-    → an :class:`EncoderBlock`.
+    """Raw TPDO payloads (int32 position [, int32 velocity] [, uint32 0x1013 time stamp µs], little endian, or
+    any ``layout``) → an :class:`EncoderBlock`.
 
     The int32 position register is unwrapped to int64; velocity (drive units) is scaled to counts/s
     by ``counts_per_s_per_unit``; the time stamp (wrapping every 2³² µs ≈ 71.6 min) is unwrapped into
@@ -133,10 +180,13 @@ class TpdoDecoder:
     """
 
     def __init__(self, unwrapper: SyncUnwrapper, with_velocity: bool, counts_per_s_per_unit: float,
-                 with_timestamp: bool = False) -> None:
+                 with_timestamp: bool = False, layout: TpdoLayout | None = None) -> None:
         self._unwrapper = unwrapper
-        self._fields = 1 + with_velocity + with_timestamp
-        self._with_velocity, self._with_timestamp = with_velocity, with_timestamp
+        if layout is None:
+            layout = TpdoLayout(4 * (1 + with_velocity + with_timestamp), 0, 4 if with_velocity else None,
+                                4 * (1 + with_velocity) if with_timestamp else None)
+        self._layout, self._dtype = layout, layout.dtype()
+        self._with_velocity, self._with_timestamp = layout.velocity is not None, layout.timestamp is not None
         self._scale = counts_per_s_per_unit
         self._last_raw: int | None = None
         self._last_counts = 0
@@ -147,7 +197,7 @@ class TpdoDecoder:
 
     def decode(self, frames: list[tuple[int, bytes, int]]) -> EncoderBlock | None:
         """Decode frames in arrival order; None if none is usable."""
-        size = 4 * self._fields
+        size = self._layout.size
         good = [f for f in frames if len(f[1]) == size and f[0] != 0]
         self.bad_length += sum(len(f[1]) != size for f in frames)
         self.before_first_sync += sum(len(f[1]) == size and f[0] == 0 for f in frames)
@@ -155,14 +205,14 @@ class TpdoDecoder:
             return None
         index = np.array([self._unwrapper.push(c, ns) for c, _, ns in good], dtype=np.int64)
         host_ns = np.array([ns for _, _, ns in good], dtype=np.int64)
-        values = np.frombuffer(b"".join(d for _, d, _ in good), dtype="<i4").reshape(-1, self._fields)
-        raw = values[:, 0].astype(np.int64)
+        values = np.frombuffer(b"".join(d for _, d, _ in good), dtype=self._dtype)
+        raw = values["position"].astype(np.int64)
         prev = raw[0] if self._last_raw is None else self._last_raw
         steps = (np.diff(np.r_[prev, raw]) + 2**31) % 2**32 - 2**31
         counts = self._last_counts + np.cumsum(steps) + (raw[0] if self._last_raw is None else 0)
         self._last_raw, self._last_counts = int(raw[-1]), int(counts[-1])
-        velocity = values[:, 1] * self._scale if self._with_velocity else None
-        drive_time_s = self._unwrap_stamps(values[:, -1].view("<u4")) if self._with_timestamp else None
+        velocity = values["velocity"] * self._scale if self._with_velocity else None
+        drive_time_s = self._unwrap_stamps(values["timestamp"]) if self._with_timestamp else None
         return EncoderBlock(index=index, position_counts=counts, host_ns=host_ns, drive_time_s=drive_time_s,
                             velocity_counts_per_s=velocity)
 
