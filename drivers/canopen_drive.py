@@ -346,7 +346,7 @@ class CanopenDrive:
     def _on_heartbeat(self, nmt_state: int) -> None:
         self._hb_ns, self._hb_state = time.monotonic_ns(), nmt_state
 
-    def _collect(self, timeout_s: float) -> list[tuple[int, bytes, int]]:
+    def _collect(self, timeout_s: float) -> list[tuple[int, bytes, int, int]]:
         if self._capture is None:
             return []
         q, out = self._capture.frames, []

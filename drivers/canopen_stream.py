@@ -17,7 +17,6 @@ the SYNC frames itself.
 from __future__ import annotations
 
 import logging
-import math
 import queue
 import threading
 import time
@@ -36,7 +35,6 @@ log = logging.getLogger(__name__)
 SYNC_COB_ID = 0x80
 SYNC_COUNTER_OVERFLOW = 240
 RAW_PRE_LOG_MAX = 100_000  # frames kept while no raw log file is open yet
-WRAP_MARGIN = 0.25  # a silence of (1 - this) SYNC counter wraps or more counts as a wrap (see SyncUnwrapper)
 POSITION_ACTUAL, VELOCITY_ACTUAL, HIGH_RES_TIMESTAMP = 0x6064, 0x606C, 0x1013
 
 
@@ -101,14 +99,15 @@ class SyncProducer:
 
 
 class FrameCapture:
-    """Notifier-side callbacks: remember the SYNC counter, queue each TPDO as (counter, bytes, host_ns).
+    """Notifier-side callbacks: remember the SYNC counter, queue each TPDO as (counter, bytes, host_ns, syncs) —
+    ``syncs`` the SYNC frames seen so far.
 
     ``counter`` is the SYNC's data byte, or the running count of SYNC frames when they carry none;
     0 means "before the first SYNC". A full queue drops the frame and counts an overrun.
     """
 
     def __init__(self, with_counter: bool, max_frames: int) -> None:
-        self.frames: queue.Queue[tuple[int, bytes, int]] = queue.Queue(max_frames)
+        self.frames: queue.Queue[tuple[int, bytes, int, int]] = queue.Queue(max_frames)
         self._with_counter = with_counter
         self.syncs = 0
         self.first_sync_ns = 0  # host arrival of the first SYNC seen, ns
@@ -128,7 +127,7 @@ class FrameCapture:
 
     def on_tpdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
         try:
-            self.frames.put_nowait((self._counter, bytes(data), time.monotonic_ns()))
+            self.frames.put_nowait((self._counter, bytes(data), time.monotonic_ns(), self.syncs))
         except queue.Full:
             self.overruns += 1
         except Exception:  # noqa: BLE001
@@ -143,7 +142,11 @@ class SyncUnwrapper:
     """SYNC counter (1…``modulus``, or a running count if ``modulus`` is None) → cumulative index.
 
     Index 0 is the first SYNC sent (counter 1). A step of 0 is the same SYNC again (kept as is, the
-    recorder drops repeats); a silence longer than one wrap is resolved with the host stamps.
+    recorder drops repeats); a silence longer than one wrap is resolved with the number of SYNC frames the host
+    saw in between — not with the host stamps where that count is known: a host that stalls (a loaded machine)
+    reads frames that came in order with bunched stamps after a gap in time, and the stamps alone would then
+    invent a wrap of lost cycles. SYNC frames lost below the host (a driver's receive buffer overflowing)
+    and a silence of the master are told apart by neither.
     """
 
     def __init__(self, modulus: int | None, period_s: float, first_sync_ns: int) -> None:
@@ -152,20 +155,23 @@ class SyncUnwrapper:
         self._counter = 0
         self._index = -1
         self._ns = first_sync_ns - int(self._period_ns)
+        self._syncs = 0
 
-    def push(self, counter: int, host_ns: int) -> int:
-        """Index of a frame that answered SYNC ``counter`` and arrived at ``host_ns`` (monotonic ns)."""
+    def push(self, counter: int, host_ns: int, syncs_seen: int | None = None) -> int:
+        """Index of a frame that answered SYNC ``counter`` and arrived at ``host_ns`` (monotonic ns), the host
+        having seen ``syncs_seen`` SYNC frames by then (None: unknown; then the host time tells the wraps)."""
         if self._modulus is None:
             self._index = counter - 1
         else:
             step = (counter - self._counter) % self._modulus
             elapsed = (host_ns - self._ns) / self._period_ns
-            # whole wraps hidden by a silence; a silence counts as a wrap from 3/4 of one on (not from 1/2): a host
-            # that stalls (a loaded machine, a SYNC master's late thread) bunches the arrival stamps of frames
-            # that came in order, and must not invent 240 lost cycles
-            step += self._modulus * max(0, math.floor((elapsed - step) / self._modulus + WRAP_MARGIN))
+            if syncs_seen is not None:  # the SYNC frames the host saw in between: exact, however late it read them
+                elapsed = syncs_seen - self._syncs
+            step += self._modulus * max(0, round((elapsed - step) / self._modulus))
             self._index += step
         self._counter, self._ns = counter, host_ns
+        if syncs_seen is not None:
+            self._syncs = syncs_seen
         return self._index
 
 
@@ -195,17 +201,18 @@ class TpdoDecoder:
         self.bad_length = 0
         self.before_first_sync = 0
 
-    def decode(self, frames: list[tuple[int, bytes, int]]) -> EncoderBlock | None:
-        """Decode frames in arrival order; None if none is usable."""
+    def decode(self, frames: list[tuple[int, bytes, int]] | list[tuple[int, bytes, int, int]]) -> EncoderBlock | None:
+        """Decode frames (counter, payload, host_ns[, SYNC frames seen]) in arrival order; None if none is usable."""
         size = self._layout.size
         good = [f for f in frames if len(f[1]) == size and f[0] != 0]
         self.bad_length += sum(len(f[1]) != size for f in frames)
         self.before_first_sync += sum(len(f[1]) == size and f[0] == 0 for f in frames)
         if not good:
             return None
-        index = np.array([self._unwrapper.push(c, ns) for c, _, ns in good], dtype=np.int64)
-        host_ns = np.array([ns for _, _, ns in good], dtype=np.int64)
-        values = np.frombuffer(b"".join(d for _, d, _ in good), dtype=self._dtype)
+        index = np.array([self._unwrapper.push(f[0], f[2], f[3] if len(f) > 3 else None) for f in good],
+                         dtype=np.int64)
+        host_ns = np.array([f[2] for f in good], dtype=np.int64)
+        values = np.frombuffer(b"".join(f[1] for f in good), dtype=self._dtype)
         raw = values["position"].astype(np.int64)
         prev = raw[0] if self._last_raw is None else self._last_raw
         steps = (np.diff(np.r_[prev, raw]) + 2**31) % 2**32 - 2**31

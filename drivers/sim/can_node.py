@@ -66,10 +66,12 @@ SOD, RTSO, SO, OE, QSA = 0x40, 0x21, 0x23, 0x27, 0x07  # CiA 402 statusword stat
 REMOTE, TARGET_REACHED, SETPOINT_ACK = 1 << 9, 1 << 10, 1 << 12
 HISTORY_EVERY = 64
 CACHE_CYCLES = 50
-#: A cyclic set-point acts this many cycles after the SYNC that applies it: the drive computes its samples
-#: CACHE_CYCLES ahead, and what it computed must not change (a set-point buffer; it only shifts the master's
-#: program in time — a real drive delays by one or two cycles)
-SETPOINT_DELAY_CYCLES = 2 * CACHE_CYCLES
+#: A cyclic set-point acts this many cycles after the SYNC that applies it, a set-point buffer (a real drive
+#: delays by one or two cycles; here it only shifts the master's program in time). What the bench computed must
+#: not change: the drive computes its samples CACHE_CYCLES ahead, and the simulated DAQ reads the bench by the
+#: host clock, which a stalled SYNC master's cycles lag (catching up in bursts) — 250 ms covers the lags
+#: measured on a loaded 2-core host; a later set-point is dropped and counted (SetpointReference.late)
+SETPOINT_DELAY_CYCLES = 250
 
 
 class _TriggerQueue(queue.Queue):
@@ -350,9 +352,10 @@ class SimCanNode:
             self._sync()
 
     def _setpoint_time_s(self) -> float:
-        """When a cyclic set-point applied now takes effect, s of drive time: one cycle of interpolation plus
-        SETPOINT_DELAY_CYCLES after the drive's present (its cycle, or the host clock when SYNC lags it)."""
-        return self._now_s() + (1 + SETPOINT_DELAY_CYCLES) * self._period_s
+        """When a cyclic set-point applied at this SYNC takes effect, s of drive time: one cycle of interpolation
+        plus SETPOINT_DELAY_CYCLES after the drive's present cycle (the master's program runs on the SYNC cycles,
+        so set-points arrive one per cycle, evenly spaced whatever the host's timing)."""
+        return (self._now_cycle() + 1 + SETPOINT_DELAY_CYCLES) * self._period_s
 
     def _on_rpdo(self, msg: can.Message) -> None:
         with self._lock:

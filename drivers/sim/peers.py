@@ -148,7 +148,8 @@ class _PtyPeer:
 
 
 def open_canopen_with_sim_node(bench: Bench, sim_bench: SimBench | None, fast: bool) -> CanopenWithSimNode:
-    """Registry factory for ``[drive] driver = "canopen"`` with ``simulated_node = true``.
+    """Registry factory for ``[drive] driver = "canopen"`` with ``simulated_node = true`` (with ``motion =
+    "external"``: the drive owned by a simulated robot controller, :class:`RobotCell`, acq listening).
 
     Refuses (``ConfigError``) ``--fast``: a CAN bus runs in real time (``interface = "virtual"`` is a
     validator of :class:`DriveCanopen`).

@@ -39,6 +39,7 @@ _ENABLE_STEPS = (0x06, 0x07)
 _CW_ENABLE = 0x0F
 _HEARTBEAT_MS = 100
 _RPDO = struct.Struct("<Hi")  # controlword u16, target velocity i32 (velocity units)
+_GRID_CYCLES = 50  # program speeds computed per block of cycles (linear between them: the program is smooth)
 
 
 class _CountingBus(VirtualBus):
@@ -70,6 +71,7 @@ class SimRobotController:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self.syncs = 0
+        self._grid_t, self._grid_v = np.array([np.inf]), np.zeros(1)
 
     @property
     def sent(self) -> Counter[int]:
@@ -130,8 +132,17 @@ class SimRobotController:
             self._network.disconnect()
             self._network = None
 
+    def _speed_at(self, u_s: float) -> float:
+        """The program's speed (rad/s) at program time ``u_s`` (s), from a grid computed a block ahead (the
+        program's numpy evaluation per cycle would cost the 1 kHz loop its timing)."""
+        if not self._grid_t[0] <= u_s <= self._grid_t[-1]:
+            self._grid_t = u_s + np.arange(_GRID_CYCLES + 1) * self._s.period_s
+            self._grid_v = self._program.reference(self._grid_t)[0]
+        return float(np.interp(u_s, self._grid_t, self._grid_v))
+
     def _run(self) -> None:
-        """Every period: RPDO1 (controlword, target velocity for the next cycle), then SYNC (with its counter)."""
+        """Every period: RPDO1 (controlword, the program's target velocity), then SYNC (with its counter). A
+        late thread catches up the SYNCs it owes (the drive's cycle count stays with the clock)."""
         s = self._s
         period, overflow, units = s.period_s, s.sync_counter_overflow, s.velocity_units_per_rpm
         t0, k = time.monotonic(), 0
@@ -142,8 +153,8 @@ class SimRobotController:
                 return
             if k < steps:
                 cw, speed = _ENABLE_STEPS[k], 0.0
-            else:  # program time 0 is the cycle the drive is enabled
-                cw, speed = _CW_ENABLE, float(self._program.reference(np.array([(k - steps + 1) * period]))[0][0])
+            else:  # the program runs on the SYNC cycles from the one the drive is enabled in
+                cw, speed = _CW_ENABLE, self._speed_at((k - steps + 1) * period)
             rpdo = _RPDO.pack(cw, round(speed / RPM_TO_RAD_S * units))
             self._network.send_message(0x200 + s.node_id, rpdo)
             self._network.send_message(SYNC_COB_ID, bytes([k % overflow + 1]) if overflow else b"")
