@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import sqlite3
+import struct
 import uuid
 from collections import Counter
 from pathlib import Path
@@ -20,7 +21,7 @@ from acq.session import load
 from acqcore.errors import ConfigError
 from drivers import canopen_od as od
 from drivers.canopen_eds import tpdo_from_eds
-from drivers.canopen_stream import SyncUnwrapper
+from drivers.canopen_stream import SyncUnwrapper, TpdoDecoder, TpdoLayout
 from drivers.config import Bench
 from drivers.registry import open_bench
 from drivers.sim.bench import SimBench
@@ -111,6 +112,18 @@ def test_listening_acq_sends_no_nmt_sync_sdo_write_or_rpdo_and_records_every_tpd
     assert any(np.array_equal(produced[c:c + n], recorded) for c in np.flatnonzero(produced == recorded[0]))
     assert np.ptp(recorded) > bench.encoder.counts_per_rev  # the robot's master moved the joint > 1 rev
     assert any("listen-only" in e.detail for e in session.events)
+
+
+def test_a_master_tpdo_with_other_objects_is_decoded_by_its_mapping() -> None:
+    """Statusword (16 bit), position, 0x1013 time stamp: position and drive time read at their offsets."""
+    layout = TpdoLayout.from_entries([0x60410010, 0x60640020, 0x10130020])
+    assert (layout.size, layout.position, layout.velocity, layout.timestamp) == (10, 2, None, 6)
+    frames = [(c, struct.pack("<HiI", 0x0627, 1000 * c - 5, 1000 * c), c * 1_000_000) for c in (1, 2, 3)]
+    block = TpdoDecoder(SyncUnwrapper(240, 0.001, 0), False, 1.0, layout=layout).decode(frames)
+    assert block.position_counts.tolist() == [995, 1995, 2995] and block.index.tolist() == [0, 1, 2]
+    np.testing.assert_allclose(block.drive_time_s, [0.001, 0.002, 0.003])
+    with pytest.raises(ValueError, match="does not map 0x6064"):
+        TpdoLayout.from_entries([0x60410010, 0x606C0020])
 
 
 def test_a_stalled_host_reading_bunched_frames_invents_no_lost_wrap() -> None:
