@@ -18,6 +18,13 @@ the 0x6085 ramp followed by disable voltage, verified on the statusword. Heartbe
 other failures seen while streaming surface as :class:`DeviceError` from :meth:`read` once the
 frames received before are delivered (the recorder then ends the session ``failed``, data kept).
 
+Listen-only (``[drive] motion = "external"``, :meth:`CanopenDrive.start` → ``_start_listening``): the machine's
+own master runs NMT, SYNC and the motion, so acq sends no NMT, no SYNC, no SDO write and no RPDO; it records the
+TPDO the master set up (COB-ID and mapping from the bench config or the drive's EDS/DCF,
+:mod:`drivers.canopen_eds`), pairing each with the master's SYNC before it, stamped on arrival. With
+``configure = true`` it first maps its own TPDO ``tpdo`` by SDO (still no NMT, SYNC or motion). No heartbeat is
+required (the master owns the drive's heartbeat), and the bus-load check of acq's own traffic does not apply.
+
 Units: positions in drive position units (``counts_per_rev`` per motor revolution, default the
 encoder's), velocities ``velocity_units_per_rpm``, accelerations ``acceleration_units_per_rpm_per_s``.
 """
@@ -32,10 +39,11 @@ import canopen
 from canopen.sdo import SdoAbortedError
 
 from drivers import canopen_od as od
+from drivers.canopen_eds import PassiveTpdo, passive_tpdo
 from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent, StreamName
 from drivers.canopen_motion import STATUS_POLL_S, ProfilePositionMotion, device_step, node402
 from drivers.canopen_stream import (SYNC_COB_ID, SYNC_COUNTER_OVERFLOW, FrameCapture, RawFrameLog, SyncProducer,
-                                    SyncUnwrapper, TpdoDecoder)
+                                    SyncUnwrapper, TpdoDecoder, TpdoLayout)
 from drivers.config import Bench, DriveCanopen, Profile
 from acqcore.errors import AcqError, ConfigError, DeviceError
 
@@ -79,10 +87,11 @@ class CanopenDrive:
     ----------
     settings : the bench's ``[drive]`` section.
     counts_per_rev : drive position units per motor revolution.
+    passive : the master's TPDO to record (``motion = "external"`` with ``configure = false``), else None.
     """
 
-    def __init__(self, settings: DriveCanopen, counts_per_rev: int) -> None:
-        self._s, self._cpr = settings, counts_per_rev
+    def __init__(self, settings: DriveCanopen, counts_per_rev: int, passive: PassiveTpdo | None = None) -> None:
+        self._s, self._cpr, self._passive = settings, counts_per_rev, passive
         self.name = f"CANopen node {settings.node_id} on {settings.interface}:{settings.channel}"
         self._network: canopen.Network | None = None
         self._node: canopen.profiles.p402.BaseNode402 | None = None
@@ -100,14 +109,13 @@ class CanopenDrive:
 
     # ---- Drive protocol ----------------------------------------------------------------------------
     def start(self) -> DriveInfo:
-        """Configure in PRE-OPERATIONAL, start the TPDO stream on SYNC (the drive stays disabled)."""
+        """Configure in PRE-OPERATIONAL, start the TPDO stream on SYNC (the drive stays disabled); with
+        ``motion = "external"`` listen only (see the module doc)."""
         s = self._s
+        if s.motion == "external":
+            return self._start_listening()
         try:
-            with device_step(self.name, f"cannot open the CAN interface at {s.bitrate / 1000:g} kbit/s"):
-                self._network = canopen.Network()
-                self._network.listeners.append(self._raw)
-                self._network.connect(interface=s.interface, channel=s.channel, bitrate=s.bitrate,
-                                      receive_own_messages=True)
+            self._open_bus()
             node = node402(s.node_id)
             self._network.add_node(node)
             self._node = node
@@ -125,7 +133,7 @@ class CanopenDrive:
                 node.sdo[od.HEARTBEAT_TIME].raw = max(1, round(s.heartbeat_period_s * 1000))
                 node.nmt.wait_for_heartbeat(s.heartbeat_timeout_s)
             overflow = self._enable_sync_counter(SYNC_COUNTER_OVERFLOW)
-            cob_id = self._map_tpdo()
+            cob_id, _ = self._map_tpdo()
             self._set_profile_position()
             self._capture = FrameCapture(with_counter=overflow > 0, max_frames=QUEUE_FRAMES)
             self._network.subscribe(SYNC_COB_ID, self._capture.on_sync)
@@ -136,13 +144,59 @@ class CanopenDrive:
                 self._sync = SyncProducer(self._network.bus, s.period_s, overflow)
                 first_sync_ns = time.monotonic_ns()
                 self._sync.start()
-                self._wait_first_sync()
+                self._wait_first_sync(self._s.heartbeat_timeout_s, "the interface does not echo the host's own SYNC "
+                                      "frames (receive_own_messages), so TPDOs cannot be paired with their SYNC")
             unwrapper = SyncUnwrapper(overflow or None, s.period_s, first_sync_ns)
             self._decoder = TpdoDecoder(unwrapper, s.map_velocity, self._cpr / 60.0 / s.velocity_units_per_rpm,
                                         with_timestamp=s.map_timestamp)
         except BaseException:
             self.stop()
             raise
+        return DriveInfo(period_s=s.period_s, counts_per_rev=self._cpr, transport="canopen",
+                         timestamp_kind="sync_counter", device=self.name)
+
+    def _open_bus(self) -> None:
+        s = self._s
+        with device_step(self.name, f"cannot open the CAN interface at {s.bitrate / 1000:g} kbit/s"):
+            self._network = canopen.Network()
+            self._network.listeners.append(self._raw)
+            self._network.connect(interface=s.interface, channel=s.channel, bitrate=s.bitrate,
+                                  receive_own_messages=True)
+
+    def _start_listening(self) -> DriveInfo:
+        """Record the master's TPDO on the master's SYNC; send nothing (``configure``: SDO mapping only)."""
+        s = self._s
+        try:
+            self._open_bus()
+            if s.configure:
+                node = node402(s.node_id)
+                self._network.add_node(node)  # subscribes to the drive's SDO answers; sends nothing by itself
+                self._node = node
+                node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
+                cob_id, entries = self._map_tpdo()
+                source = f"TPDO{s.tpdo} mapped by acq (SDO)"
+            else:
+                assert self._passive is not None  # open_drive resolves it
+                cob_id, entries, source = self._passive.cob_id, list(self._passive.entries), self._passive.source
+            layout = TpdoLayout.from_entries(entries)
+            overflow = s.sync_counter_overflow
+            self._capture = FrameCapture(with_counter=overflow > 0, max_frames=QUEUE_FRAMES)
+            self._network.subscribe(SYNC_COB_ID, self._capture.on_sync)
+            self._network.subscribe(cob_id, self._capture.on_tpdo)
+            self._wait_first_sync(s.state_timeout_s, "no SYNC from the machine's master (is the machine running, "
+                                  "on this bus?)")
+            if (self._capture.first_sync_bytes > 0) != (overflow > 0):
+                raise DeviceError(
+                    f"{self.name}: the master's SYNC carries {self._capture.first_sync_bytes} data byte(s) but [drive] "
+                    f"sync_counter_overflow = {overflow} — set it to the master's 0x1019 value (0: a SYNC without counter)")
+            unwrapper = SyncUnwrapper(overflow or None, s.period_s, self._capture.first_sync_ns)
+            self._decoder = TpdoDecoder(unwrapper, False, self._cpr / 60.0 / s.velocity_units_per_rpm, layout=layout)
+        except BaseException:
+            self.stop()
+            raise
+        self._event("info", f"listen-only: COB-ID 0x{cob_id:X} mapping {_entries(entries)} ({source}), SYNC of the "
+                            "machine's master; no NMT, SYNC, SDO write or motion command sent"
+                            + (" after the SDO mapping" if s.configure else ""))
         return DriveInfo(period_s=s.period_s, counts_per_rev=self._cpr, transport="canopen",
                          timestamp_kind="sync_counter", device=self.name)
 
@@ -155,6 +209,9 @@ class CanopenDrive:
 
     def start_motion(self, profile: Profile) -> None:
         """Set the profile-position ramps, enable (CiA 402), run the triangle until :meth:`stop_motion`."""
+        if self._s.motion == "external":
+            raise ConfigError("[drive] motion = \"external\": the machine's master moves the drive, acq never "
+                              "commands motion")
         self._motion.start(profile)
 
     def read(self, timeout_s: float) -> EncoderBlock | None:
@@ -189,7 +246,7 @@ class CanopenDrive:
             self._sync = None
         if self._network is not None:
             try:
-                if self._node is not None:
+                if self._node is not None and self._s.motion == "commanded":  # listening: the master owns NMT
                     self._node.nmt.state = "PRE-OPERATIONAL"
             except Exception as e:  # noqa: BLE001 - the bus may be gone; close it anyway
                 errors.append(f"NMT PRE-OPERATIONAL failed: {e}")
@@ -215,13 +272,13 @@ class CanopenDrive:
                                   f"{self._s.heartbeat_timeout_s:g} s (last state {self._hb_state})")
             self._node.nmt.wait_for_heartbeat(self._s.heartbeat_timeout_s)
 
-    def _wait_first_sync(self) -> None:
-        """The host must see its own SYNC frames (``receive_own_messages``) to pair TPDOs with them."""
-        deadline = time.monotonic() + self._s.heartbeat_timeout_s
+    def _wait_first_sync(self, timeout_s: float, why: str) -> None:
+        """Wait for a SYNC on the bus (acq's own, echoed by ``receive_own_messages``, or the master's); the
+        DeviceError says ``why`` none came within ``timeout_s`` (s)."""
+        deadline = time.monotonic() + timeout_s
         while self._capture.syncs == 0:
             if time.monotonic() > deadline:
-                raise DeviceError(f"{self.name}: the interface does not echo the host's own SYNC frames "
-                                  "(receive_own_messages), so TPDOs cannot be paired with their SYNC")
+                raise DeviceError(f"{self.name}: no SYNC within {timeout_s:g} s: {why}")
             time.sleep(self._s.period_s)
 
     def _enable_sync_counter(self, overflow: int) -> int:
@@ -234,8 +291,8 @@ class CanopenDrive:
                 return 0
         return overflow
 
-    def _map_tpdo(self) -> int:
-        """Map the TPDO (CiA 301 sequence via canopen), read it back, refuse a difference; its COB-ID."""
+    def _map_tpdo(self) -> tuple[int, list[int]]:
+        """Map the TPDO (CiA 301 sequence via canopen), read it back, refuse a difference; its COB-ID and entries."""
         s, node = self._s, self._node
         wanted = [od.map_entry(od.POSITION_ACTUAL, 32)] + ([od.map_entry(od.VELOCITY_ACTUAL, 32)] if s.map_velocity else [])
         if s.map_timestamp:
@@ -258,7 +315,7 @@ class CanopenDrive:
             raise DeviceError(
                 f"{self.name}: TPDO{s.tpdo} read back differs from what was written — wrote {_entries(wanted)} "
                 f"type 1 COB-ID 0x{cob_id:X}, read {_entries(got)} type {got_type} COB-ID 0x{got_cob:X}")
-        return cob_id
+        return cob_id, wanted
 
     def _require_timestamp(self) -> None:
         """0x1013 must exist on the drive (an SDO upload of it must succeed) before it is mapped."""
@@ -289,7 +346,7 @@ class CanopenDrive:
     def _on_heartbeat(self, nmt_state: int) -> None:
         self._hb_ns, self._hb_state = time.monotonic_ns(), nmt_state
 
-    def _collect(self, timeout_s: float) -> list[tuple[int, bytes, int]]:
+    def _collect(self, timeout_s: float) -> list[tuple[int, bytes, int, int]]:
         if self._capture is None:
             return []
         q, out = self._capture.frames, []
@@ -307,7 +364,7 @@ class CanopenDrive:
                 return out
 
     def _check_health(self) -> None:
-        if self._failure is not None or self._capture is None:
+        if self._failure is not None or self._capture is None or self._s.motion == "external":
             return
         age_s = (time.monotonic_ns() - self._hb_ns) * 1e-9
         if age_s > self._s.heartbeat_timeout_s:
@@ -359,8 +416,11 @@ def open_drive(bench: Bench, sim_bench: object, fast: bool) -> CanopenDrive:
     """Registry factory: a CANopen drive on ``[drive] interface``/``channel`` (``sim_bench`` and ``fast``
     unused: a simulated node is put on the bus by :mod:`drivers.sim.peers`, chosen by the registry).
     Refuses (``ConfigError``) a bus load above ``max_bus_load`` (the rules between keys are validators of
-    :class:`DriveCanopen`)."""
+    :class:`DriveCanopen`); listening, reads the master's TPDO from the config or the EDS/DCF first."""
     s = bench.drive
     assert isinstance(s, DriveCanopen)
+    if s.motion == "external":  # acq adds no cyclic traffic: the load is the machine's
+        passive = None if s.configure else passive_tpdo(s)
+        return CanopenDrive(s, s.counts_per_rev or bench.encoder.counts_per_rev, passive)
     check_bus_load(s)
     return CanopenDrive(s, s.counts_per_rev or bench.encoder.counts_per_rev)

@@ -19,6 +19,8 @@ SYNC_OVERFLOW = 0x1019
 HIGH_RES_TIMESTAMP = 0x1013
 TPDO_COMM = 0x1800
 TPDO_MAP = 0x1A00
+RPDO_COMM = 0x1400
+RPDO_MAP = 0x1600
 CONTROLWORD = 0x6040
 STATUSWORD = 0x6041
 MODE = 0x6060
@@ -26,6 +28,7 @@ MODE_DISPLAY = 0x6061
 POSITION_ACTUAL = 0x6064
 VELOCITY_ACTUAL = 0x606C
 TARGET_POSITION = 0x607A
+TARGET_VELOCITY = 0x60FF
 PROFILE_VELOCITY = 0x6081
 PROFILE_ACCELERATION = 0x6083
 PROFILE_DECELERATION = 0x6084
@@ -33,6 +36,7 @@ QUICK_STOP_DECELERATION = 0x6085
 SUPPORTED_MODES = 0x6502
 
 MODE_PROFILE_POSITION = 1
+MODE_CYCLIC_SYNC_VELOCITY = 9
 PDO_INVALID = 1 << 31
 RTR_NOT_ALLOWED = 1 << 30
 N_TPDO = 4
@@ -57,10 +61,12 @@ def _var(name: str, index: int, data_type: int, access: str, default: int | None
     return var
 
 
-def _tpdo_objects(n: int, node_id: int) -> tuple[ODRecord, ODRecord]:
-    comm = ODRecord(f"TPDO{n} communication parameter", TPDO_COMM + n - 1)
+def _tpdo_objects(n: int, node_id: int, receive: bool = False) -> tuple[ODRecord, ODRecord]:
+    """Communication and mapping records of TPDO ``n`` (``receive``: of RPDO ``n``, COB-ID 0x200 + … ; empty map)."""
+    kind, comm_index, map_index = ("RPDO", RPDO_COMM, RPDO_MAP) if receive else ("TPDO", TPDO_COMM, TPDO_MAP)
+    comm = ODRecord(f"{kind}{n} communication parameter", comm_index + n - 1)
     enabled = n == 1
-    cob_id = tpdo_cob_id(n, node_id) | (0 if enabled else PDO_INVALID)
+    cob_id = (tpdo_cob_id(n, node_id) + 0x80 * receive) | (0 if enabled else PDO_INVALID)
     for sub, name, dtype, access, default in (
         (0, "Highest sub-index", UNSIGNED8, "const", 5),
         (1, "COB-ID", UNSIGNED32, "rw", cob_id),
@@ -69,10 +75,10 @@ def _tpdo_objects(n: int, node_id: int) -> tuple[ODRecord, ODRecord]:
         (5, "Event timer", UNSIGNED16, "rw", 0),
     ):
         comm.add_member(_var(name, comm.index, dtype, access, default, sub))
-    mapping = ODRecord(f"TPDO{n} mapping parameter", TPDO_MAP + n - 1)
-    mapping.add_member(_var("Number of mapped objects", mapping.index, UNSIGNED8, "rw", 1 if enabled else 0))
+    mapping = ODRecord(f"{kind}{n} mapping parameter", map_index + n - 1)
+    mapping.add_member(_var("Number of mapped objects", mapping.index, UNSIGNED8, "rw", int(enabled and not receive)))
     for sub in range(1, 9):
-        default = DEFAULT_TPDO1_MAP if (enabled and sub == 1) else 0
+        default = DEFAULT_TPDO1_MAP if (enabled and sub == 1 and not receive) else 0
         mapping.add_member(_var(f"Mapped object {sub}", mapping.index, UNSIGNED32, "rw", default, sub))
     return comm, mapping
 
@@ -93,16 +99,20 @@ def drive_object_dictionary(node_id: int) -> ObjectDictionary:
         _var("Position actual value", POSITION_ACTUAL, INTEGER32, "ro", 0, mappable=True),
         _var("Velocity actual value", VELOCITY_ACTUAL, INTEGER32, "ro", 0, mappable=True),
         _var("Target position", TARGET_POSITION, INTEGER32, "rw", 0, mappable=True),
+        _var("Target velocity", TARGET_VELOCITY, INTEGER32, "rw", 0, mappable=True),  # velocity units
         _var("Profile velocity", PROFILE_VELOCITY, UNSIGNED32, "rw", 0),
         _var("Profile acceleration", PROFILE_ACCELERATION, UNSIGNED32, "rw", 0),
         _var("Profile deceleration", PROFILE_DECELERATION, UNSIGNED32, "rw", 0),
         _var("Quick stop deceleration", QUICK_STOP_DECELERATION, UNSIGNED32, "rw", 0),
-        _var("Supported drive modes", SUPPORTED_MODES, UNSIGNED32, "ro", 1 << (MODE_PROFILE_POSITION - 1)),
+        _var("Supported drive modes", SUPPORTED_MODES, UNSIGNED32, "ro",
+             1 << (MODE_PROFILE_POSITION - 1) | 1 << (MODE_CYCLIC_SYNC_VELOCITY - 1)),
     ):
         od.add_object(var)
     for n in range(1, N_TPDO + 1):
         for record in _tpdo_objects(n, node_id):
             od.add_object(record)
+    for record in _tpdo_objects(1, node_id, receive=True):  # RPDO1: a master's cyclic set-points
+        od.add_object(record)
     od.add_object(_identity())
     return od
 

@@ -21,6 +21,8 @@ import queue
 import threading
 import time
 from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import can
@@ -33,6 +35,42 @@ log = logging.getLogger(__name__)
 SYNC_COB_ID = 0x80
 SYNC_COUNTER_OVERFLOW = 240
 RAW_PRE_LOG_MAX = 100_000  # frames kept while no raw log file is open yet
+POSITION_ACTUAL, VELOCITY_ACTUAL, HIGH_RES_TIMESTAMP = 0x6064, 0x606C, 0x1013
+
+
+@dataclass(frozen=True)
+class TpdoLayout:
+    """Where the recorded objects sit in a TPDO's payload (byte offsets; None: not mapped).
+
+    ``position`` is 0x6064 (int32), ``velocity`` 0x606C (int32), ``timestamp`` 0x1013 (uint32 µs); any other
+    mapped object (a statusword, say) is skipped. ``size`` is the payload's length, bytes.
+    """
+
+    size: int
+    position: int
+    velocity: int | None = None
+    timestamp: int | None = None
+
+    @classmethod
+    def from_entries(cls, entries: Sequence[int]) -> TpdoLayout:
+        """The layout of CiA 301 mapping ``entries`` (index << 16 | subindex << 8 | bits), in mapping order."""
+        offsets: dict[int, int] = {}
+        at = 0
+        for e in entries:
+            if e & 0xFF == 32 and (e >> 8) & 0xFF == 0:
+                offsets.setdefault(e >> 16, at // 8)
+            at += e & 0xFF
+        if POSITION_ACTUAL not in offsets:
+            raise ValueError("the TPDO does not map 0x6064 position actual value (32 bit)")
+        return cls(at // 8, offsets[POSITION_ACTUAL], offsets.get(VELOCITY_ACTUAL), offsets.get(HIGH_RES_TIMESTAMP))
+
+    def dtype(self) -> np.dtype:
+        """A numpy structured dtype reading the mapped fields of one payload (little endian, CiA 301)."""
+        fields = {"position": (self.position, "<i4"), "velocity": (self.velocity, "<i4"),
+                  "timestamp": (self.timestamp, "<u4")}
+        used = {k: v for k, v in fields.items() if v[0] is not None}
+        return np.dtype({"names": list(used), "formats": [f for _, f in used.values()],
+                         "offsets": [o for o, _ in used.values()], "itemsize": self.size})
 
 
 class SyncProducer:
@@ -61,22 +99,27 @@ class SyncProducer:
 
 
 class FrameCapture:
-    """Notifier-side callbacks: remember the SYNC counter, queue each TPDO as (counter, bytes, host_ns).
+    """Notifier-side callbacks: remember the SYNC counter, queue each TPDO as (counter, bytes, host_ns, syncs) —
+    ``syncs`` the SYNC frames seen so far.
 
     ``counter`` is the SYNC's data byte, or the running count of SYNC frames when they carry none;
     0 means "before the first SYNC". A full queue drops the frame and counts an overrun.
     """
 
     def __init__(self, with_counter: bool, max_frames: int) -> None:
-        self.frames: queue.Queue[tuple[int, bytes, int]] = queue.Queue(max_frames)
+        self.frames: queue.Queue[tuple[int, bytes, int, int]] = queue.Queue(max_frames)
         self._with_counter = with_counter
         self.syncs = 0
+        self.first_sync_ns = 0  # host arrival of the first SYNC seen, ns
+        self.first_sync_bytes = 0  # its data length: 1 if the SYNC carries a counter
         self._counter = 0
         self.overruns = 0
         self.errors = 0
 
     def on_sync(self, can_id: int, data: bytearray, timestamp: float) -> None:
         try:
+            if self.syncs == 0:
+                self.first_sync_ns, self.first_sync_bytes = time.monotonic_ns(), len(data)
             self.syncs += 1
             self._counter = data[0] if self._with_counter else self.syncs
         except Exception:  # noqa: BLE001 - canopen would only log it; count it too
@@ -84,7 +127,7 @@ class FrameCapture:
 
     def on_tpdo(self, can_id: int, data: bytearray, timestamp: float) -> None:
         try:
-            self.frames.put_nowait((self._counter, bytes(data), time.monotonic_ns()))
+            self.frames.put_nowait((self._counter, bytes(data), time.monotonic_ns(), self.syncs))
         except queue.Full:
             self.overruns += 1
         except Exception:  # noqa: BLE001
@@ -99,7 +142,11 @@ class SyncUnwrapper:
     """SYNC counter (1…``modulus``, or a running count if ``modulus`` is None) → cumulative index.
 
     Index 0 is the first SYNC sent (counter 1). A step of 0 is the same SYNC again (kept as is, the
-    recorder drops repeats); a silence longer than one wrap is resolved with the host stamps.
+    recorder drops repeats); a silence longer than one wrap is resolved with the number of SYNC frames the host
+    saw in between — not with the host stamps where that count is known: a host that stalls (a loaded machine)
+    reads frames that came in order with bunched stamps after a gap in time, and the stamps alone would then
+    invent a wrap of lost cycles. SYNC frames lost below the host (a driver's receive buffer overflowing)
+    and a silence of the master are told apart by neither.
     """
 
     def __init__(self, modulus: int | None, period_s: float, first_sync_ns: int) -> None:
@@ -108,23 +155,29 @@ class SyncUnwrapper:
         self._counter = 0
         self._index = -1
         self._ns = first_sync_ns - int(self._period_ns)
+        self._syncs = 0
 
-    def push(self, counter: int, host_ns: int) -> int:
-        """Index of a frame that answered SYNC ``counter`` and arrived at ``host_ns`` (monotonic ns)."""
+    def push(self, counter: int, host_ns: int, syncs_seen: int | None = None) -> int:
+        """Index of a frame that answered SYNC ``counter`` and arrived at ``host_ns`` (monotonic ns), the host
+        having seen ``syncs_seen`` SYNC frames by then (None: unknown; then the host time tells the wraps)."""
         if self._modulus is None:
             self._index = counter - 1
         else:
             step = (counter - self._counter) % self._modulus
             elapsed = (host_ns - self._ns) / self._period_ns
+            if syncs_seen is not None:  # the SYNC frames the host saw in between: exact, however late it read them
+                elapsed = syncs_seen - self._syncs
             step += self._modulus * max(0, round((elapsed - step) / self._modulus))
             self._index += step
         self._counter, self._ns = counter, host_ns
+        if syncs_seen is not None:
+            self._syncs = syncs_seen
         return self._index
 
 
 class TpdoDecoder:
-    """Raw TPDO payloads (int32 position [, int32 velocity] [, uint32 0x1013 time stamp µs], little endian)
-    → an :class:`EncoderBlock`.
+    """Raw TPDO payloads (int32 position [, int32 velocity] [, uint32 0x1013 time stamp µs], little endian, or
+    any ``layout``) → an :class:`EncoderBlock`.
 
     The int32 position register is unwrapped to int64; velocity (drive units) is scaled to counts/s
     by ``counts_per_s_per_unit``; the time stamp (wrapping every 2³² µs ≈ 71.6 min) is unwrapped into
@@ -133,10 +186,13 @@ class TpdoDecoder:
     """
 
     def __init__(self, unwrapper: SyncUnwrapper, with_velocity: bool, counts_per_s_per_unit: float,
-                 with_timestamp: bool = False) -> None:
+                 with_timestamp: bool = False, layout: TpdoLayout | None = None) -> None:
         self._unwrapper = unwrapper
-        self._fields = 1 + with_velocity + with_timestamp
-        self._with_velocity, self._with_timestamp = with_velocity, with_timestamp
+        if layout is None:
+            layout = TpdoLayout(4 * (1 + with_velocity + with_timestamp), 0, 4 if with_velocity else None,
+                                4 * (1 + with_velocity) if with_timestamp else None)
+        self._layout, self._dtype = layout, layout.dtype()
+        self._with_velocity, self._with_timestamp = layout.velocity is not None, layout.timestamp is not None
         self._scale = counts_per_s_per_unit
         self._last_raw: int | None = None
         self._last_counts = 0
@@ -145,24 +201,25 @@ class TpdoDecoder:
         self.bad_length = 0
         self.before_first_sync = 0
 
-    def decode(self, frames: list[tuple[int, bytes, int]]) -> EncoderBlock | None:
-        """Decode frames in arrival order; None if none is usable."""
-        size = 4 * self._fields
+    def decode(self, frames: list[tuple[int, bytes, int]] | list[tuple[int, bytes, int, int]]) -> EncoderBlock | None:
+        """Decode frames (counter, payload, host_ns[, SYNC frames seen]) in arrival order; None if none is usable."""
+        size = self._layout.size
         good = [f for f in frames if len(f[1]) == size and f[0] != 0]
         self.bad_length += sum(len(f[1]) != size for f in frames)
         self.before_first_sync += sum(len(f[1]) == size and f[0] == 0 for f in frames)
         if not good:
             return None
-        index = np.array([self._unwrapper.push(c, ns) for c, _, ns in good], dtype=np.int64)
-        host_ns = np.array([ns for _, _, ns in good], dtype=np.int64)
-        values = np.frombuffer(b"".join(d for _, d, _ in good), dtype="<i4").reshape(-1, self._fields)
-        raw = values[:, 0].astype(np.int64)
+        index = np.array([self._unwrapper.push(f[0], f[2], f[3] if len(f) > 3 else None) for f in good],
+                         dtype=np.int64)
+        host_ns = np.array([f[2] for f in good], dtype=np.int64)
+        values = np.frombuffer(b"".join(f[1] for f in good), dtype=self._dtype)
+        raw = values["position"].astype(np.int64)
         prev = raw[0] if self._last_raw is None else self._last_raw
         steps = (np.diff(np.r_[prev, raw]) + 2**31) % 2**32 - 2**31
         counts = self._last_counts + np.cumsum(steps) + (raw[0] if self._last_raw is None else 0)
         self._last_raw, self._last_counts = int(raw[-1]), int(counts[-1])
-        velocity = values[:, 1] * self._scale if self._with_velocity else None
-        drive_time_s = self._unwrap_stamps(values[:, -1].view("<u4")) if self._with_timestamp else None
+        velocity = values["velocity"] * self._scale if self._with_velocity else None
+        drive_time_s = self._unwrap_stamps(values["timestamp"]) if self._with_timestamp else None
         return EncoderBlock(index=index, position_counts=counts, host_ns=host_ns, drive_time_s=drive_time_s,
                             velocity_counts_per_s=velocity)
 

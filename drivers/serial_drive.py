@@ -14,6 +14,9 @@ second at 1 kHz; (2) acknowledgements to motion commands must be received while 
 is busy or not yet started; (3) each frame's ``host_ns`` must be the arrival time. Every port read
 has a timeout (``read_timeout_s``), so the thread never blocks forever and stops promptly.
 
+With ``[drive] motion = "external"`` (``acq monitor``: the machine's own controller moves the joint) acq only
+switches the telemetry stream on and off; it never sends ``start_triangle`` or ``stop_motion``.
+
 Raw wire values are unwrapped, never corrected: the u16 sequence becomes the cumulative int64
 ``index`` (the u32 drive time disambiguates a silence longer than 65536 frames), the u32 µs drive time
 becomes ``drive_time_s``, the i32 position register becomes int64 ``position_counts``. A sequence
@@ -148,6 +151,9 @@ class SerialDrive:
 
     def start_motion(self, profile: Profile) -> None:
         """Send the triangle's parameters; the drive starts it and acknowledges."""
+        if self.settings.motion == "external":
+            raise ConfigError("[drive] motion = \"external\": the machine's controller moves the drive, acq never "
+                              "commands motion")
         if profile.cruise_s or profile.jerk_time_s:
             raise ConfigError(f"profile: cruise_s = {profile.cruise_s:g} s, jerk_time_s = {profile.jerk_time_s:g} s "
                               "cannot be sent in the serial protocol's start_triangle; set both to 0")

@@ -102,6 +102,8 @@ class SimBench:
         self._cursors: dict[str, float] = {}
         self._noise_cache: dict[tuple[str, int, int], np.ndarray] = {}
         self._noise_seed = [s.seed % 2**64] + ([round(s.elapsed_s * 1e3)] if s.elapsed_s else [])  # new noise per window
+        #: the robot program of this session (``motion = "external"``), else None; a simulated master reads it
+        self.robot_program: WindowReference | None = program
         if program is not None:
             self.use_reference(program)
 

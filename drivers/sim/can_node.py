@@ -26,6 +26,12 @@ seed — the virtual bus's own timing is not reproducible, see :meth:`~drivers.s
 A disable while moving ramps the reference to rest at the quick-stop deceleration (the bench's speed
 loop cannot let the motor coast).
 
+Cyclic synchronous velocity (mode 9, ``[drive] motion = "external"``: a master such as
+:class:`drivers.sim.robot_controller.SimRobotController` owns the drive): RPDO1 (0x1400/0x1600, remappable over SDO)
+is taken off the bus by the controller as it arrives and applied at the next SYNC — its controlword walks the state
+machine, its target velocity 0x60FF becomes the :class:`~drivers.sim.csv_reference.SetpointReference` the bench
+follows, :data:`SETPOINT_DELAY_CYCLES` after that SYNC.
+
 Fault switches, for tests: :meth:`~SimCanNode.drop_tpdos`, :meth:`~SimCanNode.stop_heartbeat`,
 ``refuse_mode_change`` (0x6060 writes are ignored), ``has_timestamp`` (set False before :meth:`~SimCanNode.start`:
 a drive without 0x1013) and ``reject_mapping`` (0x1A0x keeps its
@@ -46,31 +52,44 @@ import canopen
 import numpy as np
 from can.interfaces.virtual import VirtualBus, channels, channels_lock
 
-from drivers.canopen_od import (HIGH_RES_TIMESTAMP, MODE_PROFILE_POSITION, N_TPDO, PDO_INVALID, TPDO_COMM,
-                                 TPDO_MAP, drive_object_dictionary)
+from drivers.canopen_od import (HIGH_RES_TIMESTAMP, MODE_CYCLIC_SYNC_VELOCITY, MODE_PROFILE_POSITION, N_TPDO,
+                                 PDO_INVALID, RPDO_COMM, RPDO_MAP, TARGET_VELOCITY, TPDO_COMM, TPDO_MAP,
+                                 drive_object_dictionary)
 from drivers.config import Bench, DriveCanopen
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
 from drivers.sim.bench import SimBench
+from drivers.sim.csv_reference import SetpointReference
 from drivers.sim.pp_generator import ProfileGenerator
 
 SOD, RTSO, SO, OE, QSA = 0x40, 0x21, 0x23, 0x27, 0x07  # CiA 402 statusword state bits
 REMOTE, TARGET_REACHED, SETPOINT_ACK = 1 << 9, 1 << 10, 1 << 12
 HISTORY_EVERY = 64
 CACHE_CYCLES = 50
+#: A cyclic set-point acts this many cycles after the SYNC that applies it, a set-point buffer (a real drive
+#: delays by one or two cycles; here it only shifts the master's program in time). What the bench computed must
+#: not change: the drive computes its samples CACHE_CYCLES ahead, and the simulated DAQ reads the bench by the
+#: host clock, which a stalled SYNC master's cycles lag (catching up in bursts) — 250 ms covers the lags
+#: measured on a loaded 2-core host; a later set-point is dropped and counted (SetpointReference.late)
+SETPOINT_DELAY_CYCLES = 250
 
 
 class _TriggerQueue(queue.Queue):
-    """A receive queue that hands every SYNC to ``on_sync`` as it is delivered."""
+    """A receive queue that hands every SYNC to ``on_sync`` and every RPDO (COB-ID 0x200…0x57F) to ``on_rpdo``
+    as it is delivered (in bus order: an RPDO sent before a SYNC is taken before that SYNC is answered)."""
 
-    def __init__(self, on_sync: Callable[[], None]) -> None:
+    def __init__(self, on_sync: Callable[[], None], on_rpdo: Callable[[can.Message], None]) -> None:
         super().__init__()
-        self._on_sync = on_sync
+        self._on_sync, self._on_rpdo = on_sync, on_rpdo
 
     def put(self, item: can.Message, block: bool = True, timeout: float | None = None) -> None:
         super().put(item, block, timeout)
-        if item.arbitration_id == 0x80 and not item.is_extended_id:
+        if item.is_extended_id:
+            return
+        if item.arbitration_id == 0x80:
             self._on_sync()
+        elif 0x200 <= item.arbitration_id < 0x580:
+            self._on_rpdo(item)
 
 
 class _ControllerLastChannel(list):
@@ -85,12 +104,12 @@ class _ControllerLastChannel(list):
 class _ControllerBus(VirtualBus):
     """The drive's end of a python-can ``virtual`` channel, answering SYNC at delivery (see module doc)."""
 
-    def __init__(self, channel: str, on_sync: Callable[[], None]) -> None:
+    def __init__(self, channel: str, on_sync: Callable[[], None], on_rpdo: Callable[[can.Message], None]) -> None:
         with channels_lock:  # python-can's lock is re-entrant; the channel list must be ours before it is used
             channels.setdefault(channel, _ControllerLastChannel())
             super().__init__(channel=channel)
             self.channel.remove(self.queue)
-            self.queue = _TriggerQueue(on_sync)
+            self.queue = _TriggerQueue(on_sync, on_rpdo)
             self.channel.append(self.queue)
 
 
@@ -107,6 +126,11 @@ class SimCanNode:
         self._rad_per_count = 2 * math.pi / sim_bench.counts_per_rev
         self._start_counts = sim_bench.sim.encoder_start_counts
         self.generator = ProfileGenerator()
+        self.external = getattr(s, "motion", "commanded") == "external"
+        self.setpoints = SetpointReference(s.period_s)
+        self._rpdo: bytes | None = None  # RPDO1 received since the last SYNC
+        self._rpdo_layout: tuple[int, list[tuple[int, int, int]]] | None = None  # (COB-ID or -1, [(index, sub, bytes)])
+        self.rpdos = 0
         self.network: canopen.Network | None = None
         self.node: canopen.LocalNode | None = None
         self._consumer = f"can-node@{id(self):x}"
@@ -140,8 +164,8 @@ class SimCanNode:
     # ---- life cycle --------------------------------------------------------------------------------
     def start(self) -> None:
         """Join the virtual bus, boot (boot-up message) into NMT PRE-OPERATIONAL."""
-        self._bench.use_reference(self.generator)
-        self.network = canopen.Network(_ControllerBus(self._s.channel, self._on_sync))
+        self._bench.use_reference(self.setpoints if self.external else self.generator)
+        self.network = canopen.Network(_ControllerBus(self._s.channel, self._on_sync, self._on_rpdo))
         self.network.connect()
         dictionary = drive_object_dictionary(self._s.node_id)
         if not self.has_timestamp:
@@ -228,10 +252,15 @@ class SimCanNode:
     def _write(self, index: int, od: Any, data: bytes) -> None:
         if TPDO_COMM <= index < TPDO_COMM + N_TPDO or TPDO_MAP <= index < TPDO_MAP + N_TPDO:
             self._tpdos = None
+        elif index in (RPDO_COMM, RPDO_MAP):
+            self._rpdo_layout = None
         elif index == 0x6060 and not self.refuse_mode_change:
             self._mode = od.decode_raw(data)
         elif index == 0x6040:
             self._controlword(od.decode_raw(data))
+        elif index == TARGET_VELOCITY and self._state == OE and self._mode == MODE_CYCLIC_SYNC_VELOCITY:
+            speed = od.decode_raw(data) / self._s.velocity_units_per_rpm * RPM_TO_RAD_S
+            self.setpoints.push(self._setpoint_time_s(), speed)
 
     def _param(self, index: int) -> int:
         return int(self.node.sdo[index].raw)
@@ -254,6 +283,9 @@ class SimCanNode:
         return sw
 
     def _ramp_to_rest(self) -> None:
+        if self._mode == MODE_CYCLIC_SYNC_VELOCITY:  # the master's set-points stop; the drive's ramp is one cycle
+            self.setpoints.push(self._setpoint_time_s(), 0.0)
+            return
         decel = self._param(0x6085) or self._param(0x6084)
         self.generator.stop(self._now_s(), max(decel, 1) / self._s.acceleration_units_per_rpm_per_s * RPM_TO_RAD_S)
 
@@ -319,6 +351,33 @@ class SimCanNode:
         with self._lock:
             self._sync()
 
+    def _setpoint_time_s(self) -> float:
+        """When a cyclic set-point applied at this SYNC takes effect, s of drive time: one cycle of interpolation
+        plus SETPOINT_DELAY_CYCLES after the drive's present cycle (the master's program runs on the SYNC cycles,
+        so set-points arrive one per cycle, evenly spaced whatever the host's timing)."""
+        return (self._now_cycle() + 1 + SETPOINT_DELAY_CYCLES) * self._period_s
+
+    def _on_rpdo(self, msg: can.Message) -> None:
+        with self._lock:
+            if self.node is None or self.node.nmt.state != "OPERATIONAL":
+                return
+            if self._rpdo_layout is None:
+                cob, mapping = int(self.node.sdo[RPDO_COMM][1].raw), self.node.sdo[RPDO_MAP]
+                entries = [mapping[i].raw for i in range(1, mapping[0].raw + 1)]
+                self._rpdo_layout = (-1 if cob & PDO_INVALID else cob & 0x7FF,
+                                     [(e >> 16, (e >> 8) & 0xFF, (e & 0xFF) // 8) for e in entries])
+            if msg.arbitration_id == self._rpdo_layout[0]:
+                self._rpdo = bytes(msg.data)
+
+    def _apply_rpdo(self) -> None:
+        """Write the RPDO1 received before this SYNC into the objects it maps (through the write callbacks)."""
+        data, self._rpdo = self._rpdo, None
+        at = 0
+        for index, subindex, size in self._rpdo_layout[1]:
+            self.node.set_data(index, subindex, data[at:at + size])
+            at += size
+        self.rpdos += 1
+
     def _sync(self) -> None:
         if self._cycle is None:
             self._cycle = self.first_cycle = self._now_cycle()
@@ -329,6 +388,8 @@ class SimCanNode:
             self._bench.hold_history(self._consumer, self._cycle * self._period_s)
         if self.node.nmt.state != "OPERATIONAL":
             return
+        if self._rpdo is not None and self._rpdo_layout is not None:
+            self._apply_rpdo()
         if self._tpdos is None:
             self._tpdos = self._tpdo_table()
         for cob, kind, entries in self._tpdos:

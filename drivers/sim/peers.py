@@ -14,10 +14,13 @@ from typing import Any, Protocol
 
 from drivers import canopen_drive, serial_drive
 from drivers.base import Drive, DriveInfo
-from drivers.config import Bench, DriveCanopen, DriveSerial
+from drivers.canopen_eds import passive_tpdo
+from drivers.canopen_od import STATUSWORD, tpdo_cob_id
+from drivers.config import POSITION_ACTUAL_ENTRY, Bench, DriveCanopen, DriveSerial
 from acqcore.errors import ConfigError
 from drivers.sim.bench import SimBench
 from drivers.sim.can_node import SimCanNode
+from drivers.sim.robot_controller import SimRobotController
 from drivers.sim.serial_device import SimSerialDevice, open_simulated_device
 
 
@@ -78,6 +81,58 @@ class CanopenWithSimNode(DriveWithPeer):
         return self.peer  # type: ignore[return-value]
 
 
+class RobotCell:
+    """The simulated drive and the production robot's controller that owns it, as one :class:`SimulatedPeer`:
+    the drive joins the bus first, the controller configures and runs it."""
+
+    def __init__(self, node: SimCanNode, controller: SimRobotController) -> None:
+        self.node, self.controller = node, controller
+
+    def start(self) -> None:
+        self.node.start()
+        self.controller.start()
+
+    def stop(self) -> None:
+        try:
+            self.controller.stop()
+        finally:
+            self.node.stop()
+
+
+class CanopenWithRobot(DriveWithPeer):
+    """A listening :class:`~drivers.canopen_drive.CanopenDrive` on the bus of a simulated robot cell."""
+
+    @property
+    def sim_node(self) -> SimCanNode:
+        """The simulated CiA 402 drive."""
+        return self.peer.node  # type: ignore[attr-defined]
+
+    @property
+    def controller(self) -> SimRobotController:
+        """The robot's CANopen master (SYNC, RPDO set-points, NMT)."""
+        return self.peer.controller  # type: ignore[attr-defined]
+
+
+#: the simulated master's own feedback TPDO when acq maps its own (configure = true): statusword + position
+_MASTER_FEEDBACK = ((STATUSWORD << 16) | 16, POSITION_ACTUAL_ENTRY)
+
+
+def _robot_cell(bench: Bench, sim_bench: SimBench) -> RobotCell:
+    """The drive and its master for a listening bench; the master sets up the TPDO the bench says it did."""
+    s = bench.drive
+    assert isinstance(s, DriveCanopen) and sim_bench.robot_program is not None
+    if s.configure:
+        if s.tpdo == 1:
+            raise ConfigError("[drive] tpdo = 1 with configure = true: the simulated robot's master uses TPDO1 "
+                              "for its own feedback — give acq another one (2…4)")
+        number, cob_id, entries = 1, tpdo_cob_id(1, s.node_id), _MASTER_FEEDBACK
+    else:
+        machine = passive_tpdo(s)
+        number, cob_id, entries = s.tpdo, machine.cob_id, machine.entries
+    controller = SimRobotController(bench, sim_bench.robot_program, number, cob_id, entries)
+    return RobotCell(SimCanNode(bench, sim_bench), controller)
+
+
 class _PtyPeer:
     """A :class:`SimSerialDevice` as a :class:`SimulatedPeer`: it serves its pty from construction on, and
     ``stop`` closes it."""
@@ -93,7 +148,8 @@ class _PtyPeer:
 
 
 def open_canopen_with_sim_node(bench: Bench, sim_bench: SimBench | None, fast: bool) -> CanopenWithSimNode:
-    """Registry factory for ``[drive] driver = "canopen"`` with ``simulated_node = true``.
+    """Registry factory for ``[drive] driver = "canopen"`` with ``simulated_node = true`` (with ``motion =
+    "external"``: the drive owned by a simulated robot controller, :class:`RobotCell`, acq listening).
 
     Refuses (``ConfigError``) ``--fast``: a CAN bus runs in real time (``interface = "virtual"`` is a
     validator of :class:`DriveCanopen`).
@@ -103,6 +159,8 @@ def open_canopen_with_sim_node(bench: Bench, sim_bench: SimBench | None, fast: b
     if fast:
         raise ConfigError("--fast: the simulated CANopen drive runs on the bus in real time; record without --fast")
     adapter = canopen_drive.open_drive(bench, None, fast)
+    if s.motion == "external":  # the robot's own master owns the drive; acq listens
+        return CanopenWithRobot(adapter, _robot_cell(bench, sim_bench))
     return CanopenWithSimNode(adapter, SimCanNode(bench, sim_bench))
 
 

@@ -115,6 +115,7 @@ class SimSerialDevice:
         self.byte_ns = bits_per_byte(parity) * 1e9 / baud
         self.pre_roll_s = pre_roll_s
         self.log = FaultLog()
+        self.commands: list[str] = []  # the kinds of the host's commands, in order received
         self._rng = np.random.default_rng(seed)
         self._master, slave = os.openpty()
         tty.setraw(slave)
@@ -218,6 +219,7 @@ class SimSerialDevice:
     def _obey(self, command: Command) -> None:
         """Execute a command (under the lock) and queue its acknowledgement."""
         now = time.monotonic_ns()
+        self.commands.append(command.kind)
         if command.kind == "stream_on" and not self._streaming:
             self._streaming = True
             self._next_cycle = max(self._next_cycle, self._cycle_at(now) + 1)
