@@ -34,13 +34,13 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 
 from acq.analyze import SessionResult, analyze_session, draw_report, sha256_of
 from acq.catalogue import Catalogue, Outcome
+from acq.paths import GLOB_CHARS
 from acq.session import Session, load, read_status
 from acq.storage import remove_temp_files
 from acqcore.errors import AcqError, ConfigError
 from analysis import AnalysisRequest
 
 CATALOGUE_NAME = "catalogue.sqlite"
-_GLOB_CHARS = frozenset("*?[")
 _BLAS_THREADS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 
@@ -58,11 +58,6 @@ class BatchReport:
     def failed(self) -> list[Outcome]:
         """Outcomes with an error."""
         return [o for o in self.outcomes if o.error is not None]
-
-
-def is_batch(spec: Path | str) -> bool:
-    """True when ``spec`` names a folder or a glob pattern rather than one session file."""
-    return Path(spec).is_dir() or bool(_GLOB_CHARS & set(str(spec)))
 
 
 def find_sessions(spec: Path | str) -> tuple[list[Path], Path]:
@@ -85,11 +80,11 @@ def find_sessions(spec: Path | str) -> tuple[list[Path], Path]:
 
 def _prefix(parts: Sequence[str]) -> Iterator[str]:
     """The path parts before the first one with a wildcard ('.' when the first has one)."""
-    if not parts or _GLOB_CHARS & set(parts[0]):
+    if not parts or GLOB_CHARS & set(parts[0]):
         yield "."
         return
     for part in parts:
-        if _GLOB_CHARS & set(part):
+        if GLOB_CHARS & set(part):
             return
         yield part
 

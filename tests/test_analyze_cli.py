@@ -170,3 +170,29 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     outcome = analyze_one(str(copy), "sha", AnalysisRequest(), report=True)  # what a batch worker does
     assert outcome.error is None and outcome.doc is not None and outcome.doc["quality"]["verdict"] == "ok"
     assert outcome.doc["quality"]["reasons"][-1].startswith("note: report not drawn: ModuleNotFoundError")
+
+
+def test_help_and_a_mistyped_path_load_no_numerical_library() -> None:
+    """`acq --help` lists every command with its own short help, and `acq analyze missing.h5` says so in one line,
+    in a process that never imported numpy, scipy, h5py, pydantic or Qt (what made them take 1.1 s)."""
+    import importlib
+    import subprocess
+    import sys
+
+    from acq.cli import LAZY_COMMANDS
+
+    for name, (module, attribute, short_help) in LAZY_COMMANDS.items():
+        command = getattr(importlib.import_module(module), attribute)
+        assert command.name == name and command.get_short_help_str(limit=10_000) == short_help
+    probe = ("import sys; from acq.cli import main\n"
+             "try:\n    main(sys.argv[1:])\nexcept SystemExit as e:\n    code = e.code\n"
+             "heavy = sorted({'numpy', 'scipy', 'h5py', 'pydantic', 'PySide6'} & set(sys.modules))\n"
+             "print('loaded:', heavy, 'exit:', code, file=sys.stderr)")
+    helped = subprocess.run([sys.executable, "-c", probe, "--help"], capture_output=True, text=True, timeout=60)
+    assert helped.stderr.strip() == "loaded: [] exit: 0"
+    listed = dict(re.findall(r"^  (\w+) +(\S.*)$", helped.stdout.split("Commands:")[1], re.M))
+    assert sorted(listed) == sorted([*LAZY_COMMANDS, "analyze", "check", "info", "record"])
+    assert listed["devices"] == "List NI devices and AI channels, CAN interfaces, serial ports..."
+    missing = subprocess.run([sys.executable, "-c", probe, "analyze", "missing.h5"], capture_output=True, text=True,
+                             timeout=60)
+    assert missing.stderr.splitlines() == ["acq: error: missing.h5: no such session file", "loaded: [] exit: 2"]
