@@ -66,13 +66,15 @@ def recording_from_session(session: Session) -> Recording:
 
 def options_for(session: Session, *, torque: TorqueMethod | None = None, params: str = "K,Jm,Jl",
                 fit: str = "amplitude", band_hz: tuple[float, float] | None = None,
-                pipeline: Pipeline = "acq") -> AnalysisOptions:
-    """Analysis options with the bench's nominal plant; torque defaults to park with ≥ 2 phases."""
+                pipeline: Pipeline = "acq", select_segments: bool = False) -> AnalysisOptions:
+    """Analysis options with the bench's nominal plant; torque defaults to park with ≥ 2 phases; ``select_segments``
+    averages only the Welch segments that excite the joint (``acq monitor``: a robot program excites in parts)."""
     nominal = session.bench.nominal
     if torque is None:
         torque = "park" if len(session.current.phases_a) >= 2 else "encoder"
     return AnalysisOptions(
         torque_method=torque, params=params, fit=fit, band_hz=band_hz, pipeline=pipeline,  # type: ignore[arg-type]
+        select_segments=select_segments,
         nominal=TwoMassParams(K_Nm_per_rad=nominal.K_Nm_per_rad, Jm_kgm2=nominal.Jm_kgm2, Jl_kgm2=nominal.Jl_kgm2,
                               C_Nms_per_rad=0.0),  # the bench gives no damping; the fit always fits C
     )

@@ -64,7 +64,8 @@ class MonitorSettings:
     baseline_windows: int = 5
     threshold_pct: float = 10.0
     ewma_lambda: float = 0.2
-    request: dict[str, Any] = field(default_factory=lambda: dict(DEFAULT_REQUEST))
+    # a robot program excites the joint only in parts: the analysis uses the segments that excite (analysis.segments)
+    request: dict[str, Any] = field(default_factory=lambda: {**DEFAULT_REQUEST, "select_segments": True})
 
 
 @dataclass
@@ -87,6 +88,15 @@ class MonitorStatus:
     baseline_K: float | None = None
     state: str = "starting"
     message: str = ""
+    last_excited_fraction: float | None = None  # share of the last analysed window that excites the joint
+    last_moves: tuple[dict[str, Any], ...] = ()  # its moves: index, start_s, duration_s, peak_rad_s, excited
+    excited_fraction_sum: float = 0.0  # over the windows judged for excitation (for the share of the program)
+    excitation_judged: int = 0
+
+    @property
+    def program_excited_fraction(self) -> float | None:
+        """Share of the program's windows (time) that excites the joint, over the windows judged so far."""
+        return self.excited_fraction_sum / self.excitation_judged if self.excitation_judged else None
 
 
 def expected_window_bytes(bench: Bench, window_s: float) -> int:
@@ -231,11 +241,24 @@ class Monitor:
         self.status.excited += verdict in ("ok", "poor", "failed")
         self.status.not_excited += verdict == "not excited"
         self.status.interrupted += verdict == "interrupted"
+        self._excitation(outcome, verdict)
         self._windows[key] = replace(self._windows[key], done=True)
         trend = self._trend()
         self._judge(trend, key)
         self._retain(trend)
         self._show()
+
+    def _excitation(self, outcome: Outcome, verdict: str | None) -> None:
+        """Which share of the window and which moves excite (segment selection); a window the joint did not
+        travel in excites nowhere."""
+        excitation = (outcome.doc or {}).get("excitation")
+        if excitation is None and verdict != "not excited":
+            return
+        st = self.status
+        st.last_excited_fraction = excitation["excited_fraction"] if excitation else 0.0
+        st.last_moves = tuple(excitation["moves"]) if excitation else ()
+        st.excited_fraction_sum += st.last_excited_fraction
+        st.excitation_judged += 1
 
     def _trend(self) -> Trend:
         entries = [e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags]

@@ -13,12 +13,13 @@ from typing import Any, Literal
 
 from analysis.clocks import ClockFit
 from analysis.diagnose import recording_fault, with_fault
-from analysis.fit import FitKind, FitOptions, FitParams, FitResult, PARAM_NAMES, fit_two_mass
+from analysis.fit import FitKind, FitOptions, FitParams, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass
 from analysis.encoder import longest_gap_free_span
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
 from analysis.model import TwoMassParams
 from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.report import FigureData, figure_data
+from analysis.segments import Move, describe_moves
 from analysis.signals import Recording, TorqueMethod, prepare_signals, prepare_signals_paper
 
 Pipeline = Literal["acq", "paper"]
@@ -49,6 +50,9 @@ class AnalysisOptions:
         The bench's nominal values (needed for ``params="K"``; otherwise one extra fit start).
     pipeline : {"acq", "paper"}
         Our chain or the paper's.
+    select_segments : bool
+        Average only the Welch segments that excite the joint in the fit band (:mod:`analysis.segments`;
+        for motion that excites in parts, e.g. a robot program); the result then says which moves do.
     """
 
     torque_method: TorqueMethod = "encoder"
@@ -59,13 +63,15 @@ class AnalysisOptions:
     segment_s: float = 0.5
     nominal: TwoMassParams | None = None
     pipeline: Pipeline = "acq"
+    select_segments: bool = False
 
     def to_json_dict(self) -> dict[str, Any]:
         """The options as JSON-ready values."""
         nominal = None if self.nominal is None else {n: getattr(self.nominal, n) for n in PARAM_NAMES[:3]}
         return {"pipeline": self.pipeline, "torque_method": self.torque_method if self.pipeline == "acq" else "hilbert",
                 "params": self.params, "fit": self.fit, "band_hz": None if self.band_hz is None else list(self.band_hz),
-                "align": self.align and self.pipeline == "acq", "segment_s": self.segment_s, "nominal": nominal}
+                "align": self.align and self.pipeline == "acq", "segment_s": self.segment_s, "nominal": nominal,
+                **({"select_segments": True} if self.select_segments else {})}
 
 
 @dataclass(frozen=True)
@@ -88,6 +94,8 @@ class Result:
         Options as given.
     notes : tuple of str
         What the signal chain reports (gaps and spans used, clock stage, torque sign).
+    moves : tuple of Move
+        The joint's moves and whether the selected segments cover them (with ``select_segments`` only).
     """
 
     fit: FitResult
@@ -97,6 +105,7 @@ class Result:
     figures: FigureData
     options: AnalysisOptions
     notes: tuple[str, ...]
+    moves: tuple[Move, ...] = ()
 
     def to_json_dict(self) -> dict[str, Any]:
         """The result as JSON-ready values (NaN → None), keys as documented for ``--json``.
@@ -119,7 +128,17 @@ class Result:
                         else _num(1e6 * self.quality.encoder_jitter_s),
                         "encoder_time_stamps": self.quality.encoder_time_stamps},
             "options": {**self.options.to_json_dict(), "band_hz": list(self.fit.band)},
+            **({} if self.frf.selection is None else {"excitation": self._excitation()}),
         }
+
+    def _excitation(self) -> dict[str, Any]:
+        """Segment selection's figures: the excited share of the record and which moves excite."""
+        sel = self.frf.selection
+        assert sel is not None
+        return {"excited_fraction": sel.excited_fraction, "segments_used": int(sel.keep.sum()),
+                "segments": int(sel.keep.size), "selection_applied": sel.applied,
+                "moves": [{"index": m.index, "start_s": round(m.start_s, 4), "duration_s": round(m.duration_s, 4),
+                           "peak_rad_s": round(m.peak_rad_s, 3), "excited": m.excited} for m in self.moves]}
 
 
 def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Result:
@@ -150,9 +169,13 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
     else:
         sig = prepare_signals(rec, options.torque_method, align=options.align)
         weighting = "coherence"
+    select = (options.band_hz or default_band_hz(sig.period_s)) if options.select_segments else None
     frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=options.segment_s,
                        torque_noise_Nm=sig.torque_noise_Nm, torque_alias_Nm=sig.torque_alias_Nm,
-                       jackknife_blocks=JACKKNIFE_BLOCKS)
+                       jackknife_blocks=JACKKNIFE_BLOCKS, select_band_hz=select)
+    moves = () if frf.selection is None else tuple(
+        describe_moves(sig.t_s, sig.speed_rad_s, sig.period_s, rec.counts_per_rev, math.pi / rec.pole_pairs,
+                       frf.selection))
     fit = fit_two_mass(frf, FitOptions(params=options.params, kind=options.fit, band_hz=options.band_hz,
                                        weighting=weighting), nominal=options.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
@@ -162,7 +185,7 @@ def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Res
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual)),
-                  options=options, notes=tuple(sig.notes))
+                  options=options, notes=tuple(sig.notes), moves=moves)
 
 
 def _num(x: float) -> float | None:
