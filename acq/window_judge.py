@@ -65,8 +65,9 @@ def analyse_window(path: str, sha256: str, request: dict[str, Any]) -> Outcome:
         excitation = outcome.doc.get("excitation")
         if excitation is not None:
             moves = excitation["moves"]
-            reasons.insert(0, f"{sum(m['excited'] for m in moves)} of {len(moves)} moves excite the joint "
-                              f"({100 * excitation['excited_fraction']:.0f} % of the window)")
+            lo, hi = outcome.doc["options"]["band_hz"]
+            reasons.insert(0, f"{sum(m['excited'] for m in moves)} of {len(moves)} moves put torque into {lo:g}…{hi:g} Hz "
+                              f"beyond chance ({100 * excitation['excited_fraction']:.0f} % of the window)")
         return replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
                        seconds=outcome.seconds)
     return outcome
