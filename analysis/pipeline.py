@@ -19,7 +19,7 @@ from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
 from analysis.model import TwoMassParams
 from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.report import FigureData, figure_data
-from analysis.segments import Move, describe_moves
+from analysis.segments import Move, SegmentSelection, describe_moves
 from analysis.signals import Recording, TorqueMethod, prepare_signals, prepare_signals_paper
 
 Pipeline = Literal["acq", "paper"]
@@ -128,17 +128,16 @@ class Result:
                         else _num(1e6 * self.quality.encoder_jitter_s),
                         "encoder_time_stamps": self.quality.encoder_time_stamps},
             "options": {**self.options.to_json_dict(), "band_hz": list(self.fit.band)},
-            **({} if self.frf.selection is None else {"excitation": self._excitation()}),
+            **({} if self.frf.selection is None else {"excitation": _excitation(self.frf.selection, self.moves)}),
         }
 
-    def _excitation(self) -> dict[str, Any]:
-        """Segment selection's figures: the excited share of the record and which moves excite."""
-        sel = self.frf.selection
-        assert sel is not None
-        return {"excited_fraction": sel.excited_fraction, "segments_used": int(sel.keep.sum()),
-                "segments": int(sel.keep.size), "selection_applied": sel.applied,
-                "moves": [{"index": m.index, "start_s": round(m.start_s, 4), "duration_s": round(m.duration_s, 4),
-                           "peak_rad_s": round(m.peak_rad_s, 3), "excited": m.excited} for m in self.moves]}
+
+def _excitation(sel: SegmentSelection, moves: tuple[Move, ...]) -> dict[str, Any]:
+    """Segment selection's figures: the excited share of the record and which moves excite."""
+    return {"excited_fraction": sel.excited_fraction, "segments_used": int(sel.keep.sum()),
+            "segments": int(sel.keep.size), "selection_applied": sel.applied,
+            "moves": [{"index": m.index, "start_s": round(m.start_s, 4), "duration_s": round(m.duration_s, 4),
+                       "peak_rad_s": round(m.peak_rad_s, 3), "excited": m.excited} for m in moves]}
 
 
 def analyze(rec: Recording, options: AnalysisOptions = AnalysisOptions()) -> Result:
