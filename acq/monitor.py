@@ -36,13 +36,13 @@ from acq.catalogue import Catalogue, Entry, Outcome
 from acq.recorder import Recorder, stop_on_signals
 from acq.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.session import load, repair
-from acq.trend import Trend, compute_trend
+from acq.trend import ELAPSED_TAG, Trend, compute_trend
 from acq.window_judge import analyse_window, marked
 from acqcore.errors import ConfigError
 from drivers.config import Bench
 from drivers.registry import open_bench
 
-WINDOW_TAG, ELAPSED_TAG = "monitor_window", "monitor_elapsed_s"
+WINDOW_TAG = "monitor_window"
 #: Expected window size = this × the data's raw size (HDF5 chunks, block tables, events): measured 1.1…1.2.
 _SIZE_MARGIN = 1.5
 

@@ -41,6 +41,9 @@ EWMA_L = 3.0
 State = Literal["baseline", "ok", "alarm", "skipped", "before baseline"]
 
 
+#: Tag of a monitor window (set by :mod:`acq.monitor`): machine time at its start, s; the x axis of a monitor's trend.
+ELAPSED_TAG = "monitor_elapsed_s"
+
 @dataclass(frozen=True)
 class TrendPoint:
     """One session in the trend.
@@ -306,8 +309,6 @@ def trend_widget(trend: Trend) -> Any:
                                    symbol="s", symbolBrush=color), name)
     k_plot.setXRange(-0.5, len(trend.points) - 0.5, padding=0.02)  # every session, whatever the curves hold
     step = max(1, len(trend.points) // 10)
-    from acq.monitor import ELAPSED_TAG  # here: acq.monitor imports this module
-
     elapsed = [p.entry.tags.get(ELAPSED_TAG) for p in trend.points]
     if trend.points and all(isinstance(e, int | float) for e in elapsed):  # a monitor's windows: its machine time
         ticks = [(float(i), f"{e / 3600:.1f} h") for i, e in enumerate(elapsed)][::step]  # type: ignore[operator]

@@ -43,10 +43,10 @@ from rich.table import Table
 from acq.display import format_value
 from acq.catalogue import Catalogue
 from acq.config import load_bench
-from acq.monitor import ELAPSED_TAG, WINDOW_TAG, Monitor, MonitorSettings, MonitorStatus
+from acq.monitor import WINDOW_TAG, Monitor, MonitorSettings, MonitorStatus
 from acq.retention import folder_bytes
 from acq.session import load
-from acq.trend import Trend, TrendPoint, compute_trend, render_trend_png
+from acq.trend import ELAPSED_TAG, Trend, TrendPoint, compute_trend, render_trend_png
 
 ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
 WINDOW_S, BASELINE, KEEP = 10.0, 5, 3
