@@ -61,6 +61,10 @@ MIGRATIONS: tuple[str, ...] = (
     """
     ALTER TABLE analyses ADD COLUMN partial INTEGER NOT NULL DEFAULT 0;
     """,
+    # 3 → 4: which share of a window and which moves excite the joint (segment selection, acq monitor)
+    """
+    ALTER TABLE analyses ADD COLUMN excitation_json TEXT;
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -218,6 +222,7 @@ class Catalogue:
             "mean_coherence": doc.get("quality", {}).get("mean_coherence"),
             "truth_json": json.dumps(doc["simulated_truth"]) if "simulated_truth" in doc else None,
             "partial": int(bool(doc.get("partial"))),
+            "excitation_json": json.dumps(doc["excitation"]) if "excitation" in doc else None,
         }
         for name, short in _PARAM_COLUMNS:
             lo, hi = doc.get("ci95", {}).get(name, (None, None))

@@ -36,14 +36,14 @@ from acq.catalogue import Catalogue, Entry, Outcome
 from acq.recorder import Recorder, stop_on_signals
 from acq.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.session import load, repair
-from acq.trend import Trend, compute_trend
+from acq.trend import ELAPSED_TAG, Trend, compute_trend
 from acq.window_judge import analyse_window, marked
 from acqcore.errors import ConfigError
 from analysis import AnalysisRequest
 from drivers.config import Bench
 from drivers.registry import open_bench
 
-WINDOW_TAG, ELAPSED_TAG = "monitor_window", "monitor_elapsed_s"
+WINDOW_TAG = "monitor_window"
 #: Expected window size = this × the data's raw size (HDF5 chunks, block tables, events): measured 1.1…1.2.
 _SIZE_MARGIN = 1.5
 
@@ -65,7 +65,8 @@ class MonitorSettings:
     baseline_windows: int = 5
     threshold_pct: float = 10.0
     ewma_lambda: float = 0.2
-    request: AnalysisRequest = AnalysisRequest()
+    # a robot program excites the joint only in parts: the analysis uses the segments that excite (analysis.segments)
+    request: AnalysisRequest = AnalysisRequest(select_segments=True)
 
 
 @dataclass
@@ -88,6 +89,15 @@ class MonitorStatus:
     baseline_K: float | None = None
     state: str = "starting"
     message: str = ""
+    last_excited_fraction: float | None = None  # share of the last analysed window that excites the joint
+    last_moves: tuple[dict[str, Any], ...] = ()  # its moves: index, start_s, duration_s, peak_rad_s, excited
+    excited_fraction_sum: float = 0.0  # over the windows judged for excitation (for the share of the program)
+    excitation_judged: int = 0
+
+    @property
+    def program_excited_fraction(self) -> float | None:
+        """Share of the program's windows (time) that excites the joint, over the windows judged so far."""
+        return self.excited_fraction_sum / self.excitation_judged if self.excitation_judged else None
 
 
 def expected_window_bytes(bench: Bench, window_s: float) -> int:
@@ -232,11 +242,24 @@ class Monitor:
         self.status.excited += verdict in ("ok", "poor", "failed")
         self.status.not_excited += verdict == "not excited"
         self.status.interrupted += verdict == "interrupted"
+        self._excitation(outcome, verdict)
         self._windows[key] = replace(self._windows[key], done=True)
         trend = self._trend()
         self._judge(trend, key)
         self._retain(trend)
         self._show()
+
+    def _excitation(self, outcome: Outcome, verdict: str | None) -> None:
+        """Which share of the window and which moves excite (segment selection); a window the joint did not
+        travel in excites nowhere."""
+        excitation = (outcome.doc or {}).get("excitation")
+        if excitation is None and verdict != "not excited":
+            return
+        st = self.status
+        st.last_excited_fraction = excitation["excited_fraction"] if excitation else 0.0
+        st.last_moves = tuple(excitation["moves"]) if excitation else ()
+        st.excited_fraction_sum += st.last_excited_fraction
+        st.excitation_judged += 1
 
     def _trend(self) -> Trend:
         entries = [e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import re
+from typing import Any
 from pathlib import Path
 
 import click
@@ -15,8 +16,11 @@ from acq.monitor import Monitor, MonitorSettings, MonitorStatus
 from acq.retention import parse_size
 from acq.values import format_value
 from acqcore.errors import ConfigError
+from drivers.motion import RPM_TO_RAD_S
 
 _UNITS_S = {"": 1.0, "s": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
+#: Moves listed in the status table (a window of a busy program holds a dozen or more).
+_MOVES_SHOWN = 8
 
 
 def parse_duration(option: str, text: str) -> float:
@@ -43,14 +47,37 @@ def status_table(st: MonitorStatus) -> Table:
         ("last K N·m/rad (95 %)", k_text),
         ("ΔK against the baseline", format_value(st.change_pct, "+.1f") + " %"),
         ("baseline K N·m/rad", format_value(st.baseline_K, ".1f")),
+        ("excited share: last window · all windows", f"{_pct(st.last_excited_fraction)} · "
+                                                     f"{_pct(st.program_excited_fraction)}"),
         ("trend state", f"[bold red]{st.state}[/]" if st.state == "alarm" else st.state),
         ("alarms raised", str(st.alarms)),
         ("disk used", f"{st.disk_bytes / 1e6:.1f} MB"),
     ]
     for what, value in rows:
         table.add_row(what, value)
+    if st.last_moves:
+        excited = sum(m["excited"] for m in st.last_moves)
+        table.add_row(f"moves of the last window: {excited} of {len(st.last_moves)} excite", moves_table(st.last_moves))
     if st.message:
         table.caption = st.message
+    return table
+
+
+def _pct(fraction: float | None) -> str:
+    return "—" if fraction is None else f"{100 * fraction:.0f} %"
+
+
+def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
+    """A window's moves: number, start (s), peak speed (rpm), whether the analysis used them (excites)."""
+    table = Table(box=None, pad_edge=False, show_edge=False)
+    for column in ("move", "start s", "peak rpm", "excites"):
+        table.add_column(column, justify="right")
+    for m in moves[:_MOVES_SHOWN]:
+        table.add_row(str(m["index"]), f"{m['start_s']:.2f}", f"{m['peak_rad_s'] / RPM_TO_RAD_S:.0f}",
+                      "[green]yes[/]" if m["excited"] else "no")
+    if len(moves) > _MOVES_SHOWN:
+        rest = moves[_MOVES_SHOWN:]
+        table.add_row("…", f"+{len(rest)} more", "", f"{sum(m['excited'] for m in rest)} yes")
     return table
 
 
@@ -99,7 +126,7 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
 
     def log(st: MonitorStatus) -> None:  # one line per change when not on a terminal (a service, a log file)
         line = (f"{st.machine_time_s / 3600:.2f} h: {st.captured} captured, {st.excited} excited, {st.analysed} "
-                f"analysed, K {format_value(st.last_K, '.1f')}, ΔK {format_value(st.change_pct, '+.1f')} %, "
+                f"analysed, excited {_pct(st.last_excited_fraction)} of the last window, K {format_value(st.last_K, '.1f')}, ΔK {format_value(st.change_pct, '+.1f')} %, "
                 f"{st.state}, {st.disk_bytes / 1e6:.1f} MB" + (f" — {st.message}" if st.message else ""))
         if line != last[0]:
             console.print(line, highlight=False, markup=False, soft_wrap=True)

@@ -36,6 +36,9 @@ EWMA_L = 3.0
 State = Literal["baseline", "ok", "alarm", "skipped", "before baseline"]
 
 
+#: Tag of a monitor window (set by :mod:`acq.monitor`): machine time at its start, s; the x axis of a monitor's trend.
+ELAPSED_TAG = "monitor_elapsed_s"
+
 @dataclass(frozen=True)
 class TrendPoint:
     """One session in the trend.
@@ -235,7 +238,6 @@ def trend_widget(trend: Trend) -> Any:
                        size="14pt")
     legend = pg.LegendItem(colCount=3, labelTextSize="10pt")  # a row of its own: it never covers a point
     widget.ci.addItem(legend, row=1, col=0)
-    widget.ci.layout.setRowFixedHeight(1, 80)
     k_plot = widget.addPlot(row=2, col=0)
     f_plot = widget.addPlot(row=3, col=0)
     widget.ci.layout.setRowStretchFactor(2, 3)
@@ -247,8 +249,10 @@ def trend_widget(trend: Trend) -> Any:
     k = np.array([p.entry.K_Nm_per_rad for _, p in pts], dtype=float)
     lo = np.array([p.entry.K_ci95[0] if p.entry.K_ci95[0] is not None else np.nan for _, p in pts], dtype=float)
     hi = np.array([p.entry.K_ci95[1] if p.entry.K_ci95[1] is not None else np.nan for _, p in pts], dtype=float)
-    k_plot.addItem(pg.ErrorBarItem(x=x, y=k, top=np.nan_to_num(hi - k), bottom=np.nan_to_num(k - lo), beam=0.2,
-                                   pen=pg.mkPen("#555", width=1.5)))
+    # intervals of the judged points only: a skipped point's (often wild) interval would be a bar without its dot
+    barred = np.array([_category(p) != "skipped" for _, p in pts], dtype=bool)
+    k_plot.addItem(pg.ErrorBarItem(x=x[barred], y=k[barred], top=np.nan_to_num(hi - k)[barred],
+                                   bottom=np.nan_to_num(k - lo)[barred], beam=0.2, pen=pg.mkPen("#555", width=1.5)))
     colors = {"baseline": "#17becf", "ok": "#1f77b4", "alarm: EWMA": "#ff7f0e", "alarm: threshold": "#d62728",
               "skipped": "#bbbbbb", "before baseline": "#bbbbbb"}
     for state, color in colors.items():
@@ -284,24 +288,37 @@ def trend_widget(trend: Trend) -> Any:
         values = values[np.isfinite(values)]
         pad = 0.05 * (values.max() - values.min() or values.max())
         k_plot.setYRange(values.min() - pad, values.max() + pad, padding=0)
+        no_k = [i for i, p in enumerate(trend.points) if p.entry.K_Nm_per_rad is None]
+        if no_k:  # a gap in the trend says why: those windows are there, without a number
+            legend.addItem(k_plot.plot(no_k, [values.min() - 0.5 * pad] * len(no_k), pen=None, symbol="x",
+                                       symbolSize=9, symbolPen="#777", symbolBrush="#777"),
+                           f"no K: {len(no_k)} not excited / failed")
         outside = int(np.sum(~judged_pts & ((k < values.min() - pad) | (k > values.max() + pad))))
         if outside:
             # a legend line only: an empty curve in the plot would upset its x range
             legend.addItem(pg.PlotDataItem(pen=None), f"{outside} skipped session(s) outside the range shown")
     for key, color, name in (("f_a_hz", "#2ca02c", "f_a (lower plot)"), ("f_r_hz", "#9467bd", "f_r (lower plot)")):
-        fx = [i for i, p in pts if getattr(p.entry, key) is not None]
+        # a skipped session's f_a, f_r (its fit is why it was skipped) would blow up the range like its K
+        fx = [i for i, p in pts if getattr(p.entry, key) is not None and _category(p) != "skipped"]
         legend.addItem(f_plot.plot(fx, [getattr(trend.points[i].entry, key) for i in fx], pen=pg.mkPen(color, width=2),
                                    symbol="s", symbolBrush=color), name)
     k_plot.setXRange(-0.5, len(trend.points) - 0.5, padding=0.02)  # every session, whatever the curves hold
     step = max(1, len(trend.points) // 10)
-    ticks = [(float(i), (p.entry.created_utc or "?")[:19].replace("T", "\n"))
-             for i, p in enumerate(trend.points)][::step]
+    elapsed = [p.entry.tags.get(ELAPSED_TAG) for p in trend.points]
+    if trend.points and all(isinstance(e, int | float) for e in elapsed):  # a monitor's windows: its machine time
+        ticks = [(float(i), f"{e / 3600:.1f} h") for i, e in enumerate(elapsed)][::step]  # type: ignore[operator]
+        x_label = "machine time at the window's start (h)"
+    else:
+        ticks = [(float(i), (p.entry.created_utc or "?")[:19].replace("T", "\n"))
+                 for i, p in enumerate(trend.points)][::step]
+        x_label = "session start (UTC)"
     for plot, label, unit in ((k_plot, "K", "N·m/rad"), (f_plot, "frequency", "Hz")):
         plot.setLabel("left", label, units=unit)
         plot.getAxis("left").enableAutoSIPrefix(False)
         plot.getAxis("bottom").setTicks([ticks])
         plot.showGrid(x=True, y=True, alpha=0.25)
-    f_plot.setLabel("bottom", "session start (UTC)")
+    f_plot.setLabel("bottom", x_label)
+    widget.ci.layout.setRowFixedHeight(1, 20 * -(-len(legend.items) // 3) + 5)  # every legend row, none clipped
     return frame
 
 

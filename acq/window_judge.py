@@ -37,7 +37,7 @@ def marked(path: str, sha256: str, request: AnalysisRequest, meta: dict[str, Any
            doc: dict[str, Any] | None = None) -> Outcome:
     """A window's catalogue record without numbers: verdict ``not excited`` / ``not analysed`` / ``interrupted``."""
     keep = {k: v for k, v in (doc or {}).items() if k in ("session", "analyzed_utc", "acq_version", "simulated_truth",
-                                                          "clock", "options")}
+                                                          "clock", "options", "excitation")}
     quality = {k: v for k, v in (doc or {}).get("quality", {}).items() if k.endswith("coherence")}
     out = {"options": request.to_json_dict(), **keep, "quality": {**quality, "verdict": verdict, "reasons": reasons}}
     return Outcome(path, sha256, request.key(), meta, out, None, 0.0)
@@ -62,6 +62,12 @@ def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
     if outcome.doc is not None and not_excited(outcome.doc):
         reasons = [r for r in outcome.doc["quality"]["reasons"] if not r.startswith("note: ")]
         reasons.sort(key=lambda r: "coherence" not in r)  # the excitation's own reasons first
+        excitation = outcome.doc.get("excitation")
+        if excitation is not None:
+            moves = excitation["moves"]
+            lo, hi = outcome.doc["options"]["band_hz"]
+            reasons.insert(0, f"{sum(m['excited'] for m in moves)} of {len(moves)} moves put torque into {lo:g}…{hi:g} Hz "
+                              f"beyond chance ({100 * excitation['excited_fraction']:.0f} % of the window)")
         return replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
                        seconds=outcome.seconds)
     return outcome

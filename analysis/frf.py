@@ -25,6 +25,7 @@ import numpy as np
 from scipy import signal
 
 from analysis.encoder import difference_response
+from analysis.segments import SegmentSelection, select_segments
 
 
 KERNEL_PER_BIN = 8
@@ -68,6 +69,8 @@ class FrequencyResponse:
     replicates : tuple of FrequencyResponse or None
         The same estimate with one contiguous block of segments left out, one per block (the
         delete-one-block jackknife of :func:`analysis.fit.fit_two_mass`); None when not asked for.
+    selection : SegmentSelection or None
+        The segments averaged when segment selection was asked for (:mod:`analysis.segments`); None: all.
     """
 
     f_hz: np.ndarray
@@ -81,6 +84,7 @@ class FrequencyResponse:
     noise_ratio: np.ndarray | None = None
     alias: np.ndarray | None = None
     replicates: tuple[FrequencyResponse, ...] | None = None
+    selection: SegmentSelection | None = None
 
 
 def min_duration_s(segment_s: float, overlap: float = 0.5) -> float:
@@ -141,6 +145,7 @@ def estimate_frf(
     torque_noise_Nm: np.ndarray | None = None,
     torque_alias_Nm: np.ndarray | None = None,
     jackknife_blocks: int = 0,
+    select_band_hz: tuple[float, float] | None = None,
 ) -> FrequencyResponse:
     """Estimate H1 = G_xy/G_xx and the coherence from torque and backward-difference speed.
 
@@ -164,6 +169,9 @@ def estimate_frf(
         Also estimate the response with each of this many contiguous blocks of segments left out
         (``replicates``, for the fit's delete-one-block jackknife). Fewer blocks when the record holds
         fewer than two segments per block; none below :data:`MIN_JACKKNIFE_BLOCKS`.
+    select_band_hz : tuple of float or None, optional
+        Average only the segments that excite the joint in this band (low, high), Hz
+        (:func:`analysis.segments.select_segments`; ``selection`` says which); None: every segment.
 
     Returns
     -------
@@ -190,9 +198,17 @@ def estimate_frf(
     N = None if torque_noise_Nm is None else seg.fft(np.asarray(torque_noise_Nm, dtype=float))
     U = None if torque_alias_Nm is None else [seg.fft(uk) for uk in np.atleast_2d(torque_alias_Nm)]
     n_fine = KERNEL_PER_BIN * nperseg
-    _, gxx_fine = signal.welch(x, fs=fs, window="hann", nperseg=min(n_fine, x.size), nfft=n_fine,
-                               detrend="linear")
-    full = _response(seg, X, Y, N, U, gxx_fine, period_s)
+    selection = None
+    if select_band_hz is not None:
+        f = np.fft.rfftfreq(nperseg, period_s)
+        selection = select_segments(X, Y, (f >= select_band_hz[0]) & (f <= select_band_hz[1]), nperseg, step)
+        keep = selection.keep
+        X, Y = X[keep], Y[keep]
+        N = None if N is None else N[keep]
+        U = None if U is None else [u[keep] for u in U]
+        n_segments = X.shape[0]
+    gxx_fine = _fine_psd(x, fs, nperseg, step, n_fine, None if selection is None else selection.runs())
+    full = replace(_response(seg, X, Y, N, U, gxx_fine, period_s), selection=selection)
     blocks = min(jackknife_blocks, n_segments // 2)
     if blocks < MIN_JACKKNIFE_BLOCKS:
         return full
@@ -202,6 +218,21 @@ def estimate_frf(
                            None if U is None else [u[keep] for u in U], gxx_fine, period_s)
                  for keep in (block != b for b in range(blocks)))
     return replace(full, replicates=reps)
+
+
+def _fine_psd(x: np.ndarray, fs: float, nperseg: int, step: int, n_fine: int,
+              runs: list[tuple[int, int]] | None) -> np.ndarray:
+    """Torque PSD at ``n_fine`` bins from the samples of the runs of segments (first, last + 1) given, each run's
+    Welch estimate (segments up to ``n_fine`` long) weighted by its number of segments; None: the whole record."""
+    if runs is None:
+        return signal.welch(x, fs=fs, window="hann", nperseg=min(n_fine, x.size), nfft=n_fine, detrend="linear")[1]
+    total = np.zeros(n_fine // 2 + 1)
+    for first, end in runs:
+        span = x[first * step: (end - 1) * step + nperseg]
+        _, psd = signal.welch(span, fs=fs, window="hann", nperseg=min(n_fine, span.size), nfft=n_fine,
+                              detrend="linear")
+        total += (end - first) * psd
+    return total / sum(end - first for first, end in runs)
 
 
 def _response(seg: _Segments, X: np.ndarray, Y: np.ndarray, N: np.ndarray | None, U: list[np.ndarray] | None,

@@ -15,13 +15,14 @@ from typing import Any
 from analysis.chain import SignalChain
 from analysis.clocks import ClockFit
 from analysis.diagnose import recording_fault, with_fault
-from analysis.fit import FitOptions, FitResult, PARAM_NAMES, fit_two_mass
+from analysis.fit import FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass
 from analysis.encoder import longest_gap_free_span
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
 from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.recording import Recording
 from analysis.report import FigureData, figure_data
 from analysis.request import AnalysisRequest
+from analysis.segments import Move, SegmentSelection, describe_moves
 from analysis.signals import prepare_signals
 
 # blocks of the delete-one-block jackknife behind the intervals: 10 gives 9 degrees of freedom
@@ -51,6 +52,8 @@ class Result:
         The signal chain it chose for the recording (the torque method resolved).
     notes : tuple of str
         What the signal chain reports (gaps and spans used, clock stage, torque sign).
+    moves : tuple of Move
+        The joint's moves and whether the selected segments cover them (with ``select_segments`` only).
     """
 
     fit: FitResult
@@ -61,6 +64,7 @@ class Result:
     request: AnalysisRequest
     chain: SignalChain
     notes: tuple[str, ...]
+    moves: tuple[Move, ...] = ()
 
     def to_json_dict(self) -> dict[str, Any]:
         """The result as JSON-ready values (NaN → None), keys as documented for ``--json``.
@@ -83,7 +87,16 @@ class Result:
                         else _num(1e6 * self.quality.encoder_jitter_s),
                         "encoder_time_stamps": self.quality.encoder_time_stamps},
             "options": {**self.request.to_json_dict(self.chain), "band_hz": list(self.fit.band)},
+            **({} if self.frf.selection is None else {"excitation": _excitation(self.frf.selection, self.moves)}),
         }
+
+
+def _excitation(sel: SegmentSelection, moves: tuple[Move, ...]) -> dict[str, Any]:
+    """Segment selection's figures: the excited share of the record and which moves excite."""
+    return {"excited_fraction": sel.excited_fraction, "segments_used": int(sel.keep.sum()),
+            "segments": int(sel.keep.size), "selection_applied": sel.applied,
+            "moves": [{"index": m.index, "start_s": round(m.start_s, 4), "duration_s": round(m.duration_s, 4),
+                       "peak_rad_s": round(m.peak_rad_s, 3), "excited": m.excited} for m in moves]}
 
 
 def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Result:
@@ -110,9 +123,13 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     require_two_segments(longest_gap_free_span(rec.encoder_index).count, rec.period_s, request.segment_s)
     chain = request.chain(rec)
     sig = prepare_signals(rec, chain)
+    select = (request.band_hz or default_band_hz(sig.period_s)) if request.select_segments else None
     frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=request.segment_s,
                        torque_noise_Nm=sig.torque_noise_Nm, torque_alias_Nm=sig.torque_alias_Nm,
-                       jackknife_blocks=JACKKNIFE_BLOCKS)
+                       jackknife_blocks=JACKKNIFE_BLOCKS, select_band_hz=select)
+    moves = () if frf.selection is None else tuple(
+        describe_moves(sig.t_s, sig.speed_rad_s, sig.period_s, rec.counts_per_rev, math.pi / rec.pole_pairs,
+                       frf.selection))
     fit = fit_two_mass(frf, FitOptions(params=request.params, kind=request.fit, band_hz=request.band_hz,
                                        weighting=chain.weighting), nominal=request.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
@@ -122,7 +139,7 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual)),
-                  request=request, chain=chain, notes=tuple(sig.notes))
+                  request=request, chain=chain, notes=tuple(sig.notes), moves=moves)
 
 
 def _num(x: float) -> float | None:

@@ -50,6 +50,9 @@ class AnalysisRequest:
     partial : bool
         Also analyse the intact part of a session still being recorded or damaged (read by the application
         that turns a session file into a :class:`Recording`; the analysis of a recording ignores it).
+    select_segments : bool
+        Average only the Welch segments that excite the joint in the fit band (:mod:`analysis.segments`;
+        for motion that excites in parts, e.g. a robot program); the result then says which moves do.
     """
 
     torque_method: TorqueMethod | None = None
@@ -61,6 +64,7 @@ class AnalysisRequest:
     nominal: TwoMassParams | None = None
     pipeline: Pipeline = "acq"
     partial: bool = False
+    select_segments: bool = False
 
     def chain(self, rec: Recording) -> SignalChain:
         """The signal chain this request asks for on ``rec`` (the torque method resolved by its phases)."""
@@ -79,7 +83,8 @@ class AnalysisRequest:
         nominal = None if self.nominal is None else {n: getattr(self.nominal, n) for n in PARAM_NAMES[:3]}
         return {"pipeline": self.pipeline, "torque_method": self.torque_method if chain is None else chain.torque_method,
                 "params": self.params, "fit": self.fit, "band_hz": None if self.band_hz is None else list(self.band_hz),
-                "align": self.align if chain is None else chain.align, "segment_s": self.segment_s, "nominal": nominal}
+                "align": self.align if chain is None else chain.align, "segment_s": self.segment_s, "nominal": nominal,
+                **({"select_segments": True} if self.select_segments else {})}
 
     @classmethod
     def from_json_dict(cls, options: dict[str, Any]) -> AnalysisRequest:

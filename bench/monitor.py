@@ -6,7 +6,8 @@
 All runs use ``configs/benches/sim_robot.toml`` in ``--fast`` (machine time simulated), 10 s windows,
 a baseline of 5 good windows, the default alarm rules (−10 % threshold, EWMA λ = 0.2 at 3σ), ``--keep 3``:
 
-* **constant K** — one monitor of ``--hours`` per seed: windows, excited share, alarms (any alarm is a
+* **constant K** — one monitor of ``--hours`` per seed: windows, excited windows, the share of the program's time
+  that excites the joint (segment selection, mean over the windows), alarms (any alarm is a
   false alarm), K scatter against the truth, the RSS of the monitor (and with its workers) after the first
   simulated hour and at the end, and the disk used;
 * **wear** — K falls ``--decay`` % of its new value per simulated hour over ``--decay-hours``: the window
@@ -42,10 +43,10 @@ from rich.table import Table
 from acq.values import format_value
 from acq.catalogue import Catalogue
 from acq.config import load_bench
-from acq.monitor import ELAPSED_TAG, WINDOW_TAG, Monitor, MonitorSettings, MonitorStatus
+from acq.monitor import WINDOW_TAG, Monitor, MonitorSettings, MonitorStatus
 from acq.retention import folder_bytes
 from acq.session import load
-from acq.trend import Trend, TrendPoint, compute_trend, render_trend_png
+from acq.trend import ELAPSED_TAG, Trend, TrendPoint, compute_trend, render_trend_png
 
 ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
 WINDOW_S, BASELINE, KEEP = 10.0, 5, 3
@@ -96,7 +97,7 @@ def run_monitor(folder: Path, hours: float, every_s: float, **sim: float) -> tup
 
 def constant_k(hours: float, every_s: float, seeds: list[int], tmp: Path, out: Console) -> None:
     table = Table(title=f"constant K, {hours:g} simulated h per seed, one 10 s window per {every_s:g} s")
-    for c in ("seed", "windows", "excited", "not excited", "false alarms", "K − truth % (mean ± sd)", "max |ΔK| %",
+    for c in ("seed", "windows", "excited", "not excited", "excited share of the program", "false alarms", "K − truth % (mean ± sd)", "max |ΔK| %",
               "RSS MB 1st h → end: monitor · with workers", "disk MB", "wall s"):
         table.add_column(c, justify="right")
     for seed in seeds:
@@ -108,7 +109,9 @@ def constant_k(hours: float, every_s: float, seeds: list[int], tmp: Path, out: C
         alarms = sum(p.state == "alarm" for p in trend.points)
         rss_text = " · ".join(f"{a:.0f} → {b:.0f} ({100 * (b / a - 1):+.1f} %)"
                               for a, b in zip(rss["first hour"], rss["end"])) if "first hour" in rss else "—"
-        table.add_row(str(seed), str(st.captured), str(st.excited), str(st.not_excited), str(alarms),
+        table.add_row(str(seed), str(st.captured), str(st.excited), str(st.not_excited),
+                      format_value(None if st.program_excited_fraction is None else 100 * st.program_excited_fraction,
+                                   ".0f") + " %", str(alarms),
                       f"{statistics.fmean(err):+.2f} ± {statistics.pstdev(err):.2f}",
                       f"{max(abs(p.change_pct or 0) for p in judged):.1f}", rss_text, f"{st.disk_bytes / 1e6:.0f}",
                       f"{rss['seconds']:.0f}")

@@ -235,3 +235,33 @@ def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None
     assert not not_excited({"quality": {**weak, "verdict": "ok"}, "clock": {"residual_s": 20e-6}})
     strong = {"verdict": "poor", "mean_coherence": 0.9, "excitation_coherence": 0.95}
     assert not not_excited({"quality": strong, "clock": {"residual_s": 20e-6}})  # poor for another reason
+
+
+def test_each_window_says_which_share_and_which_moves_excite_the_joint(four_windows: Path) -> None:
+    db = sqlite3.connect(four_windows / "catalogue.sqlite")
+    rows = [json.loads(r[0]) for r in db.execute("SELECT excitation_json FROM analyses")]
+    db.close()
+    assert len(rows) == 4
+    for exc in rows:  # the monitor asks for segment selection: every analysed window reports it
+        assert 0 < exc["excited_fraction"] <= 1 and exc["excited_fraction"] == exc["segments_used"] / exc["segments"]
+        assert exc["moves"] and any(m["excited"] for m in exc["moves"])
+        starts = [m["start_s"] for m in exc["moves"]]
+        assert starts == sorted(starts) and all(0 <= t < 10 for t in starts)  # moves inside the 10 s window
+
+
+def test_the_status_table_shows_the_excited_share_and_the_moves() -> None:
+    from rich.console import Console
+
+    from acq.monitor import MonitorStatus
+    from acq.monitor_cli import status_table
+
+    moves = ({"index": 0, "start_s": 0.45, "duration_s": 0.3, "peak_rad_s": 125.66, "excited": True},
+             {"index": 1, "start_s": 2.0, "duration_s": 1.4, "peak_rad_s": 4.19, "excited": False})
+    st = MonitorStatus("joint1", last_excited_fraction=0.12, last_moves=moves, excited_fraction_sum=0.9,
+                       excitation_judged=3)
+    console = Console(width=120, record=True)
+    console.print(status_table(st))
+    text = console.export_text()
+    assert "excited share: last window · all windows" in text and "12 % · 30 %" in text
+    assert "moves of the last window: 1 of 2 excite" in text
+    assert "1200" in text and "40" in text and "yes" in text  # peak speeds in rpm

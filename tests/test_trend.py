@@ -275,3 +275,34 @@ def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> Non
     assert 700.0 < low < 850.0 and 890.0 < high < 1100.0  # the judged points and their limits, not 13 000
     legend = next(item for item in layout.ci.items if isinstance(item, pg.LegendItem))
     assert "1 skipped session(s) outside the range shown" in [label.text for _, label in legend.items]
+
+
+def test_a_monitor_trend_is_drawn_over_machine_time_and_shows_the_windows_without_K(tmp_path: Path) -> None:
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    import pyqtgraph as pg
+
+    from acq.catalogue import Catalogue, Outcome
+    from acq.plots import ensure_app
+    from acq.trend import load_trend, trend_widget
+
+    path = tmp_path / "catalogue.sqlite"
+    with Catalogue(path) as c:  # windows every 30 min of machine time; 2 not excited, 1 skipped with a wild K
+        for n, (k, verdict) in enumerate([(890.0, "ok"), (None, "not excited"), (891.0, "ok"), (889.0, "ok"),
+                                          (13_000.0, "poor"), (None, "not excited"), (850.0, "ok")]):
+            doc = {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [None if k is None else 0.99 * k,
+                                                                               None if k is None else 1.01 * k]},
+                   "quality": {"verdict": verdict, "reasons": []}}
+            meta = {"session_id": f"w{n}", "joint": "joint1", "created_utc": f"2026-11-29T10:00:0{n}+00:00",
+                    "tags": {"monitor_window": n, "monitor_elapsed_s": 1800.0 * n}}
+            c.record(Outcome(f"/m/w{n}.h5", f"h{n}", "r", meta, doc, None, 1.0))
+    ensure_app(offscreen=True)
+    widget = trend_widget(load_trend(None, path, "joint1", baseline_sessions=3))
+    (layout,) = [item for item in widget.findChildren(object) if type(item).__name__ == "GraphicsLayoutWidget"]
+    k_plot, f_plot = [item for item in layout.ci.items if isinstance(item, pg.PlotItem)]
+    ticks = [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]]
+    assert ticks == ["0.0 h", "0.5 h", "1.0 h", "1.5 h", "2.0 h", "2.5 h", "3.0 h"]
+    assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (h)"
+    legend = next(item for item in layout.ci.items if isinstance(item, pg.LegendItem))
+    assert "no K: 2 not excited / failed" in [label.text for _, label in legend.items]
+    (bars,) = [item for item in k_plot.items if isinstance(item, pg.ErrorBarItem)]
+    assert sorted(bars.opts["x"]) == [0.0, 2.0, 3.0, 6.0]  # no bar for the skipped window 4
