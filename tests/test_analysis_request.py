@@ -26,9 +26,10 @@ def test_key_is_the_request_as_asked_and_the_code(monkeypatch: pytest.MonkeyPatc
     key = json.loads(asked.key())
     assert key == {"torque_method": None, "params": "K,Jm,Jl", "fit": "amplitude", "band_hz": None, "align": True,
                    "segment_s": 0.5, "nominal": None, "pipeline": "acq", "partial": False,
-                   "analysis": code_fingerprint()}
+                   "select_segments": False, "analysis": code_fingerprint()}
     others = [replace(asked, params="K"), replace(asked, band_hz=(20.0, 300.0)), replace(asked, pipeline="paper"),
               replace(asked, partial=True), replace(asked, torque_method="encoder"),
+              replace(asked, select_segments=True),
               replace(asked, nominal=TwoMassParams(900.0, 1e-4, 5e-4, 0.0))]
     assert len({asked.key(), *(o.key() for o in others)}) == 1 + len(others)
     monkeypatch.setattr(analysis.request, "code_fingerprint", lambda: "other code")
