@@ -25,8 +25,8 @@ four blocks) that Jacobian covariance is used, with the normal 1.96. Then the mi
 what the residual leaves unexplained, propagated to the parameters with its own size and correlation along
 frequency (:func:`analysis.adequacy.misfit_covariance`, a HAC sandwich) — the part no scatter between
 blocks shows because every period repeats it (the chain's small errors, a mode or a nonlinearity the
-two-mass model lacks). Last the chain's own accuracy (:data:`CHAIN_REL_STD`) as a scale common to all
-parameters. The 95 % interval is exp(ln θ ± half-width) on each value.
+two-mass model lacks). Where that share is below the chain's own accuracy (:data:`CHAIN_REL_STD`), the
+latter is taken instead. The 95 % interval is exp(ln θ ± half-width) on each value.
 
 The model is compared with the measurement as the Welch estimator sees it: H convolved with the
 Hann window's spectral kernel |W(ν)|², weighted by the finely resolved torque spectrum
@@ -58,12 +58,12 @@ BAND_HIGH_MAX_HZ = 500.0
 BAND_HIGH_FRACTION_OF_FENC = 0.4
 COHERENCE_CLIP = 0.99
 Z95 = 1.959963984540054
-# 1σ relative accuracy of the chain's torque and speed estimates, the one part of the interval no session
-# can show: a scale error of the torque (k_t, the current sensor's gain, the torque estimate's gain)
-# multiplies K, J_m, J_l and C alike and leaves the FRF's shape — so every residual — untouched. Where it
-# comes from: on the simulated bench (8 plants with K, J_m, J_l scaled 0.5…2, 10 seeds each, 10 s
-# sessions) every seed of a plant shares an error that is mostly such a common scale, −0.6…+0.6 %
-# (0.4…0.6 % on four plants). It assumes the real chain's torque is no less accurate than the simulated
+# 1σ relative accuracy of the chain's torque and speed estimates, the lower bound of the systematic part of
+# every interval: a scale error of the torque (k_t, the current sensor's gain, the torque estimate's gain)
+# multiplies K, J_m, J_l and C alike and leaves the FRF's shape — so every residual — untouched, so no
+# session can show it. Where it comes from: on the simulated bench (8 plants with K, J_m, J_l scaled
+# 0.5…2, 10 seeds each, 10 s sessions) every seed of a plant shares an error, −0.6…+0.6 % (0.4…0.6 % on
+# four plants), mostly such a common scale. It assumes the real chain's torque is no less accurate than the simulated
 # one — a k_t off by more (datasheets give ±5…10 %) is a wrong bench constant, not a noisy session. The
 # verdict's misfit test (:mod:`analysis.quality`) allows the same 0.4 % of |H| for the chain's small
 # errors in the FRF's shape (≈ 0.2…0.6 % at the bottom of the band on healthy simulated sessions).
@@ -345,8 +345,10 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
     if problem.replicates:
         cov, quantile = _jackknife(problem, res.x, options)
     cov = cov * (quantile / Z95) ** 2  # the interval below is ±1.96 σ of this covariance
-    cov += misfit_covariance(res.fun, jac, problem.f.size)
-    cov += np.log1p(CHAIN_REL_STD) ** 2  # a common scale: every log parameter moves by the same amount
+    misfit = misfit_covariance(res.fun, jac, problem.f.size)
+    # at least the chain's accuracy: it was measured as the chain's whole systematic error, the part a
+    # residual shows included, so it only tops up what the misfit leaves below it
+    cov += misfit + np.diag(np.clip(np.log1p(CHAIN_REL_STD) ** 2 - np.diag(misfit), 0.0, None))
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     ci = {n: (getattr(values, n), getattr(values, n)) for n in PARAM_NAMES}
     for name, x, s in zip(problem.free, res.x, sigma):

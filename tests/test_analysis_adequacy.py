@@ -12,7 +12,11 @@ from analysis.adequacy import band_misfits, bandwidth_bins, critical_t, misfit_c
 from analysis.fit import amplitude_misfits, fit_two_mass
 from analysis.frf import estimate_frf
 from analysis.quality import assess
-from tests.test_analysis_fit import PAPER, PERIOD_S, covers, simulate
+from analysis.sample_instants import EncoderJitter
+from tests.test_analysis_fit import COUNTS_PER_REV, PAPER, PERIOD_S, covers, simulate
+
+# the simulated encoder's resolution, without timing jitter: what the misfit test needs to know
+RESOLUTION = EncoderJitter(float("nan"), 0.0, False, lsb_rad=2.0 * np.pi / COUNTS_PER_REV)
 
 
 def _line(n: int = 400) -> np.ndarray:
@@ -68,11 +72,11 @@ def test_clean_session_fits_within_noise_and_its_intervals_hold_the_truth(clean_
     windows = band_misfits(f, misfit, reps, np.full(f.size, 0.004))
     assert reps.shape == (10, f.size)
     assert max(w.t for w in windows) < critical_t(len(windows), 10)  # 3.0 (at the top of the band) < 4.3
-    q = assess(frf, fit)
+    q = assess(frf, fit, encoder_jitter=RESOLUTION)
     assert q.verdict == "ok" and q.misfit_band_hz is None
     assert covers(fit, PAPER)
     half = {n: 0.5 * (hi - lo) / getattr(fit.values, n) for n, (lo, hi) in fit.ci95.items()}
-    assert all(0.008 < half[n] < 0.015 for n in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2"))  # scale floor ±0.8 % + misfit
+    assert all(0.0078 < half[n] < 0.015 for n in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2"))  # ≥ the chain floor ±0.78 %
 
 
 def test_a_backlash_like_low_frequency_misfit_makes_the_verdict_poor_and_names_the_band(clean_session):
@@ -81,7 +85,8 @@ def test_a_backlash_like_low_frequency_misfit_makes_the_verdict_poor_and_names_t
     dip = 1.0 - 0.04 / (1.0 + (frf.f_hz / 40.0) ** 8)
     bent = replace(frf, H=frf.H * dip, replicates=tuple(replace(r, H=r.H * dip) for r in frf.replicates))
     fit = fit_two_mass(bent)
-    q = assess(bent, fit)
+    assert assess(bent, fit).misfit_band_hz is None  # the encoder's resolution unknown: not judged
+    q = assess(bent, fit, encoder_jitter=RESOLUTION)
     assert q.verdict == "poor" and q.misfit_band_hz is not None
     low, high = q.misfit_band_hz
     assert low == 10.0 and 24.0 <= high <= 60.0
