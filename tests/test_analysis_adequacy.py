@@ -1,0 +1,94 @@
+"""The two-mass model's adequacy from the session's own data (analysis/adequacy.py, issue #13): the misfit's
+share of the intervals (HAC) and the verdict's misfit test, on synthetic residuals and simulated sessions."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from analysis.adequacy import band_misfits, bandwidth_bins, critical_t, misfit_covariance
+from analysis.fit import amplitude_misfits, fit_two_mass
+from analysis.frf import estimate_frf
+from analysis.quality import assess
+from analysis.sample_instants import EncoderJitter
+from tests.test_analysis_fit import COUNTS_PER_REV, PAPER, PERIOD_S, covers, simulate
+
+# the simulated encoder's resolution, without timing jitter: what the misfit test needs to know
+RESOLUTION = EncoderJitter(float("nan"), 0.0, False, lsb_rad=2.0 * np.pi / COUNTS_PER_REV)
+
+
+def _line(n: int = 400) -> np.ndarray:
+    """Jacobian of a straight line a + b·x over n points, x in −1…1."""
+    x = np.linspace(-1.0, 1.0, n)
+    return np.column_stack([np.ones(n), x])
+
+
+def test_hac_of_white_residuals_is_the_classical_covariance():
+    rng = np.random.default_rng(1)
+    J = _line()
+    r = 0.01 * rng.standard_normal(J.shape[0])
+    cov = misfit_covariance(r, J, r.size)
+    classical = np.mean(r**2) * np.linalg.inv(J.T @ J)
+    assert bandwidth_bins(r) <= 2
+    assert np.allclose(np.sqrt(np.diag(cov)), np.sqrt(np.diag(classical)), rtol=0.15)
+
+
+def test_hac_of_a_smooth_misfit_is_several_times_wider_than_white_residuals_of_the_same_size():
+    J = _line()
+    x = np.linspace(-1.0, 1.0, J.shape[0])
+    smooth = 0.01 * np.sqrt(2.0) * np.sin(2.0 * np.pi * 1.5 * x)  # RMS 1 %, three half-waves over the band
+    white = 0.01 * np.random.default_rng(2).standard_normal(x.size)
+    assert bandwidth_bins(smooth) > 20
+    ratio = np.sqrt(np.diag(misfit_covariance(smooth, J, x.size)) / np.diag(misfit_covariance(white, J, x.size)))
+    assert np.all(ratio > 3.0)
+
+
+def test_band_misfits_of_noise_stay_below_the_critical_t_and_a_5_percent_step_is_found():
+    rng = np.random.default_rng(3)
+    f = np.arange(10.0, 400.0, 2.0)
+    reps = 0.003 * rng.standard_normal((10, f.size))  # ten replicates, 0.3 % per bin
+    misfit = reps.mean(axis=0)
+    windows = band_misfits(f, misfit, reps)
+    t_crit = critical_t(len(windows), reps.shape[0])
+    assert 4.0 < t_crit < 5.0  # 48 windows, 9 degrees of freedom
+    assert max(w.t for w in windows) < t_crit
+    bumped = misfit + np.where((f >= 150.0) & (f < 170.0), 0.05, 0.0)
+    worst = max(band_misfits(f, bumped, reps + (bumped - misfit)), key=lambda w: w.t)
+    assert 140.0 <= worst.low_hz and worst.high_hz <= 180.0 and worst.t > 2.0 * t_crit
+
+
+@pytest.fixture(scope="module")
+def clean_session():
+    rec = simulate(PAPER, 0)
+    frf = estimate_frf(rec.torque_Nm, rec.speed_rad_s, PERIOD_S, jackknife_blocks=10)
+    return frf, fit_two_mass(frf)
+
+
+def test_clean_session_fits_within_noise_and_its_intervals_hold_the_truth(clean_session):
+    frf, fit = clean_session
+    f, misfit, reps = amplitude_misfits(frf, fit)
+    windows = band_misfits(f, misfit, reps, np.full(f.size, 0.004))
+    assert reps.shape == (10, f.size)
+    assert max(w.t for w in windows) < critical_t(len(windows), 10)  # 3.0 (at the top of the band) < 4.3
+    q = assess(frf, fit, encoder_jitter=RESOLUTION)
+    assert q.verdict == "ok" and q.misfit_band_hz is None
+    assert covers(fit, PAPER)
+    half = {n: 0.5 * (hi - lo) / getattr(fit.values, n) for n, (lo, hi) in fit.ci95.items()}
+    assert all(0.0078 < half[n] < 0.015 for n in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2"))  # ≥ the chain floor ±0.78 %
+
+
+def test_a_backlash_like_low_frequency_misfit_makes_the_verdict_poor_and_names_the_band(clean_session):
+    frf, _ = clean_session
+    # |H| 4 % low below 40 Hz, as a dead zone softens the joint at the slow, large twists of the motion
+    dip = 1.0 - 0.04 / (1.0 + (frf.f_hz / 40.0) ** 8)
+    bent = replace(frf, H=frf.H * dip, replicates=tuple(replace(r, H=r.H * dip) for r in frf.replicates))
+    fit = fit_two_mass(bent)
+    assert assess(bent, fit).misfit_band_hz is None  # the encoder's resolution unknown: not judged
+    q = assess(bent, fit, encoder_jitter=RESOLUTION)
+    assert q.verdict == "poor" and q.misfit_band_hz is not None
+    low, high = q.misfit_band_hz
+    assert low == 10.0 and 24.0 <= high <= 60.0
+    assert q.reasons[0].startswith(f"the two-mass model does not fit |H| between 10 and {high:.0f} Hz: it misses by")
+    assert "a third mode or backlash in the band" in q.reasons[0]
