@@ -249,13 +249,10 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     y, phi = i - offset.dc_a, th + offset.theta0_rad
     g = -np.sin(phi)
     tn = np.linspace(-1.0, 1.0, y.size)
-    drift = _slow_offset_columns(y.size, rate_hz)
-    nd = drift.shape[0]
+    cols = _slow_offset_columns(y.size, rate_hz, spare_rows=3)  # the slow offset, the angle columns, then the lines
+    nd = cols.shape[0] - 3
     iq1, _ = _spline_iq(y, g, m, smoothing, np.ones((1, y.size)))
     w_e = np.gradient(th) * rate_hz
-    # the columns as rows of one array: the slow offset, the three angle columns, then four per line found
-    cols = np.concatenate((drift, np.empty((3, y.size))))
-    del drift
     cos_phi = np.cos(phi)
 
     def angle_columns(iq_a: np.ndarray) -> None:
@@ -334,14 +331,15 @@ class Interference:
     offset_drift_a: float
 
 
-def _slow_offset_columns(n: int, rate_hz: float) -> np.ndarray:
-    """Cubic B-spline basis in time with knots ``OFFSET_KNOT_S`` apart (sums to 1 at every sample), one row each."""
+def _slow_offset_columns(n: int, rate_hz: float, spare_rows: int = 0) -> np.ndarray:
+    """Cubic B-spline basis in time with knots ``OFFSET_KNOT_S`` apart (sums to 1 at every sample), one row each,
+    followed by ``spare_rows`` rows of zeros for the caller's own columns."""
     u = np.arange(n) / (OFFSET_KNOT_S * rate_hz)
     nk = int(np.floor(u[-1])) + 1
     k = np.minimum(np.floor(u).astype(int), nk - 1)
     r = u - k
     w = np.stack([(1 - r) ** 3, 3 * r**3 - 6 * r**2 + 4, -3 * r**3 + 3 * r**2 + 3 * r + 1, r**3], axis=1) / 6.0
-    cols = np.zeros((nk + 3, n))
+    cols = np.zeros((nk + 3 + spare_rows, n))
     bounds = np.searchsorted(k, np.arange(nk + 1))
     for q, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):  # knot interval q carries functions q … q + 3
         for j in range(4):
@@ -456,7 +454,7 @@ def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, smoothing: float,
         s0, s1 = k0 * m, min(n, k1 * m)
         act = np.flatnonzero(np.any(Vt[:, s0:s1], axis=1))
         v, yb = Vt[act, s0:s1], Yt[:, s0:s1]
-        VV[np.ix_(act, act)] += v @ v.T
+        VV[act[:, None], act] += v @ v.T
         VY[act] += v @ yb.T
         rows = np.zeros((ny + act.size, (k1 - k0) * m))
         np.multiply(yb, g[s0:s1], out=rows[:ny, :s1 - s0])
