@@ -334,16 +334,17 @@ class Interference:
 def _slow_offset_columns(n: int, rate_hz: float, spare_rows: int = 0) -> np.ndarray:
     """Cubic B-spline basis in time with knots ``OFFSET_KNOT_S`` apart (sums to 1 at every sample), one row each,
     followed by ``spare_rows`` rows of zeros for the caller's own columns."""
-    u = np.arange(n) / (OFFSET_KNOT_S * rate_hz)
-    nk = int(np.floor(u[-1])) + 1
-    k = np.minimum(np.floor(u).astype(int), nk - 1)
-    r = u - k
-    w = np.stack([(1 - r) ** 3, 3 * r**3 - 6 * r**2 + 4, -3 * r**3 + 3 * r**2 + 3 * r + 1, r**3], axis=1) / 6.0
+    span = OFFSET_KNOT_S * rate_hz
+    nk = int(np.floor((n - 1) / span)) + 1
     cols = np.zeros((nk + 3 + spare_rows, n))
-    bounds = np.searchsorted(k, np.arange(nk + 1))
+    bounds = np.searchsorted(np.minimum(np.floor(np.arange(n) / span), nk - 1), np.arange(nk + 1))
     for q, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):  # knot interval q carries functions q … q + 3
-        for j in range(4):
-            cols[q + j, a:b] = w[a:b, j]
+        r = np.arange(a, b) / span - q
+        r2, r3 = r**2, r**3
+        cols[q, a:b] = (1 - r) ** 3 / 6.0
+        cols[q + 1, a:b] = (3 * r3 - 6 * r2 + 4) / 6.0
+        cols[q + 2, a:b] = (-3 * r3 + 3 * r2 + 3 * r + 1) / 6.0
+        cols[q + 3, a:b] = r3 / 6.0
     return cols
 
 
@@ -484,8 +485,9 @@ def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, smoothing: float,
     Zy, Zu = Z[:, :ny], Z[:, ny:]
     beta = np.linalg.lstsq(VV - Zu.T @ Zu, VY - Zu.T @ Zy, rcond=None)[0]
     coef = _banded_triangular_solve(R, Zy - Zu @ beta, transpose=False)
-    c4 = np.stack([coef[k:k + nk] for k in range(4)], axis=2)  # (nk, r, 4)
-    s_out = np.matmul(c4, W.T).transpose(0, 2, 1).reshape(nk * m, -1)[:n]  # (nk, r, m) → samples
+    c4 = np.stack([coef[k:k + nk] for k in range(4)])  # (4, nk, r): the 4 coefficients active in each span
+    # one wide product (m, 4) @ (4, nk·r) instead of nk tiny ones, then (m, nk, r) → samples
+    s_out = (W @ c4.reshape(4, -1)).reshape(m, nk, -1).transpose(1, 0, 2).reshape(nk * m, -1)[:n]
     return (s_out[:, 0], beta[:, 0]) if y.ndim == 1 else (s_out, beta)
 
 
