@@ -157,7 +157,7 @@ def current_crossings_s(current_a: np.ndarray, rate_hz: float, first_index: int 
     whichever is larger, so quasi-DC stretches near reversals and standstill do not chatter.
     """
     i = np.asarray(current_a, dtype=np.float64)
-    lo, hi = (_percentile(i, q) for q in (1.0, 99.0))
+    lo, hi = (percentile_without_copy(i, q) for q in (1.0, 99.0))
     noise = 1.4826 * np.median(np.abs(np.diff(i[: 1 << 18], 2))) / np.sqrt(6.0)
     return (first_index + _crossings(lambda a, b: i[a:b] - 0.5 * (lo + hi), i.size,
                                      max(5.0 * noise, 0.01 * (hi - lo)))) / rate_hz
@@ -174,7 +174,7 @@ def angle_crossings_s(angle: CubicSpline, pole_pairs: int, t_start_s: float, t_s
                                   n, 0.05) / rate_hz
 
 
-def _percentile(x: np.ndarray, q: float) -> float:
+def percentile_without_copy(x: np.ndarray, q: float) -> float:
     """``np.percentile(x, q)`` (linear interpolation) without copying ``x``.
 
     NumPy partitions a copy of the whole array (123 MB for 10 min at 25.6 kS/s); here the two order statistics

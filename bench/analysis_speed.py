@@ -38,6 +38,8 @@ from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:  # this checkout's acq and analysis, also in the children
+    sys.path.insert(0, str(ROOT))
 TARGET_CPU_60S = 0.4
 TARGET_CPU_600S = 4.0
 TARGET_RSS_600S_MB = 600.0
