@@ -226,8 +226,8 @@ def prepare_signals(rec: Recording, torque_method: TorqueMethod = "encoder", ali
             t_drive = clock.drive_time_s(t_piece)
             tq, theta0 = _demodulated(piece, rec, angle(t_drive), torque_method, theta0,
                                       noise_seed=a if noise is not None else None, found=found, gains_found=gains)
-            if resampling == "antialias":  # torque, its noise realisation, the alias terms' real and imaginary parts
-                tq = np.atleast_2d(tq)  # moved in one filter call and one spline
+            if alias is not None:  # anti-alias resampling: the torque, its noise realisation and the alias terms' real
+                tq = np.atleast_2d(tq)  # and imaginary parts moved in one filter call and one spline
                 rows = np.empty((tq.shape[0] + 2 * ALIAS_ORDERS, tq.shape[1]))
                 rows[:tq.shape[0]] = tq
                 turn = np.exp(-2j * np.pi * ((t_drive / rec.period_s) % 1.0))
