@@ -28,7 +28,8 @@ def antialias(x: np.ndarray, rate_hz: float, f_pass_hz: float, f_stop_hz: float)
     Parameters
     ----------
     x : ndarray
-        Signal sampled at ``rate_hz`` (sample 0 at time 0 of its own clock).
+        Signal sampled at ``rate_hz`` (sample 0 at time 0 of its own clock); shape (..., n): several signals
+        on the same samples are filtered along the last axis in one call.
     rate_hz : float
         Sampling rate of ``x``, Hz.
     f_pass_hz, f_stop_hz : float
@@ -37,9 +38,11 @@ def antialias(x: np.ndarray, rate_hz: float, f_pass_hz: float, f_stop_hz: float)
     if not 0.0 < f_pass_hz < f_stop_hz:
         raise ValueError(f"need 0 < f_pass_hz < f_stop_hz, got {f_pass_hz}, {f_stop_hz}")
     q = max(1, int(rate_hz // (8.0 * f_stop_hz)))
-    y = resample_poly(np.asarray(x, dtype=np.float64), 1, q) if q > 1 else np.asarray(x, dtype=np.float64)
+    x = np.asarray(x, dtype=np.float64)
+    y = resample_poly(x, 1, q, axis=-1) if q > 1 else x
     rate = rate_hz / q
-    return oaconvolve(y, _lowpass(rate, f_pass_hz, f_stop_hz), mode="same"), rate
+    h = _lowpass(rate, f_pass_hz, f_stop_hz)
+    return oaconvolve(y, h.reshape((1,) * (y.ndim - 1) + h.shape), mode="same", axes=-1), rate
 
 
 def _lowpass(rate_hz: float, f_pass_hz: float, f_stop_hz: float) -> np.ndarray:
@@ -61,7 +64,7 @@ def sample_at(x: np.ndarray, rate_hz: float, t0_s: float, t_s: np.ndarray) -> np
     Parameters
     ----------
     x : ndarray
-        Samples at ``t0_s + i/rate_hz``.
+        Samples at ``t0_s + i/rate_hz``, shape (..., n) (several signals read at once).
     rate_hz : float
         Sampling rate of ``x``, Hz.
     t0_s : float
@@ -70,10 +73,10 @@ def sample_at(x: np.ndarray, rate_hz: float, t0_s: float, t_s: np.ndarray) -> np
         Instants, s, inside the sampled span.
     """
     t = np.asarray(t_s, dtype=np.float64)
-    span = (t0_s, t0_s + (x.size - 1) / rate_hz)
+    span = (t0_s, t0_s + (x.shape[-1] - 1) / rate_hz)
     if t.size and (t.min() < span[0] - 1e-12 or t.max() > span[1] + 1e-12):
         raise ValueError(f"instants {t.min():.6f}…{t.max():.6f} s outside the signal {span[0]:.6f}…{span[1]:.6f} s")
-    return CubicSpline(np.arange(x.size), x)((t - t0_s) * rate_hz)
+    return CubicSpline(np.arange(x.shape[-1]), x, axis=-1)((t - t0_s) * rate_hz)
 
 
 def to_instants(x: np.ndarray, rate_hz: float, t0_s: float, t_s: np.ndarray, f_pass_hz: float,
@@ -83,7 +86,8 @@ def to_instants(x: np.ndarray, rate_hz: float, t0_s: float, t_s: np.ndarray, f_p
     Parameters
     ----------
     x : ndarray
-        Samples at ``t0_s + i/rate_hz`` (e.g. torque, N·m, at DAQ instants).
+        Samples at ``t0_s + i/rate_hz`` (e.g. torque, N·m, at DAQ instants); shape (..., n) moves several
+        signals at once (one filter call, one spline), shape (..., len(t_s)) out.
     rate_hz : float
         Sampling rate of ``x``, Hz.
     t0_s : float

@@ -230,15 +230,22 @@ def torque_on_instants(rec: Recording, spans: Spans, chain: SignalChain = Signal
             t_drive = clock.drive_time_s(t_piece)
             tq, theta0 = _demodulated(piece, rec, spans.angle(t_drive), chain.torque_method, theta0,
                                       noise_seed=a if noise is not None else None, found=found, gains_found=gains)
-            if noise is not None:
-                tq, tq_noise = tq
-                noise[sel] = resample.to_instants(tq_noise, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
-            if alias is not None:
-                for k in range(1, ALIAS_ORDERS + 1):
-                    z = tq * np.exp(-2j * np.pi * k * ((t_drive / rec.period_s) % 1.0))
-                    alias[k - 1, sel] = (resample.to_instants(z.real, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
-                                         + 1j * resample.to_instants(z.imag, rec.rate_hz, t0, t_daq[sel],
-                                                                     f_pass, f_stop))
+            if alias is not None:  # anti-alias resampling: the torque, its noise realisation and the alias terms' real
+                tq = np.atleast_2d(tq)  # and imaginary parts moved in one filter call and one spline
+                rows = np.empty((tq.shape[0] + 2 * ALIAS_ORDERS, tq.shape[1]))
+                rows[:tq.shape[0]] = tq
+                turn = np.exp(-2j * np.pi * ((t_drive / rec.period_s) % 1.0))
+                z = tq[0] * turn
+                for order in range(ALIAS_ORDERS):
+                    rows[tq.shape[0] + 2 * order], rows[tq.shape[0] + 2 * order + 1] = z.real, z.imag
+                    z *= turn
+                del tq, turn, z
+                moved = resample.to_instants(rows, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
+                out[sel] = moved[0]
+                if noise is not None:
+                    noise[sel] = moved[1]
+                alias[:, sel] = moved[-2 * ALIAS_ORDERS::2] + 1j * moved[-2 * ALIAS_ORDERS + 1::2]
+                continue
         else:
             k = np.clip(np.searchsorted(t_daq, t_piece), 0, t_daq.size - 1)
             tq = torque.torque_hilbert(piece["i_a"], rec.k_t_Nm_per_A, sign[k])

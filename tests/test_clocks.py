@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from analysis.clock_search import overlap_correlation
+from analysis.clocks import percentile_without_copy
 from analysis.recording import Recording
 from analysis.signals import prepare_signals
 from drivers.config import Bench, Profile
@@ -51,6 +52,16 @@ def own_time_columns(rec: Recording) -> Recording:
     return replace(rec, block_host_ns=np.rint(last / rec.rate_hz * 1e9).astype(np.int64),
                    encoder_host_ns=np.rint(rec.encoder_index * rec.period_s * 1e9).astype(np.int64),
                    host_clock_shared=False)
+
+
+@pytest.mark.parametrize("q", [0.0, 1.0, 37.3, 99.0, 100.0])
+def test_the_copy_free_percentile_of_a_long_current_is_numpys(q: float) -> None:
+    rng = np.random.default_rng(5)
+    n = 1_300_001  # long enough for the chunked path; ties and a skewed tail included
+    x = np.concatenate((np.round(3.0 * np.sin(np.arange(n - 1000) * 1e-3), 2), rng.exponential(5.0, 1000)))
+    assert percentile_without_copy(x, q) == pytest.approx(np.percentile(x, q), rel=1e-15, abs=1e-15)
+    x[n // 2] = np.nan
+    assert np.isnan(percentile_without_copy(x, q))
 
 
 def test_overlap_correlation_is_the_pearson_correlation_over_each_lags_overlap() -> None:
