@@ -11,7 +11,7 @@ import sys
 #: 21.5 s with two; with the machine loaded (load 2.6) OpenBLAS's default threads took 71 s wall against 12.4 s.
 #: After the blocked spline products (issue 17; bench/analysis_speed.py, load ≈ 14): 60 s session 1.16 s CPU with
 #: one thread, 2.29 s with the default; 10 min 10.8 s against 26.3 s, and 70 s wall against 152 s. Batch and monitor
-#: workers pin one thread as well (acq/batch.py).
+#: workers pin one thread as well (acq/monitoring/batch.py).
 BLAS_THREADS = "1"
 
 
@@ -21,7 +21,7 @@ def main() -> None:
     for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
         os.environ.setdefault(name, BLAS_THREADS)
     try:
-        from acq.cli import main as run_cli
+        from acq.ui.cli import main as run_cli
     except KeyboardInterrupt:
         sys.stderr.write("acq: interrupted\n")
         sys.exit(130)

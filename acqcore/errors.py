@@ -1,6 +1,6 @@
 """The one error type people see, and its kinds.
 
-Exception tree (each kind maps to a process exit code in ``acq.cli``)::
+Exception tree (each kind maps to a process exit code in ``acq.ui.cli``)::
 
     AcqError                      one line for people; ``kind`` selects the exit code
      ├── ConfigError              bad input: config file, option, session file  -> exit 2

@@ -44,7 +44,7 @@ class AnalysisRequest:
         Welch segment length, s.
     nominal : TwoMassParams or None
         The bench's nominal values (needed for ``params="K"``; otherwise one extra fit start). None: the
-        application fills in the bench's (:func:`acq.analyze.analyze_session`).
+        application fills in the bench's (:func:`acq.offline.analyze.analyze_session`).
     pipeline : {"acq", "paper"}
         Our chain or the paper's (:mod:`analysis.chain`).
     partial : bool

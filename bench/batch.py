@@ -29,11 +29,11 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from acq.batch import find_sessions, run_batch
+from acq.monitoring.batch import find_sessions, run_batch
 from analysis import AnalysisRequest
-from acq.catalogue import Catalogue, Outcome
 from acq.config import load_bench, load_profile
-from acq.recorder import Recorder
+from acq.monitoring.catalogue import Catalogue, Outcome
+from acq.recording.recorder import Recorder
 from drivers.registry import open_bench
 from tests.pg_server import new_database, server_binaries, throwaway_server
 

@@ -60,9 +60,9 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=1)
     ap.add_argument("--scenario", type=int, default=1)
     args = ap.parse_args()
-    from acq.analyze import recording_from_session
-    from acq.recorder import Recorder
-    from acq.session import load
+    from acq.offline.analyze import recording_from_session
+    from acq.recording.recorder import Recorder
+    from acq.recording.session import load
     from drivers.registry import open_bench
     from drivers.sim.bench import SimBench
 

@@ -4,7 +4,7 @@
 
 Writes the pair in the form ``acq export`` writes (``t_s`` to the ns, currents in their shortest
 exact form, encoder with ``index`` and ``drive_time_s``) into a temporary folder, then times
-:func:`acq.importers.import_session` in this process (median of ``--repeat``, wall and CPU), the floor —
+:func:`acq.offline.importers.import_session` in this process (median of ``--repeat``, wall and CPU), the floor —
 pandas' C parser reading the same two files into float64 (``pandas.read_csv(engine="c")``, median of
 ``--repeat``; ``pip install pandas`` for it) — and their ratio, and once the whole ``acq import`` command in a
 fresh process (Python start-up and the package's imports included). Target (issue 17): import ≤ 2× the floor.
@@ -25,7 +25,7 @@ from rich.console import Console
 from rich.table import Table
 
 from acq.config import DEFAULT_BENCH, load_bench, load_profile
-from acq.importers import import_session
+from acq.offline.importers import import_session
 
 RATE_HZ = 25600.0
 PERIOD_S = 0.001

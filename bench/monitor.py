@@ -40,13 +40,13 @@ import psutil
 from rich.console import Console
 from rich.table import Table
 
-from acq.values import format_value
-from acq.catalogue import Catalogue
 from acq.config import load_bench
-from acq.monitor import WINDOW_TAG, Monitor, MonitorSettings, MonitorStatus
-from acq.retention import folder_bytes
-from acq.session import load
-from acq.trend import ELAPSED_TAG, Trend, TrendPoint, compute_trend, render_trend_png
+from acq.monitoring.catalogue import Catalogue
+from acq.monitoring.monitor import WINDOW_TAG, Monitor, MonitorSettings, MonitorStatus
+from acq.monitoring.retention import folder_bytes
+from acq.monitoring.trend import ELAPSED_TAG, Trend, TrendPoint, compute_trend, render_trend_png
+from acq.recording.session import load
+from acq.ui.values import format_value
 
 ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
 WINDOW_S, BASELINE, KEEP = 10.0, 5, 3

@@ -22,7 +22,7 @@ from rich.console import Console
 from rich.table import Table
 
 from acq.config import load_bench, load_profile
-from acq.recorder import Recorder
+from acq.recording.recorder import Recorder
 from drivers.config import Bench
 from drivers.registry import open_bench
 

@@ -3,8 +3,8 @@
 A scenario is the bench's ``[sim]``/``[daq]``/``[drive]``/``[encoder]`` settings, the profile, the record
 length and the outcome **expected before running**: ``ok`` within K ±2 %, J ±4 % (the plain paper plant
 ±1 % / ±2 %), or ``not ok`` with the reason the analysis should give. Adding a scenario is one line of
-:data:`SCENARIOS`. A run records a real session through :class:`acq.recorder.Recorder` from the simulated
-drivers (``--fast``) into an HDF5 file and analyses what :func:`acq.analyze.recording_from_session` reads
+:data:`SCENARIOS`. A run records a real session through :class:`acq.recording.recorder.Recorder` from the simulated
+drivers (``--fast``) into an HDF5 file and analyses what :func:`acq.offline.analyze.recording_from_session` reads
 back — the same path as ``acq record`` — so options other parts of the simulator add (e.g. the drive's
 SYNC-latch jitter) take effect by naming them in ``sim``.
 
@@ -175,7 +175,7 @@ def scenario_bench(sc: Scenario, seed: int, offset_s: float, drift_ppm: float) -
 def record(sc: Scenario, seed: int, offset_s: float, drift_ppm: float, out_dir: Path) -> tuple[Path, dict[str, Any]]:
     """Record one scenario run as a session file in ``out_dir`` (simulated drivers, ``--fast`` unless the
     scenario needs real time); its truth."""
-    from acq.recorder import Recorder
+    from acq.recording.recorder import Recorder
     from drivers.registry import open_bench
     from drivers.sim.bench import SimBench
 
@@ -191,8 +191,8 @@ def record(sc: Scenario, seed: int, offset_s: float, drift_ppm: float, out_dir: 
 
 def analyse(path: Path, pipeline: str = "acq") -> Any:
     """Analyse a session file as ``acq analyze`` does (``pipeline="paper"``: the paper's chain)."""
-    from acq.analyze import request_for, recording_from_session
-    from acq.session import load
+    from acq.offline.analyze import request_for, recording_from_session
+    from acq.recording.session import load
     from analysis import AnalysisRequest, analyze
 
     session = load(path)

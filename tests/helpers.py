@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from acq.cli import main
+from acq.ui.cli import main
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from acq.session import load
+from acq.recording.session import load
 from tests.helpers import run_cli
 
 KEYS = {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "ci95", "antiresonance_hz", "resonance_hz",
@@ -19,7 +19,7 @@ KEYS = {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "ci95", "antireso
 def session_10s(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A 10 s recording of the default simulated bench (recorded, not analysed)."""
     out = tmp_path_factory.mktemp("sessions")
-    from acq.cli import main
+    from acq.ui.cli import main
 
     with pytest.raises(SystemExit) as exc:
         main(["record", "--profile", "triangle_0.2s", "--fast", "--no-analyze", "--out", str(out)])
@@ -97,7 +97,7 @@ def test_missing_session_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
 
 def test_a_session_with_an_empty_stream_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from acq.config import load_bench, load_profile
-    from acq.session import SessionWriter
+    from acq.recording.session import SessionWriter
     from drivers.base import CurrentSourceInfo, DriveInfo
 
     path = tmp_path / "empty.h5"
@@ -125,9 +125,9 @@ def test_a_broken_result_file_is_one_line_for_view(session_10s: Path, tmp_path: 
 
 def test_piped_result_tables_fit_80_columns(session_10s: Path, capsys: pytest.CaptureFixture[str],
                                             monkeypatch: pytest.MonkeyPatch) -> None:
-    import acq.cli
+    import acq.ui.cli
 
-    monkeypatch.setattr(acq.cli.out, "width", 80)  # what a pipe or an 80-column terminal gives
+    monkeypatch.setattr(acq.ui.cli.out, "width", 80)  # what a pipe or an 80-column terminal gives
     shown = {}
     for option in ("", "--params=K", "--paper"):
         run = run_cli(capsys, "analyze", str(session_10s), "--no-report", *([option] if option else []))
@@ -145,13 +145,13 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     import shutil
     import sys
 
-    from acq.batch import analyze_one
+    from acq.monitoring.batch import analyze_one
     from analysis import AnalysisRequest
-    from acq.catalogue import Catalogue
+    from acq.monitoring.catalogue import Catalogue
 
     copy = Path(shutil.copy2(session_10s, tmp_path / "s.h5"))
     expected = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report").out)
-    monkeypatch.delitem(sys.modules, "acq.plots", raising=False)
+    monkeypatch.delitem(sys.modules, "acq.ui.plots", raising=False)
     monkeypatch.setitem(sys.modules, "pyqtgraph", None)  # a headless worker without the Qt libraries
     run = run_cli(capsys, "analyze", str(copy))
     assert run.code == 0, run.err
@@ -179,12 +179,12 @@ def test_help_and_a_mistyped_path_load_no_numerical_library() -> None:
     import subprocess
     import sys
 
-    from acq.cli import LAZY_COMMANDS
+    from acq.ui.cli import LAZY_COMMANDS
 
     for name, (module, attribute, short_help) in LAZY_COMMANDS.items():
         command = getattr(importlib.import_module(module), attribute)
         assert command.name == name and command.get_short_help_str(limit=10_000) == short_help
-    probe = ("import sys; from acq.cli import main\n"
+    probe = ("import sys; from acq.ui.cli import main\n"
              "try:\n    main(sys.argv[1:])\nexcept SystemExit as e:\n    code = e.code\n"
              "heavy = sorted({'numpy', 'scipy', 'h5py', 'pydantic', 'PySide6'} & set(sys.modules))\n"
              "print('loaded:', heavy, 'exit:', code, file=sys.stderr)")

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import pytest
 
-import acq.catalogue
-from acq.catalogue import MIGRATIONS, SCHEMA_VERSION, Catalogue, Outcome
+import acq.monitoring.catalogue
+from acq.monitoring.catalogue import MIGRATIONS, SCHEMA_VERSION, Catalogue, Outcome
 from tests.helpers import run_cli
 
 
@@ -50,7 +50,7 @@ def test_record_upserts_and_reads_back_the_same_on_both_back_ends(catalogue_loca
 
 def test_an_older_catalogue_is_migrated_with_its_rows(catalogue_location: Path | str,
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(acq.catalogue, "SCHEMA_VERSION", 1)
+    monkeypatch.setattr(acq.monitoring.catalogue, "SCHEMA_VERSION", 1)
     with Catalogue(catalogue_location) as old, old._transaction():
         assert old.schema_version == 1
         old._execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc) "
@@ -65,11 +65,11 @@ def test_an_older_catalogue_is_migrated_with_its_rows(catalogue_location: Path |
 
 
 def test_a_newer_catalogue_is_refused(catalogue_location: Path | str, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(acq.catalogue, "MIGRATIONS", (*MIGRATIONS, "CREATE TABLE later (x TEXT)"))
-    monkeypatch.setattr(acq.catalogue, "SCHEMA_VERSION", SCHEMA_VERSION + 1)
+    monkeypatch.setattr(acq.monitoring.catalogue, "MIGRATIONS", (*MIGRATIONS, "CREATE TABLE later (x TEXT)"))
+    monkeypatch.setattr(acq.monitoring.catalogue, "SCHEMA_VERSION", SCHEMA_VERSION + 1)
     Catalogue(catalogue_location).close()
     monkeypatch.undo()
-    with pytest.raises(acq.catalogue.ConfigError) as error:
+    with pytest.raises(acq.monitoring.catalogue.ConfigError) as error:
         Catalogue(catalogue_location)
     assert str(error.value).endswith(f": catalogue schema version {SCHEMA_VERSION + 1} is newer than this acq knows "
                                      f"({SCHEMA_VERSION}) — update acq")
@@ -77,7 +77,7 @@ def test_a_newer_catalogue_is_refused(catalogue_location: Path | str, monkeypatc
 
 _WRITER = """
 import sys, time
-from acq.catalogue import Catalogue, Outcome
+from acq.monitoring.catalogue import Catalogue, Outcome
 time.sleep(max(0.0, float(sys.argv[3]) - time.time()))  # all open the fresh catalogue together
 with Catalogue(sys.argv[1]) as c:
     for i in range(50):

@@ -12,7 +12,7 @@ from serial.tools import list_ports
 
 pytest.importorskip("nidaqmx")  # the stand-in borrows nidaqmx.constants and nidaqmx.errors
 
-import acq.devices
+import acq.commissioning.devices
 from acq.config import DEFAULT_BENCH
 from drivers.nidaq import DRIVER_MISSING
 from tests.helpers import run_cli
@@ -38,7 +38,7 @@ def devices_json(capsys: pytest.CaptureFixture[str]) -> dict[str, dict[str, Any]
 
 
 def use_standin(monkeypatch: pytest.MonkeyPatch, hw: StandinHardware) -> None:
-    monkeypatch.setattr(acq.devices, "import_nidaqmx", hw.module)
+    monkeypatch.setattr(acq.commissioning.devices, "import_nidaqmx", hw.module)
 
 
 def test_lists_ni_channels_can_and_serial_and_the_sim(monkeypatch: pytest.MonkeyPatch, machine: dict[str, Any],

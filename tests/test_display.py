@@ -9,12 +9,12 @@ from typing import Any
 
 from rich.console import Console
 
-from acq.batch import BatchReport
-from acq.catalogue import Entry, Outcome
-from acq.devices import Section
-from acq.display import batch_table, result_table, sections_table, summary_table, trend_table
-from acq.summary import SessionSummary, StreamSummary
-from acq.trend import compute_trend
+from acq.commissioning.devices import Section
+from acq.monitoring.batch import BatchReport
+from acq.monitoring.catalogue import Entry, Outcome
+from acq.monitoring.trend import compute_trend
+from acq.recording.summary import SessionSummary, StreamSummary
+from acq.ui.display import batch_table, result_table, sections_table, summary_table, trend_table
 
 TRUTH = {"K_Nm_per_rad": 891.0, "Jm_kgm2": 0.003027, "Jl_kgm2": 0.00748, "C_Nms_per_rad": 0.1, "offset_s": 0.037,
          "drift_ppm": 40.0}

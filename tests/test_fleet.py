@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from acq.catalogue import Catalogue, Outcome
+from acq.monitoring.catalogue import Catalogue, Outcome
 from tests.helpers import run_cli
 
 #: (robot, joint, site, hours before now, K N·m/rad or None for a failed analysis)

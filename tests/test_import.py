@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 
-from acq.analyze import analyze_session
-from acq.catalogue import Catalogue
 from acq.config import DEFAULT_BENCH
-from acq.session import load
+from acq.monitoring.catalogue import Catalogue
+from acq.offline.analyze import analyze_session
+from acq.recording.session import load
 from tests.helpers import run_cli
 
 RATE_HZ = 25600.0

@@ -9,6 +9,8 @@
   other tools' files need no ``drivers`` for it;
 - no import cycles among the packages' modules, counting annotations-only imports under
   ``if TYPE_CHECKING:`` too (a cycle there is a cycle of the design, even when it never runs).
+- presentation apart from computation: only ``acq.ui`` imports rich, click, Qt or matplotlib, and
+  nothing outside it imports ``acq.ui`` (``MIXED`` names the modules still to be split).
 """
 
 from __future__ import annotations
@@ -129,7 +131,7 @@ def test_drivers_do_not_import_acq_and_the_ground_floor_imports_nothing_of_ours(
 
 def test_the_catalogue_and_the_file_readers_do_not_import_drivers() -> None:
     graph = import_graph()
-    users = ("acq.catalogue", "acq.catalogue_backends", "acq.csvtable", "acq.import_files")
+    users = ("acq.monitoring.catalogue", "acq.monitoring.catalogue_backends", "acq.offline.csvtable", "acq.offline.import_files")
     assert {m: sorted(i for i in graph[m] if i.startswith("drivers")) for m in users} == {m: [] for m in users}
 
 
@@ -150,11 +152,55 @@ def test_the_checker_finds_a_cycle_and_a_reverse_import() -> None:
     assert "drivers.sim.bench" in _imports(ROOT / "tests" / "test_canopen.py")
     signals = _imports(ROOT / "analysis" / "signals.py")  # from analysis import encoder: the module, not the face
     assert "analysis.encoder" in signals and "analysis" not in signals
-    assert "acq.batch" in _imports(ROOT / "acq" / "display.py")  # under if TYPE_CHECKING
+    assert "acq.monitoring.batch" in _imports(ROOT / "acq" / "ui" / "display.py")  # under if TYPE_CHECKING
 
 
 def test_only_the_session_module_reads_root_attributes() -> None:
-    """Outside ``acq/session.py`` session metadata is read through the typed ``Session.meta``."""
+    """Outside ``acq/recording/session.py`` session metadata is read through the typed ``Session.meta``."""
     readers = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "acq").rglob("*.py") if p.name != "session.py"
                      and any(isinstance(n, ast.Attribute) and n.attr == "attrs" for n in ast.walk(ast.parse(p.read_text()))))
     assert readers == []
+
+
+#: Libraries that draw or talk to a person; with ``acq.ui`` itself, what only ``acq.ui`` may import.
+PRESENTATION = ("rich", "click", "pyqtgraph", "PySide6", "shiboken6", "matplotlib")
+
+#: ``python -m acq`` and the console script start the user interface: they may import ``acq.ui`` (nothing else).
+ENTRY = ("acq.__main__", "acq.entry")
+
+#: Modules outside ``acq.ui`` that still hold a presentation part beside their computation (a click command or
+#: option, a rich table or progress bar, a figure drawn lazily) and what of it they import. Issue #15 item 2
+#: splits them; the list only shrinks — a module that loses its presentation part leaves it.
+MIXED: dict[str, list[str]] = {
+    "acq.monitoring.batch": ["rich"],
+    "acq.monitoring.catalogue": ["click"],
+    "acq.monitoring.trend": ["acq.ui", "pyqtgraph", "shiboken6"],
+    "acq.offline.analyze": ["acq.ui"],
+    "acq.offline.exporters": ["click", "rich"],
+    "acq.offline.importers": ["acq.ui", "click", "rich"],
+}
+
+
+def presentation_imports() -> dict[str, list[str]]:
+    """Module outside ``acq.ui`` → the presentation it imports (imports that run)."""
+    found: dict[str, list[str]] = {}
+    for pkg in PACKAGES:
+        for path in sorted((ROOT / pkg).rglob("*.py")):
+            name = _module_name(path)
+            if name == "acq.ui" or name.startswith("acq.ui."):
+                continue
+            uses: set[str] = set()
+            for imported in _imports(path, type_only=False):
+                top = imported.split(".")[0]
+                if top in PRESENTATION:
+                    uses.add(top)
+                elif (imported == "acq.ui" or imported.startswith("acq.ui.")) and name not in ENTRY:
+                    uses.add("acq.ui")
+            if uses:
+                found[name] = sorted(uses)
+    return found
+
+
+def test_presentation_lives_in_the_ui_package() -> None:
+    """Computation apart from presentation: rich, click, Qt, matplotlib and ``acq.ui`` only in ``acq.ui``."""
+    assert presentation_imports() == MIXED

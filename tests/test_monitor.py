@@ -10,9 +10,9 @@ from pathlib import Path
 import pytest
 
 from acq.config import load_bench
-from acq.recorder import Recorder
-from acq.retention import WindowFiles, make_room, parse_size, to_delete
-from acq.session import SessionWriter, load
+from acq.monitoring.retention import WindowFiles, make_room, parse_size, to_delete
+from acq.recording.recorder import Recorder
+from acq.recording.session import SessionWriter, load
 from drivers.base import CurrentSourceInfo, DriveInfo
 from drivers.config import Bench
 from acqcore.errors import ConfigError
@@ -103,7 +103,7 @@ def test_monitor_refuses_a_bench_that_commands_motion(capsys: pytest.CaptureFixt
 @pytest.fixture(scope="module")
 def four_windows(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A --fast monitor of 4 windows (all four excite), baseline 2 windows, raw files of the last 1 kept."""
-    from acq.cli import main
+    from acq.ui.cli import main
 
     out = tmp_path_factory.mktemp("monitor")
     bench = _bench_file(tmp_path_factory.mktemp("bench"), seed=EXCITING_SEED)
@@ -143,7 +143,7 @@ def test_restart_resumes_numbering_and_marks_an_interrupted_window(four_windows:
                            host_ns_at_start=0, tags={"monitor_window": 4, "monitor_elapsed_s": 240.0})
     writer._file.close()  # as a kill -9 leaves it
     with pytest.raises(SystemExit) as exc:
-        from acq.cli import main
+        from acq.ui.cli import main
 
         main(["monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for", "1m",
               "--baseline-windows", "2", "--keep", "1", "--out", str(out)])
@@ -211,7 +211,7 @@ def test_sizes_parse_and_a_bad_one_is_named() -> None:
 
 
 def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Path) -> None:
-    from acq.monitor import Monitor, MonitorSettings
+    from acq.monitoring.monitor import Monitor, MonitorSettings
 
     settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=tmp_path, window_s=10.0, every_s=60.0,
                                for_s=3600.0, fast=True, baseline_windows=2)
@@ -227,7 +227,7 @@ def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Pa
 
 
 def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None:
-    from acq.window_judge import not_excited
+    from acq.monitoring.window_judge import not_excited
 
     weak = {"verdict": "failed", "mean_coherence": 0.2, "excitation_coherence": 0.1}
     assert not_excited({"quality": weak, "clock": {"residual_s": 20e-6}})
@@ -252,8 +252,8 @@ def test_each_window_says_which_share_and_which_moves_excite_the_joint(four_wind
 def test_the_status_table_shows_the_excited_share_and_the_moves() -> None:
     from rich.console import Console
 
-    from acq.monitor import MonitorStatus
-    from acq.monitor_cli import status_table
+    from acq.monitoring.monitor import MonitorStatus
+    from acq.ui.monitor_cli import status_table
 
     moves = ({"index": 0, "start_s": 0.45, "duration_s": 0.3, "peak_rad_s": 125.66, "excited": True},
              {"index": 1, "start_s": 2.0, "duration_s": 1.4, "peak_rad_s": 4.19, "excited": False})

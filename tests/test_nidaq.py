@@ -14,11 +14,11 @@ import pytest
 
 pytest.importorskip("nidaqmx")  # the stand-in borrows nidaqmx.constants and nidaqmx.errors
 
-import acq.devices
+import acq.commissioning.devices
 import drivers.nidaq
 from acq.config import DEFAULT_BENCH, load_bench, load_profile
-from acq.recorder import Recorder
-from acq.session import load
+from acq.recording.recorder import Recorder
+from acq.recording.session import load
 from drivers.nidaq import DRIVER_MISSING, NidaqCurrentSource
 from drivers.sim.bench import SimBench
 from drivers.sim.drive import SimDrive
@@ -47,7 +47,7 @@ def hardware(monkeypatch: pytest.MonkeyPatch) -> StandinHardware:
     """An NI 9234 behind the stand-in, with synthetic currents; `acq` imports it instead of nidaqmx."""
     hw = StandinHardware(currents=synthetic_currents(RATE_HZ, 1), sensor_gain=A_PER_V)
     monkeypatch.setattr(drivers.nidaq, "import_nidaqmx", hw.module)
-    monkeypatch.setattr(acq.devices, "import_nidaqmx", hw.module)
+    monkeypatch.setattr(acq.commissioning.devices, "import_nidaqmx", hw.module)
     return hw
 
 

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from acq.config import load_bench
-from acq.recorder import Recorder
-from acq.session import load
+from acq.recording.recorder import Recorder
+from acq.recording.session import load
 from acqcore.errors import ConfigError
 from drivers import canopen_od as od
 from drivers.canopen_eds import tpdo_from_eds

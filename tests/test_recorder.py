@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from acq.config import DEFAULT_BENCH
-from acq.session import load
+from acq.recording.session import load
 from tests.helpers import run_cli
 
 RATE_HZ, PERIOD_S, BLOCK = 25600, 0.001, 2560
@@ -114,7 +114,7 @@ def test_sigkill_leaves_flushed_samples_and_check_repairs(tmp_path: Path, capsys
 
 def test_listeners_see_blocks_and_the_recorders_gap_events(tmp_path: Path) -> None:
     from acq.config import load_bench, load_profile
-    from acq.recorder import Recorder
+    from acq.recording.recorder import Recorder
     from drivers.registry import open_bench
 
     bench = load_bench()
@@ -131,7 +131,7 @@ def test_listeners_see_blocks_and_the_recorders_gap_events(tmp_path: Path) -> No
 
 def _sim_recorder(tmp_path: Path, duration_s: float, listeners: list | None = None):
     from acq.config import load_bench, load_profile
-    from acq.recorder import Recorder
+    from acq.recording.recorder import Recorder
     from drivers.registry import open_bench
 
     bench = load_bench()

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from acq.analyze import analyze_session
 from acq.config import load_bench
-from acq.recorder import Recorder
+from acq.offline.analyze import analyze_session
+from acq.recording.recorder import Recorder
 from analysis import AnalysisRequest
 from analysis.encoder import difference_response
 from analysis.frf import estimate_frf

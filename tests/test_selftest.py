@@ -12,9 +12,9 @@ from pathlib import Path
 
 import pytest
 
+from acq.commissioning.selftest_checks import Check
 from acq.config import DEFAULT_BENCH
-from acq.selftest_checks import Check
-from acq.selftest_cli import selftest_json
+from acq.ui.selftest_cli import selftest_json
 from analysis.diagnose import SpeedRatio, likely_counts_per_rev, ratio_fault
 from tests.helpers import run_cli
 from tests.nidaqmx_standin import StandinHardware

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from acq.config import load_bench, load_profile
-from acq.session import FORMAT, SessionWriter, load, repair
+from acq.recording.session import FORMAT, SessionWriter, load, repair
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 
 
@@ -120,7 +120,7 @@ def test_not_a_session(tmp_path: Path) -> None:
 
 
 def test_sessions_started_in_the_same_second_get_distinct_files(tmp_path: Path) -> None:
-    from acq.session import new_session_path
+    from acq.recording.session import new_session_path
 
     first = new_session_path(tmp_path, "joint1", "2026-11-22T10:15:03+00:00")
     assert first.name == "2026-11-22T10-15-03_joint1.h5"

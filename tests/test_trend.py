@@ -18,9 +18,9 @@ from pathlib import Path
 
 import pytest
 
-from acq.batch import find_sessions, run_batch
-from acq.catalogue import SCHEMA_VERSION, Catalogue, Entry
-from acq.trend import compute_trend
+from acq.monitoring.batch import find_sessions, run_batch
+from acq.monitoring.catalogue import SCHEMA_VERSION, Catalogue, Entry
+from acq.monitoring.trend import compute_trend
 from analysis import AnalysisRequest
 from tests.helpers import run_cli
 
@@ -43,7 +43,7 @@ def wear(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Six 6 s sessions of joint1 (tagged pose=home), K stepping down, analysed into sessions/catalogue.sqlite."""
     root = tmp_path_factory.mktemp("wear")
     out = root / "sessions"
-    from acq.cli import main
+    from acq.ui.cli import main
 
     for k in WEAR_K:
         with pytest.raises(SystemExit) as exc:
@@ -165,7 +165,7 @@ def test_dask_cluster_runs_the_same_batch(wear: Path, tmp_path: Path, catalogue_
 
 _WRITER = """
 import sys
-from acq.catalogue import Catalogue, Outcome
+from acq.monitoring.catalogue import Catalogue, Outcome
 with Catalogue(sys.argv[1]) as c:
     for i in range(200):
         c.record(Outcome(f"/x/{sys.argv[2]}-{i}.h5", "h", "r", {"session_id": f"{sys.argv[2]}-{i}", "joint": "j"},
@@ -193,8 +193,8 @@ def test_two_processes_share_a_catalogue(wear: Path, tmp_path: Path) -> None:
 
 def test_view_shows_the_trend_window(wear: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-    from acq.plots import ensure_app
-    from acq.trend import load_trend, trend_widget
+    from acq.ui.plots import ensure_app
+    from acq.monitoring.trend import load_trend, trend_widget
 
     ensure_app(offscreen=True)
     widget = trend_widget(load_trend(wear, None, "joint1"))
@@ -224,10 +224,10 @@ def test_the_trend_window_redraws_when_a_writer_adds_sessions(tmp_path: Path) ->
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     import functools
 
-    from acq.catalogue import Catalogue, Outcome
-    from acq.plots import ensure_app
-    from acq.trend import load_trend
-    from acq.view import LiveTrend
+    from acq.monitoring.catalogue import Catalogue, Outcome
+    from acq.ui.plots import ensure_app
+    from acq.monitoring.trend import load_trend
+    from acq.ui.view import LiveTrend
 
     path = tmp_path / "catalogue.sqlite"
 
@@ -255,9 +255,9 @@ def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> Non
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     import pyqtgraph as pg
 
-    from acq.catalogue import Catalogue, Outcome
-    from acq.plots import ensure_app
-    from acq.trend import load_trend, trend_widget
+    from acq.monitoring.catalogue import Catalogue, Outcome
+    from acq.ui.plots import ensure_app
+    from acq.monitoring.trend import load_trend, trend_widget
 
     path = tmp_path / "catalogue.sqlite"
     with Catalogue(path) as c:  # five good windows, then one whose fit went wild (verdict poor: skipped)
@@ -281,9 +281,9 @@ def test_a_monitor_trend_is_drawn_over_machine_time_and_shows_the_windows_withou
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     import pyqtgraph as pg
 
-    from acq.catalogue import Catalogue, Outcome
-    from acq.plots import ensure_app
-    from acq.trend import load_trend, trend_widget
+    from acq.monitoring.catalogue import Catalogue, Outcome
+    from acq.ui.plots import ensure_app
+    from acq.monitoring.trend import load_trend, trend_widget
 
     path = tmp_path / "catalogue.sqlite"
     with Catalogue(path) as c:  # windows every 30 min of machine time; 2 not excited, 1 skipped with a wild K

@@ -16,9 +16,9 @@ import numpy as np
 import pytest
 from pyqtgraph.Qt import QtCore
 
-from acq.analyze import analyze_session, draw_report
 from acq.config import load_bench, load_profile
-from acq.recorder import Recorder
+from acq.offline.analyze import analyze_session, draw_report
+from acq.recording.recorder import Recorder
 from analysis import AnalysisRequest
 from drivers.registry import open_bench
 from tests.helpers import run_cli
@@ -69,8 +69,8 @@ def _assert_real_image(path: Path, size: tuple[int, int]) -> None:
 def test_window_holds_traces_frf_coherence_and_values(session: Path) -> None:
     import pyqtgraph as pg
 
-    from acq.plots import ReportView, ensure_app
-    from acq.view import session_figure
+    from acq.ui.plots import ReportView, ensure_app
+    from acq.ui.view import session_figure
 
     ensure_app()
     view = ReportView([session_figure(session)], title="test")
@@ -104,8 +104,8 @@ def test_window_holds_traces_frf_coherence_and_values(session: Path) -> None:
 
 
 def test_several_sessions_overlay_their_frfs_with_a_legend(session: Path, tmp_path: Path) -> None:
-    from acq.plots import ReportView, ensure_app
-    from acq.view import session_figure
+    from acq.ui.plots import ReportView, ensure_app
+    from acq.ui.view import session_figure
 
     later = tmp_path / "later_joint1.h5"
     shutil.copy(session, later)
@@ -121,7 +121,7 @@ def test_several_sessions_overlay_their_frfs_with_a_legend(session: Path, tmp_pa
 
 def _laid_out(view: Any, tmp_path: Path) -> None:
     """Show and render the view offscreen, so that its layout (and the f_a/f_r label rows) is final."""
-    from acq.plots import grab_png
+    from acq.ui.plots import grab_png
 
     grab_png(view, tmp_path / "layout.png")
 
@@ -131,8 +131,8 @@ def _scene_box(item: Any) -> Any:
 
 
 def test_legend_and_frequency_labels_cover_no_curve_and_no_label_overlaps(session: Path, tmp_path: Path) -> None:
-    from acq.plots import ReportView, ensure_app
-    from acq.view import session_figure
+    from acq.ui.plots import ReportView, ensure_app
+    from acq.ui.view import session_figure
 
     ensure_app()
     later = Path(shutil.copy(session, tmp_path / "later_joint1.h5"))  # same f_a and f_r: labels at the same place
@@ -159,8 +159,8 @@ def test_legend_and_frequency_labels_cover_no_curve_and_no_label_overlaps(sessio
 
 
 def test_phase_panel_when_the_clocks_are_aligned_and_none_when_not(session: Path, tmp_path: Path) -> None:
-    from acq.plots import ReportView, SessionFigure, ensure_app
-    from acq.view import session_figure
+    from acq.ui.plots import ReportView, SessionFigure, ensure_app
+    from acq.ui.view import session_figure
 
     ensure_app()
     aligned = session_figure(session)
@@ -233,7 +233,7 @@ def test_view_screenshot_and_live_window_under_xvfb(session: Path, tmp_path: Pat
 
 
 def test_live_view_loses_no_samples_and_draws_frames(tmp_path: Path) -> None:
-    from acq.live import LiveView
+    from acq.ui.live import LiveView
 
     recorder = _recorder(tmp_path, 2.0)
     view = LiveView(recorder)
@@ -249,8 +249,8 @@ def test_live_view_loses_no_samples_and_draws_frames(tmp_path: Path) -> None:
 def test_ctrl_c_under_the_live_view_ends_the_recording_as_interrupted(tmp_path: Path) -> None:
     from pyqtgraph.Qt import QtCore
 
-    from acq.live import LiveView
-    from acq.session import load
+    from acq.ui.live import LiveView
+    from acq.recording.session import load
 
     recorder = _recorder(tmp_path, 30.0)
     view = LiveView(recorder)

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
+from acq.commissioning.selftest import run_selftest
+from acq.commissioning.selftest_checks import Check
 from acq.config import load_bench, load_profile
-from acq.selftest import run_selftest
-from acq.selftest_checks import Check
 from drivers.config import Bench
 
 ENV = "ACQ_HW_BENCH"

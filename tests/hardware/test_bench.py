@@ -11,10 +11,10 @@ import h5py
 import numpy as np
 import pytest
 
+from acq.commissioning.selftest_checks import Check
 from acq.config import load_profile
-from acq.recorder import Recorder
-from acq.selftest_checks import Check
-from acq.session import load
+from acq.recording.recorder import Recorder
+from acq.recording.session import load
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen, DriveSerial
 from drivers.registry import open_bench
 

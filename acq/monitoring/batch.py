@@ -1,0 +1,322 @@
+"""Batch re-analysis: every session of a folder or glob, in parallel, into the catalogue.
+
+One runner, two back ends with the same :class:`concurrent.futures.Executor` face: a local process
+pool (default) or a Dask distributed cluster (``--scheduler ADDRESS``), whose workers read the
+session files by the absolute paths given here — the files must be reachable at the same path on
+every worker (a shared mount). The parent only hashes the files, hands paths to the workers and
+writes the catalogue, one transaction per session as results come in.
+
+A session is skipped when the catalogue already holds a successful analysis of the same file
+(SHA-256) with the same request (options as asked for); a failed one is tried again. A session
+that fails is recorded with its error and the batch goes on.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import glob
+import multiprocessing
+import os
+import signal
+import threading
+import time
+import warnings
+from collections.abc import Iterator, Sequence
+from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
+from contextlib import contextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+from acq.monitoring.catalogue import Catalogue, Outcome
+from acq.offline.analyze import SessionResult, analyze_session, draw_report, sha256_of
+from acq.recording.paths import GLOB_CHARS
+from acq.recording.session import Session, load, read_status
+from acq.recording.storage import remove_temp_files
+from acqcore.errors import AcqError, ConfigError
+from analysis import AnalysisRequest
+
+CATALOGUE_NAME = "catalogue.sqlite"
+_BLAS_THREADS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+@dataclass(frozen=True)
+class BatchReport:
+    """What a batch did: the outcomes of the sessions analysed, the sessions skipped as current."""
+
+    outcomes: list[Outcome]
+    skipped: list[Path]
+    seconds: float
+    not_ready: list[Path] = field(default_factory=list)  # status recording: skipped (unless the request is partial)
+    interrupted: bool = False  # Ctrl-C: queued analyses cancelled; every outcome received is in the catalogue
+
+    @property
+    def failed(self) -> list[Outcome]:
+        """Outcomes with an error."""
+        return [o for o in self.outcomes if o.error is not None]
+
+
+def find_sessions(spec: Path | str) -> tuple[list[Path], Path]:
+    """The session files (``*.h5``) of a folder or glob, sorted, and the folder they were sought in.
+
+    The folder is where the catalogue goes by default: the folder itself, or a glob's deepest
+    folder without wildcards.
+    """
+    spec = Path(spec)
+    if spec.is_dir():
+        paths, base = spec.glob("*.h5"), spec
+    else:
+        paths = (Path(p) for p in glob.glob(str(spec), recursive=True))
+        base = Path(*_prefix(spec.parts))
+    sessions = sorted(p for p in paths if p.suffix == ".h5" and p.is_file())
+    if not sessions:
+        raise ConfigError(f"{spec}: no session files (*.h5) found")
+    return sessions, base
+
+
+def _prefix(parts: Sequence[str]) -> Iterator[str]:
+    """The path parts before the first one with a wildcard ('.' when the first has one)."""
+    if not parts or GLOB_CHARS & set(parts[0]):
+        yield "."
+        return
+    for part in parts:
+        if GLOB_CHARS & set(part):
+            return
+        yield part
+
+
+def record_outcome(done: SessionResult, request: AnalysisRequest, catalogue_path: Path | str | None,
+                   seconds: float) -> Path | str:
+    """Put one session's analysis (done outside a batch) into its catalogue; return the catalogue's path.
+
+    The catalogue is ``catalogue_path`` or ``catalogue.sqlite`` in the session's folder, so a later
+    ``acq analyze FOLDER`` finds the session current and ``acq trend`` sees it at once.
+    """
+    path = catalogue_path or done.session.path.parent / CATALOGUE_NAME
+    with Catalogue(path) as catalogue:
+        catalogue.record(succeeded(str(done.session.path), done, request, seconds))
+    return path
+
+
+def succeeded(path: str, done: SessionResult, request: AnalysisRequest, seconds: float) -> Outcome:
+    """The catalogue's record of a successful analysis of the session at ``path``."""
+    return Outcome(path, done.json_dict["session"]["sha256"], request.key(), session_meta(done.session),
+                   done.json_dict, None, seconds)
+
+
+def session_meta(session: Session) -> dict[str, Any]:
+    """What the catalogue keeps of a session's root attributes."""
+    meta = session.meta
+    return {"session_id": meta.session_id, "joint": meta.joint, "created_utc": meta.created_utc,
+            "start_monotonic_ns": meta.host_ns_at_start or 0, "status": meta.status, "tags": meta.tags}
+
+
+@contextmanager
+def quiet_numerics() -> Iterator[None]:
+    """No numpy floating-point warning (divide by zero, invalid value, overflow) reaches the person: the analysis
+    reports unusable data through its errors and verdict, and a warning line before them only confuses."""
+    with np.errstate(all="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        yield
+
+
+def analyze_one(path: str, sha256: str, request: AnalysisRequest, report: bool) -> Outcome:
+    """Analyse one session (runs in a worker process or on a Dask worker); never raises.
+
+    Parameters
+    ----------
+    path : str
+        Absolute path of the session file, as the worker sees it.
+    sha256 : str
+        The file's hash when the batch looked at it (kept when the analysis fails).
+    request : AnalysisRequest
+        What is asked (its key files the outcome in the catalogue).
+    report : bool
+        Also draw ``<session>.report.png``.
+    """
+    start = time.perf_counter()
+    try:
+        with quiet_numerics():
+            done = analyze_session(path, request, report=report)
+    except Exception as e:  # noqa: BLE001 — a batch records any session's failure and goes on
+        error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
+        return Outcome(path, sha256, request.key(), _meta_if_readable(path), None, error,
+                       time.perf_counter() - start)
+    done = draw_report(done)  # the result is written; a picture that fails is a note on it, not a failure
+    return succeeded(path, done, request, time.perf_counter() - start)
+
+
+def _meta_if_readable(path: str) -> dict[str, Any]:
+    try:
+        return session_meta(load(path))
+    except (AcqError, OSError, KeyError, ValueError):
+        return {}
+
+
+@contextmanager
+def analysis_executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
+    """Workers for analyses: a process pool of ``jobs`` (one BLAS thread each), or a Dask cluster's executor at
+    ``scheduler`` (tcp://host:port); used by the batch and by ``acq monitor``."""
+    if scheduler is None:
+        # forkserver: workers fork from a clean single-threaded server that has imported acq once (a plain fork
+        # of this process inherits the locks its threads — recorder, progress, BLAS — may hold, and can hang);
+        # one BLAS thread per worker, as Dask's workers have, so N jobs do not fight over the cores
+        for var in _BLAS_THREADS:
+            os.environ.setdefault(var, "1")
+        context = multiprocessing.get_context("forkserver")
+        context.set_forkserver_preload(["acq.monitoring.batch"])
+        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
+        try:
+            yield pool
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)  # the caller stopped the workers: quick, frees the pool's locks
+            raise
+        pool.shutdown(wait=True)
+        return
+    try:
+        from distributed import Client
+    except ImportError:
+        raise ConfigError("--scheduler needs Dask distributed: pip install 'acq[cluster]'") from None
+    try:
+        client = Client(scheduler, timeout="10s")
+    except OSError as e:
+        raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({e})") from None
+    with client:
+        yield client.get_executor(pure=False)
+
+
+#: Seconds a Ctrl-C'd batch gives running workers to finish before they are killed (what they wrote without a
+#: catalogue row is then removed); with the bookkeeping after it, a batch stops within 2 s.
+STOP_GRACE_S = 0.5
+
+
+def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequest, *, jobs: int | None = None,
+              scheduler: str | None = None, report: bool = True, console: Console | None = None) -> BatchReport:
+    """Analyse the sessions not yet current in ``catalogue``, recording each outcome as it arrives.
+
+    Parameters
+    ----------
+    paths : sequence of Path
+        Session files.
+    catalogue : Catalogue
+        Where the outcomes go (and what decides which sessions are current).
+    request : AnalysisRequest
+        What is asked. Without ``request.partial``, sessions still ``recording`` are skipped
+        (:attr:`BatchReport.not_ready`).
+    jobs : int, optional
+        Worker processes of the local pool (default: the CPU count); ignored with ``scheduler``.
+    scheduler : str, optional
+        Address of a Dask distributed scheduler to run on instead of the local pool.
+    report : bool
+        Also draw each session's report PNG.
+    console : rich.console.Console, optional
+        Where the progress bar goes (default: stderr).
+
+    Ctrl-C cancels the queued analyses, stops the running ones (a result file a stopped worker wrote without its
+    catalogue row is removed), records every outcome received and returns with ``interrupted`` set.
+    """
+    start = time.perf_counter()
+    started_at = time.time()
+    current = catalogue.current(request.key())
+    hashes = {p: sha256_of(p) for p in paths}
+    not_ready = [] if request.partial else [p for p in paths if _status(p) == "recording"]
+    todo = [p for p in paths if hashes[p] not in current and p not in not_ready]
+    outcomes: list[Outcome] = []
+    interrupted = False
+    if todo:
+        with analysis_executor(jobs or os.cpu_count() or 1, scheduler) as executor:
+            futures: dict[Future[Outcome], Path] = {
+                executor.submit(analyze_one, str(p.resolve()), hashes[p], request, report): p for p in todo}
+            columns = (TextColumn("[bold]analysing"), BarColumn(), MofNCompleteColumn(),
+                       TextColumn("{task.fields[failed]} failed"), TimeElapsedColumn(), TimeRemainingColumn())
+            with Progress(*columns, console=console or Console(stderr=True)) as progress:
+                task = progress.add_task("analysing", total=len(todo), failed=0)
+                try:
+                    for future in as_completed(futures):
+                        outcome = _outcome(future, futures[future], hashes, request)
+                        catalogue.record(outcome)
+                        outcomes.append(outcome)
+                        progress.update(task, advance=1, failed=sum(o.error is not None for o in outcomes))
+                except KeyboardInterrupt:
+                    interrupted = True
+                    with _signals_ignored():
+                        _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at)
+                    raise
+    return BatchReport(outcomes, [p for p in paths if p not in todo and p not in not_ready],
+                       time.perf_counter() - start, not_ready, interrupted)
+
+
+def _status(path: Path) -> str:
+    try:
+        return read_status(path)
+    except AcqError:
+        return ""  # unreadable: the analysis reports why
+
+
+@contextmanager
+def _signals_ignored() -> Iterator[None]:
+    """While a stopped batch tidies up (≤ 2 s), a second Ctrl-C does not cut it short."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outcomes: list[Outcome],
+                  catalogue: Catalogue, hashes: dict[Path, str], request: AnalysisRequest, started_at: float) -> None:
+    """Cancel what is queued, give what runs :data:`STOP_GRACE_S` to finish, kill the rest, record what finished;
+    no result file (nor a temp file) is left without its catalogue row."""
+    for future in futures:
+        future.cancel()
+    processes = list(getattr(executor, "_processes", None) or {})  # the local pool's worker pids (Dask: none)
+    recorded = {o.path for o in outcomes}
+    deadline = time.monotonic() + STOP_GRACE_S
+    for future, path in futures.items():
+        if future.cancelled():
+            continue
+        try:
+            outcome = future.result(timeout=max(0.0, deadline - time.monotonic()))
+        except BaseException:  # noqa: BLE001 - interrupted or still running: no outcome
+            continue
+        if outcome.path not in recorded:
+            catalogue.record(outcome)
+            outcomes.append(outcome)
+            recorded.add(outcome.path)
+    for pid in processes:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    for path in futures.values():  # a worker killed after writing its result but before the row: remove it
+        if str(path.resolve()) in recorded:
+            continue
+        for output in (path.with_name(path.stem + ".result.json"), path.with_name(path.stem + ".report.png")):
+            remove_temp_files(output)
+            with contextlib.suppress(OSError):
+                if output.stat().st_mtime >= started_at:
+                    output.unlink()
+
+
+def _outcome(future: Future[Outcome], path: Path, hashes: dict[Path, str], request: AnalysisRequest) -> Outcome:
+    """The worker's outcome, or a failure when the worker itself died (pool broken, cluster lost)."""
+    try:
+        return future.result()
+    except Exception as e:  # noqa: BLE001 — the worker never raises; this is the worker or cluster dying
+        return Outcome(str(path.resolve()), hashes[path], request.key(), {}, None,
+                       f"{path}: worker failed: {type(e).__name__}: {e}", 0.0)
+
+
+def report_json(report: BatchReport) -> list[dict[str, Any]]:
+    """The ``--json`` list: per session its path, what happened, K, verdict and error."""
+    done = [{"path": o.path, "outcome": "failed" if o.error else "analysed",
+             "K_Nm_per_rad": None if o.doc is None else o.doc["K_Nm_per_rad"],
+             "verdict": None if o.doc is None else o.doc["quality"]["verdict"], "error": o.error}
+            for o in report.outcomes]
+    return (done + [{"path": str(p.resolve()), "outcome": "skipped"} for p in report.skipped]
+            + [{"path": str(p.resolve()), "outcome": "skipped: status recording"} for p in report.not_ready])

@@ -1,0 +1,312 @@
+"""The catalogue: one database of every session analysed, the health history of the joints.
+
+Two tables. ``sessions`` holds what identifies a recording (id, path, joint, start time, tags);
+``analyses`` one row per session and analysis request: the file's SHA-256, the options asked for
+(``request_key``) and resolved, K, J_m, J_l, C with their 95 % intervals, f_a, f_r, verdict and
+reasons, clock figures, software version — or the error when the analysis failed.
+
+The database is a SQLite file (the default) or, for several hosts sharing one history, a
+PostgreSQL server (``--catalogue postgresql://user@host/db``); the few things that differ between
+the two are in :mod:`acq.monitoring.catalogue_backends`. :data:`MIGRATIONS` brings an older database up to
+:data:`SCHEMA_VERSION` step by step, each step in its own transaction, serialised between processes
+(SQLite's write lock, PostgreSQL's advisory lock). Every write is one transaction per session, an
+upsert, so several processes on one host (SQLite, WAL mode, busy timeout) or on many (PostgreSQL)
+can share a catalogue. Keep a SQLite file on a local disk — its locking is unreliable on network shares.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import click
+
+from acq.monitoring.catalogue_backends import is_url, open_catalogue_db, open_error
+from acq.recording.storage import cause_of
+from acqcore.errors import ConfigError, StorageError
+
+#: Step i brings a database from version i to i + 1.
+MIGRATIONS: tuple[str, ...] = (
+    # 0 → 1: sessions and their analyses
+    """
+    CREATE TABLE sessions (
+        session_key TEXT PRIMARY KEY,          -- session_id, or 'path:<path>' when the file is unreadable
+        session_id TEXT, path TEXT NOT NULL, joint TEXT, created_utc TEXT, start_monotonic_ns INTEGER,
+        status TEXT
+    );
+    CREATE TABLE analyses (
+        id INTEGER PRIMARY KEY AUTOINCREMENT,
+        session_key TEXT NOT NULL REFERENCES sessions(session_key),
+        sha256 TEXT NOT NULL, request_key TEXT NOT NULL, options_json TEXT,
+        analyzed_utc TEXT NOT NULL, acq_version TEXT, seconds REAL,
+        verdict TEXT, reasons_json TEXT, error TEXT,
+        K_Nm_per_rad REAL, K_lo REAL, K_hi REAL, Jm_kgm2 REAL, Jm_lo REAL, Jm_hi REAL,
+        Jl_kgm2 REAL, Jl_lo REAL, Jl_hi REAL, C_Nms_per_rad REAL, C_lo REAL, C_hi REAL,
+        f_a_hz REAL, f_r_hz REAL, clock_offset_s REAL, clock_drift_ppm REAL, clock_residual_s REAL,
+        mean_coherence REAL, truth_json TEXT,
+        UNIQUE (session_key, request_key)
+    );
+    """,
+    # 1 → 2: session tags (pose, payload_kg, temperature_C, …) and a joint index for the trend
+    """
+    ALTER TABLE sessions ADD COLUMN tags_json TEXT NOT NULL DEFAULT '{}';
+    CREATE INDEX sessions_joint ON sessions (joint, created_utc);
+    """,
+    # 2 → 3: results of a session's intact part only (damaged, or still recording; acq analyze --partial)
+    """
+    ALTER TABLE analyses ADD COLUMN partial INTEGER NOT NULL DEFAULT 0;
+    """,
+    # 3 → 4: which share of a window and which moves excite the joint (segment selection, acq monitor)
+    """
+    ALTER TABLE analyses ADD COLUMN excitation_json TEXT;
+    """,
+)
+SCHEMA_VERSION = len(MIGRATIONS)
+
+_PARAM_COLUMNS = (("K_Nm_per_rad", "K"), ("Jm_kgm2", "Jm"), ("Jl_kgm2", "Jl"), ("C_Nms_per_rad", "C"))
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """What analysing one session gave: the result document, or the error.
+
+    Attributes
+    ----------
+    path : str
+        Session file as given to the worker.
+    sha256 : str
+        SHA-256 of the file when the batch looked at it.
+    request_key : str
+        The analysis options asked for, canonical JSON (see :func:`acq.monitoring.batch.request_key`).
+    session : dict
+        ``session_id``, ``joint``, ``created_utc``, ``start_monotonic_ns``, ``status``, ``tags``
+        (empty when the file could not be read at all).
+    doc : dict or None
+        The ``.result.json`` document; None when the analysis failed.
+    error : str or None
+        One line saying why the analysis failed.
+    seconds : float
+        Wall time of the analysis, s.
+    """
+
+    path: str
+    sha256: str
+    request_key: str
+    session: dict[str, Any]
+    doc: dict[str, Any] | None
+    error: str | None
+    seconds: float
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One analysis of a session as the trend reads it (SI units, None where unknown)."""
+
+    session_key: str
+    session_id: str | None
+    path: str
+    joint: str | None
+    created_utc: str | None
+    tags: dict[str, Any]
+    verdict: str | None
+    reasons: list[str]
+    error: str | None
+    K_Nm_per_rad: float | None
+    K_ci95: tuple[float | None, float | None]
+    f_a_hz: float | None
+    f_r_hz: float | None
+    request_key: str
+    analyzed_utc: str
+    truth_K_Nm_per_rad: float | None
+
+
+class Catalogue:
+    """An open catalogue database (created and migrated on open); use as a context manager.
+
+    Parameters
+    ----------
+    path : Path or str
+        The SQLite file (created with its folder if missing), or a ``postgresql://`` URL.
+
+    Attributes
+    ----------
+    path : Path or str
+        The SQLite file, or the URL without its password (for messages).
+    """
+
+    def __init__(self, path: Path | str):
+        self.path: Path | str
+        self._dialect, self._db, self.path = open_catalogue_db(path)
+        try:
+            self._migrate()
+        except self._dialect.errors as e:
+            self._db.close()
+            raise open_error(self.path, e, "not a usable catalogue") from None
+        except BaseException:
+            self._db.close()
+            raise
+
+    def __enter__(self) -> Catalogue:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Close the database."""
+        self._db.close()
+
+    def _execute(self, sql: str, params: Iterable[Any] = ()) -> Any:
+        """Run one statement written with ``?`` placeholders; return the cursor. Booleans go in as 0/1, as SQLite
+        stores them (PostgreSQL refuses a boolean for an integer column)."""
+        values = tuple(int(p) if isinstance(p, bool) else p for p in params)
+        return self._db.execute(self._dialect.sql(sql), values)
+
+    @contextmanager
+    def _transaction(self) -> Iterator[Any]:
+        """One write transaction (on SQLite holding the write lock from its start: waits for others)."""
+        self._db.execute(self._dialect.begin)
+        try:
+            yield self._db
+        except BaseException:
+            self._db.execute("ROLLBACK")
+            raise
+        self._db.execute("COMMIT")
+
+    @property
+    def schema_version(self) -> int:
+        """The database's schema version."""
+        return self._dialect.schema_version(self._db)
+
+    def _migrate(self) -> None:
+        while True:
+            with self._transaction() as db:
+                self._dialect.lock_schema(db)
+                version = self.schema_version  # read under the lock: another process may have migrated
+                if version > SCHEMA_VERSION:
+                    raise ConfigError(f"{self.path}: catalogue schema version {version} is newer than this acq "
+                                      f"knows ({SCHEMA_VERSION}) — update acq")
+                if version == SCHEMA_VERSION:
+                    return
+                for statement in MIGRATIONS[version].split(";"):
+                    if statement.strip():
+                        db.execute(self._dialect.ddl(statement))
+                self._dialect.set_schema_version(db, version + 1)
+
+    def current(self, request_key: str) -> set[str]:
+        """SHA-256 of the files already analysed successfully with this request."""
+        rows = self._execute("SELECT sha256 FROM analyses WHERE request_key = ? AND error IS NULL", (request_key,))
+        return {r[0] for r in rows}
+
+    def record(self, outcome: Outcome) -> None:
+        """Store one analysis (replacing that session's earlier one with the same request)."""
+        from acq.recording.session import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
+
+        meta, doc = outcome.session, outcome.doc or {}
+        key = meta.get("session_id") or f"path:{Path(outcome.path).resolve()}"
+        values: dict[str, Any] = {
+            "session_key": key, "sha256": outcome.sha256, "request_key": outcome.request_key,
+            "options_json": json.dumps(doc["options"]) if doc else None,
+            "analyzed_utc": doc.get("analyzed_utc") or utc_now_iso(), "acq_version": doc.get("acq_version"),
+            "seconds": outcome.seconds, "verdict": doc.get("quality", {}).get("verdict"),
+            "reasons_json": json.dumps(doc.get("quality", {}).get("reasons", [])), "error": outcome.error,
+            "f_a_hz": doc.get("antiresonance_hz"), "f_r_hz": doc.get("resonance_hz"),
+            "clock_offset_s": doc.get("clock", {}).get("offset_s"),
+            "clock_drift_ppm": doc.get("clock", {}).get("drift_ppm"),
+            "clock_residual_s": doc.get("clock", {}).get("residual_s"),
+            "mean_coherence": doc.get("quality", {}).get("mean_coherence"),
+            "truth_json": json.dumps(doc["simulated_truth"]) if "simulated_truth" in doc else None,
+            "partial": int(bool(doc.get("partial"))),
+            "excitation_json": json.dumps(doc["excitation"]) if "excitation" in doc else None,
+        }
+        for name, short in _PARAM_COLUMNS:
+            lo, hi = doc.get("ci95", {}).get(name, (None, None))
+            values |= {name: doc.get(name), f"{short}_lo": lo, f"{short}_hi": hi}
+        try:
+            self._write_outcome(key, meta, outcome, values)
+        except self._dialect.errors as e:  # e.g. "database or disk is full": the row is not there, say which catalogue
+            raise StorageError(f"{cause_of(e) if 'full' not in str(e) else 'disk full'}: {self.path} ({e})") from None
+
+    def _write_outcome(self, key: str, meta: dict[str, Any], outcome: Outcome, values: dict[str, Any]) -> None:
+        columns = ", ".join(values)
+        updates = ", ".join(f"{c} = excluded.{c}" for c in values if c not in ("session_key", "request_key"))
+        with self._transaction():
+            self._execute(
+                "INSERT INTO sessions (session_key, session_id, path, joint, created_utc, start_monotonic_ns, status,"
+                " tags_json) VALUES (?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (session_key) DO UPDATE SET"
+                " path = excluded.path, status = excluded.status, tags_json = excluded.tags_json",
+                (key, meta.get("session_id"), str(Path(outcome.path).resolve()), meta.get("joint"),
+                 meta.get("created_utc"), meta.get("start_monotonic_ns"), meta.get("status"),
+                 json.dumps(meta.get("tags", {}))))
+            self._execute(f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"
+                       f" ON CONFLICT (session_key, request_key) DO UPDATE SET {updates}", tuple(values.values()))
+
+    def entries(self, joint: str | None = None) -> list[Entry]:
+        """Every session's analyses (one per request), oldest session first (all joints when ``joint`` is None)."""
+        rows = self._execute(
+            "SELECT s.*, a.* FROM sessions s JOIN analyses a ON a.session_key = s.session_key"
+            " WHERE (CAST(? AS TEXT) IS NULL OR s.joint = ?)"
+            " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path, a.analyzed_utc, a.id",
+            (joint, joint))
+        return [_entry(r) for r in rows]
+
+    def joints(self) -> list[str]:
+        """The joints the catalogue knows."""
+        return [r[0] for r in self._execute("SELECT DISTINCT joint FROM sessions WHERE joint IS NOT NULL")]
+
+
+class CatalogueLocation(click.ParamType):
+    """``--catalogue``: a SQLite file (a :class:`Path`) or a ``postgresql://`` URL (kept a str)."""
+
+    name = "PATH|URL"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Path | str:
+        """The URL as given, anything else as a path."""
+        return value if is_url(value) or isinstance(value, Path) else Path(value)
+
+
+#: ``--tag KEY=VALUE`` (repeatable) of the commands that make a session; :func:`parse_tags` reads it.
+tag_option = click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+                          help="Tag the session (repeatable), e.g. --tag pose=home --tag payload_kg=2.5 "
+                               "--tag temperature_C=31.")
+
+
+def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
+    """``KEY=VALUE`` texts as a tag dict; numeric values become floats (``payload_kg=2.5`` → 2.5).
+
+    Raises :class:`ConfigError` naming a text without ``=`` or with an empty key.
+    """
+    tags: dict[str, str | float] = {}
+    for text in texts:
+        key, sep, value = text.partition("=")
+        if not sep or not key.strip():
+            raise ConfigError(f"--tag {text}: must be KEY=VALUE, e.g. payload_kg=2.5")
+        try:
+            tags[key.strip()] = float(value)
+        except ValueError:
+            tags[key.strip()] = value.strip()
+    return tags
+
+
+def tags_match(tags: dict[str, Any], wanted: dict[str, str | float]) -> bool:
+    """True when ``tags`` has every wanted key with an equal value (numbers compared as numbers)."""
+    def same(have: Any, want: str | float) -> bool:
+        if isinstance(want, float) and isinstance(have, int | float):
+            return math.isclose(have, want, rel_tol=1e-9)
+        return str(have) == str(want)
+
+    return all(key in tags and same(tags[key], want) for key, want in wanted.items())
+
+
+def _entry(r: Any) -> Entry:
+    truth = json.loads(r["truth_json"]) if r["truth_json"] else {}
+    return Entry(session_key=r["session_key"], session_id=r["session_id"], path=r["path"], joint=r["joint"],
+                 created_utc=r["created_utc"], tags=json.loads(r["tags_json"]), verdict=r["verdict"],
+                 reasons=json.loads(r["reasons_json"] or "[]"), error=r["error"], K_Nm_per_rad=r["K_Nm_per_rad"],
+                 K_ci95=(r["K_lo"], r["K_hi"]), f_a_hz=r["f_a_hz"], f_r_hz=r["f_r_hz"], request_key=r["request_key"],
+                 analyzed_utc=r["analyzed_utc"], truth_K_Nm_per_rad=truth.get("K_Nm_per_rad"))

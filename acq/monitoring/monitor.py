@@ -1,0 +1,378 @@
+"""Condition monitoring: capture windows of a running machine, identify each, trend K, raise the alarm.
+
+A loop around the parts acq has (design §11): every ``every_s`` the recorder captures a window of
+``window_s`` as an ordinary crash-safe session, passively (``[drive] motion = "external"``: no motion
+command); a worker process analyses it while capture goes on (at most ``jobs`` running and one waiting:
+a window beyond that is not analysed and says so — back-pressure, never an unbounded queue); the
+outcome goes into the catalogue (:mod:`acq.monitoring.catalogue`, the batch's record of an outcome); the trend
+(:mod:`acq.monitoring.trend`: baseline, threshold and EWMA rules) judges it; on entering alarm ``on_alarm`` runs
+with ``ACQ_JOINT``, ``ACQ_K``, ``ACQ_BASELINE_K``, ``ACQ_CHANGE_PCT``, ``ACQ_SESSION`` in its environment.
+
+Each window is judged for excitation (:mod:`acq.monitoring.window_judge`): a window that does not excite is catalogued
+with verdict ``not excited`` and the reason, without K. Windows are numbered (session tag ``monitor_window``) and
+placed in machine time (``monitor_elapsed_s`` = number × ``every_s``); a restart after a crash resumes
+the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
+``interrupted`` (not counted). In ``fast`` mode (simulated benches) machine time is simulated: the loop
+does not sleep, and waits for the analysis instead of skipping (no real time passes meanwhile).
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import shlex
+import subprocess
+import time
+from collections.abc import Callable, Iterator
+from concurrent.futures import Future
+from contextlib import AbstractContextManager, contextmanager
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
+from acq.monitoring.catalogue import Catalogue, Entry, Outcome
+from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
+from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
+from acq.monitoring.window_judge import analyse_window, marked
+from acq.offline.analyze import sha256_of
+from acq.recording.recorder import Recorder, stop_on_signals
+from acq.recording.session import load, repair
+from acqcore.errors import ConfigError
+from analysis import AnalysisRequest
+from drivers.config import Bench
+from drivers.registry import open_bench
+
+WINDOW_TAG = "monitor_window"
+#: Expected window size = this × the data's raw size (HDF5 chunks, block tables, events): measured 1.1…1.2.
+_SIZE_MARGIN = 1.5
+
+
+@dataclass(frozen=True)
+class MonitorSettings:
+    """What ``acq monitor`` was asked for (SI units; sizes in bytes)."""
+
+    bench: Bench
+    out_dir: Path
+    window_s: float
+    every_s: float
+    for_s: float | None = None
+    on_alarm: str | None = None
+    keep: int = 10
+    max_disk_bytes: int | None = None
+    fast: bool = False
+    jobs: int = 1
+    baseline_windows: int = 5
+    threshold_pct: float = 10.0
+    ewma_lambda: float = 0.2
+    # a robot program excites the joint only in parts: the analysis uses the segments that excite (analysis.segments)
+    request: AnalysisRequest = AnalysisRequest(select_segments=True)
+
+
+@dataclass
+class MonitorStatus:
+    """The live figures of a monitor (shown by :func:`acq.monitor_view.status_table`)."""
+
+    joint: str
+    captured: int = 0
+    excited: int = 0
+    not_excited: int = 0
+    analysed: int = 0
+    skipped: int = 0
+    interrupted: int = 0
+    alarms: int = 0
+    machine_time_s: float = 0.0
+    disk_bytes: int = 0
+    last_K: float | None = None
+    last_K_ci: tuple[float | None, float | None] = (None, None)
+    change_pct: float | None = None
+    baseline_K: float | None = None
+    state: str = "starting"
+    message: str = ""
+    last_excited_fraction: float | None = None  # share of the last analysed window that excites the joint
+    last_moves: tuple[dict[str, Any], ...] = ()  # its moves: index, start_s, duration_s, peak_rad_s, excited
+    excited_fraction_sum: float = 0.0  # over the windows judged for excitation (for the share of the program)
+    excitation_judged: int = 0
+
+    @property
+    def program_excited_fraction(self) -> float | None:
+        """Share of the program's windows (time) that excites the joint, over the windows judged so far."""
+        return self.excited_fraction_sum / self.excitation_judged if self.excitation_judged else None
+
+
+def expected_window_bytes(bench: Bench, window_s: float) -> int:
+    """Bytes a window's session file needs at most: current (f8 per channel) and encoder (5 columns of 8 bytes)."""
+    current = bench.daq.rate_hz * len(bench.daq.channels) * 8
+    encoder = 5 * 8 / bench.drive.period_s
+    return int(_SIZE_MARGIN * window_s * (current + encoder)) + 200_000
+
+
+@contextmanager
+def _folder_lock(folder: Path) -> Iterator[None]:
+    """One monitor per folder (an flock: released by the kernel when the process dies, also on kill -9)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / "monitor.lock", "w") as f:
+        try:
+            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ConfigError(f"{folder}: another acq monitor is writing there") from None
+        yield
+
+
+class Monitor:
+    """The monitor loop; :meth:`run` returns the exit code (3 when the last state is alarm, else 0)."""
+
+    def __init__(self, settings: MonitorSettings, on_status: Callable[[MonitorStatus], None] | None = None) -> None:
+        if settings.every_s < settings.window_s:
+            raise ConfigError(f"--every {settings.every_s:g}: must be at least --window {settings.window_s:g} s")
+        self.s = settings
+        self.status = MonitorStatus(settings.bench.joint)
+        self.on_status = on_status
+        self._stop: str | None = None
+        self._recorder: Recorder | None = None
+        self._windows: dict[str, WindowFiles] = {}  # by session id (a moved folder is still the same monitor)
+        self._pending: dict[Future[Outcome], str] = {}
+        self._alarm_procs: list[subprocess.Popen[bytes]] = []
+        self._in_alarm = False
+        self._size = expected_window_bytes(settings.bench, settings.window_s)
+
+    def request_stop(self, reason: str) -> None:
+        """End after the window being captured (which ends as interrupted) and the analyses under way."""
+        self._stop = self._stop or reason
+        if self._recorder is not None:
+            self._recorder.request_stop(reason)
+
+    # ---- the loop ------------------------------------------------------------------------------------
+    def run(self) -> int:
+        """Monitor until ``for_s`` has passed or a stop is requested; always leaves the catalogue consistent."""
+        with _folder_lock(self.s.out_dir), Catalogue(self.s.out_dir / CATALOGUE_NAME) as catalogue, \
+                analysis_executor(self.s.jobs, None) as pool, self._signals():
+            self.catalogue = catalogue
+            first = self._resume(pool)
+            wall0 = time.monotonic()
+            n = first
+            while self._stop is None and (self.s.for_s is None or (n - first) * self.s.every_s < self.s.for_s):
+                if not self.s.fast:
+                    self._wait_until(wall0 + (n - first) * self.s.every_s)
+                    if self._stop is not None:
+                        break
+                self._window(n, pool)
+                n += 1
+            self._collect(at_most=0)
+            self._reap_alarms(wait=True)
+            self.status.state = "alarm" if self._in_alarm else self.status.state
+            self.status.message = f"stopped: {self._stop}" if self._stop else "done"
+            self._show()
+        return 3 if self._in_alarm else 0
+
+    def _window(self, n: int, pool: Any) -> None:
+        """Capture window ``n`` (if the disk budget allows) and hand it to the pool (if it keeps up)."""
+        self.status.machine_time_s = n * self.s.every_s
+        if not self._room_for_window():
+            self.status.skipped += 1
+            self.status.message = f"window {n} not captured: the disk budget would be exceeded"
+            self._show()
+            return
+        bench = self.s.bench
+        if bench.sim is not None:  # a simulated machine runs on machine time (program phase, wear, noise)
+            bench = bench.model_copy(update={"sim": bench.sim.model_copy(update={"elapsed_s": n * self.s.every_s})})
+        current, drive = open_bench(bench, fast=self.s.fast)
+        recorder = Recorder(bench, None, current, drive, self.s.out_dir, self.s.window_s,
+                            tags={WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s})
+        self._recorder = recorder
+        if self._stop is not None:
+            recorder.request_stop(self._stop)
+        try:
+            result = recorder.run()
+        finally:
+            self._recorder = None
+        key = str(load(result.path).meta.session_id)
+        self._windows[key] = WindowFiles(n, result.path, False, False, key)
+        self._size = max(self._size, int(_SIZE_MARGIN * result.path.stat().st_size))
+        if result.status != "complete":
+            self._mark(key, "interrupted", f"window capture {result.status}: {result.stop_reason}")
+            if result.status == "interrupted":  # Ctrl-C / SIGTERM reached the recorder's handler: the monitor ends
+                self._stop = self._stop or result.stop_reason
+            return
+        self.status.captured += 1
+        self._collect(at_most=self.s.jobs - 1 if self.s.fast else None)
+        if len(self._pending) > self.s.jobs:  # jobs running and one waiting: no more (back-pressure)
+            self._mark(key, "not analysed", f"the analysis fell behind the capture ({len(self._pending)} windows "
+                                            "waiting): this window was skipped")
+            self.status.skipped += 1
+            return
+        self._submit(pool, key)
+        self._show()
+
+    def _submit(self, pool: Any, key: str) -> None:
+        path = self._windows[key].path
+        self._pending[pool.submit(analyse_window, str(path.resolve()), sha256_of(path), self.s.request)] = key
+
+    def _collect(self, at_most: int | None) -> None:
+        """Record the finished analyses; first wait until at most ``at_most`` are left (None: do not wait)."""
+        while self._pending:
+            done = [f for f in self._pending if f.done()]
+            if not done and at_most is not None and len(self._pending) > at_most:
+                next(iter(self._pending)).exception()  # wait for the oldest
+                continue
+            if not done:
+                break
+            for future in done:
+                key = self._pending.pop(future)
+                try:
+                    outcome = future.result()
+                except Exception as e:  # noqa: BLE001 - the worker itself died: the window is marked, not lost
+                    self._mark(key, "not analysed", f"worker failed: {type(e).__name__}: {e}")
+                    continue
+                self._record(key, outcome)
+
+    def _mark(self, key: str, verdict: str, reason: str) -> None:
+        path = self._windows[key].path
+        try:
+            meta = session_meta(load(path))
+        except Exception:  # noqa: BLE001 - a window too broken to read is still marked
+            meta = {}
+        self._record(key, marked(str(path.resolve()), sha256_of(path), self.s.request, meta, verdict, [reason]))
+
+    def _record(self, key: str, outcome: Outcome) -> None:
+        """Catalogue one window, update the trend, the alarm and the figures, apply retention."""
+        self.catalogue.record(outcome)
+        verdict = (outcome.doc or {}).get("quality", {}).get("verdict")
+        self.status.analysed += verdict not in ("not analysed", "interrupted")
+        self.status.excited += verdict in ("ok", "poor", "failed")
+        self.status.not_excited += verdict == "not excited"
+        self.status.interrupted += verdict == "interrupted"
+        self._excitation(outcome, verdict)
+        self._windows[key] = replace(self._windows[key], done=True)
+        trend = self._trend()
+        self._judge(trend, key)
+        self._retain(trend)
+        self._show()
+
+    def _excitation(self, outcome: Outcome, verdict: str | None) -> None:
+        """Which share of the window and which moves excite (segment selection); a window the joint did not
+        travel in excites nowhere."""
+        excitation = (outcome.doc or {}).get("excitation")
+        if excitation is None and verdict != "not excited":
+            return
+        st = self.status
+        st.last_excited_fraction = excitation["excited_fraction"] if excitation else 0.0
+        st.last_moves = tuple(excitation["moves"]) if excitation else ()
+        st.excited_fraction_sum += st.last_excited_fraction
+        st.excitation_judged += 1
+
+    def _trend(self) -> Trend:
+        entries = [e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags]
+        if not entries:
+            return Trend(self.s.bench.joint, [], None, "no windows yet", None, self.s.threshold_pct, self.s.ewma_lambda)
+        return compute_trend(self.s.bench.joint, entries, baseline_sessions=self.s.baseline_windows,
+                             threshold_pct=self.s.threshold_pct, ewma_lambda=self.s.ewma_lambda)
+
+    def _judge(self, trend: Trend, key: str) -> None:
+        st = self.status
+        st.baseline_K = trend.baseline_K_Nm_per_rad
+        judged = [p for p in trend.points if p.state in ("baseline", "ok", "alarm")]
+        if judged:
+            last = judged[-1]
+            st.last_K, st.last_K_ci, st.change_pct = last.entry.K_Nm_per_rad, last.entry.K_ci95, last.change_pct
+        st.state = "alarm" if trend.alarm else ("ok" if trend.judged else
+                                                "baseline" if trend.baseline_K_Nm_per_rad else "learning baseline")
+        point = next((p for p in trend.points if p.entry.session_id == key), None)
+        if point is None or point.state not in ("ok", "alarm"):
+            return
+        if point.state == "alarm" and not self._in_alarm:
+            st.alarms += 1
+            self._run_on_alarm(point.entry, trend)
+        self._in_alarm = point.state == "alarm"
+
+    def _run_on_alarm(self, entry: Entry, trend: Trend) -> None:
+        """Start ``on_alarm`` (not waited for: a slow mail or webhook must not stop the capture)."""
+        self.status.message = f"ALARM: K {entry.K_Nm_per_rad:.1f} N·m/rad ({entry.path})"
+        if not self.s.on_alarm:
+            return
+        env = {**os.environ, "ACQ_JOINT": trend.joint, "ACQ_K": f"{entry.K_Nm_per_rad:.6g}",
+               "ACQ_BASELINE_K": f"{trend.baseline_K_Nm_per_rad:.6g}", "ACQ_SESSION": entry.path,
+               "ACQ_CHANGE_PCT": f"{100 * (entry.K_Nm_per_rad / trend.baseline_K_Nm_per_rad - 1):.3g}"}  # type: ignore
+        try:
+            self._alarm_procs.append(subprocess.Popen(shlex.split(self.s.on_alarm), env=env,
+                                                      stdin=subprocess.DEVNULL))
+        except OSError as e:
+            self.status.message += f" — --on-alarm failed to start: {e}"
+        self._reap_alarms(wait=False)
+
+    def _reap_alarms(self, wait: bool) -> None:
+        for proc in list(self._alarm_procs):
+            if wait:
+                try:
+                    proc.wait(timeout=30)
+                except subprocess.TimeoutExpired:
+                    continue
+            if proc.poll() is not None:
+                self._alarm_procs.remove(proc)
+
+    # ---- retention and disk ----------------------------------------------------------------------------
+    def _retain(self, trend: Trend) -> None:
+        # "before baseline": good windows that will make the baseline once there are enough of them
+        protected = {p.entry.session_id for p in trend.points if p.state in ("baseline", "alarm", "before baseline")}
+        for key, w in self._windows.items():
+            if (key in protected) != w.protected:
+                self._windows[key] = replace(w, protected=key in protected)
+        for w in to_delete(self._windows.values(), self.s.keep):
+            delete(w)
+            del self._windows[w.key]
+        self.status.disk_bytes = folder_bytes(self.s.out_dir)
+
+    def _room_for_window(self) -> bool:
+        if self.s.max_disk_bytes is None:
+            return True
+        victims, fits = make_room(self._windows.values(), self.s.out_dir, self._size, self.s.max_disk_bytes)
+        if fits:
+            for w in victims:
+                delete(w)
+                del self._windows[w.key]
+        self.status.disk_bytes = folder_bytes(self.s.out_dir)
+        return fits
+
+    # ---- resume after a crash --------------------------------------------------------------------------
+    def _resume(self, pool: Any) -> int:
+        """Mark or analyse the windows a previous run left; return the next window's number."""
+        known = {e.session_id: e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags}
+        numbers = [int(e.tags[WINDOW_TAG]) for e in known.values()]
+        for path in sorted(self.s.out_dir.glob("*.h5")):
+            try:
+                session = load(path)
+            except Exception:  # noqa: BLE001 - not a readable session: not ours to judge
+                continue
+            if WINDOW_TAG not in session.tags:
+                continue
+            n, key = int(session.tags[WINDOW_TAG]), str(session.meta.session_id)
+            numbers.append(n)
+            self._windows[key] = WindowFiles(n, path, key in known, False, key)
+            if key in known:
+                continue
+            if session.status == "recording":
+                repair(path, "the monitor stopped during this window's capture (found on restart)")
+                self._mark(key, "interrupted", "the monitor stopped during this window's capture (found on restart)")
+            elif session.status != "complete":
+                self._mark(key, "interrupted", f"window capture {session.status}: {session.meta.stop_reason}")
+            else:
+                self._submit(pool, key)
+        self._retain(self._trend())
+        self._collect(at_most=0)
+        return max(numbers, default=-1) + 1
+
+    # ---- time, signals, display ----------------------------------------------------------------------
+    def _wait_until(self, deadline: float) -> None:
+        while self._stop is None and time.monotonic() < deadline:
+            self._collect(at_most=None)
+            self._reap_alarms(wait=False)
+            time.sleep(min(0.2, max(deadline - time.monotonic(), 0.0)))
+
+    def _signals(self) -> AbstractContextManager[None]:
+        """Ctrl-C / SIGTERM end the monitor cleanly (a second one quits at once: acq check repairs the window)."""
+        return stop_on_signals(self.request_stop)
+
+    def _show(self) -> None:
+        if self.on_status is not None:
+            self.on_status(self.status)
+

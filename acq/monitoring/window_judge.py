@@ -1,0 +1,73 @@
+"""One monitor window judged and analysed (runs in a worker process): excited or not, and why.
+
+Before the analysis the joint's travel decides (less than half an electrical revolution cannot be analysed
+at all); after it the verdict's own excitation checks (coherence between f_a and f_r, and in the band,
+against :class:`analysis.quality.Thresholds`). A window that does not excite gets a catalogue record with
+verdict ``not excited`` and the reasons, without K, J or C: never a number.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import signal
+from dataclasses import replace
+from typing import Any
+
+from acq.monitoring.batch import analyze_one, session_meta
+from acq.monitoring.catalogue import Outcome
+from acq.recording.session import load
+from analysis import AnalysisRequest, Thresholds
+
+
+def not_excited(doc: dict[str, Any]) -> bool:
+    """True when a verdict that is not ok comes from the excitation checks: coherence between f_a and f_r, or in
+    the whole band, below the verdict's own "poor" limits (:class:`analysis.quality.Thresholds`), with the clocks
+    aligned (a residual above the amplitude fit's limit makes the coherence low too, but says nothing about the
+    motion: such a window keeps the analysis' own verdict and reasons)."""
+    th, quality = Thresholds(), doc["quality"]
+    exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
+    weak_between = exc is not None and not exc >= th.excitation_poor
+    weak_in_band = mean is None or not mean >= th.coherence_poor
+    residual = doc.get("clock", {}).get("residual_s")
+    aligned = residual is None or residual <= th.clock_residual_amplitude_s
+    return quality.get("verdict") != "ok" and aligned and (weak_between or weak_in_band)
+
+
+def marked(path: str, sha256: str, request: AnalysisRequest, meta: dict[str, Any], verdict: str, reasons: list[str],
+           doc: dict[str, Any] | None = None) -> Outcome:
+    """A window's catalogue record without numbers: verdict ``not excited`` / ``not analysed`` / ``interrupted``."""
+    keep = {k: v for k, v in (doc or {}).items() if k in ("session", "analyzed_utc", "acq_version", "simulated_truth",
+                                                          "clock", "options", "excitation")}
+    quality = {k: v for k, v in (doc or {}).get("quality", {}).items() if k.endswith("coherence")}
+    out = {"options": request.to_json_dict(), **keep, "quality": {**quality, "verdict": verdict, "reasons": reasons}}
+    return Outcome(path, sha256, request.key(), meta, out, None, 0.0)
+
+
+def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
+    """Judge and analyse one window (runs in a worker process); never raises."""
+    if multiprocessing.parent_process() is not None:  # a worker: Ctrl-C in the terminal is the monitor's to handle
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        session = load(path)
+        counts = session.encoder.position_counts
+        travel = float(abs(counts[1:] - counts[:-1]).sum()) if counts.size > 1 else 0.0
+        need = session.bench.encoder.counts_per_rev / (2 * session.bench.motor.pole_pairs)
+        if travel < need:
+            return marked(path, sha256, request, session_meta(session), "not excited",
+                          [f"the joint travelled {travel:.0f} counts, less than half an electrical revolution "
+                           f"({need:.0f} counts): the machine did not move it in this window"])
+    except Exception:  # noqa: BLE001 - analyze_one below records why the file cannot be read
+        pass
+    outcome = analyze_one(path, sha256, request, False)
+    if outcome.doc is not None and not_excited(outcome.doc):
+        reasons = [r for r in outcome.doc["quality"]["reasons"] if not r.startswith("note: ")]
+        reasons.sort(key=lambda r: "coherence" not in r)  # the excitation's own reasons first
+        excitation = outcome.doc.get("excitation")
+        if excitation is not None:
+            moves = excitation["moves"]
+            lo, hi = outcome.doc["options"]["band_hz"]
+            reasons.insert(0, f"{sum(m['excited'] for m in moves)} of {len(moves)} moves put torque into {lo:g}…{hi:g} Hz "
+                              f"beyond chance ({100 * excitation['excited_fraction']:.0f} % of the window)")
+        return replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
+                       seconds=outcome.seconds)
+    return outcome

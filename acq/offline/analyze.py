@@ -1,0 +1,183 @@
+"""Analyse a session file: session → :mod:`analysis` → result table, ``.result.json``, ``.report.png``.
+
+The only place where the application meets the analysis: it turns an :class:`acq.recording.session.Session`
+into the plain arrays of :class:`analysis.Recording`, runs :func:`analysis.analyze` with an
+:class:`analysis.AnalysisRequest`, and writes the results beside the session (the raw groups are
+never touched). On the simulated bench the table also shows the simulated truth and the error.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+from acq import __version__
+from acq.recording.session import Session, load, utc_now_iso
+from acq.recording.storage import atomic_path, free_bytes, write_text_atomically
+from analysis import AnalysisRequest, Recording, Result, TwoMassParams, analyze, code_fingerprint
+from acqcore.errors import ConfigError, StorageError
+
+#: Free bytes needed before drawing a report PNG: the reports are 0.2–0.6 MB (1600×1000 px); ×4 margin.
+REPORT_ROOM_BYTES = 4 << 20
+
+
+@dataclass(frozen=True)
+class SessionResult:
+    """A session's identification with where its outputs went."""
+
+    session: Session
+    result: Result
+    json_dict: dict[str, Any]
+    json_path: Path
+    report_path: Path | None
+
+
+def recording_from_session(session: Session) -> Recording:
+    """The session's raw streams as the analysis's plain arrays (nothing resampled or corrected)."""
+    session.require_samples()
+    cur, enc, bench = session.current, session.encoder, session.bench
+    return Recording(
+        current_a=dict(cur.phases_a),
+        rate_hz=cur.rate_hz,
+        encoder_index=enc.index,
+        position_counts=enc.position_counts,
+        period_s=enc.period_s,
+        counts_per_rev=enc.counts_per_rev,
+        pole_pairs=bench.motor.pole_pairs,
+        k_t_Nm_per_A=bench.motor.torque_constant_Nm_per_A,
+        block_first_index=cur.block_first_index,
+        block_count=cur.block_count,
+        block_host_ns=cur.block_host_ns,
+        encoder_host_ns=enc.host_ns,
+        host_clock_shared=session.host_clock_shared,
+        drive_time_s=enc.drive_time_s,
+    )
+
+
+def request_for(session: Session, request: AnalysisRequest = AnalysisRequest()) -> AnalysisRequest:
+    """``request`` with the bench's nominal plant when it names none."""
+    if request.nominal is not None:
+        return request
+    nominal = session.bench.nominal
+    return replace(request, nominal=TwoMassParams(K_Nm_per_rad=nominal.K_Nm_per_rad, Jm_kgm2=nominal.Jm_kgm2,
+                                                  Jl_kgm2=nominal.Jl_kgm2,
+                                                  C_Nms_per_rad=0.0))  # the bench gives no damping; C is always fitted
+
+
+def sha256_of(path: Path) -> str:
+    """SHA-256 of a file, hex."""
+    digest = hashlib.sha256()
+    with path.open("rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def simulated_truth(session: Session) -> dict[str, float] | None:
+    """The plant the simulated bench ran, when the current came from it (None for hardware).
+
+    The true clock offset refers to the simulator's drive cycle 0; it is given only when the stored
+    encoder index is that cycle (transport ``sim``) — a CANopen or serial index starts at its own first
+    SYNC or frame.
+    """
+    sim = session.bench.sim
+    if sim is None or session.bench.daq.driver != "sim":
+        return None
+    offset = sim.daq_offset_s if session.encoder.transport == "sim" else None
+    return {"K_Nm_per_rad": sim.K_at_start_Nm_per_rad(), "Jm_kgm2": sim.Jm_kgm2, "Jl_kgm2": sim.Jl_kgm2,
+            "C_Nms_per_rad": sim.C_Nms_per_rad, "offset_s": offset, "drift_ppm": sim.daq_drift_ppm}
+
+
+def result_json(session: Session, result: Result) -> dict[str, Any]:
+    """The ``--json`` / ``.result.json`` document: the result's keys plus what identifies the session."""
+    doc = result.to_json_dict()
+    doc["session"] = {
+        "path": str(session.path),
+        "session_id": session.meta.session_id,
+        "joint": session.meta.joint,
+        "created_utc": session.meta.created_utc,
+        "status": session.status,
+        "sha256": sha256_of(session.path),
+        "tags": session.tags,
+    }
+    doc["analyzed_utc"] = utc_now_iso()
+    doc["acq_version"] = __version__
+    doc["analysis_fingerprint"] = code_fingerprint()
+    truth = simulated_truth(session)
+    if truth is not None:
+        doc["simulated_truth"] = truth
+    return doc
+
+
+def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest(), *, write: bool = True,
+                    report: bool = True) -> SessionResult:
+    """Identify the joint of one session as ``request`` asks (with the bench's nominal plant unless it names one);
+    write ``<session>.result.json``.
+
+    The report PNG is not drawn here: with ``report`` its path is set, and :func:`draw_report` draws it once the
+    result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
+    :class:`ConfigError` naming the session; so does a session still ``recording`` or damaged unless ``request.partial``
+    (then its intact part is analysed and the result says ``"partial": true``). A failed write raises
+    :class:`StorageError` naming the file, leaving no temp file.
+    """
+    session = load(path)
+    session.require_usable(partial=request.partial)
+    request = request_for(session, request)
+    nyquist_hz = 0.5 / session.encoder.period_s
+    if request.band_hz is not None and request.band_hz[1] > nyquist_hz:
+        lo, hi = request.band_hz
+        raise ConfigError(f"--band {lo:g},{hi:g}: HI must not exceed {nyquist_hz:g} Hz, the Nyquist frequency of "
+                          f"{session.path.name}'s encoder (period {session.encoder.period_s:g} s)")
+    try:
+        result = analyze(recording_from_session(session), request)
+    except ValueError as e:
+        raise ConfigError(f"{session.path}: {e}") from None
+    doc = result_json(session, result)
+    doc["partial"] = bool(session.damage) or session.status == "recording"
+    doc["session"]["damage"] = list(session.damage)
+    json_path = session.path.with_name(session.path.stem + ".result.json")
+    report_path = session.path.with_name(session.path.stem + ".report.png") if report and write else None
+    if write:
+        if report_path is not None and free_bytes(report_path.parent) < REPORT_ROOM_BYTES:
+            # before anything is written (no result without its report) and before Qt's PNG writer, whose libpng
+            # prints its own line on stderr when the disk fills under it
+            raise StorageError(f"disk full: {report_path}")
+        write_json(doc, json_path)
+    return SessionResult(session, result, doc, json_path, report_path)
+
+
+def write_json(doc: dict[str, Any], path: Path) -> None:
+    """Write a result document through a temporary file of this writer, so a reader never sees half of it."""
+    write_text_atomically(path, json.dumps(doc, indent=2))
+
+
+def draw_report(done: SessionResult) -> SessionResult:
+    """Draw ``<session>.report.png`` of an identification already written (nothing when no report was asked for).
+
+    A picture that fails is not a failed identification: the failure becomes a note on the result
+    (``quality.reasons``, "note: report not drawn: …", rewritten into the ``.result.json``) and one line on
+    stderr; the returned result then has no report path.
+    """
+    if done.report_path is None:
+        return done
+    try:
+        from acq.ui.plots import render_report_png  # Qt only when a picture is drawn
+
+        with atomic_path(done.report_path) as tmp_png:
+            render_report_png(done.result.figures, tmp_png, values=done.json_dict,
+                              title=f"{done.session.meta.joint} · {done.session.path.name}")
+    except StorageError:
+        raise  # a write that failed (disk full, I/O error) is a failure, named by the file
+    except Exception as e:  # noqa: BLE001 — whatever the plotting stack does, the identification stands
+        why = f"{type(e).__name__}: {e}"
+        quality = done.json_dict["quality"]
+        reasons = [*quality["reasons"], f"note: report not drawn: {why}"]
+        doc = {**done.json_dict, "quality": {**quality, "reasons": reasons}}
+        write_json(doc, done.json_path)
+        sys.stderr.write(f"acq: {done.report_path}: report not drawn ({why}); the result stands in {done.json_path}\n")
+        return replace(done, json_dict=doc, report_path=None)
+    return done

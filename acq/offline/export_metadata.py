@@ -1,0 +1,120 @@
+"""The metadata ``acq export`` writes beside its CSV pair, so ``acq import`` restores the session's history.
+
+``<stem>.session.json`` holds what the CSV columns cannot: the session's id, joint, start time,
+operator, tags, the bench and profile as used, where the data came from, and whether both files'
+time columns are arrival stamps on one host clock. It names each CSV with its SHA-256, so an import
+recognises the pair it describes: a file changed since export is not that pair, and its metadata is
+not used (the import says so).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from acq import __version__
+from acq.offline.analyze import sha256_of
+from acq.recording.session import Session, utc_now_iso
+from acq.recording.storage import write_text_atomically
+from acqcore.errors import ConfigError
+
+FORMAT = "acq-export-metadata"
+FORMAT_VERSION = 1
+CURRENT_SUFFIX = ".current.csv"
+
+
+@dataclass(frozen=True)
+class ExportMetadata:
+    """A session's history as exported: identity, start time, tags, configs as used, host clock.
+
+    Attributes
+    ----------
+    path : Path
+        The metadata file read.
+    session_id, joint, created_utc, operator : str
+        As in the exported session (``created_utc``: ISO 8601, UTC).
+    tags, origin : dict
+        The session's tags and origin.
+    bench_json, profile_json : str
+        The bench and profile as used, JSON.
+    host_clock_shared : bool
+        Both files' ``t_s`` are stamps on one host clock (true for an export of a recording).
+    """
+
+    path: Path
+    session_id: str
+    joint: str
+    created_utc: str
+    operator: str
+    tags: dict[str, Any]
+    origin: dict[str, Any]
+    bench_json: str
+    profile_json: str
+    host_clock_shared: bool
+
+
+def metadata_path(current_path: Path) -> Path | None:
+    """``<stem>.session.json`` beside a current file named ``<stem>.current.csv`` (None for other names)."""
+    name = current_path.name
+    if not name.endswith(CURRENT_SUFFIX):
+        return None
+    return current_path.with_name(name[: -len(CURRENT_SUFFIX)] + ".session.json")
+
+
+def write_metadata(session: Session, current_path: Path, encoder_path: Path) -> Path:
+    """Write the metadata of ``session`` beside its exported ``current_path`` / ``encoder_path``; return its path."""
+    path = metadata_path(current_path)
+    assert path is not None, current_path
+    meta = session.meta
+    doc = {
+        "format": FORMAT, "format_version": FORMAT_VERSION, "exported_utc": utc_now_iso(), "acq_version": __version__,
+        "session_id": meta.session_id, "joint": meta.joint, "created_utc": meta.created_utc,
+        "operator": meta.operator, "tags": meta.tags, "origin": meta.origin,
+        "bench": session.bench.model_dump(mode="json"),
+        "profile": session.profile.model_dump(mode="json") if session.profile is not None else None,
+        "host_clock_shared": meta.host_clock_shared,
+        "files": {"current": {"name": current_path.name, "sha256": sha256_of(current_path)},
+                  "encoder": {"name": encoder_path.name, "sha256": sha256_of(encoder_path)}},
+    }
+    write_text_atomically(path, json.dumps(doc, indent=1) + "\n")  # a failed write names the file, leaves no temp
+    return path
+
+
+def read_metadata(current_path: Path, encoder_path: Path) -> tuple[ExportMetadata | None, str | None]:
+    """The metadata beside an exported pair, if there is one and it describes these two files.
+
+    Returns
+    -------
+    metadata : ExportMetadata or None
+        None when there is no metadata file, or it describes other files.
+    warning : str or None
+        Why a metadata file that is there was not used.
+
+    Raises
+    ------
+    ConfigError
+        The metadata file is there but unreadable or malformed (file and key named).
+    """
+    path = metadata_path(current_path)
+    if path is None or not path.exists():
+        return None, None
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ConfigError(f"{path}: not readable as acq export metadata ({e})") from None
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ConfigError(f"{path}: format: not {FORMAT!r}")
+    try:
+        files = {role: doc["files"][role] for role in ("current", "encoder")}
+        for role, given in (("current", current_path), ("encoder", encoder_path)):
+            if files[role]["sha256"] != sha256_of(given):
+                return None, (f"{path.name} describes another {role} file than {given.name} (SHA-256 differs): "
+                              "its metadata is not used, the time columns are not taken as one host clock")
+        meta = ExportMetadata(path, str(doc["session_id"]), str(doc["joint"]), str(doc["created_utc"]),
+                              str(doc.get("operator", "")), dict(doc["tags"]), dict(doc["origin"]),
+                              json.dumps(doc["bench"]), json.dumps(doc["profile"]), bool(doc["host_clock_shared"]))
+    except (KeyError, TypeError) as e:
+        raise ConfigError(f"{path}: key {e}: missing or malformed") from None
+    return meta, None

@@ -1,0 +1,249 @@
+"""``acq import``: a current file (CSV or TDMS) and an encoder CSV recorded by other tools become a session.
+
+The files are read and checked by :mod:`acq.offline.import_files`. Beside a pair written by ``acq export``
+its metadata (:mod:`acq.offline.export_metadata`) restores the session's id, joint, start time, tags, bench
+and profile; otherwise ``--started`` (or a TDMS ``wf_start_time``) dates the recording.
+
+Host stamps: the encoder file's ``t_s`` are stored uncorrected as ``host_ns``; the current's blocks
+(0.1 s) are stamped with their last sample's time on the same axis. The two time columns are one
+host clock only for a pair from ``acq export`` (its metadata says so) or with ``--same-clock``; the
+session's ``host_clock_shared`` says which, and only then does the analysis let the stamps narrow its
+clock search. Files from separate tools keep their time columns when they overlap; when they do not,
+the current is shifted to start with the encoder. Every choice is written into the session's
+``origin`` with the files' names and SHA-256.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import click
+import numpy as np
+from rich.console import Console
+from rich.markup import escape
+
+from acq import __version__
+from acq.config import load_bench, load_profile, with_joint
+from acq.monitoring.catalogue import parse_tags, tag_option
+from acq.offline.analyze import sha256_of
+from acq.offline.export_metadata import ExportMetadata, read_metadata
+from acq.offline.import_files import (CurrentTable, EncoderTable, host_ns, read_current_csv, read_current_tdms,
+                                      read_encoder_csv)
+from acq.recording.session import SessionWriter, load
+from acq.recording.storage import storage_error
+from acq.recording.summary import summarize
+from acq.ui.display import summary_table
+from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
+from drivers.config import Bench, Profile
+from acqcore.errors import ConfigError, StorageError
+
+BLOCK_S = 0.1
+
+
+def _timeline(cur: CurrentTable, enc: EncoderTable, shared_by: str | None) -> tuple[float, str]:
+    """Shift, s, that puts the current's file time on the encoder's, and what it rests on.
+
+    ``shared_by`` names what says the two time columns are one host clock (None: separate tools).
+    """
+    c0, c1 = (float(x) for x in cur.time_s(cur.sample_index[[0, -1]]))
+    e0, e1 = float(enc.t_s[0]), float(enc.t_s[-1])
+    overlap = min(c1, e1) - max(c0, e0)
+    overlapping = overlap >= 0.5 * min(c1 - c0, e1 - e0)
+    if shared_by is not None:
+        if not overlapping:
+            raise ConfigError(f"{shared_by}: the files' time columns do not overlap (current {c0:.3f}–{c1:.3f} s, "
+                              f"encoder {e0:.3f}–{e1:.3f} s), so they cannot be one host clock")
+        return 0.0, (f"shared ({shared_by}): both files' time columns are stamps on one host clock; each current block "
+                     "(0.1 s) is stamped with its last sample's time, without transfer latency")
+    if overlapping:
+        return 0.0, ("separate: the files come from separate tools (no acq export metadata, no --same-clock); their "
+                     "time columns are stored as given but are not one host clock (the analysis aligns the streams "
+                     "from the data alone)")
+    shift = e0 - c0
+    return shift, (f"separate: the files' time columns do not overlap; the current was shifted by {shift:+.6f} s to "
+                   "start with the encoder, so host stamps carry no offset between the streams (the analysis "
+                   "aligns them from the data)")
+
+
+def _current_blocks(cur: CurrentTable, shift_s: float) -> Iterator[CurrentBlock]:
+    """The current in blocks of ``BLOCK_S`` that never straddle a gap, stamped on the host timeline."""
+    values = np.vstack(list(cur.phases_a.values()))
+    per_block = max(1, round(cur.rate_hz * BLOCK_S))
+    bounds = [0, *(np.flatnonzero(np.diff(cur.sample_index) != 1) + 1), cur.sample_index.size]
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        for s in range(a, b, per_block):
+            e = min(s + per_block, b)
+            host = int(host_ns(cur.time_s(cur.sample_index[e - 1]) + shift_s))
+            yield CurrentBlock(int(cur.sample_index[s]), values[:, s:e], host)
+
+
+def _file_entry(role: str, path: Path, extra: dict[str, Any]) -> dict[str, Any]:
+    return {"role": role, "name": path.name, "path": str(path.resolve()), "sha256": sha256_of(path), **extra}
+
+
+def parse_started(text: str) -> str:
+    """``--started``: an ISO 8601 time (UTC when it names no zone) as the sessions' ``created_utc`` form."""
+    try:
+        when = datetime.fromisoformat(text)
+    except ValueError:
+        raise ConfigError(f"--started {text}: not an ISO 8601 time (e.g. 2026-11-20T10:15:03Z)") from None
+    if when.tzinfo is None:
+        when = when.replace(tzinfo=UTC)
+    return when.astimezone(UTC).isoformat(timespec="seconds")
+
+
+def _configs(meta: ExportMetadata | None, bench: Bench | None, profile: Profile | None, joint: str | None,
+             current_path: Path) -> tuple[Bench, Profile]:
+    """Bench and profile as given, else as used when the exported session was recorded; ``joint`` applied."""
+    if meta is not None:
+        bench = bench or Bench.model_validate_json(meta.bench_json)
+        profile = profile or Profile.model_validate_json(meta.profile_json)
+    if bench is None or profile is None:
+        option = "--bench" if bench is None else "--profile"
+        raise ConfigError(f"{option}: needed (no acq export metadata beside {current_path.name})")
+    return with_joint(bench, joint), profile
+
+
+def _start_time(started_utc: str | None, meta: ExportMetadata | None, cur: CurrentTable) -> tuple[str | None, str]:
+    """When the recording started (ISO 8601, UTC; None: now) and what says so."""
+    if started_utc:
+        return started_utc, "--started"
+    if meta is not None:
+        return meta.created_utc, "acq export metadata"
+    if cur.start_utc:
+        return cur.start_utc, "TDMS wf_start_time"
+    return None, "the time of import"
+
+
+@dataclass(frozen=True)
+class ImportResult:
+    """Where the session went, and the warnings found on the way (also stored as events)."""
+
+    path: Path
+    warnings: list[str]
+
+
+def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, profile: Profile | None, out: Path,
+                   current_channels: tuple[str, ...] = (), tags: dict[str, str | float] | None = None, *,
+                   joint: str | None = None, same_clock: bool = False, started_utc: str | None = None) -> ImportResult:
+    """Turn a current file (CSV or TDMS) and an encoder CSV into the session file ``out``.
+
+    Every check runs before anything is written; the file is written under a temporary name and
+    renamed at the end, so bad input never leaves a session file behind.
+
+    Parameters
+    ----------
+    bench, profile : the configs; None takes them from the ``acq export`` metadata beside the files.
+    tags : tags, added to (and overriding) those the metadata restores.
+    joint : joint name overriding the bench's.
+    same_clock : the two files' ``t_s`` are stamps on one host clock (``--same-clock``).
+    started_utc : when the recording started (ISO 8601, UTC); default from the metadata, a TDMS
+        ``wf_start_time``, else the time of import.
+
+    Raises
+    ------
+    ConfigError
+        Bad input, one line naming the file, line (or channel/sample) and column.
+    """
+    if out.exists():
+        raise ConfigError(f"-o {out}: exists (not overwritten)")
+    meta, meta_warning = read_metadata(current_path, encoder_path)
+    bench, profile = _configs(meta, bench, profile, joint, current_path)
+    if current_path.suffix.lower() == ".tdms":
+        cur = read_current_tdms(current_path, bench.daq.rate_hz, current_channels)
+    else:
+        if current_channels:
+            raise ConfigError(f"--current-channel: only for TDMS files, not {current_path}")
+        cur = read_current_csv(current_path, bench.daq.rate_hz)
+    period_s = bench.drive.period_s
+    enc = read_encoder_csv(encoder_path, period_s)
+    shared_by = "--same-clock" if same_clock else (
+        meta.path.name if meta is not None and meta.host_clock_shared else None)
+    shift, timeline = _timeline(cur, enc, shared_by)
+    created_utc, started_from = _start_time(started_utc, meta, cur)
+    origin: dict[str, Any] = {
+        "kind": "imported",
+        "importer": f"acq {__version__}",
+        "files": [_file_entry("current", current_path, cur.file_info), _file_entry("encoder", encoder_path, {})],
+        "host_timeline": timeline,
+        "encoder_host_ns": "the encoder file's t_s (host arrival stamps), uncorrected",
+        "encoder_index": enc.timestamp_kind,
+        "started_from": started_from,
+    }
+    if meta is not None:
+        origin["restored"] = {"metadata": _file_entry("metadata", meta.path, {}), "origin": meta.origin}
+    if meta_warning:
+        origin["metadata_not_used"] = meta_warning
+    notes = [*cur.notes, *enc.notes]
+    events = sorted((StreamEvent(int(host_ns(n.t_s + (shift if n.stream == "current" else 0.0))), n.stream, n.kind,
+                                 n.detail) for n in notes), key=lambda e: e.host_ns)  # file times onto the host timeline
+    cpr = getattr(bench.drive, "counts_per_rev", None) or bench.encoder.counts_per_rev
+    tmp = out.with_name(f".{out.name}.importing")
+    tmp.unlink(missing_ok=True)
+    try:
+        writer = SessionWriter(
+            tmp, bench=bench, profile=profile,
+            current_info=CurrentSourceInfo(cur.rate_hz, tuple(cur.phases_a), f"imported: {current_path.name}"),
+            drive_info=DriveInfo(period_s, cpr, "imported", enc.timestamp_kind, f"imported: {encoder_path.name}"),
+            host_ns_at_start=int(host_ns(min(float(cur.time_s(0)) + shift, float(enc.t_s[0])))), origin=origin,
+            tags={**(meta.tags if meta else {}), **(tags or {})}, operator=meta.operator if meta else "",
+            host_clock_shared=shared_by is not None, session_id=meta.session_id if meta else None,
+            created_utc=created_utc)
+        for block in _current_blocks(cur, shift):
+            writer.append_current(block)
+        writer.append_encoder(EncoderBlock(enc.index, enc.position_counts, host_ns(enc.t_s), enc.drive_time_s))
+        for event in events:
+            writer.add_event(event)
+        writer.finish("complete", f"imported from {current_path.name} and {encoder_path.name}")
+        if writer.failure is not None:
+            raise writer.failure
+        os.replace(tmp, out)
+    except StorageError as e:  # named by the file asked for; the half-written temp file is removed below
+        raise StorageError(str(e).split(" — ")[0].replace(str(tmp), str(out))) from None
+    except OSError as e:
+        raise storage_error(e, out) from None
+    finally:
+        tmp.unlink(missing_ok=True)
+    return ImportResult(out, [*([meta_warning] if meta_warning else []), *(n.detail for n in notes
+                                                                           if n.kind == "warning")])
+
+
+@click.command("import")
+@click.option("--current", "current_path", required=True, type=click.Path(path_type=Path),
+              help="Current file: CSV (t_s, i_a_A [, i_b_A, i_c_A]) or TDMS.")
+@click.option("--current-channel", "current_channels", multiple=True, metavar="GROUP/CHANNEL",
+              help="TDMS channel of a phase, repeat in phase order a, b, c (default: the file's only channel).")
+@click.option("--encoder", "encoder_path", required=True, type=click.Path(path_type=Path),
+              help="Encoder CSV (t_s, position_counts [, index] [, drive_time_s]).")
+@click.option("--bench", "bench_path", default=None, type=click.Path(path_type=Path),
+              help="Bench TOML (default: the bench as used, from the acq export metadata beside the files).")
+@click.option("--profile", "profile_name", default=None,
+              help="Profile name in configs/profiles/ or a TOML path (default: from the acq export metadata).")
+@click.option("--joint", default=None, help="Joint name (default: the bench config's).")
+@click.option("--same-clock", is_flag=True,
+              help="Both files' t_s are stamps on one host clock (one tool wrote both): let them narrow the clock "
+                   "search. Without it only a pair from acq export (its metadata says so) counts as one clock.")
+@click.option("--started", "started", default=None, metavar="ISO-TIME",
+              help="When the recording started, ISO 8601 (UTC if no zone), e.g. 2026-11-20T10:15:03Z (default: "
+                   "from the acq export metadata, a TDMS wf_start_time, else now). The catalogue and trend sort by it.")
+@click.option("-o", "--out", "out_path", required=True, type=click.Path(path_type=Path), help="Session file to write.")
+@tag_option
+def import_command(current_path: Path, current_channels: tuple[str, ...], encoder_path: Path, bench_path: Path | None,
+                   profile_name: str | None, joint: str | None, same_clock: bool, started: str | None, out_path: Path,
+                   tags: tuple[str, ...]) -> int:
+    """Turn a current file and an encoder CSV recorded by other tools into a session."""
+    result = import_session(current_path, encoder_path, load_bench(bench_path) if bench_path else None,
+                            load_profile(profile_name) if profile_name else None, out_path, current_channels,
+                            tags=parse_tags(tags), joint=joint, same_clock=same_clock,
+                            started_utc=parse_started(started) if started else None)
+    console = Console()
+    console.print(summary_table(summarize(load(result.path))))
+    for warning in result.warnings:
+        Console(stderr=True).print(f"[yellow]warning[/]: {escape(warning)}")
+    console.print(f"imported → {escape(str(result.path))}")
+    return 0

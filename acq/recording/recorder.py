@@ -1,0 +1,468 @@
+"""Record a session: run both streams, execute the profile, write everything raw, end cleanly.
+
+One reader thread per stream only reads its device and queues what it got; the calling thread
+checks stream indices (gaps by counters, never by timing), writes through
+:class:`acq.recording.session.SessionWriter`, flushes at least every 0.5 s and always finishes the file:
+``complete`` when both streams have the requested duration, ``interrupted`` on Ctrl-C / SIGTERM,
+``failed`` on a device error or a failed write (disk full, I/O error: the drive is stopped at once and
+only the samples committed before the failure count). Timestamps are never altered: raw indices and
+host stamps go to disk.
+"""
+
+from __future__ import annotations
+
+import math
+import queue
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from acq.recording.session import SessionExists, SessionWriter, Status, new_session_path, utc_now_iso
+from drivers.base import (CurrentBlock, CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock,
+                          StreamEvent)
+from drivers.config import Bench, Profile
+from acqcore.errors import AcqError, ConfigError, DeviceError
+
+FLUSH_INTERVAL_S = 0.5
+#: Also flush once this much is pending (a --fast simulated bench delivers seconds of data per 0.5 s): bounds
+#: the memory held and what a failed write can lose. 1 MiB ≈ 1.7 s of 3 × 25.6 kS/s float64.
+FLUSH_BYTES = 1 << 20
+READ_TIMEOUT_S = 0.2
+STALL_TIMEOUT_S = 5.0
+SHUTDOWN_TIMEOUT_S = 5.0
+
+#: Called in the recording thread after each block is written, ``("current" | "encoder", block)``,
+#: and for each event stored, ``("event", StreamEvent)`` (gaps found from the indices, device events).
+Listener = Callable[[str, Any], None]
+
+
+class Interrupted(Exception):
+    """Ends a recording as ``interrupted`` (a stop was requested: Ctrl-C, SIGTERM, a live window closed)."""
+
+
+@dataclass(frozen=True)
+class RecordingResult:
+    """What a finished recording reports (the session file holds the rest)."""
+
+    path: Path
+    status: Status
+    stop_reason: str
+    current_samples: int
+    encoder_samples: int
+    current_gaps: int
+    encoder_gaps: int
+    write_failed: bool = False  # a write to the session file failed (disk full, I/O error): nothing more is stored
+
+
+class _Reader(threading.Thread):
+    """Reads one device until it has ``target`` samples or is told to stop; queues everything."""
+
+    def __init__(self, name: str, device: CurrentSource | Drive, target: int, out: queue.Queue[tuple[str, Any]]):
+        super().__init__(name=f"acq-{name}-reader", daemon=True)
+        self.stream = name
+        self.device = device
+        self.target = target
+        self.out = out
+        self.stop_requested = threading.Event()
+        self.first_index: int | None = None
+        self.covered = 0
+
+    def _advance(self, block: CurrentBlock | EncoderBlock) -> None:
+        """Stream position covered so far, by the stream's own index (drops do not delay the end)."""
+        if isinstance(block, CurrentBlock):
+            first, end = block.first_index, block.first_index + block.count
+        else:
+            first, end = int(block.index[0]), int(block.index[-1]) + 1
+        if self.first_index is None:
+            self.first_index = first
+        self.covered = end - self.first_index
+
+    def run(self) -> None:
+        try:
+            while not self.stop_requested.is_set() and self.covered < self.target:
+                block = self.device.read(READ_TIMEOUT_S)
+                for event in self.device.events():
+                    self.out.put(("event", event))
+                if block is not None and block.count:
+                    self._advance(block)
+                    self.out.put((self.stream, block))
+        except Exception as e:  # noqa: BLE001 - every device failure ends the recording cleanly
+            self.out.put(("error", e))
+        finally:
+            self.out.put(("done", self.stream))
+
+
+class _StreamChecker:
+    """Keeps the stored streams strictly ordered and turns index jumps into gap events."""
+
+    def __init__(self) -> None:
+        self.next_current: int | None = None
+        self.last_cycle: int | None = None
+        self.current_gaps = 0
+        self.encoder_gaps = 0
+
+    def current(self, block: CurrentBlock) -> tuple[CurrentBlock | None, list[StreamEvent]]:
+        events: list[StreamEvent] = []
+        if self.next_current is not None and block.first_index != self.next_current:
+            missing = block.first_index - self.next_current
+            if missing > 0:
+                self.current_gaps += 1
+                events.append(StreamEvent(block.host_ns, "current", "gap",
+                                          f"{missing} samples missing before index {block.first_index}"))
+            else:
+                overlap = min(-missing, block.count)
+                events.append(StreamEvent(block.host_ns, "current", "warning",
+                                          f"{overlap} samples repeated at index {block.first_index} dropped"))
+                if overlap == block.count:
+                    return None, events
+                block = CurrentBlock(block.first_index + overlap, block.current_a[:, overlap:], block.host_ns)
+        self.next_current = block.first_index + block.count
+        return block, events
+
+    def encoder(self, block: EncoderBlock) -> tuple[EncoderBlock | None, list[StreamEvent]]:
+        events: list[StreamEvent] = []
+        idx = np.asarray(block.index, dtype=np.int64)
+        last = self.last_cycle if self.last_cycle is not None else int(idx[0]) - 1
+        # a --fast bench delivers 100 small blocks a second: the usual block (in order, after the last one, no gap)
+        # is recognised in two comparisons, the rest of the checks run only on a block that is not
+        in_order = bool(idx[0] > last) and bool((idx[1:] > idx[:-1]).all())
+        if in_order and int(idx[-1]) - last == idx.size:
+            self.last_cycle = int(idx[-1])
+            return block, events
+        if not in_order:
+            keep = idx > np.maximum.accumulate(np.concatenate(([last], idx[:-1])))
+            events.append(StreamEvent(int(block.host_ns[0]), "encoder", "warning",
+                                      f"{int((~keep).sum())} samples out of order or repeated dropped"))
+            block = _select(block, keep)
+            idx = idx[keep]
+            if idx.size == 0:
+                return None, events
+        steps = np.diff(idx, prepend=last)
+        for pos in np.flatnonzero(steps > 1):
+            self.encoder_gaps += 1
+            events.append(StreamEvent(int(block.host_ns[pos]), "encoder", "gap",
+                                      f"{int(steps[pos] - 1)} frames missing before cycle {int(idx[pos])}"))
+        self.last_cycle = int(idx[-1])
+        return block, events
+
+
+def _select(block: EncoderBlock, keep: np.ndarray) -> EncoderBlock:
+    def pick(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else np.asarray(a)[keep]
+
+    return EncoderBlock(
+        index=np.asarray(block.index)[keep],
+        position_counts=np.asarray(block.position_counts)[keep],
+        host_ns=np.asarray(block.host_ns)[keep],
+        drive_time_s=pick(block.drive_time_s),
+        velocity_counts_per_s=pick(block.velocity_counts_per_s),
+    )
+
+
+@contextmanager
+def stop_on_signals(request_stop: Callable[[str], None]) -> Iterator[None]:
+    """While recording (main thread only), Ctrl-C and SIGTERM ask for a stop at the next safe point.
+
+    The handlers never raise: an exception in the middle of a flush could write a part twice or lose one.
+    A second Ctrl-C (SIGTERM) is the previous handler's again: it quits at once.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    reasons = {signal.SIGINT: "interrupted by user (Ctrl-C)", signal.SIGTERM: "stopped by SIGTERM"}
+
+    def handler(signum: int, frame: object) -> None:
+        request_stop(reasons[signum])
+        signal.signal(signum, previous[signum])  # the same signal again quits at once (acq check repairs the file)
+
+    previous = {sig: signal.signal(sig, handler) for sig in reasons}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+class Recorder:
+    """Record ``duration_s`` of both streams while the drive executes ``profile``.
+
+    Parameters
+    ----------
+    bench, profile : the configs (stored in the session). ``profile`` None records passively: no motion command
+        at all (``[drive] motion = "external"``: the machine's controller moves the joint); it must be None then.
+    current, drive : the devices (real or simulated; the recorder cannot tell).
+    out_dir : folder for the session file, named ``<UTC start>_<joint>.h5``.
+    duration_s : seconds of data wanted in each stream (counted in samples, not wall time).
+    listeners : called with each block written and each event stored (see :data:`Listener`).
+    progress : called with the fraction recorded (0..1) as data arrives.
+    """
+
+    def __init__(
+        self,
+        bench: Bench,
+        profile: Profile | None,
+        current: CurrentSource,
+        drive: Drive,
+        out_dir: Path,
+        duration_s: float,
+        *,
+        operator: str = "",
+        tags: dict[str, Any] | None = None,
+        listeners: list[Listener] | None = None,
+        progress: Callable[[float], None] | None = None,
+    ) -> None:
+        external = getattr(bench.drive, "motion", "commanded") == "external"
+        if external != (profile is None):
+            raise ConfigError("[drive] motion = \"external\": acq must not command motion, record without a profile"
+                              if external else "a recording without a profile needs [drive] motion = \"external\"")
+        self.bench, self.profile = bench, profile
+        self.current, self.drive = current, drive
+        self.out_dir = Path(out_dir)
+        self.duration_s = duration_s
+        self.operator, self.tags = operator, tags
+        self.listeners = listeners or []
+        self.progress = progress
+        self._started = False
+        self._writer: SessionWriter | None = None
+        self._ran = False
+        self._stop_request: str | None = None
+        self._shutting_down = False
+
+    def request_stop(self, reason: str) -> None:
+        """Ask the recording to end as ``interrupted`` with ``reason`` at the next safe point (any thread)."""
+        if self._stop_request is None:
+            self._stop_request = reason
+
+    def start_devices(self) -> None:
+        """Start both devices (idempotent); a set-up error raises here, before any file exists."""
+        if self._started:
+            return
+        try:
+            self._cur_info = self.current.start()
+            self._drive_info = self.drive.start()
+        except BaseException:
+            self._release_devices()
+            raise
+        self._started = True
+
+    @property
+    def current_info(self) -> CurrentSourceInfo:
+        """What the started current source reported (coerced rate, channels)."""
+        self.start_devices()
+        return self._cur_info
+
+    @property
+    def drive_info(self) -> DriveInfo:
+        """What the started drive reported (period, counts per revolution)."""
+        self.start_devices()
+        return self._drive_info
+
+    def _release_devices(self) -> None:
+        self.drive.stop()
+        self.current.stop()
+
+    def open_session(self) -> SessionWriter:
+        """Start the devices and create the session file (and the drive's raw log beside it); idempotent.
+        A failure releases the devices and raises before anything is recorded."""
+        self.start_devices()
+        if self._writer is not None:
+            return self._writer
+        try:
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+            for _ in range(100):  # another recorder may take the name between the check and the create
+                path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
+                try:
+                    writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
+                                           drive_info=self._drive_info, host_ns_at_start=time.monotonic_ns(),
+                                           operator=self.operator, tags=self.tags)
+                except SessionExists:
+                    continue
+                break
+            else:
+                raise ConfigError(f"{self.out_dir}: no free session file name for joint {self.bench.joint}")
+            keep_raw = getattr(self.drive, "keep_raw_frames", None)  # transports that can log their raw traffic
+            if keep_raw is not None:
+                keep_raw(path)
+            self._writer = writer
+            return self._writer
+        except OSError as e:
+            self._release_devices()
+            raise ConfigError(f"{self.out_dir}: cannot write a session there ({e.strerror or e})") from None
+        except BaseException:
+            self._release_devices()
+            raise
+
+    def abort(self, reason: str) -> None:
+        """End a session that was opened but never run (e.g. Ctrl-C while a window was being built): the file is
+        finished as ``interrupted`` with ``reason`` and the devices are released. Nothing after :meth:`run`."""
+        if self._writer is None or self._ran:
+            return
+        self._ran = True
+        self._release_devices()
+        self._writer.finish("interrupted", reason)
+
+    def run(self) -> RecordingResult:
+        """Record; always returns with the file finished (device set-up errors raise before a file exists)."""
+        writer = self.open_session()
+        self._ran = True
+        cur_info, drive_info = self._cur_info, self._drive_info
+        path = writer.path
+        inbox: queue.Queue[tuple[str, Any]] = queue.Queue()
+        readers = {
+            "current": _Reader("current", self.current, math.ceil(self.duration_s * cur_info.rate_hz), inbox),
+            "encoder": _Reader("encoder", self.drive, math.ceil(self.duration_s / drive_info.period_s), inbox),
+        }
+        checker = _StreamChecker()
+        counts = {"current": 0, "encoder": 0}
+        status: Status = "complete"
+        reason = f"recorded {self.duration_s:g} s"
+        with stop_on_signals(self.request_stop):
+            try:
+                # Motion first: the started devices buffer their samples meanwhile, and a simulated
+                # bench then starts the motion at the same point of its record in every run.
+                if self.profile is not None:  # None: the machine's own controller moves the joint; acq only listens
+                    self.drive.start_motion(self.profile)
+                for r in readers.values():
+                    r.start()
+                self._pump(inbox, readers, writer, checker, counts)
+            except Interrupted as e:
+                status, reason = "interrupted", str(e)
+            except KeyboardInterrupt:  # raised by code that embeds the recorder, or where no handler could be set
+                status, reason = "interrupted", "interrupted by user (Ctrl-C)"
+            except AcqError as e:
+                status, reason = "failed", str(e)
+            except Exception as e:  # noqa: BLE001 - keep the data whatever went wrong, and say what
+                status, reason = "failed", f"{type(e).__name__}: {e}"
+            finally:
+                status, reason = self._shut_down(inbox, readers, writer, checker, counts, status, reason)
+        stored = writer.committed  # only what is on disk is reported, never what was received
+        return RecordingResult(path, status, reason, stored["current_samples"], stored["encoder_samples"],
+                               checker.current_gaps, checker.encoder_gaps, writer.failure is not None)
+
+    def _pump(self, inbox: queue.Queue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
+              checker: _StreamChecker, counts: dict[str, int]) -> None:
+        done: set[str] = set()
+        last_flush = last_data = time.monotonic()
+        while len(done) < len(readers):
+            if self._stop_request is not None and any(r.covered < r.target for r in readers.values()):
+                raise Interrupted(self._stop_request)  # a stop once both streams are complete changes nothing
+            try:
+                kind, item = inbox.get(timeout=READ_TIMEOUT_S)
+            except queue.Empty:
+                kind, item = "", None
+            now = time.monotonic()
+            if kind == "error":
+                raise item if isinstance(item, AcqError) else DeviceError(f"{type(item).__name__}: {item}")
+            if kind == "done":
+                done.add(item)
+            elif kind:
+                self._store(kind, item, writer, checker, counts)
+                last_data = now
+            if now - last_data > STALL_TIMEOUT_S:
+                silent = [n for n, r in readers.items() if n not in done]
+                raise DeviceError(f"no data from {', '.join(silent)} for {STALL_TIMEOUT_S:g} s")
+            if now - last_flush >= FLUSH_INTERVAL_S or writer.pending_bytes >= FLUSH_BYTES:
+                writer.flush()
+                last_flush = now
+
+    def _store(self, kind: str, item: Any, writer: SessionWriter, checker: _StreamChecker,
+               counts: dict[str, int]) -> None:
+        if kind == "event":
+            self._event(writer, item)
+            return
+        block, events = checker.current(item) if kind == "current" else checker.encoder(item)
+        for event in events:
+            self._event(writer, event)
+        if block is None:
+            return
+        if kind == "current":
+            writer.append_current(block)
+        else:
+            writer.append_encoder(block)
+        counts[kind] += block.count
+        self._notify(kind, block)
+        if self.progress is not None and kind == "current":
+            self._call_out(self.progress, min(1.0, counts["current"] / (self.duration_s * self._cur_info.rate_hz)))
+
+    def _event(self, writer: SessionWriter, event: StreamEvent) -> None:
+        """Store an event and show it to the listeners as ``("event", event)``."""
+        writer.add_event(event)
+        self._notify("event", event)
+
+    def _notify(self, kind: str, item: Any) -> None:
+        for listener in self.listeners:
+            self._call_out(listener, kind, item)
+
+    def _call_out(self, callback: Callable[..., None], *args: Any) -> None:
+        """Call a listener or the progress callback; while shutting down nothing it raises may keep the file
+        from being finished."""
+        try:
+            callback(*args)
+        except Exception:
+            if not self._shutting_down:
+                raise
+
+    def _shut_down(self, inbox: queue.Queue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
+                   checker: _StreamChecker, counts: dict[str, int], status: Status, reason: str) -> tuple[Status, str]:
+        """Stop motion first (safety); store everything the readers still deliver until each has ended; then
+        stop the devices, store what is left and finish the file."""
+        self._shutting_down = True
+        try:
+            try:
+                if self.profile is not None:
+                    self.drive.stop_motion()
+            except Exception as e:  # noqa: BLE001 - the file must still be finished
+                writer.add_event(StreamEvent(time.monotonic_ns(), "drive", "error", f"stop motion failed: {e}"))
+            for r in readers.values():
+                r.stop_requested.set()
+            deadline = time.monotonic() + SHUTDOWN_TIMEOUT_S
+            while any(r.is_alive() for r in readers.values()) and time.monotonic() < deadline:
+                status, reason = self._drain(inbox, writer, checker, counts, status, reason, wait_s=READ_TIMEOUT_S)
+            for stop in (self.current.stop, self.drive.stop):
+                try:
+                    stop()
+                except Exception as e:  # noqa: BLE001
+                    writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "error", f"device stop failed: {e}"))
+            for r in readers.values():
+                if r.is_alive():
+                    r.join(timeout=READ_TIMEOUT_S)
+            status, reason = self._drain(inbox, writer, checker, counts, status, reason, wait_s=0.0)
+            for device in (self.current, self.drive):
+                for event in device.events():
+                    writer.add_event(event)
+        except Exception as e:  # noqa: BLE001 - e.g. the disk filled: the footer still says what happened
+            if status == "complete":
+                status, reason = "failed", f"{type(e).__name__}: {e}"
+        finally:
+            if status != "complete":
+                writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "info", f"stopped: {reason}"))
+            writer.finish(status, reason)
+            if writer.failure is not None:  # a write failed (now or earlier): the recording failed, whatever else
+                status, reason = "failed", f"{writer.failure} — {writer.seconds_kept:.1f} s kept"
+        return status, reason
+
+    def _drain(self, inbox: queue.Queue[tuple[str, Any]], writer: SessionWriter, checker: _StreamChecker,
+               counts: dict[str, int], status: Status, reason: str, wait_s: float) -> tuple[Status, str]:
+        """Store what the readers queued (waiting up to ``wait_s`` for the first item); a late error fails
+        a recording that was complete."""
+        try:
+            item = inbox.get(timeout=wait_s) if wait_s > 0 else inbox.get_nowait()
+        except queue.Empty:
+            return status, reason
+        while True:
+            kind, payload = item
+            if kind in ("current", "encoder", "event"):
+                self._store(kind, payload, writer, checker, counts)
+            elif kind == "error" and status == "complete":
+                status, reason = "failed", str(payload)
+            try:
+                item = inbox.get_nowait()
+            except queue.Empty:
+                return status, reason

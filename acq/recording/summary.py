@@ -1,0 +1,77 @@
+"""What a session holds, in numbers: samples, durations, effective rates and gaps per stream."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from acq.recording.session import Session
+
+
+@dataclass(frozen=True)
+class StreamSummary:
+    """One stream: samples stored, seconds covered, nominal and host-measured rates (Hz), gaps."""
+
+    name: str
+    samples: int
+    duration_s: float
+    nominal_rate_hz: float
+    effective_rate_hz: float
+    gaps: int
+    missing: int
+
+
+@dataclass(frozen=True)
+class SessionSummary:
+    """A session at a glance."""
+
+    path: str
+    joint: str
+    status: str
+    stop_reason: str
+    created_utc: str
+    streams: tuple[StreamSummary, ...]
+    events: int
+
+    def to_json_dict(self) -> dict[str, object]:
+        return asdict(self)
+
+
+def _gaps(index: np.ndarray) -> tuple[int, int]:
+    steps = np.diff(index)
+    jumps = steps[steps > 1]
+    return int(jumps.size), int((jumps - 1).sum())
+
+
+def _rate(span_samples: float, host_first_ns: int, host_last_ns: int) -> float:
+    span_s = (host_last_ns - host_first_ns) * 1e-9
+    return float(span_samples / span_s) if span_s > 0 else float("nan")
+
+
+def summarize(session: Session) -> SessionSummary:
+    """Count samples and gaps from the stream indices; rates measured against the host clock."""
+    cur, enc = session.current, session.encoder
+    n_cur = cur.sample_count
+    cur_gaps, cur_missing = _gaps(cur.sample_index())
+    cur_rate = float("nan")
+    if cur.block_count.size > 1:
+        span = (cur.block_first_index[-1] + cur.block_count[-1]) - (cur.block_first_index[0] + cur.block_count[0])
+        cur_rate = _rate(span, int(cur.block_host_ns[0]), int(cur.block_host_ns[-1]))
+    n_enc = int(enc.index.size)
+    enc_gaps, enc_missing = _gaps(enc.index)
+    enc_rate = _rate(float(enc.index[-1] - enc.index[0]), int(enc.host_ns[0]), int(enc.host_ns[-1])) if n_enc > 1 else float("nan")
+    streams = (
+        StreamSummary("current", n_cur, n_cur / cur.rate_hz, cur.rate_hz, cur_rate, cur_gaps, cur_missing),
+        StreamSummary("encoder", n_enc, (n_enc + enc_missing) * enc.period_s, 1.0 / enc.period_s, enc_rate,
+                      enc_gaps, enc_missing),
+    )
+    return SessionSummary(
+        path=str(session.path),
+        joint=session.meta.joint or "",
+        status=session.status,
+        stop_reason=session.meta.stop_reason,
+        created_utc=session.meta.created_utc or "",
+        streams=streams,
+        events=len(session.events),
+    )

@@ -1,0 +1,402 @@
+"""The ``acq`` command line: record, info, check (more commands register themselves below).
+
+Errors for people: an :class:`~acqcore.errors.AcqError` anywhere becomes one line on stderr and
+exit code 2 (bad input) or 1 (device, failed write); a usage error is one line too (exit 2); Ctrl-C is
+exit 130.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import os
+import signal
+import sys
+import threading
+import time
+import warnings
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+from click.utils import make_default_short_help
+from rich.console import Console
+
+from acq import __version__
+from acq.monitoring.catalogue import CatalogueLocation, parse_tags, tag_option
+from acq.recording.paths import is_batch, require_session_file
+from acqcore.errors import AcqError, ConfigError
+
+if TYPE_CHECKING:
+    from analysis import AnalysisRequest
+    from acq.offline.analyze import SessionResult
+    from acq.recording.recorder import Recorder, RecordingResult
+    from acq.recording.session import Session
+
+# numpy, scipy, h5py, pydantic and Qt are imported inside the commands that use them: `acq --help`, a command's
+# --help and a mistyped path print at once (1.1 s of imports before; bench/cli_start.py measures it)
+
+EXIT_INTERRUPTED = 130
+out = Console()
+err = Console(stderr=True)
+
+
+#: Commands defined in modules of their own: name → (module, attribute, the command's short help). A module is
+#: imported only when its command runs or shows its own --help, so the list in `acq --help` carries the short help
+#: (tests/test_analyze_cli.py keeps it equal to the command's own).
+LAZY_COMMANDS: dict[str, tuple[str, str, str]] = {
+    "devices": ("acq.ui.devices_cli", "devices_command",
+                "List NI devices and AI channels, CAN interfaces, serial ports and the simulated bench."),
+    "export": ("acq.offline.exporters", "export_command",
+               "Export SESSION to a current CSV, an encoder CSV and the session's metadata (JSON)."),
+    "fleet": ("acq.ui.fleet_display", "fleet_command",
+              "Every joint (by robot tag): latest K ± 95 %, ΔK to its baseline, sessions of the last day, state "
+              "(alarm / stale / no baseline / ok), worst first; exit code 3 if any joint is in alarm."),
+    "import": ("acq.offline.importers", "import_command",
+               "Turn a current file and an encoder CSV recorded by other tools into a session."),
+    "monitor": ("acq.ui.monitor_cli", "monitor_command",
+                "Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in "
+                "alarm."),
+    "selftest": ("acq.ui.selftest_cli", "selftest_command",
+                 "Check the bench and its config against the data: devices, streams, a slow move, an identification."),
+    "trend": ("acq.ui.trend_cli", "trend_command",
+              "K of a joint over time (± 95 %), f_a, f_r, baseline and alarms; exit code 3 while in alarm."),
+    "view": ("acq.ui.view", "view_command",
+             "Show traces, FRF with the fitted model, coherence and identified values of SESSION(s); or, with "
+             "--trend JOINT [FOLDER], the joint's stiffness over time."),
+}
+
+
+class LazyGroup(click.Group):
+    """A group whose :data:`LAZY_COMMANDS` load on first use (click's documented "lazy loading" pattern)."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return sorted([*super().list_commands(ctx), *LAZY_COMMANDS])
+
+    def get_command(self, ctx: click.Context, cmd_name: str) -> click.Command | None:
+        if cmd_name in LAZY_COMMANDS:
+            module, attribute, _ = LAZY_COMMANDS[cmd_name]
+            return getattr(importlib.import_module(module), attribute)
+        return super().get_command(ctx, cmd_name)
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        """The command list as click writes it, the lazy commands' short help taken from :data:`LAZY_COMMANDS`."""
+        names = self.list_commands(ctx)
+        limit = formatter.width - 6 - max(len(name) for name in names)
+        rows = [(name, make_default_short_help(LAZY_COMMANDS[name][2], limit) if name in LAZY_COMMANDS
+                 else self.commands[name].get_short_help_str(limit)) for name in names]
+        with formatter.section("Commands"):
+            formatter.write_dl(rows)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="acq")
+def cli() -> None:
+    """Record a robot joint on the bench and identify its stiffness K and inertias J_m, J_l."""
+
+
+def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> RecordingResult:
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    columns = (TextColumn("[bold]{task.description}"), BarColumn(), TextColumn("{task.fields[seconds]}"),
+               TimeElapsedColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=err, transient=False) as progress:
+        task = progress.add_task(label, total=1.0, seconds=f"0.0 / {duration_s:g} s")
+
+        def update(fraction: float) -> None:
+            progress.update(task, completed=fraction, seconds=f"{fraction * duration_s:.1f} / {duration_s:g} s")
+
+        recorder.progress = update
+        return recorder.run()
+
+
+@cli.command()
+@click.option("--profile", "profile_name", required=True, help="Profile name in configs/profiles/ or a TOML path.")
+@click.option("--bench", "bench_path", type=click.Path(path_type=Path), default=None,
+              help="Bench TOML (default: the simulated bench configs/benches/sim.toml).")
+@click.option("--duration", "duration_s", type=float, default=None,
+              help="Seconds to record (default: the profile's duration_s).")
+@click.option("--joint", default=None, help="Joint name (default: the bench config's).")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("sessions"), show_default=True,
+              help="Folder for the session file.")
+@click.option("--operator", default="", help="Who is at the bench (stored in the session).")
+@click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
+@click.option("--no-analyze", is_flag=True, help="Only record; do not identify the joint afterwards.")
+@click.option("--live", is_flag=True, help="Watch it in a live window: phase current, speed, position, counters, gaps.")
+@tag_option
+def record(profile_name: str, bench_path: Path | None, duration_s: float | None, joint: str | None,
+           out_dir: Path, operator: str, fast: bool, no_analyze: bool, tags: tuple[str, ...],
+           live: bool) -> int:
+    """Swing the joint on PROFILE, record current and encoder, write one session file."""
+    from acq.config import check_duration, check_memory, load_bench, load_profile, with_joint
+    from acq.ui.display import summary_table
+    from acq.recording.recorder import Recorder
+    from acq.recording.session import load
+    from acq.recording.summary import summarize
+    from drivers.registry import open_bench
+
+    bench = with_joint(load_bench(bench_path), joint)
+    profile = load_profile(profile_name)
+    duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
+    check_memory(bench)
+    current, drive = open_bench(bench, fast=fast)
+    recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))
+    if live:
+        from acq.ui.live import LiveView, require_display  # Qt is imported only when asked for
+
+        require_display()  # before the devices start: no display → one-line error
+    recorder.open_session()  # devices and file ready before any progress is drawn; an error is one line
+    label = f"recording {bench.joint}"
+    try:
+        live_view = LiveView(recorder) if live else None  # scaled by what the started devices report
+        result = (live_view.record(lambda: _record_with_progress(recorder, duration, label)) if live_view
+                  else _record_with_progress(recorder, duration, label))
+    except BaseException as e:  # before the recording ran: finish its file, release the devices
+        recorder.abort("interrupted by user (Ctrl-C)" if isinstance(e, KeyboardInterrupt)
+                       else f"{type(e).__name__}: {e}")
+        raise
+    if result.write_failed:  # nothing more is written to that disk: no summary read back, no analysis
+        click.echo(f"acq: failed: {result.stop_reason} ({result.current_samples} current and "
+                   f"{result.encoder_samples} encoder samples stored in {result.path})", err=True)
+        return 1
+    out.print(summary_table(summarize(load(result.path))))
+    if not no_analyze and result.current_samples and result.encoder_samples:
+        _analyze_after_recording(result.path)
+    if result.status == "complete":
+        return 0
+    click.echo(f"acq: {result.status}: {result.stop_reason} — everything recorded up to the stop is kept in "
+               f"{result.path} ({result.current_samples} current samples, {result.encoder_samples} encoder samples)",
+               err=True)  # one plain line (rich would wrap it)
+    return EXIT_INTERRUPTED if result.status == "interrupted" else 1
+
+
+def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_path: Path | str | None) -> SessionResult:
+    """Analyse one session with ``request`` and put the result into its folder's catalogue; the report PNG is drawn
+    after both (:func:`acq.offline.analyze.draw_report`: a picture that fails is only a note), by the caller."""
+    from acq.offline.analyze import analyze_session
+    from acq.monitoring.batch import quiet_numerics, record_outcome
+
+    start = time.perf_counter()
+    with quiet_numerics():
+        done = analyze_session(path, request, report=report)
+    try:
+        record_outcome(done, request, catalogue_path, time.perf_counter() - start)
+    except BaseException:  # no result without its catalogue row (a later batch analyses the session again)
+        done.json_path.unlink(missing_ok=True)
+        raise
+    return done
+
+
+def _print_result(done: SessionResult) -> None:
+    from acq.ui.display import result_table
+
+    out.print(result_table(done.json_dict))
+    out.print(f"result: {done.json_path}" + (f" · report: {done.report_path}" if done.report_path else ""))
+
+
+def _analyze_after_recording(path: Path) -> None:
+    """Identify the joint of a session just recorded; a failure is reported, the recording stands."""
+    with err.status("identifying the joint …"):
+        try:
+            from acq.offline.analyze import draw_report
+            from analysis import AnalysisRequest
+
+            done = draw_report(_identify(path, AnalysisRequest(), report=True, catalogue_path=None))
+        except AcqError as e:
+            click.echo(f"acq: analysis: {e}", err=True)
+            return
+        except Exception as e:  # noqa: BLE001 - the recording stands whatever the analysis did
+            click.echo(f"acq: analysis failed: {type(e).__name__}: {e} (the session is kept: acq analyze {path})",
+                       err=True)
+            return
+    _print_result(done)
+
+
+def _parse_band(text: str | None) -> tuple[float, float] | None:
+    if text is None:
+        return None
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise ConfigError(f"--band {text}: must be LO,HI in Hz, e.g. 10,400") from None
+    if not 0 < lo < hi:
+        raise ConfigError(f"--band {text}: must be LO,HI in Hz with 0 < LO < HI")
+    return lo, hi
+
+
+@cli.command(name="analyze")
+@click.argument("session_path", type=click.Path(path_type=Path))
+@click.option("--torque", type=click.Choice(["encoder", "hilbert", "park"]), default=None,
+              help="Torque from current: encoder-angle demodulation (default, one phase), Park (≥ 2 phases), "
+                   "or the paper's Hilbert envelope.")
+@click.option("--params", type=click.Choice(["K,Jm,Jl", "K"]), default="K,Jm,Jl", show_default=True,
+              help="Free parameters besides C; K fixes J_m, J_l to the bench's nominal values.")
+@click.option("--fit", "fit_kind", type=click.Choice(["amplitude", "complex"]), default="amplitude",
+              show_default=True, help="Fit the FRF amplitude (paper) or the complex FRF.")
+@click.option("--band", default=None, help="Fit band LO,HI in Hz (default 10 … min(0.4·f_enc, 500)).")
+@click.option("--paper", is_flag=True, help="The paper's chain: Hilbert torque, no clock alignment, linear "
+                                            "resampling, uniform weights (for comparison).")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
+@click.option("--no-report", is_flag=True, help="Do not draw <session>.report.png.")
+@click.option("--jobs", type=click.IntRange(min=1), default=None,
+              help="Folder or glob: parallel analyses (default: the CPU count).")
+@click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
+              help="The catalogue to fill: a SQLite file (default: catalogue.sqlite in the session's folder) or a "
+                   "postgresql://user@host/db URL shared by several hosts.")
+@click.option("--partial", is_flag=True, help="Also analyse a session still being recorded (status recording) or "
+                                              "damaged: its intact part, the result marked partial.")
+@click.option("--scheduler", default=None, metavar="ADDRESS",
+              help="Folder or glob: run on a Dask distributed cluster (tcp://host:8786); the workers must reach "
+                   "the session files at the same paths.")
+def analyze_command(session_path: Path, torque: str | None, params: str, fit_kind: str, band: str | None,
+                    paper: bool, as_json: bool, no_report: bool, jobs: int | None, catalogue_path: Path | str | None,
+                    partial: bool, scheduler: str | None) -> int:
+    """Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png.
+
+    SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
+    (same file hash and options) is analysed in parallel and recorded there; exit code 1 if any failed.
+    """
+    batch = is_batch(session_path)
+    if not batch:
+        require_session_file(session_path)  # a mistyped path is one line before the analysis's libraries load
+    from analysis import AnalysisRequest
+
+    request = AnalysisRequest(torque_method=torque, params=params, fit=fit_kind,  # type: ignore[arg-type]
+                              band_hz=_parse_band(band), pipeline="paper" if paper else "acq", partial=partial)
+    if batch:
+        from acq.ui.batch_cli import analyze_many
+
+        return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
+                            report=not no_report, as_json=as_json, out=out)
+    from acq.offline.analyze import draw_report
+
+    if as_json:
+        done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)
+        click.echo(json.dumps(done.json_dict, indent=2))
+        sys.stdout.flush()  # the numbers reach the reader before the picture is drawn
+        draw_report(done)  # a picture that fails is a note in the .result.json and a line on stderr
+        return 0
+    with err.status(f"analysing {session_path} …"):
+        done = draw_report(_identify(session_path, request, report=not no_report, catalogue_path=catalogue_path))
+    _print_result(done)
+    return 0
+
+
+@cli.command()
+@click.argument("session_path", type=click.Path(path_type=Path))
+@click.option("--json", "as_json", is_flag=True, help="Print the summary as JSON.")
+def info(session_path: Path, as_json: bool) -> int:
+    """Summarise a session: samples, durations, effective rates, gaps."""
+    require_session_file(session_path)
+    from acq.ui.display import summary_table
+    from acq.recording.session import load
+    from acq.recording.summary import summarize
+
+    session = load(session_path)
+    summary = summarize(session)
+    warning = _integrity_warning(session)
+    if as_json:
+        doc = summary.to_json_dict()
+        doc["damage"] = list(session.damage)
+        click.echo(json.dumps(doc, indent=2))
+    else:
+        out.print(summary_table(summary))
+    if warning:
+        click.echo(f"acq: warning: {warning}", err=True)
+    return 0
+
+
+def _integrity_warning(session: Session) -> str | None:
+    """One line when a session is damaged or still ``recording`` (killed recorder), saying to run acq check."""
+    if session.damage:
+        return f"{session.path}: damaged ({'; '.join(session.damage)}) — run acq check {session.path}"
+    if session.status == "recording":
+        return (f"{session.path}: status recording (still being recorded, or the recorder was killed) — "
+                f"run acq check {session.path}")
+    return None
+
+
+@cli.command()
+@click.argument("session_path", type=click.Path(path_type=Path))
+def check(session_path: Path) -> int:
+    """Verify a session's checksums and committed counts; repair one left by a killed recorder.
+
+    Exit 0 when the session is intact (or was repaired), 1 when damage remains (each damaged span is listed).
+    """
+    require_session_file(session_path)
+    from acq.ui.display import summary_table
+    from acq.recording.session import load, repair
+    from acq.recording.summary import summarize
+
+    session = load(session_path)
+    if session.status == "recording":
+        session = repair(session_path, "recorder stopped without finishing the file (found by acq check)")
+        out.print(summary_table(summarize(session)))
+        out.print(f"{session_path}: interrupted — the recorder stopped without finishing the file; repaired: "
+                  f"status = interrupted, {session.current.sample_count} current and {session.encoder.index.size} "
+                  "encoder samples kept")
+        return 0
+    out.print(summary_table(summarize(session)))
+    if session.damage:
+        for line in session.damage:
+            click.echo(f"{session_path}: {line}")  # plain lines (no wrapping): scripts grep them
+        click.echo(f"acq: damaged: {session_path} ({'; '.join(session.damage)}) — the intact part holds "
+                   f"{session.current.sample_count} current and {session.encoder.index.size} encoder samples "
+                   "(acq analyze --partial uses it)", err=True)
+        return 1
+    click.echo(f"{session_path}: {session.status}, checksums and counts verified ({session.current.sample_count} "
+               f"current, {session.encoder.index.size} encoder samples), nothing to repair")
+    return 0
+
+
+def _exit_now(code: int) -> None:
+    """Exit at once after a Ctrl-C: every file and the catalogue were closed on the way out (context managers);
+    the interpreter's own teardown of scipy/h5py/Qt and a process pool takes 1–2 s more, which a person who
+    pressed Ctrl-C should not wait for. In-process callers (tests) get the usual SystemExit."""
+    if threading.current_thread() is not threading.main_thread() or "pytest" in sys.modules:
+        sys.exit(code)
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
+def _sigterm_as_ctrl_c(signum: int, frame: object) -> None:
+    raise KeyboardInterrupt
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point of the ``acq`` console script."""
+    in_main = threading.current_thread() is threading.main_thread()
+    # SIGTERM stops acq as Ctrl-C does (a batch cancels and tidies up, a recording finishes its file)
+    previous = signal.signal(signal.SIGTERM, _sigterm_as_ctrl_c) if in_main else None
+    try:
+        _run(argv)
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _run(argv: list[str] | None) -> None:
+    try:
+        with warnings.catch_warnings():  # numpy's floating-point warnings (the filter of acq.monitoring.batch.quiet_numerics,
+            warnings.simplefilter("ignore", RuntimeWarning)  # which an analysis adds; numpy is not loaded here yet)
+            code = cli.main(args=argv, prog_name="acq", standalone_mode=False)
+    except AcqError as e:
+        click.echo(f"acq: error: {e}", err=True)
+        sys.exit(e.exit_code)
+    except click.exceptions.Abort:  # click's name for a KeyboardInterrupt inside a command
+        click.echo("acq: interrupted", err=True)
+        _exit_now(EXIT_INTERRUPTED)
+    except KeyboardInterrupt:
+        click.echo("acq: interrupted", err=True)
+        _exit_now(EXIT_INTERRUPTED)
+    except click.UsageError as e:  # one line, like every other error (click's own adds usage and a hint)
+        click.echo(f"acq: error: {e.format_message()}", err=True)
+        sys.exit(e.exit_code)
+    except click.ClickException as e:
+        e.show()
+        sys.exit(e.exit_code)
+    except OSError as e:
+        click.echo(f"acq: error: {e}", err=True)
+        sys.exit(ConfigError("").exit_code)
+    sys.exit(code if isinstance(code, int) else 0)

@@ -1,0 +1,148 @@
+"""How ``acq fleet`` shows the fleet: the click command, a rich table, and a PNG with ΔK over time as one
+heat strip per joint.
+
+The numbers come from :mod:`acq.monitoring.fleet`; nothing here judges a joint.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+from collections.abc import Sequence
+from datetime import UTC, datetime, timedelta
+from pathlib import Path
+from typing import Any
+
+import click
+from rich.console import Console
+from rich.table import Table
+
+from acq.monitoring.catalogue import CatalogueLocation
+from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet
+from acq.monitoring.trend import EXIT_ALARM
+from acq.ui.values import format_value
+
+_STYLES = {"alarm": "bold red", "stale": "yellow", "no baseline": "dim", "ok": ""}
+#: Time bins of the PNG's heat strips (the width of a strip is the time since the oldest session).
+HEAT_BINS = 400
+
+
+def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> Table:
+    """One row per joint, worst first: robot, joint, latest K and its 95 % interval, ΔK, last session, sessions
+    analysed / excited in the last day, state."""
+    alarms = sum(s.state == "alarm" for s in statuses)
+    table = Table(title=f"fleet — {len(statuses)} joints" + (f"  [bold red]{alarms} in ALARM[/]" if alarms else ""))
+    for c in ("robot", "joint", "K N·m/rad", "95 % interval", "ΔK %", "baseline", "last session (UTC)",
+              "last day: analysed", "excited", "state"):
+        table.add_column(c, justify="right" if c[0] in "K9Δbe" or c.startswith("last day") else "left")
+    f1 = functools.partial(format_value, spec=".1f")
+    for s in statuses:
+        e = None if s.latest is None else s.latest.entry
+        state = f"ALARM {s.latest.reason}" if s.state == "alarm" and s.latest is not None else s.state
+        table.add_row(s.robot, s.joint, f1(None if e is None else e.K_Nm_per_rad),
+                      "—" if e is None else f"{f1(e.K_ci95[0])}–{f1(e.K_ci95[1])}",
+                      format_value(s.change_pct, "+.1f"), f1(s.trend.baseline_K_Nm_per_rad),
+                      "—" if s.last_session_utc is None else s.last_session_utc.strftime("%Y-%m-%d %H:%M"),
+                      str(s.analysed_last_day), str(s.excited_last_day), state, style=_STYLES[s.state])
+    table.caption = (f"stale: no session for {stale_days:g} days; excited: sessions with a K of verdict ok; "
+                     "alarm rules as acq trend (per joint: acq trend --joint J --tag robot=R)")
+    return table
+
+
+def render_fleet_png(statuses: Sequence[JointStatus], path: Path | str, *, now: datetime, threshold_pct: float,
+                     stale_days: float, size: tuple[int, int] | None = None) -> Path:
+    """Draw :func:`fleet_widget` offscreen into a PNG (default 1400 px wide, 40 px per joint)."""
+    import shiboken6
+
+    from acq.ui.plots import ensure_app, grab_png
+
+    ensure_app(offscreen=True)
+    frame = fleet_widget(statuses, now=now, threshold_pct=threshold_pct, stale_days=stale_days)
+    try:
+        return grab_png(frame, path, size or (1400, 220 + 40 * len(statuses)))
+    finally:
+        shiboken6.delete(frame)  # now, not at interpreter exit (deleteLater there crashes Qt's teardown)
+
+
+def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pct: float, stale_days: float) -> Any:
+    """The fleet figure (needs a QApplication): one row per joint, worst at the top, coloured by ΔK against its
+    baseline from each judged session until the next, the last for at most ``stale_days`` (red: K below; white:
+    at the baseline; blank: not judged, or stale); the colour scale spans ±2 × the alarm threshold."""
+    import numpy as np
+    import pyqtgraph as pg
+    from pyqtgraph.Qt import QtCore, QtWidgets
+
+    frame = QtWidgets.QWidget()
+    widget = pg.GraphicsLayoutWidget()
+    QtWidgets.QVBoxLayout(frame).addWidget(widget)
+    alarms = sum(s.state == "alarm" for s in statuses)
+    widget.ci.addLabel("fleet — ΔK against each joint's baseline" + (f"  ({alarms} in ALARM)" if alarms else ""),
+                       row=0, col=0, colspan=2, size="14pt")
+    plot = widget.addPlot(row=1, col=0, axisItems={"bottom": pg.DateAxisItem()})
+    histories = [s.history() for s in statuses]
+    t0 = min((h[0][0] for h in histories if h), default=now - timedelta(days=1))
+    span_s = max((now - t0).total_seconds(), 3600.0)
+    edges = [t0 + timedelta(seconds=span_s * i / HEAT_BINS) for i in range(HEAT_BINS + 1)]
+    heat = np.full((HEAT_BINS, len(statuses)), np.nan)  # ImageItem: axis 0 is x (time), axis 1 is y (joint)
+    edge_s = np.array([e.timestamp() for e in edges])
+    for row, history in enumerate(histories):
+        for start, change in history:  # each value holds from its session until the next one (later ones overwrite)
+            first, last = np.searchsorted(edge_s, [start.timestamp(), start.timestamp() + stale_days * 86400.0],
+                                          side="right") - 1
+            heat[max(first, 0):last + 1, len(statuses) - 1 - row] = change
+            heat[last + 1:, len(statuses) - 1 - row] = np.nan
+    limit = 2.0 * threshold_pct
+    colormap = pg.ColorMap(pos=[0.0, 0.5, 1.0], color=[(214, 39, 40), (247, 247, 247), (31, 119, 180)])
+    image = pg.ImageItem(heat, levels=(-limit, limit), lut=colormap.getLookupTable(nPts=256))
+    image.setRect(QtCore.QRectF(t0.timestamp(), 0.0, span_s, float(len(statuses))))
+    plot.addItem(image)
+    bar = pg.ColorBarItem(values=(-limit, limit), colorMap=colormap, label="ΔK %", interactive=False)
+    bar.setImageItem(image)
+    widget.addItem(bar, row=1, col=1)
+    labels = [(len(statuses) - 1 - i + 0.5, f"{s.robot}/{s.joint} · {s.state}"
+               + ("" if s.change_pct is None else f" {s.change_pct:+.1f} %")) for i, s in enumerate(statuses)]
+    plot.getAxis("left").setTicks([labels])
+    plot.getAxis("left").setWidth(12 + 8 * max((len(text) for _, text in labels), default=10))
+    plot.setLabel("bottom", "session start (UTC)")
+    plot.setXRange(t0.timestamp(), now.timestamp(), padding=0.01)
+    plot.setYRange(0.0, float(len(statuses)), padding=0.0)
+    plot.showGrid(x=True, y=False, alpha=0.25)
+    return frame
+
+
+@click.command(name="fleet")
+@click.argument("folder", required=False, type=click.Path(path_type=Path, file_okay=False))
+@click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
+              help="The catalogue, a file or postgresql:// URL (default: FOLDER/catalogue.sqlite, FOLDER defaulting "
+                   "to sessions/).")
+@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+              help="Only sessions with this tag (repeatable), e.g. --tag site=plant2.")
+@click.option("--stale-days", type=click.FloatRange(0, min_open=True), default=7.0, show_default=True,
+              help="A joint with no session for this many days is stale.")
+@click.option("--baseline-sessions", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Baseline = mean K of each joint's first N good sessions.")
+@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=10.0, show_default=True,
+              help="Alarm when K is this many % below the baseline.")
+@click.option("--ewma-lambda", type=click.FloatRange(0, 1, min_open=True), default=0.2, show_default=True,
+              help="EWMA weight of the newest session (alarm at the 3σ control limit).")
+@click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
+              help="Also draw the fleet (ΔK over time, one row per joint) into this PNG.")
+@click.option("--json", "as_json", is_flag=True, help="Print the fleet as JSON.")
+def fleet_command(folder: Path | None, catalogue_path: Path | str | None, tags: tuple[str, ...], stale_days: float,
+                  baseline_sessions: int, threshold_pct: float, ewma_lambda: float, png_path: Path | None,
+                  as_json: bool) -> int:
+    """Every joint (by robot tag): latest K ± 95 %, ΔK to its baseline, sessions of the last day, state
+    (alarm / stale / no baseline / ok), worst first; exit code 3 if any joint is in alarm."""
+    now = datetime.now(UTC)
+    statuses = load_fleet(folder, catalogue_path, tags, now=now, stale_days=stale_days,
+                          baseline_sessions=baseline_sessions, threshold_pct=threshold_pct, ewma_lambda=ewma_lambda)
+    out = Console()
+    if as_json:
+        click.echo(json.dumps(fleet_json(statuses), indent=2))
+    else:
+        out.print(fleet_table(statuses, stale_days))
+    if png_path is not None:
+        render_fleet_png(statuses, png_path, now=now, threshold_pct=threshold_pct, stale_days=stale_days)
+        if not as_json:
+            out.print(f"plot: {png_path}")
+    return EXIT_ALARM if any(s.state == "alarm" for s in statuses) else 0

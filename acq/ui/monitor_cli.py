@@ -1,0 +1,138 @@
+"""``acq monitor``: the command line and the live status of :mod:`acq.monitoring.monitor`."""
+
+from __future__ import annotations
+
+import re
+from typing import Any
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.live import Live
+from rich.table import Table
+
+from acq.config import load_bench
+from acq.monitoring.monitor import Monitor, MonitorSettings, MonitorStatus
+from acq.monitoring.retention import parse_size
+from acq.ui.values import format_value
+from acqcore.errors import ConfigError
+from drivers.motion import RPM_TO_RAD_S
+
+_UNITS_S = {"": 1.0, "s": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
+#: Moves listed in the status table (a window of a busy program holds a dozen or more).
+_MOVES_SHOWN = 8
+
+
+def parse_duration(option: str, text: str) -> float:
+    """``600``, ``600s``, ``10m``, ``8h``, ``1.5d`` → seconds; ConfigError naming the option otherwise."""
+    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([a-z]*)\s*", text.lower())
+    if m is None or m.group(2) not in _UNITS_S or float(m.group(1)) <= 0:
+        raise ConfigError(f"{option} {text}: not a duration (e.g. 600, 10m, 8h)")
+    return float(m.group(1)) * _UNITS_S[m.group(2)]
+
+
+def status_table(st: MonitorStatus) -> Table:
+    """The monitor's live figures as one rich table."""
+    table = Table(title=f"acq monitor — {st.joint}" + ("  [bold red]ALARM[/]" if st.state == "alarm" else ""),
+                  show_header=False)
+    table.add_column("what")
+    table.add_column("value", justify="right")
+    hours = st.machine_time_s / 3600.0
+    lo, hi = st.last_K_ci
+    k_text = "—" if st.last_K is None else (f"{st.last_K:.1f} ({format_value(lo, '.1f')} … {format_value(hi, '.1f')})")
+    rows = [
+        ("machine time", f"{hours:.2f} h"),
+        ("windows captured / excited / analysed", f"{st.captured} / {st.excited} / {st.analysed}"),
+        ("not excited · skipped · interrupted", f"{st.not_excited} · {st.skipped} · {st.interrupted}"),
+        ("last K N·m/rad (95 %)", k_text),
+        ("ΔK against the baseline", format_value(st.change_pct, "+.1f") + " %"),
+        ("baseline K N·m/rad", format_value(st.baseline_K, ".1f")),
+        ("excited share: last window · all windows", f"{_pct(st.last_excited_fraction)} · "
+                                                     f"{_pct(st.program_excited_fraction)}"),
+        ("trend state", f"[bold red]{st.state}[/]" if st.state == "alarm" else st.state),
+        ("alarms raised", str(st.alarms)),
+        ("disk used", f"{st.disk_bytes / 1e6:.1f} MB"),
+    ]
+    for what, value in rows:
+        table.add_row(what, value)
+    if st.last_moves:
+        excited = sum(m["excited"] for m in st.last_moves)
+        table.add_row(f"moves of the last window: {excited} of {len(st.last_moves)} excite", moves_table(st.last_moves))
+    if st.message:
+        table.caption = st.message
+    return table
+
+
+def _pct(fraction: float | None) -> str:
+    return "—" if fraction is None else f"{100 * fraction:.0f} %"
+
+
+def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
+    """A window's moves: number, start (s), peak speed (rpm), whether the analysis used them (excites)."""
+    table = Table(box=None, pad_edge=False, show_edge=False)
+    for column in ("move", "start s", "peak rpm", "excites"):
+        table.add_column(column, justify="right")
+    for m in moves[:_MOVES_SHOWN]:
+        table.add_row(str(m["index"]), f"{m['start_s']:.2f}", f"{m['peak_rad_s'] / RPM_TO_RAD_S:.0f}",
+                      "[green]yes[/]" if m["excited"] else "no")
+    if len(moves) > _MOVES_SHOWN:
+        rest = moves[_MOVES_SHOWN:]
+        table.add_row("…", f"+{len(rest)} more", "", f"{sum(m['excited'] for m in rest)} yes")
+    return table
+
+
+@click.command(name="monitor")
+@click.option("--bench", "bench_path", type=click.Path(path_type=Path), required=True,
+              help="Bench TOML with [drive] motion = \"external\" (e.g. configs/benches/sim_robot.toml).")
+@click.option("--window", "window_s", type=click.FloatRange(min=1.0), default=10.0, show_default=True,
+              help="Seconds per window.")
+@click.option("--every", "every", default="60", show_default=True, help="One window per this (600, 10m, 1h).")
+@click.option("--for", "for_text", default=None, help="Stop after this (8h); default: until Ctrl-C.")
+@click.option("--on-alarm", default=None, metavar="CMD",
+              help="Run CMD on entering alarm, with ACQ_JOINT, ACQ_K, ACQ_BASELINE_K, ACQ_CHANGE_PCT, ACQ_SESSION.")
+@click.option("--keep", type=click.IntRange(min=0), default=10, show_default=True,
+              help="Keep the raw files of the last N windows (baseline and alarming windows are always kept).")
+@click.option("--max-disk", default=None, help="Disk budget of the folder (2GB, 500MB); never exceeded.")
+@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("monitor"), show_default=True,
+              help="Folder for the windows and catalogue.sqlite (a restart there resumes).")
+@click.option("--baseline-windows", type=click.IntRange(min=1), default=5, show_default=True,
+              help="Baseline = mean K of the first N good windows.")
+@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=10.0, show_default=True,
+              help="Alarm when K is this many % below the baseline (or by the EWMA rule).")
+@click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Analysis worker processes.")
+@click.option("--fast", is_flag=True, help="Simulated bench: machine time runs as fast as the analysis allows.")
+def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str | None, on_alarm: str | None,
+                    keep: int, max_disk: str | None, out_dir: Path, baseline_windows: int, threshold_pct: float,
+                    jobs: int, fast: bool) -> int:
+    """Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in alarm."""
+    bench = load_bench(bench_path)
+    if getattr(bench.drive, "motion", "commanded") != "external":
+        raise ConfigError(f"{bench_path}: acq monitor listens only — set [drive] motion = \"external\" "
+                          "(the machine's controller moves the joint)")
+    try:
+        budget = None if max_disk is None else parse_size(max_disk)
+    except ValueError as e:
+        raise ConfigError(f"--max-disk {max_disk}: {e}") from None
+    settings = MonitorSettings(bench=bench, out_dir=out_dir, window_s=window_s, every_s=parse_duration("--every", every),
+                               for_s=None if for_text is None else parse_duration("--for", for_text), on_alarm=on_alarm,
+                               keep=keep, max_disk_bytes=budget, fast=fast, jobs=jobs,
+                               baseline_windows=baseline_windows, threshold_pct=threshold_pct)
+    console = Console(stderr=True)
+    if console.is_terminal:
+        with Live(status_table(MonitorStatus(bench.joint)), console=console, refresh_per_second=2) as live:
+            monitor = Monitor(settings, on_status=lambda st: live.update(status_table(st)))
+            return monitor.run()
+    last = [""]
+
+    def log(st: MonitorStatus) -> None:  # one line per change when not on a terminal (a service, a log file)
+        line = (f"{st.machine_time_s / 3600:.2f} h: {st.captured} captured, {st.excited} excited, {st.analysed} "
+                f"analysed, excited {_pct(st.last_excited_fraction)} of the last window, K {format_value(st.last_K, '.1f')}, ΔK {format_value(st.change_pct, '+.1f')} %, "
+                f"{st.state}, {st.disk_bytes / 1e6:.1f} MB" + (f" — {st.message}" if st.message else ""))
+        if line != last[0]:
+            console.print(line, highlight=False, markup=False, soft_wrap=True)
+            last[0] = line
+
+    monitor = Monitor(settings, on_status=log)
+    code = monitor.run()
+    console.print(status_table(monitor.status))
+    return code

@@ -1,0 +1,88 @@
+"""``acq selftest`` on the command line: one line per check as it completes, a summary, or ``--json``."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.markup import escape
+from rich.table import Table
+
+from acq.commissioning.selftest import run_selftest
+from acq.commissioning.selftest_checks import Check
+from acq.config import load_bench, load_profile
+
+MARK = {"pass": "[green]✓[/]", "warn": "[yellow]⚠[/]", "fail": "[bold red]✗[/]"}
+STAGES = ("devices", "streams", "motion", "identification")
+
+
+def check_line(check: Check) -> str:
+    """``✓ stage · name  figure`` and, unless it passed, ``→ fix`` on the next line (rich markup)."""
+    line = f"{MARK[check.status]} [bold]{check.stage} · {escape(check.name)}[/]  {escape(check.figure)}"
+    return line + (f"\n    → {escape(check.fix)}" if check.fix else "")
+
+
+def summary_table(checks: list[Check]) -> Table:
+    """Per stage: checks passed / warned / failed, or not run; the caption says what to do next."""
+    table = Table(title="selftest")
+    for column in ("stage", "✓", "⚠", "✗", "result"):
+        table.add_column(column, justify="left" if column in ("stage", "result") else "right")
+    failed = next((c for c in checks if c.status == "fail"), None)
+    for stage in STAGES:
+        mine = [c for c in checks if c.stage == stage]
+        n = {s: sum(c.status == s for c in mine) for s in MARK}
+        result = ("not run" if not mine else "✗ " + ", ".join(c.name for c in mine if c.status == "fail")
+                  if n["fail"] else "⚠ " + ", ".join(c.name for c in mine if c.status == "warn") if n["warn"] else "✓")
+        table.add_row(stage, str(n["pass"]), str(n["warn"]), str(n["fail"]), escape(result))
+    table.caption = (f"stopped at {failed.stage} · {failed.name}: {failed.fix}" if failed else
+                     "the bench is ready: acq record --profile NAME --bench B")
+    return table
+
+
+def selftest_json(checks: list[Check], bench_path: str) -> dict[str, object]:
+    """``{"bench", "passed", "stopped_at", "checks": [...]}``."""
+    failed = next((c for c in checks if c.status == "fail"), None)
+    return {"bench": bench_path, "passed": failed is None,
+            "stopped_at": None if failed is None else f"{failed.stage} · {failed.name}",
+            "checks": [c.to_json_dict() for c in checks]}
+
+
+@click.command("selftest")
+@click.option("--bench", "bench_path", type=click.Path(path_type=Path), default=None,
+              help="Bench TOML (default: the simulated bench configs/benches/sim.toml).")
+@click.option("--profile", "profile_name", default="triangle_0.2s", show_default=True,
+              help="Profile of the identification check (name in configs/profiles/ or a TOML path).")
+@click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
+@click.option("--keep", "keep_dir", type=click.Path(path_type=Path), default=None,
+              help="Keep the selftest's sessions in this folder (default: a temporary folder, removed).")
+@click.option("--json", "as_json", is_flag=True, help="Print the checks as JSON.")
+def selftest_command(bench_path: Path | None, profile_name: str, fast: bool, keep_dir: Path | None,
+                     as_json: bool) -> int:
+    """Check the bench and its config against the data: devices, streams, a slow move, an identification.
+
+    Each check prints ✓ / ⚠ / ✗ with its figure; a ✗ says what to change in which config key and stops the
+    run. Exit code 0 when nothing failed, 2 when the devices refused the config at opening, 1 otherwise.
+    """
+    bench = load_bench(bench_path)
+    profile = load_profile(profile_name)
+    work_dir = keep_dir if keep_dir is not None else Path(tempfile.mkdtemp(prefix="acq-selftest-"))
+    out = Console()
+    checks: list[Check] = []
+    try:
+        for check in run_selftest(bench, profile, work_dir, fast=fast):
+            checks.append(check)
+            if not as_json:
+                out.print(check_line(check))
+    finally:
+        if keep_dir is None:
+            shutil.rmtree(work_dir, ignore_errors=True)
+    if as_json:
+        click.echo(json.dumps(selftest_json(checks, str(bench_path or "configs/benches/sim.toml")), indent=2))
+    else:
+        out.print(summary_table(checks))
+    failed = next((c for c in checks if c.status == "fail"), None)
+    return 0 if failed is None else int(failed.values.get("exit_code", 1))  # 2: a config the devices refused

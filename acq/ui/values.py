@@ -1,0 +1,49 @@
+"""How a result's numbers read: parameter labels, values, intervals and options as text.
+
+Shared by the terminal's tables (:mod:`acq.ui.display`) and the report picture (:mod:`acq.ui.plots`); it imports
+nothing of ``acq``, so both can use it without importing each other.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from analysis import PARAM_LABELS, PARAM_NAMES
+
+#: (key in the result document, symbol, SI unit) of each two-mass parameter, in table order.
+PARAMS: tuple[tuple[str, str, str], ...] = tuple((key, *PARAM_LABELS[key]) for key in PARAM_NAMES)
+
+
+def format_value(x: float | None, spec: str = ".4g", scale: float = 1.0) -> str:
+    """``x · scale`` formatted with ``spec``; "—" for a value that is missing, NaN or infinite."""
+    return "—" if x is None or not math.isfinite(x) else format(x * scale, spec)
+
+
+def interval_text(doc: dict[str, Any], key: str, *, relative: bool = False) -> str:
+    """The 95 % interval of parameter ``key`` of a result document: "lo – hi", or "± x %" with ``relative``;
+    "fixed (nominal)" for a parameter the fit held at the bench's nominal value (a zero-width interval)."""
+    value = doc.get(key)
+    lo, hi = (doc.get("ci95", {}).get(key) or (None, None))
+    if lo is not None and lo == hi:
+        nominal = (doc.get("options", {}).get("nominal") or {}).get(key)
+        return "fixed (nominal)" if nominal == value else "fixed"
+    if not relative:
+        return f"{format_value(lo)} – {format_value(hi)}"
+    if value is None or lo is None or hi is None or value == 0:
+        return "—"
+    return f"± {50.0 * (hi - lo) / abs(value):.2g} %"
+
+
+def options_text(doc: dict[str, Any]) -> str:
+    """The analysis options a result came from, in one line (torque method, free parameters, fit, band)."""
+    opts = doc.get("options", {})
+    band = opts.get("band_hz")
+    parts = ["paper's chain (--paper)"] if opts.get("pipeline") == "paper" else []
+    parts += [f"torque {opts.get('torque_method', '?')}", f"params {opts.get('params', '?')}",
+              f"fit {opts.get('fit', '?')}"]
+    if band:
+        parts.append(f"band {band[0]:g}–{band[1]:g} Hz")
+    if opts.get("pipeline") != "paper" and opts.get("align") is False:
+        parts.append("clocks not aligned")
+    return " · ".join(parts)

@@ -1,0 +1,159 @@
+"""``acq view SESSION [SESSION…] [--screenshot out.png]``: the report window of one or several sessions.
+
+Each session is identified through :func:`acq.offline.analyze.analyze_session` (nothing written beside it);
+when ``<session>.result.json`` exists, its options are used, so the window shows what ``acq analyze``
+found (the JSON holds the values, not the curves, hence the re-run: ≲ 3 s for a 60 s session).
+Several sessions overlay their FRFs with a legend (e.g. the same joint months apart).
+
+Qt is imported only when a window or a screenshot is drawn, so the rest of the CLI starts fast.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import click
+
+from acq.monitoring.catalogue import CatalogueLocation
+from acq.offline.analyze import analyze_session
+from acqcore.errors import AcqError, ConfigError
+from analysis import AnalysisRequest
+
+if TYPE_CHECKING:
+    from acq.ui.plots import SessionFigure
+    from acq.monitoring.trend import Trend
+
+NO_DISPLAY_MESSAGE = ("acq view: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window as an image "
+                      "instead: acq view SESSION --screenshot out.png")
+
+
+def has_display() -> bool:
+    """True when Qt can show a window: an X11 or Wayland display, or Qt's offscreen platform chosen."""
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+                or os.environ.get("QT_QPA_PLATFORM", "").startswith("offscreen"))
+
+
+def stored_request(path: Path) -> AnalysisRequest:
+    """The analysis request recorded in ``<session>.result.json`` (the default request if there is none)."""
+    result_path = path.with_name(path.stem + ".result.json")
+    if not result_path.exists():
+        return AnalysisRequest()
+    try:
+        return AnalysisRequest.from_json_dict(json.loads(result_path.read_text())["options"])
+    except (ValueError, KeyError, TypeError, AttributeError):
+        raise ConfigError(f"{result_path}: not a result of acq analyze (run acq analyze {path} to redo it)") from None
+
+
+def session_figure(path: Path) -> SessionFigure:
+    """Identify one session (with its stored options, if any) and wrap what the figure needs."""
+    from acq.ui.plots import SessionFigure
+
+    done = analyze_session(path, stored_request(Path(path)), write=False)
+    return SessionFigure(Path(path).stem, done.result.figures, done.json_dict)
+
+
+def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"{text!r}: must be WIDTHxHEIGHT in pixels, e.g. 1600x1000") from None
+    if width < 200 or height < 200:
+        raise click.BadParameter(f"{text!r}: at least 200x200 pixels")
+    return width, height
+
+
+@click.command(name="view")
+@click.argument("sessions", nargs=-1, type=click.Path(path_type=Path))
+@click.option("--screenshot", type=click.Path(path_type=Path), default=None,
+              help="Draw the window offscreen into this PNG and exit (needs no display).")
+@click.option("--size", default="1600x1000", show_default=True, callback=_parse_size,
+              help="Window / screenshot size WIDTHxHEIGHT, px.")
+@click.option("--trend", "trend_joint", default=None, metavar="JOINT",
+              help="Show the stiffness trend of JOINT from the catalogue of the folder given (default sessions/).")
+@click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
+              help="With --trend: the catalogue, a file or postgresql:// URL (default: FOLDER/catalogue.sqlite).")
+@click.option("--refresh", "refresh_s", type=click.FloatRange(0.5, 3600), default=5.0, show_default=True,
+              help="With --trend: re-read the catalogue every this many s (a monitor may be writing to it).")
+def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tuple[int, int],
+                 trend_joint: str | None, catalogue_path: Path | str | None, refresh_s: float) -> int:
+    """Show traces, FRF with the fitted model, coherence and identified values of SESSION(s);
+    or, with --trend JOINT [FOLDER], the joint's stiffness over time."""
+    if trend_joint is None and not sessions:
+        raise click.UsageError("give one or more SESSION files, or --trend JOINT [FOLDER]")
+    if trend_joint is not None and len(sessions) > 1:
+        raise click.UsageError("--trend takes one FOLDER (or none for sessions/)")
+    if screenshot is None and not has_display():
+        click.echo(NO_DISPLAY_MESSAGE, err=True)
+        return 1
+    from acq.ui.plots import ReportView, ensure_app, grab_png
+
+    if trend_joint is not None:
+        from acq.monitoring.trend import load_trend
+
+        folder = sessions[0] if sessions else None
+        load = functools.partial(load_trend, folder, catalogue_path, trend_joint)
+        first = load()  # a catalogue without the joint is one line before any window opens
+        app = ensure_app(offscreen=screenshot is not None)
+        live = LiveTrend(load, first, refresh_s)  # kept alive with the window: its timer redraws it
+        window = live.frame
+    else:
+        figures = [session_figure(p) for p in sessions]
+        app = ensure_app(offscreen=screenshot is not None)
+        title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}"
+                 if len(figures) == 1 else f"{len(figures)} sessions")
+        window = ReportView(figures, title=title)
+    if screenshot is not None:
+        grab_png(window, screenshot, size)
+        click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")
+        return 0
+    window.resize(*size)
+    window.show()
+    app.exec()
+    return 0
+
+
+class LiveTrend:
+    """The trend window of ``acq view --trend``, redrawn when the catalogue has new sessions of the joint.
+
+    ``load`` re-reads the catalogue (SQLite in WAL mode or PostgreSQL: reading does not block a monitor that
+    writes); a failed re-read (the catalogue busy, a server away) keeps the figure shown and says why in the
+    title. The figure itself is :func:`acq.monitoring.trend.trend_widget`.
+    """
+
+    def __init__(self, load: Callable[[], Trend], first: Trend, refresh_s: float) -> None:
+        from pyqtgraph.Qt import QtCore, QtWidgets
+
+        from acq.monitoring.trend import trend_widget
+
+        self._load, self._draw = load, trend_widget
+        self.frame = QtWidgets.QWidget()
+        self._layout = QtWidgets.QVBoxLayout(self.frame)
+        self._figure = trend_widget(first)
+        self._layout.addWidget(self._figure)
+        self.shown = first
+        self.frame.setWindowTitle(f"acq trend — {first.joint}")
+        self._timer = QtCore.QTimer(self.frame)
+        self._timer.timeout.connect(self.refresh)
+        self._timer.start(int(refresh_s * 1000))
+
+    def refresh(self) -> bool:
+        """Re-read the catalogue; redraw when the joint's sessions changed. True when redrawn."""
+        try:
+            trend = self._load()
+        except AcqError as e:
+            self.frame.setWindowTitle(f"acq trend — {self.shown.joint} (not refreshed: {e})")
+            return False
+        if [p.entry for p in trend.points] == [p.entry for p in self.shown.points]:
+            return False
+        figure = self._draw(trend)
+        self._layout.replaceWidget(self._figure, figure)
+        self._figure.deleteLater()
+        self._figure, self.shown = figure, trend
+        self.frame.setWindowTitle(f"acq trend — {trend.joint}")
+        return True
+
