@@ -25,8 +25,9 @@ from pathlib import Path
 from typing import Any, Literal
 
 from acq.monitoring.batch import CATALOGUE_NAME
-from acq.monitoring.catalogue import Catalogue, Entry, parse_tags, tags_match
+from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.catalogue_backends import is_url
+from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
 from analysis import Z95
 

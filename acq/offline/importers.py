@@ -29,7 +29,8 @@ from rich.markup import escape
 
 from acq import __version__
 from acq.config import load_bench, load_profile, with_joint
-from acq.monitoring.catalogue import parse_tags, tag_option
+from acq.recording.tags import parse_tags
+from acq.ui.options import tag_option
 from acq.offline.analyze import sha256_of
 from acq.offline.export_metadata import ExportMetadata, read_metadata
 from acq.offline.import_files import (CurrentTable, EncoderTable, host_ns, read_current_csv, read_current_tdms,

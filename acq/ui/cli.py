@@ -23,8 +23,9 @@ from click.utils import make_default_short_help
 from rich.console import Console
 
 from acq import __version__
-from acq.monitoring.catalogue import CatalogueLocation, parse_tags, tag_option
 from acq.recording.paths import is_batch, require_session_file
+from acq.recording.tags import parse_tags
+from acq.ui.options import CatalogueLocation, tag_option
 from acqcore.errors import AcqError, ConfigError
 
 if TYPE_CHECKING:

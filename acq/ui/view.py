@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from acq.monitoring.catalogue import CatalogueLocation
+from acq.ui.options import CatalogueLocation
 from acq.offline.analyze import analyze_session
 from acqcore.errors import AcqError, ConfigError
 from analysis import AnalysisRequest
