@@ -173,7 +173,6 @@ ENTRY = ("acq.__main__", "acq.entry")
 #: splits them; the list only shrinks — a module that loses its presentation part leaves it.
 MIXED: dict[str, list[str]] = {
     "acq.monitoring.batch": ["rich"],
-    "acq.monitoring.trend": ["acq.ui", "pyqtgraph", "shiboken6"],
     "acq.offline.analyze": ["acq.ui"],
     "acq.offline.exporters": ["click", "rich"],
     "acq.offline.importers": ["acq.ui", "click", "rich"],
