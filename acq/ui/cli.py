@@ -48,7 +48,7 @@ err = Console(stderr=True)
 LAZY_COMMANDS: dict[str, tuple[str, str, str]] = {
     "devices": ("acq.ui.devices_cli", "devices_command",
                 "List NI devices and AI channels, CAN interfaces, serial ports and the simulated bench."),
-    "export": ("acq.offline.exporters", "export_command",
+    "export": ("acq.ui.export_cli", "export_command",
                "Export SESSION to a current CSV, an encoder CSV and the session's metadata (JSON)."),
     "fleet": ("acq.ui.fleet_display", "fleet_command",
               "Every joint (by robot tag): latest K ± 95 %, ΔK to its baseline, sessions of the last day, state "
