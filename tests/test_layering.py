@@ -174,7 +174,6 @@ ENTRY = ("acq.__main__", "acq.entry")
 MIXED: dict[str, list[str]] = {
     "acq.monitoring.batch": ["rich"],
     "acq.offline.analyze": ["acq.ui"],
-    "acq.offline.importers": ["acq.ui", "click", "rich"],
 }
 
 

@@ -53,7 +53,7 @@ LAZY_COMMANDS: dict[str, tuple[str, str, str]] = {
     "fleet": ("acq.ui.fleet_display", "fleet_command",
               "Every joint (by robot tag): latest K ± 95 %, ΔK to its baseline, sessions of the last day, state "
               "(alarm / stale / no baseline / ok), worst first; exit code 3 if any joint is in alarm."),
-    "import": ("acq.offline.importers", "import_command",
+    "import": ("acq.ui.import_cli", "import_command",
                "Turn a current file and an encoder CSV recorded by other tools into a session."),
     "monitor": ("acq.ui.monitor_cli", "monitor_command",
                 "Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in "
