@@ -173,7 +173,7 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
 
 def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_path: Path | str | None) -> SessionResult:
     """Analyse one session with ``request`` and put the result into its folder's catalogue; the report PNG is drawn
-    after both (:func:`acq.offline.analyze.draw_report`: a picture that fails is only a note), by the caller."""
+    after both (:func:`acq.ui.report_png.draw_report`: a picture that fails is only a note), by the caller."""
     from acq.offline.analyze import analyze_session
     from acq.monitoring.batch import quiet_numerics, record_outcome
 
@@ -199,7 +199,7 @@ def _analyze_after_recording(path: Path) -> None:
     """Identify the joint of a session just recorded; a failure is reported, the recording stands."""
     with err.status("identifying the joint …"):
         try:
-            from acq.offline.analyze import draw_report
+            from acq.ui.report_png import draw_report
             from analysis import AnalysisRequest
 
             done = draw_report(_identify(path, AnalysisRequest(), report=True, catalogue_path=None))
@@ -269,7 +269,7 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
 
         return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
                             report=not no_report, as_json=as_json, out=out)
-    from acq.offline.analyze import draw_report
+    from acq.ui.report_png import draw_report
 
     if as_json:
         done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)
