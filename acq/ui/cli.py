@@ -19,7 +19,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
-from click.utils import make_default_short_help
 from rich.console import Console
 
 from acq import __version__
@@ -84,8 +83,10 @@ class LazyGroup(click.Group):
         """The command list as click writes it, the lazy commands' short help taken from :data:`LAZY_COMMANDS`."""
         names = self.list_commands(ctx)
         limit = formatter.width - 6 - max(len(name) for name in names)
-        rows = [(name, make_default_short_help(LAZY_COMMANDS[name][2], limit) if name in LAZY_COMMANDS
-                 else self.commands[name].get_short_help_str(limit)) for name in names]
+        # a lazy command's short help cut as click cuts it, from a stand-in command (no import of its module)
+        commands = [click.Command(name, help=LAZY_COMMANDS[name][2]) if name in LAZY_COMMANDS else self.commands[name]
+                    for name in names]
+        rows = [(c.name or "", c.get_short_help_str(limit)) for c in commands]
         with formatter.section("Commands"):
             formatter.write_dl(rows)
 
