@@ -271,6 +271,16 @@ class SimBench:
             return self.latch_times_s(first_cycle, count)
         return np.arange(first_cycle, first_cycle + count) * self.drive_period_s
 
+    def velocity_demand_rad_s(self, first_cycle: int, count: int) -> np.ndarray:
+        """The drive's velocity demand (CiA 402 0x606B) at drive cycles ``first_cycle …`` (at k·T), rad/s of the motor:
+        the speed reference the speed loop acts on, held from its last control instant at or before k·T — the very
+        values the simulated physics followed (it is advanced there first, so the reference answers nothing new)."""
+        t = np.arange(first_cycle, first_cycle + count) * self.drive_period_s
+        loop_s = self.speed_pi.period_s
+        with self._lock:
+            self._physics.advance_to(float(np.max(t, initial=0.0)))
+            return self._physics.schedule.reference(np.floor(t / loop_s + 1e-9) * loop_s)[0]
+
     def encoder_counts(self, first_cycle: int, count: int) -> np.ndarray:
         """Unwrapped position (int64 counts) latched at drive cycles ``first_cycle …`` (at
         :meth:`latch_times_s`): floor(θ_m/2π·cpr) + start."""
