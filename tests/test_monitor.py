@@ -320,3 +320,29 @@ def test_the_status_table_shows_the_excited_share_and_the_moves() -> None:
     assert "excited share: last window · all windows" in text and "12 % · 30 %" in text
     assert "moves of the last window: 1 of 2 excite" in text
     assert "1200" in text and "40" in text and "yes" in text  # peak speeds in rpm
+
+
+def test_the_payload_tag_is_catalogued_and_changes_the_truth_only_with_robot_payload_inertia(
+        four_windows: Path, tmp_path: Path) -> None:
+    def truth_and_payload(rows: list[dict[str, object]]) -> list[tuple[float, float]]:
+        return [(json.loads(str(r["truth_json"]))["Jl_kgm2"], json.loads(str(r["tags_json"]))["payload_kg"]) for r in rows]
+
+    off = truth_and_payload(_rows(four_windows))  # default: the payload changes the gravity load only
+    assert [jl for jl, _ in off] == [0.00748] * 4 and len({p for _, p in off}) > 1
+    from acq.ui.cli import main
+
+    bench = _bench_file(tmp_path, seed=EXCITING_SEED, robot_payload_inertia="true")
+    with pytest.raises(SystemExit) as exc:
+        main(["monitor", "--bench", str(bench), "--fast", "--every", "60", "--for", "2m", "--out", str(tmp_path / "m")])
+    assert exc.value.code == 0
+    rows = _rows(tmp_path / "m")
+    on = truth_and_payload(rows)
+    tip_m, ratio = 2 * 0.375, 10.0  # the payload is a point mass at the arm's tip, twice the centre of mass's distance
+    assert [jl for jl, _ in on] == [pytest.approx(0.00748 + p * (tip_m / ratio) ** 2, rel=1e-12) for _, p in on]
+    assert [p for _, p in on] == [p for _, p in off[:2]]  # the same program cycles, the same payloads
+    assert on[1][0] > 2.0 * on[0][0]  # window 1 carries 1.8 kg: J_l more than doubles
+    db = sqlite3.connect(tmp_path / "m" / "catalogue.sqlite")
+    ((verdict, jl, lo, hi),) = db.execute("SELECT verdict, Jl_kgm2, Jl_lo, Jl_hi FROM analyses a JOIN sessions s USING "
+                                          "(session_key) WHERE s.tags_json LIKE '%\"monitor_window\": 0%'").fetchall()
+    db.close()
+    assert verdict == "ok" and lo <= on[0][0] <= hi and jl == pytest.approx(on[0][0], rel=0.02)

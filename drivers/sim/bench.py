@@ -71,7 +71,8 @@ class SimBench:
             robot = RobotProgram(s.seed, s.robot_idle_fraction, s.robot_payload_max_kg)
             program = WindowReference(robot, robot.rest_before(s.elapsed_s))
         payload_kg = program.payload_kg() if program is not None else 0.0
-        self.plant = TwoMass(s.K_at_start_Nm_per_rad(), s.Jm_kgm2, s.Jl_kgm2, s.C_Nms_per_rad, s.bm_Nms_per_rad,
+        Jl_kgm2 = s.Jl_kgm2 + s.payload_Jl_kgm2(payload_kg, bench.gear.ratio)  # the session's J_l: its start cycle's payload
+        self.plant = TwoMass(s.K_at_start_Nm_per_rad(), s.Jm_kgm2, Jl_kgm2, s.C_Nms_per_rad, s.bm_Nms_per_rad,
                              s.bl_Nms_per_rad, bench.motor.torque_constant_Nm_per_A, s.current_bandwidth_hz)
         self.speed_pi = tune_speed_pi(nom.Jm_kgm2 + nom.Jl_kgm2, s.speed_bandwidth_hz, 1.0 / s.speed_loop_hz)
         if not s.speed_accel_feedforward:

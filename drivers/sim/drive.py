@@ -90,6 +90,12 @@ class SimDrive:
                             drive_time_s=self._sim.stamp_times_s(first, n)[keep],
                             velocity_demand_counts_per_s=demand[keep])
 
+    def machine_tags(self) -> dict[str, float]:
+        """What the simulated machine knows of this session: the payload (kg) of the robot program's cycle it starts
+        in (``motion = "external"``), else nothing."""
+        program = self._sim.robot_program
+        return {} if program is None else {"payload_kg": round(program.payload_kg(), 3)}
+
     def stop(self) -> None:
         """Stop streaming (brings the motor to rest first). Idempotent."""
         if self._running:
