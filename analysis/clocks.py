@@ -20,6 +20,10 @@ Four stages, each narrowing the search of the next:
 4. angle: in short windows the phase of i_a against the encoder's electrical angle is θ_0 + p·ω·δ(t)
    where δ(t) is the remaining clock error; a coherent search then weighted least squares on
    2·phase (blind to the sign of i_q) fit offset, drift and θ_0 to µs.
+
+No pair of crystal clocks drifts by more than :data:`MAX_DRIFT_PPM`: the frequency stage fits only the
+offset where its slope would need more, and an angle fit that needs more is rejected (the next candidate
+of the wide search, or the host relation, is taken; with none left the alignment fails, :attr:`ClockFit.failure`).
 """
 
 from __future__ import annotations
@@ -33,6 +37,7 @@ from scipy.interpolate import CubicSpline
 from scipy.ndimage import median_filter
 
 from analysis.clock_search import starting_relation, wide_search
+from analysis.fit import Z95
 from analysis.torque import window_phasors
 
 _CHUNK = 1 << 18  # samples per pass over the DAQ record (each pass holds ~15 float64 temporaries of this length: 30 MB)
@@ -41,6 +46,12 @@ _NARROW_S = 0.03  # half-range of the frequency stage's first pass around its st
 _ENVELOPE_PIECES = 8  # pieces of a record whose least-delayed host stamps give the host relation's slope
 _SEARCH_BLOCK = 2048  # windows per block of the angle stage's coherent offset search (321 offsets: 10 MB)
 _PIECE_S = 2.0  # current the angle stage uses to tell the wide search's candidates apart, s
+#: The largest drift, ppm, two free-running clocks can have against each other: the DAQ's timebase and the drive's
+#: are crystal oscillators specified to ±50…100 ppm of nominal (over temperature and ageing), so two of them differ
+#: by at most 200 ppm (design §4's plausible range, ±100 ppm, is the common pair of ±50 ppm parts). A fit needing
+#: more has locked onto a wrong lag — on a robot's point-to-point moves the phase of i_a matches the encoder's
+#: angle mod 2π at many relations, some of them stretched by percents. Drifts beyond this bound are rejected.
+MAX_DRIFT_PPM = 200.0
 
 ClockMethod = Literal["angle", "frequency", "wide", "host", "none"]
 
@@ -76,6 +87,10 @@ class ClockFit:
         shared host clock resolved; empty when the offset is unique.
     notes : tuple of str
         What a person should know about the alignment (host stamps overruled, ambiguity).
+    failure : str
+        Why no alignment was found (every fit of the electrical angle needed a drift beyond
+        :data:`MAX_DRIFT_PPM`); empty when the alignment did not fail. The relation is then the best
+        guess left (frequency stage, host stamps, or "started together") and not to be trusted.
     """
 
     offset_s: float
@@ -93,6 +108,7 @@ class ClockFit:
     wide_offset_s: float = np.nan
     ambiguous_by_s: tuple[float, ...] = ()
     notes: tuple[str, ...] = ()
+    failure: str = ""
 
     def drive_time_s(self, t_daq_s: np.ndarray | float) -> np.ndarray:
         """Drive time, s, of DAQ time ``t_daq_s``, s."""
@@ -298,9 +314,10 @@ def frequency_alignment(f_current_hz: np.ndarray, t_daq_s: np.ndarray, f_encoder
     t_c = t_daq_s[0] + (cols + 0.5) * nw_len * dt
     keep = np.ones(cols.size, bool)
     for _ in range(3):
-        if keep.sum() >= 3:
-            a, b = np.polyfit(t_c[keep], tau[keep], 1)[::-1]
-        else:
+        a, b = np.polyfit(t_c[keep], tau[keep], 1)[::-1] if keep.sum() >= 3 else (0.0, 0.0)
+        if keep.sum() < 3 or abs(drift_ppm + b * 1e6) > MAX_DRIFT_PPM:
+            # too few windows for a slope, or a slope no pair of clocks has (a few windows of motion, their lags
+            # scattered by ms): the offset only, the starting drift kept — the angle stage fits the drift
             a, b = float(np.median(tau[keep])), 0.0
         r = tau - a - b * t_c
         mad = 1.4826 * np.median(np.abs(r[keep]))
@@ -461,16 +478,21 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
                                                          grid, f_cur, f_enc))
     offset_s, drift_ppm, start, ambiguous_by, notes = starting_relation(host, wide, together_s, _NARROW_S)
 
+    rejected: list[AngleFit] = []
+
     def refine(offset_s: float, drift_ppm: float, method: ClockMethod
                ) -> tuple[float, float, tuple[float, float], ClockMethod, AngleFit | None]:
-        """The frequency and angle stages from a starting relation."""
+        """The frequency and angle stages from a starting relation (an angle fit of implausible drift rejected)."""
         freq = (np.nan, np.nan)
         for lag in (_NARROW_S, 0.004):
             o, d, n = frequency_alignment(f_cur, grid, f_enc, offset_s, drift_ppm, lag)
             if n:
                 offset_s, drift_ppm, freq, method = o, d, (o, d), "frequency"
-        return offset_s, drift_ppm, freq, method, angle_alignment(current_a, rate_hz, first_index, angle, pole_pairs,
-                                                                  offset_s, drift_ppm)
+        fit = angle_alignment(current_a, rate_hz, first_index, angle, pole_pairs, offset_s, drift_ppm)
+        if fit is not None and not plausible_drift(fit.drift_ppm, fit.drift_std_ppm):
+            rejected.append(fit)
+            fit = None
+        return offset_s, drift_ppm, freq, method, fit
 
     offset_s, drift_ppm, freq, method, fit = refine(offset_s, drift_ppm, start)
     if host is not None and start == "wide":
@@ -485,13 +507,36 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
             final_s = fit.offset_s if fit is not None else offset_s
             notes.append(f"clock: the host stamps are {1e3 * (host[0] - final_s):+.0f} ms off the data's alignment "
                          "(blocks delivered late?); the wide search's offset is used")
+    failure = ""
+    if rejected and fit is None:
+        failure = (f"clock: no alignment found — {_rejection_text(rejected)}: the motion repeats too evenly to align "
+                   "the streams on (or they do not belong together), so K, J and C would be those of a wrong alignment")
+    elif rejected:
+        notes.append(f"clock: rejected a fit of the electrical angle: {_rejection_text(rejected)}")
     common = dict(host_offset_s=host[0] if host else np.nan, host_drift_ppm=host[1] if host else np.nan,
                   frequency_offset_s=freq[0], frequency_drift_ppm=freq[1],
                   wide_offset_s=wide.offset_s if wide else np.nan, ambiguous_by_s=ambiguous_by, notes=tuple(notes))
     if fit is None:
-        return ClockFit(offset_s, drift_ppm, method=method, **common)
+        return ClockFit(offset_s, drift_ppm, method=method, failure=failure, **common)
     return ClockFit(fit.offset_s, fit.drift_ppm, fit.residual_s, fit.offset_std_s, fit.drift_std_ppm,
                     fit.theta0_rad, n_windows=fit.n_windows, method="angle", **common)
+
+
+def plausible_drift(drift_ppm: float, drift_std_ppm: float) -> bool:
+    """False when a fitted drift, ppm, lies beyond :data:`MAX_DRIFT_PPM` by more than its own 95 % uncertainty
+    (``drift_std_ppm``, its standard error, ppm; NaN counts as zero): the data then say the clocks would
+    have to differ by more than any pair of crystal oscillators does."""
+    return not abs(drift_ppm) - Z95 * float(np.nan_to_num(drift_std_ppm)) > MAX_DRIFT_PPM
+
+
+def _rejection_text(rejected: list[AngleFit]) -> str:
+    """What the rejected angle fits needed (the smallest drift of them), for a note or the failure."""
+    least = min(rejected, key=lambda f: abs(f.drift_ppm))
+    drift, margin = (f"{x:,.0f}".replace(",", " ") for x in (least.drift_ppm, Z95 * least.drift_std_ppm))
+    more = f" (and from {len(rejected) - 1} other start(s) more)" if len(rejected) > 1 else ""
+    return (f"the phase of the current against the encoder's angle fits at offset {least.offset_s:+.3f} s only with a "
+            f"drift of {'+' if least.drift_ppm >= 0 else ''}{drift} ± {margin} ppm{more}, beyond the "
+            f"±{MAX_DRIFT_PPM:.0f} ppm two crystal clocks can differ")
 
 
 def _angle_residual(fit: AngleFit | None) -> float:
@@ -503,7 +548,8 @@ def _angle_residual_s(offset_s: float, current_a: np.ndarray, rate_hz: float, fi
                       pole_pairs: int, grid: np.ndarray, f_cur: np.ndarray,
                       f_enc: Callable[[np.ndarray], np.ndarray]) -> float:
     """Timing residual, s, of the frequency and angle stages started at ``offset_s`` on ``_PIECE_S`` of current in
-    the middle of the overlap there (inf when the angle stage finds too little motion)."""
+    the middle of the overlap there (inf when the angle stage finds too little motion or needs an implausible
+    drift, :func:`plausible_drift`)."""
     t_enc = angle.x[[0, -1]]
     lo, hi = max(grid[0], t_enc[0] - offset_s), min(grid[-1], t_enc[1] - offset_s)
     a_s, b_s = max(lo, 0.5 * (lo + hi - _PIECE_S)), min(hi, 0.5 * (lo + hi + _PIECE_S))
@@ -516,4 +562,4 @@ def _angle_residual_s(offset_s: float, current_a: np.ndarray, rate_hz: float, fi
     a, b = (int(np.clip(round(x * rate_hz) - first_index, 0, current_a.size)) for x in (a_s, b_s))
     fit = angle_alignment(current_a[a:b], rate_hz, first_index + a, angle, pole_pairs, offset_s, drift_ppm,
                           iterations=0)
-    return fit.residual_s if fit is not None else np.inf
+    return fit.residual_s if fit is not None and plausible_drift(fit.drift_ppm, fit.drift_std_ppm) else np.inf

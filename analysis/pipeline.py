@@ -79,7 +79,8 @@ class Result:
             "antiresonance_hz": _num(self.fit.f_a),
             "resonance_hz": _num(self.fit.f_r),
             "clock": {"offset_s": _num(self.clock.offset_s), "drift_ppm": _num(self.clock.drift_ppm),
-                      "residual_s": _num(self.clock.residual_s), "ambiguous_by_s": list(self.clock.ambiguous_by_s)},
+                      "residual_s": _num(self.clock.residual_s), "ambiguous_by_s": list(self.clock.ambiguous_by_s),
+                      "failure": self.clock.failure or None},
             "quality": {"verdict": self.quality.verdict, "mean_coherence": _num(self.quality.mean_coherence),
                         "excitation_coherence": _num(self.quality.excitation_coherence),
                         "reasons": [*self.quality.reasons, *(f"note: {n}" for n in self.notes)],
@@ -135,7 +136,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
     quality = with_fault(assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
-                                encoder_jitter=sig.encoder_jitter), recording_fault(rec))  # a wrong bench constant
+                                encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None),
+                         recording_fault(rec))  # a wrong bench constant
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual)),

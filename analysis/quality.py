@@ -135,6 +135,7 @@ def assess(
     inseparable_hz: tuple[float, ...] = (),
     thresholds: Thresholds = Thresholds(),
     encoder_jitter: EncoderJitter | None = None,
+    clock_failure: str | None = None,
 ) -> Quality:
     """Judge an identification from its FRF, its fit and the clock alignment.
 
@@ -153,6 +154,9 @@ def assess(
         Limits of the verdict.
     encoder_jitter : EncoderJitter or None, optional
         The encoder's sample-instant jitter estimated from the data (not judged if None).
+    clock_failure : str or None, optional
+        Why the clock alignment failed (:attr:`analysis.clocks.ClockFit.failure`): the verdict is then failed
+        with it as the first reason — low coherence and wide intervals follow from it, not from the motion.
 
     Returns
     -------
@@ -230,6 +234,8 @@ def assess(
             findings[:0] = found  # a timing defect is the cause: first
         else:
             findings.extend(found)  # the encoder's resolution: a property of the bench, after the motion's reasons
+    if clock_failure:
+        findings.insert(0, ("failed", clock_failure))  # the cause of what follows: first
     for f_hz in inseparable_hz:
         findings.append(("poor", f"a {f_hz:.1f} Hz line on the phase current cannot be told apart from the torque "
                                  f"(the motor turns at that electrical frequency for long): remove it at its source "

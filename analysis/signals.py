@@ -179,7 +179,7 @@ def spans_and_clock(rec: Recording, chain: SignalChain = SignalChain()) -> Spans
         if not rec.host_clock_shared:
             notes.append("clock: the streams' time stamps are not on one host clock; aligned from the data alone")
         notes.extend(clock.notes)
-        if clock.method != "angle":
+        if clock.method != "angle" and not clock.failure:  # a failure is the verdict's reason, not a note
             notes.append(f"clock: the angle stage failed (too little motion); using the {clock.method} stage")
     else:
         clock = ClockFit(float(cycles[0]) * rec.period_s - n0 / rec.rate_hz, 0.0)

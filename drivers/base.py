@@ -67,6 +67,9 @@ class EncoderBlock:
         The drive's own time stamp of each sample, s, where the transport carries one.
     velocity_counts_per_s : ndarray of float64 or None
         The drive's velocity actual value, counts/s, where mapped.
+    velocity_demand_counts_per_s : ndarray of float64 or None
+        The drive's velocity demand, counts/s (CiA 402 0x606B: the reference its speed loop acts on), where the
+        drive gives it — with it a closed-loop (indirect) FRF is possible that load disturbances do not bias.
     """
 
     index: np.ndarray
@@ -74,6 +77,7 @@ class EncoderBlock:
     host_ns: np.ndarray
     drive_time_s: np.ndarray | None = None
     velocity_counts_per_s: np.ndarray | None = None
+    velocity_demand_counts_per_s: np.ndarray | None = None
 
     @property
     def count(self) -> int:

@@ -27,6 +27,7 @@ MODE = 0x6060
 MODE_DISPLAY = 0x6061
 POSITION_ACTUAL = 0x6064
 VELOCITY_ACTUAL = 0x606C
+VELOCITY_DEMAND = 0x606B
 TARGET_POSITION = 0x607A
 TARGET_VELOCITY = 0x60FF
 PROFILE_VELOCITY = 0x6081
@@ -97,6 +98,7 @@ def drive_object_dictionary(node_id: int) -> ObjectDictionary:
         _var("Modes of operation", MODE, INTEGER8, "rw", 0, mappable=True),
         _var("Modes of operation display", MODE_DISPLAY, INTEGER8, "ro", 0, mappable=True),
         _var("Position actual value", POSITION_ACTUAL, INTEGER32, "ro", 0, mappable=True),
+        _var("Velocity demand value", VELOCITY_DEMAND, INTEGER32, "ro", 0, mappable=True),  # velocity units
         _var("Velocity actual value", VELOCITY_ACTUAL, INTEGER32, "ro", 0, mappable=True),
         _var("Target position", TARGET_POSITION, INTEGER32, "rw", 0, mappable=True),
         _var("Target velocity", TARGET_VELOCITY, INTEGER32, "rw", 0, mappable=True),  # velocity units

@@ -35,21 +35,23 @@ log = logging.getLogger(__name__)
 SYNC_COB_ID = 0x80
 SYNC_COUNTER_OVERFLOW = 240
 RAW_PRE_LOG_MAX = 100_000  # frames kept while no raw log file is open yet
-POSITION_ACTUAL, VELOCITY_ACTUAL, HIGH_RES_TIMESTAMP = 0x6064, 0x606C, 0x1013
+POSITION_ACTUAL, VELOCITY_ACTUAL, VELOCITY_DEMAND, HIGH_RES_TIMESTAMP = 0x6064, 0x606C, 0x606B, 0x1013
 
 
 @dataclass(frozen=True)
 class TpdoLayout:
     """Where the recorded objects sit in a TPDO's payload (byte offsets; None: not mapped).
 
-    ``position`` is 0x6064 (int32), ``velocity`` 0x606C (int32), ``timestamp`` 0x1013 (uint32 µs); any other
-    mapped object (a statusword, say) is skipped. ``size`` is the payload's length, bytes.
+    ``position`` is 0x6064 (int32), ``velocity`` 0x606C (int32), ``timestamp`` 0x1013 (uint32 µs),
+    ``velocity_demand`` 0x606B (int32, the speed loop's reference, in the velocity's units); any other mapped object
+    (a statusword, say) is skipped. ``size`` is the payload's length, bytes.
     """
 
     size: int
     position: int
     velocity: int | None = None
     timestamp: int | None = None
+    velocity_demand: int | None = None
 
     @classmethod
     def from_entries(cls, entries: Sequence[int]) -> TpdoLayout:
@@ -62,12 +64,13 @@ class TpdoLayout:
             at += e & 0xFF
         if POSITION_ACTUAL not in offsets:
             raise ValueError("the TPDO does not map 0x6064 position actual value (32 bit)")
-        return cls(at // 8, offsets[POSITION_ACTUAL], offsets.get(VELOCITY_ACTUAL), offsets.get(HIGH_RES_TIMESTAMP))
+        return cls(at // 8, offsets[POSITION_ACTUAL], offsets.get(VELOCITY_ACTUAL), offsets.get(HIGH_RES_TIMESTAMP),
+                   offsets.get(VELOCITY_DEMAND))
 
     def dtype(self) -> np.dtype:
         """A numpy structured dtype reading the mapped fields of one payload (little endian, CiA 301)."""
         fields = {"position": (self.position, "<i4"), "velocity": (self.velocity, "<i4"),
-                  "timestamp": (self.timestamp, "<u4")}
+                  "timestamp": (self.timestamp, "<u4"), "velocity_demand": (self.velocity_demand, "<i4")}
         used = {k: v for k, v in fields.items() if v[0] is not None}
         return np.dtype({"names": list(used), "formats": [f for _, f in used.values()],
                          "offsets": [o for o, _ in used.values()], "itemsize": self.size})
@@ -179,8 +182,8 @@ class TpdoDecoder:
     """Raw TPDO payloads (int32 position [, int32 velocity] [, uint32 0x1013 time stamp µs], little endian, or
     any ``layout``) → an :class:`EncoderBlock`.
 
-    The int32 position register is unwrapped to int64; velocity (drive units) is scaled to counts/s
-    by ``counts_per_s_per_unit``; the time stamp (wrapping every 2³² µs ≈ 71.6 min) is unwrapped into
+    The int32 position register is unwrapped to int64; velocity and velocity demand (drive units) are scaled to
+    counts/s by ``counts_per_s_per_unit``; the time stamp (wrapping every 2³² µs ≈ 71.6 min) is unwrapped into
     ``drive_time_s`` (s of the drive's clock, its origin the drive's). Frames of the wrong length are
     counted and skipped.
     """
@@ -219,9 +222,10 @@ class TpdoDecoder:
         counts = self._last_counts + np.cumsum(steps) + (raw[0] if self._last_raw is None else 0)
         self._last_raw, self._last_counts = int(raw[-1]), int(counts[-1])
         velocity = values["velocity"] * self._scale if self._with_velocity else None
+        demand = values["velocity_demand"] * self._scale if self._layout.velocity_demand is not None else None
         drive_time_s = self._unwrap_stamps(values["timestamp"]) if self._with_timestamp else None
         return EncoderBlock(index=index, position_counts=counts, host_ns=host_ns, drive_time_s=drive_time_s,
-                            velocity_counts_per_s=velocity)
+                            velocity_counts_per_s=velocity, velocity_demand_counts_per_s=demand)
 
     def _unwrap_stamps(self, raw_us: np.ndarray) -> np.ndarray:
         """uint32 µs stamps → cumulative drive time, s (a step is taken modulo 2³²: frames come in order)."""

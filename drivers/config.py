@@ -339,6 +339,8 @@ class SimSettings(Strict):
     elapsed_s: NonNegFloat = 0.0
     robot_idle_fraction: float = Field(default=0.15, ge=0.0, le=1.0)  # program cycles that are a long wait
     robot_payload_max_kg: NonNegFloat = 2.0  # payload per program cycle, uniform in 0 … this, kg at the arm's tip
+    # the payload also adds to J_l (as a point mass at the tip: payload_Jl_kgm2); off: it changes the gravity load only
+    robot_payload_inertia: bool = False
     K_decay_pct_per_hour: NonNegFloat = 0.0  # wear: K falls linearly with elapsed_s
     # The bench's physical truth where it may differ from what [motor], [encoder] and [daq] state (a bench
     # misconfigured on purpose, for `acq selftest`); None / 1.0 / +1: the same as stated.
@@ -347,6 +349,11 @@ class SimSettings(Strict):
     current_sensor_gain: PositiveFloat = 1.0  # measured / true phase current (a sensor scale stated wrongly)
     phase_order: list[PhaseName] | None = None  # the phases really wired to [daq] channels, same order
     encoder_direction: Literal[1, -1] = 1  # −1: the encoder counts down while the motor turns forward
+
+    def payload_Jl_kgm2(self, payload_kg: float, gear_ratio: float) -> float:
+        """Motor-side load inertia a payload adds, kg·m²: a point mass at the arm's tip (twice ``arm_com_distance_m``,
+        where the gravity model puts it), m·r²/ratio²; zero unless ``robot_payload_inertia``."""
+        return payload_kg * (2.0 * self.arm_com_distance_m / gear_ratio) ** 2 if self.robot_payload_inertia else 0.0
 
     def K_at_start_Nm_per_rad(self) -> float:
         """The true K at this session's start (``elapsed_s``) after the wear ``K_decay_pct_per_hour``, N·m/rad."""

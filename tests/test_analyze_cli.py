@@ -34,7 +34,7 @@ def test_analyze_json_has_documented_keys_and_finds_K(session_10s: Path, capsys:
     doc = json.loads(run.out)
     assert KEYS <= set(doc)
     assert set(doc["ci95"]) == {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad"}
-    assert set(doc["clock"]) == {"offset_s", "drift_ppm", "residual_s", "ambiguous_by_s"}
+    assert set(doc["clock"]) == {"offset_s", "drift_ppm", "residual_s", "ambiguous_by_s", "failure"}
     assert {"verdict", "mean_coherence", "reasons"} <= set(doc["quality"])
     assert doc["quality"]["verdict"] == "ok"
     truth = doc["simulated_truth"]

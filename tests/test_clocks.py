@@ -144,3 +144,21 @@ def test_a_mismatch_every_lag_shares_does_not_drop_the_true_lag_from_the_wide_se
     # the truth is the offset or one of the reported alternatives (coarse: their shifts are given to 1 ms)
     assert abs(clock.offset_s - offset_s) <= 50e-6 or np.min(np.abs(shifts)) < 0.005
     assert np.all(np.abs(shifts / 1.2 - np.round(shifts / 1.2)) < 0.01)  # whole motion cycles of 1.2 s only
+
+
+def test_the_frequency_stage_fits_only_the_offset_where_its_slope_would_need_an_implausible_drift() -> None:
+    from analysis.clocks import MAX_DRIFT_PPM, frequency_alignment, plausible_drift
+
+    t = np.arange(0.0, 10.0, 1e-3)
+    moves = lambda x: 200.0 * np.clip(np.sin(2 * np.pi * 3.1 * x) + np.sin(2 * np.pi * 1.3 * x), 0, None)  # noqa: E731
+    # the current's track lags the encoder's by 1 ms more every second: a line through the windows' lags needs
+    # 1000 ppm — what a few scattered windows of motion give, never two crystal clocks
+    f_cur = moves(t - (2e-3 + 1e-3 * t))
+    offset_s, drift_ppm, n = frequency_alignment(f_cur, t, moves, 0.0, 30.0, 0.03)
+    assert n == 5 and drift_ppm == 30.0  # the starting drift kept
+    assert offset_s == pytest.approx(-7e-3, abs=0.2e-3)  # the median window's lag (the one at 5 s)
+    # and where the lags do fit a plausible line, the slope is taken
+    f_cur = moves(t - (2e-3 + 50e-6 * t))
+    offset_s, drift_ppm, n = frequency_alignment(f_cur, t, moves, 0.0, 0.0, 0.03)
+    assert drift_ppm == pytest.approx(-50.0, abs=5.0) and offset_s == pytest.approx(-2e-3, abs=0.1e-3)
+    assert MAX_DRIFT_PPM == 200.0 and plausible_drift(-250.0, 30.0) and not plausible_drift(-31730.0, 1240.0)

@@ -232,9 +232,64 @@ def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None
     weak = {"verdict": "failed", "mean_coherence": 0.2, "excitation_coherence": 0.1}
     assert not_excited({"quality": weak, "clock": {"residual_s": 20e-6}})
     assert not not_excited({"quality": weak, "clock": {"residual_s": 3e-3}})  # misaligned: the analysis' verdict
+    assert not not_excited({"quality": weak, "clock": {"residual_s": None, "failure": "clock: no alignment found"}})
     assert not not_excited({"quality": {**weak, "verdict": "ok"}, "clock": {"residual_s": 20e-6}})
     strong = {"verdict": "poor", "mean_coherence": 0.9, "excitation_coherence": 0.95}
     assert not not_excited({"quality": strong, "clock": {"residual_s": 20e-6}})  # poor for another reason
+
+
+@pytest.fixture(scope="module")
+def repeating_window(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The first window of the shipped sim_robot bench (seed 0): moves so alike that the phase of i_a matches the
+    encoder's angle at wrong relations stretched by percents (the clock fit once took offset −0.609 s and drift
+    −31 730 ppm, truth +0.037 s and +40 ppm, and the window was catalogued "not excited")."""
+    from acq.ui.cli import main
+
+    out = tmp_path_factory.mktemp("repeating")
+    with pytest.raises(SystemExit) as exc:
+        main(["monitor", "--bench", str(ROBOT), "--fast", "--for", "1m", "--keep", "1", "--out", str(out)])
+    assert exc.value.code == 0
+    return out
+
+
+def test_a_clock_fit_of_implausible_drift_is_rejected_and_the_host_stamps_align_the_window(
+        repeating_window: Path) -> None:
+    from acq.offline.analyze import recording_from_session
+    from analysis.fit import Z95
+    from analysis.signals import spans_and_clock
+
+    (row,) = _rows(repeating_window)
+    clock = spans_and_clock(recording_from_session(load(row["path"]))).clock
+    assert clock.method == "angle" and not clock.failure
+    assert abs(clock.offset_s - 0.037) < 1e-3  # the truth, not a wrong lag 0.6 s away
+    assert abs(clock.drift_ppm - 40.0) <= Z95 * clock.drift_std_ppm  # −28 ± 227 ppm (95 %): few fast moves
+    rejected = [n for n in clock.notes if n.startswith("clock: rejected a fit of the electrical angle")]
+    assert len(rejected) == 1 and "beyond the ±200 ppm two crystal clocks can differ" in rejected[0]
+    drift = float(rejected[0].split("drift of ")[1].split(" ±")[0].replace(" ", ""))
+    assert abs(drift) > 1000.0
+    # aligned, the window is honestly not excited: its moves put no torque into the band
+    assert row["verdict"] == "not excited" and row["K_Nm_per_rad"] is None
+    assert "moves put torque into 10…400 Hz beyond chance" in json.loads(row["reasons_json"])[0]
+
+
+def test_without_shared_host_stamps_the_window_fails_on_its_clock_and_is_not_called_not_excited(
+        repeating_window: Path) -> None:
+    from dataclasses import replace
+
+    from acq.monitoring.window_judge import not_excited
+    from acq.offline.analyze import recording_from_session
+    from analysis import AnalysisRequest, analyze
+
+    (row,) = _rows(repeating_window)
+    rec = replace(recording_from_session(load(row["path"])), host_clock_shared=False)  # as two separate tools
+    doc = analyze(rec, AnalysisRequest(select_segments=True)).to_json_dict()
+    failure = doc["clock"]["failure"]
+    assert failure.startswith("clock: no alignment found — the phase of the current against the encoder's angle fits")
+    assert "beyond the ±200 ppm two crystal clocks can differ" in failure
+    assert abs(float(failure.split("drift of ")[1].split(" ±")[0].replace(" ", ""))) > 1000.0
+    assert doc["quality"]["verdict"] == "failed" and doc["quality"]["reasons"][0] == failure
+    assert doc["clock"]["residual_s"] is None
+    assert not not_excited(doc)  # the clock failed, not the motion
 
 
 def test_each_window_says_which_share_and_which_moves_excite_the_joint(four_windows: Path) -> None:
@@ -265,3 +320,29 @@ def test_the_status_table_shows_the_excited_share_and_the_moves() -> None:
     assert "excited share: last window · all windows" in text and "12 % · 30 %" in text
     assert "moves of the last window: 1 of 2 excite" in text
     assert "1200" in text and "40" in text and "yes" in text  # peak speeds in rpm
+
+
+def test_the_payload_tag_is_catalogued_and_changes_the_truth_only_with_robot_payload_inertia(
+        four_windows: Path, tmp_path: Path) -> None:
+    def truth_and_payload(rows: list[dict[str, object]]) -> list[tuple[float, float]]:
+        return [(json.loads(str(r["truth_json"]))["Jl_kgm2"], json.loads(str(r["tags_json"]))["payload_kg"]) for r in rows]
+
+    off = truth_and_payload(_rows(four_windows))  # default: the payload changes the gravity load only
+    assert [jl for jl, _ in off] == [0.00748] * 4 and len({p for _, p in off}) > 1
+    from acq.ui.cli import main
+
+    bench = _bench_file(tmp_path, seed=EXCITING_SEED, robot_payload_inertia="true")
+    with pytest.raises(SystemExit) as exc:
+        main(["monitor", "--bench", str(bench), "--fast", "--every", "60", "--for", "2m", "--out", str(tmp_path / "m")])
+    assert exc.value.code == 0
+    rows = _rows(tmp_path / "m")
+    on = truth_and_payload(rows)
+    tip_m, ratio = 2 * 0.375, 10.0  # the payload is a point mass at the arm's tip, twice the centre of mass's distance
+    assert [jl for jl, _ in on] == [pytest.approx(0.00748 + p * (tip_m / ratio) ** 2, rel=1e-12) for _, p in on]
+    assert [p for _, p in on] == [p for _, p in off[:2]]  # the same program cycles, the same payloads
+    assert on[1][0] > 2.0 * on[0][0]  # window 1 carries 1.8 kg: J_l more than doubles
+    db = sqlite3.connect(tmp_path / "m" / "catalogue.sqlite")
+    ((verdict, jl, lo, hi),) = db.execute("SELECT verdict, Jl_kgm2, Jl_lo, Jl_hi FROM analyses a JOIN sessions s USING "
+                                          "(session_key) WHERE s.tags_json LIKE '%\"monitor_window\": 0%'").fetchall()
+    db.close()
+    assert verdict == "ok" and lo <= on[0][0] <= hi and jl == pytest.approx(on[0][0], rel=0.02)

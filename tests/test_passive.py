@@ -203,3 +203,25 @@ def test_a_monitor_of_the_robot_catalogues_windows_with_K_near_the_truth(
     for verdict, k, truth, _ in rows:
         if verdict == "ok":
             assert k == pytest.approx(json.loads(truth)["K_Nm_per_rad"], rel=0.03)
+
+
+def test_a_velocity_demand_mapped_in_the_masters_tpdo_is_recorded_beside_the_position(tmp_path: Path) -> None:
+    """The master maps 0x6064 position and 0x606B velocity demand (8 bytes): acq decodes the demand at its offset,
+    scales it from the drive's 0.1 rpm to counts/s and stores it; the encoder's speed follows it."""
+    bench = _drive(ROBOT_CANOPEN, tpdo_mapping=[0x60640020, 0x606B0020])
+    current, drive = open_bench(bench)
+    result = Recorder(bench, None, current, drive, tmp_path, 2.0).run()
+    enc = load(result.path).encoder
+    assert result.status == "complete" and result.encoder_gaps == 0
+    demand = enc.velocity_demand_counts_per_s
+    assert demand is not None and enc.velocity_counts_per_s is None
+    unit = bench.encoder.counts_per_rev / 60.0 / bench.drive.velocity_units_per_rpm  # counts/s of 0.1 rpm
+    np.testing.assert_allclose(demand / unit, np.round(demand / unit), atol=1e-9)  # whole drive units
+    measured = np.diff(enc.position_counts) / bench.drive.period_s
+    assert np.abs(demand).max() > 100 / 60 * bench.encoder.counts_per_rev  # the master moved it faster than 100 rpm
+    assert np.sqrt(np.mean((measured - demand[1:]) ** 2)) < 0.05 * np.abs(measured).max()
+    layout = TpdoLayout.from_entries([0x60410010, 0x60640020, 0x606B0020])
+    assert (layout.size, layout.position, layout.velocity, layout.velocity_demand) == (10, 2, None, 6)
+    frames = [(c, struct.pack("<Hii", 0x0627, 1000 * c, -3 * c), c * 1_000_000) for c in (1, 2)]
+    block = TpdoDecoder(SyncUnwrapper(240, 0.001, 0), False, 2.0, layout=layout).decode(frames)
+    assert block.velocity_demand_counts_per_s.tolist() == [-6.0, -12.0]

@@ -182,3 +182,34 @@ def test_a_session_opened_but_never_run_is_finished_as_interrupted(tmp_path: Pat
     assert (s.status, s.attrs["stop_reason"]) == ("interrupted", "interrupted by user (Ctrl-C)")
     rec.abort("again")  # idempotent
     assert load(writer.path).attrs["stop_reason"] == "interrupted by user (Ctrl-C)"
+
+
+def test_the_recorded_velocity_demand_is_the_simulated_speed_reference_at_each_cycle(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from acq.config import load_bench, load_profile
+    from acq.recording.recorder import Recorder
+    from drivers.motion import triangle_speed_rad_s
+    from drivers.registry import open_bench
+    from drivers.sim.bench import SimBench
+
+    bench, profile = load_bench(), load_profile("triangle_0.2s")
+    sim = SimBench(bench, realtime=False)
+    current, drive = open_bench(bench, fast=True, sim_bench=sim)
+    result = Recorder(bench, profile, current, drive, tmp_path, 2.0).run()
+    enc = load(result.path).encoder
+    (motion,) = sim.truth["motions"]
+    # the triangle the drive's speed loop followed, read at its last 4 kHz control instant at or before k·T
+    loop_s = 1.0 / bench.sim.speed_loop_hz
+    t_loop = np.floor(enc.index * PERIOD_S / loop_s + 1e-9) * loop_s
+    moving = (t_loop >= motion["t_start_s"]) & (t_loop < motion["t_stop_s"])
+    expected = np.where(moving, triangle_speed_rad_s(t_loop - motion["t_start_s"], profile), 0.0)
+    assert enc.velocity_demand_counts_per_s is not None and moving.sum() > 1500
+    np.testing.assert_allclose(enc.velocity_demand_counts_per_s[t_loop < motion["t_stop_s"]],
+                               (expected * bench.encoder.counts_per_rev / (2 * np.pi))[t_loop < motion["t_stop_s"]],
+                               rtol=1e-12, atol=1e-6)
+    assert enc.velocity_demand_counts_per_s.max() == pytest.approx(1000 / 60 * bench.encoder.counts_per_rev)  # 1000 rpm
+    # the speed loop tracks its demand: the encoder's speed stays within a few % of the peak from it
+    measured = np.diff(enc.position_counts) / PERIOD_S
+    assert np.sqrt(np.mean((measured - enc.velocity_demand_counts_per_s[1:]) ** 2)) < 0.05 * measured.max()
+    info = run_cli(capsys, "info", str(result.path), "--json")
+    assert '"encoder_extras": [\n    "drive_time_s",\n    "velocity_demand_counts_per_s"\n  ]' in info.out

@@ -177,8 +177,9 @@ class Monitor:
         if bench.sim is not None:  # a simulated machine runs on machine time (program phase, wear, noise)
             bench = bench.model_copy(update={"sim": bench.sim.model_copy(update={"elapsed_s": n * self.s.every_s})})
         current, drive = open_bench(bench, fast=self.s.fast)
+        machine = getattr(drive, "machine_tags", dict)()  # what the machine says of the window (a robot's payload)
         recorder = Recorder(bench, None, current, drive, self.s.out_dir, self.s.window_s,
-                            tags={WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s})
+                            tags={**machine, WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s})
         self._recorder = recorder
         if self._stop is not None:
             recorder.request_stop(self._stop)

@@ -22,14 +22,15 @@ from analysis import AnalysisRequest, Thresholds
 def not_excited(doc: dict[str, Any]) -> bool:
     """True when a verdict that is not ok comes from the excitation checks: coherence between f_a and f_r, or in
     the whole band, below the verdict's own "poor" limits (:class:`analysis.quality.Thresholds`), with the clocks
-    aligned (a residual above the amplitude fit's limit makes the coherence low too, but says nothing about the
-    motion: such a window keeps the analysis' own verdict and reasons)."""
+    aligned (a failed alignment, or a residual above the amplitude fit's limit, makes the coherence low too, but
+    says nothing about the motion: such a window keeps the analysis' own verdict and reasons, the clock's first)."""
     th, quality = Thresholds(), doc["quality"]
     exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
     weak_between = exc is not None and not exc >= th.excitation_poor
     weak_in_band = mean is None or not mean >= th.coherence_poor
-    residual = doc.get("clock", {}).get("residual_s")
-    aligned = residual is None or residual <= th.clock_residual_amplitude_s
+    clock = doc.get("clock", {})
+    residual = clock.get("residual_s")
+    aligned = not clock.get("failure") and (residual is None or residual <= th.clock_residual_amplitude_s)
     return quality.get("verdict") != "ok" and aligned and (weak_between or weak_in_band)
 
 

@@ -81,13 +81,17 @@ def simulated_truth(session: Session) -> dict[str, float] | None:
 
     The true clock offset refers to the simulator's drive cycle 0; it is given only when the stored
     encoder index is that cycle (transport ``sim``) — a CANopen or serial index starts at its own first
-    SYNC or frame.
+    SYNC or frame. With ``[sim] robot_payload_inertia`` the true J_l includes the session's ``payload_kg`` tag
+    (None without the tag: the payload is unknown).
     """
     sim = session.bench.sim
     if sim is None or session.bench.daq.driver != "sim":
         return None
     offset = sim.daq_offset_s if session.encoder.transport == "sim" else None
-    return {"K_Nm_per_rad": sim.K_at_start_Nm_per_rad(), "Jm_kgm2": sim.Jm_kgm2, "Jl_kgm2": sim.Jl_kgm2,
+    payload = session.tags.get("payload_kg")
+    Jl = (sim.Jl_kgm2 + sim.payload_Jl_kgm2(float(payload or 0.0), session.bench.gear.ratio)
+          if payload is not None or not sim.robot_payload_inertia else None)
+    return {"K_Nm_per_rad": sim.K_at_start_Nm_per_rad(), "Jm_kgm2": sim.Jm_kgm2, "Jl_kgm2": Jl,
             "C_Nms_per_rad": sim.C_Nms_per_rad, "offset_s": offset, "drift_ppm": sim.daq_drift_ppm}
 
 

@@ -163,6 +163,7 @@ def _select(block: EncoderBlock, keep: np.ndarray) -> EncoderBlock:
         host_ns=np.asarray(block.host_ns)[keep],
         drive_time_s=pick(block.drive_time_s),
         velocity_counts_per_s=pick(block.velocity_counts_per_s),
+        velocity_demand_counts_per_s=pick(block.velocity_demand_counts_per_s),
     )
 
 

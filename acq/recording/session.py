@@ -18,6 +18,7 @@ Layout (``format = "acq-session"``, ``format_version = 1``)::
         host_ns                  int64, host arrival time of each sample
         drive_time_s             float64, optional (the drive's own stamp)
         velocity_counts_per_s    float64, optional
+        velocity_demand_counts_per_s  float64, optional (the drive's speed reference, CiA 402 0x606B)
     /events             compound rows (host_ns, stream, kind, detail)
 
     /flushes            compound rows (host_ns, current_samples, current_blocks, encoder_samples, events):
@@ -74,7 +75,7 @@ FLUSH_DTYPE = np.dtype([("host_ns", "<i8"), ("current_samples", "<i8"), ("curren
 #: less fails the recording as "disk full" before HDF5 sees an ENOSPC (which leaves HDF5 unreliable, see
 #: acq.recording.h5safe). 1 MiB is ~10x the metadata a 60 s session's footer and chunk indexes grow by per flush.
 RESERVE_BYTES = 1 << 20
-_OPTIONAL_ENCODER = ("drive_time_s", "velocity_counts_per_s")
+_OPTIONAL_ENCODER = ("drive_time_s", "velocity_counts_per_s", "velocity_demand_counts_per_s")
 
 
 def utc_now_iso() -> str:
@@ -288,7 +289,8 @@ class SessionWriter:
         self._pending.add("encoder/position_counts", np.asarray(block.position_counts, dtype=np.int64))
         self._pending.add("encoder/index", np.asarray(block.index, dtype=np.int64))
         self._pending.add("encoder/host_ns", np.asarray(block.host_ns, dtype=np.int64))
-        for name, values in zip(_OPTIONAL_ENCODER, (block.drive_time_s, block.velocity_counts_per_s)):
+        for name in _OPTIONAL_ENCODER:
+            values = getattr(block, name)
             if values is not None:
                 self._filled_optional.add(name)
             filler = np.full(block.count, np.nan) if values is None else np.asarray(values, dtype=np.float64)
@@ -458,7 +460,8 @@ class CurrentData:
 
 @dataclass(frozen=True)
 class EncoderData:
-    """The encoder stream as stored (counts, drive cycle index, host arrival ns)."""
+    """The encoder stream as stored (counts, drive cycle index, host arrival ns; the optional columns None where the
+    drive did not give them)."""
 
     period_s: float
     counts_per_rev: int
@@ -470,6 +473,7 @@ class EncoderData:
     host_ns: np.ndarray
     drive_time_s: np.ndarray | None
     velocity_counts_per_s: np.ndarray | None
+    velocity_demand_counts_per_s: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -717,8 +721,7 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
     return EncoderData(
         period_s=period_s, counts_per_rev=counts_per_rev, transport=transport, timestamp_kind=kind, device=device,
         position_counts=columns["position_counts"][0][:n], index=columns["index"][0][:n],
-        host_ns=columns["host_ns"][0][:n], drive_time_s=optional("drive_time_s"),
-        velocity_counts_per_s=optional("velocity_counts_per_s"),
+        host_ns=columns["host_ns"][0][:n], **{name: optional(name) for name in _OPTIONAL_ENCODER},
     )
 
 
@@ -852,8 +855,8 @@ def _write_copy(dst: h5py.File, session: Session, stop_reason: str, group_attrs:
     enc = dst.create_group("encoder")
     e = session.encoder
     enc.attrs.update(group_attrs["encoder"])
-    for name, values in (("position_counts", e.position_counts), ("index", e.index), ("host_ns", e.host_ns),
-                         ("drive_time_s", e.drive_time_s), ("velocity_counts_per_s", e.velocity_counts_per_s)):
+    for name in ("position_counts", "index", "host_ns", *_OPTIONAL_ENCODER):
+        values = getattr(e, name)
         if values is not None:
             column(enc, name, values)
     rows = np.array([(ev.host_ns, ev.stream.encode(), ev.kind.encode(), ev.detail.encode()[:240])

@@ -24,7 +24,8 @@ class StreamSummary:
 
 @dataclass(frozen=True)
 class SessionSummary:
-    """A session at a glance."""
+    """A session at a glance; ``encoder_extras`` names the optional encoder columns the drive gave (the drive's time
+    stamps ``drive_time_s``, ``velocity_counts_per_s``, ``velocity_demand_counts_per_s``)."""
 
     path: str
     joint: str
@@ -33,6 +34,7 @@ class SessionSummary:
     created_utc: str
     streams: tuple[StreamSummary, ...]
     events: int
+    encoder_extras: tuple[str, ...] = ()
 
     def to_json_dict(self) -> dict[str, object]:
         return asdict(self)
@@ -74,4 +76,6 @@ def summarize(session: Session) -> SessionSummary:
         created_utc=session.meta.created_utc or "",
         streams=streams,
         events=len(session.events),
+        encoder_extras=tuple(name for name in ("drive_time_s", "velocity_counts_per_s", "velocity_demand_counts_per_s")
+                             if getattr(enc, name) is not None),
     )

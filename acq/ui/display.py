@@ -206,12 +206,19 @@ def _lookup(doc: dict[str, Any], path: tuple[str, ...]) -> tuple[bool, Any]:
     return True, node
 
 
+#: the optional encoder columns in words, for the summary's title
+_EXTRA_TEXT = {"drive_time_s": "drive time stamps", "velocity_counts_per_s": "velocity actual",
+               "velocity_demand_counts_per_s": "velocity demand"}
+
+
 def summary_table(summary: SessionSummary) -> FittedTable:
     """A session at a glance, one row per stream: samples, duration, nominal and effective rates, gaps."""
     title = (f"{escape(summary.path)}\njoint {escape(summary.joint)} · {escape(_utc_text(summary.created_utc))} · "
              f"status [bold]{escape(summary.status)}[/bold]")
     if summary.stop_reason:
         title += f" ({escape(summary.stop_reason)})"
+    if summary.encoder_extras:
+        title += "\nencoder also: " + ", ".join(_EXTRA_TEXT.get(n, n) for n in summary.encoder_extras)
     s = summary.streams
     columns = [Column("stream", [x.name for x in s], "left"), Column("samples", [f"{x.samples}" for x in s]),
                Column("duration\ns", [f"{x.duration_s:.3f}" for x in s]),

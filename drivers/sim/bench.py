@@ -71,7 +71,8 @@ class SimBench:
             robot = RobotProgram(s.seed, s.robot_idle_fraction, s.robot_payload_max_kg)
             program = WindowReference(robot, robot.rest_before(s.elapsed_s))
         payload_kg = program.payload_kg() if program is not None else 0.0
-        self.plant = TwoMass(s.K_at_start_Nm_per_rad(), s.Jm_kgm2, s.Jl_kgm2, s.C_Nms_per_rad, s.bm_Nms_per_rad,
+        Jl_kgm2 = s.Jl_kgm2 + s.payload_Jl_kgm2(payload_kg, bench.gear.ratio)  # the session's J_l: its start cycle's payload
+        self.plant = TwoMass(s.K_at_start_Nm_per_rad(), s.Jm_kgm2, Jl_kgm2, s.C_Nms_per_rad, s.bm_Nms_per_rad,
                              s.bl_Nms_per_rad, bench.motor.torque_constant_Nm_per_A, s.current_bandwidth_hz)
         self.speed_pi = tune_speed_pi(nom.Jm_kgm2 + nom.Jl_kgm2, s.speed_bandwidth_hz, 1.0 / s.speed_loop_hz)
         if not s.speed_accel_feedforward:
@@ -270,6 +271,16 @@ class SimBench:
         if self.sim.drive_time_stamps:
             return self.latch_times_s(first_cycle, count)
         return np.arange(first_cycle, first_cycle + count) * self.drive_period_s
+
+    def velocity_demand_rad_s(self, first_cycle: int, count: int) -> np.ndarray:
+        """The drive's velocity demand (CiA 402 0x606B) at drive cycles ``first_cycle …`` (at k·T), rad/s of the motor:
+        the speed reference the speed loop acts on, held from its last control instant at or before k·T — the very
+        values the simulated physics followed (it is advanced there first, so the reference answers nothing new)."""
+        t = np.arange(first_cycle, first_cycle + count) * self.drive_period_s
+        loop_s = self.speed_pi.period_s
+        with self._lock:
+            self._physics.advance_to(float(np.max(t, initial=0.0)))
+            return self._physics.schedule.reference(np.floor(t / loop_s + 1e-9) * loop_s)[0]
 
     def encoder_counts(self, first_cycle: int, count: int) -> np.ndarray:
         """Unwrapped position (int64 counts) latched at drive cycles ``first_cycle …`` (at

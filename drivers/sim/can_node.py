@@ -19,7 +19,8 @@ one of the channel whichever bus joins first (:class:`_ControllerLastChannel`), 
 host before the TPDO.
 
 Drive clock: one drive cycle per SYNC received (the first SYNC is the cycle the host clock says it
-is); a TPDO carries the bench's int32 position register (0x6064) and velocity (0x606C) at its cycle,
+is); a TPDO carries the bench's int32 position register (0x6064), velocity (0x606C) and velocity demand (0x606B,
+the speed reference its loop follows: :meth:`~drivers.sim.bench.SimBench.velocity_demand_rad_s`) at its cycle,
 and the high-resolution time stamp 0x1013 (µs of the drive clock, wrapping at 2³²) of the instant the
 position was latched: k·T, or the SYNC's arrival with ``[sim] sync_jitter_s`` (drawn from the bench's
 seed — the virtual bus's own timing is not reproducible, see :meth:`~drivers.sim.bench.SimBench.latch_times_s`).
@@ -145,6 +146,7 @@ class SimCanNode:
         self._cache_first = 0
         self._cache_counts = np.zeros(0, dtype=np.int32)
         self._cache_omega = np.zeros(0)
+        self._cache_demand = np.zeros(0)
         self._cache_stamp_us = np.zeros(0, dtype=np.int64)
         self.refuse_mode_change = False
         self.has_timestamp = True
@@ -204,10 +206,10 @@ class SimCanNode:
         t_host_s = (time.monotonic_ns() - self._bench.host_t0_ns) * 1e-9 - self._bench.sim.host_latency_s
         return max(self._now_cycle() * self._period_s, t_host_s)
 
-    def _sample(self) -> tuple[int, float, int]:
-        """Position register (counts), speed (rad/s) and 0x1013 time stamp (µs) at the present cycle, from a
-        block computed ahead (one vectorised bench query per ``CACHE_CYCLES``: a query per SYNC would cost the
-        bus its timing)."""
+    def _sample(self) -> tuple[int, float, int, float]:
+        """Position register (counts), speed (rad/s), 0x1013 time stamp (µs) and velocity demand (rad/s) at the
+        present cycle, from a block computed ahead (one vectorised bench query per ``CACHE_CYCLES``: a query per
+        SYNC would cost the bus its timing)."""
         cycle = self._now_cycle()
         i = cycle - self._cache_first
         if not 0 <= i < len(self._cache_counts):
@@ -216,7 +218,9 @@ class SimCanNode:
             t_s = (cycle + np.arange(CACHE_CYCLES)) * self._period_s
             self._cache_omega = self._bench.true_state_at(t_s)["omega_m_rad_s"]
             self._cache_stamp_us = np.round(self._bench.latch_times_s(cycle, CACHE_CYCLES) * 1e6).astype(np.int64)
-        return int(self._cache_counts[i]), float(self._cache_omega[i]), int(self._cache_stamp_us[i]) % 2**32
+            self._cache_demand = self._bench.velocity_demand_rad_s(cycle, CACHE_CYCLES)
+        return (int(self._cache_counts[i]), float(self._cache_omega[i]), int(self._cache_stamp_us[i]) % 2**32,
+                float(self._cache_demand[i]))
 
     def _theta_rad(self) -> float:
         return float(self._bench.true_state_at(self._now_s())["theta_m_rad"])
@@ -239,6 +243,8 @@ class SimCanNode:
             return self._sample()[0]
         if index == 0x606C:
             return round(self._sample()[1] / RPM_TO_RAD_S * self._s.velocity_units_per_rpm)
+        if index == 0x606B:
+            return round(self._sample()[3] / RPM_TO_RAD_S * self._s.velocity_units_per_rpm)
         if index == HIGH_RES_TIMESTAMP:
             return self._sample()[2]
         if self.reject_mapping and TPDO_MAP <= index < TPDO_MAP + N_TPDO:

@@ -2,7 +2,9 @@
 
 One frame per drive cycle k (t = k·``period_s``), index = k, position = the unwrapped encoder counts
 latched at k·period (or, with ``sim.sync_jitter_s``, when SYNC k arrives), ``drive_time_s`` = the drive's
-time stamp of that latch (:meth:`drivers.sim.bench.SimBench.stamp_times_s`). Frames arrive at the host
+time stamp of that latch (:meth:`drivers.sim.bench.SimBench.stamp_times_s`), ``velocity_demand_counts_per_s`` = the
+speed reference the drive's loop acts on at k·T (:meth:`~drivers.sim.bench.SimBench.velocity_demand_rad_s`, in the
+encoder's counts per second). Frames arrive at the host
 in batches of ~10 ms, each with its own jittered ``host_ns``; frames listed in ``sim.drop_encoder_frames``
 as (first_cycle, count) never arrive (the recorder finds the gap from the index). ``start_motion`` begins
 the triangle ``sim.pre_roll_s`` after the drive's present cycle; ``stop_motion`` ramps to rest at the
@@ -76,6 +78,7 @@ class SimDrive:
         if not self._sim.pace_until(int(host_ns[-1]), timeout_s):
             return None
         counts = self._sim.encoder_counts(first, n)
+        demand = self._sim.velocity_demand_rad_s(first, n) * (self._sim.counts_per_rev / (2.0 * np.pi))
         self._next, self._last_host_ns = first + n, int(host_ns[-1])
         self._sim.hold_history(self._consumer, self._next * self._period_s)
         keep = np.ones(n, dtype=bool)
@@ -84,7 +87,14 @@ class SimDrive:
         if not keep.any():
             return None
         return EncoderBlock(index=cycles[keep], position_counts=counts[keep], host_ns=host_ns[keep],
-                            drive_time_s=self._sim.stamp_times_s(first, n)[keep])
+                            drive_time_s=self._sim.stamp_times_s(first, n)[keep],
+                            velocity_demand_counts_per_s=demand[keep])
+
+    def machine_tags(self) -> dict[str, float]:
+        """What the simulated machine knows of this session: the payload (kg) of the robot program's cycle it starts
+        in (``motion = "external"``), else nothing."""
+        program = self._sim.robot_program
+        return {} if program is None else {"payload_kg": round(program.payload_kg(), 3)}
 
     def stop(self) -> None:
         """Stop streaming (brings the motor to rest first). Idempotent."""
