@@ -45,6 +45,7 @@ import os
 import time
 import uuid
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -132,7 +133,7 @@ class _PendingColumns:
         self.nbytes = 0
         while self._parts:
             name, parts = self._parts.popitem()  # taken before writing: an interrupted flush never repeats a part
-            _append(datasets[name], np.concatenate(parts))
+            _append(datasets[name], parts[0] if len(parts) == 1 else np.concatenate(parts))
 
 
 class SessionWriter:
@@ -280,6 +281,27 @@ class SessionWriter:
         self._pending.add("current/blocks/first_index", np.array([block.first_index], dtype=np.int64))
         self._pending.add("current/blocks/count", np.array([block.count], dtype=np.int64))
         self._pending.add("current/blocks/host_ns", np.array([block.host_ns], dtype=np.int64))
+
+    def append_current_blocks(self, current_a: Sequence[np.ndarray], first_index: np.ndarray, count: np.ndarray,
+                              host_ns: np.ndarray) -> None:
+        """Append many DAQ blocks at once (an import): as :meth:`append_current` of each, without a call per block.
+
+        Parameters
+        ----------
+        current_a : one array per channel (in the writer's channel order), A, the blocks' samples back to back.
+        first_index, count, host_ns : the block table, one row per block (as in :class:`CurrentBlock`).
+        """
+        if self.failure is not None:
+            return
+        n = int(np.sum(count))
+        if len(current_a) != len(self._channels) or any(np.shape(v) != (n,) for v in current_a) or not (
+                np.shape(first_index) == np.shape(host_ns) == np.shape(count)):
+            raise ValueError(f"current_a: {len(self._channels)} channels of {n} samples and a block table of equal "
+                             "columns expected")
+        for ch, values in zip(self._channels, current_a):
+            self._pending.add(f"current/{ch}_A", np.asarray(values, dtype=np.float64))
+        for name, column in (("first_index", first_index), ("count", count), ("host_ns", host_ns)):
+            self._pending.add(f"current/blocks/{name}", np.asarray(column, dtype=np.int64))
 
     def append_encoder(self, block: EncoderBlock) -> None:
         """Append encoder samples (caller guarantees strictly increasing ``index``); ignored after a failure."""
