@@ -170,14 +170,14 @@ def _regular_clock(table: CsvTable) -> tuple[np.ndarray, float]:
     else:
         in_run = dt < 1.5 * np.median(dt)
         step = float(dt[in_run].sum() / in_run.sum())
-    grid = (t - t[0]) / step
+    grid = t - t[0]
+    grid /= step  # in place: a 60 s file's columns are 12 MB, each temporary costs its page faults
     nearest = np.rint(grid)
-    deviation = grid - nearest
-    if np.abs(deviation, out=deviation).max() > 0.25:  # the row is looked for only when one is off
-        index = nearest.astype(np.int64)
-        row = int(np.flatnonzero(np.abs(grid - index) > 0.25)[0])
+    deviation = np.abs(np.subtract(grid, nearest, out=grid), out=grid)
+    if deviation.max() > 0.25:  # the row is looked for only when one is off
+        row = int(np.flatnonzero(deviation > 0.25)[0])
         raise table.error(row, "t_s", f"{t[row]:.12g} is off the regular sample clock of {1 / step:.6g} Hz by "
-                                      f"{grid[row] - index[row]:+.2f} samples")
+                                      f"{(t[row] - t[0]) / step - nearest[row]:+.2f} samples")
     return nearest.astype(np.int64), 1.0 / step
 
 
