@@ -34,6 +34,8 @@ from analysis import AnalysisRequest
 from acq.config import load_bench, load_profile
 from acq.monitoring.catalogue import Catalogue, Outcome
 from acq.recording.recorder import Recorder
+from acq.ui.batch_cli import batch_progress
+from acq.ui.report_png import draw_report
 from drivers.registry import open_bench
 from tests.pg_server import new_database, server_binaries, throwaway_server
 
@@ -53,8 +55,9 @@ def record_sessions(out: Path, n: int, seconds: float) -> list[Path]:
 def timed(paths: list[Path], catalogue: Path | str, report: bool, **how: object) -> tuple[float, int]:
     """Analyse ``paths`` into a fresh catalogue; return (wall s, failures)."""
     t0 = time.perf_counter()
-    with Catalogue(catalogue) as c:
-        done = run_batch(paths, c, REQUEST, report=report, **how)  # type: ignore[arg-type]
+    with Catalogue(catalogue) as c, batch_progress() as on_progress:
+        done = run_batch(paths, c, REQUEST, draw_report=draw_report if report else None, on_progress=on_progress,
+                         **how)  # type: ignore[arg-type]
     assert not done.skipped
     return time.perf_counter() - t0, len(done.failed)
 

@@ -44,7 +44,8 @@ from acq.config import load_bench
 from acq.monitoring.catalogue import Catalogue
 from acq.monitoring.monitor import WINDOW_TAG, Monitor, MonitorSettings, MonitorStatus
 from acq.monitoring.retention import folder_bytes
-from acq.monitoring.trend import ELAPSED_TAG, Trend, TrendPoint, compute_trend, render_trend_png
+from acq.monitoring.trend import ELAPSED_TAG, Trend, TrendPoint, compute_trend
+from acq.ui.trend_plot import render_trend_png
 from acq.recording.session import load
 from acq.ui.values import format_value
 

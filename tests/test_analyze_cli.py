@@ -148,6 +148,7 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     from acq.monitoring.batch import analyze_one
     from analysis import AnalysisRequest
     from acq.monitoring.catalogue import Catalogue
+    from acq.ui.report_png import draw_report
 
     copy = Path(shutil.copy2(session_10s, tmp_path / "s.h5"))
     expected = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report").out)
@@ -167,7 +168,7 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     with Catalogue(tmp_path / "catalogue.sqlite") as catalogue:
         (entry,) = catalogue.entries()
     assert entry.verdict == "ok" and entry.error is None and entry.K_Nm_per_rad == expected["K_Nm_per_rad"]
-    outcome = analyze_one(str(copy), "sha", AnalysisRequest(), report=True)  # what a batch worker does
+    outcome = analyze_one(str(copy), "sha", AnalysisRequest(), draw_report)  # what a batch worker does
     assert outcome.error is None and outcome.doc is not None and outcome.doc["quality"]["verdict"] == "ok"
     assert outcome.doc["quality"]["reasons"][-1].startswith("note: report not drawn: ModuleNotFoundError")
 

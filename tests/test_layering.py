@@ -171,14 +171,7 @@ ENTRY = ("acq.__main__", "acq.entry")
 #: Modules outside ``acq.ui`` that still hold a presentation part beside their computation (a click command or
 #: option, a rich table or progress bar, a figure drawn lazily) and what of it they import. Issue #15 item 2
 #: splits them; the list only shrinks — a module that loses its presentation part leaves it.
-MIXED: dict[str, list[str]] = {
-    "acq.monitoring.batch": ["rich"],
-    "acq.monitoring.catalogue": ["click"],
-    "acq.monitoring.trend": ["acq.ui", "pyqtgraph", "shiboken6"],
-    "acq.offline.analyze": ["acq.ui"],
-    "acq.offline.exporters": ["click", "rich"],
-    "acq.offline.importers": ["acq.ui", "click", "rich"],
-}
+MIXED: dict[str, list[str]] = {}
 
 
 def presentation_imports() -> dict[str, list[str]]:

@@ -194,7 +194,8 @@ def test_two_processes_share_a_catalogue(wear: Path, tmp_path: Path) -> None:
 def test_view_shows_the_trend_window(wear: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from acq.ui.plots import ensure_app
-    from acq.monitoring.trend import load_trend, trend_widget
+    from acq.monitoring.trend import load_trend
+    from acq.ui.trend_plot import trend_widget
 
     ensure_app(offscreen=True)
     widget = trend_widget(load_trend(wear, None, "joint1"))
@@ -257,7 +258,8 @@ def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> Non
 
     from acq.monitoring.catalogue import Catalogue, Outcome
     from acq.ui.plots import ensure_app
-    from acq.monitoring.trend import load_trend, trend_widget
+    from acq.monitoring.trend import load_trend
+    from acq.ui.trend_plot import trend_widget
 
     path = tmp_path / "catalogue.sqlite"
     with Catalogue(path) as c:  # five good windows, then one whose fit went wild (verdict poor: skipped)
@@ -283,7 +285,8 @@ def test_a_monitor_trend_is_drawn_over_machine_time_and_shows_the_windows_withou
 
     from acq.monitoring.catalogue import Catalogue, Outcome
     from acq.ui.plots import ensure_app
-    from acq.monitoring.trend import load_trend, trend_widget
+    from acq.monitoring.trend import load_trend
+    from acq.ui.trend_plot import trend_widget
 
     path = tmp_path / "catalogue.sqlite"
     with Catalogue(path) as c:  # windows every 30 min of machine time; 2 not excited, 1 skipped with a wild K

@@ -17,7 +17,8 @@ import pytest
 from pyqtgraph.Qt import QtCore
 
 from acq.config import load_bench, load_profile
-from acq.offline.analyze import analyze_session, draw_report
+from acq.offline.analyze import analyze_session
+from acq.ui.report_png import draw_report
 from acq.recording.recorder import Recorder
 from analysis import AnalysisRequest
 from drivers.registry import open_bench

@@ -21,7 +21,7 @@ import signal
 import threading
 import time
 import warnings
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -29,11 +29,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
 from acq.monitoring.catalogue import Catalogue, Outcome
-from acq.offline.analyze import SessionResult, analyze_session, draw_report, sha256_of
+from acq.offline.analyze import SessionResult, analyze_session, sha256_of
 from acq.recording.paths import GLOB_CHARS
 from acq.recording.session import Session, load, read_status
 from acq.recording.storage import remove_temp_files
@@ -42,6 +40,13 @@ from analysis import AnalysisRequest
 
 CATALOGUE_NAME = "catalogue.sqlite"
 _BLAS_THREADS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+#: Draws a written result's report PNG and returns the result (with a note if the picture failed), e.g.
+#: :func:`acq.ui.report_png.draw_report`; a module-level function, so it reaches the workers by name.
+DrawReport = Callable[[SessionResult], SessionResult]
+
+#: Told how far a batch is: (sessions done, sessions to analyse, of them failed); first called with (0, n, 0).
+OnProgress = Callable[[int, int, int], None]
 
 
 @dataclass(frozen=True)
@@ -124,7 +129,7 @@ def quiet_numerics() -> Iterator[None]:
         yield
 
 
-def analyze_one(path: str, sha256: str, request: AnalysisRequest, report: bool) -> Outcome:
+def analyze_one(path: str, sha256: str, request: AnalysisRequest, draw_report: DrawReport | None = None) -> Outcome:
     """Analyse one session (runs in a worker process or on a Dask worker); never raises.
 
     Parameters
@@ -135,18 +140,19 @@ def analyze_one(path: str, sha256: str, request: AnalysisRequest, report: bool) 
         The file's hash when the batch looked at it (kept when the analysis fails).
     request : AnalysisRequest
         What is asked (its key files the outcome in the catalogue).
-    report : bool
-        Also draw ``<session>.report.png``.
+    draw_report : callable, optional
+        Draws ``<session>.report.png`` once the result is written (None: no report).
     """
     start = time.perf_counter()
     try:
         with quiet_numerics():
-            done = analyze_session(path, request, report=report)
+            done = analyze_session(path, request, report=draw_report is not None)
     except Exception as e:  # noqa: BLE001 — a batch records any session's failure and goes on
         error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
         return Outcome(path, sha256, request.key(), _meta_if_readable(path), None, error,
                        time.perf_counter() - start)
-    done = draw_report(done)  # the result is written; a picture that fails is a note on it, not a failure
+    if draw_report is not None:
+        done = draw_report(done)  # the result is written; a picture that fails is a note on it, not a failure
     return succeeded(path, done, request, time.perf_counter() - start)
 
 
@@ -195,7 +201,8 @@ STOP_GRACE_S = 0.5
 
 
 def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequest, *, jobs: int | None = None,
-              scheduler: str | None = None, report: bool = True, console: Console | None = None) -> BatchReport:
+              scheduler: str | None = None, draw_report: DrawReport | None = None,
+              on_progress: OnProgress | None = None) -> BatchReport:
     """Analyse the sessions not yet current in ``catalogue``, recording each outcome as it arrives.
 
     Parameters
@@ -211,10 +218,10 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequ
         Worker processes of the local pool (default: the CPU count); ignored with ``scheduler``.
     scheduler : str, optional
         Address of a Dask distributed scheduler to run on instead of the local pool.
-    report : bool
-        Also draw each session's report PNG.
-    console : rich.console.Console, optional
-        Where the progress bar goes (default: stderr).
+    draw_report : callable, optional
+        Draws each session's report PNG in its worker (None: no reports).
+    on_progress : callable, optional
+        Told (done, to analyse, failed) when the analyses start and as each outcome is recorded.
 
     Ctrl-C cancels the queued analyses, stops the running ones (a result file a stopped worker wrote without its
     catalogue row is removed), records every outcome received and returns with ``interrupted`` set.
@@ -230,22 +237,20 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequ
     if todo:
         with analysis_executor(jobs or os.cpu_count() or 1, scheduler) as executor:
             futures: dict[Future[Outcome], Path] = {
-                executor.submit(analyze_one, str(p.resolve()), hashes[p], request, report): p for p in todo}
-            columns = (TextColumn("[bold]analysing"), BarColumn(), MofNCompleteColumn(),
-                       TextColumn("{task.fields[failed]} failed"), TimeElapsedColumn(), TimeRemainingColumn())
-            with Progress(*columns, console=console or Console(stderr=True)) as progress:
-                task = progress.add_task("analysing", total=len(todo), failed=0)
-                try:
-                    for future in as_completed(futures):
-                        outcome = _outcome(future, futures[future], hashes, request)
-                        catalogue.record(outcome)
-                        outcomes.append(outcome)
-                        progress.update(task, advance=1, failed=sum(o.error is not None for o in outcomes))
-                except KeyboardInterrupt:
-                    interrupted = True
-                    with _signals_ignored():
-                        _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at)
-                    raise
+                executor.submit(analyze_one, str(p.resolve()), hashes[p], request, draw_report): p for p in todo}
+            tell = on_progress or (lambda done, total, failed: None)
+            tell(0, len(todo), 0)
+            try:
+                for future in as_completed(futures):
+                    outcome = _outcome(future, futures[future], hashes, request)
+                    catalogue.record(outcome)
+                    outcomes.append(outcome)
+                    tell(len(outcomes), len(todo), sum(o.error is not None for o in outcomes))
+            except KeyboardInterrupt:
+                interrupted = True
+                with _signals_ignored():
+                    _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at)
+                raise
     return BatchReport(outcomes, [p for p in paths if p not in todo and p not in not_ready],
                        time.perf_counter() - start, not_ready, interrupted)
 

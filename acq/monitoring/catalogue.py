@@ -17,16 +17,13 @@ can share a catalogue. Keep a SQLite file on a local disk — its locking is unr
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import click
-
-from acq.monitoring.catalogue_backends import is_url, open_catalogue_db, open_error
+from acq.monitoring.catalogue_backends import open_catalogue_db, open_error
 from acq.recording.storage import cause_of
 from acqcore.errors import ConfigError, StorageError
 
@@ -258,49 +255,6 @@ class Catalogue:
     def joints(self) -> list[str]:
         """The joints the catalogue knows."""
         return [r[0] for r in self._execute("SELECT DISTINCT joint FROM sessions WHERE joint IS NOT NULL")]
-
-
-class CatalogueLocation(click.ParamType):
-    """``--catalogue``: a SQLite file (a :class:`Path`) or a ``postgresql://`` URL (kept a str)."""
-
-    name = "PATH|URL"
-
-    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Path | str:
-        """The URL as given, anything else as a path."""
-        return value if is_url(value) or isinstance(value, Path) else Path(value)
-
-
-#: ``--tag KEY=VALUE`` (repeatable) of the commands that make a session; :func:`parse_tags` reads it.
-tag_option = click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
-                          help="Tag the session (repeatable), e.g. --tag pose=home --tag payload_kg=2.5 "
-                               "--tag temperature_C=31.")
-
-
-def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
-    """``KEY=VALUE`` texts as a tag dict; numeric values become floats (``payload_kg=2.5`` → 2.5).
-
-    Raises :class:`ConfigError` naming a text without ``=`` or with an empty key.
-    """
-    tags: dict[str, str | float] = {}
-    for text in texts:
-        key, sep, value = text.partition("=")
-        if not sep or not key.strip():
-            raise ConfigError(f"--tag {text}: must be KEY=VALUE, e.g. payload_kg=2.5")
-        try:
-            tags[key.strip()] = float(value)
-        except ValueError:
-            tags[key.strip()] = value.strip()
-    return tags
-
-
-def tags_match(tags: dict[str, Any], wanted: dict[str, str | float]) -> bool:
-    """True when ``tags`` has every wanted key with an equal value (numbers compared as numbers)."""
-    def same(have: Any, want: str | float) -> bool:
-        if isinstance(want, float) and isinstance(have, int | float):
-            return math.isclose(have, want, rel_tol=1e-9)
-        return str(have) == str(want)
-
-    return all(key in tags and same(tags[key], want) for key, want in wanted.items())
 
 
 def _entry(r: Any) -> Entry:

@@ -23,8 +23,9 @@ from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any, Literal
 
-from acq.monitoring.catalogue import Catalogue, Entry, parse_tags, tags_match
+from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.trend import Trend, TrendPoint, catalogue_location, compute_trend
+from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
 
 FleetState = Literal["alarm", "stale", "no baseline", "ok"]

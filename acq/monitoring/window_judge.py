@@ -58,7 +58,7 @@ def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
                            f"({need:.0f} counts): the machine did not move it in this window"])
     except Exception:  # noqa: BLE001 - analyze_one below records why the file cannot be read
         pass
-    outcome = analyze_one(path, sha256, request, False)
+    outcome = analyze_one(path, sha256, request)  # no report PNG
     if outcome.doc is not None and not_excited(outcome.doc):
         reasons = [r for r in outcome.doc["quality"]["reasons"] if not r.startswith("note: ")]
         reasons.sort(key=lambda r: "coherence" not in r)  # the excitation's own reasons first

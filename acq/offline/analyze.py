@@ -1,23 +1,22 @@
-"""Analyse a session file: session → :mod:`analysis` → result table, ``.result.json``, ``.report.png``.
+"""Analyse a session file: session → :mod:`analysis` → ``.result.json`` (the report PNG: :mod:`acq.ui.report_png`).
 
 The only place where the application meets the analysis: it turns an :class:`acq.recording.session.Session`
 into the plain arrays of :class:`analysis.Recording`, runs :func:`analysis.analyze` with an
 :class:`analysis.AnalysisRequest`, and writes the results beside the session (the raw groups are
-never touched). On the simulated bench the table also shows the simulated truth and the error.
+never touched). On the simulated bench the result also holds the simulated truth.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-import sys
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from acq import __version__
 from acq.recording.session import Session, load, utc_now_iso
-from acq.recording.storage import atomic_path, free_bytes, write_text_atomically
+from acq.recording.storage import free_bytes, write_text_atomically
 from analysis import AnalysisRequest, Recording, Result, TwoMassParams, analyze, code_fingerprint
 from acqcore.errors import ConfigError, StorageError
 
@@ -118,8 +117,8 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     """Identify the joint of one session as ``request`` asks (with the bench's nominal plant unless it names one);
     write ``<session>.result.json``.
 
-    The report PNG is not drawn here: with ``report`` its path is set, and :func:`draw_report` draws it once the
-    result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
+    The report PNG is not drawn here: with ``report`` its path is set, and :func:`acq.ui.report_png.draw_report`
+    draws it once the result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
     :class:`ConfigError` naming the session; so does a session still ``recording`` or damaged unless ``request.partial``
     (then its intact part is analysed and the result says ``"partial": true``). A failed write raises
     :class:`StorageError` naming the file, leaving no temp file.
@@ -155,29 +154,11 @@ def write_json(doc: dict[str, Any], path: Path) -> None:
     write_text_atomically(path, json.dumps(doc, indent=2))
 
 
-def draw_report(done: SessionResult) -> SessionResult:
-    """Draw ``<session>.report.png`` of an identification already written (nothing when no report was asked for).
-
-    A picture that fails is not a failed identification: the failure becomes a note on the result
-    (``quality.reasons``, "note: report not drawn: …", rewritten into the ``.result.json``) and one line on
-    stderr; the returned result then has no report path.
-    """
-    if done.report_path is None:
-        return done
-    try:
-        from acq.ui.plots import render_report_png  # Qt only when a picture is drawn
-
-        with atomic_path(done.report_path) as tmp_png:
-            render_report_png(done.result.figures, tmp_png, values=done.json_dict,
-                              title=f"{done.session.meta.joint} · {done.session.path.name}")
-    except StorageError:
-        raise  # a write that failed (disk full, I/O error) is a failure, named by the file
-    except Exception as e:  # noqa: BLE001 — whatever the plotting stack does, the identification stands
-        why = f"{type(e).__name__}: {e}"
-        quality = done.json_dict["quality"]
-        reasons = [*quality["reasons"], f"note: report not drawn: {why}"]
-        doc = {**done.json_dict, "quality": {**quality, "reasons": reasons}}
-        write_json(doc, done.json_path)
-        sys.stderr.write(f"acq: {done.report_path}: report not drawn ({why}); the result stands in {done.json_path}\n")
-        return replace(done, json_dict=doc, report_path=None)
-    return done
+def report_not_drawn(done: SessionResult, why: str) -> SessionResult:
+    """``done`` after its report PNG failed (``why``): a note in ``quality.reasons`` ("note: report not drawn: …"),
+    rewritten into the ``.result.json``, and no report path. A picture that fails is not a failed identification."""
+    quality = done.json_dict["quality"]
+    reasons = [*quality["reasons"], f"note: report not drawn: {why}"]
+    doc = {**done.json_dict, "quality": {**quality, "reasons": reasons}}
+    write_json(doc, done.json_path)
+    return replace(done, json_dict=doc, report_path=None)

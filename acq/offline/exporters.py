@@ -19,10 +19,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import click
 import numpy as np
-from rich.console import Console
-from rich.markup import escape
 
 from acq.offline.export_metadata import write_metadata
 from acq.recording.session import Session, load
@@ -79,14 +76,3 @@ def export_csv(session_path: Path, out_dir: Path) -> tuple[Path, Path, Path]:
         columns["drive_time_s"] = _exact(enc.drive_time_s)
     _write_columns(encoder_path, columns)
     return current_path, encoder_path, write_metadata(session, current_path, encoder_path)
-
-
-@click.command("export")
-@click.argument("session_path", type=click.Path(path_type=Path))
-@click.option("--csv", "csv_dir", required=True, type=click.Path(path_type=Path, file_okay=False),
-              help="Folder for the current and encoder CSV files (the pair `acq import` reads) and the metadata.")
-def export_command(session_path: Path, csv_dir: Path) -> int:
-    """Export SESSION to a current CSV, an encoder CSV and the session's metadata (JSON)."""
-    for path in export_csv(session_path, csv_dir):
-        Console().print(f"wrote {escape(str(path))}")
-    return 0

@@ -1,24 +1,52 @@
-"""``acq analyze FOLDER|GLOB``: the batch of :mod:`acq.monitoring.batch` with its table or JSON."""
+"""``acq analyze FOLDER|GLOB``: the batch of :mod:`acq.monitoring.batch` with its progress bar, table or JSON."""
 
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from rich.console import Console
+from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn,
+                           TimeRemainingColumn)
 
-from acq.monitoring.batch import CATALOGUE_NAME, find_sessions, report_json, run_batch
+from acq.monitoring.batch import CATALOGUE_NAME, OnProgress, find_sessions, report_json, run_batch
 from acq.monitoring.catalogue import Catalogue
 from acq.ui.display import batch_table
+from acq.ui.report_png import draw_report
 from analysis import AnalysisRequest
+
+
+@contextmanager
+def batch_progress(console: Console | None = None) -> Iterator[OnProgress]:
+    """A progress bar (on ``console``, default stderr) for :func:`~acq.monitoring.batch.run_batch`'s ``on_progress``:
+    shown from the first call (when analyses start; none when every session is current) to the end of the block."""
+    columns = (TextColumn("[bold]analysing"), BarColumn(), MofNCompleteColumn(),
+               TextColumn("{task.fields[failed]} failed"), TimeElapsedColumn(), TimeRemainingColumn())
+    progress = Progress(*columns, console=console or Console(stderr=True))
+    tasks: list[TaskID] = []
+
+    def update(done: int, total: int, failed: int) -> None:
+        if not tasks:
+            progress.start()
+            tasks.append(progress.add_task("analysing", total=total, failed=failed))
+        progress.update(tasks[0], completed=done, failed=failed)
+
+    try:
+        yield update
+    finally:
+        if tasks:
+            progress.stop()
 
 
 def analyze_many(spec: Path, request: AnalysisRequest, *, jobs: int | None, catalogue_path: Path | str | None,
                  scheduler: str | None, report: bool, as_json: bool, out: Console) -> int:
     """``acq analyze FOLDER|GLOB``: the batch, its table (or JSON) on ``out``; 1 when a session failed, else 0."""
     paths, base = find_sessions(spec)
-    with Catalogue(catalogue_path or base / CATALOGUE_NAME) as catalogue:
-        done = run_batch(paths, catalogue, request, jobs=jobs, scheduler=scheduler, report=report)
+    with Catalogue(catalogue_path or base / CATALOGUE_NAME) as catalogue, batch_progress() as on_progress:
+        done = run_batch(paths, catalogue, request, jobs=jobs, scheduler=scheduler,
+                         draw_report=draw_report if report else None, on_progress=on_progress)
     if as_json:
         out.print_json(json.dumps(report_json(done)))
     else:

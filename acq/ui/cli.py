@@ -23,8 +23,9 @@ from click.utils import make_default_short_help
 from rich.console import Console
 
 from acq import __version__
-from acq.monitoring.catalogue import CatalogueLocation, parse_tags, tag_option
 from acq.recording.paths import is_batch, require_session_file
+from acq.recording.tags import parse_tags
+from acq.ui.options import CatalogueLocation, tag_option
 from acqcore.errors import AcqError, ConfigError
 
 if TYPE_CHECKING:
@@ -47,12 +48,12 @@ err = Console(stderr=True)
 LAZY_COMMANDS: dict[str, tuple[str, str, str]] = {
     "devices": ("acq.ui.devices_cli", "devices_command",
                 "List NI devices and AI channels, CAN interfaces, serial ports and the simulated bench."),
-    "export": ("acq.offline.exporters", "export_command",
+    "export": ("acq.ui.export_cli", "export_command",
                "Export SESSION to a current CSV, an encoder CSV and the session's metadata (JSON)."),
     "fleet": ("acq.ui.fleet_display", "fleet_command",
               "Every joint (by robot tag): latest K ± 95 %, ΔK to its baseline, sessions of the last day, state "
               "(alarm / stale / no baseline / ok), worst first; exit code 3 if any joint is in alarm."),
-    "import": ("acq.offline.importers", "import_command",
+    "import": ("acq.ui.import_cli", "import_command",
                "Turn a current file and an encoder CSV recorded by other tools into a session."),
     "monitor": ("acq.ui.monitor_cli", "monitor_command",
                 "Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in "
@@ -172,7 +173,7 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
 
 def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_path: Path | str | None) -> SessionResult:
     """Analyse one session with ``request`` and put the result into its folder's catalogue; the report PNG is drawn
-    after both (:func:`acq.offline.analyze.draw_report`: a picture that fails is only a note), by the caller."""
+    after both (:func:`acq.ui.report_png.draw_report`: a picture that fails is only a note), by the caller."""
     from acq.offline.analyze import analyze_session
     from acq.monitoring.batch import quiet_numerics, record_outcome
 
@@ -198,7 +199,7 @@ def _analyze_after_recording(path: Path) -> None:
     """Identify the joint of a session just recorded; a failure is reported, the recording stands."""
     with err.status("identifying the joint …"):
         try:
-            from acq.offline.analyze import draw_report
+            from acq.ui.report_png import draw_report
             from analysis import AnalysisRequest
 
             done = draw_report(_identify(path, AnalysisRequest(), report=True, catalogue_path=None))
@@ -268,7 +269,7 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
 
         return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
                             report=not no_report, as_json=as_json, out=out)
-    from acq.offline.analyze import draw_report
+    from acq.ui.report_png import draw_report
 
     if as_json:
         done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)

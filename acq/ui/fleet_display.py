@@ -17,7 +17,7 @@ import click
 from rich.console import Console
 from rich.table import Table
 
-from acq.monitoring.catalogue import CatalogueLocation
+from acq.ui.options import CatalogueLocation
 from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet
 from acq.monitoring.trend import EXIT_ALARM
 from acq.ui.values import format_value

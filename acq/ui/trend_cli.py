@@ -8,9 +8,10 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from acq.monitoring.catalogue import CatalogueLocation
-from acq.monitoring.trend import EXIT_ALARM, load_trend, render_trend_png, trend_json
+from acq.ui.options import CatalogueLocation
+from acq.monitoring.trend import EXIT_ALARM, load_trend, trend_json
 from acq.ui.display import trend_table
+from acq.ui.trend_plot import render_trend_png
 from acqcore.errors import ConfigError
 
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from acq.monitoring.catalogue import CatalogueLocation
+from acq.ui.options import CatalogueLocation
 from acq.offline.analyze import analyze_session
 from acqcore.errors import AcqError, ConfigError
 from analysis import AnalysisRequest
@@ -122,13 +122,13 @@ class LiveTrend:
 
     ``load`` re-reads the catalogue (SQLite in WAL mode or PostgreSQL: reading does not block a monitor that
     writes); a failed re-read (the catalogue busy, a server away) keeps the figure shown and says why in the
-    title. The figure itself is :func:`acq.monitoring.trend.trend_widget`.
+    title. The figure itself is :func:`acq.ui.trend_plot.trend_widget`.
     """
 
     def __init__(self, load: Callable[[], Trend], first: Trend, refresh_s: float) -> None:
         from pyqtgraph.Qt import QtCore, QtWidgets
 
-        from acq.monitoring.trend import trend_widget
+        from acq.ui.trend_plot import trend_widget
 
         self._load, self._draw = load, trend_widget
         self.frame = QtWidgets.QWidget()

@@ -1,0 +1,22 @@
+"""``acq export``: the command line of :mod:`acq.offline.exporters` (one line per file written)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.markup import escape
+
+
+@click.command("export")
+@click.argument("session_path", type=click.Path(path_type=Path))
+@click.option("--csv", "csv_dir", required=True, type=click.Path(path_type=Path, file_okay=False),
+              help="Folder for the current and encoder CSV files (the pair `acq import` reads) and the metadata.")
+def export_command(session_path: Path, csv_dir: Path) -> int:
+    """Export SESSION to a current CSV, an encoder CSV and the session's metadata (JSON)."""
+    from acq.offline.exporters import export_csv  # numpy and h5py only when the command runs
+
+    for path in export_csv(session_path, csv_dir):
+        Console().print(f"wrote {escape(str(path))}")
+    return 0
