@@ -16,7 +16,7 @@ the current is shifted to start with the encoder. Every choice is written into t
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from pathlib import Path
@@ -32,7 +32,7 @@ from acq.offline.import_files import (CurrentTable, EncoderTable, host_ns, read_
                                       read_encoder_csv)
 from acq.recording.session import SessionWriter
 from acq.recording.storage import storage_error
-from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
+from drivers.base import CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from acqcore.errors import ConfigError, StorageError
 
@@ -64,20 +64,19 @@ def _timeline(cur: CurrentTable, enc: EncoderTable, shared_by: str | None) -> tu
                    "aligns them from the data)")
 
 
-def _current_blocks(cur: CurrentTable, shift_s: float) -> Iterator[CurrentBlock]:
-    """The current in blocks of ``BLOCK_S`` that never straddle a gap, stamped on the host timeline."""
-    values = np.vstack(list(cur.phases_a.values()))
+def _current_blocks(cur: CurrentTable, shift_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The block table of the current cut in blocks of ``BLOCK_S`` that never straddle a gap: each block's
+    first DAQ sample index, sample count and host stamp (its last sample's time on the host timeline, ns)."""
     per_block = max(1, round(cur.rate_hz * BLOCK_S))
     bounds = [0, *(np.flatnonzero(np.diff(cur.sample_index) != 1) + 1), cur.sample_index.size]
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        for s in range(a, b, per_block):
-            e = min(s + per_block, b)
-            host = int(host_ns(cur.time_s(cur.sample_index[e - 1]) + shift_s))
-            yield CurrentBlock(int(cur.sample_index[s]), values[:, s:e], host)
+    starts = np.concatenate([np.arange(a, b, per_block) for a, b in zip(bounds[:-1], bounds[1:])])
+    ends = np.append(starts[1:], cur.sample_index.size)  # blocks are back to back: one ends where the next starts
+    return cur.sample_index[starts], ends - starts, host_ns(cur.time_s(cur.sample_index[ends - 1]) + shift_s)
 
 
-def _file_entry(role: str, path: Path, extra: dict[str, Any]) -> dict[str, Any]:
-    return {"role": role, "name": path.name, "path": str(path.resolve()), "sha256": sha256_of(path), **extra}
+def _file_entry(role: str, path: Path, extra: dict[str, Any], sha256: Future[str] | None = None) -> dict[str, Any]:
+    digest = sha256_of(path) if sha256 is None else sha256.result()
+    return {"role": role, "name": path.name, "path": str(path.resolve()), "sha256": digest, **extra}
 
 
 def parse_started(text: str) -> str:
@@ -146,6 +145,17 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
     """
     if out.exists():
         raise ConfigError(f"-o {out}: exists (not overwritten)")
+    # the files' SHA-256 in a thread while they are parsed (hashlib and Arrow's parser both release the GIL)
+    with ThreadPoolExecutor(max_workers=1) as hashing:
+        sha256 = {path: hashing.submit(sha256_of, path) for path in (current_path, encoder_path)}
+        return _import(current_path, encoder_path, bench, profile, out, current_channels, tags, joint, same_clock,
+                       started_utc, sha256)
+
+
+def _import(current_path: Path, encoder_path: Path, bench: Bench | None, profile: Profile | None, out: Path,
+            current_channels: tuple[str, ...], tags: dict[str, str | float] | None, joint: str | None,
+            same_clock: bool, started_utc: str | None, sha256: dict[Path, Future[str]]) -> ImportResult:
+    """:func:`import_session` with the files' SHA-256 under way."""
     meta, meta_warning = read_metadata(current_path, encoder_path)
     bench, profile = _configs(meta, bench, profile, joint, current_path)
     if current_path.suffix.lower() == ".tdms":
@@ -163,7 +173,8 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
     origin: dict[str, Any] = {
         "kind": "imported",
         "importer": f"acq {__version__}",
-        "files": [_file_entry("current", current_path, cur.file_info), _file_entry("encoder", encoder_path, {})],
+        "files": [_file_entry("current", current_path, cur.file_info, sha256[current_path]),
+                  _file_entry("encoder", encoder_path, {}, sha256[encoder_path])],
         "host_timeline": timeline,
         "encoder_host_ns": "the encoder file's t_s (host arrival stamps), uncorrected",
         "encoder_index": enc.timestamp_kind,
@@ -188,8 +199,7 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
             tags={**(meta.tags if meta else {}), **(tags or {})}, operator=meta.operator if meta else "",
             host_clock_shared=shared_by is not None, session_id=meta.session_id if meta else None,
             created_utc=created_utc)
-        for block in _current_blocks(cur, shift):
-            writer.append_current(block)
+        writer.append_current_blocks(list(cur.phases_a.values()), *_current_blocks(cur, shift))
         writer.append_encoder(EncoderBlock(enc.index, enc.position_counts, host_ns(enc.t_s), enc.drive_time_s))
         for event in events:
             writer.add_event(event)

@@ -46,6 +46,7 @@ import os
 import time
 import uuid
 import functools
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -100,10 +101,26 @@ def _extendable(group: h5py.Group, name: str, dtype: Any, chunk: int) -> h5py.Da
     return group.create_dataset(name, shape=(0,), maxshape=(None,), dtype=dtype, chunks=(chunk,), fletcher32=True)
 
 
-def _append(ds: h5py.Dataset, values: np.ndarray) -> None:
-    n = ds.shape[0]
-    ds.resize((n + values.shape[0],))
-    ds[n:] = values
+class _Column:
+    """An extendable 1-D dataset and its length, kept here rather than asked of HDF5 (a dataspace query) per append.
+
+    The writer is the file's only writer, so the length cannot change behind it.
+    """
+
+    def __init__(self, ds: h5py.Dataset) -> None:
+        self.ds, self.id, self.dtype = ds, ds.id, ds.dtype
+        self.length = ds.shape[0]
+
+    def append(self, values: np.ndarray) -> None:
+        """Grow the dataset by ``values`` (its dtype) in one HDF5 write."""
+        start, count = self.length, values.shape[0]
+        if not count:
+            return
+        self.id.set_extent((start + count,))
+        file_space = self.id.get_space()
+        file_space.select_hyperslab((start,), (count,))
+        self.id.write(h5py.h5s.create_simple((count,)), file_space, np.ascontiguousarray(values, self.dtype))
+        self.length = start + count
 
 
 class SessionExists(ConfigError):
@@ -129,11 +146,11 @@ class _PendingColumns:
         self._parts.clear()
         self.nbytes = 0
 
-    def write_to(self, datasets: dict[str, h5py.Dataset]) -> None:
+    def write_to(self, columns: dict[str, _Column]) -> None:
         self.nbytes = 0
         while self._parts:
             name, parts = self._parts.popitem()  # taken before writing: an interrupted flush never repeats a part
-            _append(datasets[name], np.concatenate(parts))
+            columns[name].append(parts[0] if len(parts) == 1 else np.concatenate(parts))
 
 
 class SessionWriter:
@@ -176,6 +193,7 @@ class SessionWriter:
         self._channels = current_info.channels
         self._filled_optional: set[str] = set()
         self._pending = _PendingColumns()
+        self._nans = np.zeros(0)
         self._rate_hz = float(current_info.rate_hz)
         #: Totals on disk after the last successful flush: the only counts ever reported or written in the footer.
         self.committed = {"current_samples": 0, "current_blocks": 0, "encoder_samples": 0, "events": 0}
@@ -199,9 +217,9 @@ class SessionWriter:
         self._inode = os.stat(self.path).st_ino
         # Handles held open until the file is closed: HDF5 writes a dataset's cached chunks when its handle
         # closes, and a write error there (inside h5py's deallocation) cannot be caught and corrupts HDF5's state.
-        self._datasets = {ds.name.lstrip("/"): ds for ds in _datasets(f)}
+        self._columns = {ds.name.lstrip("/"): _Column(ds) for ds in _datasets(f)}
         # worst-case growth of a flush beyond its payload: one partial chunk per dataset rewritten elsewhere
-        self._chunk_bytes = sum(ds.chunks[0] * ds.dtype.itemsize for ds in self._datasets.values())
+        self._chunk_bytes = sum(c.ds.chunks[0] * c.ds.dtype.itemsize for c in self._columns.values())
 
     def _create_layout(self, f: h5py.File, bench: Bench, profile: Profile | None, current_info: CurrentSourceInfo,
                        drive_info: DriveInfo, host_ns_at_start: int, operator: str, tags: dict[str, Any] | None,
@@ -282,6 +300,27 @@ class SessionWriter:
         self._pending.add("current/blocks/count", np.array([block.count], dtype=np.int64))
         self._pending.add("current/blocks/host_ns", np.array([block.host_ns], dtype=np.int64))
 
+    def append_current_blocks(self, current_a: Sequence[np.ndarray], first_index: np.ndarray, count: np.ndarray,
+                              host_ns: np.ndarray) -> None:
+        """Append many DAQ blocks at once (an import): as :meth:`append_current` of each, without a call per block.
+
+        Parameters
+        ----------
+        current_a : one array per channel (in the writer's channel order), A, the blocks' samples back to back.
+        first_index, count, host_ns : the block table, one row per block (as in :class:`CurrentBlock`).
+        """
+        if self.failure is not None:
+            return
+        n = int(np.sum(count))
+        if len(current_a) != len(self._channels) or any(np.shape(v) != (n,) for v in current_a) or not (
+                np.shape(first_index) == np.shape(host_ns) == np.shape(count)):
+            raise ValueError(f"current_a: {len(self._channels)} channels of {n} samples and a block table of equal "
+                             "columns expected")
+        for ch, values in zip(self._channels, current_a):
+            self._pending.add(f"current/{ch}_A", np.asarray(values, dtype=np.float64))
+        for name, column in (("first_index", first_index), ("count", count), ("host_ns", host_ns)):
+            self._pending.add(f"current/blocks/{name}", np.asarray(column, dtype=np.int64))
+
     def append_encoder(self, block: EncoderBlock) -> None:
         """Append encoder samples (caller guarantees strictly increasing ``index``); ignored after a failure."""
         if self.failure is not None:
@@ -293,8 +332,16 @@ class SessionWriter:
             values = getattr(block, name)
             if values is not None:
                 self._filled_optional.add(name)
-            filler = np.full(block.count, np.nan) if values is None else np.asarray(values, dtype=np.float64)
-            self._pending.add(f"encoder/{name}", filler)
+                self._pending.add(f"encoder/{name}", np.asarray(values, dtype=np.float64))
+            else:
+                self._pending.add(f"encoder/{name}", self._nan_filler(block.count))
+
+    def _nan_filler(self, count: int) -> np.ndarray:
+        """``count`` NaN for an optional column a block lacks: a view of one read-only buffer, not a new array."""
+        if self._nans.size < count:
+            self._nans = np.full(max(count, 2 * self._nans.size), np.nan)
+            self._nans.flags.writeable = False
+        return self._nans[:count]
 
     def add_event(self, event: StreamEvent) -> None:
         """Append one event row; ignored after a failure."""
@@ -322,9 +369,9 @@ class SessionWriter:
         row = np.array([(time.monotonic_ns(), totals["current_samples"], totals["current_blocks"],
                          totals["encoder_samples"], totals["events"])], dtype=FLUSH_DTYPE)
         try:
-            pending.write_to(self._datasets)
+            pending.write_to(self._columns)
             self._file.flush()
-            _append(self._datasets["flushes"], row)  # only after the samples it counts are on disk
+            self._columns["flushes"].append(row)  # only after the samples it counts are on disk
             self._file.flush()
         except Exception as e:  # noqa: BLE001 - h5py reports write errors as OSError or RuntimeError
             self._stop(storage_error(e, self.path), abandon_file=True)
