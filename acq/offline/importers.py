@@ -145,19 +145,21 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
     """
     if out.exists():
         raise ConfigError(f"-o {out}: exists (not overwritten)")
+    # the configs first: a missing bench or bad metadata is one line at once, not after hashing the files
+    meta, meta_warning = read_metadata(current_path, encoder_path)
+    bench, profile = _configs(meta, bench, profile, joint, current_path)
     # the files' SHA-256 in a thread while they are parsed (hashlib and Arrow's parser both release the GIL)
     with ThreadPoolExecutor(max_workers=1) as hashing:
         sha256 = {path: hashing.submit(sha256_of, path) for path in (current_path, encoder_path)}
-        return _import(current_path, encoder_path, bench, profile, out, current_channels, tags, joint, same_clock,
-                       started_utc, sha256)
+        return _import(current_path, encoder_path, bench, profile, out, current_channels, tags, meta, meta_warning,
+                       same_clock, started_utc, sha256)
 
 
-def _import(current_path: Path, encoder_path: Path, bench: Bench | None, profile: Profile | None, out: Path,
-            current_channels: tuple[str, ...], tags: dict[str, str | float] | None, joint: str | None,
-            same_clock: bool, started_utc: str | None, sha256: dict[Path, Future[str]]) -> ImportResult:
-    """:func:`import_session` with the files' SHA-256 under way."""
-    meta, meta_warning = read_metadata(current_path, encoder_path)
-    bench, profile = _configs(meta, bench, profile, joint, current_path)
+def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profile, out: Path,
+            current_channels: tuple[str, ...], tags: dict[str, str | float] | None, meta: ExportMetadata | None,
+            meta_warning: str | None, same_clock: bool, started_utc: str | None,
+            sha256: dict[Path, Future[str]]) -> ImportResult:
+    """:func:`import_session` with the configs resolved and the files' SHA-256 under way."""
     if current_path.suffix.lower() == ".tdms":
         cur = read_current_tdms(current_path, bench.daq.rate_hz, current_channels)
     else:
