@@ -269,9 +269,9 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     for round_ in range(LINE_ROUNDS + 1):  # a strong line's leak into the first fit can hide weaker ones
         iq, beta = _spline_iq(Y, g, m, smoothing, cols)
         iq_y, beta_y = (iq, beta) if Y.ndim == 1 else (iq[:, 0], beta[:, 0])
+        resid = y - g * iq_y - beta_y @ cols
         if round_ == LINE_ROUNDS:
             break
-        resid = y - g * iq_y - beta_y @ cols
         new = [f for f in _interference_lines(resid, rate_hz) if all(abs(f - h) > 1.0 for h in lines_hz)]
         new = new[:MAX_LINES - len(lines_hz)]
         if not new:
@@ -285,7 +285,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         return k_t_Nm_per_A * iq
     # the noise floor of the final residual: with the lines removed (left in, a line's leak raised the
     # floor and the noise model biased K by −2 % with 25 mA tones on a 10 kS/s current)
-    sigma = _broadband_noise_rms(y - g * iq_y - beta_y @ cols, rate_hz, m)
+    sigma = _broadband_noise_rms(resid, rate_hz, m)
     return k_t_Nm_per_A * np.stack((iq[:, 0], sigma * iq[:, 1]))
 
 
