@@ -270,11 +270,10 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     for round_ in range(LINE_ROUNDS + 1):  # a strong line's leak into the first fit can hide weaker ones
         iq, beta = _spline_iq(Y, g, m, r_band, cols)
         iq_y, beta_y = (iq, beta) if Y.ndim == 1 else (iq[:, 0], beta[:, 0])
-        resid, psd = y - g * iq_y - beta_y @ cols, None
+        resid = y - g * iq_y - beta_y @ cols
         if round_ == LINE_ROUNDS:
             break
-        psd = _residual_psd(resid, rate_hz, int(rate_hz)) if resid.size >= 4 * int(rate_hz) else None
-        new = [f for f in _interference_lines(resid, rate_hz, psd) if all(abs(f - h) > 1.0 for h in lines_hz)]
+        new = [f for f in _interference_lines(resid, rate_hz) if all(abs(f - h) > 1.0 for h in lines_hz)]
         new = new[:MAX_LINES - len(lines_hz)]
         if not new:
             break
@@ -287,7 +286,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         return k_t_Nm_per_A * iq
     # the noise floor of the final residual: with the lines removed (left in, a line's leak raised the
     # floor and the noise model biased K by −2 % with 25 mA tones on a 10 kS/s current)
-    sigma = _broadband_noise_rms(resid, rate_hz, m, psd)
+    sigma = _broadband_noise_rms(resid, rate_hz, m)
     return k_t_Nm_per_A * np.stack((iq[:, 0], sigma * iq[:, 1]))
 
 
@@ -350,33 +349,17 @@ def _slow_offset_columns(n: int, rate_hz: float, spare_rows: int = 0) -> np.ndar
     return cols
 
 
-@dataclass(frozen=True)
-class _ResidualPsd:
-    """Welch PSD of a residual, A²/Hz, at ``f_hz``, Hz, averaged over ``segments`` half-overlapping Hann segments."""
-
-    f_hz: np.ndarray
-    psd: np.ndarray
-    nperseg: int
-    segments: int
-
-
-def _residual_psd(resid_a: np.ndarray, rate_hz: float, nperseg: int) -> _ResidualPsd:
-    """:func:`scipy.signal.welch` of ``resid_a`` with ``nperseg`` samples per segment (its default 50 % overlap)."""
-    f, psd = welch(resid_a, fs=rate_hz, nperseg=nperseg)
-    return _ResidualPsd(f, psd, nperseg, (resid_a.size - nperseg) // (nperseg - nperseg // 2) + 1)
-
-
-def _interference_lines(resid_a: np.ndarray, rate_hz: float, spectrum: _ResidualPsd | None) -> list[float]:
+def _interference_lines(resid_a: np.ndarray, rate_hz: float) -> list[float]:
     """Frequencies, Hz, of narrow lines standing out of the residual's spectrum (strongest first).
 
-    Found in ``spectrum``, the residual's Welch PSD with 1 Hz bins (None: the record is shorter than four of its
-    segments, no lines), then located to a small fraction of the record's resolution on the zero-padded
-    periodogram of the whole residual (parabolic interpolation of the peak), since a sine fitted over a record of
-    T seconds must be within ≪ 1/T of the line.
+    Found in a Welch PSD with 1 Hz bins, then located to a small fraction of the record's
+    resolution on the zero-padded periodogram of the whole residual (parabolic interpolation of
+    the peak), since a sine fitted over a record of T seconds must be within ≪ 1/T of the line.
     """
-    if spectrum is None:
+    nper = min(resid_a.size, int(rate_hz))
+    if resid_a.size < 4 * nper:
         return []
-    f, psd, nper = spectrum.f_hz, spectrum.psd, spectrum.nperseg
+    f, psd = welch(resid_a, fs=rate_hz, nperseg=nper)
     ref = median_filter(psd, size=2 * LINE_NEIGHBOURS + 1, mode="nearest")
     peaks, _ = find_peaks(psd, height=LINE_FACTOR * ref, distance=3)
     peaks = peaks[(f[peaks] >= LINE_MIN_HZ) & (f[peaks] <= 0.49 * rate_hz)]
@@ -419,28 +402,20 @@ def _interference_found(lines_hz: list[float], beta_tones: np.ndarray, offset_a:
     return Interference(tuple(lines_hz), amps, inseparable, float(np.ptp(offset_a)))
 
 
-def _broadband_noise_rms(resid_a: np.ndarray, rate_hz: float, m: int, spectrum: _ResidualPsd | None = None) -> float:
-    """RMS of white noise with the final residual's broadband floor, A.
+def _broadband_noise_rms(resid_a: np.ndarray, rate_hz: float, m: int) -> float:
+    """RMS of white noise with the first-pass residual's broadband floor, A.
 
     The floor is the median of the residual's Welch PSD above twice the spline's bandwidth (≈ rate/(2m)),
     where the spline absorbs none of the noise, and where narrow lines — PWM ripple at the switching
     frequency, which the spline filters out of the torque anyway — are outliers the median ignores. The
     residual's RMS instead counts such ripple as broadband noise (a 3 % ripple biased K by −2…−5 %) and,
     below the bandwidth, misses what the spline absorbed.
-
-    ``spectrum`` is the residual's PSD when the line search already computed it (else one with 4096-sample
-    segments is made). A noise bin of a Welch PSD is the mean times χ²_ν/ν, ν ≈ 1.89 per Hann segment at 50 %
-    overlap (Percival & Walden: 2/(1 + 2·0.167²)), whose median lies below the mean by the factor
-    (1 − 2/(9ν))³ (Wilson–Hilferty), 0.991 with 1 Hz bins over 20 s: the median is divided by it.
     """
-    if spectrum is None:
-        spectrum = _residual_psd(resid_a, rate_hz, min(resid_a.size, 4096))
-    f, psd = spectrum.f_hz, spectrum.psd
+    f, psd = welch(resid_a, fs=rate_hz, nperseg=min(resid_a.size, 4096))
     floor = psd[(f >= rate_hz / m) & (f <= 0.45 * rate_hz)]
     if floor.size < 8:
         return 1.4826 * float(np.median(np.abs(resid_a - np.median(resid_a))))
-    nu = 2.0 * spectrum.segments / (1.0 + 2.0 * 0.167**2)
-    return float(np.sqrt(np.median(floor) / (1.0 - 2.0 / (9.0 * nu)) ** 3 * rate_hz / 2.0))
+    return float(np.sqrt(np.median(floor) * rate_hz / 2.0))
 
 
 def _bspline_weights(m: int) -> np.ndarray:
