@@ -16,7 +16,7 @@ transients); callers keep their instants away from the ends.
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import CubicSpline
+from scipy.ndimage import map_coordinates, spline_filter1d
 from scipy.signal import firwin, kaiserord, oaconvolve, resample_poly
 
 _RIPPLE_DB = 80.0
@@ -76,7 +76,16 @@ def sample_at(x: np.ndarray, rate_hz: float, t0_s: float, t_s: np.ndarray) -> np
     span = (t0_s, t0_s + (x.shape[-1] - 1) / rate_hz)
     if t.size and (t.min() < span[0] - 1e-12 or t.max() > span[1] + 1e-12):
         raise ValueError(f"instants {t.min():.6f}…{t.max():.6f} s outside the signal {span[0]:.6f}…{span[1]:.6f} s")
-    return CubicSpline(np.arange(x.shape[-1]), x, axis=-1)((t - t0_s) * rate_hz)
+    # The interpolating cubic spline through uniform samples by scipy.ndimage: its B-spline prefilter is a recursive
+    # filter (O(n), no banded solve) and each instant reads 4 coefficients. It is CubicSpline's interpolant but for
+    # the end conditions (mirror instead of not-a-knot), whose effect decays by 2 − √3 ≈ 0.27 per sample from the
+    # ends: < 1e-11 beyond the 20 samples of the anti-alias filter's edge_s margin.
+    pos = (t - t0_s) * rate_hz
+    coef = spline_filter1d(np.asarray(x, dtype=np.float64), order=3, axis=-1, mode="mirror")
+    flat = coef.reshape(-1, coef.shape[-1])
+    at = np.reshape(pos, (1, -1))
+    out = np.stack([map_coordinates(row, at, order=3, prefilter=False, mode="mirror") for row in flat])
+    return out.reshape(coef.shape[:-1] + t.shape)
 
 
 def to_instants(x: np.ndarray, rate_hz: float, t0_s: float, t_s: np.ndarray, f_pass_hz: float,

@@ -251,7 +251,8 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     tn = np.linspace(-1.0, 1.0, y.size)
     cols = _slow_offset_columns(y.size, rate_hz, spare_rows=3)  # the slow offset, the angle columns, then the lines
     nd = cols.shape[0] - 3
-    iq1, _ = _spline_iq(y, g, m, smoothing, np.ones((1, y.size)))
+    r_band = _spline_factor(g, m, smoothing)  # the spline's normal matrix depends on g alone: factored once
+    iq1, _ = _spline_iq(y, g, m, r_band, np.ones((1, y.size)))
     w_e = np.gradient(th) * rate_hz
     cos_phi = np.cos(phi)
 
@@ -267,11 +268,11 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         Y = np.column_stack((y, np.random.default_rng(noise_seed).standard_normal(y.size)))
     lines_hz: list[float] = []
     for round_ in range(LINE_ROUNDS + 1):  # a strong line's leak into the first fit can hide weaker ones
-        iq, beta = _spline_iq(Y, g, m, smoothing, cols)
+        iq, beta = _spline_iq(Y, g, m, r_band, cols)
         iq_y, beta_y = (iq, beta) if Y.ndim == 1 else (iq[:, 0], beta[:, 0])
+        resid = y - g * iq_y - beta_y @ cols
         if round_ == LINE_ROUNDS:
             break
-        resid = y - g * iq_y - beta_y @ cols
         new = [f for f in _interference_lines(resid, rate_hz) if all(abs(f - h) > 1.0 for h in lines_hz)]
         new = new[:MAX_LINES - len(lines_hz)]
         if not new:
@@ -285,7 +286,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         return k_t_Nm_per_A * iq
     # the noise floor of the final residual: with the lines removed (left in, a line's leak raised the
     # floor and the noise model biased K by −2 % with 25 mA tones on a 10 kS/s current)
-    sigma = _broadband_noise_rms(y - g * iq_y - beta_y @ cols, rate_hz, m)
+    sigma = _broadband_noise_rms(resid, rate_hz, m)
     return k_t_Nm_per_A * np.stack((iq[:, 0], sigma * iq[:, 1]))
 
 
@@ -429,9 +430,32 @@ def _bspline_weights(m: int) -> np.ndarray:
 _BLOCK_SPANS = 512
 
 
-def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, smoothing: float,
+def _spline_factor(g: np.ndarray, m: int, smoothing: float) -> np.ndarray:
+    """Banded Cholesky factor R (A = RᵀR, upper banded storage of :func:`scipy.linalg.cholesky_banded`) of the
+    penalised normal matrix A = Bᵀ·diag(g²)·B + λ·D₂ᵀD₂ of a uniform cubic B-spline B with a knot every m samples,
+    λ = ``smoothing`` × the mean diagonal of Bᵀ·diag(g²)·B."""
+    n = g.size
+    nk = -(-n // m)
+    W = _bspline_weights(m)
+    G2 = np.zeros(nk * m)
+    G2[:n] = g * g
+    pairs = [(k, l) for k in range(4) for l in range(k, 4)]
+    diag = G2.reshape(nk, m) @ np.stack([W[:, k] * W[:, l] for k, l in pairs], axis=1)  # (nk, 10)
+    ab = np.zeros((4, nk + 3))  # upper banded storage: ab[3 - d, j] = A[j - d, j]
+    for q, (k, l) in enumerate(pairs):
+        ab[3 - (l - k), l:l + nk] += diag[:, q]
+    lam = smoothing * ab[3].mean()
+    d2 = np.array([1.0, -2.0, 1.0])
+    for a in range(3):
+        for b in range(a, 3):
+            ab[3 - (b - a), b:b + nk + 1] += lam * d2[a] * d2[b]
+    return cholesky_banded(ab)
+
+
+def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray,
                extra: np.ndarray | list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Penalised LS of y ≈ g·s(t) + Σ β_k·extra_k, s a uniform cubic B-spline (knot every m samples).
+    """Penalised LS of y ≈ g·s(t) + Σ β_k·extra_k, s a uniform cubic B-spline (knot every m samples), R the
+    Cholesky factor of the spline's penalised normal matrix (:func:`_spline_factor` of the same g and m).
 
     The global coefficients β border the banded spline system and are eliminated by their Schur
     complement. ``y`` may hold several right-hand sides as columns, shape (n, r): one factorisation
@@ -465,26 +489,13 @@ def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, smoothing: float,
         which = np.concatenate((np.arange(ny), ny + act))
         for k in range(4):
             Pt[which, k0 + k:k1 + k] += full[k]
-    G2 = np.zeros(nk * m)
-    G2[:n] = g * g
-    pairs = [(k, l) for k in range(4) for l in range(k, 4)]
-    diag = G2.reshape(nk, m) @ np.stack([W[:, k] * W[:, l] for k, l in pairs], axis=1)  # (nk, 10)
-    ab = np.zeros((4, nk + 3))  # upper banded storage: ab[3 - d, j] = A[j - d, j]
-    for q, (k, l) in enumerate(pairs):
-        ab[3 - (l - k), l:l + nk] += diag[:, q]
-    lam = smoothing * ab[3].mean()
-    d2 = np.array([1.0, -2.0, 1.0])
-    for a in range(3):
-        for b in range(a, 3):
-            ab[3 - (b - a), b:b + nk + 1] += lam * d2[a] * d2[b]
-    # A = RᵀR (banded Cholesky). The Schur complement needs Pᵤᵀ·A⁻¹·[P_y, Pᵤ] = Zᵤᵀ·[Z_y, Zᵤ] with Z = R⁻ᵀ·P (one
+    # A = RᵀR (:func:`_spline_factor`). The Schur complement needs Pᵤᵀ·A⁻¹·[P_y, Pᵤ] = Zᵤᵀ·[Z_y, Zᵤ] with Z = R⁻ᵀ·P (one
     # triangular solve per column), and the spline only R⁻¹·(Z_y − Zᵤ·β): half the banded solves of A⁻¹·P, which
     # are sequential level-2 sweeps, one per column (LAPACK's tbsv)
-    R = cholesky_banded(ab)
-    Z = _banded_triangular_solve(R, Pt.T, transpose=True)  # (nk + 3, ny + ne), Fortran order as LAPACK wants it
+    Z = _banded_triangular_solve(r_band, Pt.T, transpose=True)  # (nk + 3, ny + ne), Fortran order as LAPACK wants it
     Zy, Zu = Z[:, :ny], Z[:, ny:]
     beta = np.linalg.lstsq(VV - Zu.T @ Zu, VY - Zu.T @ Zy, rcond=None)[0]
-    coef = _banded_triangular_solve(R, Zy - Zu @ beta, transpose=False)
+    coef = _banded_triangular_solve(r_band, Zy - Zu @ beta, transpose=False)
     c4 = np.stack([coef[k:k + nk] for k in range(4)])  # (4, nk, r): the 4 coefficients active in each span
     # one wide product (m, 4) @ (4, nk·r) instead of nk tiny ones, then (m, nk, r) → samples
     s_out = (W @ c4.reshape(4, -1)).reshape(m, nk, -1).transpose(1, 0, 2).reshape(nk * m, -1)[:n]
