@@ -105,7 +105,12 @@ def validate(model: type[M], data: dict[str, Any], source: Path | str) -> M:
 def load_bench(path: Path | str | None = None) -> Bench:
     """Load a bench config; ``None`` is the built-in simulated bench."""
     p = Path(path) if path is not None else DEFAULT_BENCH
-    return validate(Bench, read_toml(p), p)
+    data = read_toml(p)
+    drive = data.get("drive")
+    if isinstance(drive, dict) and isinstance(drive.get("eds"), str) and drive["eds"] \
+            and not Path(drive["eds"]).is_absolute():  # a drive's EDS/DCF named beside the bench file
+        drive["eds"] = str(p.parent / drive["eds"])
+    return validate(Bench, data, p)
 
 
 def resolve_profile_path(name_or_path: str) -> Path:

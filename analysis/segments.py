@@ -175,6 +175,8 @@ def describe_moves(t_s: np.ndarray, speed_rad_s: np.ndarray, period_s: float, co
     sigma = 1.4826 * float(np.median(np.abs(np.diff(speed_rad_s)))) / np.sqrt(2.0)
     threshold = max(REST_SIGMAS * sigma, REST_MIN_COUNTS_PER_PERIOD * 2 * np.pi / counts_per_rev / period_s)
     starts, ends = _runs(v > threshold)
+    if starts.size == 0:  # the joint never left rest
+        return []
     # close gaps shorter than MIN_RUN_PERIODS, then drop blips shorter than it
     join = starts[1:] - ends[:-1] >= MIN_RUN_PERIODS
     starts, ends = starts[np.concatenate(([True], join))], ends[np.concatenate((join, [True]))]

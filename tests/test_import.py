@@ -460,3 +460,11 @@ def test_acq_import_applies_the_rules_between_config_keys(capsys: pytest.Capture
     assert (run.code, run.err) == (2, f"acq: error: {bench}: [drive] baud = 115200: too low for one 16-byte acq1 "
                                       "frame every 0.001 s; needs at least 160000 baud (16 bytes × 10 bits / 0.001 s)\n")
     assert not (tmp_path / "imported.h5").exists()
+
+
+def test_a_mistyped_current_file_is_named_before_the_bench_is_asked_for(capsys: pytest.CaptureFixture[str],
+                                                                         tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    _, enc = pair
+    run = run_cli(capsys, "import", "--current", str(tmp_path / "nofile.csv"), "--encoder", str(enc),
+                  "-o", str(tmp_path / "imported.h5"))
+    assert (run.code, run.err) == (2, f"acq: error: {tmp_path / 'nofile.csv'}: no such file\n")

@@ -225,3 +225,10 @@ def test_a_velocity_demand_mapped_in_the_masters_tpdo_is_recorded_beside_the_pos
     frames = [(c, struct.pack("<Hii", 0x0627, 1000 * c, -3 * c), c * 1_000_000) for c in (1, 2)]
     block = TpdoDecoder(SyncUnwrapper(240, 0.001, 0), False, 2.0, layout=layout).decode(frames)
     assert block.velocity_demand_counts_per_s.tolist() == [-6.0, -12.0]
+
+
+def test_an_eds_named_in_a_bench_file_is_found_beside_that_file(tmp_path: Path) -> None:
+    text = ROBOT_CANOPEN.read_text().replace("tpdo_cob_id = 0x181", "").replace(
+        "tpdo_mapping = [0x60410010, 0x60640020]", 'eds = "drive.dcf"')
+    bench = load_bench(_bench_file(tmp_path, text))
+    assert bench.drive.eds == str(tmp_path / "drive.dcf")

@@ -111,3 +111,11 @@ def test_the_excited_moves_are_the_fast_ones_and_the_excited_share_matches_them(
     expected = sum(m.duration_s + segment_s for m in FAST) / WINDOW_S
     assert exc["excited_fraction"] == pytest.approx(expected, abs=len(FAST) * hop_s / WINDOW_S)
     assert exc["excited_fraction"] == exc["segments_used"] / exc["segments"]
+
+
+def test_a_joint_that_never_leaves_rest_has_no_moves() -> None:
+    from analysis.segments import SegmentSelection, describe_moves
+
+    dither = np.where(np.arange(4000) % 2, 1.0, -1.0) * 2 * np.pi / 4096 / 1e-3  # ±1 count per period
+    kept = SegmentSelection(np.ones(3, bool), np.ones(3), 2.0, 256, 128, False)
+    assert describe_moves(np.arange(4000) * 1e-3, dither, 1e-3, 4096, 1.0, kept) == []

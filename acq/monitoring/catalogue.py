@@ -79,7 +79,7 @@ class Outcome:
     sha256 : str
         SHA-256 of the file when the batch looked at it.
     request_key : str
-        The analysis options asked for, canonical JSON (see :func:`acq.monitoring.batch.request_key`).
+        The analysis options asked for, canonical JSON (see :meth:`analysis.AnalysisRequest.key`).
     session : dict
         ``session_id``, ``joint``, ``created_utc``, ``start_monotonic_ns``, ``status``, ``tags``
         (empty when the file could not be read at all).

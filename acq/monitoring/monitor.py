@@ -71,7 +71,7 @@ class MonitorSettings:
 
 @dataclass
 class MonitorStatus:
-    """The live figures of a monitor (shown by :func:`acq.monitor_view.status_table`)."""
+    """The live figures of a monitor (shown by :func:`acq.ui.monitor_cli.status_table`)."""
 
     joint: str
     captured: int = 0

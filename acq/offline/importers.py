@@ -145,6 +145,9 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
     """
     if out.exists():
         raise ConfigError(f"-o {out}: exists (not overwritten)")
+    for given in (current_path, encoder_path):  # a mistyped name before anything that looks beside it
+        if not given.exists():
+            raise ConfigError(f"{given}: no such file")
     # the configs first: a missing bench or bad metadata is one line at once, not after hashing the files
     meta, meta_warning = read_metadata(current_path, encoder_path)
     bench, profile = _configs(meta, bench, profile, joint, current_path)
