@@ -270,7 +270,10 @@ def test_simulated_session_exported_and_imported_back_keeps_its_history_and_K(
                 "--out", str(tmp_path / "rec"), "--tag", "pose=home", "--tag", "payload_kg=2.5")
     assert r.code == 0, r.err
     (recorded,) = (tmp_path / "rec").glob("*.h5")
-    assert run_cli(capsys, "export", str(recorded), "--csv", str(tmp_path / "csv")).code == 0
+    exported = run_cli(capsys, "export", str(recorded), "--csv", str(tmp_path / "csv"))
+    assert exported.code == 0
+    assert exported.out.splitlines()[-1] == ("note: not in the CSV pair (acq import does not read them yet): "
+                                             "velocity_demand_counts_per_s")
     cur, enc = (tmp_path / "csv" / f"{recorded.stem}.{kind}.csv" for kind in ("current", "encoder"))
     assert (tmp_path / "csv" / f"{recorded.stem}.session.json").is_file()
     r = run_cli(capsys, "import", "--current", str(cur), "--encoder", str(enc), "-o", str(tmp_path / "imported.h5"),

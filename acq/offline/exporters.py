@@ -58,8 +58,13 @@ def current_t0_s(session: Session) -> float:
     return float(np.min(host_s - last_index / cur.rate_hz))
 
 
-def export_csv(session_path: Path, out_dir: Path) -> tuple[Path, Path, Path]:
-    """Write the session's current and encoder CSV files and its metadata into ``out_dir``; return their paths."""
+#: Encoder datasets a session may hold that the CSV pair does not carry (``acq import`` does not read them yet).
+NOT_EXPORTED = ("velocity_counts_per_s", "velocity_demand_counts_per_s")
+
+
+def export_csv(session_path: Path, out_dir: Path) -> tuple[tuple[Path, Path, Path], tuple[str, ...]]:
+    """Write the session's current and encoder CSV files and its metadata into ``out_dir``; return their paths and
+    the names of the session's encoder datasets left out (:data:`NOT_EXPORTED` that it holds)."""
     session = load(session_path)
     session.require_samples()
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -75,4 +80,5 @@ def export_csv(session_path: Path, out_dir: Path) -> tuple[Path, Path, Path]:
     if enc.drive_time_s is not None:
         columns["drive_time_s"] = _exact(enc.drive_time_s)
     _write_columns(encoder_path, columns)
-    return current_path, encoder_path, write_metadata(session, current_path, encoder_path)
+    left_out = tuple(name for name in NOT_EXPORTED if getattr(enc, name, None) is not None)
+    return (current_path, encoder_path, write_metadata(session, current_path, encoder_path)), left_out

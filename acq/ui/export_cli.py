@@ -17,6 +17,10 @@ def export_command(session_path: Path, csv_dir: Path) -> int:
     """Export SESSION to a current CSV, an encoder CSV and the session's metadata (JSON)."""
     from acq.offline.exporters import export_csv  # numpy and h5py only when the command runs
 
-    for path in export_csv(session_path, csv_dir):
-        Console().print(f"wrote {escape(str(path))}")
+    written, left_out = export_csv(session_path, csv_dir)
+    out = Console(soft_wrap=True)  # a path or a list of names stays on one line, whatever the width
+    for path in written:
+        out.print(f"wrote {escape(str(path))}")
+    if left_out:
+        out.print(f"note: not in the CSV pair (acq import does not read them yet): {', '.join(left_out)}")
     return 0
