@@ -437,5 +437,8 @@ def amplitude_misfits(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarra
     """
     problem = _Problem(frf, fit.band, fit.options, fit.values)
     x = problem.x0(fit.values)
-    reps = [_Problem(r, fit.band, fit.options, fit.values).log_ratio(x).real for r in frf.replicates or ()]
+    # a replicate with an empty (non-finite or zero) bin the full record has would misalign the rows: left out
+    same_bins = [p for p in (_Problem(r, fit.band, fit.options, fit.values) for r in frf.replicates or ())
+                 if np.array_equal(p.f, problem.f)]
+    reps = [p.log_ratio(x).real for p in same_bins]
     return problem.f, problem.log_ratio(x).real, np.asarray(reps).reshape(len(reps), problem.f.size)

@@ -166,7 +166,10 @@ class DriveCanopen(Strict):
     # file ``eds``) or, with configure = true, maps TPDO ``tpdo`` itself by SDO (never NMT, SYNC or motion)
     motion: Literal["commanded", "external"] = "commanded"
     configure: bool = False
-    tpdo_cob_id: int | None = Field(default=None, ge=0x181, le=0x57F)  # the TPDO's COB-ID on the bus
+    # the TPDO's COB-ID on the bus: CiA 301's predefined connection set puts the PDOs at 0x181…0x57F (TPDO1…4 at
+    # 0x181…0x4FF, RPDO1…4 above them); a master may reassign them anywhere below the SDO identifiers (0x581…),
+    # but not onto NMT (0x000), SYNC/EMCY (0x080…0x0FF) or TIME (0x100)
+    tpdo_cob_id: int | None = Field(default=None, ge=0x101, le=0x57F)
     tpdo_mapping: list[Annotated[int, Field(ge=0, le=0xFFFFFFFF)]] | None = None  # CiA 301 entries, 0x60640020 …
     eds: str | None = Field(default=None, min_length=1)  # the drive's EDS/DCF file (its TPDO mapping and COB-ID)
     sync_counter_overflow: int = Field(default=0, ge=0, le=240)  # the master's SYNC counter (0x1019); 0: none
