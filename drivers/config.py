@@ -342,6 +342,8 @@ class SimSettings(Strict):
     elapsed_s: NonNegFloat = 0.0
     robot_idle_fraction: float = Field(default=0.15, ge=0.0, le=1.0)  # program cycles that are a long wait
     robot_payload_max_kg: NonNegFloat = 2.0  # payload per program cycle, uniform in 0 … this, kg at the arm's tip
+    # share of the program's moves with S-curve (jerk-limited, raised-cosine) ramps instead of trapezoid ones
+    robot_s_curve_fraction: float = Field(default=0.0, ge=0.0, le=1.0)
     # the payload also adds to J_l (as a point mass at the tip: payload_Jl_kgm2); off: it changes the gravity load only
     robot_payload_inertia: bool = False
     K_decay_pct_per_hour: NonNegFloat = 0.0  # wear: K falls linearly with elapsed_s

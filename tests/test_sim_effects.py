@@ -290,3 +290,24 @@ def test_drives_that_cannot_carry_an_s_curve_or_a_cruise_refuse_it_in_one_line()
     serial = SerialDrive(DriveSerial(driver="serial", period_s=0.001, port="loop://"), 131072)
     with pytest.raises(ConfigError, match=r"^profile: cruise_s = 0.1 s, jerk_time_s = 0 s cannot be sent"):
         serial.start_motion(PROFILE.model_copy(update={"cruise_s": 0.1}))
+
+
+def test_s_curve_moves_travel_the_same_distance_with_a_continuous_acceleration() -> None:
+    from drivers.sim.robot_program import Move, RobotProgram
+
+    dt = 1e-5
+    for s_curve in (False, True):
+        move = Move(0.0, 30.0, 1000 * RPM_TO_RAD_S, 0.2, s_curve=s_curve)  # reaches its top speed
+        u = np.arange(0.0, move.duration_s + 0.01, dt)
+        speed, accel = move.reference(u)
+        assert np.sum(speed) * dt == pytest.approx(30.0, rel=1e-4)  # the distance asked for
+        if s_curve:  # its acceleration is the derivative of its speed (the trapezoid's is, piecewise)
+            assert np.allclose(np.gradient(speed, dt)[2:-2], accel[2:-2], atol=5e-3 * np.max(accel), rtol=0)
+        jump = np.max(np.abs(np.diff(accel)))  # largest acceleration step between two samples
+        # a trapezoid steps to its full acceleration; the S-curve's steps are of order a_peak·π·dt/tr
+        assert (jump < 1e-3 * np.max(accel)) if s_curve else (jump == pytest.approx(np.max(accel)))
+    shares = [np.mean([m.s_curve for c in range(40) for m in RobotProgram(3, 0.0, 2.0, f).cycle(c).moves])
+              for f in (0.0, 0.5, 1.0)]
+    assert shares[0] == 0.0 and shares[2] == 1.0 and 0.4 < shares[1] < 0.6
+    plain, mixed = RobotProgram(3, 0.0, 2.0, 0.0).cycle(7), RobotProgram(3, 0.0, 2.0, 0.5).cycle(7)
+    assert [m.distance_rad for m in plain.moves] == [m.distance_rad for m in mixed.moves]  # same program, other ramps

@@ -68,7 +68,7 @@ class SimBench:
         s, nom = self.sim, bench.nominal
         program = None
         if getattr(bench.drive, "motion", "commanded") == "external":  # the machine's own robot program moves it
-            robot = RobotProgram(s.seed, s.robot_idle_fraction, s.robot_payload_max_kg)
+            robot = RobotProgram(s.seed, s.robot_idle_fraction, s.robot_payload_max_kg, s.robot_s_curve_fraction)
             program = WindowReference(robot, robot.rest_before(s.elapsed_s))
         payload_kg = program.payload_kg() if program is not None else 0.0
         Jl_kgm2 = s.Jl_kgm2 + s.payload_Jl_kgm2(payload_kg, bench.gear.ratio)  # the session's J_l: its start cycle's payload

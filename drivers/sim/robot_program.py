@@ -8,7 +8,9 @@ reproducible without simulating the ones before it:
 * with probability ``robot_idle_fraction`` the robot waits the whole cycle (no motion: nothing excites);
 * otherwise it moves between random targets until the cycle is full and returns home, each move a trapezoid speed profile (accelerate
   in ``accel_s``, cruise, decelerate in ``accel_s``; a triangle when the move is too short to reach
-  the top speed) of random length, top speed and acceleration time, with a pause after each move;
+  the top speed) of random length, top speed and acceleration time, with a pause after each move; a share
+  ``robot_s_curve_fraction`` of the moves ramps as an S-curve instead (speed (1 − cos)/2 over the ramp:
+  the acceleration rises and falls smoothly, jerk-limited, with the same ramp time and distance);
 * the payload (kg at the arm's tip) is drawn per cycle; it changes the gravity load the drive carries.
 
 All positions and speeds are on the motor side (rad, rad/s).
@@ -18,7 +20,7 @@ from __future__ import annotations
 
 import functools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -40,6 +42,7 @@ class Move:
     distance_rad: float
     top_rad_s: float
     accel_s: float
+    s_curve: bool = False
 
     @property
     def peak_rad_s(self) -> float:
@@ -59,12 +62,17 @@ class Move:
     def reference(self, u_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Speed (rad/s) and acceleration (rad/s²) at ``u_s`` (s since the move's start; zero outside it)."""
         v, tr, T = self.peak_rad_s, self.ramp_s, self.duration_s
-        a = v / tr
         sign = math.copysign(1.0, self.distance_rad)
         up, down = (u_s >= 0) & (u_s < tr), (u_s >= T - tr) & (u_s < T)
         cruise = (u_s >= tr) & (u_s < T - tr)
-        speed = np.where(up, a * u_s, 0.0) + np.where(cruise, v, 0.0) + np.where(down, a * (T - u_s), 0.0)
-        accel = np.where(up, a, 0.0) - np.where(down, a, 0.0)
+        rise, fall = u_s, T - u_s  # time into the ramp up, time left of the ramp down
+        if self.s_curve:  # raised cosine: v·(1 − cos(π·r/tr))/2 covers the same v·tr/2 as the linear ramp
+            w = math.pi / tr
+            ramp, slope = (lambda r: 0.5 * v * (1.0 - np.cos(w * r))), (lambda r: 0.5 * v * w * np.sin(w * r))
+        else:
+            ramp, slope = (lambda r: v / tr * r), (lambda r: np.full_like(r, v / tr))
+        speed = np.where(up, ramp(rise), 0.0) + np.where(cruise, v, 0.0) + np.where(down, ramp(fall), 0.0)
+        accel = np.where(up, slope(rise), 0.0) - np.where(down, slope(fall), 0.0)
         return sign * speed, sign * accel
 
 
@@ -84,10 +92,13 @@ class RobotProgram:
     seed : the program's seed (``[sim] seed``).
     idle_fraction : share of cycles in which the robot waits.
     payload_max_kg : payload per cycle, uniform in 0 … this, kg.
+    s_curve_fraction : share of the moves with S-curve ramps (drawn from a stream of its own, so the moves
+        themselves do not change with it).
     """
 
-    def __init__(self, seed: int, idle_fraction: float, payload_max_kg: float) -> None:
+    def __init__(self, seed: int, idle_fraction: float, payload_max_kg: float, s_curve_fraction: float = 0.0) -> None:
         self.seed, self.idle_fraction, self.payload_max_kg = seed, idle_fraction, payload_max_kg
+        self.s_curve_fraction = s_curve_fraction
 
     @functools.lru_cache(maxsize=64)  # noqa: B019 - a few programs live per process, each one bench's
     def cycle(self, index: int) -> Cycle:
@@ -107,7 +118,8 @@ class RobotProgram:
             moves.append(move)
             t, here = t + move.duration_s + pause, target
         moves.append(self._move(rng, t, -here))
-        return Cycle(payload, tuple(moves))
+        shapes = np.random.default_rng([self.seed % 2**32, 0x5C0E, index]).random(len(moves)) < self.s_curve_fraction
+        return Cycle(payload, tuple(replace(m, s_curve=bool(s)) for m, s in zip(moves, shapes)))
 
     @staticmethod
     def _move(rng: np.random.Generator, t_start_s: float, distance_rad: float) -> Move:
