@@ -35,6 +35,11 @@ RATIO_SIGMAS = 5.0
 #: Cosine similarity of the two electrical-frequency shapes at the chosen lag below which the lag is not
 #: trusted (the true lag lies outside ±MAX_LAG_S, or one stream did not see the motion): no verdict then.
 MIN_SHAPE_SIMILARITY = 0.5
+#: Relative scatter (1.4826·MAD / median) of the half-periods' ratios above which they do not share one ratio:
+#: a wrong bench constant scales every half-period alike (their scatter is the counting's few %), while a lag
+#: locked onto the wrong one of a robot's repeated moves scatters them by factors (seen: 0.8 … 10⁵ around a
+#: median of 6.6 on a simulated S-curve window) — no verdict then, rather than a wrong constant to "check".
+MAX_RELATIVE_SCATTER = 0.25
 REFINE_LAG_S, REFINE_STEP_S = 0.015, 0.0005  # lag refinement ±, step, s: three grid steps of the search, 0.5 ms
 REFINE_SPAN_S = 20.0  # record span the ratio uses, s: 100 ppm of clock drift moves the lag ≤ 2 ms over it
 SEQUENCE_MAX_S = 60.0  # the phase sequence is judged on at most the first minute, s
@@ -134,7 +139,10 @@ def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index:
     if per_interval.size < 8:
         return None
     ratio = float(np.median(per_interval))  # an extra crossing where i_q changes sign is an outlier, not a bias
-    spread = float(1.4826 * np.median(np.abs(per_interval - ratio)) / math.sqrt(per_interval.size))
+    scatter = float(1.4826 * np.median(np.abs(per_interval - ratio)))
+    if scatter > MAX_RELATIVE_SCATTER * ratio:
+        return None
+    spread = scatter / math.sqrt(per_interval.size)
     return SpeedRatio(ratio, spread, best_lag, 0.5 * per_interval.size)
 
 

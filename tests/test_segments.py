@@ -119,3 +119,20 @@ def test_a_joint_that_never_leaves_rest_has_no_moves() -> None:
     dither = np.where(np.arange(4000) % 2, 1.0, -1.0) * 2 * np.pi / 4096 / 1e-3  # ±1 count per period
     kept = SegmentSelection(np.ones(3, bool), np.ones(3), 2.0, 256, 128, False)
     assert describe_moves(np.arange(4000) * 1e-3, dither, 1e-3, 4096, 1.0, kept) == []
+
+
+def test_a_robot_window_whose_half_periods_share_no_ratio_names_no_bench_constant(tmp_path: Path) -> None:
+    """Seed 0's first window with S-curve moves: the lag search locks onto the wrong one of the repeated moves,
+    and the half-periods' ratios scatter from 0.8 to 10⁵ around 6.6 — that once read "check counts_per_rev =
+    19879" on a correctly configured bench."""
+    from acq.offline.analyze import recording_from_session
+    from acq.recording.session import load
+    from analysis.diagnose import electrical_speed_ratio, recording_fault
+
+    bench = load_bench(ROBOT)
+    bench = bench.model_copy(update={"sim": bench.sim.model_copy(update={"robot_s_curve_fraction": 0.5})})
+    current, drive = open_bench(bench, fast=True, sim_bench=SimBench(bench, realtime=False))
+    rec = recording_from_session(load(Recorder(bench, None, current, drive, tmp_path, 10.0).run().path))
+    assert electrical_speed_ratio(rec.current_a["i_a"], rec.rate_hz, rec.encoder_index, rec.position_counts,
+                                  rec.period_s, rec.counts_per_rev, rec.pole_pairs) is None
+    assert recording_fault(rec) is None
