@@ -346,3 +346,13 @@ def test_the_payload_tag_is_catalogued_and_changes_the_truth_only_with_robot_pay
                                           "(session_key) WHERE s.tags_json LIKE '%\"monitor_window\": 0%'").fetchall()
     db.close()
     assert verdict == "ok" and lo <= on[0][0] <= hi and jl == pytest.approx(on[0][0], rel=0.02)
+
+
+def test_a_window_whose_moves_excite_the_band_says_which_coherence_was_too_low() -> None:
+    from acq.monitoring.window_judge import _but
+
+    between = {"quality": {"excitation_coherence": 0.61, "mean_coherence": 0.9}}
+    band = {"quality": {"excitation_coherence": 0.95, "mean_coherence": 0.5}}
+    assert _but(between, 14) == ", but too little between f_a and f_r (coherence 0.61, below 0.7)"
+    assert _but(band, 3) == ", but too little over the band (mean coherence 0.50, below 0.72)"
+    assert _but(between, 0) == ""  # no move excites: the count says it all

@@ -34,6 +34,19 @@ def not_excited(doc: dict[str, Any]) -> bool:
     return quality.get("verdict") != "ok" and aligned and (weak_between or weak_in_band)
 
 
+def _but(doc: dict[str, Any], excited_moves: int) -> str:
+    """Why moves that excite the band still leave the window unexcited: the coherence check that failed."""
+    if not excited_moves:
+        return ""
+    th, quality = Thresholds(), doc["quality"]
+    exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
+    if exc is not None and not exc >= th.excitation_poor:
+        return f", but too little between f_a and f_r (coherence {exc:.2f}, below {th.excitation_poor:g})"
+    if mean is not None and not mean >= th.coherence_poor:
+        return f", but too little over the band (mean coherence {mean:.2f}, below {th.coherence_poor:g})"
+    return ""
+
+
 def marked(path: str, sha256: str, request: AnalysisRequest, meta: dict[str, Any], verdict: str, reasons: list[str],
            doc: dict[str, Any] | None = None) -> Outcome:
     """A window's catalogue record without numbers: verdict ``not excited`` / ``not analysed`` / ``interrupted``."""
@@ -67,8 +80,9 @@ def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
         if excitation is not None:
             moves = excitation["moves"]
             lo, hi = outcome.doc["options"]["band_hz"]
-            reasons.insert(0, f"{sum(m['excited'] for m in moves)} of {len(moves)} moves put torque into {lo:g}…{hi:g} Hz "
-                              f"beyond chance ({100 * excitation['excited_fraction']:.0f} % of the window)")
+            excited = sum(m["excited"] for m in moves)
+            reasons.insert(0, f"{excited} of {len(moves)} moves put torque into {lo:g}…{hi:g} Hz beyond chance "
+                              f"({100 * excitation['excited_fraction']:.0f} % of the window){_but(outcome.doc, excited)}")
         return replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
                        seconds=outcome.seconds)
     return outcome
