@@ -19,32 +19,35 @@ from acq.recording.session import load
 from analysis import AnalysisRequest, Thresholds
 
 
+def _weak_coherence(quality: dict[str, Any]) -> str | None:
+    """Which excitation check of the verdict's own "poor" limits (:class:`analysis.quality.Thresholds`) fails:
+    coherence between f_a and f_r, else in the whole band — its words, "" when no coherence was measured at all,
+    None when both hold."""
+    th = Thresholds()
+    exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
+    if exc is not None and not exc >= th.excitation_poor:
+        return f"too little between f_a and f_r (coherence {exc:.2f}, below {th.excitation_poor:g})"
+    if mean is None:
+        return ""
+    if not mean >= th.coherence_poor:
+        return f"too little over the band (mean coherence {mean:.2f}, below {th.coherence_poor:g})"
+    return None
+
+
 def not_excited(doc: dict[str, Any]) -> bool:
-    """True when a verdict that is not ok comes from the excitation checks: coherence between f_a and f_r, or in
-    the whole band, below the verdict's own "poor" limits (:class:`analysis.quality.Thresholds`), with the clocks
+    """True when a verdict that is not ok comes from the excitation checks (:func:`_weak_coherence`), with the clocks
     aligned (a failed alignment, or a residual above the amplitude fit's limit, makes the coherence low too, but
     says nothing about the motion: such a window keeps the analysis' own verdict and reasons, the clock's first)."""
-    th, quality = Thresholds(), doc["quality"]
-    exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
-    weak_between = exc is not None and not exc >= th.excitation_poor
-    weak_in_band = mean is None or not mean >= th.coherence_poor
-    clock = doc.get("clock", {})
+    quality, clock = doc["quality"], doc.get("clock", {})
     residual = clock.get("residual_s")
-    aligned = not clock.get("failure") and (residual is None or residual <= th.clock_residual_amplitude_s)
-    return quality.get("verdict") != "ok" and aligned and (weak_between or weak_in_band)
+    aligned = not clock.get("failure") and (residual is None or residual <= Thresholds().clock_residual_amplitude_s)
+    return quality.get("verdict") != "ok" and aligned and _weak_coherence(quality) is not None
 
 
 def _but(doc: dict[str, Any], excited_moves: int) -> str:
     """Why moves that excite the band still leave the window unexcited: the coherence check that failed."""
-    if not excited_moves:
-        return ""
-    th, quality = Thresholds(), doc["quality"]
-    exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
-    if exc is not None and not exc >= th.excitation_poor:
-        return f", but too little between f_a and f_r (coherence {exc:.2f}, below {th.excitation_poor:g})"
-    if mean is not None and not mean >= th.coherence_poor:
-        return f", but too little over the band (mean coherence {mean:.2f}, below {th.coherence_poor:g})"
-    return ""
+    weakness = _weak_coherence(doc["quality"]) if excited_moves else None
+    return f", but {weakness}" if weakness else ""
 
 
 def marked(path: str, sha256: str, request: AnalysisRequest, meta: dict[str, Any], verdict: str, reasons: list[str],
