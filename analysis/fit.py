@@ -157,6 +157,11 @@ def band_mask(f_hz: np.ndarray, band: tuple[float, float]) -> np.ndarray:
     return (f_hz >= band[0]) & (f_hz <= band[1])
 
 
+def fitted_bins(frf: FrequencyResponse, band: tuple[float, float]) -> np.ndarray:
+    """Boolean mask of the bins a fit in ``band`` (Hz) uses: inside it, with a finite, non-zero H."""
+    return band_mask(frf.f_hz, band) & np.isfinite(frf.H) & (np.abs(frf.H) > 0)
+
+
 def initial_guess(frf: FrequencyResponse, band: tuple[float, float]) -> TwoMassParams:
     """Estimate K, J_m, J_l from the FRF alone, without any nominal value.
 
@@ -205,7 +210,7 @@ class _Problem:
 
     def __init__(self, frf: FrequencyResponse, band: tuple[float, float], options: FitOptions,
                  fixed: TwoMassParams) -> None:
-        sel = band_mask(frf.f_hz, band) & np.isfinite(frf.H) & (np.abs(frf.H) > 0)
+        sel = fitted_bins(frf, band)
         self.f = frf.f_hz[sel]
         self.log_h = np.log(frf.H[sel])
         g2 = np.clip(frf.coherence[sel], 0.0, COHERENCE_CLIP)

@@ -16,7 +16,7 @@ import numpy as np
 
 from analysis.adequacy import BandMisfit, band_misfits, critical_t, missed_spans
 from analysis.encoder import difference_response
-from analysis.fit import CHAIN_REL_STD, COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask
+from analysis.fit import CHAIN_REL_STD, COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask, fitted_bins
 from analysis.frf import FrequencyResponse
 from analysis.model import PARAM_LABELS
 from analysis.sample_instants import EncoderJitter
@@ -263,7 +263,7 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult,
     every motion period, which the scatter cannot show) and :data:`analysis.fit.CHAIN_REL_STD`.
     """
     f, misfit, reps = amplitude_misfits(frf, fit)
-    sel = band_mask(frf.f_hz, fit.band) & np.isfinite(frf.H) & (np.abs(frf.H) > 0)
+    sel = fitted_bins(frf, fit.band)
     signal = np.abs(frf.H[sel] * difference_response(f, frf.period_s)) ** 2 * frf.torque_psd[sel]
     with np.errstate(divide="ignore", invalid="ignore"):
         quant = np.sqrt(jitter.quantisation_noise_psd(f, frf.period_s) / signal)
