@@ -10,6 +10,7 @@ not used (the import says so).
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -82,8 +83,10 @@ def write_metadata(session: Session, current_path: Path, encoder_path: Path) -> 
     return path
 
 
-def read_metadata(current_path: Path, encoder_path: Path) -> tuple[ExportMetadata | None, str | None]:
-    """The metadata beside an exported pair, if there is one and it describes these two files.
+def read_metadata(current_path: Path, encoder_path: Path, digest: Callable[[Path], str] = sha256_of,
+                  ) -> tuple[ExportMetadata | None, str | None]:
+    """The metadata beside an exported pair, if there is one and it describes these two files (their SHA-256 by
+    ``digest``: the importer passes one that keeps what it computed, so no file is hashed twice).
 
     Returns
     -------
@@ -109,7 +112,7 @@ def read_metadata(current_path: Path, encoder_path: Path) -> tuple[ExportMetadat
     try:
         files = {role: doc["files"][role] for role in ("current", "encoder")}
         for role, given in (("current", current_path), ("encoder", encoder_path)):
-            if files[role]["sha256"] != sha256_of(given):
+            if files[role]["sha256"] != digest(given):
                 return None, (f"{path.name} describes another {role} file than {given.name} (SHA-256 differs): "
                               "its metadata is not used, the time columns are not taken as one host clock")
         meta = ExportMetadata(path, str(doc["session_id"]), str(doc["joint"]), str(doc["created_utc"]),

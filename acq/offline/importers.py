@@ -15,6 +15,7 @@ the current is shifted to start with the encoder. Every choice is written into t
 
 from __future__ import annotations
 
+import functools
 import os
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -149,11 +150,12 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
         if not given.exists():
             raise ConfigError(f"{given}: no such file")
     # the configs first: a missing bench or bad metadata is one line at once, not after hashing the files
-    meta, meta_warning = read_metadata(current_path, encoder_path)
+    digest = functools.cache(sha256_of)  # an exported pair's metadata check hashes the files the session records
+    meta, meta_warning = read_metadata(current_path, encoder_path, digest)
     bench, profile = _configs(meta, bench, profile, joint, current_path)
-    # the files' SHA-256 in a thread while they are parsed (hashlib and Arrow's parser both release the GIL)
+    # the files' SHA-256 (those not yet known) in a thread while they are parsed (hashlib and Arrow release the GIL)
     with ThreadPoolExecutor(max_workers=1) as hashing:
-        sha256 = {path: hashing.submit(sha256_of, path) for path in (current_path, encoder_path)}
+        sha256 = {path: hashing.submit(digest, path) for path in (current_path, encoder_path)}
         return _import(current_path, encoder_path, bench, profile, out, current_channels, tags, meta, meta_warning,
                        same_clock, started_utc, sha256)
 
