@@ -161,8 +161,14 @@ def write_json(doc: dict[str, Any], path: Path) -> None:
 def report_not_drawn(done: SessionResult, why: str) -> SessionResult:
     """``done`` after its report PNG failed (``why``): a note in ``quality.reasons`` ("note: report not drawn: …"),
     rewritten into the ``.result.json``, and no report path. A picture that fails is not a failed identification."""
-    quality = done.json_dict["quality"]
+    return replace(done, json_dict=write_report_note(done.json_dict, done.json_path, why), report_path=None)
+
+
+def write_report_note(doc: dict[str, Any], json_path: Path, why: str) -> dict[str, Any]:
+    """The result document ``doc`` with the note "note: report not drawn: ``why``" in ``quality.reasons``, written
+    to ``json_path``; returns it."""
+    quality = doc["quality"]
     reasons = [*quality["reasons"], f"note: report not drawn: {why}"]
-    doc = {**done.json_dict, "quality": {**quality, "reasons": reasons}}
-    write_json(doc, done.json_path)
-    return replace(done, json_dict=doc, report_path=None)
+    noted = {**doc, "quality": {**quality, "reasons": reasons}}
+    write_json(noted, json_path)
+    return noted

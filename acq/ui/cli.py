@@ -189,21 +189,29 @@ def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_p
     return done
 
 
-def _print_result(done: SessionResult) -> None:
+def _print_result_and_draw(done: SessionResult) -> None:
+    """Print the identified values and where the result is, then draw the report PNG and say where it is (the
+    person reads the numbers while the picture is drawn)."""
     from acq.ui.display import result_table
+    from acq.ui.report_png import draw_report
 
     out.print(result_table(done.json_dict))
-    out.print(f"result: {done.json_path}" + (f" · report: {done.report_path}" if done.report_path else ""))
+    out.print(f"result: {done.json_path}")
+    if done.report_path is None:
+        return
+    with err.status("drawing the report …"):
+        done = draw_report(done)  # a picture that fails is a note in the .result.json and a line on stderr
+    if done.report_path is not None:
+        out.print(f"report: {done.report_path}")
 
 
 def _analyze_after_recording(path: Path) -> None:
     """Identify the joint of a session just recorded; a failure is reported, the recording stands."""
     with err.status("identifying the joint …"):
         try:
-            from acq.ui.report_png import draw_report
             from analysis import AnalysisRequest
 
-            done = draw_report(_identify(path, AnalysisRequest(), report=True, catalogue_path=None))
+            done = _identify(path, AnalysisRequest(), report=True, catalogue_path=None)
         except AcqError as e:
             click.echo(f"acq: analysis: {e}", err=True)
             return
@@ -211,7 +219,7 @@ def _analyze_after_recording(path: Path) -> None:
             click.echo(f"acq: analysis failed: {type(e).__name__}: {e} (the session is kept: acq analyze {path})",
                        err=True)
             return
-    _print_result(done)
+    _print_result_and_draw(done)
 
 
 def _parse_band(text: str | None) -> tuple[float, float] | None:
@@ -240,6 +248,10 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
                                             "resampling, uniform weights (for comparison).")
 @click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
 @click.option("--no-report", is_flag=True, help="Do not draw <session>.report.png.")
+@click.option("--wait-report", is_flag=True,
+              help="With --json: exit only once <session>.report.png is written (default: the JSON is printed at "
+                   "once and the picture drawn by a background process; a failure goes to <session>.report.log "
+                   "and a note in the .result.json).")
 @click.option("--jobs", type=click.IntRange(min=1), default=None,
               help="Folder or glob: parallel analyses (default: the CPU count).")
 @click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
@@ -251,8 +263,8 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
               help="Folder or glob: run on a Dask distributed cluster (tcp://host:8786); the workers must reach "
                    "the session files at the same paths.")
 def analyze_command(session_path: Path, torque: str | None, params: str, fit_kind: str, band: str | None,
-                    paper: bool, as_json: bool, no_report: bool, jobs: int | None, catalogue_path: Path | str | None,
-                    partial: bool, scheduler: str | None) -> int:
+                    paper: bool, as_json: bool, no_report: bool, wait_report: bool, jobs: int | None,
+                    catalogue_path: Path | str | None, partial: bool, scheduler: str | None) -> int:
     """Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png.
 
     SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
@@ -270,17 +282,21 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
 
         return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
                             report=not no_report, as_json=as_json, out=out)
-    from acq.ui.report_png import draw_report
-
     if as_json:
+        from acq.ui.report_png import draw_report, draw_report_detached
+
         done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)
         click.echo(json.dumps(done.json_dict, indent=2))
         sys.stdout.flush()  # the numbers reach the reader before the picture is drawn
-        draw_report(done)  # a picture that fails is a note in the .result.json and a line on stderr
+        # a picture that fails is a note in the .result.json, and a line on stderr (here) or in <session>.report.log
+        if wait_report:
+            draw_report(done)
+        else:
+            draw_report_detached(done)
         return 0
     with err.status(f"analysing {session_path} …"):
-        done = draw_report(_identify(session_path, request, report=not no_report, catalogue_path=catalogue_path))
-    _print_result(done)
+        done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)
+    _print_result_and_draw(done)
     return 0
 
 

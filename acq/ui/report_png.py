@@ -1,12 +1,75 @@
-"""The report PNG of an identification (``<session>.report.png``), drawn once its result and catalogue row stand."""
+"""The report PNG of an identification (``<session>.report.png``), drawn once its result and catalogue row stand.
+
+Two ways to draw it, one drawing (:func:`acq.ui.plots.render_report_png`, written atomically):
+
+* :func:`draw_report` in this process: ``acq analyze`` at a terminal, ``acq record``, the batch workers;
+* :func:`draw_report_detached` in a background process (``python -m acq.ui.report_png JOB``) started after
+  ``acq analyze --json`` has printed its result, so a script reading the numbers does not wait for Qt
+  (≈ 0.3 s to import, ≈ 0.3 s to draw). The background drawers of a user take turns (one lock in the temp
+  folder): a loop of 100 analyses runs one Qt process at a time, the others wait before loading anything
+  heavy. A drawer draws only while ``<session>.result.json`` still holds the result it was started for (a
+  newer analysis of the session draws its own picture; a removed folder is left alone). A drawing that
+  fails is a note in the ``.result.json`` (as in this process) and a line in ``<session>.report.log``,
+  which also catches what a crash of Qt writes; the log is removed when the picture is drawn.
+"""
 
 from __future__ import annotations
 
+import faulthandler
+import io
+import os
+import subprocess
 import sys
+import tempfile
+from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-from acq.offline.analyze import SessionResult, report_not_drawn
 from acq.recording.storage import atomic_path
 from acqcore.errors import StorageError
+
+if TYPE_CHECKING:
+    from acq.offline.analyze import SessionResult
+    from analysis import FigureData
+
+#: A background drawer that has not finished after this long is stopped (its stack goes to the log), so a hung Qt
+#: cannot hold the drawers' lock for ever. A drawing takes ≈ 0.6 s CPU whatever the session's length (the traces
+#: are decimated); 120 s leaves room for a machine loaded 100× over.
+DRAW_TIMEOUT_S = 120.0
+
+
+def report_log_path(report_path: Path) -> Path:
+    """``<session>.report.log``: where a background drawer writes why a picture was not drawn."""
+    return report_path.with_suffix(".log")
+
+
+def drawers_lock_path() -> Path:
+    """The lock the background drawers of this user take turns on (in the temp folder: ``TMPDIR`` moves it)."""
+    return Path(tempfile.gettempdir()) / f"acq-report-drawers-{os.getuid()}.lock"
+
+
+def _title(done: SessionResult) -> str:
+    return f"{done.session.meta.joint} · {done.session.path.name}"
+
+
+def _not_drawn_line(report_path: Path, why: str, json_path: Path) -> str:
+    return f"acq: {report_path}: report not drawn ({why}); the result stands in {json_path}\n"
+
+
+def _render(figures: FigureData, values: dict[str, Any], title: str, report_path: Path) -> str | None:
+    """Draw ``report_path`` (atomically); None when drawn, else why not. A write that failed raises
+    :class:`StorageError` (disk full, I/O error: a failure, named by the file)."""
+    try:
+        from acq.ui.plots import render_report_png  # Qt only when a picture is drawn
+
+        with atomic_path(report_path) as tmp_png:
+            render_report_png(figures, tmp_png, values=values, title=title)
+    except StorageError:
+        raise
+    except Exception as e:  # noqa: BLE001 — whatever the plotting stack does, the identification stands
+        return f"{type(e).__name__}: {e}"
+    report_log_path(report_path).unlink(missing_ok=True)  # an earlier failure's log is moot once the picture is there
+    return None
 
 
 def draw_report(done: SessionResult) -> SessionResult:
@@ -18,17 +81,165 @@ def draw_report(done: SessionResult) -> SessionResult:
     """
     if done.report_path is None:
         return done
-    try:
-        from acq.ui.plots import render_report_png  # Qt only when a picture is drawn
+    why = _render(done.result.figures, done.json_dict, _title(done), done.report_path)
+    if why is None:
+        return done
+    from acq.offline.analyze import report_not_drawn
 
-        with atomic_path(done.report_path) as tmp_png:
-            render_report_png(done.result.figures, tmp_png, values=done.json_dict,
-                              title=f"{done.session.meta.joint} · {done.session.path.name}")
-    except StorageError:
-        raise  # a write that failed (disk full, I/O error) is a failure, named by the file
-    except Exception as e:  # noqa: BLE001 — whatever the plotting stack does, the identification stands
-        why = f"{type(e).__name__}: {e}"
-        noted = report_not_drawn(done, why)
-        sys.stderr.write(f"acq: {done.report_path}: report not drawn ({why}); the result stands in {done.json_path}\n")
-        return noted
-    return done
+    sys.stderr.write(_not_drawn_line(done.report_path, why, done.json_path))
+    return report_not_drawn(done, why)
+
+
+@dataclass(frozen=True)
+class _Job:
+    """What a background drawer draws: the figure data, the result document as written, where the files are."""
+
+    figures: FigureData
+    result_text: str
+    title: str
+    report_path: Path
+    json_path: Path
+
+    def is_current(self) -> bool:
+        """The ``.result.json`` still holds this job's result (not a newer analysis's, not removed)."""
+        try:
+            return self.json_path.read_text(encoding="utf-8") == self.result_text
+        except OSError:
+            return False
+
+
+_JOB_TEXTS = ("result_text", "title", "report_path", "json_path")
+
+
+def _write_job(done: SessionResult, report_path: Path) -> Path:
+    """The job file of a background drawer: a hidden ``.npz`` beside the report (no pickle: plain arrays and
+    texts), removed by the drawer as it reads it — or with the folder."""
+    import json
+
+    import numpy as np
+
+    figures = done.result.figures
+    arrays = {f.name: np.asarray(getattr(figures, f.name)) for f in fields(figures)}
+    texts = (json.dumps(done.json_dict, indent=2), _title(done), str(report_path), str(done.json_path))
+    arrays.update({name: np.asarray(text) for name, text in zip(_JOB_TEXTS, texts)})
+    fd, name = tempfile.mkstemp(dir=report_path.parent, prefix=f".{report_path.name}.", suffix=".job.npz")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez(f, **arrays)
+    except BaseException:
+        Path(name).unlink(missing_ok=True)
+        raise
+    return Path(name)
+
+
+def _read_job(data: bytes) -> _Job:
+    import numpy as np
+
+    from analysis import FigureData
+
+    with np.load(io.BytesIO(data), allow_pickle=False) as npz:
+        values = {name: npz[name] for name in npz.files}
+    scalars = {f.name: values[f.name].item() for f in fields(FigureData) if values[f.name].ndim == 0}
+    arrays = {f.name: values[f.name] for f in fields(FigureData) if values[f.name].ndim > 0}
+    arrays["band_hz"] = tuple(float(v) for v in arrays["band_hz"])
+    texts = [str(values[name]) for name in _JOB_TEXTS]
+    return _Job(FigureData(**scalars, **arrays), texts[0], texts[1], Path(texts[2]), Path(texts[3]))
+
+
+def draw_report_detached(done: SessionResult) -> None:
+    """Draw ``<session>.report.png`` in a background process and return at once (nothing when no report was asked
+    for). The drawer outlives this process (its own session: a closed terminal does not stop it) and holds none of
+    its streams, so a caller reading this process's output to its end does not wait for the picture either.
+
+    When no process can be started, or its job not written, the picture is drawn here (:func:`draw_report`).
+    """
+    if done.report_path is None:
+        return
+    report_path = done.report_path
+    try:
+        job = _write_job(done, report_path)
+    except OSError:
+        draw_report(done)  # a write that fails here fails there too, named by the picture
+        return
+    log = report_log_path(report_path)
+    try:
+        with log.open("ab") as log_file:
+            subprocess.Popen([sys.executable, "-m", "acq.ui.report_png", str(job)], stdin=subprocess.DEVNULL,
+                             stdout=subprocess.DEVNULL, stderr=log_file, start_new_session=True)
+    except OSError:  # no process (fork limit, memory), or no log: draw here
+        job.unlink(missing_ok=True)
+        _remove_if_empty(log)
+        draw_report(done)
+
+
+def _remove_if_empty(path: Path) -> None:
+    try:
+        if path.stat().st_size == 0:
+            path.unlink()
+    except OSError:
+        pass  # gone already
+
+
+class _DrawersLock:
+    """Exclusive ``flock`` on :func:`drawers_lock_path`, waited for (released by the kernel if a drawer dies)."""
+
+    def __enter__(self) -> _DrawersLock:
+        import fcntl
+
+        self._file = drawers_lock_path().open("a")
+        fcntl.flock(self._file, fcntl.LOCK_EX)
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._file.close()
+
+
+def run_job(job_path: Path) -> None:
+    """The background drawer: read and remove the job, wait for its turn, draw if the result is still this job's.
+
+    A failure is a note in the ``.result.json`` and a line on stderr (``<session>.report.log``); this process has
+    no caller to raise to.
+    """
+    faulthandler.enable()  # a crash of Qt leaves its traceback in the log
+    try:
+        data = job_path.read_bytes()
+    except FileNotFoundError:
+        return  # the folder was removed: nothing to draw for
+    job_path.unlink(missing_ok=True)
+    with _DrawersLock():
+        faulthandler.dump_traceback_later(DRAW_TIMEOUT_S, exit=True)
+        try:
+            _draw_job(_read_job(data))
+        finally:
+            faulthandler.cancel_dump_traceback_later()
+
+
+def _draw_job(job: _Job) -> None:
+    if not job.is_current():  # a newer analysis draws its own picture
+        _remove_if_empty(report_log_path(job.report_path))
+        return
+    try:
+        why = _render(job.figures, _loads(job.result_text), job.title, job.report_path)
+    except StorageError as e:
+        why = str(e)
+    if why is None:
+        return
+    sys.stderr.write(_not_drawn_line(job.report_path, why, job.json_path))
+    sys.stderr.flush()
+    if job.is_current():  # never over a newer analysis's result
+        from acq.offline.analyze import write_report_note
+
+        try:
+            write_report_note(_loads(job.result_text), job.json_path, why)
+        except StorageError as e:
+            sys.stderr.write(f"acq: {e}\n")
+
+
+def _loads(text: str) -> dict[str, Any]:
+    import json
+
+    return json.loads(text)
+
+
+if __name__ == "__main__":
+    run_job(Path(sys.argv[1]))
