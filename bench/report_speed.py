@@ -3,7 +3,7 @@
     python bench/report_speed.py [--runs 7] [--session S.h5]
 
 Each run starts ``python -m acq analyze S --json …`` as a script would (``subprocess.run`` reading stdout and stderr
-to their end) and times it from start to exit, for ``--no-report`` (no picture), the default (the picture drawn by a
+to their end) and times it from start to exit (wall, and the CPU of that process), for ``--no-report`` (no picture), the default (the picture drawn by a
 background process after the JSON is printed) and ``--wait-report`` (drawn before exit, what the default did
 before). For the default it also times until the PNG is on disk, and waits for it before the next run (so the runs
 do not overlap). The three kinds run interleaved, so a change of the machine's load hits each alike; medians.
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import subprocess
 import sys
@@ -52,21 +53,27 @@ def record_session(folder: Path) -> Path:
     return path
 
 
-def analyze_wall_s(session: Path, options: list[str], png: Path) -> tuple[float, float | None]:
-    """Wall time of one ``acq analyze --json`` as its caller sees it, s; and, when it leaves the picture to a
-    background process, the time from start until the PNG is on disk, s."""
+def _children_cpu_s() -> float:
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def analyze_wall_s(session: Path, options: list[str], png: Path) -> tuple[float, float, float | None]:
+    """Wall time of one ``acq analyze --json`` as its caller sees it and the CPU of that process (not of a
+    background drawer it leaves), s; and, when it leaves the picture to a background process, the time from start
+    until the PNG is on disk, s."""
     png.unlink(missing_ok=True)
-    t0 = time.perf_counter()
+    cpu0, t0 = _children_cpu_s(), time.perf_counter()
     subprocess.run([sys.executable, "-m", "acq", "analyze", str(session), "--json", *options], capture_output=True,
                    check=True)
-    wall = time.perf_counter() - t0
+    wall, cpu = time.perf_counter() - t0, _children_cpu_s() - cpu0
     if options:
-        return wall, None
+        return wall, cpu, None
     while not png.exists():
         if time.perf_counter() - t0 > PNG_TIMEOUT_S:
             raise SystemExit(f"{png}: not drawn within {PNG_TIMEOUT_S:g} s (see {png.with_suffix('.log')})")
         time.sleep(0.005)
-    return wall, time.perf_counter() - t0
+    return wall, cpu, time.perf_counter() - t0
 
 
 def picture_cost_s(session: Path, png: Path, runs: int) -> tuple[float, float, float]:
@@ -86,21 +93,23 @@ def main() -> None:
         session = args.session or record_session(Path(tmp))
         png = session.with_name(session.stem + ".report.png")
         walls: dict[str, list[float]] = {name: [] for name in KINDS}
+        cpus: dict[str, list[float]] = {name: [] for name in KINDS}
         until_png: list[float] = []
         for _ in range(args.runs):
             for name, options in KINDS.items():
-                wall, png_s = analyze_wall_s(session, options, png)
+                wall, cpu, png_s = analyze_wall_s(session, options, png)
                 walls[name].append(wall)
+                cpus[name].append(cpu)
                 if png_s is not None:
                     until_png.append(png_s)
         import_s, first_s, second_s = picture_cost_s(session, Path(tmp) / "cost.png", max(1, args.runs // 2))
-    floor = statistics.median(walls["--no-report"])
-    print(f"acq analyze {session.name} --json: caller's wall time, median of {args.runs} runs, "
+    floor, cpu_floor = statistics.median(walls["--no-report"]), statistics.median(cpus["--no-report"])
+    print(f"acq analyze {session.name} --json: the caller's process, median of {args.runs} runs, "
           f"load average {os.getloadavg()[0]:.2f}")
-    print(f"{'options':32s} {'median [s]':>10s} {'excess [s]':>10s}")
-    for name, values in walls.items():
-        median = statistics.median(values)
-        print(f"{name:32s} {median:10.3f} {median - floor:10.3f}")
+    print(f"{'options':32s} {'wall [s]':>9s} {'excess':>7s} {'CPU [s]':>9s} {'excess':>7s}")
+    for name in KINDS:
+        wall, cpu = statistics.median(walls[name]), statistics.median(cpus[name])
+        print(f"{name:32s} {wall:9.3f} {wall - floor:+7.3f} {cpu:9.3f} {cpu - cpu_floor:+7.3f}")
     print(f"{'default: PNG on disk after':32s} {statistics.median(until_png):10.3f}")
     print(f"the picture's own CPU (best of {max(1, args.runs // 2)}): import pyqtgraph + Qt {import_s:.3f} s, "
           f"first drawing {first_s:.3f} s, a second drawing {second_s:.3f} s")

@@ -155,7 +155,12 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
 
 def write_json(doc: dict[str, Any], path: Path) -> None:
     """Write a result document through a temporary file of this writer, so a reader never sees half of it."""
-    write_text_atomically(path, json.dumps(doc, indent=2))
+    write_text_atomically(path, result_text(doc))
+
+
+def result_text(doc: dict[str, Any]) -> str:
+    """A result document as :func:`write_json` writes it (a reader may compare a file with it)."""
+    return json.dumps(doc, indent=2)
 
 
 def report_not_drawn(done: SessionResult, why: str) -> SessionResult:

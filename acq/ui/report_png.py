@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import faulthandler
 import io
+import json
 import os
 import subprocess
 import sys
@@ -114,13 +115,13 @@ _JOB_TEXTS = ("result_text", "title", "report_path", "json_path")
 def _write_job(done: SessionResult, report_path: Path) -> Path:
     """The job file of a background drawer: a hidden ``.npz`` beside the report (no pickle: plain arrays and
     texts), removed by the drawer as it reads it — or with the folder."""
-    import json
-
     import numpy as np
+
+    from acq.offline.analyze import result_text
 
     figures = done.result.figures
     arrays = {f.name: np.asarray(getattr(figures, f.name)) for f in fields(figures)}
-    texts = (json.dumps(done.json_dict, indent=2), _title(done), str(report_path), str(done.json_path))
+    texts = (result_text(done.json_dict), _title(done), str(report_path), str(done.json_path))
     arrays.update({name: np.asarray(text) for name, text in zip(_JOB_TEXTS, texts)})
     fd, name = tempfile.mkstemp(dir=report_path.parent, prefix=f".{report_path.name}.", suffix=".job.npz")
     try:
@@ -164,7 +165,8 @@ def draw_report_detached(done: SessionResult) -> None:
     log = report_log_path(report_path)
     try:
         with log.open("ab") as log_file:
-            subprocess.Popen([sys.executable, "-m", "acq.ui.report_png", str(job)], stdin=subprocess.DEVNULL,
+            # -P: the caller's working folder is not searched for modules (a folder named 'analysis' there is data)
+            subprocess.Popen([sys.executable, "-P", "-m", "acq.ui.report_png", str(job)], stdin=subprocess.DEVNULL,
                              stdout=subprocess.DEVNULL, stderr=log_file, start_new_session=True)
     except OSError:  # no process (fork limit, memory), or no log: draw here
         job.unlink(missing_ok=True)
@@ -181,17 +183,18 @@ def _remove_if_empty(path: Path) -> None:
 
 
 class _DrawersLock:
-    """Exclusive ``flock`` on :func:`drawers_lock_path`, waited for (released by the kernel if a drawer dies)."""
+    """Exclusive ``flock`` on :func:`drawers_lock_path`, waited for (released by the kernel if a drawer dies). The
+    file is not followed if it is a link (the temp folder is shared with other users)."""
 
     def __enter__(self) -> _DrawersLock:
         import fcntl
 
-        self._file = drawers_lock_path().open("a")
-        fcntl.flock(self._file, fcntl.LOCK_EX)
+        self._fd = os.open(drawers_lock_path(), os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+        fcntl.flock(self._fd, fcntl.LOCK_EX)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        self._file.close()
+        os.close(self._fd)
 
 
 def run_job(job_path: Path) -> None:
@@ -215,11 +218,12 @@ def run_job(job_path: Path) -> None:
 
 
 def _draw_job(job: _Job) -> None:
+    """Draw ``job``'s picture if its result is still the session's; a failure: a line on stderr, a note in the result."""
     if not job.is_current():  # a newer analysis draws its own picture
         _remove_if_empty(report_log_path(job.report_path))
         return
     try:
-        why = _render(job.figures, _loads(job.result_text), job.title, job.report_path)
+        why = _render(job.figures, json.loads(job.result_text), job.title, job.report_path)
     except StorageError as e:
         why = str(e)
     if why is None:
@@ -230,15 +234,9 @@ def _draw_job(job: _Job) -> None:
         from acq.offline.analyze import write_report_note
 
         try:
-            write_report_note(_loads(job.result_text), job.json_path, why)
+            write_report_note(json.loads(job.result_text), job.json_path, why)
         except StorageError as e:
             sys.stderr.write(f"acq: {e}\n")
-
-
-def _loads(text: str) -> dict[str, Any]:
-    import json
-
-    return json.loads(text)
 
 
 if __name__ == "__main__":
