@@ -25,11 +25,16 @@ helped scenarios 1/2/3/48 but cost the stiff plant its resonance (a new confiden
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+
+ROOT = Path(__file__).resolve().parent.parent
+if str(ROOT) not in sys.path:  # this checkout's bench package
+    sys.path.insert(0, str(ROOT))
 
 from analysis import resample
 from analysis.fit import FitOptions, _Problem
