@@ -205,7 +205,7 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
             host_ns_at_start=int(host_ns(min(float(cur.time_s(0)) + shift, float(enc.t_s[0])))), origin=origin,
             tags={**(meta.tags if meta else {}), **(tags or {})}, operator=meta.operator if meta else "",
             host_clock_shared=shared_by is not None, session_id=meta.session_id if meta else None,
-            created_utc=created_utc)
+            created_utc=created_utc, bulk=True)
         writer.append_current_blocks(list(cur.phases_a.values()), *_current_blocks(cur, shift))
         writer.append_encoder(EncoderBlock(enc.index, enc.position_counts, host_ns(enc.t_s), enc.drive_time_s))
         for event in events:
