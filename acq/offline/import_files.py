@@ -99,8 +99,10 @@ CSV_BOUNDS = {"t_s": 1e10, "drive_time_s": 1e10, "i_a_A": 1e4, "i_b_A": 1e4, "i_
               "position_counts": 2.0**62, "index": 2.0**62}
 
 
-def _check_increasing(table: CsvTable, column: str, values: np.ndarray, *, strict: bool) -> None:
-    step = np.diff(values)
+def _check_increasing(table: CsvTable, column: str, values: np.ndarray, *, strict: bool,
+                      step: np.ndarray | None = None) -> None:
+    """Refuse the first row that does not increase on the previous; ``step`` is ``np.diff(values)`` if known."""
+    step = np.diff(values) if step is None else step
     bad = np.flatnonzero(step <= 0 if strict else step < 0)
     if bad.size:
         row = int(bad[0]) + 1
@@ -161,10 +163,9 @@ def _gap_notes(stream: FileStream, index: np.ndarray, t_s: np.ndarray, unit: str
 # ------------------------------------------------------------------------------------ current
 
 
-def _regular_clock(table: CsvTable) -> tuple[np.ndarray, float]:
-    """DAQ sample index of each row (0 at the first) and the rate, Hz, from the regular ``t_s``."""
+def _regular_clock(table: CsvTable, dt: np.ndarray) -> tuple[np.ndarray, float]:
+    """DAQ sample index of each row (0 at the first) and the rate, Hz, from the regular ``t_s`` and its steps ``dt``."""
     t = table.columns["t_s"]
-    dt = np.diff(t)
     if dt.max() < 1.5 * dt.min():  # no gap: every step is in the run, the median need not be found
         step = float(dt.sum() / dt.size)
     else:
@@ -172,13 +173,13 @@ def _regular_clock(table: CsvTable) -> tuple[np.ndarray, float]:
         step = float(dt[in_run].sum() / in_run.sum())
     grid = t - t[0]
     grid /= step  # in place: a 60 s file's columns are 12 MB, each temporary costs its page faults
-    nearest = np.rint(grid)
+    nearest = np.rint(grid, out=np.empty(t.size, np.int64), casting="unsafe")  # rounded into int64: exact below 2**53
     deviation = np.abs(np.subtract(grid, nearest, out=grid), out=grid)
     if deviation.max() > 0.25:  # the row is looked for only when one is off
         row = int(np.flatnonzero(deviation > 0.25)[0])
         raise table.error(row, "t_s", f"{t[row]:.12g} is off the regular sample clock of {1 / step:.6g} Hz by "
                                       f"{(t[row] - t[0]) / step - nearest[row]:+.2f} samples")
-    return nearest.astype(np.int64), 1.0 / step
+    return nearest, 1.0 / step
 
 
 def read_current_csv(path: Path, bench_rate_hz: float) -> CurrentTable:
@@ -187,14 +188,15 @@ def read_current_csv(path: Path, bench_rate_hz: float) -> CurrentTable:
     table = read_csv(path, ("t_s",), tuple(f"{p}_A" for p in PHASES), bounds=CSV_BOUNDS)
     _nonempty(table)
     t = table.columns["t_s"]
-    _check_increasing(table, "t_s", t, strict=True)
+    dt = np.diff(t)  # once, for the order check and the clock
+    _check_increasing(table, "t_s", t, strict=True, step=dt)
 
     def where() -> str:
         return f"line {table.line(-1)}, column t_s"
 
     if table.rows < 2:
         _check_duration(path, where, 0.0)
-    index, rate = _regular_clock(table)
+    index, rate = _regular_clock(table, dt)
     _check_duration(path, where, float(index[-1] + 1) / rate)
     _check_rate(path, lambda: f"lines 2–{table.line(-1)}, column t_s", rate, bench_rate_hz)
     phases = {p: table.columns[f"{p}_A"] for p in PHASES if f"{p}_A" in table.columns}
