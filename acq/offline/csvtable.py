@@ -60,7 +60,7 @@ class CsvTable:
 
 
 def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = (),
-             bounds: dict[str, float] | None = None) -> CsvTable:
+             bounds: dict[str, float] | None = None, data: pa.Buffer | None = None) -> CsvTable:
     """Read a comma-separated file whose header names its columns.
 
     Parameters
@@ -73,6 +73,8 @@ def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = 
         Column names that may be present; any other name is an error (a misspelt header).
     bounds : dict of str to float, optional
         Physical bound per column: a cell whose magnitude exceeds it is an error.
+    data : pyarrow.Buffer, optional
+        The file's bytes as :func:`file_bytes` read them: parsed from memory instead of reading the file again.
 
     Returns
     -------
@@ -85,7 +87,7 @@ def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = 
         is not a number, or a cell that is NaN or infinite.
     """
     names = _header(path, required, optional)
-    columns = _parse_with_arrow(path, names)
+    columns = _parse_with_arrow(path, names, data)
     if columns is None:
         data = _parse_with_numpy(path, names)
         columns = [np.ascontiguousarray(data[:, i]) for i in range(len(names))]
@@ -116,7 +118,20 @@ def _first_bad_value(table: CsvTable, limits: dict[str, float]) -> ConfigError:
     return table.error(row, name, f"{table.columns[name][row]:g} is beyond the physical bound ±{limit:g}")
 
 
-def _parse_with_arrow(path: Path, names: list[str]) -> list[np.ndarray] | None:
+def file_bytes(path: Path) -> pa.Buffer | None:
+    """A file's bytes read at once, to be parsed and hashed alike (one read; the hash is of the bytes parsed), when
+    it fits one parse block (``BLOCK_BYTES``); None for a larger file (parsed in blocks) or one not readable (then
+    :func:`read_csv` says why)."""
+    try:
+        if path.stat().st_size > BLOCK_BYTES:
+            return None
+        with pa.OSFile(str(path)) as f:
+            return f.read_buffer()
+    except (OSError, pa.ArrowException):
+        return None
+
+
+def _parse_with_arrow(path: Path, names: list[str], data: pa.Buffer | None) -> list[np.ndarray] | None:
     """The data columns as contiguous float64 arrays, or None when Arrow refuses anything in them.
 
     As strict as :func:`numpy.loadtxt` below, or stricter: no quotes, no empty cell read as missing, blank lines
@@ -126,9 +141,9 @@ def _parse_with_arrow(path: Path, names: list[str]) -> list[np.ndarray] | None:
         # one thread: Arrow's pool costs ≈ 10 % more CPU for no shorter wall time on 2 cores while the import
         # hashes the file in another thread (acq.offline.importers). One block for a file up to BLOCK_BYTES: each
         # column is then one chunk, handed to numpy without a copy (and the per-block work is done once)
-        block_bytes = min(path.stat().st_size + 1, BLOCK_BYTES)
+        block_bytes = min((path.stat().st_size if data is None else data.size) + 1, BLOCK_BYTES)
         table = pa_csv.read_csv(
-            path,
+            path if data is None else pa.BufferReader(data),
             read_options=pa_csv.ReadOptions(column_names=names, skip_rows=1, use_threads=False,
                                             block_size=block_bytes),
             parse_options=pa_csv.ParseOptions(delimiter=",", quote_char=False, double_quote=False, escape_char=False,

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+import pyarrow as pa
 
 from acq.offline.csvtable import CsvTable, read_csv
 from acqcore.errors import ConfigError
@@ -182,10 +183,10 @@ def _regular_clock(table: CsvTable, dt: np.ndarray) -> tuple[np.ndarray, float]:
     return nearest, 1.0 / step
 
 
-def read_current_csv(path: Path, bench_rate_hz: float) -> CurrentTable:
+def read_current_csv(path: Path, bench_rate_hz: float, data: pa.Buffer | None = None) -> CurrentTable:
     """Read and check a current CSV (``t_s`` and phase columns ``i_a_A`` ...); its rate must be the bench's
-    ``[daq] rate_hz`` (``bench_rate_hz``) within :data:`RATE_TOLERANCE`."""
-    table = read_csv(path, ("t_s",), tuple(f"{p}_A" for p in PHASES), bounds=CSV_BOUNDS)
+    ``[daq] rate_hz`` (``bench_rate_hz``) within :data:`RATE_TOLERANCE`. ``data``: the file's bytes, if read."""
+    table = read_csv(path, ("t_s",), tuple(f"{p}_A" for p in PHASES), bounds=CSV_BOUNDS, data=data)
     _nonempty(table)
     t = table.columns["t_s"]
     dt = np.diff(t)  # once, for the order check and the clock
@@ -317,9 +318,10 @@ def _cycles_from_stamps(t: np.ndarray, period_s: float) -> np.ndarray:
     return rows + np.cumsum(missing)
 
 
-def read_encoder_csv(path: Path, period_s: float) -> EncoderTable:
-    """Read and check an encoder CSV (``t_s, position_counts[, index][, drive_time_s]``)."""
-    table = read_csv(path, ("t_s", "position_counts"), ("index", "drive_time_s"), bounds=CSV_BOUNDS)
+def read_encoder_csv(path: Path, period_s: float, data: pa.Buffer | None = None) -> EncoderTable:
+    """Read and check an encoder CSV (``t_s, position_counts[, index][, drive_time_s]``); ``data``: its bytes, if
+    read."""
+    table = read_csv(path, ("t_s", "position_counts"), ("index", "drive_time_s"), bounds=CSV_BOUNDS, data=data)
     _nonempty(table)
     t = table.columns["t_s"]
     notes = _stamps_stepping_back(table, t)  # host stamps: several samples may arrive at once, or jitter
