@@ -37,7 +37,7 @@ FLUSH_BYTES = 1 << 20
 READ_TIMEOUT_S = 0.2
 #: The recording thread takes what the readers queued once per this interval, all of it, instead of waking for each
 #: block: a wake-up (and the GIL handed over to it) per batch. Real time: a block waits at most this long (the
-#: flush interval is 0.5 s, a display frame ~30 ms); --fast: ~15 blocks a batch instead of one.
+#: flush interval is 0.5 s, a display frame ~30 ms); --fast: ~35 blocks a batch instead of one.
 HANDOFF_S = 0.01
 STALL_TIMEOUT_S = 5.0
 SHUTDOWN_TIMEOUT_S = 5.0
@@ -412,7 +412,7 @@ class Recorder:
     def _store_run(self, run: list[EncoderBlock], writer: SessionWriter, checker: _StreamChecker,
                    counts: dict[str, int]) -> None:
         """Store encoder blocks that arrived one after another as one block (emptying ``run``): one check, one append
-        and one call to each listener for the lot (a --fast bench queues ~15 blocks of 40 cycles per handoff)."""
+        and one call to each listener for the lot (a --fast bench queues ~20 blocks of 40 cycles in a row)."""
         if run:
             block = run[0] if len(run) == 1 else _joined(run)
             run.clear()
