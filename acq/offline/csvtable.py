@@ -89,8 +89,8 @@ def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = 
     names = _header(path, required, optional)
     columns = _parse_with_arrow(path, names, data)
     if columns is None:
-        data = _parse_with_numpy(path, names)
-        columns = [np.ascontiguousarray(data[:, i]) for i in range(len(names))]
+        rows = _parse_with_numpy(path, names)
+        columns = [np.ascontiguousarray(rows[:, i]) for i in range(len(names))]
     table = CsvTable(path, dict(zip(names, columns)))
     limits = bounds or {}
     for name, values in table.columns.items():
