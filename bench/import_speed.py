@@ -6,13 +6,15 @@ Writes the pair in the form ``acq export`` writes (``t_s`` to the ns, currents i
 exact form, encoder with ``index`` and ``drive_time_s``) into a temporary folder, then times
 :func:`acq.offline.importers.import_session` in this process (median of ``--repeat``, wall and CPU), the floor —
 pandas' C parser reading the same two files into float64 (``pandas.read_csv(engine="c")``, median of
-``--repeat``; ``pip install pandas`` for it) — and their ratio, and once the whole ``acq import`` command in a
-fresh process (Python start-up and the package's imports included). Target (issue 17): import ≤ 2× the floor.
+``--repeat``; ``pip install pandas`` for it), the runs of the two interleaved so that the machine's load hits
+both alike — and their ratio, and once the whole ``acq import`` command in a fresh process (Python start-up and
+the package's imports included), with the load average. Target (issue 17): import ≤ 2× the floor.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import statistics
 import subprocess
 import sys
@@ -51,20 +53,16 @@ def write_pair(folder: Path, seconds: float, phases: int) -> tuple[Path, Path]:
     return cur, enc
 
 
-def pandas_floor(cur: Path, enc: Path, repeat: int) -> tuple[float, float] | None:
-    """Median wall and CPU seconds of pandas' C parser reading both files into float64; None without pandas."""
+def pandas_floor(cur: Path, enc: Path) -> tuple[float, float] | None:
+    """Wall and CPU seconds of pandas' C parser reading both files into float64; None without pandas."""
     try:
         import pandas as pd
     except ImportError:
         return None
-    walls, cpus = [], []
-    for _ in range(repeat):
-        t0, c0 = time.perf_counter(), time.process_time()
-        for path in (cur, enc):
-            pd.read_csv(path, engine="c", dtype=np.float64).to_numpy()
-        walls.append(time.perf_counter() - t0)
-        cpus.append(time.process_time() - c0)
-    return statistics.median(walls), statistics.median(cpus)
+    t0, c0 = time.perf_counter(), time.process_time()
+    for path in (cur, enc):
+        pd.read_csv(path, engine="c", dtype=np.float64).to_numpy()
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
 def main() -> None:
@@ -77,13 +75,15 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         cur, enc = write_pair(folder, args.seconds, args.phases)
-        walls, cpus = [], []
+        walls, cpus, floors = [], [], []
         for i in range(args.repeat):
             t0, c0 = time.perf_counter(), time.process_time()
             import_session(cur, enc, bench, profile, folder / f"s{i}.h5")
             walls.append(time.perf_counter() - t0)
             cpus.append(time.process_time() - c0)
-        floor = pandas_floor(cur, enc, args.repeat)
+            floors.append(pandas_floor(cur, enc))
+        measured = [f for f in floors if f is not None]
+        floor = (statistics.median(w for w, _ in measured), statistics.median(c for _, c in measured)) if measured else None
         t0 = time.perf_counter()
         subprocess.run([sys.executable, "-m", "acq", "import", "--current", str(cur), "--encoder", str(enc),
                         "--bench", str(DEFAULT_BENCH), "--profile", "triangle_0.2s", "-o", str(folder / "cli.h5")],
@@ -105,6 +105,7 @@ def main() -> None:
             table.add_row("import / floor (target ≤ 2)", f"{wall / floor[0]:.2f} wall, {cpu / floor[1]:.2f} CPU")
         table.add_row("`acq import` in a fresh process", f"{cli_s:.2f} s  (start-up and imports included)")
         Console().print(table)
+        print(f"load average {' '.join(f'{x:.2f}' for x in os.getloadavg())}")
 
 
 if __name__ == "__main__":

@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+import pyarrow as pa
 
 from acq.offline.csvtable import CsvTable, read_csv
 from acqcore.errors import ConfigError
@@ -99,8 +100,10 @@ CSV_BOUNDS = {"t_s": 1e10, "drive_time_s": 1e10, "i_a_A": 1e4, "i_b_A": 1e4, "i_
               "position_counts": 2.0**62, "index": 2.0**62}
 
 
-def _check_increasing(table: CsvTable, column: str, values: np.ndarray, *, strict: bool) -> None:
-    step = np.diff(values)
+def _check_increasing(table: CsvTable, column: str, values: np.ndarray, *, strict: bool,
+                      step: np.ndarray | None = None) -> None:
+    """Refuse the first row that does not increase on the previous; ``step`` is ``np.diff(values)`` if known."""
+    step = np.diff(values) if step is None else step
     bad = np.flatnonzero(step <= 0 if strict else step < 0)
     if bad.size:
         row = int(bad[0]) + 1
@@ -161,10 +164,9 @@ def _gap_notes(stream: FileStream, index: np.ndarray, t_s: np.ndarray, unit: str
 # ------------------------------------------------------------------------------------ current
 
 
-def _regular_clock(table: CsvTable) -> tuple[np.ndarray, float]:
-    """DAQ sample index of each row (0 at the first) and the rate, Hz, from the regular ``t_s``."""
+def _regular_clock(table: CsvTable, dt: np.ndarray) -> tuple[np.ndarray, float]:
+    """DAQ sample index of each row (0 at the first) and the rate, Hz, from the regular ``t_s`` and its steps ``dt``."""
     t = table.columns["t_s"]
-    dt = np.diff(t)
     if dt.max() < 1.5 * dt.min():  # no gap: every step is in the run, the median need not be found
         step = float(dt.sum() / dt.size)
     else:
@@ -172,29 +174,30 @@ def _regular_clock(table: CsvTable) -> tuple[np.ndarray, float]:
         step = float(dt[in_run].sum() / in_run.sum())
     grid = t - t[0]
     grid /= step  # in place: a 60 s file's columns are 12 MB, each temporary costs its page faults
-    nearest = np.rint(grid)
+    nearest = np.rint(grid, out=np.empty(t.size, np.int64), casting="unsafe")  # rounded into int64: exact below 2**53
     deviation = np.abs(np.subtract(grid, nearest, out=grid), out=grid)
     if deviation.max() > 0.25:  # the row is looked for only when one is off
         row = int(np.flatnonzero(deviation > 0.25)[0])
         raise table.error(row, "t_s", f"{t[row]:.12g} is off the regular sample clock of {1 / step:.6g} Hz by "
                                       f"{(t[row] - t[0]) / step - nearest[row]:+.2f} samples")
-    return nearest.astype(np.int64), 1.0 / step
+    return nearest, 1.0 / step
 
 
-def read_current_csv(path: Path, bench_rate_hz: float) -> CurrentTable:
+def read_current_csv(path: Path, bench_rate_hz: float, data: pa.Buffer | None = None) -> CurrentTable:
     """Read and check a current CSV (``t_s`` and phase columns ``i_a_A`` ...); its rate must be the bench's
-    ``[daq] rate_hz`` (``bench_rate_hz``) within :data:`RATE_TOLERANCE`."""
-    table = read_csv(path, ("t_s",), tuple(f"{p}_A" for p in PHASES), bounds=CSV_BOUNDS)
+    ``[daq] rate_hz`` (``bench_rate_hz``) within :data:`RATE_TOLERANCE`. ``data``: the file's bytes, if read."""
+    table = read_csv(path, ("t_s",), tuple(f"{p}_A" for p in PHASES), bounds=CSV_BOUNDS, data=data)
     _nonempty(table)
     t = table.columns["t_s"]
-    _check_increasing(table, "t_s", t, strict=True)
+    dt = np.diff(t)  # once, for the order check and the clock
+    _check_increasing(table, "t_s", t, strict=True, step=dt)
 
     def where() -> str:
         return f"line {table.line(-1)}, column t_s"
 
     if table.rows < 2:
         _check_duration(path, where, 0.0)
-    index, rate = _regular_clock(table)
+    index, rate = _regular_clock(table, dt)
     _check_duration(path, where, float(index[-1] + 1) / rate)
     _check_rate(path, lambda: f"lines 2–{table.line(-1)}, column t_s", rate, bench_rate_hz)
     phases = {p: table.columns[f"{p}_A"] for p in PHASES if f"{p}_A" in table.columns}
@@ -315,9 +318,10 @@ def _cycles_from_stamps(t: np.ndarray, period_s: float) -> np.ndarray:
     return rows + np.cumsum(missing)
 
 
-def read_encoder_csv(path: Path, period_s: float) -> EncoderTable:
-    """Read and check an encoder CSV (``t_s, position_counts[, index][, drive_time_s]``)."""
-    table = read_csv(path, ("t_s", "position_counts"), ("index", "drive_time_s"), bounds=CSV_BOUNDS)
+def read_encoder_csv(path: Path, period_s: float, data: pa.Buffer | None = None) -> EncoderTable:
+    """Read and check an encoder CSV (``t_s, position_counts[, index][, drive_time_s]``); ``data``: its bytes, if
+    read."""
+    table = read_csv(path, ("t_s", "position_counts"), ("index", "drive_time_s"), bounds=CSV_BOUNDS, data=data)
     _nonempty(table)
     t = table.columns["t_s"]
     notes = _stamps_stepping_back(table, t)  # host stamps: several samples may arrive at once, or jitter

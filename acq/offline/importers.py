@@ -15,7 +15,7 @@ the current is shifted to start with the encoder. Every choice is written into t
 
 from __future__ import annotations
 
-import functools
+import hashlib
 import os
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -24,10 +24,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pyarrow as pa
 
 from acq import __version__
 from acq.config import with_joint
 from acq.offline.analyze import sha256_of
+from acq.offline.csvtable import file_bytes
 from acq.offline.export_metadata import ExportMetadata, read_metadata
 from acq.offline.import_files import (CurrentTable, EncoderTable, host_ns, read_current_csv, read_current_tdms,
                                       read_encoder_csv)
@@ -150,29 +152,44 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
         if not given.exists():
             raise ConfigError(f"{given}: no such file")
     # the configs first: a missing bench or bad metadata is one line at once, not after hashing the files
-    digest = functools.cache(sha256_of)  # an exported pair's metadata check hashes the files the session records
+    known: dict[Path, str] = {}  # an exported pair's metadata check hashes the files the session records
+
+    def digest(path: Path) -> str:
+        if path not in known:
+            known[path] = sha256_of(path)
+        return known[path]
+
     meta, meta_warning = read_metadata(current_path, encoder_path, digest)
     bench, profile = _configs(meta, bench, profile, joint, current_path)
-    # the files' SHA-256 (those not yet known) in a thread while they are parsed (hashlib and Arrow release the GIL)
+    # a CSV not hashed yet is read once into memory (if it fits one parse block): its SHA-256 is taken in a thread
+    # from the very bytes that are parsed meanwhile (hashlib and Arrow release the GIL)
+    data = {path: file_bytes(path) for path in (current_path, encoder_path)
+            if path.suffix.lower() != ".tdms" and path not in known}
     with ThreadPoolExecutor(max_workers=1) as hashing:
-        sha256 = {path: hashing.submit(digest, path) for path in (current_path, encoder_path)}
+        sha256 = {path: hashing.submit(digest, path) if data.get(path) is None else
+                  hashing.submit(_sha256_hex, data[path]) for path in (current_path, encoder_path)}
         return _import(current_path, encoder_path, bench, profile, out, current_channels, tags, meta, meta_warning,
-                       same_clock, started_utc, sha256)
+                       same_clock, started_utc, sha256, data)
+
+
+def _sha256_hex(data: pa.Buffer) -> str:
+    """SHA-256 of bytes in memory, hex (:func:`acq.offline.analyze.sha256_of` of the file they were read from)."""
+    return hashlib.sha256(data).hexdigest()
 
 
 def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profile, out: Path,
             current_channels: tuple[str, ...], tags: dict[str, str | float] | None, meta: ExportMetadata | None,
             meta_warning: str | None, same_clock: bool, started_utc: str | None,
-            sha256: dict[Path, Future[str]]) -> ImportResult:
-    """:func:`import_session` with the configs resolved and the files' SHA-256 under way."""
+            sha256: dict[Path, Future[str]], data: dict[Path, pa.Buffer | None]) -> ImportResult:
+    """:func:`import_session` with the configs resolved, the files' SHA-256 under way and the bytes of those read."""
     if current_path.suffix.lower() == ".tdms":
         cur = read_current_tdms(current_path, bench.daq.rate_hz, current_channels)
     else:
         if current_channels:
             raise ConfigError(f"--current-channel: only for TDMS files, not {current_path}")
-        cur = read_current_csv(current_path, bench.daq.rate_hz)
+        cur = read_current_csv(current_path, bench.daq.rate_hz, data.get(current_path))
     period_s = bench.drive.period_s
-    enc = read_encoder_csv(encoder_path, period_s)
+    enc = read_encoder_csv(encoder_path, period_s, data.get(encoder_path))
     shared_by = "--same-clock" if same_clock else (
         meta.path.name if meta is not None and meta.host_clock_shared else None)
     shift, timeline = _timeline(cur, enc, shared_by)
@@ -205,7 +222,7 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
             host_ns_at_start=int(host_ns(min(float(cur.time_s(0)) + shift, float(enc.t_s[0])))), origin=origin,
             tags={**(meta.tags if meta else {}), **(tags or {})}, operator=meta.operator if meta else "",
             host_clock_shared=shared_by is not None, session_id=meta.session_id if meta else None,
-            created_utc=created_utc)
+            created_utc=created_utc, bulk=True)
         writer.append_current_blocks(list(cur.phases_a.values()), *_current_blocks(cur, shift))
         writer.append_encoder(EncoderBlock(enc.index, enc.position_counts, host_ns(enc.t_s), enc.drive_time_s))
         for event in events:

