@@ -249,7 +249,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     y, phi = i - offset.dc_a, th + offset.theta0_rad
     g = -np.sin(phi)
     tn = np.linspace(-1.0, 1.0, y.size)
-    cols = _slow_offset_columns(y.size, rate_hz, spare_rows=3)  # the slow offset, the angle columns, then the lines
+    cols, support = _slow_offset_columns(y.size, rate_hz, spare_rows=3)  # the slow offset, the angle columns, then lines
     nd = cols.shape[0] - 3
     r_band = _spline_factor(g, m, smoothing)  # the spline's normal matrix depends on g alone: factored once
     iq1, _ = _spline_iq(y, g, m, r_band, np.ones((1, y.size)))
@@ -268,7 +268,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         Y = np.column_stack((y, np.random.default_rng(noise_seed).standard_normal(y.size)))
     lines_hz: list[float] = []
     for round_ in range(LINE_ROUNDS + 1):  # a strong line's leak into the first fit can hide weaker ones
-        iq, beta = _spline_iq(Y, g, m, r_band, cols)
+        iq, beta = _spline_iq(Y, g, m, r_band, cols, support)
         iq_y, beta_y = (iq, beta) if Y.ndim == 1 else (iq[:, 0], beta[:, 0])
         resid = y - g * iq_y - beta_y @ cols
         if round_ == LINE_ROUNDS:
@@ -279,6 +279,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
             break
         lines_hz += new
         cols = np.concatenate((cols, *(_tone_columns(f, rate_hz, tn) for f in new)))
+        support = np.concatenate((support, np.tile(np.array([0, y.size]), (4 * len(new), 1))))
         angle_columns(iq_y)  # the lines leaked into the first i_q, and so into the angle columns
     if found is not None:
         found.append(_interference_found(lines_hz, beta_y[nd + 3:], beta_y[:nd] @ cols[:nd], w_e))
@@ -332,9 +333,10 @@ class Interference:
     offset_drift_a: float
 
 
-def _slow_offset_columns(n: int, rate_hz: float, spare_rows: int = 0) -> np.ndarray:
+def _slow_offset_columns(n: int, rate_hz: float, spare_rows: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Cubic B-spline basis in time with knots ``OFFSET_KNOT_S`` apart (sums to 1 at every sample), one row each,
-    followed by ``spare_rows`` rows of zeros for the caller's own columns."""
+    followed by ``spare_rows`` rows of zeros for the caller's own columns; and each row's support, shape (rows, 2):
+    the samples [start, stop) outside which it is zero (the spare rows: all samples)."""
     span = OFFSET_KNOT_S * rate_hz
     nk = int(np.floor((n - 1) / span)) + 1
     cols = np.zeros((nk + 3 + spare_rows, n))
@@ -346,7 +348,11 @@ def _slow_offset_columns(n: int, rate_hz: float, spare_rows: int = 0) -> np.ndar
         cols[q + 1, a:b] = (3 * r3 - 6 * r2 + 4) / 6.0
         cols[q + 2, a:b] = (-3 * r3 + 3 * r2 + 3 * r + 1) / 6.0
         cols[q + 3, a:b] = r3 / 6.0
-    return cols
+    support = np.tile(np.array([0, n]), (cols.shape[0], 1))
+    j = np.arange(nk + 3)  # function j lives on knot intervals j − 3 … j
+    support[:nk + 3, 0] = bounds[np.clip(j - 3, 0, nk)]
+    support[:nk + 3, 1] = bounds[np.clip(j + 1, 0, nk)]
+    return cols, support
 
 
 def _interference_lines(resid_a: np.ndarray, rate_hz: float) -> list[float]:
@@ -452,33 +458,36 @@ def _spline_factor(g: np.ndarray, m: int, smoothing: float) -> np.ndarray:
     return cholesky_banded(ab)
 
 
-def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray,
-               extra: np.ndarray | list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray, extra: np.ndarray,
+               support: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Penalised LS of y ≈ g·s(t) + Σ β_k·extra_k, s a uniform cubic B-spline (knot every m samples), R the
     Cholesky factor of the spline's penalised normal matrix (:func:`_spline_factor` of the same g and m).
 
     The global coefficients β border the banded spline system and are eliminated by their Schur
     complement. ``y`` may hold several right-hand sides as columns, shape (n, r): one factorisation
-    serves them all. ``extra`` holds the columns as rows, shape (len(extra), n). Returns s at the samples
-    (shape of ``y``) and β (shape (len(extra),) or (len(extra), r)).
+    serves them all. ``extra`` holds the columns as rows, shape (len(extra), n); ``support`` (shape
+    (len(extra), 2), default: all samples) the samples [start, stop) outside which each is zero (the slow
+    offset's B-splines cover a few seconds each). Returns s at the samples (shape of ``y``) and β (shape
+    (len(extra),) or (len(extra), r)).
 
     The projections Bᵀ(g·x) and the products extraᵀ·extra, extraᵀ·y are summed block by block of
     :data:`_BLOCK_SPANS` knot spans (cache-sized), skipping in each block the extra columns that are zero
-    there (the slow offset's B-splines cover a few seconds each).
+    there; the triangular solve of a column starts where it does.
     """
     n = y.shape[0]
     nk = -(-n // m)
     W = _bspline_weights(m)
     Yt = y.reshape(n, -1).T
-    Vt = np.asarray(extra, dtype=np.float64)  # (len(extra), n)
-    ny, ne = Yt.shape[0], Vt.shape[0]
+    ny, ne = Yt.shape[0], extra.shape[0]
+    if support is None:
+        support = np.tile(np.array([0, n]), (ne, 1))
     Pt = np.zeros((ny + ne, nk + 3))  # rows: Bᵀ(g·y_i), then Bᵀ(g·extra_k)
     VV, VY = np.zeros((ne, ne)), np.zeros((ne, ny))
     for k0 in range(0, nk, _BLOCK_SPANS):
         k1 = min(nk, k0 + _BLOCK_SPANS)
         s0, s1 = k0 * m, min(n, k1 * m)
-        act = np.flatnonzero(np.any(Vt[:, s0:s1], axis=1))
-        v, yb = Vt[act, s0:s1], Yt[:, s0:s1]
+        act = np.flatnonzero((support[:, 0] < s1) & (support[:, 1] > s0))
+        v, yb = extra[act, s0:s1], Yt[:, s0:s1]
         VV[act[:, None], act] += v @ v.T
         VY[act] += v @ yb.T
         rows = np.zeros((ny + act.size, (k1 - k0) * m))
@@ -491,8 +500,13 @@ def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray,
             Pt[which, k0 + k:k1 + k] += full[k]
     # A = RᵀR (:func:`_spline_factor`). The Schur complement needs Pᵤᵀ·A⁻¹·[P_y, Pᵤ] = Zᵤᵀ·[Z_y, Zᵤ] with Z = R⁻ᵀ·P (one
     # triangular solve per column), and the spline only R⁻¹·(Z_y − Zᵤ·β): half the banded solves of A⁻¹·P, which
-    # are sequential level-2 sweeps, one per column (LAPACK's tbsv)
-    Z = _banded_triangular_solve(r_band, Pt.T, transpose=True)  # (nk + 3, ny + ne), Fortran order as LAPACK wants it
+    # are sequential level-2 sweeps, one per column (LAPACK's tbsv). Rᵀ is lower triangular, so a column of P that
+    # is zero up to row j has Z zero there too: its sweep starts at j (the same arithmetic on the rest)
+    start = np.concatenate((np.zeros(ny, dtype=int), support[:, 0] // m))
+    Z = np.zeros((nk + 3, ny + ne), order="F")
+    for j in np.unique(start):
+        which = np.flatnonzero(start == j)
+        Z[j:, which] = _banded_triangular_solve(r_band[:, j:], Pt[which, j:].T, transpose=True)
     Zy, Zu = Z[:, :ny], Z[:, ny:]
     beta = np.linalg.lstsq(VV - Zu.T @ Zu, VY - Zu.T @ Zy, rcond=None)[0]
     coef = _banded_triangular_solve(r_band, Zy - Zu @ beta, transpose=False)
