@@ -270,7 +270,8 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     for round_ in range(LINE_ROUNDS + 1):  # a strong line's leak into the first fit can hide weaker ones
         iq, beta = _spline_iq(Y, g, m, r_band, cols, support)
         iq_y, beta_y = (iq, beta) if Y.ndim == 1 else (iq[:, 0], beta[:, 0])
-        resid = y - g * iq_y - beta_y @ cols
+        offset_a = beta_y[:nd] @ cols[:nd]  # the slow offset (kept for found)
+        resid = y - g * iq_y - offset_a - beta_y[nd:] @ cols[nd:]
         if round_ == LINE_ROUNDS:
             break
         new = [f for f in _interference_lines(resid, rate_hz) if all(abs(f - h) > 1.0 for h in lines_hz)]
@@ -282,7 +283,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         support = np.concatenate((support, np.tile(np.array([0, y.size]), (4 * len(new), 1))))
         angle_columns(iq_y)  # the lines leaked into the first i_q, and so into the angle columns
     if found is not None:
-        found.append(_interference_found(lines_hz, beta_y[nd + 3:], beta_y[:nd] @ cols[:nd], w_e))
+        found.append(_interference_found(lines_hz, beta_y[nd + 3:], offset_a, w_e))
     if Y.ndim == 1:
         return k_t_Nm_per_A * iq
     # the noise floor of the final residual: with the lines removed (left in, a line's leak raised the
