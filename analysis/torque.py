@@ -265,7 +265,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     angle_columns(iq1)
     Y = y
     if noise_seed is not None:  # unit white noise through the same estimator, scaled to the floor at the end
-        Y = np.column_stack((y, np.random.default_rng(noise_seed).standard_normal(y.size)))
+        Y = np.stack((y, np.random.default_rng(noise_seed).standard_normal(y.size))).T  # columns, each contiguous
     lines_hz: list[float] = []
     for round_ in range(LINE_ROUNDS + 1):  # a strong line's leak into the first fit can hide weaker ones
         iq, beta = _spline_iq(Y, g, m, r_band, cols, support)
@@ -418,7 +418,8 @@ def _broadband_noise_rms(resid_a: np.ndarray, rate_hz: float, m: int) -> float:
     residual's RMS instead counts such ripple as broadband noise (a 3 % ripple biased K by −2…−5 %) and,
     below the bandwidth, misses what the spline absorbed.
     """
-    f, psd = welch(resid_a, fs=rate_hz, nperseg=min(resid_a.size, 4096))
+    # no detrending: a segment's mean leaks into bins 0 and 1 of the (periodic) Hann window only, far below the floor's
+    f, psd = welch(resid_a, fs=rate_hz, nperseg=min(resid_a.size, 4096), detrend=False)
     floor = psd[(f >= rate_hz / m) & (f <= 0.45 * rate_hz)]
     if floor.size < 8:
         return 1.4826 * float(np.median(np.abs(resid_a - np.median(resid_a))))
