@@ -15,6 +15,7 @@ this module.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from scipy.linalg import cholesky_banded
@@ -78,7 +79,7 @@ class SlowOffset:
         values = np.zeros((q1 - q0 + 4, s1 - s0))
         for q in range(q0, q1 + 1):  # knot interval q carries functions q … q + 3
             a, b = max(s0, int(bounds[q])), min(s1, int(bounds[q + 1]))
-            values[q - q0:q - q0 + 4, a - s0:b - s0] = self._pieces(np.arange(a, b) / self.span - q)
+            values[q - q0:q - q0 + 4, a - s0:b - s0] = self._pieces(q, a, b)
         return np.arange(q0, q1 + 4), values
 
     def curve(self, beta: np.ndarray) -> np.ndarray:
@@ -87,15 +88,27 @@ class SlowOffset:
         out = np.empty(self.n)
         for q in range(self.intervals):
             a, b = int(bounds[q]), int(bounds[q + 1])
-            out[a:b] = beta[q:q + 4] @ self._pieces(np.arange(a, b) / self.span - q)
+            out[a:b] = beta[q:q + 4] @ self._pieces(q, a, b)
         return out
 
-    @staticmethod
-    def _pieces(r: np.ndarray) -> np.ndarray:
-        """The 4 cubic pieces at the positions r ∈ [0, 1) within a knot interval, shape (4, len(r))."""
-        r2, r3 = r**2, r**3
-        return np.stack(((1 - r) ** 3 / 6.0, (3 * r3 - 6 * r2 + 4) / 6.0, (-3 * r3 + 3 * r2 + 3 * r + 1) / 6.0,
-                         r3 / 6.0))
+    def _pieces(self, q: int, a: int, b: int) -> np.ndarray:
+        """The 4 cubic pieces of knot interval q at its samples a … b − 1, shape (4, b − a)."""
+        if self.span.is_integer():  # every interval starts at q·span: one table serves them all
+            first = q * int(self.span)
+            return self._table[:, a - first:b - first]
+        return _cubic_pieces(np.arange(a, b) / self.span - q)
+
+    @cached_property
+    def _table(self) -> np.ndarray:
+        """The 4 cubic pieces at the samples of one knot interval of an integer ``span`` (the last interval holds
+        the rest, at most as many), shape (4, span)."""
+        return _cubic_pieces(np.arange(int(self.span)) / self.span)
+
+
+def _cubic_pieces(r: np.ndarray) -> np.ndarray:
+    """The 4 cubic B-spline pieces at the positions r within a knot interval (in units of it), shape (4, len(r))."""
+    r2, r3 = r**2, r**3
+    return np.stack(((1 - r) ** 3 / 6.0, (3 * r3 - 6 * r2 + 4) / 6.0, (-3 * r3 + 3 * r2 + 3 * r + 1) / 6.0, r3 / 6.0))
 
 
 def spline_factor(g: np.ndarray, m: int, smoothing: float) -> np.ndarray:
