@@ -119,18 +119,19 @@ def spline_factor(g: np.ndarray, m: int, smoothing: float) -> np.ndarray:
     nk = -(-n // m)
     W = bspline_weights(m)
     G2 = np.zeros(nk * m)
-    G2[:n] = g * g
+    np.square(g, out=G2[:n])
     pairs = [(k, l) for k in range(4) for l in range(k, 4)]
-    diag = G2.reshape(nk, m) @ np.stack([W[:, k] * W[:, l] for k, l in pairs], axis=1)  # (nk, 10)
+    # (10, m) @ (m, nk): one row per pair of active coefficients, read contiguously below
+    diag = np.stack([W[:, k] * W[:, l] for k, l in pairs]) @ G2.reshape(nk, m).T
     ab = np.zeros((4, nk + 3))  # upper banded storage: ab[3 - d, j] = A[j - d, j]
     for q, (k, l) in enumerate(pairs):
-        ab[3 - (l - k), l:l + nk] += diag[:, q]
+        ab[3 - (l - k), l:l + nk] += diag[q]
     lam = smoothing * ab[3].mean()
     d2 = np.array([1.0, -2.0, 1.0])
     for a in range(3):
         for b in range(a, 3):
             ab[3 - (b - a), b:b + nk + 1] += lam * d2[a] * d2[b]
-    return cholesky_banded(ab)
+    return cholesky_banded(ab, overwrite_ab=True)
 
 
 def spline_fit(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray, extra: np.ndarray,
