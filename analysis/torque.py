@@ -21,8 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.ndimage import median_filter
-from scipy.signal import butter, find_peaks, hilbert, sosfiltfilt, welch
+from scipy.signal import butter, find_peaks, hilbert, sosfiltfilt
 
+from analysis import welch
 from analysis.torque_spline import SlowOffset, spline_factor, spline_fit
 
 _SQRT3 = np.sqrt(3.0)
@@ -344,7 +345,7 @@ def _interference_lines(resid_a: np.ndarray, rate_hz: float) -> list[float]:
     nper = min(resid_a.size, int(rate_hz))
     if resid_a.size < 4 * nper:
         return []
-    f, psd = welch(resid_a, fs=rate_hz, nperseg=nper)
+    f, psd = welch.psd(resid_a, rate_hz, nper)
     ref = median_filter(psd, size=2 * LINE_NEIGHBOURS + 1, mode="nearest")
     peaks, _ = find_peaks(psd, height=LINE_FACTOR * ref, distance=3)
     peaks = peaks[(f[peaks] >= LINE_MIN_HZ) & (f[peaks] <= 0.49 * rate_hz)]
@@ -397,7 +398,7 @@ def _broadband_noise_rms(resid_a: np.ndarray, rate_hz: float, m: int) -> float:
     below the bandwidth, misses what the spline absorbed.
     """
     # no detrending: a segment's mean leaks into bins 0 and 1 of the (periodic) Hann window only, far below the floor's
-    f, psd = welch(resid_a, fs=rate_hz, nperseg=min(resid_a.size, 4096), detrend=False)
+    f, psd = welch.psd(resid_a, rate_hz, min(resid_a.size, 4096), detrend=False)
     floor = psd[(f >= rate_hz / m) & (f <= 0.45 * rate_hz)]
     if floor.size < 8:
         return 1.4826 * float(np.median(np.abs(resid_a - np.median(resid_a))))
