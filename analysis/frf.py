@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import signal
 
+from analysis import welch
 from analysis.encoder import difference_response
 from analysis.segments import SegmentSelection, select_segments
 
@@ -228,12 +229,11 @@ def _fine_psd(x: np.ndarray, fs: float, nperseg: int, step: int, n_fine: int,
     """Torque PSD at ``n_fine`` bins from the samples of the runs of segments (first, last + 1) given, each run's
     Welch estimate (segments up to ``n_fine`` long) weighted by its number of segments; None: the whole record."""
     if runs is None:
-        return signal.welch(x, fs=fs, window="hann", nperseg=min(n_fine, x.size), nfft=n_fine, detrend="linear")[1]
+        return welch.psd(x, fs, min(n_fine, x.size), detrend="linear", nfft=n_fine)[1]
     total = np.zeros(n_fine // 2 + 1)
     for first, end in runs:
         span = x[first * step: (end - 1) * step + nperseg]
-        _, psd = signal.welch(span, fs=fs, window="hann", nperseg=min(n_fine, span.size), nfft=n_fine,
-                              detrend="linear")
+        _, psd = welch.psd(span, fs, min(n_fine, span.size), detrend="linear", nfft=n_fine)
         total += (end - first) * psd
     return total / sum(end - first for first, end in runs)
 

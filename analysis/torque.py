@@ -398,7 +398,7 @@ def _broadband_noise_rms(resid_a: np.ndarray, rate_hz: float, m: int) -> float:
     below the bandwidth, misses what the spline absorbed.
     """
     # no detrending: a segment's mean leaks into bins 0 and 1 of the (periodic) Hann window only, far below the floor's
-    f, psd = welch.psd(resid_a, rate_hz, min(resid_a.size, 4096), detrend=False)
+    f, psd = welch.psd(resid_a, rate_hz, min(resid_a.size, 4096), detrend=None)
     floor = psd[(f >= rate_hz / m) & (f <= 0.45 * rate_hz)]
     if floor.size < 8:
         return 1.4826 * float(np.median(np.abs(resid_a - np.median(resid_a))))
