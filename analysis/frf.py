@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import signal
 
+from analysis import welch
 from analysis.encoder import difference_response
 from analysis.segments import SegmentSelection, select_segments
 
@@ -208,16 +209,19 @@ def estimate_frf(
         U = None if U is None else [u[keep] for u in U]
         n_segments = X.shape[0]
     gxx_fine = _fine_psd(x, fs, nperseg, step, n_fine, None if selection is None else selection.runs())
-    full = replace(_response(seg, X, Y, N, U, gxx_fine, period_s), selection=selection)
     blocks = min(jackknife_blocks, n_segments // 2)
-    if blocks < MIN_JACKKNIFE_BLOCKS:
+    jackknife = blocks >= MIN_JACKKNIFE_BLOCKS
+    # delete-one-block replicates: the segments of one contiguous stretch of the record left out; each is the total's
+    # sums less that block's
+    block = np.arange(n_segments) * blocks // n_segments if jackknife else np.zeros(n_segments, dtype=int)
+    parts = _block_sums(seg, X, Y, N, U, np.flatnonzero(np.diff(block, prepend=-1)))
+    total = parts[0]
+    for part in parts[1:]:
+        total = total + part
+    full = replace(_response(seg, total, gxx_fine, period_s), selection=selection)
+    if not jackknife:
         return full
-    # delete-one-block replicates: the segments of one contiguous stretch of the record left out
-    block = np.arange(n_segments) * blocks // n_segments
-    reps = tuple(_response(seg, X[keep], Y[keep], None if N is None else N[keep],
-                           None if U is None else [u[keep] for u in U], gxx_fine, period_s)
-                 for keep in (block != b for b in range(blocks)))
-    return replace(full, replicates=reps)
+    return replace(full, replicates=tuple(_response(seg, total - part, gxx_fine, period_s) for part in parts))
 
 
 def _fine_psd(x: np.ndarray, fs: float, nperseg: int, step: int, n_fine: int,
@@ -225,31 +229,79 @@ def _fine_psd(x: np.ndarray, fs: float, nperseg: int, step: int, n_fine: int,
     """Torque PSD at ``n_fine`` bins from the samples of the runs of segments (first, last + 1) given, each run's
     Welch estimate (segments up to ``n_fine`` long) weighted by its number of segments; None: the whole record."""
     if runs is None:
-        return signal.welch(x, fs=fs, window="hann", nperseg=min(n_fine, x.size), nfft=n_fine, detrend="linear")[1]
+        return welch.psd(x, fs, min(n_fine, x.size), detrend="linear", nfft=n_fine)[1]
     total = np.zeros(n_fine // 2 + 1)
     for first, end in runs:
         span = x[first * step: (end - 1) * step + nperseg]
-        _, psd = signal.welch(span, fs=fs, window="hann", nperseg=min(n_fine, span.size), nfft=n_fine,
-                              detrend="linear")
+        _, psd = welch.psd(span, fs, min(n_fine, span.size), detrend="linear", nfft=n_fine)
         total += (end - first) * psd
     return total / sum(end - first for first, end in runs)
 
 
-def _response(seg: _Segments, X: np.ndarray, Y: np.ndarray, N: np.ndarray | None, U: list[np.ndarray] | None,
-              gxx_fine: np.ndarray, period_s: float) -> FrequencyResponse:
-    """H1, coherence and the noise / fold-over terms averaged over the segment FFTs given."""
+@dataclass(frozen=True)
+class _Sums:
+    """Sums over a set of segments of the products the response needs, and the number of segments: conj(X)·X,
+    conj(Y)·Y, conj(X)·Y and conj(N)·N at the one-sided bins, and per fold-over signal u_k conj(X)·U_k(f) and
+    conj(X)·conj(U_k(−f)), shape (k, 2, bins). Sums, not means: a delete-one-block replicate is the total less one
+    block's sums (one pass over the segments for all replicates instead of one per replicate)."""
+
+    count: int
+    xx: np.ndarray
+    yy: np.ndarray
+    xy: np.ndarray
+    nn: np.ndarray | None
+    xu: np.ndarray | None
+
+    def __add__(self, other: _Sums) -> _Sums:
+        return self._combine(other, 1.0)
+
+    def __sub__(self, other: _Sums) -> _Sums:
+        return self._combine(other, -1.0)
+
+    def _combine(self, other: _Sums, sign: float) -> _Sums:
+        def f(a: np.ndarray | None, b: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None or b is None else a + sign * b
+
+        return _Sums(self.count + int(sign) * other.count, f(self.xx, other.xx), f(self.yy, other.yy),
+                     f(self.xy, other.xy), f(self.nn, other.nn), f(self.xu, other.xu))
+
+
+def _block_sums(seg: _Segments, X: np.ndarray, Y: np.ndarray, N: np.ndarray | None, U: list[np.ndarray] | None,
+                starts: np.ndarray) -> list[_Sums]:
+    """:class:`_Sums` of each run of segments from ``starts[i]`` up to the next start (the last: to the end)."""
+    n = seg.nperseg // 2 + 1
+    conj_x = np.conj(X[:, :n])
+
+    def by_block(p: np.ndarray) -> np.ndarray:
+        return np.add.reduceat(p, starts, axis=0)
+
+    xx, yy, xy = by_block(conj_x * X[:, :n]), by_block(np.conj(Y[:, :n]) * Y[:, :n]), by_block(conj_x * Y[:, :n])
+    nn = None if N is None else by_block(np.conj(N[:, :n]) * N[:, :n])
+    # the FFT of conj(u) at bin f is conj(U(−f)) (U two-sided)
+    xu = None if U is None else np.stack([np.stack((by_block(conj_x * u[:, :n]),
+                                                    by_block(conj_x * np.conj(u[:, (-np.arange(n)) % seg.nperseg]))))
+                                          for u in U])  # (k, 2, blocks, n)
+    counts = np.diff(np.append(starts, X.shape[0]))
+    return [_Sums(int(c), xx[b], yy[b], xy[b], None if nn is None else nn[b], None if xu is None else xu[:, :, b])
+            for b, c in enumerate(counts)]
+
+
+def _response(seg: _Segments, sums: _Sums, gxx_fine: np.ndarray, period_s: float) -> FrequencyResponse:
+    """H1, coherence and the noise / fold-over terms averaged over the segments whose ``sums`` are given."""
     f = np.fft.rfftfreq(seg.nperseg, period_s)
-    gxx, gyy, gxy = seg.density(X, X).real, seg.density(Y, Y).real, seg.density(X, Y)
+    gxx, gyy = seg.density_of_sum(sums.xx, sums.count).real, seg.density_of_sum(sums.yy, sums.count).real
+    gxy = seg.density_of_sum(sums.xy, sums.count)
     with np.errstate(divide="ignore", invalid="ignore"):
         h = gxy / gxx / difference_response(f, period_s)
         coh = np.abs(gxy) ** 2 / (gxx * gyy)
     coh = np.clip(np.nan_to_num(coh, nan=0.0), 0.0, 1.0)
     noise_ratio = alias = None
-    if N is not None:
+    if sums.nn is not None:
         with np.errstate(divide="ignore", invalid="ignore"):
-            noise_ratio = np.clip(np.nan_to_num(seg.density(N, N).real / gxx, nan=0.0), 0.0, 0.5)
-    if U is not None:
-        alias = _fold_over(seg, X, U, f.size)
+            noise_ratio = np.clip(np.nan_to_num(seg.density_of_sum(sums.nn, sums.count).real / gxx, nan=0.0), 0.0, 0.5)
+    if sums.xu is not None:
+        with np.errstate(divide="ignore", invalid="ignore"):  # A_k = G_{x u_k}/G_xx, B_k = G_{x ū_k}/G_xx
+            alias = np.nan_to_num(sums.xu / sums.xx.real)
     return FrequencyResponse(
         f_hz=f,
         H=h,
@@ -257,7 +309,7 @@ def _response(seg: _Segments, X: np.ndarray, Y: np.ndarray, N: np.ndarray | None
         torque_psd=gxx,
         torque_psd_fine=gxx_fine,
         segment_s=seg.nperseg * period_s,
-        n_segments=X.shape[0],
+        n_segments=sums.count,
         period_s=period_s,
         noise_ratio=noise_ratio,
         alias=alias,
@@ -287,22 +339,12 @@ class _Segments:
     def density(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
         """One-sided cross spectral density G_ab (conj(A)·B averaged), of the non-negative bins."""
         n = self.nperseg // 2 + 1
-        g = np.mean(np.conj(A[:, :n]) * B[:, :n], axis=0) * self.scale
+        return self.density_of_sum(np.sum(np.conj(A[:, :n]) * B[:, :n], axis=0), A.shape[0])
+
+    def density_of_sum(self, total: np.ndarray, count: int) -> np.ndarray:
+        """One-sided cross spectral density G_ab from the sum of conj(A)·B over ``count`` segments (non-negative
+        bins)."""
+        n = self.nperseg // 2 + 1
+        g = total[:n] / count * self.scale
         g[1:n - 1 if self.nperseg % 2 == 0 else n] *= 2.0
         return g
-
-
-def _fold_over(seg: _Segments, X: np.ndarray, u_fft: list[np.ndarray], n_bins: int) -> np.ndarray:
-    """A_k = G_{x u_k}/G_xx and B_k = G_{x ū_k}/G_xx at the one-sided bins, shape (k, 2, n_bins).
-
-    ``X`` is the torque's one-sided segment FFT, ``u_fft`` the two-sided segment FFTs of each u_k;
-    the FFT of conj(u) at bin f is conj(U(−f)).
-    """
-    out = np.zeros((len(u_fft), 2, n_bins), complex)
-    gxx = np.mean(np.abs(X) ** 2, axis=0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        for k, U in enumerate(u_fft):
-            U_neg = np.conj(U[:, (-np.arange(n_bins)) % seg.nperseg])
-            out[k, 0] = np.nan_to_num(np.mean(np.conj(X) * U[:, :n_bins], axis=0) / gxx)
-            out[k, 1] = np.nan_to_num(np.mean(np.conj(X) * U_neg, axis=0) / gxx)
-    return out

@@ -20,6 +20,7 @@ from scipy.ndimage import map_coordinates, spline_filter1d
 from scipy.signal import firwin, kaiserord, oaconvolve, resample_poly
 
 _RIPPLE_DB = 80.0
+_KEEP_TRANSITION = 0.25  # transition width of :func:`decimate_keeping`'s filter, × the band it keeps
 
 
 def antialias(x: np.ndarray, rate_hz: float, f_pass_hz: float, f_stop_hz: float) -> tuple[np.ndarray, float]:
@@ -43,6 +44,21 @@ def antialias(x: np.ndarray, rate_hz: float, f_pass_hz: float, f_stop_hz: float)
     rate = rate_hz / q
     h = _lowpass(rate, f_pass_hz, f_stop_hz)
     return oaconvolve(y, h.reshape((1,) * (y.ndim - 1) + h.shape), mode="same", axes=-1), rate
+
+
+def decimate_keeping(x: np.ndarray, rate_hz: float, f_keep_hz: float) -> tuple[np.ndarray, float]:
+    """Zero-phase decimation of ``x`` by the largest integer q whose output still carries 0…``f_keep_hz`` flat
+    (ripple 1e-4) and unaliased (what folds onto it is ≥ 80 dB down); returns the signal and its rate, Hz.
+
+    The Kaiser FIR passes ``f_keep_hz`` and stops from rate/q − ``f_keep_hz`` (what folds onto ``f_keep_hz``); q
+    leaves that transition at least :data:`_KEEP_TRANSITION` × ``f_keep_hz`` wide (the filter's length grows as
+    1/width: a cost, not an accuracy choice). Shape (..., n) decimates several signals along the last axis.
+    """
+    q = max(1, int(rate_hz // ((2.0 + _KEEP_TRANSITION) * f_keep_hz)))
+    if q == 1:
+        return np.asarray(x, dtype=np.float64), rate_hz
+    h = _lowpass(rate_hz, f_keep_hz, rate_hz / q - f_keep_hz)
+    return resample_poly(x, 1, q, window=h, axis=-1), rate_hz / q
 
 
 def _lowpass(rate_hz: float, f_pass_hz: float, f_stop_hz: float) -> np.ndarray:

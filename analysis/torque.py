@@ -20,10 +20,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cholesky_banded
-from scipy.linalg.lapack import dtbtrs
 from scipy.ndimage import median_filter
-from scipy.signal import butter, find_peaks, hilbert, sosfiltfilt, welch
+from scipy.signal import butter, find_peaks, hilbert, sosfiltfilt
+
+from analysis import welch
+from analysis.torque_spline import SlowOffset, spline_factor, spline_fit
 
 _SQRT3 = np.sqrt(3.0)
 
@@ -249,28 +250,30 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     y, phi = i - offset.dc_a, th + offset.theta0_rad
     g = -np.sin(phi)
     tn = np.linspace(-1.0, 1.0, y.size)
-    cols = _slow_offset_columns(y.size, rate_hz, spare_rows=3)  # the slow offset, the angle columns, then the lines
-    nd = cols.shape[0] - 3
-    r_band = _spline_factor(g, m, smoothing)  # the spline's normal matrix depends on g alone: factored once
-    iq1, _ = _spline_iq(y, g, m, r_band, np.ones((1, y.size)))
+    offset = SlowOffset(y.size, OFFSET_KNOT_S * rate_hz)  # the slow offset's columns, then the angle columns and lines
+    nd = offset.count
+    cols = np.empty((3, y.size))
+    r_band = spline_factor(g, m, smoothing)  # the spline's normal matrix depends on g alone: factored once
+    iq1, _ = spline_fit(y, g, m, r_band, np.ones((1, y.size)))
     w_e = np.gradient(th) * rate_hz
     cos_phi = np.cos(phi)
 
     def angle_columns(iq_a: np.ndarray) -> None:
-        np.multiply(iq_a, cos_phi, out=cols[nd])
-        np.negative(cols[nd], out=cols[nd])
-        np.multiply(cols[nd], w_e, out=cols[nd + 1])
-        np.multiply(cols[nd + 1], tn, out=cols[nd + 2])
+        np.multiply(iq_a, cos_phi, out=cols[0])
+        np.negative(cols[0], out=cols[0])
+        np.multiply(cols[0], w_e, out=cols[1])
+        np.multiply(cols[1], tn, out=cols[2])
 
     angle_columns(iq1)
     Y = y
     if noise_seed is not None:  # unit white noise through the same estimator, scaled to the floor at the end
-        Y = np.column_stack((y, np.random.default_rng(noise_seed).standard_normal(y.size)))
+        Y = np.stack((y, np.random.default_rng(noise_seed).standard_normal(y.size))).T  # columns, each contiguous
     lines_hz: list[float] = []
     for round_ in range(LINE_ROUNDS + 1):  # a strong line's leak into the first fit can hide weaker ones
-        iq, beta = _spline_iq(Y, g, m, r_band, cols)
+        iq, beta = spline_fit(Y, g, m, r_band, cols, offset)
         iq_y, beta_y = (iq, beta) if Y.ndim == 1 else (iq[:, 0], beta[:, 0])
-        resid = y - g * iq_y - beta_y @ cols
+        offset_a = offset.curve(beta_y[:nd])
+        resid = y - g * iq_y - offset_a - beta_y[nd:] @ cols
         if round_ == LINE_ROUNDS:
             break
         new = [f for f in _interference_lines(resid, rate_hz) if all(abs(f - h) > 1.0 for h in lines_hz)]
@@ -281,7 +284,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         cols = np.concatenate((cols, *(_tone_columns(f, rate_hz, tn) for f in new)))
         angle_columns(iq_y)  # the lines leaked into the first i_q, and so into the angle columns
     if found is not None:
-        found.append(_interference_found(lines_hz, beta_y[nd + 3:], beta_y[:nd] @ cols[:nd], w_e))
+        found.append(_interference_found(lines_hz, beta_y[nd + 3:], offset_a, w_e))
     if Y.ndim == 1:
         return k_t_Nm_per_A * iq
     # the noise floor of the final residual: with the lines removed (left in, a line's leak raised the
@@ -332,23 +335,6 @@ class Interference:
     offset_drift_a: float
 
 
-def _slow_offset_columns(n: int, rate_hz: float, spare_rows: int = 0) -> np.ndarray:
-    """Cubic B-spline basis in time with knots ``OFFSET_KNOT_S`` apart (sums to 1 at every sample), one row each,
-    followed by ``spare_rows`` rows of zeros for the caller's own columns."""
-    span = OFFSET_KNOT_S * rate_hz
-    nk = int(np.floor((n - 1) / span)) + 1
-    cols = np.zeros((nk + 3 + spare_rows, n))
-    bounds = np.searchsorted(np.minimum(np.floor(np.arange(n) / span), nk - 1), np.arange(nk + 1))
-    for q, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):  # knot interval q carries functions q … q + 3
-        r = np.arange(a, b) / span - q
-        r2, r3 = r**2, r**3
-        cols[q, a:b] = (1 - r) ** 3 / 6.0
-        cols[q + 1, a:b] = (3 * r3 - 6 * r2 + 4) / 6.0
-        cols[q + 2, a:b] = (-3 * r3 + 3 * r2 + 3 * r + 1) / 6.0
-        cols[q + 3, a:b] = r3 / 6.0
-    return cols
-
-
 def _interference_lines(resid_a: np.ndarray, rate_hz: float) -> list[float]:
     """Frequencies, Hz, of narrow lines standing out of the residual's spectrum (strongest first).
 
@@ -359,7 +345,7 @@ def _interference_lines(resid_a: np.ndarray, rate_hz: float) -> list[float]:
     nper = min(resid_a.size, int(rate_hz))
     if resid_a.size < 4 * nper:
         return []
-    f, psd = welch(resid_a, fs=rate_hz, nperseg=nper)
+    f, psd = welch.psd(resid_a, rate_hz, nper)
     ref = median_filter(psd, size=2 * LINE_NEIGHBOURS + 1, mode="nearest")
     peaks, _ = find_peaks(psd, height=LINE_FACTOR * ref, distance=3)
     peaks = peaks[(f[peaks] >= LINE_MIN_HZ) & (f[peaks] <= 0.49 * rate_hz)]
@@ -411,104 +397,12 @@ def _broadband_noise_rms(resid_a: np.ndarray, rate_hz: float, m: int) -> float:
     residual's RMS instead counts such ripple as broadband noise (a 3 % ripple biased K by −2…−5 %) and,
     below the bandwidth, misses what the spline absorbed.
     """
-    f, psd = welch(resid_a, fs=rate_hz, nperseg=min(resid_a.size, 4096))
+    # no detrending: a segment's mean leaks into bins 0 and 1 of the (periodic) Hann window only, far below the floor's
+    f, psd = welch.psd(resid_a, rate_hz, min(resid_a.size, 4096), detrend=None)
     floor = psd[(f >= rate_hz / m) & (f <= 0.45 * rate_hz)]
     if floor.size < 8:
         return 1.4826 * float(np.median(np.abs(resid_a - np.median(resid_a))))
     return float(np.sqrt(np.median(floor) * rate_hz / 2.0))
-
-
-def _bspline_weights(m: int) -> np.ndarray:
-    """Uniform cubic B-spline weights of the 4 active coefficients at the m samples of one knot span."""
-    r = np.arange(m) / m
-    return np.stack([(1 - r) ** 3, 3 * r**3 - 6 * r**2 + 4, -3 * r**3 + 3 * r**2 + 3 * r + 1, r**3], axis=1) / 6.0
-
-
-# Knot spans per block of the projections in :func:`_spline_iq`: the block's rows (right-hand sides and extra
-# columns, ~20 of them, 512·m samples each) stay in a core's L2 cache (1 MB here) through the products, instead of
-# streaming every full-length row through memory several times.
-_BLOCK_SPANS = 512
-
-
-def _spline_factor(g: np.ndarray, m: int, smoothing: float) -> np.ndarray:
-    """Banded Cholesky factor R (A = RᵀR, upper banded storage of :func:`scipy.linalg.cholesky_banded`) of the
-    penalised normal matrix A = Bᵀ·diag(g²)·B + λ·D₂ᵀD₂ of a uniform cubic B-spline B with a knot every m samples,
-    λ = ``smoothing`` × the mean diagonal of Bᵀ·diag(g²)·B."""
-    n = g.size
-    nk = -(-n // m)
-    W = _bspline_weights(m)
-    G2 = np.zeros(nk * m)
-    G2[:n] = g * g
-    pairs = [(k, l) for k in range(4) for l in range(k, 4)]
-    diag = G2.reshape(nk, m) @ np.stack([W[:, k] * W[:, l] for k, l in pairs], axis=1)  # (nk, 10)
-    ab = np.zeros((4, nk + 3))  # upper banded storage: ab[3 - d, j] = A[j - d, j]
-    for q, (k, l) in enumerate(pairs):
-        ab[3 - (l - k), l:l + nk] += diag[:, q]
-    lam = smoothing * ab[3].mean()
-    d2 = np.array([1.0, -2.0, 1.0])
-    for a in range(3):
-        for b in range(a, 3):
-            ab[3 - (b - a), b:b + nk + 1] += lam * d2[a] * d2[b]
-    return cholesky_banded(ab)
-
-
-def _spline_iq(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray,
-               extra: np.ndarray | list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Penalised LS of y ≈ g·s(t) + Σ β_k·extra_k, s a uniform cubic B-spline (knot every m samples), R the
-    Cholesky factor of the spline's penalised normal matrix (:func:`_spline_factor` of the same g and m).
-
-    The global coefficients β border the banded spline system and are eliminated by their Schur
-    complement. ``y`` may hold several right-hand sides as columns, shape (n, r): one factorisation
-    serves them all. ``extra`` holds the columns as rows, shape (len(extra), n). Returns s at the samples
-    (shape of ``y``) and β (shape (len(extra),) or (len(extra), r)).
-
-    The projections Bᵀ(g·x) and the products extraᵀ·extra, extraᵀ·y are summed block by block of
-    :data:`_BLOCK_SPANS` knot spans (cache-sized), skipping in each block the extra columns that are zero
-    there (the slow offset's B-splines cover a few seconds each).
-    """
-    n = y.shape[0]
-    nk = -(-n // m)
-    W = _bspline_weights(m)
-    Yt = y.reshape(n, -1).T
-    Vt = np.asarray(extra, dtype=np.float64)  # (len(extra), n)
-    ny, ne = Yt.shape[0], Vt.shape[0]
-    Pt = np.zeros((ny + ne, nk + 3))  # rows: Bᵀ(g·y_i), then Bᵀ(g·extra_k)
-    VV, VY = np.zeros((ne, ne)), np.zeros((ne, ny))
-    for k0 in range(0, nk, _BLOCK_SPANS):
-        k1 = min(nk, k0 + _BLOCK_SPANS)
-        s0, s1 = k0 * m, min(n, k1 * m)
-        act = np.flatnonzero(np.any(Vt[:, s0:s1], axis=1))
-        v, yb = Vt[act, s0:s1], Yt[:, s0:s1]
-        VV[act[:, None], act] += v @ v.T
-        VY[act] += v @ yb.T
-        rows = np.zeros((ny + act.size, (k1 - k0) * m))
-        np.multiply(yb, g[s0:s1], out=rows[:ny, :s1 - s0])
-        np.multiply(v, g[s0:s1], out=rows[ny:, :s1 - s0])
-        # (4, m) @ (m, rows·spans): a wide product (the tall (rows·spans, m) @ (m, 4) is ~10× slower in OpenBLAS)
-        full = (W.T @ rows.reshape(-1, m).T).reshape(4, rows.shape[0], k1 - k0)
-        which = np.concatenate((np.arange(ny), ny + act))
-        for k in range(4):
-            Pt[which, k0 + k:k1 + k] += full[k]
-    # A = RᵀR (:func:`_spline_factor`). The Schur complement needs Pᵤᵀ·A⁻¹·[P_y, Pᵤ] = Zᵤᵀ·[Z_y, Zᵤ] with Z = R⁻ᵀ·P (one
-    # triangular solve per column), and the spline only R⁻¹·(Z_y − Zᵤ·β): half the banded solves of A⁻¹·P, which
-    # are sequential level-2 sweeps, one per column (LAPACK's tbsv)
-    Z = _banded_triangular_solve(r_band, Pt.T, transpose=True)  # (nk + 3, ny + ne), Fortran order as LAPACK wants it
-    Zy, Zu = Z[:, :ny], Z[:, ny:]
-    beta = np.linalg.lstsq(VV - Zu.T @ Zu, VY - Zu.T @ Zy, rcond=None)[0]
-    coef = _banded_triangular_solve(r_band, Zy - Zu @ beta, transpose=False)
-    c4 = np.stack([coef[k:k + nk] for k in range(4)])  # (4, nk, r): the 4 coefficients active in each span
-    # one wide product (m, 4) @ (4, nk·r) instead of nk tiny ones, then (m, nk, r) → samples
-    s_out = (W @ c4.reshape(4, -1)).reshape(m, nk, -1).transpose(1, 0, 2).reshape(nk * m, -1)[:n]
-    return (s_out[:, 0], beta[:, 0]) if y.ndim == 1 else (s_out, beta)
-
-
-def _banded_triangular_solve(r_band: np.ndarray, b: np.ndarray, transpose: bool) -> np.ndarray:
-    """R⁻ᵀ·b (``transpose``) or R⁻¹·b for R upper triangular in the banded storage of
-    :func:`scipy.linalg.cholesky_banded` (LAPACK dtbtrs; scipy.linalg offers no public banded triangular solve)."""
-    x, info = dtbtrs(r_band, b, uplo="U", trans="T" if transpose else "N")
-    if info != 0:
-        raise np.linalg.LinAlgError(f"banded triangular solve failed (LAPACK info {info})")
-    return x
 
 
 @dataclass(frozen=True)
