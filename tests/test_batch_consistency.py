@@ -101,3 +101,21 @@ def test_ctrl_c_stops_a_batch_and_every_result_written_is_catalogued(recorded: P
     assert 1 <= len(results) < 8  # the result seen was catalogued; stopped part-way: queued work was cancelled
     assert [p.name for p in folder.iterdir() if p.name.startswith(".")] == []  # no temp file left
     os.sync()
+
+
+def test_a_batch_works_where_the_user_stands_in_folders_named_like_our_packages(recorded: Path, tmp_path: Path) -> None:
+    """Workers import acq, not the ./acq, ./analysis or ./drivers of the folder the user runs acq in: the forkserver
+    runs ``python -c``, which puts that folder first on sys.path (every worker died: BrokenProcessPool)."""
+    stand = tmp_path / "bench"
+    for name in ("acq", "analysis", "drivers"):
+        (stand / name).mkdir(parents=True)
+    folder = stand / "sessions"
+    folder.mkdir()
+    for i in range(2):
+        copy_session(recorded, folder / f"s{i}.h5")
+    # as the console script starts: the folder the user stands in is not on the parent's sys.path
+    console_script = "import sys; sys.path.pop(0); from acq.entry import main; main()"
+    proc = subprocess.run([sys.executable, "-c", console_script, "analyze", str(folder), "--jobs", "2", "--no-report"],
+                          cwd=stand, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert [(r["verdict"], r["error"]) for r in catalogue_rows(folder / "catalogue.sqlite")] == [("ok", None)] * 2

@@ -163,6 +163,24 @@ def _meta_if_readable(path: str) -> dict[str, Any]:
         return {}
 
 
+def _start_forkserver_without_cwd() -> None:
+    """Start the forkserver as ``python -P`` would (PYTHONSAFEPATH): it runs ``python -c``, which puts the current
+    folder first on sys.path, so a folder named ``acq``, ``analysis`` or ``drivers`` where the user stands would be
+    imported by every worker in place of ours (they then die: BrokenProcessPool). The variable is set only while
+    the server starts, so commands acq runs later (``--on-alarm``) see the user's environment."""
+    from multiprocessing import forkserver
+
+    before = os.environ.get("PYTHONSAFEPATH")
+    os.environ["PYTHONSAFEPATH"] = "1"
+    try:
+        forkserver.ensure_running()
+    finally:
+        if before is None:
+            del os.environ["PYTHONSAFEPATH"]
+        else:
+            os.environ["PYTHONSAFEPATH"] = before
+
+
 @contextmanager
 def analysis_executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
     """Workers for analyses: a process pool of ``jobs`` (one BLAS thread each), or a Dask cluster's executor at
@@ -175,6 +193,7 @@ def analysis_executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
             os.environ.setdefault(var, "1")
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["acq.monitoring.batch"])
+        _start_forkserver_without_cwd()
         pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context)
         try:
             yield pool
