@@ -151,8 +151,12 @@ def _half_periods(crossings: np.ndarray, lag_s: float, cycles: np.ndarray, count
     """½ / (electrical cycles the encoder travelled) for each moving half-period of the current (1 if consistent)."""
     theta_rev = np.interp(crossings + lag_s, cycles * period_s, counts / counts_per_rev, left=np.nan, right=np.nan)
     half_cycles = pole_pairs * np.abs(np.diff(theta_rev))
-    moving = np.isfinite(half_cycles) & (np.diff(crossings) < 0.5 / (0.2 * f_enc_max_hz))
-    return 0.5 / np.maximum(half_cycles[moving], 1e-12)
+    dt = np.diff(crossings)
+    # moving by both streams: a current that is noise around zero while the joint stands crosses zero often and
+    # quickly, but the encoder does not travel meanwhile (it read 5·10¹¹× "faster" on an idle robot window)
+    moving = (np.isfinite(half_cycles) & (dt < 0.5 / (0.2 * f_enc_max_hz))
+              & (half_cycles >= 0.2 * f_enc_max_hz * dt))
+    return 0.5 / half_cycles[moving]
 
 
 def _smooth(x: np.ndarray) -> np.ndarray:

@@ -136,3 +136,18 @@ def test_a_robot_window_whose_half_periods_share_no_ratio_names_no_bench_constan
     assert electrical_speed_ratio(rec.current_a["i_a"], rec.rate_hz, rec.encoder_index, rec.position_counts,
                                   rec.period_s, rec.counts_per_rev, rec.pole_pairs) is None
     assert recording_fault(rec) is None
+
+
+def test_an_idle_robot_window_names_no_bench_constant(tmp_path: Path) -> None:
+    """Seed 0's first 4 s window (the README's monitor example) stands still most of the time: the current is
+    noise around zero and crosses zero quickly while the encoder does not move. Those half-periods once read
+    "the current turns 500000000000.00× faster … check [motor] pole_pairs = 2000000000000 or [encoder]
+    counts_per_rev = 0"; only half-periods in which the encoder travels count now."""
+    from acq.offline.analyze import recording_from_session
+    from acq.recording.session import load
+    from analysis.diagnose import recording_fault
+
+    bench = load_bench(ROBOT)
+    current, drive = open_bench(bench, fast=True, sim_bench=SimBench(bench, realtime=False))
+    rec = recording_from_session(load(Recorder(bench, None, current, drive, tmp_path, 4.0).run().path))
+    assert recording_fault(rec) is None
