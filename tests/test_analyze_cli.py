@@ -62,6 +62,10 @@ def test_papers_pipeline_is_worse_than_ours(session_10s: Path, capsys: pytest.Ca
     assert paper["options"]["pipeline"] == "paper" and paper["options"]["torque_method"] == "hilbert"
     err = {name: abs(doc["Jm_kgm2"] / 0.003027 - 1) for name, doc in (("ours", ours), ("paper", paper))}
     assert err["paper"] > 5 * err["ours"]
+    # the comparison sits beside the session's result, it does not replace it
+    stem = session_10s.with_suffix("")
+    assert json.loads(Path(f"{stem}.result.json").read_text())["K_Nm_per_rad"] == ours["K_Nm_per_rad"]
+    assert json.loads(Path(f"{stem}.paper.result.json").read_text())["K_Nm_per_rad"] == paper["K_Nm_per_rad"]
 
 
 @pytest.mark.parametrize(("band", "message"), [

@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from acq.monitoring.catalogue import Catalogue, Outcome
-from acq.offline.analyze import SessionResult, analyze_session, sha256_of
+from acq.offline.analyze import SessionResult, analyze_session, output_paths, sha256_of
 from acq.recording.paths import GLOB_CHARS
 from acq.recording.session import Session, load, read_status
 from acq.recording.storage import remove_temp_files
@@ -320,7 +320,7 @@ def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outc
     for path in futures.values():  # a worker killed after writing its result but before the row: remove it
         if str(path.resolve()) in recorded:
             continue
-        for output in (path.with_name(path.stem + ".result.json"), path.with_name(path.stem + ".report.png")):
+        for output in output_paths(path, request):
             remove_temp_files(output)
             with contextlib.suppress(OSError):
                 if output.stat().st_mtime >= started_at:

@@ -116,7 +116,7 @@ def result_json(session: Session, result: Result) -> dict[str, Any]:
 def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest(), *, write: bool = True,
                     report: bool = True) -> SessionResult:
     """Identify the joint of one session as ``request`` asks (with the bench's nominal plant unless it names one);
-    write ``<session>.result.json``.
+    write ``<session>.result.json`` (:func:`output_paths`).
 
     The report PNG is not drawn here: with ``report`` its path is set, and :func:`acq.ui.report_png.draw_report`
     draws it once the result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
@@ -139,8 +139,8 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     doc = result_json(session, result)
     doc["partial"] = bool(session.damage) or session.status == "recording"
     doc["session"]["damage"] = list(session.damage)
-    json_path = session.path.with_name(session.path.stem + ".result.json")
-    report_path = session.path.with_name(session.path.stem + ".report.png") if report and write else None
+    json_path, png_path = output_paths(session.path, request)
+    report_path = png_path if report and write else None
     if write:
         if report_path is not None and free_bytes(report_path.parent) < REPORT_ROOM_BYTES:
             # before anything is written (no result without its report) and before Qt's PNG writer, whose libpng
@@ -148,6 +148,14 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
             raise StorageError(f"disk full: {report_path}")
         write_json(doc, json_path)
     return SessionResult(session, result, doc, json_path, report_path)
+
+
+def output_paths(session_path: Path, request: AnalysisRequest) -> tuple[Path, Path]:
+    """The result document and report PNG of ``request`` on a session: ``<session>.result.json`` and
+    ``<session>.report.png``; the paper's chain (a comparison, not the session's result) writes
+    ``<session>.paper.result.json`` and ``<session>.paper.report.png`` beside them instead of replacing them."""
+    stem = session_path.stem + (".paper" if request.pipeline == "paper" else "")
+    return session_path.with_name(stem + ".result.json"), session_path.with_name(stem + ".report.png")
 
 
 def write_json(doc: dict[str, Any], path: Path) -> None:
