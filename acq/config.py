@@ -110,7 +110,25 @@ def load_bench(path: Path | str | None = None) -> Bench:
     if isinstance(drive, dict) and isinstance(drive.get("eds"), str) and drive["eds"] \
             and not Path(drive["eds"]).is_absolute():  # a drive's EDS/DCF named beside the bench file
         drive["eds"] = str(p.parent / drive["eds"])
-    return validate(Bench, data, p)
+    return require_analysable(validate(Bench, data, p), p)
+
+
+def require_analysable(bench: Bench, path: Path) -> Bench:
+    """``bench`` if the analysis can use what it records (:mod:`analysis.limits`), else a ConfigError naming the
+    file, the key and the value — before anything is recorded (a kHz/Hz mix-up once recorded 78 samples and
+    ended in scipy's own words)."""
+    from analysis import encoder_period_problem, min_current_rate_hz
+
+    period = bench.drive.period_s
+    problem = encoder_period_problem(period)
+    if problem is not None:
+        raise ConfigError(f"{path}: [drive] period_s = {period:g}: {problem}")
+    need = min_current_rate_hz(period)
+    if not bench.daq.rate_hz > need:
+        raise ConfigError(f"{path}: [daq] rate_hz = {bench.daq.rate_hz:g}: must be above {need:g} Hz for [drive] "
+                          f"period_s = {period:g} (the current is filtered up to {need / 2:g} Hz before it is "
+                          f"moved onto the encoder's instants)")
+    return bench
 
 
 def resolve_profile_path(name_or_path: str) -> Path:

@@ -43,6 +43,13 @@ def test_shipped_configs_validate() -> None:
          "[daq] driver = \"labview\": unknown driver (expected one of 'sim', 'nidaqmx')"),
         ("counts_per_rev = 131072", "counts_per_rev = 131072.5",
          "[encoder] counts_per_rev = 131072.5: must be a valid integer"),
+        # rules between the bench and the analysis: refused before a sample is recorded
+        ("rate_hz = 25600", "rate_hz = 25.6",  # a kHz/Hz mix-up
+         "[daq] rate_hz = 25.6: must be above 1200 Hz for [drive] period_s = 0.001 (the current is filtered up to "
+         "600 Hz before it is moved onto the encoder's instants)"),
+        ("period_s = 0.001", "period_s = 1",
+         "[drive] period_s = 1: the encoder then samples at 1 Hz, too slow for the fit band (from 10 Hz to 0.4 × "
+         "its rate = 0.4 Hz): at most 0.04 s"),
     ],
 )
 def test_bad_bench_config_is_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],
