@@ -222,8 +222,12 @@ def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Pa
 
     monitor = Monitor(settings, on_status=stop_after_first)
     assert monitor.run() == 0
-    assert [r["window"] for r in _rows(tmp_path)] == [0]  # analysed before ending; no second window captured
+    rows = _rows(tmp_path)
+    assert [r["window"] for r in rows] == [0]  # analysed before ending; no second window captured
     assert monitor.status.message == "stopped: interrupted by user (Ctrl-C)"
+    # one good window of the two the baseline needs: its K is shown while the baseline is learned
+    assert rows[0]["verdict"] == "ok" and monitor.status.state == "learning baseline"
+    assert monitor.status.last_K == rows[0]["K_Nm_per_rad"] and monitor.status.change_pct is None
 
 
 def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None:

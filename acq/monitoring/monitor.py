@@ -272,9 +272,9 @@ class Monitor:
     def _judge(self, trend: Trend, key: str) -> None:
         st = self.status
         st.baseline_K = trend.baseline_K_Nm_per_rad
-        judged = [p for p in trend.points if p.state in ("baseline", "ok", "alarm")]
-        if judged:
-            last = judged[-1]
+        with_k = [p for p in trend.points if p.state in ("before baseline", "baseline", "ok", "alarm")]
+        if with_k:  # while the baseline is learned too: a person watching wants to see K from the first good window
+            last = with_k[-1]
             st.last_K, st.last_K_ci, st.change_pct = last.entry.K_Nm_per_rad, last.entry.K_ci95, last.change_pct
         st.state = "alarm" if trend.alarm else ("ok" if trend.judged else
                                                 "baseline" if trend.baseline_K_Nm_per_rad else "learning baseline")
