@@ -2,6 +2,7 @@
 
 * The encoder must sample fast enough that the fit band (:func:`analysis.fit.default_band_hz`: 10 Hz up to
   0.4 × its rate) is not empty.
+* The record must hold two Welch segments (:func:`analysis.frf.min_duration_s`).
 * The current must be sampled fast enough for the chain's anti-alias filter, which stops at 0.6 × the encoder
   rate before the torque is moved onto the encoder's instants (:mod:`analysis.signals`): that edge must lie
   below the DAQ's Nyquist frequency.
@@ -10,6 +11,7 @@
 from __future__ import annotations
 
 from analysis.fit import default_band_hz
+from analysis.frf import min_duration_s
 from analysis.signals import _STOP_FRACTION
 
 
@@ -26,3 +28,9 @@ def min_current_rate_hz(period_s: float) -> float:
     """The lowest DAQ rate, Hz, whose Nyquist frequency lies above the chain's anti-alias stop edge for an
     encoder sampled every ``period_s`` (s)."""
     return 2.0 * _STOP_FRACTION / period_s
+
+
+def min_record_s(segment_s: float = 0.5) -> float:
+    """The shortest record, s, the analysis identifies from: two Welch segments of ``segment_s`` (s) at 50 %
+    overlap (the default request's 0.5 s segments: 0.75 s)."""
+    return min_duration_s(segment_s)

@@ -82,8 +82,14 @@ def test_bad_band_is_one_line_exit_2(session_10s: Path, capsys: pytest.CaptureFi
 
 
 def test_record_then_too_short_session_fails_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    # shorter than the identification needs: refused before anything is recorded
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.5", "--fast", "--out", str(tmp_path))
-    assert run.code == 0, "the recording itself is complete; its exit code reports the recording"
+    assert run.code == 2 and not list(tmp_path.glob("*.h5"))
+    assert run.err.strip() == ("acq: error: --duration 0.5: the identification needs at least 0.75 s (two 0.5 s Welch "
+                               "segments); record longer, or add --no-analyze")
+    # long enough on paper, but the streams overlap less: the recording stands, the exit code says no result came
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.76", "--fast", "--out", str(tmp_path))
+    assert run.code == 1, "a complete recording whose identification could not run"
     assert "acq: analysis:" in run.err and "the FRF needs at least 0.750 s" in run.err
     (path,) = tmp_path.glob("*.h5")
     again = run_cli(capsys, "analyze", str(path))

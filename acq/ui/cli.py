@@ -140,6 +140,12 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     bench = with_joint(load_bench(bench_path), joint)
     profile = load_profile(profile_name)
     duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
+    if not no_analyze:
+        from analysis import min_record_s
+
+        if duration < min_record_s():
+            raise ConfigError(f"--duration {duration:g}: the identification needs at least {min_record_s():g} s (two "
+                              "0.5 s Welch segments); record longer, or add --no-analyze")
     check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))
@@ -162,10 +168,11 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
                    f"{result.encoder_samples} encoder samples stored in {result.path})", err=True)
         return 1
     out.print(summary_table(summarize(load(result.path))))
+    identified = True
     if not no_analyze and result.current_samples and result.encoder_samples:
-        _analyze_after_recording(result.path)
+        identified = _analyze_after_recording(result.path)
     if result.status == "complete":
-        return 0
+        return 0 if identified else 1
     click.echo(f"acq: {result.status}: {result.stop_reason} — everything recorded up to the stop is kept in "
                f"{result.path} ({result.current_samples} current samples, {result.encoder_samples} encoder samples)",
                err=True)  # one plain line (rich would wrap it)
@@ -205,8 +212,9 @@ def _print_result_and_draw(done: SessionResult) -> None:
         out.print(f"report: {done.report_path}")
 
 
-def _analyze_after_recording(path: Path) -> None:
-    """Identify the joint of a session just recorded; a failure is reported, the recording stands."""
+def _analyze_after_recording(path: Path) -> bool:
+    """Identify the joint of a session just recorded; False when no result could be made (said on stderr): the
+    recording stands, the command's exit code says the identification did not run."""
     with err.status("identifying the joint …"):
         try:
             from analysis import AnalysisRequest
@@ -214,12 +222,13 @@ def _analyze_after_recording(path: Path) -> None:
             done = _identify(path, AnalysisRequest(), report=True, catalogue_path=None)
         except AcqError as e:
             click.echo(f"acq: analysis: {e}", err=True)
-            return
+            return False
         except Exception as e:  # noqa: BLE001 - the recording stands whatever the analysis did
             click.echo(f"acq: analysis failed: {type(e).__name__}: {e} (the session is kept: acq analyze {path})",
                        err=True)
-            return
+            return False
     _print_result_and_draw(done)
+    return True
 
 
 def _parse_band(text: str | None) -> tuple[float, float] | None:
