@@ -304,6 +304,11 @@ def test_simulated_session_exported_and_imported_back_keeps_its_history_and_K(
     assert (f"warning: {recorded.stem}.session.json describes another encoder file than {enc.name} (SHA-256 "
             "differs): its metadata is not used, the time columns are not taken as one host clock") in " ".join(
         r.err.split())
+    # without --bench the configs would come from that metadata: the error says why it is not used
+    r = run_cli(capsys, "import", "--current", str(cur), "--encoder", str(enc), "-o", str(tmp_path / "no_bench.h5"))
+    assert r.code == 2 and r.err.strip() == (
+        f"acq: error: --bench: needed ({recorded.stem}.session.json describes another encoder file than {enc.name} "
+        "(SHA-256 differs): its metadata is not used, the time columns are not taken as one host clock)")
 
 
 def test_import_tags_the_session(capsys: pytest.CaptureFixture[str], tmp_path: Path,

@@ -94,14 +94,15 @@ def parse_started(text: str) -> str:
 
 
 def _configs(meta: ExportMetadata | None, bench: Bench | None, profile: Profile | None, joint: str | None,
-             current_path: Path) -> tuple[Bench, Profile]:
-    """Bench and profile as given, else as used when the exported session was recorded; ``joint`` applied."""
+             current_path: Path, meta_warning: str | None = None) -> tuple[Bench, Profile]:
+    """Bench and profile as given, else as used when the exported session was recorded; ``joint`` applied.
+    ``meta_warning``: why metadata that is there was not used (it is then the reason a config is needed)."""
     if meta is not None:
         bench = bench or Bench.model_validate_json(meta.bench_json)
         profile = profile or Profile.model_validate_json(meta.profile_json)
     if bench is None or profile is None:
         option = "--bench" if bench is None else "--profile"
-        raise ConfigError(f"{option}: needed (no acq export metadata beside {current_path.name})")
+        raise ConfigError(f"{option}: needed ({meta_warning or f'no acq export metadata beside {current_path.name}'})")
     return with_joint(bench, joint), profile
 
 
@@ -160,7 +161,7 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
         return known[path]
 
     meta, meta_warning = read_metadata(current_path, encoder_path, digest)
-    bench, profile = _configs(meta, bench, profile, joint, current_path)
+    bench, profile = _configs(meta, bench, profile, joint, current_path, meta_warning)
     # a CSV not hashed yet is read once into memory (if it fits one parse block): its SHA-256 is taken in a thread
     # from the very bytes that are parsed meanwhile (hashlib and Arrow release the GIL)
     data = {path: file_bytes(path) for path in (current_path, encoder_path)
