@@ -122,6 +122,9 @@ BAD_CURRENT = [
     pytest.param(lambda p: p.write_text(p.read_text().replace("t_s,i_a_A,i_b_A", "t_s,i_a_a,i_b_A", 1)),
                  f"line 1, column i_a_a: unknown column (did you mean i_a_A? {EXPECTED_COLUMNS})",
                  id="misspelt-header"),
+    pytest.param(lambda p: p.write_text(p.read_text().replace(",", ";")),
+                 "line 1, column t_s;i_a_A;i_b_A: unknown column (the columns are separated by ';'; acq reads "
+                 f"comma-separated files: {EXPECTED_COLUMNS})", id="semicolons"),
     pytest.param(lambda p: _with_row_changed(p, 57, "0.002187500,abc,1.0"),
                  "line 57, column i_a_A: 'abc' is not a number", id="non-numeric"),
     pytest.param(lambda p: _with_row_changed(p, 100, "0.003867188,0.5,"),

@@ -184,7 +184,9 @@ def _header(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) ->
     for name in names:
         if name not in known:
             close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
-            hint = f"did you mean {close[0]}? " if close else ""
+            other = next((sep for sep in (";", "\t", "|") if any(n in known for n in name.split(sep))), None)
+            hint = (f"the columns are separated by {other!r}; acq reads comma-separated files: "
+                    if other is not None else f"did you mean {close[0]}? " if close else "")
             raise ConfigError(f"{path}: line 1, column {name or '(empty)'}: unknown column ({hint}expected {expected})")
         if names.count(name) > 1:
             raise ConfigError(f"{path}: line 1, column {name}: appears twice")
