@@ -3,13 +3,14 @@
 A config error is one line, e.g.::
 
     configs/benches/lab_canopen.toml: [daq] rate_hz = -25600: must be greater than 0
-    configs/benches/lab_canopen.toml: [motor] pole_pair = 4: unknown key
+    configs/benches/lab_canopen.toml: [motor] pole_pair = 4: unknown key (did you mean pole_pairs?)
     configs/profiles/x.toml: top_speed_rpm: missing
     configs/benches/lab.toml: [daq] block_s = 3 must be at most half of buffer_s = 5   (a rule between keys)
 """
 
 from __future__ import annotations
 
+import difflib
 import json
 import tomllib
 from pathlib import Path
@@ -99,7 +100,13 @@ def validate(model: type[M], data: dict[str, Any], source: Path | str) -> M:
         errors = e.errors()
         # A misspelt key shows up as "unknown" and "missing"; the unknown one names the cause.
         first = next((err for err in errors if err["type"] == "extra_forbidden"), errors[0])
-        raise ConfigError(_format(Path(source), first, data)) from None
+        message = _format(Path(source), first, data)
+        if first["type"] == "extra_forbidden":
+            missing = [str(err["loc"][-1]) for err in errors
+                       if err["type"] == "missing" and tuple(err["loc"][:-1]) == tuple(first["loc"][:-1])]
+            close = difflib.get_close_matches(str(first["loc"][-1]), missing, n=1, cutoff=0.6)
+            message += f" (did you mean {close[0]}?)" if close else ""
+        raise ConfigError(message) from None
 
 
 def load_bench(path: Path | str | None = None) -> Bench:

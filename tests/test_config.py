@@ -37,7 +37,7 @@ def test_shipped_configs_validate() -> None:
     [
         ("rate_hz = 25600", "rate_hz = -25600", "[daq] rate_hz = -25600: must be greater than 0"),
         ("rate_hz = 25600", "rate_hz = \"fast\"", "[daq] rate_hz = \"fast\": must be a valid number"),
-        ("pole_pairs = 4", "pole_pair = 4", "[motor] pole_pair = 4: unknown key"),
+        ("pole_pairs = 4", "pole_pair = 4", "[motor] pole_pair = 4: unknown key (did you mean pole_pairs?)"),
         ("pole_pairs = 4", "", "[motor] pole_pairs: missing"),
         ("driver = \"sim\"\nrate_hz", "driver = \"labview\"\nrate_hz",
          "[daq] driver = \"labview\": unknown driver (expected one of 'sim', 'nidaqmx')"),
