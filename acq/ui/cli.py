@@ -170,7 +170,10 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     out.print(summary_table(summarize(load(result.path))))
     identified = True
     if not no_analyze and result.current_samples and result.encoder_samples:
-        identified = _analyze_after_recording(result.path)
+        if result.status == "interrupted":  # Ctrl-C means stop now: no identification to wait for
+            click.echo(f"acq: not identified (interrupted): acq analyze {result.path}", err=True)
+        else:
+            identified = _analyze_after_recording(result.path)
     if result.status == "complete":
         return 0 if identified else 1
     click.echo(f"acq: {result.status}: {result.stop_reason} — everything recorded up to the stop is kept in "
