@@ -309,3 +309,29 @@ def test_a_monitor_trend_is_drawn_over_machine_time_and_shows_the_windows_withou
     assert "no K: 2 not excited / failed" in [label.text for _, label in legend.items]
     (bars,) = [item for item in k_plot.items if isinstance(item, pg.ErrorBarItem)]
     assert sorted(bars.opts["x"]) == [0.0, 2.0, 3.0, 6.0]  # no bar for the skipped window 4
+
+
+def test_a_short_monitor_run_is_labelled_in_seconds_not_in_hours(tmp_path: Path) -> None:
+    """Windows 5 s apart read 0.0 s, 5.0 s, 10.0 s (in hours they all read 0.0 h)."""
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    import pyqtgraph as pg
+
+    from acq.monitoring.catalogue import Catalogue, Outcome
+    from acq.monitoring.trend import load_trend
+    from acq.ui.plots import ensure_app
+    from acq.ui.trend_plot import trend_widget
+
+    path = tmp_path / "catalogue.sqlite"
+    with Catalogue(path) as c:
+        for n in range(3):
+            doc = {"options": {}, "K_Nm_per_rad": 890.0, "ci95": {"K_Nm_per_rad": [880.0, 900.0]},
+                   "quality": {"verdict": "ok", "reasons": []}}
+            meta = {"session_id": f"w{n}", "joint": "joint1", "created_utc": f"2026-11-29T10:00:0{n}+00:00",
+                    "tags": {"monitor_window": n, "monitor_elapsed_s": 5.0 * n}}
+            c.record(Outcome(f"/m/w{n}.h5", f"h{n}", "r", meta, doc, None, 1.0))
+    ensure_app(offscreen=True)
+    widget = trend_widget(load_trend(None, path, "joint1", baseline_sessions=3))
+    (layout,) = [item for item in widget.findChildren(object) if type(item).__name__ == "GraphicsLayoutWidget"]
+    _, f_plot = [item for item in layout.ci.items if isinstance(item, pg.PlotItem)]
+    assert [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]] == ["0.0 s", "5.0 s", "10.0 s"]
+    assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (s)"

@@ -105,8 +105,10 @@ def trend_widget(trend: Trend) -> Any:
     step = max(1, len(trend.points) // 10)
     elapsed = [p.entry.tags.get(ELAPSED_TAG) for p in trend.points]
     if trend.points and all(isinstance(e, int | float) for e in elapsed):  # a monitor's windows: its machine time
-        ticks = [(float(i), f"{e / 3600:.1f} h") for i, e in enumerate(elapsed)][::step]  # type: ignore[operator]
-        x_label = "machine time at the window's start (h)"
+        span_s = max(elapsed) - min(elapsed)  # type: ignore[type-var,operator]
+        unit, scale = ("h", 3600.0) if span_s >= 3600.0 else ("min", 60.0) if span_s >= 120.0 else ("s", 1.0)
+        ticks = [(float(i), f"{e / scale:.1f} {unit}") for i, e in enumerate(elapsed)][::step]  # type: ignore[operator]
+        x_label = f"machine time at the window's start ({unit})"
     else:
         ticks = [(float(i), (p.entry.created_utc or "?")[:19].replace("T", "\n"))
                  for i, p in enumerate(trend.points)][::step]
