@@ -381,6 +381,11 @@ def _chunks(n: int, rate_hz: float) -> Iterator[tuple[int, int, int, int]]:
         yield a, b, min(margin, a), min(margin, n - b)
 
 
+#: What a slow offset of one phase's current can be: while the motor stands still the torque it holds is a constant
+#: current too (i_q·sin θ_e with θ_e fixed), so an idle robot window reads amperes of "offset" that is torque.
+_OFFSET_CAUSES = "a drifting sensor offset, or torque held while the motor stood still: one phase cannot tell them apart"
+
+
 def _interference_notes(found: list[torque.Interference]) -> list[str]:
     """One note on the lines and the offset drift removed from the current (strongest chunk's values)."""
     lines: dict[float, float] = {}
@@ -391,9 +396,10 @@ def _interference_notes(found: list[torque.Interference]) -> list[str]:
                 lines[key] = max(lines.get(key, 0.0), amp)
     drift = max((f.offset_drift_a for f in found), default=0.0)
     if not lines:
-        return [f"current: sensor offset drifted by {1e3 * drift:.0f} mA (removed)"] if drift >= 5e-3 else []
+        return [f"current: slow offset removed, moving by {1e3 * drift:.0f} mA ({_OFFSET_CAUSES})"] if drift >= 5e-3 else []
     text = ", ".join(f"{hz:.1f} Hz ({1e3 * a:.0f} mA)" for hz, a in sorted(lines.items()))
-    return [f"current: removed interference lines at {text}; sensor offset drifted by {1e3 * drift:.0f} mA"]
+    return [f"current: removed interference lines at {text}; slow offset moving by {1e3 * drift:.0f} mA "
+            f"({_OFFSET_CAUSES})"]
 
 
 def _gain_notes(found: list[torque.PhaseGains]) -> list[str]:
