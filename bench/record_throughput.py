@@ -12,6 +12,12 @@
    handoff from the readers and the writing); medians of ``--repeat`` runs, interleaved so that the machine's
    load hits all alike.
 2. real time: CPU seconds the whole process spends per recorded second at the same rates.
+
+BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
+thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
+(7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it
+saves (measured, 10 s at the rates above: the bench alone 0.29 s CPU with one thread, 0.46 s with the default, 0.09 s
+of it in OpenBLAS's own thread), in the floor and in the recorder alike.
 """
 
 from __future__ import annotations
@@ -19,6 +25,7 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import tempfile
 import threading
 import time
@@ -32,6 +39,16 @@ from acq.recording.recorder import Recorder
 from drivers.base import CurrentSource, Drive
 from drivers.config import Bench
 from drivers.registry import open_bench
+
+_BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def blas_env(threads: str) -> dict[str, str]:
+    """This process's environment with ``threads`` BLAS threads (``default``: none of the variables set)."""
+    env = {k: v for k, v in os.environ.items() if k not in _BLAS_VARS}
+    if threads != "default":
+        env.update(dict.fromkeys(_BLAS_VARS, threads))
+    return env
 
 
 def heavy_bench() -> Bench:
@@ -109,7 +126,12 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0, help="recorded seconds in --fast mode")
     parser.add_argument("--realtime-seconds", type=float, default=5.0, help="recorded seconds in real time")
     parser.add_argument("--repeat", type=int, default=5, help="--fast runs of each (medians are shown)")
+    parser.add_argument("--blas-threads", default="1",
+                        help="BLAS threads: a count, or 'default' (OpenBLAS's own); 1 is what acq record runs with")
     args = parser.parse_args()
+    env = blas_env(args.blas_threads)
+    if env != dict(os.environ):  # numpy has loaded its BLAS already: start again with the threads asked for
+        os.execve(sys.executable, [sys.executable, *sys.argv], env)
     bench = heavy_bench()
     runs: dict[str, list[tuple[float, float, int]]] = {"sim": [], "sim2": [], "recorder": []}
     own_rates: list[float] = []
@@ -125,7 +147,7 @@ def main() -> None:
              for name, r in runs.items()}
     wall = statistics.median(wall for wall, _, _ in runs["recorder"])
     table = Table(title="recorder throughput — 3 × 51.2 kS/s current + 4 kHz encoder, simulated bench "
-                        f"(medians of {args.repeat})")
+                        f"(medians of {args.repeat}, BLAS threads: {args.blas_threads})")
     table.add_column("figure")
     table.add_column("per wall second", justify="right")
     table.add_column("per CPU second", justify="right")
