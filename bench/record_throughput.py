@@ -5,11 +5,12 @@
 1. ``--fast``: how many samples per second the recorder sustains for 3 current channels at
    51.2 kS/s + encoder at 4 kHz, next to what the simulated bench alone generates, as far as the recorder
    reads it, nothing queued or written (the floor), two ways: both streams read in turn in one thread, and
-   each stream read in its own thread as the recorder's two readers read them (two CPU-bound simulated
-   devices then contend for the GIL and the bench's lock: that cost is the simulator's, counted alike in
-   the recorder's figure and this floor) — and their ratios (target, issue 17: ≥ 0.9), per wall second and
+   each stream read in its own thread as the recorder's two readers read them (each simulated read holds the
+   bench's lock for its whole block, :meth:`drivers.sim.bench.SimBench.exclusive`, so the two compute one after
+   the other; what contention is left is the simulator's, counted alike in the recorder's figure and this floor) — and their ratios (target, issue 17: ≥ 0.9), per wall second and
    per CPU second of the process; and the recording thread's own rate (its CPU alone: the index checks, the
-   handoff from the readers and the writing); medians of ``--repeat`` runs, interleaved so that the machine's
+   handoff from the readers and the writing) and its readers' (the rest of the process's CPU: the simulator as the
+   recorder reads it, to set beside the floor); medians of ``--repeat`` runs, interleaved so that the machine's
    load hits all alike.
 2. real time: CPU seconds the whole process spends per recorded second at the same rates.
 
@@ -135,6 +136,7 @@ def main() -> None:
     bench = heavy_bench()
     runs: dict[str, list[tuple[float, float, int]]] = {"sim": [], "sim2": [], "recorder": []}
     own_rates: list[float] = []
+    reader_rates: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(args.repeat):
             runs["sim"].append(generate_only(bench, args.seconds))
@@ -142,6 +144,7 @@ def main() -> None:
             wall, cpu, samples, own = record(bench, args.seconds, True, Path(tmp))
             runs["recorder"].append((wall, cpu, samples))
             own_rates.append(samples / own)
+            reader_rates.append(samples / (cpu - own))
         rt_wall, rt_cpu, _, _ = record(bench, args.realtime_seconds, False, Path(tmp))
     rates = {name: (statistics.median(n / wall for wall, _, n in r), statistics.median(n / cpu for _, cpu, n in r))
              for name, r in runs.items()}
@@ -156,6 +159,8 @@ def main() -> None:
     table.add_row(f"recorder, --fast, {args.seconds:g} s session [samples/s]", *(f"{v:,.0f}" for v in rates["recorder"]))
     table.add_row("  its recording thread alone: checks, handoff, writing [samples/s]", "",
                   f"{statistics.median(own_rates):,.0f}")
+    table.add_row("  its readers: the simulator as the recorder reads it (the rest of its CPU) [samples/s]", "",
+                  f"{statistics.median(reader_rates):,.0f}")
     for name, floor in (("one thread", "sim"), ("a thread per stream", "sim2")):
         table.add_row(f"  recorder / sim alone, {name} (target ≥ 0.9)",
                       *(f"{r / g:.2f}" for r, g in zip(rates["recorder"], rates[floor])))
