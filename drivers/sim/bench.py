@@ -194,10 +194,12 @@ class SimBench:
         """The bench's lock, for a device to hold over a whole read (``with sim.exclusive(): ...``; the methods
         below take it again at no cost). The DAQ's and the drive's reader threads then compute their blocks one
         after the other instead of side by side (each numpy call that releases the GIL let the other thread run
-        its Python meanwhile, and the two cores then did the same work for ~25 % more CPU): measured with
-        bench/record_throughput.py's rates (3 × 51.2 kS/s + 4 kHz, one BLAS thread, medians of 8 interleaved, load
-        2.5–3.9), the bench read by a thread per stream 4.49 → 5.73 M samples per CPU second (read in one thread:
-        5.82), the recorder 4.01 → 5.05. Same samples (they depend on indices only). Never held while pacing."""
+        its Python meanwhile on the other core, for more CPU per sample). Measured with bench/record_throughput.py's
+        rates (3 × 51.2 kS/s + 4 kHz, one BLAS thread, M samples per CPU second, medians of interleaved runs): with
+        the cores free enough for both readers to run at once (load 2.5, 8 runs) the bench read by a thread per
+        stream 4.49 → 5.73 (read in one thread: 5.82) and the recorder 4.01 → 5.05; at load 4 (16 runs, ABBA) the
+        recorder 4.54 → 4.78, its readers 5.03 → 5.27, the floor unchanged (5.33, 5.36). Same samples (they depend
+        on indices only). Never held while pacing to the host clock."""
         return self._lock
 
     # ---- history -----------------------------------------------------------------------------------
