@@ -7,10 +7,11 @@
    reads it, nothing queued or written (the floor), two ways: both streams read in turn in one thread, and
    each stream read in its own thread as the recorder's two readers read them (each simulated read holds the
    bench's lock for its whole block, :meth:`drivers.sim.bench.SimBench.exclusive`, so the two compute one after
-   the other; what contention is left is the simulator's, counted alike in the recorder's figure and this floor) — and their ratios (target, issue 17: ≥ 0.9), per wall second and
-   per CPU second of the process; and the recording thread's own rate (its CPU alone: the index checks, the
-   handoff from the readers and the writing) and its readers' (the rest of the process's CPU: the simulator as the
-   recorder reads it, to set beside the floor); medians of ``--repeat`` runs, interleaved so that the machine's
+   the other; what contention is left is the simulator's, counted alike in the recorder's figure and this
+   floor) — and their ratios (target, issue 17: ≥ 0.9), per wall second and per CPU second of the process;
+   and the recording thread's own rate (its CPU alone: the index checks, the handoff from the readers and the
+   writing) and its readers' (the rest of the process's CPU: the simulator as the recorder reads it, to set
+   beside the floor); medians of ``--repeat`` runs, interleaved so that the machine's
    load hits all alike.
 2. real time: CPU seconds the whole process spends per recorded second at the same rates.
 
