@@ -5,13 +5,21 @@
 1. ``--fast``: how many samples per second the recorder sustains for 3 current channels at
    51.2 kS/s + encoder at 4 kHz, next to what the simulated bench alone generates, as far as the recorder
    reads it, nothing queued or written (the floor), two ways: both streams read in turn in one thread, and
-   each stream read in its own thread as the recorder's two readers read them (two CPU-bound simulated
-   devices then contend for the GIL and the bench's lock: that cost is the simulator's, counted alike in
-   the recorder's figure and this floor) — and their ratios (target, issue 17: ≥ 0.9), per wall second and
-   per CPU second of the process; and the recording thread's own rate (its CPU alone: the index checks, the
-   handoff from the readers and the writing); medians of ``--repeat`` runs, interleaved so that the machine's
+   each stream read in its own thread as the recorder's two readers read them (each simulated read holds the
+   bench's lock for its whole block, :meth:`drivers.sim.bench.SimBench.exclusive`, so the two compute one after
+   the other; what contention is left is the simulator's, counted alike in the recorder's figure and this
+   floor) — and their ratios (target, issue 17: ≥ 0.9), per wall second and per CPU second of the process;
+   and the recording thread's own rate (its CPU alone: the index checks, the handoff from the readers and the
+   writing) and its readers' (the rest of the process's CPU: the simulator as the recorder reads it, to set
+   beside the floor); medians of ``--repeat`` runs, interleaved so that the machine's
    load hits all alike.
 2. real time: CPU seconds the whole process spends per recorded second at the same rates.
+
+BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
+thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
+(7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it
+saves (measured, 10 s at the rates above: the bench alone 0.29 s CPU with one thread, 0.46 s with the default, 0.09 s
+of it in OpenBLAS's own thread), in the floor and in the recorder alike.
 """
 
 from __future__ import annotations
@@ -19,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
+import sys
 import tempfile
 import threading
 import time
@@ -32,6 +41,16 @@ from acq.recording.recorder import Recorder
 from drivers.base import CurrentSource, Drive
 from drivers.config import Bench
 from drivers.registry import open_bench
+
+_BLAS_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def blas_env(threads: str) -> dict[str, str]:
+    """This process's environment with ``threads`` BLAS threads (``default``: none of the variables set)."""
+    env = {k: v for k, v in os.environ.items() if k not in _BLAS_VARS}
+    if threads != "default":
+        env.update(dict.fromkeys(_BLAS_VARS, threads))
+    return env
 
 
 def heavy_bench() -> Bench:
@@ -109,10 +128,16 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0, help="recorded seconds in --fast mode")
     parser.add_argument("--realtime-seconds", type=float, default=5.0, help="recorded seconds in real time")
     parser.add_argument("--repeat", type=int, default=5, help="--fast runs of each (medians are shown)")
+    parser.add_argument("--blas-threads", default="1",
+                        help="BLAS threads: a count, or 'default' (OpenBLAS's own); 1 is what acq record runs with")
     args = parser.parse_args()
+    env = blas_env(args.blas_threads)
+    if env != dict(os.environ):  # numpy has loaded its BLAS already: start again with the threads asked for
+        os.execve(sys.executable, [sys.executable, *sys.argv], env)
     bench = heavy_bench()
     runs: dict[str, list[tuple[float, float, int]]] = {"sim": [], "sim2": [], "recorder": []}
     own_rates: list[float] = []
+    reader_rates: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(args.repeat):
             runs["sim"].append(generate_only(bench, args.seconds))
@@ -120,12 +145,13 @@ def main() -> None:
             wall, cpu, samples, own = record(bench, args.seconds, True, Path(tmp))
             runs["recorder"].append((wall, cpu, samples))
             own_rates.append(samples / own)
+            reader_rates.append(samples / (cpu - own))
         rt_wall, rt_cpu, _, _ = record(bench, args.realtime_seconds, False, Path(tmp))
     rates = {name: (statistics.median(n / wall for wall, _, n in r), statistics.median(n / cpu for _, cpu, n in r))
              for name, r in runs.items()}
     wall = statistics.median(wall for wall, _, _ in runs["recorder"])
     table = Table(title="recorder throughput — 3 × 51.2 kS/s current + 4 kHz encoder, simulated bench "
-                        f"(medians of {args.repeat})")
+                        f"(medians of {args.repeat}, BLAS threads: {args.blas_threads})")
     table.add_column("figure")
     table.add_column("per wall second", justify="right")
     table.add_column("per CPU second", justify="right")
@@ -134,6 +160,8 @@ def main() -> None:
     table.add_row(f"recorder, --fast, {args.seconds:g} s session [samples/s]", *(f"{v:,.0f}" for v in rates["recorder"]))
     table.add_row("  its recording thread alone: checks, handoff, writing [samples/s]", "",
                   f"{statistics.median(own_rates):,.0f}")
+    table.add_row("  its readers: the simulator as the recorder reads it (the rest of its CPU) [samples/s]", "",
+                  f"{statistics.median(reader_rates):,.0f}")
     for name, floor in (("one thread", "sim"), ("a thread per stream", "sim2")):
         table.add_row(f"  recorder / sim alone, {name} (target ≥ 0.9)",
                       *(f"{r / g:.2f}" for r, g in zip(rates["recorder"], rates[floor])))

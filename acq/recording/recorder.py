@@ -32,8 +32,12 @@ from acqcore.errors import AcqError, ConfigError, DeviceError
 
 FLUSH_INTERVAL_S = 0.5
 #: Also flush once this much is pending (a --fast simulated bench delivers seconds of data per 0.5 s): bounds
-#: the memory held and what a failed write can lose. 1 MiB ≈ 1.7 s of 3 × 25.6 kS/s float64.
-FLUSH_BYTES = 1 << 20
+#: the memory held and what a failed write can lose. 2 MiB ≈ 1.7 s of 3 × 51.2 kS/s float64, so in real time the
+#: 0.5 s interval commits first for any card below 4 MB/s. Each commit costs its two H5Fflush and the partial chunks
+#: it rewrites: a 10 s --fast session at those rates commits 7 times instead of 13 and the recording thread's CPU
+#: falls from 38.4 to 29.5 ms (4 MiB: 27.0; medians of 10, bench/record_throughput.py rates, load 2–3). Not more:
+#: a commit needs twice its size free (SessionWriter's room check), 4 MiB kept nothing on an 8 MB disk.
+FLUSH_BYTES = 2 << 20
 READ_TIMEOUT_S = 0.2
 #: The recording thread takes what the readers queued once per this interval, all of it, instead of waking for each
 #: block: a wake-up (and the GIL handed over to it) per batch. Real time: a block waits at most this long (the

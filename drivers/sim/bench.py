@@ -190,6 +190,18 @@ class SimBench:
         with self._lock:
             self._physics.schedule = source
 
+    def exclusive(self) -> threading.RLock:
+        """The bench's lock, for a device to hold over a whole read (``with sim.exclusive(): ...``; the methods
+        below take it again at no cost). The DAQ's and the drive's reader threads then compute their blocks one
+        after the other instead of side by side (each numpy call that releases the GIL let the other thread run
+        its Python meanwhile on the other core, for more CPU per sample). Measured with bench/record_throughput.py's
+        rates (3 × 51.2 kS/s + 4 kHz, one BLAS thread, M samples per CPU second, medians of interleaved runs): with
+        the cores free enough for both readers to run at once (load 2.5, 8 runs) the bench read by a thread per
+        stream 4.49 → 5.73 (read in one thread: 5.82) and the recorder 4.01 → 5.05; at load 4 (16 runs, ABBA) the
+        recorder 4.54 → 4.78, its readers 5.03 → 5.27, the floor unchanged (5.33, 5.36). Same samples (they depend
+        on indices only). Never held while pacing to the host clock."""
+        return self._lock
+
     # ---- history -----------------------------------------------------------------------------------
     def hold_history(self, consumer: str, from_t_s: float) -> None:
         """Declare that ``consumer`` will still read states at drive times ≥ ``from_t_s`` (s)."""

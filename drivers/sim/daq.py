@@ -39,9 +39,10 @@ class SimCurrentSource:
         host_ns = max(int(self._sim.host_ns_at(self._sim.daq_time_s(first + n - 1), jitter_s)[0]), self._last_host_ns)
         if not self._sim.pace_until(host_ns, timeout_s):
             return None
-        current_a = self._sim.current_samples(first, n)
-        self._next, self._last_host_ns = first + n, host_ns
-        self._sim.hold_history(self._consumer, self._sim.daq_history_from_s(self._next))
+        with self._sim.exclusive():
+            current_a = self._sim.current_samples(first, n)
+            self._next, self._last_host_ns = first + n, host_ns
+            self._sim.hold_history(self._consumer, self._sim.daq_history_from_s(self._next))
         return CurrentBlock(first_index=first, current_a=current_a, host_ns=host_ns)
 
     def stop(self) -> None:

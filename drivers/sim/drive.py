@@ -77,17 +77,19 @@ class SimDrive:
         host_ns = np.maximum.accumulate(np.maximum(host_ns, self._last_host_ns))
         if not self._sim.pace_until(int(host_ns[-1]), timeout_s):
             return None
-        counts = self._sim.encoder_counts(first, n)
-        demand = self._sim.velocity_demand_rad_s(first, n) * (self._sim.counts_per_rev / (2.0 * np.pi))
-        self._next, self._last_host_ns = first + n, int(host_ns[-1])
-        self._sim.hold_history(self._consumer, self._next * self._period_s)
+        with self._sim.exclusive():
+            counts = self._sim.encoder_counts(first, n)
+            demand = self._sim.velocity_demand_rad_s(first, n) * (self._sim.counts_per_rev / (2.0 * np.pi))
+            drive_time_s = self._sim.stamp_times_s(first, n)
+            self._next, self._last_host_ns = first + n, int(host_ns[-1])
+            self._sim.hold_history(self._consumer, self._next * self._period_s)
         keep = np.ones(n, dtype=bool)
         for a, b in self._drops:
             keep[max(a - first, 0):max(b - first, 0)] = False
         if not keep.any():
             return None
         return EncoderBlock(index=cycles[keep], position_counts=counts[keep], host_ns=host_ns[keep],
-                            drive_time_s=self._sim.stamp_times_s(first, n)[keep],
+                            drive_time_s=drive_time_s[keep],
                             velocity_demand_counts_per_s=demand[keep])
 
     def machine_tags(self) -> dict[str, float]:
