@@ -29,8 +29,11 @@ def session_10s(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_analyze_json_has_documented_keys_and_finds_K(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    earlier_png = session_10s.with_name(session_10s.stem + ".report.png")
+    earlier_png.write_bytes(b"a picture of an earlier result")
     run = run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report")
     assert run.code == 0, run.err
+    assert not earlier_png.exists(), "a picture of another result must not stand beside this one"
     doc = json.loads(run.out)
     assert KEYS <= set(doc)
     assert set(doc["ci95"]) == {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad"}

@@ -147,6 +147,8 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
             # prints its own line on stderr when the disk fills under it
             raise StorageError(f"disk full: {report_path}")
         write_json(doc, json_path)
+        if report_path is None:  # no picture of this result: one of an earlier result would be taken for it
+            png_path.unlink(missing_ok=True)
     return SessionResult(session, result, doc, json_path, report_path)
 
 
