@@ -111,7 +111,7 @@ def test_folders_where_files_are_expected_are_one_line(tmp_path: Path, capsys: p
     out_file.write_text("")
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--duration", "1", "--out", str(out_file))
     assert run.code == 2
-    assert run.err.strip() == f"acq: error: {out_file}: cannot write a session there (File exists)"
+    assert run.err.strip() == f"acq: error: --out {out_file}: is a file, not a folder"
 
 
 def test_every_driver_the_config_accepts_has_an_adapter_in_the_registry() -> None:

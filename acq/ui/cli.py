@@ -139,6 +139,8 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
 
     bench = with_joint(load_bench(bench_path), joint)
     profile = load_profile(profile_name)
+    if out_dir.exists() and not out_dir.is_dir():  # before any device starts
+        raise ConfigError(f"--out {out_dir}: is a file, not a folder")
     duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
     if not no_analyze:
         from analysis import min_record_s
