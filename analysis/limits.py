@@ -21,7 +21,7 @@ def encoder_period_problem(period_s: float) -> str | None:
     if high > low:
         return None
     return (f"the encoder then samples at {1.0 / period_s:g} Hz, too slow for the fit band (from {low:g} Hz to "
-            f"0.4 × its rate = {high:g} Hz): at most {0.4 / low:g} s")
+            f"0.4 × its rate = {high:g} Hz): it must be below {0.4 / low:g} s")
 
 
 def min_current_rate_hz(period_s: float) -> float:
@@ -30,7 +30,8 @@ def min_current_rate_hz(period_s: float) -> float:
     return 2.0 * _STOP_FRACTION / period_s
 
 
-def min_record_s(segment_s: float = 0.5) -> float:
+def min_record_s(segment_s: float) -> float:
     """The shortest record, s, the analysis identifies from: two Welch segments of ``segment_s`` (s) at 50 %
-    overlap (the default request's 0.5 s segments: 0.75 s)."""
+    overlap, both streams together (the alignment trims what only one stream covers, so a record barely longer
+    can still fall short)."""
     return min_duration_s(segment_s)

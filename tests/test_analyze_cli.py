@@ -88,8 +88,8 @@ def test_record_then_too_short_session_fails_with_one_line(tmp_path: Path, capsy
     # shorter than the identification needs: refused before anything is recorded
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.5", "--fast", "--out", str(tmp_path))
     assert run.code == 2 and not list(tmp_path.glob("*.h5"))
-    assert run.err.strip() == ("acq: error: --duration 0.5: the identification needs at least 0.75 s (two 0.5 s Welch "
-                               "segments); record longer, or add --no-analyze")
+    assert run.err.strip() == ("acq: error: --duration 0.5: the identification needs at least 0.75 s of both streams (two "
+                               "0.5 s Welch segments); record longer, or add --no-analyze")
     # long enough on paper, but the streams overlap less: the recording stands, the exit code says no result came
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.76", "--fast", "--out", str(tmp_path))
     assert run.code == 1, "a complete recording whose identification could not run"

@@ -49,7 +49,7 @@ def test_shipped_configs_validate() -> None:
          "600 Hz before it is moved onto the encoder's instants)"),
         ("period_s = 0.001", "period_s = 1",
          "[drive] period_s = 1: the encoder then samples at 1 Hz, too slow for the fit band (from 10 Hz to 0.4 × "
-         "its rate = 0.4 Hz): at most 0.04 s"),
+         "its rate = 0.4 Hz): it must be below 0.04 s"),
     ],
 )
 def test_bad_bench_config_is_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str],

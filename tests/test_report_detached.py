@@ -171,3 +171,51 @@ def test_a_drawer_draws_nothing_over_a_newer_result(session: Path, env: dict[str
     log.write_text("")  # as the drawer's process has it
     _draw_job(older)
     assert not png.exists() and result.read_text() == newer and not log.exists()
+
+
+def test_a_picture_finished_after_a_newer_result_is_not_put_in_place(session: Path, env: dict[str, str],
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """The result is checked again when the picture is ready (drawing takes ≈ 0.6 s): an analysis that came
+    meanwhile (here `--no-report`, which also removes an earlier picture) keeps its result without a stale PNG."""
+    import acq.ui.plots as plots
+    from acq.offline.analyze import analyze_session
+    from acq.ui.report_png import _draw_job, _read_job, _write_job
+
+    monkeypatch.setenv("QT_QPA_PLATFORM", "offscreen")
+    done = analyze_session(session)
+    png, result, _ = _paths(session)
+    job_file = _write_job(done, png)
+    job = _read_job(job_file.read_bytes())
+    job_file.unlink()  # as the drawer does when it has read it
+    draw = plots.render_report_png
+
+    def draw_while_a_newer_analysis_comes(*args: object, **kwargs: object) -> None:
+        draw(*args, **kwargs)
+        analyze_session(session, AnalysisRequest(band_hz=(20.0, 300.0)), report=False)
+
+    monkeypatch.setattr(plots, "render_report_png", draw_while_a_newer_analysis_comes)
+    _draw_job(job)
+    assert not png.exists()
+    assert json.loads(result.read_text())["options"]["band_hz"] == [20.0, 300.0]
+    assert not [p.name for p in session.parent.iterdir() if p.name.startswith(".")]  # no temp picture left
+
+
+def test_a_drawer_stopped_by_its_timeout_leaves_the_note_and_no_temp_file(
+        session: Path, env: dict[str, str], monkeypatch: pytest.MonkeyPatch, capfd: pytest.CaptureFixture[str]) -> None:
+    import acq.ui.report_png as report_png
+    from acq.offline.analyze import analyze_session
+
+    done = analyze_session(session)
+    png, result, _ = _paths(session)
+    job_file = report_png._write_job(done, png)
+    job = report_png._read_job(job_file.read_bytes())
+    job_file.unlink()
+    left = png.with_name(f".{png.name}.abc123.tmp.png")  # what atomic_path had begun when Qt hung
+    left.write_bytes(b"half a picture")
+    monkeypatch.setattr(report_png.os, "_exit", lambda code: (_ for _ in ()).throw(SystemExit(code)))
+    with pytest.raises(SystemExit):
+        report_png._give_up(job)
+    why = f"stopped after {report_png.DRAW_TIMEOUT_S:g} s without a picture"
+    assert json.loads(result.read_text())["quality"]["reasons"][-1] == f"note: report not drawn: {why}"
+    assert f"acq: {png}: report not drawn ({why}); the result stands in {result}" in capfd.readouterr().err
+    assert not left.exists() and not png.exists()

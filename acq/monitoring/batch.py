@@ -166,8 +166,9 @@ def _meta_if_readable(path: str) -> dict[str, Any]:
 def _start_forkserver_without_cwd() -> None:
     """Start the forkserver as ``python -P`` would (PYTHONSAFEPATH): it runs ``python -c``, which puts the current
     folder first on sys.path, so a folder named ``acq``, ``analysis`` or ``drivers`` where the user stands would be
-    imported by every worker in place of ours (they then die: BrokenProcessPool). The variable is set only while
-    the server starts, so commands acq runs later (``--on-alarm``) see the user's environment."""
+    imported by every worker in place of ours (they then die: BrokenProcessPool). The server and its workers keep
+    the variable (they run no program of the user's); acq's own process has it only while the server starts, so
+    the commands it runs later (``--on-alarm``) see the user's environment."""
     from multiprocessing import forkserver
 
     before = os.environ.get("PYTHONSAFEPATH")

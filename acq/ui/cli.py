@@ -143,11 +143,13 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
         raise ConfigError(f"--out {out_dir}: is a file, not a folder")
     duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
     if not no_analyze:
-        from analysis import min_record_s
+        from analysis import AnalysisRequest, min_record_s
 
-        if duration < min_record_s():
-            raise ConfigError(f"--duration {duration:g}: the identification needs at least {min_record_s():g} s (two "
-                              "0.5 s Welch segments); record longer, or add --no-analyze")
+        segment_s = AnalysisRequest().segment_s
+        if duration < min_record_s(segment_s):
+            given = f"--duration {duration:g}" if duration_s is not None else f"the profile's duration_s = {duration:g}"
+            raise ConfigError(f"{given}: the identification needs at least {min_record_s(segment_s):g} s of both "
+                              f"streams (two {segment_s:g} s Welch segments); record longer, or add --no-analyze")
     check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))

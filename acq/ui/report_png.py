@@ -22,11 +22,13 @@ import os
 import subprocess
 import sys
 import tempfile
+import threading
 from dataclasses import dataclass, fields
 from pathlib import Path
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from acq.recording.storage import atomic_path
+from acq.recording.storage import atomic_path, remove_temp_files
 from acqcore.errors import StorageError
 
 if TYPE_CHECKING:
@@ -57,14 +59,24 @@ def _not_drawn_line(report_path: Path, why: str, json_path: Path) -> str:
     return f"acq: {report_path}: report not drawn ({why}); the result stands in {json_path}\n"
 
 
-def _render(figures: FigureData, values: dict[str, Any], title: str, report_path: Path) -> str | None:
-    """Draw ``report_path`` (atomically); None when drawn, else why not. A write that failed raises
-    :class:`StorageError` (disk full, I/O error: a failure, named by the file)."""
+class _Superseded(Exception):
+    """A newer analysis replaced the result while its picture was drawn: the picture is not put in place."""
+
+
+def _render(figures: FigureData, values: dict[str, Any], title: str, report_path: Path,
+            still_current: Callable[[], bool] = lambda: True) -> str | None:
+    """Draw ``report_path`` (atomically, and only if ``still_current()`` holds when the picture is ready); None when
+    drawn or superseded, else why not. A write that failed raises :class:`StorageError` (disk full, I/O error: a
+    failure, named by the file)."""
     try:
         from acq.ui.plots import render_report_png  # Qt only when a picture is drawn
 
         with atomic_path(report_path) as tmp_png:
             render_report_png(figures, tmp_png, values=values, title=title)
+            if not still_current():  # drawing takes ≈ 0.6 s: a newer result (or --no-report) may have come meanwhile
+                raise _Superseded
+    except _Superseded:
+        return None
     except StorageError:
         raise
     except Exception as e:  # noqa: BLE001 — whatever the plotting stack does, the identification stands
@@ -189,12 +201,19 @@ class _DrawersLock:
     def __enter__(self) -> _DrawersLock:
         import fcntl
 
-        self._fd = os.open(drawers_lock_path(), os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+        path = drawers_lock_path()
+        try:
+            self._fd: int | None = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW, 0o600)
+        except OSError as e:  # e.g. another user made a file of that name: the turns are a courtesy, not a need
+            sys.stderr.write(f"acq: {path}: not usable ({e.strerror}); drawing without waiting for other drawers\n")
+            self._fd = None
+            return self
         fcntl.flock(self._fd, fcntl.LOCK_EX)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        os.close(self._fd)
+        if self._fd is not None:
+            os.close(self._fd)
 
 
 def run_job(job_path: Path) -> None:
@@ -210,11 +229,26 @@ def run_job(job_path: Path) -> None:
         return  # the folder was removed: nothing to draw for
     job_path.unlink(missing_ok=True)
     with _DrawersLock():
-        faulthandler.dump_traceback_later(DRAW_TIMEOUT_S, exit=True)
+        job = _read_job(data)
+        remove_temp_files(job.report_path)  # a drawer stopped by its timeout leaves its temp picture
+        timer = threading.Timer(DRAW_TIMEOUT_S, _give_up, (job,))
+        timer.daemon = True
+        timer.start()
+        # the last resort if Qt hangs holding the interpreter's lock (the timer then cannot run): no Python needed
+        faulthandler.dump_traceback_later(DRAW_TIMEOUT_S + 10.0, exit=True)
         try:
-            _draw_job(_read_job(data))
+            _draw_job(job)
         finally:
+            timer.cancel()
             faulthandler.cancel_dump_traceback_later()
+
+
+def _give_up(job: _Job) -> None:
+    """Stop a drawer that hangs: its stack, the line and the note of a picture not drawn, no temp file."""
+    faulthandler.dump_traceback(all_threads=True)
+    _not_drawn(job, f"stopped after {DRAW_TIMEOUT_S:g} s without a picture")
+    remove_temp_files(job.report_path)
+    os._exit(1)  # the main thread is stuck in the plotting stack: no orderly exit reaches it
 
 
 def _draw_job(job: _Job) -> None:
@@ -223,11 +257,17 @@ def _draw_job(job: _Job) -> None:
         _remove_if_empty(report_log_path(job.report_path))
         return
     try:
-        why = _render(job.figures, json.loads(job.result_text), job.title, job.report_path)
+        why = _render(job.figures, json.loads(job.result_text), job.title, job.report_path, job.is_current)
     except StorageError as e:
         why = str(e)
     if why is None:
+        _remove_if_empty(report_log_path(job.report_path))  # drawn (its log is gone) or superseded meanwhile
         return
+    _not_drawn(job, why)
+
+
+def _not_drawn(job: _Job, why: str) -> None:
+    """The line on stderr (the log) and the note in the result of a picture not drawn (never over a newer result)."""
     sys.stderr.write(_not_drawn_line(job.report_path, why, job.json_path))
     sys.stderr.flush()
     if job.is_current():  # never over a newer analysis's result
