@@ -247,7 +247,14 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     m = max(1, int(round(knot_spacing_s * rate_hz)))
     if i.size < 4 * m:
         raise ValueError("record shorter than four spline knots")
-    y, phi = i - offset.dc_a, th + offset.theta0_rad
+    # the current less its DC, with unit white noise beside it when the estimator's noise is asked for (scaled to
+    # the floor at the end): both right-hand sides of the fits, as the columns of Y (each contiguous)
+    Yt = np.empty((1 if noise_seed is None else 2, i.size))
+    y = np.subtract(i, offset.dc_a, out=Yt[0])
+    if noise_seed is not None:
+        np.random.default_rng(noise_seed).standard_normal(out=Yt[1])
+    Y = y if noise_seed is None else Yt.T
+    phi = th + offset.theta0_rad
     g = -np.sin(phi)
     tn = np.linspace(-1.0, 1.0, y.size)
     offset = SlowOffset(y.size, OFFSET_KNOT_S * rate_hz)  # the slow offset's columns, then the angle columns and lines
@@ -265,9 +272,6 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         np.multiply(cols[1], tn, out=cols[2])
 
     angle_columns(iq1)
-    Y = y
-    if noise_seed is not None:  # unit white noise through the same estimator, scaled to the floor at the end
-        Y = np.stack((y, np.random.default_rng(noise_seed).standard_normal(y.size))).T  # columns, each contiguous
     lines_hz: list[float] = []
     for round_ in range(LINE_ROUNDS + 1):  # a strong line's leak into the first fit can hide weaker ones
         iq, beta = spline_fit(Y, g, m, r_band, cols, offset)
