@@ -112,3 +112,45 @@ def frequency_response(p: TwoMassParams, f_hz: np.ndarray) -> np.ndarray:
     # Horner's scheme written out: np.polyval's arithmetic (0·s + c₀ = c₀ exactly) without its per-call overhead
     # (the fit evaluates this ~1400 times per analysis)
     return ((num[0] * s + num[1]) * s + num[2]) / (((den[0] * s + den[1]) * s + den[2]) * s + den[3])
+
+
+def response_log_derivatives(p: TwoMassParams, f_hz: np.ndarray,
+                             names: tuple[str, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The model's H(j2πf) and its derivatives with respect to the natural logarithms of the parameters ``names``.
+
+    For H = N/D: ∂H/∂ln θ = θ·(∂N/∂θ − H·∂D/∂θ)/D, the polynomials' derivatives written out from
+    :func:`transfer_function` (the fit's analytic Jacobian; b_m and b_l enter as constants).
+
+    Parameters
+    ----------
+    p : TwoMassParams
+        Model parameters, SI units.
+    f_hz : ndarray
+        Frequencies, Hz.
+    names : tuple of str
+        Fields of :class:`TwoMassParams` among ``K_Nm_per_rad``, ``Jm_kgm2``, ``Jl_kgm2``, ``C_Nms_per_rad``.
+
+    Returns
+    -------
+    H : ndarray of complex
+        :func:`frequency_response` at ``f_hz``, (rad/s)/(N·m).
+    dH : ndarray of complex, shape (len(names), len(f_hz))
+        ∂H/∂ln θ for each name, (rad/s)/(N·m).
+    """
+    s = 2j * np.pi * np.asarray(f_hz, dtype=float)
+    K, Jm, Jl, C = p.K_Nm_per_rad, p.Jm_kgm2, p.Jl_kgm2, p.C_Nms_per_rad
+    bm, bl = p.bm_Nms_per_rad, p.bl_Nms_per_rad
+    h = frequency_response(p, f_hz)
+    num, den = transfer_function(p)
+    d = ((den[0] * s + den[1]) * s + den[2]) * s + den[3]
+    partial = {  # (θ, ∂N/∂θ, ∂D/∂θ)
+        "K_Nm_per_rad": (K, 1.0, (Jm + Jl) * s + (bm + bl)),
+        "Jm_kgm2": (Jm, 0.0, ((Jl * s + (C + bl)) * s + K) * s),
+        "Jl_kgm2": (Jl, s * s, ((Jm * s + (C + bm)) * s + K) * s),
+        "C_Nms_per_rad": (C, s, ((Jm + Jl) * s + (bm + bl)) * s),
+    }
+    dh = np.empty((len(names), s.size), dtype=complex)
+    for row, name in enumerate(names):
+        theta, dn, dd = partial[name]
+        dh[row] = theta * (dn - h * dd) / d
+    return h, dh
