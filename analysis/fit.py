@@ -45,8 +45,7 @@ from scipy.ndimage import median_filter
 
 from analysis.adequacy import misfit_covariance
 from analysis.frf import KERNEL_PER_BIN, FrequencyResponse, window_kernel
-from analysis.model import (TwoMassParams, antiresonance_hz, frequency_response, resonance_hz,
-                            response_log_derivatives)
+from analysis.model import TwoMassParams, antiresonance_hz, frequency_response, resonance_hz
 
 FitKind = Literal["amplitude", "complex"]
 FitParams = Literal["K", "K,Jm,Jl"]
@@ -251,17 +250,13 @@ class _Problem:
         The model as H1 sees it: the plant's H through the Welch window kernel, scaled by the torque
         noise's 1 − G_nn/G_xx, plus the encoder's fold-over terms (:mod:`analysis.frf`).
         """
-        return np.log(self._as_seen(frequency_response(self.params(x), self.f_eval))) - self.log_h
-
-    def _as_seen(self, h_all: np.ndarray) -> np.ndarray:
-        """The model as H1 sees it at the band's bins from the model's values at ``f_eval`` (last axis; linear, so it
-        maps the derivatives alike)."""
-        h = self.gain * (self.smooth @ h_all[..., :self.n_fine].T).T
+        h_all = frequency_response(self.params(x), self.f_eval)
+        h = self.gain * (self.smooth @ h_all[:self.n_fine])
         n = self.f.size
         for k, (a, b) in enumerate(self.fold):
             up = self.n_fine + 2 * k * n
-            h = h + h_all[..., up:up + n] * a + np.conj(h_all[..., up + n:up + 2 * n]) * b
-        return h
+            h = h + h_all[up:up + n] * a + np.conj(h_all[up + n:up + 2 * n]) * b
+        return np.log(h) - self.log_h
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """Weighted residual vector for ``least_squares``."""
@@ -269,13 +264,6 @@ class _Problem:
         if self.kind == "amplitude":
             return self.sqrt_w * z.real
         return np.concatenate([self.sqrt_w * z.real, self.sqrt_w * np.angle(np.exp(1j * z.imag))])
-
-    def jacobian(self, x: np.ndarray) -> np.ndarray:
-        """∂ :meth:`residuals` / ∂x, shape (residuals, free parameters): analytic (:func:`response_log_derivatives`
-        through the same kernel and fold-over terms), one model evaluation instead of one per parameter."""
-        h_all, dh_all = response_log_derivatives(self.params(x), self.f_eval, self.free)
-        q = self.sqrt_w * (self._as_seen(dh_all) / self._as_seen(h_all))  # √w·∂ ln h/∂x, one row per parameter
-        return q.real.T if self.kind == "amplitude" else np.concatenate([q.real.T, q.imag.T])
 
 
 def _kernel_operator(f_hz: np.ndarray, offsets_hz: np.ndarray, kernel: np.ndarray,
@@ -360,8 +348,7 @@ def fit_two_mass(
         best = None
         for start in starts:
             try:
-                res = optimize.least_squares(problem.residuals, problem.x0(start), jac=problem.jacobian, method="lm",
-                                             x_scale=1.0)
+                res = optimize.least_squares(problem.residuals, problem.x0(start), method="lm", x_scale=1.0)
             except (ValueError, FloatingPointError):
                 continue
             if np.isfinite(res.cost) and (best is None or res.cost < best.cost):
@@ -424,7 +411,7 @@ def _jackknife(problem: _Problem, x_best: np.ndarray, options: FitOptions) -> tu
     for rep in problem.replicates:
         sub = _Problem(rep, problem.band, options, problem.fixed)
         try:
-            xs.append(optimize.least_squares(sub.residuals, x_best, jac=sub.jacobian, method="lm", x_scale=1.0).x)
+            xs.append(optimize.least_squares(sub.residuals, x_best, method="lm", x_scale=1.0).x)
         except (ValueError, FloatingPointError):
             continue
     b = len(xs)
