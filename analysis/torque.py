@@ -250,15 +250,11 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     if i.size < 4 * m:
         raise ValueError("record shorter than four spline knots")
     # the current less its DC, with unit white noise beside it when the estimator's noise is asked for (scaled to
-    # the floor at the end): the first pass's right-hand sides, as the columns of Y (each contiguous)
+    # the floor at the end): both right-hand sides of the fits, as the columns of Y (each contiguous)
     Yt = np.empty((1 if noise_seed is None else 2, i.size))
     y = np.subtract(i, offset.dc_a, out=Yt[0])
     if noise_seed is not None:
-        # uniform on ±√3 (variance 1): only the noise's spectrum is used, which a linear estimator's output takes from
-        # the input's variance alone, whatever its distribution; drawn 4× faster than normal deviates
-        np.random.default_rng(noise_seed).random(out=Yt[1])
-        Yt[1] -= 0.5
-        Yt[1] *= np.sqrt(12.0)
+        np.random.default_rng(noise_seed).standard_normal(out=Yt[1])
     Y = y if noise_seed is None else Yt.T
     phi = th + offset.theta0_rad
     g = -np.sin(phi)
