@@ -230,16 +230,22 @@ def percentile_without_copy(x: np.ndarray, q: float) -> float:
 
 def _crossings(chunk: Callable[[int, int], np.ndarray], n: int, h: float) -> np.ndarray:
     """Sample positions where a Schmitt trigger of threshold ±h on the chunked signal switches."""
-    out, state = [], 0
+    out, state = [np.empty(0, dtype=np.int64)], 0
     for a in range(0, n, _CHUNK):
         x = chunk(a, min(n, a + _CHUNK))
-        s = np.where(x > h, 1, np.where(x < -h, -1, 0)).astype(np.int8)
-        nz = np.flatnonzero(s)
-        vals = s[nz]
-        before = np.concatenate(([state], vals[:-1]))  # the trigger's state before each decided sample
-        out.append(a + nz[(vals != before) & (before != 0)])
-        if nz.size:
-            state = int(vals[-1])
+        s = (x > h).view(np.int8) - (x < -h).view(np.int8)  # +1 above, −1 below, 0 inside the hysteresis
+        # the runs of equal values (few: the signal stays above, below or inside for many samples), then the decided
+        # ones: a switch is a decided run whose value differs from the trigger's state before it (the previous one)
+        first = np.concatenate(([0], np.flatnonzero(s[1:] != s[:-1]) + 1))
+        vals = s[first]
+        first, vals = first[vals != 0], vals[vals != 0]
+        if not vals.size:
+            continue
+        switch = np.flatnonzero(vals[1:] != vals[:-1]) + 1
+        if state != 0 and vals[0] != state:
+            switch = np.concatenate(([0], switch))
+        out.append(a + first[switch])
+        state = int(vals[-1])
     return np.concatenate(out).astype(np.float64)
 
 

@@ -126,14 +126,10 @@ def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index:
     # the lag is refined to the one that makes the half-periods agree best (a lag error τ scatters them by
     # ±τ·α/ω, accelerating against decelerating), on the first REFINE_SPAN_S (a clock drift bends it later)
     early = crossings < crossings[0] + REFINE_SPAN_S
-    best_lag, best_scatter = lag_s, math.inf
-    for tau in lag_s + np.arange(-REFINE_LAG_S, REFINE_LAG_S + 1e-12, REFINE_STEP_S):
-        per_interval = _half_periods(crossings[early], tau, cycles, counts, period_s, counts_per_rev, pole_pairs,
-                                     float(np.max(f_enc)))
-        if per_interval.size >= 8:
-            scatter = float(np.median(np.abs(per_interval - np.median(per_interval))))
-            if scatter < best_scatter:
-                best_lag, best_scatter = float(tau), scatter
+    taus = lag_s + np.arange(-REFINE_LAG_S, REFINE_LAG_S + 1e-12, REFINE_STEP_S)
+    scatter = _half_period_scatter(crossings[early], taus, cycles, counts, period_s, counts_per_rev, pole_pairs,
+                                   float(np.max(f_enc)))
+    best_lag = float(taus[np.argmin(scatter)]) if np.isfinite(scatter).any() else lag_s
     per_interval = _half_periods(crossings[early], best_lag, cycles, counts, period_s, counts_per_rev, pole_pairs,
                                  float(np.max(f_enc)))
     if per_interval.size < 8:
@@ -157,6 +153,30 @@ def _half_periods(crossings: np.ndarray, lag_s: float, cycles: np.ndarray, count
     moving = (np.isfinite(half_cycles) & (dt < 0.5 / (0.2 * f_enc_max_hz))
               & (half_cycles >= 0.2 * f_enc_max_hz * dt))
     return 0.5 / half_cycles[moving]
+
+
+def _half_period_scatter(crossings: np.ndarray, lags_s: np.ndarray, cycles: np.ndarray, counts: np.ndarray,
+                         period_s: float, counts_per_rev: int, pole_pairs: int, f_enc_max_hz: float) -> np.ndarray:
+    """For each lag, the median absolute deviation of :func:`_half_periods` (inf where fewer than 8 half-periods).
+
+    All lags at once: the half-periods that count (moving, inside the encoder record) differ between lags only at
+    the record's ends, so the lags sharing a selection are one 2-D median each (the same values as lag by lag).
+    """
+    theta_rev = np.interp(crossings[None, :] + lags_s[:, None], cycles * period_s, counts / counts_per_rev,
+                          left=np.nan, right=np.nan)
+    half_cycles = pole_pairs * np.abs(np.diff(theta_rev, axis=1))
+    moving = np.isfinite(half_cycles) & (np.diff(crossings) < 0.5 / (0.2 * f_enc_max_hz))[None, :]
+    scatter = np.full(lags_s.size, np.inf)
+    groups: dict[bytes, list[int]] = {}
+    for row, packed in enumerate(np.packbits(moving, axis=1)):
+        groups.setdefault(packed.tobytes(), []).append(row)
+    for rows in groups.values():
+        selected = moving[rows[0]]
+        if selected.sum() >= 8:
+            per_interval = 0.5 / np.maximum(half_cycles[np.ix_(rows, np.flatnonzero(selected))], 1e-12)
+            centre = np.median(per_interval, axis=1, keepdims=True)
+            scatter[rows] = np.median(np.abs(per_interval - centre), axis=1)
+    return scatter
 
 
 def _smooth(x: np.ndarray) -> np.ndarray:

@@ -40,11 +40,11 @@ from dataclasses import dataclass, replace
 from typing import Literal
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize, sparse, stats
 from scipy.ndimage import median_filter
 
 from analysis.adequacy import misfit_covariance
-from analysis.frf import FrequencyResponse, window_kernel
+from analysis.frf import KERNEL_PER_BIN, FrequencyResponse, window_kernel
 from analysis.model import TwoMassParams, antiresonance_hz, frequency_response, resonance_hz
 
 FitKind = Literal["amplitude", "complex"]
@@ -222,14 +222,19 @@ class _Problem:
         self.band = band
         self.replicates = frf.replicates or ()
         offsets, kernel = window_kernel(frf)
-        self.kernel = kernel[sel]
-        self.f_fine = self.f[:, None] + offsets[None, :]
+        f_fine, self.smooth = _kernel_operator(self.f, offsets, kernel[sel], frf.segment_s)
         self.gain = 1.0 - (frf.noise_ratio[sel] if frf.noise_ratio is not None else 0.0)
-        self.fold = []  # (f + k/T, factor·A_k, k/T − f, factor·B_k) of the fold-over terms
+        self.fold = []  # (factor·A_k, factor·B_k) of the fold-over terms, H at f + k/T and k/T − f
+        fold_f = []
         if frf.alias is not None:
             for k, (a, b) in enumerate(frf.alias[:, :, sel], start=1):
                 up, down = k / frf.period_s + self.f, k / frf.period_s - self.f
-                self.fold.append((up, self.f / up * a, down, -self.f / down * b))
+                self.fold.append((self.f / up * a, -self.f / down * b))
+                fold_f += [up, down]
+        # every frequency the model is evaluated at, in one array (one call instead of 1 + 2 per order): the fine
+        # ones, then per order f + k/T and k/T − f
+        self.f_eval = np.concatenate((f_fine, *fold_f))
+        self.n_fine = f_fine.size
 
     def params(self, x: np.ndarray) -> TwoMassParams:
         """Model parameters from the log vector ``x`` of the free ones."""
@@ -245,10 +250,12 @@ class _Problem:
         The model as H1 sees it: the plant's H through the Welch window kernel, scaled by the torque
         noise's 1 − G_nn/G_xx, plus the encoder's fold-over terms (:mod:`analysis.frf`).
         """
-        p = self.params(x)
-        h = self.gain * np.sum(frequency_response(p, self.f_fine) * self.kernel, axis=1)
-        for up, a, down, b in self.fold:
-            h = h + frequency_response(p, up) * a + np.conj(frequency_response(p, down)) * b
+        h_all = frequency_response(self.params(x), self.f_eval)
+        h = self.gain * (self.smooth @ h_all[:self.n_fine])
+        n = self.f.size
+        for k, (a, b) in enumerate(self.fold):
+            up = self.n_fine + 2 * k * n
+            h = h + h_all[up:up + n] * a + np.conj(h_all[up + n:up + 2 * n]) * b
         return np.log(h) - self.log_h
 
     def residuals(self, x: np.ndarray) -> np.ndarray:
@@ -257,6 +264,29 @@ class _Problem:
         if self.kind == "amplitude":
             return self.sqrt_w * z.real
         return np.concatenate([self.sqrt_w * z.real, self.sqrt_w * np.angle(np.exp(1j * z.imag))])
+
+
+def _kernel_operator(f_hz: np.ndarray, offsets_hz: np.ndarray, kernel: np.ndarray,
+                     segment_s: float) -> tuple[np.ndarray, sparse.csr_array]:
+    """The distinct fine frequencies f + ν, Hz, of all bins and the sparse matrix that applies each bin's
+    kernel to the model's H there: Σ_ν H(f+ν)·kernel(f, ν) = (matrix @ H(fine))[bin].
+
+    The bins and the kernel's offsets lie on one grid of spacing 1/(``KERNEL_PER_BIN``·segment), so neighbouring
+    bins share most of their fine frequencies: ~1 600 distinct ones instead of bins × offsets (~12 700), and the
+    fit evaluates the model ~300 times. When every sum f + ν is within 1e-9 of a grid point (a rounding difference
+    of a few ulp) the grid points are taken; an FRF off that grid keeps its exact distinct sums.
+    """
+    fine = f_hz[:, None] + offsets_hz[None, :]
+    step = 1.0 / (KERNEL_PER_BIN * segment_s)
+    grid = np.round(fine / step)
+    if np.all(np.abs(fine - grid * step) <= 1e-9 * np.maximum(np.abs(grid * step), step)):
+        first = grid.min()
+        values, where = np.arange(first, grid.max() + 1.0) * step, (grid - first).astype(np.intp)
+    else:
+        values, where = np.unique(fine, return_inverse=True)
+    # each row's offsets are distinct and increasing, so are its columns: the CSR arrays directly
+    indptr = np.arange(f_hz.size + 1) * offsets_hz.size
+    return values, sparse.csr_array((kernel.ravel(), where.ravel(), indptr), shape=(f_hz.size, values.size))
 
 
 def fit_two_mass(

@@ -233,10 +233,12 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     smoothing : float
         λ relative to the mean data weight per coefficient; only matters where |sin| is small.
     noise_seed : int or None
-        If given, also return what the estimator makes of white noise of the fit's residual RMS
+        If given, also return what the estimator makes of white noise of the fit's residual floor
         (drawn from this seed), N·m: shape (2, n), row 0 the torque, row 1 the noise realisation.
         Its spectrum is the estimate's noise spectrum (the estimator is linear in the current), which
         the FRF needs because noise on the torque biases H1 = G_xy/G_xx low where the torque is weak.
+        The noise goes through the first pass (the spline and the sensor DC), not the refits' few
+        dozen global columns, which barely change its spectrum.
     found : list or None
         If given, an :class:`Interference` describing what was removed is appended to it.
     """
@@ -247,14 +249,25 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     m = max(1, int(round(knot_spacing_s * rate_hz)))
     if i.size < 4 * m:
         raise ValueError("record shorter than four spline knots")
-    y, phi = i - offset.dc_a, th + offset.theta0_rad
+    # the current less its DC, with unit white noise beside it when the estimator's noise is asked for (scaled to
+    # the floor at the end): both right-hand sides of the fits, as the columns of Y (each contiguous)
+    Yt = np.empty((1 if noise_seed is None else 2, i.size))
+    y = np.subtract(i, offset.dc_a, out=Yt[0])
+    if noise_seed is not None:
+        np.random.default_rng(noise_seed).standard_normal(out=Yt[1])
+    Y = y if noise_seed is None else Yt.T
+    phi = th + offset.theta0_rad
     g = -np.sin(phi)
     tn = np.linspace(-1.0, 1.0, y.size)
     offset = SlowOffset(y.size, OFFSET_KNOT_S * rate_hz)  # the slow offset's columns, then the angle columns and lines
     nd = offset.count
     cols = np.empty((3, y.size))
     r_band = spline_factor(g, m, smoothing)  # the spline's normal matrix depends on g alone: factored once
-    iq1, _ = spline_fit(y, g, m, r_band, np.ones((1, y.size)))
+    iq1, _ = spline_fit(Y, g, m, r_band, np.ones((1, y.size)))
+    # the noise through the first pass only: the later passes' global columns (slow offset, angle, lines: a few dozen
+    # degrees of freedom among ~10⁵ spline coefficients) change its spectrum far less than its own scatter between
+    # Welch segments, and would cost a second right-hand side in every refit
+    iq1, noise_iq = (iq1, None) if Y.ndim == 1 else (iq1[:, 0], iq1[:, 1])
     w_e = np.gradient(th) * rate_hz
     cos_phi = np.cos(phi)
 
@@ -265,15 +278,14 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         np.multiply(cols[1], tn, out=cols[2])
 
     angle_columns(iq1)
-    Y = y
-    if noise_seed is not None:  # unit white noise through the same estimator, scaled to the floor at the end
-        Y = np.stack((y, np.random.default_rng(noise_seed).standard_normal(y.size))).T  # columns, each contiguous
     lines_hz: list[float] = []
     for round_ in range(LINE_ROUNDS + 1):  # a strong line's leak into the first fit can hide weaker ones
-        iq, beta = spline_fit(Y, g, m, r_band, cols, offset)
-        iq_y, beta_y = (iq, beta) if Y.ndim == 1 else (iq[:, 0], beta[:, 0])
-        offset_a = offset.curve(beta_y[:nd])
-        resid = y - g * iq_y - offset_a - beta_y[nd:] @ cols
+        iq, beta = spline_fit(y, g, m, r_band, cols, offset)
+        offset_a = offset.curve(beta[:nd])
+        resid = g * iq  # y − g·i_q − offset − Σ β·x, in place (the same operations in the same order)
+        np.subtract(y, resid, out=resid)
+        resid -= offset_a
+        resid -= beta[nd:] @ cols
         if round_ == LINE_ROUNDS:
             break
         new = [f for f in _interference_lines(resid, rate_hz) if all(abs(f - h) > 1.0 for h in lines_hz)]
@@ -282,15 +294,19 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
             break
         lines_hz += new
         cols = np.concatenate((cols, *(_tone_columns(f, rate_hz, tn) for f in new)))
-        angle_columns(iq_y)  # the lines leaked into the first i_q, and so into the angle columns
+        angle_columns(iq)  # the lines leaked into the first i_q, and so into the angle columns
     if found is not None:
-        found.append(_interference_found(lines_hz, beta_y[nd + 3:], offset_a, w_e))
-    if Y.ndim == 1:
+        found.append(_interference_found(lines_hz, beta[nd + 3:], offset_a, w_e))
+    if noise_iq is None:
         return k_t_Nm_per_A * iq
     # the noise floor of the final residual: with the lines removed (left in, a line's leak raised the
     # floor and the noise model biased K by −2 % with 25 mA tones on a 10 kS/s current)
     sigma = _broadband_noise_rms(resid, rate_hz, m)
-    return k_t_Nm_per_A * np.stack((iq[:, 0], sigma * iq[:, 1]))
+    out = np.empty((2, y.size))
+    np.multiply(iq, k_t_Nm_per_A, out=out[0])
+    np.multiply(noise_iq, sigma, out=out[1])
+    out[1] *= k_t_Nm_per_A
+    return out
 
 
 # Knot spacing of the sensor-offset spline, s: a thermal drift of a Hall sensor's offset is slower

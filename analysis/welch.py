@@ -44,7 +44,11 @@ def psd(x: np.ndarray, fs_hz: float, nperseg: int, detrend: Detrend = "constant"
     if detrend == "linear":  # the centred time is orthogonal to the constant: the slope alone is left to remove
         t = np.arange(nperseg) - 0.5 * (nperseg - 1)
         segments -= (segments @ t / float(t @ t))[:, None] * t
-    spectra = np.fft.rfft(segments * window, n=nfft, axis=1)
+    if detrend is None:
+        segments = segments * window
+    else:  # already a copy of the strided view: windowed in place
+        segments *= window
+    spectra = np.fft.rfft(segments, n=nfft, axis=1)
     density = np.mean(spectra.real**2 + spectra.imag**2, axis=0) / (fs_hz * float(np.sum(window**2)))
     density[1:-1 if nfft % 2 == 0 else None] *= 2.0  # one-sided: all but DC (and Nyquist) twice
     return np.fft.rfftfreq(nfft, 1.0 / fs_hz), density
