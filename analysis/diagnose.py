@@ -147,25 +147,29 @@ def _half_periods(crossings: np.ndarray, lag_s: float, cycles: np.ndarray, count
     """½ / (electrical cycles the encoder travelled) for each moving half-period of the current (1 if consistent)."""
     theta_rev = np.interp(crossings + lag_s, cycles * period_s, counts / counts_per_rev, left=np.nan, right=np.nan)
     half_cycles = pole_pairs * np.abs(np.diff(theta_rev))
-    dt = np.diff(crossings)
-    # moving by both streams: a current that is noise around zero while the joint stands crosses zero often and
-    # quickly, but the encoder does not travel meanwhile (it read 5·10¹¹× "faster" on an idle robot window)
-    moving = (np.isfinite(half_cycles) & (dt < 0.5 / (0.2 * f_enc_max_hz))
-              & (half_cycles >= 0.2 * f_enc_max_hz * dt))
-    return 0.5 / half_cycles[moving]
+    return 0.5 / half_cycles[_moving(half_cycles, np.diff(crossings), f_enc_max_hz)]
+
+
+def _moving(half_cycles: np.ndarray, dt_s: np.ndarray, f_enc_max_hz: float) -> np.ndarray:
+    """The half-periods (durations ``dt_s``, s; encoder travel ``half_cycles``, electrical cycles, per lag along
+    the first axis if 2-D) that count: moving by both streams, faster than 20 % of the encoder's peak. A current
+    that is noise around zero while the joint stands crosses zero often and quickly, but the encoder does not
+    travel meanwhile (it read 5·10¹¹× "faster" on an idle robot window)."""
+    return (np.isfinite(half_cycles) & (dt_s < 0.5 / (0.2 * f_enc_max_hz))
+            & (half_cycles >= 0.2 * f_enc_max_hz * dt_s))
 
 
 def _half_period_scatter(crossings: np.ndarray, lags_s: np.ndarray, cycles: np.ndarray, counts: np.ndarray,
                          period_s: float, counts_per_rev: int, pole_pairs: int, f_enc_max_hz: float) -> np.ndarray:
     """For each lag, the median absolute deviation of :func:`_half_periods` (inf where fewer than 8 half-periods).
 
-    All lags at once: the half-periods that count (moving, inside the encoder record) differ between lags only at
-    the record's ends, so the lags sharing a selection are one 2-D median each (the same values as lag by lag).
+    All lags at once: the lags whose half-periods that count (:func:`_moving`, inside the encoder record) are the
+    same ones make one 2-D median each (the same values as lag by lag).
     """
     theta_rev = np.interp(crossings[None, :] + lags_s[:, None], cycles * period_s, counts / counts_per_rev,
                           left=np.nan, right=np.nan)
     half_cycles = pole_pairs * np.abs(np.diff(theta_rev, axis=1))
-    moving = np.isfinite(half_cycles) & (np.diff(crossings) < 0.5 / (0.2 * f_enc_max_hz))[None, :]
+    moving = _moving(half_cycles, np.diff(crossings)[None, :], f_enc_max_hz)
     scatter = np.full(lags_s.size, np.inf)
     groups: dict[bytes, list[int]] = {}
     for row, packed in enumerate(np.packbits(moving, axis=1)):
@@ -173,7 +177,7 @@ def _half_period_scatter(crossings: np.ndarray, lags_s: np.ndarray, cycles: np.n
     for rows in groups.values():
         selected = moving[rows[0]]
         if selected.sum() >= 8:
-            per_interval = 0.5 / np.maximum(half_cycles[np.ix_(rows, np.flatnonzero(selected))], 1e-12)
+            per_interval = 0.5 / half_cycles[np.ix_(rows, np.flatnonzero(selected))]
             centre = np.median(per_interval, axis=1, keepdims=True)
             scatter[rows] = np.median(np.abs(per_interval - centre), axis=1)
     return scatter
