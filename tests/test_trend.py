@@ -15,6 +15,7 @@ import subprocess
 import sys
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -279,40 +280,9 @@ def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> Non
     assert "1 skipped session(s) outside the range shown" in [label.text for _, label in legend.items]
 
 
-def test_a_monitor_trend_is_drawn_over_machine_time_and_shows_the_windows_without_K(tmp_path: Path) -> None:
-    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-    import pyqtgraph as pg
-
-    from acq.monitoring.catalogue import Catalogue, Outcome
-    from acq.ui.plots import ensure_app
-    from acq.monitoring.trend import load_trend
-    from acq.ui.trend_plot import trend_widget
-
-    path = tmp_path / "catalogue.sqlite"
-    with Catalogue(path) as c:  # windows every 30 min of machine time; 2 not excited, 1 skipped with a wild K
-        for n, (k, verdict) in enumerate([(890.0, "ok"), (None, "not excited"), (891.0, "ok"), (889.0, "ok"),
-                                          (13_000.0, "poor"), (None, "not excited"), (850.0, "ok")]):
-            doc = {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [None if k is None else 0.99 * k,
-                                                                               None if k is None else 1.01 * k]},
-                   "quality": {"verdict": verdict, "reasons": []}}
-            meta = {"session_id": f"w{n}", "joint": "joint1", "created_utc": f"2026-11-29T10:00:0{n}+00:00",
-                    "tags": {"monitor_window": n, "monitor_elapsed_s": 1800.0 * n}}
-            c.record(Outcome(f"/m/w{n}.h5", f"h{n}", "r", meta, doc, None, 1.0))
-    ensure_app(offscreen=True)
-    widget = trend_widget(load_trend(None, path, "joint1", baseline_sessions=3))
-    (layout,) = [item for item in widget.findChildren(object) if type(item).__name__ == "GraphicsLayoutWidget"]
-    k_plot, f_plot = [item for item in layout.ci.items if isinstance(item, pg.PlotItem)]
-    ticks = [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]]
-    assert ticks == ["0.0 h", "0.5 h", "1.0 h", "1.5 h", "2.0 h", "2.5 h", "3.0 h"]
-    assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (h)"
-    legend = next(item for item in layout.ci.items if isinstance(item, pg.LegendItem))
-    assert "no K: 2 not excited / failed" in [label.text for _, label in legend.items]
-    (bars,) = [item for item in k_plot.items if isinstance(item, pg.ErrorBarItem)]
-    assert sorted(bars.opts["x"]) == [0.0, 2.0, 3.0, 6.0]  # no bar for the skipped window 4
-
-
-def test_a_short_monitor_run_is_labelled_in_seconds_not_in_hours(tmp_path: Path) -> None:
-    """Windows 5 s apart read 0.0 s, 5.0 s, 10.0 s (in hours they all read 0.0 h)."""
+def _monitor_trend(tmp_path: Path, windows: list[tuple[float | None, str]], every_s: float) -> tuple[Any, Any, Any]:
+    """A monitor's catalogue of ``windows`` (K, verdict) ``every_s`` of machine time apart, drawn as the trend
+    widget offscreen: its K plot, frequency plot and legend."""
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     import pyqtgraph as pg
 
@@ -323,15 +293,37 @@ def test_a_short_monitor_run_is_labelled_in_seconds_not_in_hours(tmp_path: Path)
 
     path = tmp_path / "catalogue.sqlite"
     with Catalogue(path) as c:
-        for n in range(3):
-            doc = {"options": {}, "K_Nm_per_rad": 890.0, "ci95": {"K_Nm_per_rad": [880.0, 900.0]},
-                   "quality": {"verdict": "ok", "reasons": []}}
+        for n, (k, verdict) in enumerate(windows):
+            doc = {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [None if k is None else 0.99 * k,
+                                                                               None if k is None else 1.01 * k]},
+                   "quality": {"verdict": verdict, "reasons": []}}
             meta = {"session_id": f"w{n}", "joint": "joint1", "created_utc": f"2026-11-29T10:00:0{n}+00:00",
-                    "tags": {"monitor_window": n, "monitor_elapsed_s": 5.0 * n}}
+                    "tags": {"monitor_window": n, "monitor_elapsed_s": every_s * n}}
             c.record(Outcome(f"/m/w{n}.h5", f"h{n}", "r", meta, doc, None, 1.0))
     ensure_app(offscreen=True)
     widget = trend_widget(load_trend(None, path, "joint1", baseline_sessions=3))
     (layout,) = [item for item in widget.findChildren(object) if type(item).__name__ == "GraphicsLayoutWidget"]
-    _, f_plot = [item for item in layout.ci.items if isinstance(item, pg.PlotItem)]
+    k_plot, f_plot = [item for item in layout.ci.items if isinstance(item, pg.PlotItem)]
+    return k_plot, f_plot, next(item for item in layout.ci.items if isinstance(item, pg.LegendItem))
+
+
+def test_a_monitor_trend_is_drawn_over_machine_time_and_shows_the_windows_without_K(tmp_path: Path) -> None:
+    import pyqtgraph as pg
+
+    # windows every 30 min of machine time; 2 not excited, 1 skipped with a wild K
+    k_plot, f_plot, legend = _monitor_trend(tmp_path, [(890.0, "ok"), (None, "not excited"), (891.0, "ok"),
+                                                       (889.0, "ok"), (13_000.0, "poor"), (None, "not excited"),
+                                                       (850.0, "ok")], 1800.0)
+    ticks = [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]]
+    assert ticks == ["0.0 h", "0.5 h", "1.0 h", "1.5 h", "2.0 h", "2.5 h", "3.0 h"]
+    assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (h)"
+    assert "no K: 2 not excited / failed" in [label.text for _, label in legend.items]
+    (bars,) = [item for item in k_plot.items if isinstance(item, pg.ErrorBarItem)]
+    assert sorted(bars.opts["x"]) == [0.0, 2.0, 3.0, 6.0]  # no bar for the skipped window 4
+
+
+def test_a_short_monitor_run_is_labelled_in_seconds_not_in_hours(tmp_path: Path) -> None:
+    """Windows 5 s apart read 0.0 s, 5.0 s, 10.0 s (in hours they all read 0.0 h)."""
+    _, f_plot, _ = _monitor_trend(tmp_path, [(890.0, "ok")] * 3, 5.0)
     assert [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]] == ["0.0 s", "5.0 s", "10.0 s"]
     assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (s)"
