@@ -351,7 +351,10 @@ def fit_two_mass(
                 res = optimize.least_squares(problem.residuals, problem.x0(start), method="lm", x_scale=1.0)
             except (ValueError, FloatingPointError):
                 continue
-            if np.isfinite(res.cost) and (best is None or res.cost < best.cost):
+            # a finite cost at a parameter that under- or overflowed (an inertia of exactly 0 on a far-off FRF,
+            # seen with an analytic Jacobian) is no solution: f_a, f_r and the intervals divide by it
+            physical = bool(np.all(np.isfinite(np.exp(res.x))) and np.all(np.exp(res.x) > 0.0))
+            if np.isfinite(res.cost) and physical and (best is None or res.cost < best.cost):
                 best = res
         if best is None:
             return _failed(problem, band, options, "no start gave a finite cost")

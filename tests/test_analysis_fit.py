@@ -219,3 +219,29 @@ def test_unmodelled_mode_and_clock_residual_are_reported():
     assert q.verdict in ("poor", "failed") and q.misfit_ratio > 3.0
     assert any("two-mass model misses |H|" in r for r in q.reasons)
     assert any("clock alignment residual 3000 µs" in r for r in q.reasons)
+
+
+def test_a_start_that_reaches_a_zero_inertia_at_a_finite_cost_is_no_solution(monkeypatch: pytest.MonkeyPatch):
+    """On a far-off FRF LM once walked a start to log J = −800 (J = 0.0) with a finite cost; that start must lose
+    to the others, not end in a division by zero in f_r. The optimiser's outcome is staged (the first start
+    returns such a point with the lowest cost); everything after it is the real fit."""
+    import scipy.optimize
+
+    from analysis import fit as fit_module
+
+    real = scipy.optimize.least_squares
+    calls = []
+
+    def first_start_underflows(fun, x0, **kw):
+        res = real(fun, x0, **kw)
+        calls.append(1)
+        if len(calls) == 1:
+            res.x = res.x.copy()
+            res.x[1] = -800.0  # J_m = exp(−800) = 0.0
+            res.cost = 0.0
+        return res
+
+    monkeypatch.setattr(fit_module.optimize, "least_squares", first_start_underflows)
+    _, fit = identify(simulate(PAPER, 0))
+    assert fit.values.Jm_kgm2 == pytest.approx(PAPER.Jm_kgm2, rel=0.02)
+    assert np.isfinite(fit.f_r) and fit.f_r == pytest.approx(PAPER.resonance_hz, rel=0.01)
