@@ -360,3 +360,23 @@ def test_a_window_whose_moves_excite_the_band_says_which_coherence_was_too_low()
     assert _but(between, 14) == ", but too little between f_a and f_r (coherence 0.61, below 0.7)"
     assert _but(band, 3) == ", but too little over the band (mean coherence 0.50, below 0.72)"
     assert _but(between, 0) == ""  # no move excites: the count says it all
+
+
+def test_a_window_judged_not_excited_after_its_analysis_keeps_no_K_beside_it(tmp_path: Path) -> None:
+    """Seed 0's first 10 s: the robot barely excites the joint, the analysis fails on coherence and the monitor
+    catalogues `not excited` without numbers; the `.result.json` beside the window says the same (it showed the
+    failed fit's K 12 707 N·m/rad)."""
+    from acq.monitoring.window_judge import analyse_window
+    from acq.offline.analyze import sha256_of
+    from acq.recording.recorder import Recorder
+    from analysis import AnalysisRequest
+    from drivers.registry import open_bench
+    from drivers.sim.bench import SimBench
+
+    bench = _bench(seed=0)
+    current, drive = open_bench(bench, fast=True, sim_bench=SimBench(bench, realtime=False))
+    path = Recorder(bench, None, current, drive, tmp_path, 10.0).run().path
+    outcome = analyse_window(str(path), sha256_of(path), AnalysisRequest(select_segments=True))
+    beside = json.loads(path.with_name(path.stem + ".result.json").read_text())
+    assert outcome.doc["quality"]["verdict"] == beside["quality"]["verdict"] == "not excited"
+    assert "K_Nm_per_rad" not in beside and beside == outcome.doc

@@ -11,11 +11,14 @@ from __future__ import annotations
 import multiprocessing
 import signal
 from dataclasses import replace
+from pathlib import Path
 from typing import Any
 
 from acq.monitoring.batch import analyze_one, session_meta
 from acq.monitoring.catalogue import Outcome
+from acq.offline.analyze import output_paths, write_json
 from acq.recording.session import load
+from acqcore.errors import StorageError
 from analysis import AnalysisRequest, Thresholds
 
 
@@ -86,6 +89,18 @@ def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
             excited = sum(m["excited"] for m in moves)
             reasons.insert(0, f"{excited} of {len(moves)} moves put torque into {lo:g}…{hi:g} Hz beyond chance "
                               f"({100 * excitation['excited_fraction']:.0f} % of the window){_but(outcome.doc, excited)}")
-        return replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
-                       seconds=outcome.seconds)
+        judged = replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
+                         seconds=outcome.seconds)
+        _rewrite_result(Path(path), request, judged.doc)
+        return judged
     return outcome
+
+
+def _rewrite_result(path: Path, request: AnalysisRequest, doc: dict[str, Any]) -> None:
+    """The window's ``.result.json`` as the catalogue has it — without numbers — so the file beside the window
+    does not show a K the monitor refused; if it cannot be rewritten it is removed (the catalogue stands)."""
+    json_path = output_paths(path, request)[0]
+    try:
+        write_json(doc, json_path)
+    except StorageError:
+        json_path.unlink(missing_ok=True)
