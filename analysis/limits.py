@@ -2,7 +2,6 @@
 
 * The encoder must sample fast enough that the fit band (:func:`analysis.fit.default_band_hz`: 10 Hz up to
   0.4 × its rate) is not empty.
-* The record must hold two Welch segments (:func:`analysis.frf.min_duration_s`).
 * The current must be sampled fast enough for the chain's anti-alias filter, which stops at 0.6 × the encoder
   rate before the torque is moved onto the encoder's instants (:mod:`analysis.signals`): that edge must lie
   below the DAQ's Nyquist frequency.
@@ -11,7 +10,6 @@
 from __future__ import annotations
 
 from analysis.fit import default_band_hz
-from analysis.frf import min_duration_s
 from analysis.signals import _STOP_FRACTION
 
 
@@ -29,9 +27,3 @@ def min_current_rate_hz(period_s: float) -> float:
     encoder sampled every ``period_s`` (s)."""
     return 2.0 * _STOP_FRACTION / period_s
 
-
-def min_record_s(segment_s: float) -> float:
-    """The shortest record, s, the analysis identifies from: two Welch segments of ``segment_s`` (s) at 50 %
-    overlap, both streams together (the alignment trims what only one stream covers, so a record barely longer
-    can still fall short)."""
-    return min_duration_s(segment_s)

@@ -697,15 +697,16 @@ class _Reader:
         for start in range(0, have, step):
             stop = min(start + step, have)
             try:
-                if ds.chunks:
-                    info = ds.id.get_chunk_info_by_coord((start,))
-                    if info.byte_offset is None or info.byte_offset + info.size > self.size:
-                        return out[:start], start
+                if ds.chunks and not self._on_disk(ds.id.get_chunk_info_by_coord((start,))):
+                    return out[:start], start
                 out[start:stop] = ds[start:stop]
             except (OSError, RuntimeError, ValueError):
                 return out[:start], start
         return out, (have if have < want else None)
 
+    def _on_disk(self, info: Any) -> bool:
+        """A chunk (HDF5's chunk info) was written and lies inside the file (a never-written one reads as zeros)."""
+        return info.byte_offset is not None and info.byte_offset + info.size <= self.size
 
     def _all_on_disk(self, ds: h5py.Dataset, rows: int, step: int) -> bool:
         """Every chunk holding the first ``rows`` rows was written and lies inside the file (HDF5's chunk
@@ -716,7 +717,7 @@ class _Reader:
 
         def visit(info: Any) -> None:
             if info.chunk_offset[0] < rows:
-                inside.append(info.byte_offset is not None and info.byte_offset + info.size <= self.size)
+                inside.append(self._on_disk(info))
 
         try:
             ds.id.chunk_iter(visit)

@@ -143,12 +143,12 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
         raise ConfigError(f"--out {out_dir}: is a file, not a folder")
     duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
     if not no_analyze:
-        from analysis import AnalysisRequest, min_record_s
+        from analysis import AnalysisRequest, min_duration_s
 
         segment_s = AnalysisRequest().segment_s
-        if duration < min_record_s(segment_s):
+        if duration < min_duration_s(segment_s):  # of both streams: the alignment trims what only one covers
             given = f"--duration {duration:g}" if duration_s is not None else f"the profile's duration_s = {duration:g}"
-            raise ConfigError(f"{given}: the identification needs at least {min_record_s(segment_s):g} s of both "
+            raise ConfigError(f"{given}: the identification needs at least {min_duration_s(segment_s):g} s of both "
                               f"streams (two {segment_s:g} s Welch segments); record longer, or add --no-analyze")
     check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
