@@ -194,7 +194,7 @@ def estimate_frf(
     nperseg = int(round(segment_s * fs))
     step = nperseg - int(round(overlap * nperseg))
     n_segments = 1 + (x.size - nperseg) // step
-    seg = _Segments(nperseg, step, fs)
+    seg = welch.Segments(nperseg, step, fs)
     X, Y = seg.fft(x), seg.fft(y)
     N = None if torque_noise_Nm is None else seg.fft(np.asarray(torque_noise_Nm, dtype=float))
     U = None if torque_alias_Nm is None else [seg.fft(uk) for uk in np.atleast_2d(torque_alias_Nm)]
@@ -266,7 +266,7 @@ class _Sums:
                      f(self.xy, other.xy), f(self.nn, other.nn), f(self.xu, other.xu))
 
 
-def _block_sums(seg: _Segments, X: np.ndarray, Y: np.ndarray, N: np.ndarray | None, U: list[np.ndarray] | None,
+def _block_sums(seg: welch.Segments, X: np.ndarray, Y: np.ndarray, N: np.ndarray | None, U: list[np.ndarray] | None,
                 starts: np.ndarray) -> list[_Sums]:
     """:class:`_Sums` of each run of segments from ``starts[i]`` up to the next start (the last: to the end)."""
     n = seg.nperseg // 2 + 1
@@ -286,7 +286,7 @@ def _block_sums(seg: _Segments, X: np.ndarray, Y: np.ndarray, N: np.ndarray | No
             for b, c in enumerate(counts)]
 
 
-def _response(seg: _Segments, sums: _Sums, gxx_fine: np.ndarray, period_s: float) -> FrequencyResponse:
+def _response(seg: welch.Segments, sums: _Sums, gxx_fine: np.ndarray, period_s: float) -> FrequencyResponse:
     """H1, coherence and the noise / fold-over terms averaged over the segments whose ``sums`` are given."""
     f = np.fft.rfftfreq(seg.nperseg, period_s)
     gxx, gyy = seg.density_of_sum(sums.xx, sums.count).real, seg.density_of_sum(sums.yy, sums.count).real
@@ -314,37 +314,3 @@ def _response(seg: _Segments, sums: _Sums, gxx_fine: np.ndarray, period_s: float
         noise_ratio=noise_ratio,
         alias=alias,
     )
-
-
-class _Segments:
-    """Welch's segmentation, vectorised: Hann window, linear detrend per segment, density scaling.
-
-    The same estimates as :func:`scipy.signal.welch` / :func:`scipy.signal.csd` with
-    ``detrend="linear"`` (which fits each segment in a Python loop), computed once per signal.
-    """
-
-    def __init__(self, nperseg: int, step: int, fs: float) -> None:
-        self.nperseg, self.step = nperseg, step
-        self.window = signal.get_window("hann", nperseg)
-        self.scale = 1.0 / (fs * float(np.sum(self.window**2)))
-        self.t = np.arange(nperseg) - 0.5 * (nperseg - 1)
-
-    def fft(self, x: np.ndarray) -> np.ndarray:
-        """FFT of each detrended, windowed segment; one-sided for real x, shape (segments, bins)."""
-        segs = np.lib.stride_tricks.sliding_window_view(x, self.nperseg)[:: self.step]
-        slope = (segs @ self.t) / float(self.t @ self.t)
-        segs = (segs - segs.mean(axis=1, keepdims=True) - slope[:, None] * self.t) * self.window
-        return np.fft.rfft(segs, axis=1) if np.isrealobj(segs) else np.fft.fft(segs, axis=1)
-
-    def density(self, A: np.ndarray, B: np.ndarray) -> np.ndarray:
-        """One-sided cross spectral density G_ab (conj(A)·B averaged), of the non-negative bins."""
-        n = self.nperseg // 2 + 1
-        return self.density_of_sum(np.sum(np.conj(A[:, :n]) * B[:, :n], axis=0), A.shape[0])
-
-    def density_of_sum(self, total: np.ndarray, count: int) -> np.ndarray:
-        """One-sided cross spectral density G_ab from the sum of conj(A)·B over ``count`` segments (non-negative
-        bins)."""
-        n = self.nperseg // 2 + 1
-        g = total[:n] / count * self.scale
-        g[1:n - 1 if self.nperseg % 2 == 0 else n] *= 2.0
-        return g

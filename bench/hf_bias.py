@@ -38,7 +38,8 @@ if str(ROOT) not in sys.path:  # this checkout's bench package
 
 from analysis import resample
 from analysis.fit import FitOptions, _Problem
-from analysis.frf import FrequencyResponse, _Segments, estimate_frf
+from analysis.frf import FrequencyResponse, estimate_frf
+from analysis.welch import Segments
 from analysis.model import TwoMassParams
 from analysis.signals import ALIAS_ORDERS, _PASS_FRACTION, _STOP_FRACTION, prepare_signals
 from bench.scenarios import SCENARIOS, clock_for, scenario_bench
@@ -120,7 +121,7 @@ def main() -> None:
         # phase-locked quantisation: a bound from the encoder's resolution alone (white q²/12 position error
         # through the backward difference) against the measured speed spectrum, and the coherence's random σ
         q_psd = 2 * T * (lsb**2 / 12) * np.abs(2 * np.sin(np.pi * b.f_hz * T)) ** 2 / T**2
-        seg_y = _Segments(int(round(0.5 / T)), int(round(0.25 / T)), 1 / T)
+        seg_y = Segments(int(round(0.5 / T)), int(round(0.25 / T)), 1 / T)
         Yf = seg_y.fft(sig.speed_rad_s)
         gyy = seg_y.density(Yf, Yf).real
         Ef = seg_y.fft(e_q)
@@ -140,7 +141,7 @@ def main() -> None:
                          torque_alias_Nm=sig.torque_alias_Nm)
         row("d est. τ, true θ diff, noise gain, fold-over", band_ratios(d, truth))
         # the estimated torque against the true one: G_{true,est}/G_{true,true}, coherence, noise model
-        seg = _Segments(int(round(0.5 / T)), int(round(0.25 / T)), 1 / T)
+        seg = Segments(int(round(0.5 / T)), int(round(0.25 / T)), 1 / T)
         X, E = seg.fft(tau_true), seg.fft(sig.torque_Nm)
         f = np.fft.rfftfreq(seg.nperseg, T)
         gxx, gee, gxe = seg.density(X, X).real, seg.density(E, E).real, seg.density(X, E)
