@@ -244,13 +244,17 @@ class _Problem:
         """Log vector of the free parameters of ``p``."""
         return np.log([getattr(p, n) for n in self.free])
 
+    def response(self, x: np.ndarray, f_hz: np.ndarray) -> np.ndarray:
+        """The model's torque → motor speed response, (rad/s)/(N·m), at ``f_hz`` (Hz) for the log vector ``x``."""
+        return frequency_response(self.params(x), f_hz)
+
     def log_ratio(self, x: np.ndarray) -> np.ndarray:
         """ln(H_model/H_meas) at the band's bins (complex).
 
         The model as H1 sees it: the plant's H through the Welch window kernel, scaled by the torque
         noise's 1 − G_nn/G_xx, plus the encoder's fold-over terms (:mod:`analysis.frf`).
         """
-        h_all = frequency_response(self.params(x), self.f_eval)
+        h_all = self.response(x, self.f_eval)
         h = self.gain * (self.smooth @ h_all[:self.n_fine])
         n = self.f.size
         for k, (a, b) in enumerate(self.fold):
