@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 from pathlib import Path
@@ -312,6 +313,42 @@ def test_simulated_session_exported_and_imported_back_keeps_its_history_and_K(
     assert r.code == 2 and r.err.strip() == (
         f"acq: error: --bench: needed ({recorded.stem}.session.json describes another encoder file than {enc.name} "
         "(SHA-256 differs): its metadata is not used, the time columns are not taken as one host clock)")
+
+
+def test_export_refuses_to_replace_files_unless_forced_and_a_failed_export_changes_nothing(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    assert run_import(capsys, *pair, tmp_path / "s.h5").code == 0
+    out = tmp_path / "csv"
+    assert run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out)).code == 0
+    names = ["s.current.csv", "s.encoder.csv", "s.session.json"]
+    exported = {name: (out / name).read_bytes() for name in names}
+    (out / "s.current.csv").unlink()
+    (out / "s.session.json").unlink()
+    (out / "s.encoder.csv").write_text("t_s,position_counts\n0,1\n")  # another tool's file of the same name
+    refused = run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out))
+    assert refused.code == 2
+    assert refused.err == f"acq: error: {out / 's.encoder.csv'}: exists (not overwritten; --force replaces it)\n"
+    assert sorted(p.name for p in out.iterdir()) == ["s.encoder.csv"]  # nothing written, no temp file
+    assert (out / "s.encoder.csv").read_text() == "t_s,position_counts\n0,1\n"
+
+    def disk_full(*args: object) -> str:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr("acq.offline.exporters.metadata_text", disk_full)  # the last of the three writes fails
+    failed = run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out), "--force")
+    assert failed.code == 1
+    assert failed.err == f"acq: error: disk full: {out / 's.session.json'}\n"
+    assert sorted(p.name for p in out.iterdir()) == ["s.encoder.csv"]  # the two CSVs written were not renamed
+    assert (out / "s.encoder.csv").read_text() == "t_s,position_counts\n0,1\n"
+    monkeypatch.undo()
+    forced = run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out), "--force")
+    assert forced.code == 0, forced.err
+    assert sorted(p.name for p in out.iterdir()) == names
+    assert {name: (out / name).read_bytes() for name in names[:2]} == {n: exported[n] for n in names[:2]}
+    meta = json.loads((out / "s.session.json").read_text())
+    assert meta["files"]["current"] == {"name": "s.current.csv",
+                                        "sha256": hashlib.sha256(exported["s.current.csv"]).hexdigest()}
 
 
 def test_import_tags_the_session(capsys: pytest.CaptureFixture[str], tmp_path: Path,

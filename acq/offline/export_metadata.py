@@ -18,7 +18,6 @@ from typing import Any
 from acq import __version__
 from acq.offline.analyze import sha256_of
 from acq.recording.session import Session, utc_now_iso
-from acq.recording.storage import write_text_atomically
 from acqcore.errors import ConfigError
 
 FORMAT = "acq-export-metadata"
@@ -64,10 +63,9 @@ def metadata_path(current_path: Path) -> Path | None:
     return current_path.with_name(name[: -len(CURRENT_SUFFIX)] + ".session.json")
 
 
-def write_metadata(session: Session, current_path: Path, encoder_path: Path) -> Path:
-    """Write the metadata of ``session`` beside its exported ``current_path`` / ``encoder_path``; return its path."""
-    path = metadata_path(current_path)
-    assert path is not None, current_path
+def metadata_text(session: Session, current: tuple[str, str], encoder: tuple[str, str]) -> str:
+    """The metadata document (JSON) of ``session`` exported to the CSV pair ``current`` and ``encoder``, each
+    (file name, SHA-256 hex)."""
     meta = session.meta
     doc = {
         "format": FORMAT, "format_version": FORMAT_VERSION, "exported_utc": utc_now_iso(), "acq_version": __version__,
@@ -76,11 +74,10 @@ def write_metadata(session: Session, current_path: Path, encoder_path: Path) -> 
         "bench": session.bench.model_dump(mode="json"),
         "profile": session.profile.model_dump(mode="json") if session.profile is not None else None,
         "host_clock_shared": meta.host_clock_shared,
-        "files": {"current": {"name": current_path.name, "sha256": sha256_of(current_path)},
-                  "encoder": {"name": encoder_path.name, "sha256": sha256_of(encoder_path)}},
+        "files": {"current": {"name": current[0], "sha256": current[1]},
+                  "encoder": {"name": encoder[0], "sha256": encoder[1]}},
     }
-    write_text_atomically(path, json.dumps(doc, indent=1) + "\n")  # a failed write names the file, leaves no temp
-    return path
+    return json.dumps(doc, indent=1) + "\n"
 
 
 def read_metadata(current_path: Path, encoder_path: Path, digest: Callable[[Path], str] = sha256_of,
