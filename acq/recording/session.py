@@ -787,7 +787,11 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
         damage.append(_span("encoder", n, total))
 
     def optional(name: str) -> np.ndarray | None:
-        return columns[name][0][:n] if name in columns else None
+        """The column, None when absent or all NaN: the writer creates every optional column and fills what a drive
+        does not give with NaN until :func:`_write_footer` deletes it, so while a session records (or after its
+        recorder was killed) a column of NaN only is one the drive has not given."""
+        values = columns[name][0][:n] if name in columns else None
+        return None if values is None or np.isnan(values).all() else values
 
     try:
         period_s, counts_per_rev = float(g.attrs["period_s"]), int(g.attrs["counts_per_rev"])
@@ -940,5 +944,4 @@ def _write_copy(dst: h5py.File, session: Session, stop_reason: str, group_attrs:
     rows = np.array([(ev.host_ns, ev.stream.encode(), ev.kind.encode(), ev.detail.encode()[:240])
                      for ev in session.events], dtype=EVENT_DTYPE)
     column(dst, "events", rows)
-    filled = {n for n in _OPTIONAL_ENCODER if n in enc and not np.all(np.isnan(enc[n][...]))}
-    _write_footer(dst, "interrupted", stop_reason, filled)
+    _write_footer(dst, "interrupted", stop_reason, {n for n in _OPTIONAL_ENCODER if n in enc})
