@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import hashlib
 import json
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +15,8 @@ from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 from acq.config import DEFAULT_BENCH
 from acq.monitoring.catalogue import Catalogue
 from acq.offline.analyze import analyze_session
-from acq.recording.session import load
+from acq.offline.export_metadata import read_metadata
+from acq.recording.session import SessionHistory, load
 from tests.helpers import run_cli
 
 RATE_HZ = 25600.0
@@ -349,6 +351,21 @@ def test_export_refuses_to_replace_files_unless_forced_and_a_failed_export_chang
     meta = json.loads((out / "s.session.json").read_text())
     assert meta["files"]["current"] == {"name": "s.current.csv",
                                         "sha256": hashlib.sha256(exported["s.current.csv"]).hexdigest()}
+
+
+def test_export_metadata_carries_every_field_of_the_sessions_history(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    imported = run_import(capsys, *pair, tmp_path / "s.h5", "--tag", "pose=home", "--started", "2026-11-20T10:15:03Z")
+    assert imported.code == 0, imported.err
+    assert run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(tmp_path / "csv")).code == 0
+    read, warning = read_metadata(tmp_path / "csv" / "s.current.csv", tmp_path / "csv" / "s.encoder.csv")
+    assert warning is None and read is not None
+    session = load(tmp_path / "s.h5").meta
+    history = [f.name for f in fields(SessionHistory)]
+    assert history == ["session_id", "joint", "created_utc", "operator", "origin", "tags", "host_clock_shared"]
+    assert {n: getattr(read, n) for n in history} == {n: getattr(session, n) for n in history}
+    assert (read.created_utc, read.tags, read.origin["kind"]) == ("2026-11-20T10:15:03+00:00", {"pose": "home"},
+                                                                  "imported")
 
 
 def test_import_tags_the_session(capsys: pytest.CaptureFixture[str], tmp_path: Path,

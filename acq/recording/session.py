@@ -530,27 +530,36 @@ class EncoderData:
 
 
 @dataclass(frozen=True)
-class SessionMeta:
-    """What a session file says about itself (its root attributes), typed: the one way other modules read them.
+class SessionHistory:
+    """What a session carries through ``acq export`` and ``acq import`` (:mod:`acq.offline.export_metadata`).
 
     ``session_id``, ``joint``, ``created_utc`` (ISO 8601 UTC of the start) are None only in a file that lacks
-    them; ``host_ns_at_start`` (host monotonic clock at the start, ns) likewise; ``stopped_utc``,
-    ``status``, ``stop_reason`` and ``operator`` are ``""`` when absent; ``origin`` is where the data came
-    from (``{"kind": "recorded"}``, or the imported files; ``{}`` when absent); ``tags`` the free-form tags;
-    ``host_clock_shared`` whether both streams' host stamps are arrival times on one host clock.
+    them; ``operator`` is ``""`` when absent; ``origin`` is where the data came from (``{"kind": "recorded"}``,
+    or the imported files; ``{}`` when absent); ``tags`` the free-form tags; ``host_clock_shared`` whether both
+    streams' host stamps are arrival times on one host clock.
     """
 
     session_id: str | None
     joint: str | None
     created_utc: str | None
-    host_ns_at_start: int | None
-    stopped_utc: str
-    status: str
-    stop_reason: str
     operator: str
     origin: dict[str, Any]
     tags: dict[str, Any]
     host_clock_shared: bool
+
+
+@dataclass(frozen=True)
+class SessionMeta(SessionHistory):
+    """What a session file says about itself (its root attributes), typed: the one way other modules read them.
+
+    Its :class:`SessionHistory`, and ``host_ns_at_start`` (host monotonic clock at the start, ns; None only in a
+    file that lacks it); ``stopped_utc``, ``status`` and ``stop_reason`` are ``""`` when absent.
+    """
+
+    host_ns_at_start: int | None
+    stopped_utc: str
+    status: str
+    stop_reason: str
 
     @classmethod
     def from_attrs(cls, attrs: dict[str, Any]) -> SessionMeta:
