@@ -238,12 +238,15 @@ def recording_fault(rec: Recording) -> str | None:
 
 
 def with_fault(quality: Quality, fault: str | None) -> Quality:
-    """A poor / failed ``quality`` becomes failed with ``fault`` as its first reason, so it says why instead of
-    a bare failed. An ``ok`` verdict (the data hold together: clocks aligned, model fits) or no fault:
-    unchanged — the diagnosis explains failures, it never overrules a consistent identification."""
+    """A poor / failed ``quality`` becomes failed with ``fault`` as its only reason, so it says why instead of
+    a bare failed. The other findings (low coherence, wide intervals, misfit, clock residual) follow from the
+    wrong constant, and their advice ("shorten the acceleration time", "try --band") would send the
+    technician after the motion instead of the bench config. An ``ok`` verdict (the data hold together:
+    clocks aligned, model fits) or no fault: unchanged — the diagnosis explains failures, it never overrules
+    a consistent identification."""
     if fault is None or quality.verdict == "ok":
         return quality
-    return replace(quality, verdict="failed", reasons=(fault, *quality.reasons))
+    return replace(quality, verdict="failed", reasons=(fault,))
 
 
 def first_move_sign(position_counts: np.ndarray) -> int:
