@@ -29,6 +29,26 @@ healthy runs sit at half their degrees of freedom (the allowances are conservati
 from the χ² law separates the third mass (95 % of χ²(48) is 65) without a calibration on this simulator.
 A three-mass refit on the same windows lowers χ² by 16–20 for the third mass, ≤ 6.5 healthy, 11 friction,
 12–15 backlash 0.05 mrad (3 extra parameters; a scan over f_3): separable only with a margin of ≈ 1.5×.
+
+Found (session 5) — why the third mass cannot be told from a healthy joint at 2^17 counts/rev, and when it can:
+* The healthy residual is the encoder's quantisation: with 2^20 counts/rev (``--scenarios 41 --seeds 2``) every band
+  reads 0 ± 0 % and the misfit ratio 1.03–1.08, against +3 % at 2–2.5 f_r and −9…−10 % above 3 f_r at 2^17.
+* It is locked to the motion, not fed back by the speed loop: the drive's loop does act on the quantised angle, but an
+  FRF with the recorded velocity demand (0x606B) as instrument, G_yr/G_xr, which removes any noise the loop feeds
+  back, keeps the same −3.7 / −7.0 / +8.9 … +32 % pattern at 200–400 Hz (one-off script, seeds 0–1 of the paper plant).
+  Seeds share it: the simulated trajectory repeats to a fraction of a count.
+* Per bin the white-quantisation bound √(N_q/G_yy) holds it: |H| of a 2^17 session over the same seed at 2^20, per
+  bin in units of the bound, is ≤ 1 at 200–400 Hz (RMS 0.4) and inverse-variance weighted windows stay within
+  |t| ≤ 1.3 above 100 Hz. The bound is 5 % per bin at 170–184 Hz, where the third mode's dipole (+7…+8 %, 7 bins)
+  sits, so even a window test without Bonferroni sees the third mass at |t| ≈ 2.5 (seeds 0, 2, 4).
+* A three-mass refit with weights from coherence and the quantisation bound (``--refit --quantisation-weights``,
+  seeds 0–2 of 1, 10, 11, 14, 48) lowers χ² by 1.1 / 6.4 / 17.2 for the third mass (the first two converge on a
+  spurious 20 Hz mode: local minima), 2.8–3.1 healthy 10 s, 8.6–13.9 healthy 60 s (a 21 Hz mode), 11–12 friction,
+  10–12 backlash 0.05 mrad; with coherence weights (``--refit``) healthy 10 s sessions admit a 155 Hz mode that moves
+  K by +8 % at a Δχ² of 4.5. At this resolution a third mode near 150 Hz is not identifiable from a healthy joint:
+  K ± 0.8 % holds for the two-mass structure, which the data can check only where the encoder resolves it.
+* With a 2^20 counts/rev encoder the same third mass is declined with the misfit named (scenario "third mass 150 Hz
+  (inside band), encoder 2^20 counts/rev": poor, 162…184 Hz, +7…+8 %, 6 σ, seeds 0–2).
 """
 
 from __future__ import annotations
