@@ -44,7 +44,7 @@ from scipy import optimize, sparse, stats
 from scipy.ndimage import median_filter
 
 from analysis.adequacy import misfit_covariance
-from analysis.frf import KERNEL_PER_BIN, FrequencyResponse, quantisation_share, window_kernel
+from analysis.frf import KERNEL_PER_BIN, FrequencyResponse, window_kernel
 from analysis.model import TwoMassParams, antiresonance_hz, frequency_response, resonance_hz
 
 FitKind = Literal["amplitude", "complex"]
@@ -90,16 +90,12 @@ class FitOptions:
         Fit band (low, high), Hz; None for 10 Hz … min(0.4·f_enc, 500 Hz).
     weighting : {"coherence", "uniform"}
         Bin weights γ²/(1−γ²) (ours) or all 1 (the paper's).
-    speed_lsb_rad : float
-        One encoder count, rad; > 0 (and coherence weighting): each bin's weight also allows for the bias the
-        encoder's quantisation can leave there (:class:`_Problem`). 0: not known, coherence alone.
     """
 
     params: FitParams = "K,Jm,Jl"
     kind: FitKind = "amplitude"
     band_hz: tuple[float, float] | None = None
     weighting: FitWeighting = "coherence"
-    speed_lsb_rad: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -210,16 +206,7 @@ def _damping_for_ratio(k: float, jm: float, jl: float, zeta: float) -> float:
 
 
 class _Problem:
-    """Residuals of one fit: which parameters are free, the data, the weights.
-
-    The coherence weight γ²/(1−γ²) is 1/(2·n_segments·σ²) with σ² = (1−γ²)/(2·n_segments·γ²) the random variance of
-    ln|H|. With the encoder's count known (``options.speed_lsb_rad``) the bias its quantisation can leave in a bin,
-    q² (:func:`analysis.frf.quantisation_share`), is added to that variance: w = 1/(1/w_γ + 2·n_segments·q²). The
-    quantisation error repeats with the motion, is coherent with the torque and so invisible to γ²; with coherence
-    weights alone the bins above ~150 Hz, biased by several % on a 2^17 counts/rev encoder, pulled the fit and left a
-    +0.24 % misfit at 10–24 Hz on a 60 s session (24× that window's scatter; bench/chain_bias.py). Measured there
-    (paper plant, 10 s, seed 0): K +0.23 → +0.09 %, J_m +0.32 → +0.07 %; 10 000 counts/rev: K −4.6 → −1.6 %.
-    """
+    """Residuals of one fit: which parameters are free, the data, the weights."""
 
     def __init__(self, frf: FrequencyResponse, band: tuple[float, float], options: FitOptions,
                  fixed: TwoMassParams) -> None:
@@ -228,10 +215,6 @@ class _Problem:
         self.log_h = np.log(frf.H[sel])
         g2 = np.clip(frf.coherence[sel], 0.0, COHERENCE_CLIP)
         self.w = g2 / (1.0 - g2) if options.weighting == "coherence" else np.ones_like(g2)
-        if options.weighting == "coherence" and options.speed_lsb_rad > 0.0:
-            q2 = np.nan_to_num(quantisation_share(frf, options.speed_lsb_rad, sel) ** 2, nan=np.inf)
-            with np.errstate(divide="ignore"):
-                self.w = 1.0 / (1.0 / self.w + 2.0 * frf.n_segments * q2)
         self.sqrt_w = np.sqrt(self.w)
         self.kind = options.kind
         self.free = ("K_Nm_per_rad", "C_Nms_per_rad") if options.params == "K" else PARAM_NAMES

@@ -26,7 +26,6 @@ from scipy import signal
 
 from analysis import welch
 from analysis.encoder import difference_response
-from analysis.sample_instants import EncoderJitter
 from analysis.segments import SegmentSelection, select_segments
 
 
@@ -135,24 +134,6 @@ def window_kernel(frf: FrequencyResponse) -> tuple[np.ndarray, np.ndarray]:
     weights = frf.torque_psd_fine[fine] * spectrum[k % spectrum.size][None, :]
     weights /= np.maximum(weights.sum(axis=1, keepdims=True), np.finfo(float).tiny)
     return k / (KERNEL_PER_BIN * frf.segment_s), weights
-
-
-def quantisation_share(frf: FrequencyResponse, lsb_rad: float, sel: np.ndarray) -> np.ndarray:
-    """√(N_q / (|H·D|²·G_xx)) at the bins ``sel``: the encoder quantisation's white speed-noise bound N_q
-    (:meth:`analysis.sample_instants.EncoderJitter.quantisation_noise_psd`, one count ``lsb_rad``, rad) relative to
-    the speed that the torque drives — a bound of the relative error of |H| the quantisation can leave in a bin.
-
-    The motion repeats every period and so does the quantisation error (the position passes the same counts at the
-    same phase of the motion): much of it is coherent with the torque's lines, a bias that neither the coherence
-    nor more segments reveal (bench/hf_bias.py: −3 % at 160–250 Hz, +6 % at 250–400 Hz on the paper plant at
-    2^17 counts/rev). NaN where the speed's part is zero.
-    """
-    f = frf.f_hz[sel]
-    signal_psd = np.abs(frf.H[sel] * difference_response(f, frf.period_s)) ** 2 * frf.torque_psd[sel]
-    noise_psd = EncoderJitter(sigma_s=np.nan, mean_speed2=0.0, stamped=False,
-                              lsb_rad=lsb_rad).quantisation_noise_psd(f, frf.period_s)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.sqrt(noise_psd / signal_psd)
 
 
 def estimate_frf(
