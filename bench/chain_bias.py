@@ -62,6 +62,7 @@ mean of seeds 0–2):
     amplitude fit, q through the fit      14/24         36/24           15/24          42/24
     complex fit, none                     50/48        114/48          412/48         514/48
     complex fit, + CHAIN_REL_STD          23/48         58/48           26/48          70/48
+    complex fit, q through fit, b_m = 0   26/48         62/48          234/48         155/48
     complex fit, q through fit + b_m      23/48         64/48           25/48          77/48
 
 "q through the fit": each bin's random-phase quantisation bias (the session's encoder count and spectra, nothing
