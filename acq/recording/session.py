@@ -498,7 +498,10 @@ class SessionWriter:
                 return  # no room for a footer: the /flushes rows say what is stored
         f = self._reopen()
         try:
-            _write_footer(f, status, stop_reason, self._filled_optional, self.committed, list(self._columns))
+            # only a column longer than what was committed is opened to be cut (the writer knows each length)
+            counted = {name: _committed_rows(name, self.committed) for name in self._columns}
+            longer = [name for name, n in counted.items() if n is not None and self._columns[name].length > n]
+            _write_footer(f, status, stop_reason, self._filled_optional, self.committed, longer)
             f.close()
         except Exception as e:  # noqa: BLE001 - the footer could not be written: the flush rows still hold
             abandon(f)
@@ -525,17 +528,21 @@ def _datasets(f: h5py.File) -> list[h5py.Dataset]:
     return found
 
 
+def _committed_rows(name: str, committed: dict[str, int]) -> int | None:
+    """Rows of dataset ``name`` (no leading /) that the ``committed`` totals count; None for one they do not."""
+    group = name.rsplit("/", 1)[0] if "/" in name else name
+    return {"current/blocks": committed["current_blocks"], "current": committed["current_samples"],
+            "encoder": committed["encoder_samples"], "events": committed["events"]}.get(group)
+
+
 def _write_footer(f: h5py.File, status: Status, stop_reason: str, filled_optional: set[str],
                   committed: dict[str, int] | None = None, datasets: Sequence[str] | None = None) -> None:
     """Status, reason, stop time and sample counts; with ``committed``, the ``datasets`` named (default: every
     dataset in the file) are first cut to the committed totals (rows written by a flush that did not complete are
     not kept)."""
     if committed is not None:
-        cut = {"current/blocks": committed["current_blocks"], "current": committed["current_samples"],
-               "encoder": committed["encoder_samples"], "events": committed["events"]}
         for ds in _datasets(f) if datasets is None else [f[name] for name in datasets]:
-            group = ds.name.rsplit("/", 1)[0].lstrip("/") or ds.name.lstrip("/")
-            n = cut.get(group)
+            n = _committed_rows(ds.name.lstrip("/"), committed)
             if n is not None and ds.shape[0] > n:
                 ds.resize((n,))
     for name in _OPTIONAL_ENCODER:
