@@ -15,6 +15,18 @@
    load hits all alike.
 2. real time: CPU seconds the whole process spends per recorded second at the same rates.
 
+Measured (2026-11-30, this 2-core machine shared with other work, ``--repeat 5``, BLAS 1 thread, six runs at load 2–9):
+per CPU second the recorder is 0.84–0.87 of the simulator alone read in one thread and 0.87–0.90 of it read a thread per
+stream (the code before, in the same interleaved runs: 0.81–0.84 and 0.83–0.88; per wall second, which the load moves
+most, 0.83–0.98 and 0.87–1.07); 13–30 × real time. The recording thread alone: 39–54 M samples/s, 29–40 ms CPU per
+10 s session (1.58 M samples; before: 35–45 ms) — about 13 ms of it the HDF5 writes themselves (HDF5's chunk copies,
+Fletcher32, the kernel's copy into the page cache; a writer fed without a simulator: 21 ms for the whole file), 5 ms
+creating and finishing the file, the rest the handoff, the index checks and the joining of encoder batches. Its readers
+spend 5–15 ms more than the floor: ≈ 4 ms of it is what handing each block to another thread costs the simulator's
+threads (the floor read so, with a consumer that only sums the blocks), the rest follows the writing. The target
+(≥ 0.9 per CPU second) is not met: at ≈ 300 ms for the floor it leaves ≈ 33 ms for the recording thread and the
+readers' extra together. Real time: 0.07–0.09 CPU s per recorded second.
+
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
 (7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it

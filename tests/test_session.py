@@ -70,6 +70,29 @@ def test_round_trip_layout_and_footer(tmp_path: Path) -> None:
     assert s.events == [StreamEvent(5, "encoder", "gap", "2 frames missing before cycle 12")]
 
 
+def test_appends_are_stored_once_in_order_across_flushes_and_bulk_appends(tmp_path: Path) -> None:
+    """Small appends are copied into buffers the writer reuses from flush to flush (the block handed in is free at
+    once), large ones (an import's) held by reference: each sample is stored once, in the order appended."""
+    path = tmp_path / "s.h5"
+    w = _writer(path)
+    w.append_current(_current(0, 100))
+    n = (1 << 20) // 8 + 10  # one channel's part above the copy limit
+    bulk = np.arange(100, 100 + n, dtype=float)
+    w.append_current_blocks([bulk, -bulk], np.array([100]), np.array([n]), np.array([7]))
+    block = _current(100 + n, 100)
+    w.append_current(block)
+    block.current_a[:] = 0.0  # the caller reuses its array: what was appended is kept
+    w.flush()
+    w.append_current(_current(200 + n, 30))  # into the same buffer again, after the flush
+    w.finish("complete", "recorded")
+    s = load(path)
+    expected = np.arange(230 + n)
+    np.testing.assert_array_equal(s.current.sample_index(), expected)
+    np.testing.assert_array_equal(s.current.phases_a["i_a"], expected)
+    np.testing.assert_array_equal(s.current.phases_a["i_b"], -expected)
+    np.testing.assert_array_equal(s.current.block_count, [100, n, 100, 30])
+
+
 KILLED_WRITER = textwrap.dedent(
     """
     import os, signal, sys

@@ -180,8 +180,11 @@ def _joined(blocks: list[EncoderBlock]) -> EncoderBlock:
     """Consecutive encoder blocks as one; an optional column missing from some block is NaN there."""
     def column(name: str) -> np.ndarray | None:
         parts = [getattr(b, name) for b in blocks]
-        if all(p is None for p in parts):
+        missing = [p is None for p in parts]
+        if all(missing):
             return None
+        if not any(missing):  # the usual case: every block has it
+            return np.concatenate(parts)
         return np.concatenate([np.full(b.count, np.nan) if p is None else p for b, p in zip(blocks, parts)])
 
     return EncoderBlock(
