@@ -36,6 +36,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import median_filter
 
+from analysis import trig
 from analysis.clock_search import starting_relation, wide_search
 from analysis.fit import Z95
 from analysis.torque import window_phasors
@@ -191,8 +192,8 @@ def angle_crossings_s(angle: CubicSpline, pole_pairs: int, t_start_s: float, t_s
     The same estimator as :func:`current_crossings_s` (hysteresis 0.05), so biases cancel.
     """
     n = int((t_stop_s - t_start_s) * rate_hz)
-    return t_start_s + _crossings(lambda a, b: np.sin(pole_pairs * angle(t_start_s + np.arange(a, b) / rate_hz)),
-                                  n, 0.05) / rate_hz
+    return t_start_s + _crossings(
+        lambda a, b: trig.sin_cos(pole_pairs * angle(t_start_s + np.arange(a, b) / rate_hz))[0], n, 0.05) / rate_hz
 
 
 def percentile_without_copy(x: np.ndarray, q: float) -> float:
