@@ -145,11 +145,15 @@ def child_floor(path: str, repeat: int) -> dict:
 
 
 def run_child(path: Path, threads: str, *flags: str) -> dict:
+    from acq.entry import MALLOC_SETTINGS
+
     env = dict(os.environ)
     for var in _BLAS_VARS:
         env.pop(var, None)
         if threads != "default":
             env[var] = threads
+    for var, value in MALLOC_SETTINGS.items():  # the allocator as the acq command sets it (read at the child's start)
+        env.setdefault(var, value)
     proc = subprocess.run([sys.executable, __file__, "--child", str(path), *flags], check=True, cwd=ROOT, env=env,
                           capture_output=True, text=True)
     return json.loads(proc.stdout.strip().splitlines()[-1])
