@@ -465,9 +465,9 @@ def _block_means(current_a: np.ndarray, rate_hz: float, first_index: int, omega_
     per_turn = 2.0 * np.pi * rate_hz / max(omega_e_max_rad_s, 1e-9)
     size = int(np.clip(per_turn // _BLOCK_SAMPLES_PER_TURN, 1, _MAX_BLOCK))
     n = current_a.size // size
-    # the sum of the blocks' k-th samples, k = 0 … D − 1: D passes over strided views, 4× faster than a mean over rows
-    # of 8 (NumPy's reduction of many short rows); the same means to rounding
-    means = (sum(current_a[k:n * size:size] for k in range(size)) / size if size > 1
+    # a matrix-vector product with weights 1/D: BLAS reads the rows once, 4–20× faster than NumPy's mean over many
+    # short rows (the same means to rounding)
+    means = (current_a[:n * size].reshape(n, size) @ np.full(size, 1.0 / size) if size > 1
              else np.asarray(current_a, np.float64))
     return _BlockMeans(means, (first_index + 0.5 * (size - 1)) / rate_hz, size / rate_hz, size)
 
