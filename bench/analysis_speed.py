@@ -17,8 +17,14 @@ processes measure:
 
 Thread settings: ``1`` sets ``OPENBLAS_NUM_THREADS``/``OMP_NUM_THREADS``/``MKL_NUM_THREADS`` to 1 in the child (what
 the ``acq`` command and the batch/monitor workers do, ``acq/entry.py``); ``default`` removes them (OpenBLAS then
-starts one thread per core). Targets (issue 17): 60 s ≤ 0.4 s CPU; 10 min ≤ 4 s CPU and ≤ 600 MB peak RSS; cost
-linear in duration (the CPU per minute of session is printed). ``--profile`` adds a cProfile of the first size.
+starts one thread per core). Either way the child starts with glibc's allocator as the ``acq`` command sets it
+(``acq.entry.MALLOC_SETTINGS``: freed memory kept for the next arrays instead of page-faulted back in; without it a
+60 s session's analysis spent ~0.05 s of its CPU in page faults). Targets (issue 17): 60 s ≤ 0.4 s CPU; 10 min ≤ 4 s
+CPU and ≤ 600 MB peak RSS; cost linear in duration (the CPU per minute of session is printed). ``--profile`` adds a
+cProfile of the first size.
+
+Measured (one BLAS thread, 2 cores shared with other work): before the speed work of issue 17 item 1 (main at
+1ef86d5) 60 s 0.47 s and 10 min 4.10 s CPU (load ≈ 1); after it FIGURES_AFTER.
 """
 
 from __future__ import annotations
