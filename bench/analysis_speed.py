@@ -23,8 +23,11 @@ starts one thread per core). Either way the child starts with glibc's allocator 
 CPU and ≤ 600 MB peak RSS; cost linear in duration (the CPU per minute of session is printed). ``--profile`` adds a
 cProfile of the first size.
 
-Measured (one BLAS thread, 2 cores shared with other work): before the speed work of issue 17 item 1 (main at
-1ef86d5) 60 s 0.47 s and 10 min 4.10 s CPU (load ≈ 1); after it FIGURES_AFTER.
+Measured (one BLAS thread, 2 cores shared with other work; CPU is less sensitive to load than wall time, not immune):
+main at 1ef86d5 60 s 0.47 s and 10 min 4.10 s CPU at load ≈ 1 (0.48 s and 4.27 s at load ≈ 8); with the sine/cosine
+table (analysis/trig.py), the BLAS decimating FIR (analysis/resample.fir_decimate), the diagnosis only for a
+poor/failed verdict and the allocator setting 0.36 s and 3.57 s at load ≈ 8 (without the allocator setting 60 s
+0.40 s against 0.37–0.38 s, the same load).
 """
 
 from __future__ import annotations
