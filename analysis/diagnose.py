@@ -239,16 +239,19 @@ def recording_fault(rec: Recording) -> str | None:
 
 
 def with_fault(quality: Quality, fault: Callable[[], str | None]) -> Quality:
-    """A poor / failed ``quality`` becomes failed with the fault ``fault()`` finds as its first reason, so it says
-    why instead of a bare failed. An ``ok`` verdict (the data hold together: clocks aligned, model fits) or no
-    fault: unchanged — the diagnosis explains failures, it never overrules a consistent identification, so for an
-    ``ok`` verdict ``fault`` is not called (:func:`recording_fault` is ~5 % of a 60 s session's analysis)."""
+    """A poor / failed ``quality`` becomes failed with the fault ``fault()`` finds as its only reason, so it says why
+    instead of a bare failed. The other findings (low coherence, wide intervals, misfit, clock residual) follow from
+    the wrong constant, and their advice ("shorten the acceleration time", "try --band") would send the
+    technician after the motion instead of the bench config. An ``ok`` verdict (the data hold together:
+    clocks aligned, model fits) or no fault: unchanged — the diagnosis explains failures, it never overrules
+    a consistent identification, so for an ``ok`` verdict ``fault`` is not called (:func:`recording_fault` is ~5 %
+    of a 60 s session's analysis)."""
     if quality.verdict == "ok":
         return quality
     found = fault()
     if found is None:
         return quality
-    return replace(quality, verdict="failed", reasons=(found, *quality.reasons))
+    return replace(quality, verdict="failed", reasons=(found,))
 
 
 def first_move_sign(position_counts: np.ndarray) -> int:

@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from analysis.adequacy import band_misfits, bandwidth_bins, critical_t, misfit_covariance
+from analysis.adequacy import (band_misfits, bandwidth_bins, critical_t, misfit_covariance, motion_lines,
+                               quantisation_through_fit)
 from analysis.fit import amplitude_misfits, fit_two_mass
 from analysis.frf import estimate_frf
 from analysis.quality import assess
@@ -69,7 +70,7 @@ def clean_session():
 def test_clean_session_fits_within_noise_and_its_intervals_hold_the_truth(clean_session):
     frf, fit = clean_session
     f, misfit, reps = amplitude_misfits(frf, fit)
-    windows = band_misfits(f, misfit, reps, np.full(f.size, 0.004))
+    windows = band_misfits(f, misfit, reps, np.full((f.size, f.size), 0.004**2))  # 0.4 % common to a window
     assert reps.shape == (10, f.size)
     assert max(w.t for w in windows) < critical_t(len(windows), 10)  # 3.0 (at the top of the band) < 4.3
     q = assess(frf, fit, encoder_jitter=RESOLUTION)
@@ -92,3 +93,28 @@ def test_a_backlash_like_low_frequency_misfit_makes_the_verdict_poor_and_names_t
     assert low == 10.0 and 24.0 <= high <= 60.0
     assert q.reasons[0].startswith(f"the two-mass model does not fit |H| between 10 and {high:.0f} Hz: it misses by")
     assert "a third mode or backlash in the band" in q.reasons[0]
+
+
+def test_quantisation_carried_through_a_fit_of_a_constant_leaves_its_residual_covariance():
+    # a fit of one constant (unweighted) to n bins with independent errors of variance s²: the residual e − ē has
+    # variance s²(1 − 1/n) per bin and covariance −s²/n between bins
+    n, q, lines = 6, 0.05, 2.0
+    cov = quantisation_through_fit(np.full(n, q), np.full(n, lines), np.ones((n, 1)), np.ones(n))
+    s2 = q**2 / (2.0 * lines)
+    np.testing.assert_allclose(np.diag(cov), s2 * (1.0 - 1.0 / n), rtol=1e-12)
+    np.testing.assert_allclose(cov[0, 1:], -s2 / n, rtol=1e-12)
+    # a complex fit's Jacobian (amplitude then phase rows) gives the amplitude block; a phase-only column leaves
+    # the amplitude residual its full variance
+    jac = np.vstack([np.zeros((n, 1)), np.ones((n, 1))])
+    np.testing.assert_allclose(quantisation_through_fit(np.full(n, q), np.full(n, lines), jac, np.ones(n)),
+                               s2 * np.eye(n), atol=1e-15)
+
+
+def test_motion_lines_counts_the_harmonics_of_a_periodic_torque_and_many_for_a_broad_one():
+    step = 0.5  # Hz per fine bin
+    f = np.arange(2000) * step
+    periodic = np.where(np.isclose(np.mod(f, 2.5), 0.0), 1.0, 0.0)  # a line every 2.5 Hz (a 0.4 s period)
+    periodic = periodic + 0.5 * np.roll(periodic, 1) + 0.5 * np.roll(periodic, -1)  # two fine bins a line
+    assert motion_lines(periodic, step, 100.0, 120.0) == pytest.approx(9 * 0.5 * (2.0**2 / 1.5), rel=0.2)
+    assert motion_lines(np.ones_like(f), step, 100.0, 120.0) == pytest.approx(41 / 2.0)
+    assert motion_lines(np.zeros_like(f), step, 100.0, 120.0) == 1.0

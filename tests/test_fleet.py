@@ -3,13 +3,17 @@ another site, on both catalogue back ends."""
 
 from __future__ import annotations
 
+import io
 import json
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import pytest
+from rich.console import Console
 
 from acq.monitoring.catalogue import Catalogue, Outcome
+from acq.monitoring.fleet import load_fleet
+from acq.ui.fleet_display import fleet_table
 from tests.helpers import run_cli
 
 #: (robot, joint, site, hours before now, K N·m/rad or None for a failed analysis)
@@ -56,12 +60,34 @@ def test_fleet_table_and_the_stale_limit(catalogue_location: Path | str, capsys:
     _fill(catalogue_location)
     run = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--stale-days", "20")
     assert run.code == 3, run.err
-    rows = [line for line in run.out.splitlines() if line.startswith("│")]
-    assert [r.split("│")[1].strip() + "/" + r.split("│")[2].strip() for r in rows] == ["r3/j1", "r1/j1", "r1/j2",
-                                                                                          "r2/j1"]
-    assert "-28.6" in rows[0] and "ALARM threshold" in rows[0]
-    assert "-0.4" in rows[2] and rows[2].rstrip(" │").endswith("ok")  # not stale within 20 days; largest drop first
+    rows = [line for line in run.out.splitlines() if "│" in line]
+    assert [r.split("│")[0].strip() for r in rows] == ["r3/j1", "r1/j1", "r1/j2", "r2/j1"]
+    assert "-28.6" in rows[0] and "495.0–505.0" in rows[0] and "ALARM threshold" in rows[0]
+    assert "-0.4" in rows[2] and rows[2].rstrip().endswith("ok")  # not stale within 20 days; largest drop first
     quiet = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--tag", "robot=r2")
     assert quiet.code == 0 and "1 joints" in quiet.out
     none = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--tag", "site=C")
     assert none.code == 2 and none.err.strip().endswith(": no sessions of any joint tagged site=C")
+
+
+def test_fleet_table_shows_every_value_at_80_columns(catalogue_location: Path | str,
+                                                     capsys: pytest.CaptureFixture[str],
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    _fill(catalogue_location)
+    statuses = load_fleet(None, catalogue_location, now=datetime.now(UTC), stale_days=7.0)
+    console = Console(width=80, file=io.StringIO(), color_system=None)
+    console.print(fleet_table(statuses, stale_days=7.0))
+    monkeypatch.setenv("COLUMNS", "80")
+    run = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location))
+    assert run.code == 3, run.err
+    assert run.out == console.file.getvalue()  # type: ignore[attr-defined]
+    assert "…" not in run.out and max(len(line) for line in run.out.splitlines()) <= 80
+    times = {f"{s.robot}/{s.joint}": s.last_session_utc.strftime("%m-%d %H:%M") for s in statuses
+             if s.last_session_utc is not None}
+    rows = {line.split("│")[0].strip(): [cell.strip() for cell in line.split("│")[1:]]
+            for line in run.out.splitlines() if "│" in line and line.split("│")[0].strip()}
+    assert rows == {"r3/j1": ["500.0", "± 1.0", "-28.6", "700.0", times["r3/j1"], "1/1", "ALARM"],
+                    "r1/j1": ["760.0", "± 0.7", "-15.6", "900.0", times["r1/j1"], "1/1", "ALARM"],
+                    "r1/j2": ["498.0", "± 1.0", "-0.4", "500.0", times["r1/j2"], "0/0", "stale"],
+                    "r2/j1": ["1001.0", "± 0.5", "+0.1", "1000.0", times["r2/j1"], "3/4", "ok"]}
+    assert run.out.count("threshold") == 2  # "ALARM threshold + EWMA" wrapped at spaces, in both alarm rows

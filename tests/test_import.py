@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +15,8 @@ from nptdms import ChannelObject, GroupObject, RootObject, TdmsWriter
 from acq.config import DEFAULT_BENCH
 from acq.monitoring.catalogue import Catalogue
 from acq.offline.analyze import analyze_session
-from acq.recording.session import load
+from acq.offline.export_metadata import read_metadata
+from acq.recording.session import SessionHistory, load
 from tests.helpers import run_cli
 
 RATE_HZ = 25600.0
@@ -312,6 +315,57 @@ def test_simulated_session_exported_and_imported_back_keeps_its_history_and_K(
     assert r.code == 2 and r.err.strip() == (
         f"acq: error: --bench: needed ({recorded.stem}.session.json describes another encoder file than {enc.name} "
         "(SHA-256 differs): its metadata is not used, the time columns are not taken as one host clock)")
+
+
+def test_export_refuses_to_replace_files_unless_forced_and_a_failed_export_changes_nothing(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    assert run_import(capsys, *pair, tmp_path / "s.h5").code == 0
+    out = tmp_path / "csv"
+    assert run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out)).code == 0
+    names = ["s.current.csv", "s.encoder.csv", "s.session.json"]
+    exported = {name: (out / name).read_bytes() for name in names}
+    (out / "s.current.csv").unlink()
+    (out / "s.session.json").unlink()
+    (out / "s.encoder.csv").write_text("t_s,position_counts\n0,1\n")  # another tool's file of the same name
+    refused = run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out))
+    assert refused.code == 2
+    assert refused.err == f"acq: error: {out / 's.encoder.csv'}: exists (not overwritten; --force replaces it)\n"
+    assert sorted(p.name for p in out.iterdir()) == ["s.encoder.csv"]  # nothing written, no temp file
+    assert (out / "s.encoder.csv").read_text() == "t_s,position_counts\n0,1\n"
+
+    def disk_full(*args: object) -> str:
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr("acq.offline.exporters.metadata_text", disk_full)  # the last of the three writes fails
+    failed = run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out), "--force")
+    assert failed.code == 1
+    assert failed.err == f"acq: error: disk full: {out / 's.session.json'}\n"
+    assert sorted(p.name for p in out.iterdir()) == ["s.encoder.csv"]  # the two CSVs written were not renamed
+    assert (out / "s.encoder.csv").read_text() == "t_s,position_counts\n0,1\n"
+    monkeypatch.undo()
+    forced = run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out), "--force")
+    assert forced.code == 0, forced.err
+    assert sorted(p.name for p in out.iterdir()) == names
+    assert {name: (out / name).read_bytes() for name in names[:2]} == {n: exported[n] for n in names[:2]}
+    meta = json.loads((out / "s.session.json").read_text())
+    assert meta["files"]["current"] == {"name": "s.current.csv",
+                                        "sha256": hashlib.sha256(exported["s.current.csv"]).hexdigest()}
+
+
+def test_export_metadata_carries_every_field_of_the_sessions_history(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    imported = run_import(capsys, *pair, tmp_path / "s.h5", "--tag", "pose=home", "--started", "2026-11-20T10:15:03Z")
+    assert imported.code == 0, imported.err
+    assert run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(tmp_path / "csv")).code == 0
+    read, warning = read_metadata(tmp_path / "csv" / "s.current.csv", tmp_path / "csv" / "s.encoder.csv")
+    assert warning is None and read is not None
+    session = load(tmp_path / "s.h5").meta
+    history = [f.name for f in fields(SessionHistory)]
+    assert history == ["session_id", "joint", "created_utc", "operator", "origin", "tags", "host_clock_shared"]
+    assert {n: getattr(read, n) for n in history} == {n: getattr(session, n) for n in history}
+    assert (read.created_utc, read.tags, read.origin["kind"]) == ("2026-11-20T10:15:03+00:00", {"pose": "home"},
+                                                                  "imported")
 
 
 def test_import_tags_the_session(capsys: pytest.CaptureFixture[str], tmp_path: Path,

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import pytest
 
+import acq.offline.analyze
 from acq.config import load_bench
 from acq.monitoring.retention import WindowFiles, make_room, parse_size, to_delete
 from acq.recording.recorder import Recorder
@@ -362,7 +363,8 @@ def test_a_window_whose_moves_excite_the_band_says_which_coherence_was_too_low()
     assert _but(between, 0) == ""  # no move excites: the count says it all
 
 
-def test_a_window_judged_not_excited_after_its_analysis_keeps_no_K_beside_it(tmp_path: Path) -> None:
+def test_a_window_judged_not_excited_after_its_analysis_keeps_no_K_beside_it(tmp_path: Path,
+                                                                            monkeypatch: pytest.MonkeyPatch) -> None:
     """Seed 0's first 10 s: the robot barely excites the joint, the analysis fails on coherence and the monitor
     catalogues `not excited` without numbers; the `.result.json` beside the window says the same (it showed the
     failed fit's K 12 707 N·m/rad)."""
@@ -376,7 +378,16 @@ def test_a_window_judged_not_excited_after_its_analysis_keeps_no_K_beside_it(tmp
     bench = _bench(seed=0)
     current, drive = open_bench(bench, fast=True, sim_bench=SimBench(bench, realtime=False))
     path = Recorder(bench, None, current, drive, tmp_path, 10.0).run().path
+    written: list[Path] = []
+    write = acq.offline.analyze.write_text_atomically
+
+    def counted(target: Path | str, text: str) -> None:
+        written.append(Path(target))
+        write(target, text)
+
+    monkeypatch.setattr(acq.offline.analyze, "write_text_atomically", counted)
     outcome = analyse_window(str(path), sha256_of(path), AnalysisRequest(select_segments=True))
     beside = json.loads(path.with_name(path.stem + ".result.json").read_text())
     assert outcome.doc["quality"]["verdict"] == beside["quality"]["verdict"] == "not excited"
     assert "K_Nm_per_rad" not in beside and beside == outcome.doc
+    assert written == [path.with_name(path.stem + ".result.json")]  # once, as judged: never the refused K first

@@ -31,6 +31,7 @@ CASES = [
         "third mode in the band: K −3.8 %, J_l +49 % (vs J_l alone) under an ok verdict; its ±7 % dipole of |H| at "
         "170–200 Hz is within what the 2^17 counts/rev encoder's period-locked quantisation does to a healthy plant "
         "there (±8 % at 210–230 Hz), so the misfit test cannot name it")),
+    pytest.param("third mass 150 Hz (inside band), encoder 2^20 counts/rev", 0),
     pytest.param("offset drift 40 mA, 20 s period", 1),
     pytest.param("mains hum 20 mA, 50 Hz + harmonics", 4),
     pytest.param("3 phases, gain errors +2 % / −2 % (park)", 0),

@@ -95,9 +95,14 @@ def test_wrong_pole_pairs_or_counts_is_named_by_selftest_and_by_analyze(
     analyzed = run_cli(capsys, "analyze", str(session), "--json", "--no-report")
     quality = json.loads(analyzed.out)["quality"]
     assert quality["verdict"] == "failed"
+    fault, *others = [r for r in quality["reasons"] if not r.startswith("note: ")]
     assert re.fullmatch(r"the current turns 2\.0\d× faster than pole_pairs·ω \(pole_pairs = 4, counts_per_rev = "
                         r"131072\): check \[motor\] pole_pairs = 8 or \[encoder\] counts_per_rev = 65536",
-                        quality["reasons"][0]), quality["reasons"][0]
+                        fault), fault
+    assert others == []  # the wrong constant is the reason: no advice about the motion beside it
+    printed = run_cli(capsys, "analyze", str(session), "--no-report")
+    words = " ".join(printed.out.split())  # the table's lines wrap at the terminal's width
+    assert printed.code == 0 and "check [motor] pole_pairs = 8" in words and "acceleration time" not in words
 
 
 def test_reversed_encoder_is_named(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import textwrap
@@ -14,6 +15,7 @@ import pytest
 from acq.config import load_bench, load_profile
 from acq.recording.session import FORMAT, SessionWriter, load, repair
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
+from tests.helpers import run_cli
 
 
 def _writer(path: Path) -> SessionWriter:
@@ -102,6 +104,44 @@ def test_killed_writer_leaves_readable_file_and_repair_keeps_all_flushed(tmp_pat
     np.testing.assert_array_equal(fixed.encoder.position_counts, s.encoder.position_counts)
     with h5py.File(path, "r") as f:  # a normal (non-SWMR) open works again after repair
         assert f.attrs["encoder_samples"] == 80
+
+
+LIVE_WRITER = textwrap.dedent(
+    """
+    import sys
+    import numpy as np
+    sys.path.insert(0, {tests!r})
+    from test_session import _writer, _current, _encoder
+    w = _writer(__import__("pathlib").Path({path!r}))
+    w.append_current(_current(0, 100))
+    w.append_encoder(_encoder(np.arange(8)))  # drive time stamps, no velocity: its columns hold NaN until finish
+    w.flush()
+    print("flushed", flush=True)
+    sys.stdin.readline()
+    w.finish("complete", "recorded")
+    """
+)
+
+
+def test_info_on_a_session_being_recorded_lists_only_the_columns_the_drive_gave(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("COLUMNS", "120")
+    path = tmp_path / "live.h5"
+    code = LIVE_WRITER.format(tests=str(Path(__file__).parent), path=str(path))
+    with subprocess.Popen([sys.executable, "-c", code], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                          text=True) as writer:
+        assert writer.stdout is not None and writer.stdin is not None
+        assert writer.stdout.readline() == "flushed\n"
+        seen = [run_cli(capsys, "info", str(path), "--json"), run_cli(capsys, "info", str(path))]
+        writer.stdin.write("finish\n")
+        writer.stdin.flush()
+        assert writer.wait(timeout=60) == 0
+    seen += [run_cli(capsys, "info", str(path), "--json"), run_cli(capsys, "info", str(path))]
+    for (as_json, table), status in zip((seen[:2], seen[2:]), ("recording", "complete")):
+        doc = json.loads(as_json.out)
+        assert (doc["status"], doc["encoder_extras"], doc["streams"][1]["samples"]) == (status, ["drive_time_s"], 8)
+        assert "encoder also: drive time stamps" in [line.strip() for line in table.out.splitlines()]
+        assert "velocity" not in table.out
 
 
 def test_not_a_session(tmp_path: Path) -> None:

@@ -129,7 +129,8 @@ def quiet_numerics() -> Iterator[None]:
         yield
 
 
-def analyze_one(path: str, sha256: str, request: AnalysisRequest, draw_report: DrawReport | None = None) -> Outcome:
+def analyze_one(path: str, sha256: str, request: AnalysisRequest, draw_report: DrawReport | None = None, *,
+                write: bool = True) -> Outcome:
     """Analyse one session (runs in a worker process or on a Dask worker); never raises.
 
     Parameters
@@ -142,11 +143,13 @@ def analyze_one(path: str, sha256: str, request: AnalysisRequest, draw_report: D
         What is asked (its key files the outcome in the catalogue).
     draw_report : callable, optional
         Draws ``<session>.report.png`` once the result is written (None: no report).
+    write : bool, optional
+        Write ``<session>.result.json`` (False: the caller writes the document it makes of the outcome).
     """
     start = time.perf_counter()
     try:
         with quiet_numerics():
-            done = analyze_session(path, request, report=draw_report is not None)
+            done = analyze_session(path, request, write=write, report=draw_report is not None)
     except Exception as e:  # noqa: BLE001 — a batch records any session's failure and goes on
         error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
         return Outcome(path, sha256, request.key(), _meta_if_readable(path), None, error,

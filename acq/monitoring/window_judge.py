@@ -78,7 +78,7 @@ def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
                            f"({need:.0f} counts): the machine did not move it in this window"])
     except Exception:  # noqa: BLE001 - analyze_one below records why the file cannot be read
         pass
-    outcome = analyze_one(path, sha256, request)  # no report PNG
+    outcome = analyze_one(path, sha256, request, write=False)  # no report PNG; the result is written once, below
     if outcome.doc is not None and not_excited(outcome.doc):
         reasons = [r for r in outcome.doc["quality"]["reasons"] if not r.startswith("note: ")]
         reasons.sort(key=lambda r: "coherence" not in r)  # the excitation's own reasons first
@@ -89,18 +89,21 @@ def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
             excited = sum(m["excited"] for m in moves)
             reasons.insert(0, f"{excited} of {len(moves)} moves put torque into {lo:g}…{hi:g} Hz beyond chance "
                               f"({100 * excitation['excited_fraction']:.0f} % of the window){_but(outcome.doc, excited)}")
-        judged = replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
-                         seconds=outcome.seconds)
-        _rewrite_result(Path(path), request, judged.doc)
-        return judged
-    return outcome
+        outcome = replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
+                          seconds=outcome.seconds)
+    return _write_result(Path(path), request, outcome)
 
 
-def _rewrite_result(path: Path, request: AnalysisRequest, doc: dict[str, Any]) -> None:
-    """The window's ``.result.json`` as the catalogue has it — without numbers — so the file beside the window
-    does not show a K the monitor refused; if it cannot be rewritten it is removed (the catalogue stands)."""
-    json_path = output_paths(path, request)[0]
+def _write_result(path: Path, request: AnalysisRequest, outcome: Outcome) -> Outcome:
+    """Write the window's ``.result.json`` as the catalogue has it (a window judged not excited: without numbers,
+    so the file beside the window does not show a K the monitor refused) and remove an earlier report PNG (the
+    monitor draws none: one of an earlier result would be taken for it). A failed write is the outcome's error."""
+    if outcome.doc is None:
+        return outcome
+    json_path, png_path = output_paths(path, request)
     try:
-        write_json(doc, json_path)
-    except StorageError:
-        json_path.unlink(missing_ok=True)
+        write_json(outcome.doc, json_path)
+    except StorageError as e:
+        return replace(outcome, doc=None, error=str(e))
+    png_path.unlink(missing_ok=True)
+    return outcome

@@ -11,14 +11,13 @@ from __future__ import annotations
 
 import json
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
 
 from acq import __version__
 from acq.offline.analyze import sha256_of
-from acq.recording.session import Session, utc_now_iso
-from acq.recording.storage import write_text_atomically
+from acq.recording.session import Session, SessionHistory, utc_now_iso
 from acqcore.errors import ConfigError
 
 FORMAT = "acq-export-metadata"
@@ -27,33 +26,21 @@ CURRENT_SUFFIX = ".current.csv"
 
 
 @dataclass(frozen=True)
-class ExportMetadata:
-    """A session's history as exported: identity, start time, tags, configs as used, host clock.
+class ExportMetadata(SessionHistory):
+    """A session's history as exported (:class:`~acq.recording.session.SessionHistory`: identity, start time,
+    tags, origin, host clock), with the configs as used.
 
     Attributes
     ----------
     path : Path
         The metadata file read.
-    session_id, joint, created_utc, operator : str
-        As in the exported session (``created_utc``: ISO 8601, UTC).
-    tags, origin : dict
-        The session's tags and origin.
     bench_json, profile_json : str
         The bench and profile as used, JSON.
-    host_clock_shared : bool
-        Both files' ``t_s`` are stamps on one host clock (true for an export of a recording).
     """
 
     path: Path
-    session_id: str
-    joint: str
-    created_utc: str
-    operator: str
-    tags: dict[str, Any]
-    origin: dict[str, Any]
     bench_json: str
     profile_json: str
-    host_clock_shared: bool
 
 
 def metadata_path(current_path: Path) -> Path | None:
@@ -64,23 +51,19 @@ def metadata_path(current_path: Path) -> Path | None:
     return current_path.with_name(name[: -len(CURRENT_SUFFIX)] + ".session.json")
 
 
-def write_metadata(session: Session, current_path: Path, encoder_path: Path) -> Path:
-    """Write the metadata of ``session`` beside its exported ``current_path`` / ``encoder_path``; return its path."""
-    path = metadata_path(current_path)
-    assert path is not None, current_path
+def metadata_text(session: Session, current: tuple[str, str], encoder: tuple[str, str]) -> str:
+    """The metadata document (JSON) of ``session`` exported to the CSV pair ``current`` and ``encoder``, each
+    (file name, SHA-256 hex)."""
     meta = session.meta
     doc = {
         "format": FORMAT, "format_version": FORMAT_VERSION, "exported_utc": utc_now_iso(), "acq_version": __version__,
-        "session_id": meta.session_id, "joint": meta.joint, "created_utc": meta.created_utc,
-        "operator": meta.operator, "tags": meta.tags, "origin": meta.origin,
+        **{f.name: getattr(meta, f.name) for f in fields(SessionHistory)},
         "bench": session.bench.model_dump(mode="json"),
         "profile": session.profile.model_dump(mode="json") if session.profile is not None else None,
-        "host_clock_shared": meta.host_clock_shared,
-        "files": {"current": {"name": current_path.name, "sha256": sha256_of(current_path)},
-                  "encoder": {"name": encoder_path.name, "sha256": sha256_of(encoder_path)}},
+        "files": {"current": {"name": current[0], "sha256": current[1]},
+                  "encoder": {"name": encoder[0], "sha256": encoder[1]}},
     }
-    write_text_atomically(path, json.dumps(doc, indent=1) + "\n")  # a failed write names the file, leaves no temp
-    return path
+    return json.dumps(doc, indent=1) + "\n"
 
 
 def read_metadata(current_path: Path, encoder_path: Path, digest: Callable[[Path], str] = sha256_of,
@@ -115,9 +98,11 @@ def read_metadata(current_path: Path, encoder_path: Path, digest: Callable[[Path
             if files[role]["sha256"] != digest(given):
                 return None, (f"{path.name} describes another {role} file than {given.name} (SHA-256 differs): "
                               "its metadata is not used, the time columns are not taken as one host clock")
-        meta = ExportMetadata(path, str(doc["session_id"]), str(doc["joint"]), str(doc["created_utc"]),
-                              str(doc.get("operator", "")), dict(doc["tags"]), dict(doc["origin"]),
-                              json.dumps(doc["bench"]), json.dumps(doc["profile"]), bool(doc["host_clock_shared"]))
+        meta = ExportMetadata(session_id=str(doc["session_id"]), joint=str(doc["joint"]),
+                              created_utc=str(doc["created_utc"]), operator=str(doc.get("operator", "")),
+                              origin=dict(doc["origin"]), tags=dict(doc["tags"]),
+                              host_clock_shared=bool(doc["host_clock_shared"]), path=path,
+                              bench_json=json.dumps(doc["bench"]), profile_json=json.dumps(doc["profile"]))
     except (KeyError, TypeError) as e:
         raise ConfigError(f"{path}: key {e}: missing or malformed") from None
     return meta, None

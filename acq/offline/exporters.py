@@ -13,17 +13,23 @@ except for host stamps rounded to the ns.
 ``<stem>.session.json`` (:mod:`acq.offline.export_metadata`): the session's id, joint, start time, tags,
 bench and profile as used, and whether the two ``t_s`` columns are stamps on one host clock, so
 ``acq import`` restores the session's history.
+
+An existing file is not replaced unless asked (``force``); the three are written under temp names in
+the output folder and renamed only when all three are complete, so a failed export leaves the folder
+as it was.
 """
 
 from __future__ import annotations
 
+from contextlib import ExitStack
 from pathlib import Path
 
 import numpy as np
 
-from acq.offline.export_metadata import write_metadata
+from acq.offline.analyze import sha256_of
+from acq.offline.export_metadata import metadata_path, metadata_text
 from acq.recording.session import Session, load
-from acq.recording.storage import write_text_atomically
+from acq.recording.storage import atomic_path, write_text_synced
 from acqcore.errors import ConfigError
 
 PHASE_COLUMNS = ("i_a", "i_b", "i_c")
@@ -38,9 +44,9 @@ def _exact(values: np.ndarray) -> list[str]:
 
 
 def _write_columns(path: Path, columns: dict[str, list[str]]) -> None:
-    """Write ``name -> formatted cells`` as a CSV under a temporary name, then rename (no temp file left on error)."""
+    """Write ``name -> formatted cells`` as a CSV."""
     body = "\n".join(map(",".join, zip(*columns.values())))
-    write_text_atomically(path, ",".join(columns) + "\n" + body + "\n")
+    write_text_synced(path, ",".join(columns) + "\n" + body + "\n")
 
 
 def _host_ns_at_start(session: Session) -> int:
@@ -62,23 +68,42 @@ def current_t0_s(session: Session) -> float:
 NOT_EXPORTED = ("velocity_counts_per_s", "velocity_demand_counts_per_s")
 
 
-def export_csv(session_path: Path, out_dir: Path) -> tuple[tuple[Path, Path, Path], tuple[str, ...]]:
+def export_csv(session_path: Path, out_dir: Path, *, force: bool = False,
+               ) -> tuple[tuple[Path, Path, Path], tuple[str, ...]]:
     """Write the session's current and encoder CSV files and its metadata into ``out_dir``; return their paths and
-    the names of the session's encoder datasets left out (:data:`NOT_EXPORTED` that it holds)."""
+    the names of the session's encoder datasets left out (:data:`NOT_EXPORTED` that it holds).
+
+    Raises
+    ------
+    ConfigError
+        One of the three files exists and ``force`` is false (nothing is written).
+    StorageError
+        A write failed (the folder is left as it was).
+    """
     session = load(session_path)
     session.require_samples()
-    out_dir.mkdir(parents=True, exist_ok=True)
-    cur, enc = session.current, session.encoder
     stem = Path(session_path).stem
     current_path, encoder_path = out_dir / f"{stem}.current.csv", out_dir / f"{stem}.encoder.csv"
-    t_cur = current_t0_s(session) + cur.sample_index() / cur.rate_hz
-    phases = {f"{p}_A": _exact(cur.phases_a[p]) for p in PHASE_COLUMNS if p in cur.phases_a}
-    _write_columns(current_path, {"t_s": _seconds(t_cur), **phases})
-    t_enc = (enc.host_ns - _host_ns_at_start(session)) * 1e-9
-    columns = {"t_s": _seconds(t_enc), "position_counts": [str(v) for v in enc.position_counts.tolist()],
-               "index": [str(v) for v in enc.index.tolist()]}
-    if enc.drive_time_s is not None:
-        columns["drive_time_s"] = _exact(enc.drive_time_s)
-    _write_columns(encoder_path, columns)
+    meta_path = metadata_path(current_path)
+    assert meta_path is not None, current_path
+    targets = (current_path, encoder_path, meta_path)
+    existing = [path for path in targets if path.exists()]
+    if existing and not force:
+        raise ConfigError(f"{existing[0]}: exists (not overwritten; --force replaces it)")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    cur, enc = session.current, session.encoder
+    with ExitStack() as stack:  # every temp file removed on an error; all three renamed at the end
+        tmp_current, tmp_encoder, tmp_meta = (stack.enter_context(atomic_path(path)) for path in targets)
+        t_cur = current_t0_s(session) + cur.sample_index() / cur.rate_hz
+        phases = {f"{p}_A": _exact(cur.phases_a[p]) for p in PHASE_COLUMNS if p in cur.phases_a}
+        _write_columns(tmp_current, {"t_s": _seconds(t_cur), **phases})
+        t_enc = (enc.host_ns - _host_ns_at_start(session)) * 1e-9
+        columns = {"t_s": _seconds(t_enc), "position_counts": [str(v) for v in enc.position_counts.tolist()],
+                   "index": [str(v) for v in enc.index.tolist()]}
+        if enc.drive_time_s is not None:
+            columns["drive_time_s"] = _exact(enc.drive_time_s)
+        _write_columns(tmp_encoder, columns)
+        write_text_synced(tmp_meta, metadata_text(session, (current_path.name, sha256_of(tmp_current)),
+                                                  (encoder_path.name, sha256_of(tmp_encoder))))
     left_out = tuple(name for name in NOT_EXPORTED if getattr(enc, name, None) is not None)
-    return (current_path, encoder_path, write_metadata(session, current_path, encoder_path)), left_out
+    return targets, left_out

@@ -530,27 +530,36 @@ class EncoderData:
 
 
 @dataclass(frozen=True)
-class SessionMeta:
-    """What a session file says about itself (its root attributes), typed: the one way other modules read them.
+class SessionHistory:
+    """What a session carries through ``acq export`` and ``acq import`` (:mod:`acq.offline.export_metadata`).
 
     ``session_id``, ``joint``, ``created_utc`` (ISO 8601 UTC of the start) are None only in a file that lacks
-    them; ``host_ns_at_start`` (host monotonic clock at the start, ns) likewise; ``stopped_utc``,
-    ``status``, ``stop_reason`` and ``operator`` are ``""`` when absent; ``origin`` is where the data came
-    from (``{"kind": "recorded"}``, or the imported files; ``{}`` when absent); ``tags`` the free-form tags;
-    ``host_clock_shared`` whether both streams' host stamps are arrival times on one host clock.
+    them; ``operator`` is ``""`` when absent; ``origin`` is where the data came from (``{"kind": "recorded"}``,
+    or the imported files; ``{}`` when absent); ``tags`` the free-form tags; ``host_clock_shared`` whether both
+    streams' host stamps are arrival times on one host clock.
     """
 
     session_id: str | None
     joint: str | None
     created_utc: str | None
-    host_ns_at_start: int | None
-    stopped_utc: str
-    status: str
-    stop_reason: str
     operator: str
     origin: dict[str, Any]
     tags: dict[str, Any]
     host_clock_shared: bool
+
+
+@dataclass(frozen=True)
+class SessionMeta(SessionHistory):
+    """What a session file says about itself (its root attributes), typed: the one way other modules read them.
+
+    Its :class:`SessionHistory`, and ``host_ns_at_start`` (host monotonic clock at the start, ns; None only in a
+    file that lacks it); ``stopped_utc``, ``status`` and ``stop_reason`` are ``""`` when absent.
+    """
+
+    host_ns_at_start: int | None
+    stopped_utc: str
+    status: str
+    stop_reason: str
 
     @classmethod
     def from_attrs(cls, attrs: dict[str, Any]) -> SessionMeta:
@@ -787,7 +796,11 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
         damage.append(_span("encoder", n, total))
 
     def optional(name: str) -> np.ndarray | None:
-        return columns[name][0][:n] if name in columns else None
+        """The column, None when absent or all NaN: the writer creates every optional column and fills what a drive
+        does not give with NaN until :func:`_write_footer` deletes it, so while a session records (or after its
+        recorder was killed) a column of NaN only is one the drive has not given."""
+        values = columns[name][0][:n] if name in columns else None
+        return None if values is None or np.isnan(values).all() else values
 
     try:
         period_s, counts_per_rev = float(g.attrs["period_s"]), int(g.attrs["counts_per_rev"])
@@ -940,5 +953,4 @@ def _write_copy(dst: h5py.File, session: Session, stop_reason: str, group_attrs:
     rows = np.array([(ev.host_ns, ev.stream.encode(), ev.kind.encode(), ev.detail.encode()[:240])
                      for ev in session.events], dtype=EVENT_DTYPE)
     column(dst, "events", rows)
-    filled = {n for n in _OPTIONAL_ENCODER if n in enc and not np.all(np.isnan(enc[n][...]))}
-    _write_footer(dst, "interrupted", stop_reason, filled)
+    _write_footer(dst, "interrupted", stop_reason, {n for n in _OPTIONAL_ENCODER if n in enc})

@@ -96,10 +96,15 @@ def remove_temp_files(path: Path | str) -> None:
         tmp.unlink(missing_ok=True)
 
 
+def write_text_synced(path: Path | str, text: str) -> None:
+    """Write ``text`` (UTF-8) to ``path`` and flush it to the disk (what an :func:`atomic_path` block writes)."""
+    with Path(path).open("w", encoding="utf-8") as f:
+        f.write(text)
+        f.flush()
+        os.fsync(f.fileno())
+
+
 def write_text_atomically(path: Path | str, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` through a temp file; see :func:`atomic_path`."""
     with atomic_path(path) as tmp:
-        with tmp.open("w", encoding="utf-8") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
+        write_text_synced(tmp, text)

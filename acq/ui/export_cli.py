@@ -13,11 +13,12 @@ from rich.markup import escape
 @click.argument("session_path", type=click.Path(path_type=Path))
 @click.option("--csv", "csv_dir", required=True, type=click.Path(path_type=Path, file_okay=False),
               help="Folder for the current and encoder CSV files (the pair `acq import` reads) and the metadata.")
-def export_command(session_path: Path, csv_dir: Path) -> int:
+@click.option("--force", is_flag=True, help="Replace files of an earlier export (default: refuse, write nothing).")
+def export_command(session_path: Path, csv_dir: Path, force: bool) -> int:
     """Export SESSION to a current CSV, an encoder CSV and the session's metadata (JSON)."""
     from acq.offline.exporters import export_csv  # numpy and h5py only when the command runs
 
-    written, left_out = export_csv(session_path, csv_dir)
+    written, left_out = export_csv(session_path, csv_dir, force=force)
     out = Console(soft_wrap=True)  # a path or a list of names stays on one line, whatever the width
     for path in written:
         out.print(f"wrote {escape(str(path))}")

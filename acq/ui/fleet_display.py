@@ -9,14 +9,16 @@ from __future__ import annotations
 import functools
 import json
 from collections.abc import Sequence
+from dataclasses import replace
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
 import click
 from rich.console import Console
-from rich.table import Table
 
+from acq.monitoring.catalogue import Entry
+from acq.ui.display import Column, FittedTable, start_times
 from acq.ui.options import CatalogueLocation
 from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet
 from acq.monitoring.trend import EXIT_ALARM
@@ -27,26 +29,42 @@ _STYLES = {"alarm": "bold red", "stale": "yellow", "no baseline": "dim", "ok": "
 HEAT_BINS = 400
 
 
-def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> Table:
-    """One row per joint, worst first: robot, joint, latest K and its 95 % interval, ΔK, last session, sessions
-    analysed / excited in the last day, state."""
+def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> FittedTable:
+    """One row per joint, worst first: robot/joint, latest K and its 95 % interval, ΔK, baseline, last session,
+    sessions excited / analysed in the last day, state.
+
+    At 80 columns the interval is relative (± %) and the time short (month-day hour:minute); every value stays
+    shown, the state wraps at spaces.
+    """
     alarms = sum(s.state == "alarm" for s in statuses)
-    table = Table(title=f"fleet — {len(statuses)} joints" + (f"  [bold red]{alarms} in ALARM[/]" if alarms else ""))
-    for c in ("robot", "joint", "K N·m/rad", "95 % interval", "ΔK %", "baseline", "last session (UTC)",
-              "last day: analysed", "excited", "state"):
-        table.add_column(c, justify="right" if c[0] in "K9Δbe" or c.startswith("last day") else "left")
+    title = f"fleet — {len(statuses)} joints" + (f"  [bold red]{alarms} in ALARM[/]" if alarms else "")
     f1 = functools.partial(format_value, spec=".1f")
-    for s in statuses:
-        e = None if s.latest is None else s.latest.entry
-        state = f"ALARM {s.latest.reason}" if s.state == "alarm" and s.latest is not None else s.state
-        table.add_row(s.robot, s.joint, f1(None if e is None else e.K_Nm_per_rad),
-                      "—" if e is None else f"{f1(e.K_ci95[0])}–{f1(e.K_ci95[1])}",
-                      format_value(s.change_pct, "+.1f"), f1(s.trend.baseline_K_Nm_per_rad),
-                      "—" if s.last_session_utc is None else s.last_session_utc.strftime("%Y-%m-%d %H:%M"),
-                      str(s.analysed_last_day), str(s.excited_last_day), state, style=_STYLES[s.state])
-    table.caption = (f"stale: no session for {stale_days:g} days; excited: sessions with a K of verdict ok; "
-                     "alarm rules as acq trend (per joint: acq trend --joint J --tag robot=R)")
-    return table
+    entries = [None if s.latest is None else s.latest.entry for s in statuses]
+    wide_time, short_time = start_times([None if s.last_session_utc is None else s.last_session_utc.isoformat()
+                                         for s in statuses])
+    columns = [Column("robot/\njoint", [f"{s.robot}/{s.joint}" for s in statuses], "left", wrap=True),
+               Column("K\nN·m/rad", [f1(None if e is None else e.K_Nm_per_rad) for e in entries]),
+               Column("95 % interval\nN·m/rad",
+                      ["—" if e is None else f"{f1(e.K_ci95[0])}–{f1(e.K_ci95[1])}" for e in entries],
+                      narrow=Column("95 %\n± %", [_relative_half_width(e) for e in entries])),
+               Column("ΔK\n%", [format_value(s.change_pct, "+.1f") for s in statuses]),
+               Column("baseline\nN·m/rad", [f1(s.trend.baseline_K_Nm_per_rad) for s in statuses]),
+               replace(wide_time, header="last session\n(UTC)",
+                       narrow=replace(short_time, header=short_time.header.replace("started", "last"))),
+               Column("24 h\nok/all", [f"{s.excited_last_day}/{s.analysed_last_day}" for s in statuses]),
+               Column("state", [f"ALARM {s.latest.reason.replace('+', ' + ')}"
+                                if s.state == "alarm" and s.latest is not None else s.state for s in statuses],
+                      "left", wrap=True)]
+    caption = [f"stale: no session for {stale_days:g} days; 24 h ok/all: sessions of the last day with a K of "
+               "verdict ok / all analysed; alarm rules as acq trend (per joint: acq trend --joint J --tag robot=R)"]
+    return FittedTable(title, columns, caption, row_styles=[_STYLES[s.state] for s in statuses])
+
+
+def _relative_half_width(entry: Entry | None) -> str:
+    """Half the width of K's 95 % interval relative to K, "± x.x" (%), or "—"."""
+    if entry is None or None in (*entry.K_ci95, entry.K_Nm_per_rad) or not entry.K_Nm_per_rad:
+        return "—"
+    return f"± {50.0 * (entry.K_ci95[1] - entry.K_ci95[0]) / entry.K_Nm_per_rad:.1f}"
 
 
 def render_fleet_png(statuses: Sequence[JointStatus], path: Path | str, *, now: datetime, threshold_pct: float,
