@@ -36,6 +36,7 @@ import numpy as np
 from scipy.interpolate import CubicSpline
 from scipy.ndimage import median_filter
 
+from analysis import trig
 from analysis.clock_search import starting_relation, wide_search
 from analysis.fit import Z95
 from analysis.torque import window_phasors
@@ -191,8 +192,8 @@ def angle_crossings_s(angle: CubicSpline, pole_pairs: int, t_start_s: float, t_s
     The same estimator as :func:`current_crossings_s` (hysteresis 0.05), so biases cancel.
     """
     n = int((t_stop_s - t_start_s) * rate_hz)
-    return t_start_s + _crossings(lambda a, b: np.sin(pole_pairs * angle(t_start_s + np.arange(a, b) / rate_hz)),
-                                  n, 0.05) / rate_hz
+    return t_start_s + _crossings(
+        lambda a, b: trig.sin_cos(pole_pairs * angle(t_start_s + np.arange(a, b) / rate_hz))[0], n, 0.05) / rate_hz
 
 
 def percentile_without_copy(x: np.ndarray, q: float) -> float:
@@ -464,7 +465,10 @@ def _block_means(current_a: np.ndarray, rate_hz: float, first_index: int, omega_
     per_turn = 2.0 * np.pi * rate_hz / max(omega_e_max_rad_s, 1e-9)
     size = int(np.clip(per_turn // _BLOCK_SAMPLES_PER_TURN, 1, _MAX_BLOCK))
     n = current_a.size // size
-    means = current_a[:n * size].reshape(n, size).mean(axis=1) if size > 1 else np.asarray(current_a, np.float64)
+    # a matrix-vector product with weights 1/D: BLAS reads the rows once, 4–20× faster than NumPy's mean over many
+    # short rows (the same means to rounding)
+    means = (current_a[:n * size].reshape(n, size) @ np.full(size, 1.0 / size) if size > 1
+             else np.asarray(current_a, np.float64))
     return _BlockMeans(means, (first_index + 0.5 * (size - 1)) / rate_hz, size / rate_hz, size)
 
 

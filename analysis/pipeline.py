@@ -137,7 +137,7 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
     quality = with_fault(assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
                                 encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None),
-                         recording_fault(rec))  # a wrong bench constant
+                         lambda: recording_fault(rec))  # a wrong bench constant
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual)),

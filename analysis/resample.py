@@ -3,7 +3,7 @@
 The encoder is never interpolated; only the torque (sampled ~25× faster) is moved. The chain:
 
 1. :func:`scipy.signal.resample_poly` down by an integer q to ≥ ``8·f_stop`` (its FIR is delay-compensated,
-   so zero-phase; its cut-off lies far above the band of interest);
+   so zero-phase; its cut-off lies far above the band of interest), computed by :func:`fir_decimate`;
 2. a linear-phase Kaiser FIR applied centred (zero-phase): flat to ``f_pass_hz`` (ripple 1e-4),
    ≥ 80 dB down from ``f_stop_hz``, so nothing above ``f_stop`` folds below ``f_enc − f_stop``;
 3. a cubic spline read at the instants (the signal is then oversampled ≥ 8× its band).
@@ -17,10 +17,11 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.ndimage import map_coordinates, spline_filter1d
-from scipy.signal import firwin, kaiserord, oaconvolve, resample_poly
+from scipy.signal import firwin, kaiserord, oaconvolve
 
 _RIPPLE_DB = 80.0
 _KEEP_TRANSITION = 0.25  # transition width of :func:`decimate_keeping`'s filter, × the band it keeps
+_DECIMATE_BLOCK = 1 << 14  # outputs per matrix product of :func:`fir_decimate` (its (taps/q + 1) rows stay in cache)
 
 
 def antialias(x: np.ndarray, rate_hz: float, f_pass_hz: float, f_stop_hz: float) -> tuple[np.ndarray, float]:
@@ -40,7 +41,8 @@ def antialias(x: np.ndarray, rate_hz: float, f_pass_hz: float, f_stop_hz: float)
         raise ValueError(f"need 0 < f_pass_hz < f_stop_hz, got {f_pass_hz}, {f_stop_hz}")
     q = max(1, int(rate_hz // (8.0 * f_stop_hz)))
     x = np.asarray(x, dtype=np.float64)
-    y = resample_poly(x, 1, q, axis=-1) if q > 1 else x
+    # resample_poly's own filter for (1, q): a Kaiser (β = 5) windowed sinc of 20·q + 1 taps, cut-off at the new Nyquist
+    y = fir_decimate(x, firwin(20 * q + 1, 1.0 / q, window=("kaiser", 5.0)), q) if q > 1 else x
     rate = rate_hz / q
     h = _lowpass(rate, f_pass_hz, f_stop_hz)
     return oaconvolve(y, h.reshape((1,) * (y.ndim - 1) + h.shape), mode="same", axes=-1), rate
@@ -58,7 +60,46 @@ def decimate_keeping(x: np.ndarray, rate_hz: float, f_keep_hz: float) -> tuple[n
     if q == 1:
         return np.asarray(x, dtype=np.float64), rate_hz
     h = _lowpass(rate_hz, f_keep_hz, rate_hz / q - f_keep_hz)
-    return resample_poly(x, 1, q, window=h, axis=-1), rate_hz / q
+    return fir_decimate(x, h, q), rate_hz / q
+
+
+def fir_decimate(x: np.ndarray, h: np.ndarray, q: int) -> np.ndarray:
+    """``scipy.signal.resample_poly(x, 1, q, window=h, axis=-1)`` (zero padding, q ≥ 2): every q-th sample of x
+    filtered by the FIR h centred on it (delay (len(h) − 1)/2 removed), shape (..., ⌈n/q⌉).
+
+    resample_poly's polyphase loop (:func:`scipy.signal.upfirdn`) multiplies and adds one tap at a time (≈ 2·10⁹ per
+    second here: 9 ms for the torque and its noise of a 20 s chunk). The same sums as matrix products: x in rows of q
+    samples, y[k] = Σ_r Σ_c x[(k + R − r)·q + c]·G[r, c] with G the taps rearranged by row offset r and phase c, so a
+    (taps/q + 1) × q matrix times the rows (BLAS), then the sum of each output's diagonal — 2.2–2.6× faster, equal to
+    resample_poly to 1.2e-15 relative (tests/test_resample.py). No library offers a fast integer decimating FIR.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    n_in = x.shape[-1]
+    n_out = -(-n_in // q)
+    half_len = (h.size - 1) // 2
+    pre_pad = q - half_len % q  # resample_poly's alignment: output k centred on input k·q
+    first = (half_len + pre_pad) // q
+    taps = np.concatenate((np.zeros(pre_pad), h))
+    m = -(-taps.size // q)
+    taps = np.concatenate((taps, np.zeros(m * q - taps.size)))
+    g = np.zeros((m + 1, q))  # g[r, c]: the weight of x[(k + first − r)·q + c] in y[k]
+    g[:m, 0] = taps[0::q]
+    for c in range(1, q):
+        g[1:, c] = taps[q - c::q]
+    row0, rows = first - m, n_out + m  # rows of q samples from row0·q on, zero outside x
+    padded = np.zeros(x.shape[:-1] + (rows * q,))
+    a, b = max(0, row0 * q), min(n_in, (row0 + rows) * q)
+    padded[..., a - row0 * q:b - row0 * q] = x[..., a:b]
+    blocks = padded.reshape(x.shape[:-1] + (rows, q))
+    y = np.empty(x.shape[:-1] + (n_out,))
+    for k0 in range(0, n_out, _DECIMATE_BLOCK):
+        k1 = min(n_out, k0 + _DECIMATE_BLOCK)
+        products = g @ np.swapaxes(blocks[..., k0:k1 + m, :], -1, -2)  # (..., m + 1, k1 − k0 + m)
+        out = y[..., k0:k1]
+        np.copyto(out, products[..., m, :k1 - k0])
+        for r in range(m - 1, -1, -1):
+            out += products[..., r, m - r:m - r + k1 - k0]
+    return y
 
 
 def _lowpass(rate_hz: float, f_pass_hz: float, f_stop_hz: float) -> np.ndarray:

@@ -23,7 +23,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 from scipy.signal import butter, find_peaks, hilbert, sosfiltfilt
 
-from analysis import welch
+from analysis import trig, welch
 from analysis.torque_spline import SlowOffset, spline_factor, spline_fit
 
 _SQRT3 = np.sqrt(3.0)
@@ -94,7 +94,7 @@ def window_phasors(current_a: np.ndarray, theta_e_rad: np.ndarray, window_len: i
     nw = i.size // window_len
     i = i[: nw * window_len].reshape(nw, window_len)
     th = th[: nw * window_len].reshape(nw, window_len)
-    s, c = np.sin(th), np.cos(th)
+    s, c = trig.sin_cos(th)
     M = np.empty((nw, 3, 3))
     M[:, 0, 0] = np.einsum("ij,ij->i", s, s)
     M[:, 1, 1] = np.einsum("ij,ij->i", c, c)
@@ -257,7 +257,8 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         np.random.default_rng(noise_seed).standard_normal(out=Yt[1])
     Y = y if noise_seed is None else Yt.T
     phi = th + offset.theta0_rad
-    g = -np.sin(phi)
+    g, cos_phi = trig.sin_cos(phi)
+    np.negative(g, out=g)
     tn = np.linspace(-1.0, 1.0, y.size)
     offset = SlowOffset(y.size, OFFSET_KNOT_S * rate_hz)  # the slow offset's columns, then the angle columns and lines
     nd = offset.count
@@ -269,7 +270,6 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
     # Welch segments, and would cost a second right-hand side in every refit
     iq1, noise_iq = (iq1, None) if Y.ndim == 1 else (iq1[:, 0], iq1[:, 1])
     w_e = np.gradient(th) * rate_hz
-    cos_phi = np.cos(phi)
 
     def angle_columns(iq_a: np.ndarray) -> None:
         np.multiply(iq_a, cos_phi, out=cols[0])
@@ -399,8 +399,10 @@ def _interference_found(lines_hz: list[float], beta_tones: np.ndarray, offset_a:
     the record; a ramp sweeping through f passes in milliseconds.
     """
     amps = tuple(float(np.hypot(*beta_tones[4 * k:4 * k + 2])) for k in range(len(lines_hz)))
-    f_e = np.abs(w_e_rad_s) / (2.0 * np.pi)
-    inseparable = tuple(f for f in lines_hz if np.mean(np.abs(f_e - f) < 1.0) > 1.0 - INSEPARABLE_SHARE)
+    inseparable: tuple[float, ...] = ()
+    if lines_hz:  # the electrical frequency at every sample only when there is a line to test
+        f_e = np.abs(w_e_rad_s) / (2.0 * np.pi)
+        inseparable = tuple(f for f in lines_hz if np.mean(np.abs(f_e - f) < 1.0) > 1.0 - INSEPARABLE_SHARE)
     return Interference(tuple(lines_hz), amps, inseparable, float(np.ptp(offset_a)))
 
 

@@ -17,8 +17,17 @@ processes measure:
 
 Thread settings: ``1`` sets ``OPENBLAS_NUM_THREADS``/``OMP_NUM_THREADS``/``MKL_NUM_THREADS`` to 1 in the child (what
 the ``acq`` command and the batch/monitor workers do, ``acq/entry.py``); ``default`` removes them (OpenBLAS then
-starts one thread per core). Targets (issue 17): 60 s ≤ 0.4 s CPU; 10 min ≤ 4 s CPU and ≤ 600 MB peak RSS; cost
-linear in duration (the CPU per minute of session is printed). ``--profile`` adds a cProfile of the first size.
+starts one thread per core). Either way the child starts with glibc's allocator as the ``acq`` command sets it
+(``acq.entry.MALLOC_SETTINGS``: freed memory kept for the next arrays instead of page-faulted back in; without it a
+60 s session's analysis spent ~0.05 s of its CPU in page faults). Targets (issue 17): 60 s ≤ 0.4 s CPU; 10 min ≤ 4 s
+CPU and ≤ 600 MB peak RSS; cost linear in duration (the CPU per minute of session is printed). ``--profile`` adds a
+cProfile of the first size.
+
+Measured (one BLAS thread, 2 cores shared with other work; CPU is less sensitive to load than wall time, not immune):
+main at 1ef86d5 60 s 0.47 s and 10 min 4.10 s CPU at load ≈ 1 (0.48 s and 4.27 s at load ≈ 8); with the sine/cosine
+table (analysis/trig.py), the BLAS decimating FIR (analysis/resample.fir_decimate), the diagnosis only for a
+poor/failed verdict and the allocator setting 0.36 s and 3.57 s at load ≈ 8 (without the allocator setting 60 s
+0.40 s against 0.37–0.38 s, the same load).
 """
 
 from __future__ import annotations
@@ -145,11 +154,15 @@ def child_floor(path: str, repeat: int) -> dict:
 
 
 def run_child(path: Path, threads: str, *flags: str) -> dict:
+    from acq.entry import MALLOC_SETTINGS
+
     env = dict(os.environ)
     for var in _BLAS_VARS:
         env.pop(var, None)
         if threads != "default":
             env[var] = threads
+    for var, value in MALLOC_SETTINGS.items():  # the allocator as the acq command sets it (read at the child's start)
+        env.setdefault(var, value)
     proc = subprocess.run([sys.executable, __file__, "--child", str(path), *flags], check=True, cwd=ROOT, env=env,
                           capture_output=True, text=True)
     return json.loads(proc.stdout.strip().splitlines()[-1])
