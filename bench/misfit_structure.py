@@ -44,8 +44,10 @@ Found (session 5) — why the third mass cannot be told from a healthy joint at 
 * A three-mass refit with weights from coherence and the quantisation bound (``--refit --quantisation-weights``,
   seeds 0–2 of 1, 10, 11, 14, 48) lowers χ² by 1.1 / 6.4 / 17.2 for the third mass (the first two converge on a
   spurious 20 Hz mode: local minima), 2.8–3.1 healthy 10 s, 8.6–13.9 healthy 60 s (a 21 Hz mode), 11–12 friction,
-  10–12 backlash 0.05 mrad; with coherence weights (``--refit``) healthy 10 s sessions admit a 155 Hz mode that moves
-  K by +8 % at a Δχ² of 4.5. At this resolution a third mode near 150 Hz is not identifiable from a healthy joint:
+  10–12 backlash 0.05 mrad; with coherence weights (``--refit``, seeds 0–1) a healthy 60 s session settles on a
+  148 Hz mode that moves K by +9.3 % at 0.73× the cost and the J_m ×2 plant on modes moving K by +57…+72 %; from
+  other starts (f_3 at 30/50/70/85 % of the band, a one-off) the paper plant admits a 155 Hz mode moving K by
+  +8.3 % at a Δχ² of 4.5. At this resolution a third mode near 150 Hz is not identifiable from a healthy joint:
   K ± 0.8 % holds for the two-mass structure, which the data can check only where the encoder resolves it.
 * With a 2^20 counts/rev encoder the same third mass is declined with the misfit named (scenario "third mass 150 Hz
   (inside band), encoder 2^20 counts/rev": poor, 162…184 Hz, +7…+8 %, 6 σ, seeds 0–2).
