@@ -28,9 +28,9 @@ CASES = [
     pytest.param("clock offset −2 s", 0),
     pytest.param("backlash 0.2 mrad", 0),
     pytest.param("third mass 150 Hz (inside band), J_3 = 0.5 J_l", 0, marks=_xfail(
-        "third mode in the band: K −3.8 %, J_l +49 % (vs J_l alone) under an ok verdict; its ±7 % dipole of |H| at "
-        "170–200 Hz is within what the 2^17 counts/rev encoder's period-locked quantisation does to a healthy plant "
-        "there (±8 % at 210–230 Hz), so the misfit test cannot name it")),
+        "third mode in the band: K −3.8 %, J_l +49 % (vs J_l alone) under an ok verdict; its +7…+8 % dipole of |H| at "
+        "170–184 Hz is within what the 2^17 counts/rev encoder's quantisation, repeating with the motion, can do per "
+        "bin there (5 %): the misfit test sees it at 3.2–3.6 σ, critical 4.3 (with 2^20 counts/rev it is named)")),
     pytest.param("third mass 150 Hz (inside band), encoder 2^20 counts/rev", 0),
     pytest.param("offset drift 40 mA, 20 s period", 1),
     pytest.param("mains hum 20 mA, 50 Hz + harmonics", 4),
