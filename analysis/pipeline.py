@@ -14,7 +14,7 @@ from typing import Any
 
 from analysis.chain import SignalChain
 from analysis.clocks import ClockFit
-from analysis.diagnose import recording_fault, with_fault
+from analysis.diagnose import nominal_fault, recording_fault, with_fault, with_nominal_fault
 from analysis.fit import FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass
 from analysis.encoder import longest_gap_free_span
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
@@ -135,9 +135,10 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
                                        weighting=chain.weighting), nominal=request.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
-    quality = with_fault(assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
-                                encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None),
-                         recording_fault(rec))  # a wrong bench constant
+    quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
+                     encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None)
+    quality = with_nominal_fault(quality, nominal_fault(fit.values, request.nominal, fit.fitted))  # a unit or scale
+    quality = with_fault(quality, recording_fault(rec))  # a wrong bench constant
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual)),

@@ -533,3 +533,34 @@ def test_a_mistyped_current_file_is_named_before_the_bench_is_asked_for(capsys: 
     run = run_cli(capsys, "import", "--current", str(tmp_path / "nofile.csv"), "--encoder", str(enc),
                   "-o", str(tmp_path / "imported.h5"))
     assert (run.code, run.err) == (2, f"acq: error: {tmp_path / 'nofile.csv'}: no such file\n")
+
+
+def test_a_current_in_milliamperes_is_named_as_a_scale_mistake_not_an_ok_stiffness(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, separate_tools) -> None:
+    from dataclasses import replace
+    in_mA = replace(separate_tools, current_a={"i_a": 1000.0 * separate_tools.current_a["i_a"]})
+    cur, enc = write_pair(tmp_path / "csv", in_mA)
+    assert run_import(capsys, cur, enc, tmp_path / "s.h5").code == 0
+    r = run_cli(capsys, "analyze", str(tmp_path / "s.h5"), "--json", "--no-report")
+    doc = json.loads(r.out)
+    factors = [doc[n] / v for n, v in (("K_Nm_per_rad", 891.0), ("Jm_kgm2", 0.003027), ("Jl_kgm2", 0.00748))]
+    assert factors == pytest.approx([1000.0] * 3, rel=0.02)  # the data hold together: only the scale is wrong
+    assert doc["quality"]["verdict"] == "poor"
+    assert doc["quality"]["reasons"][0] == (
+        f"K is {factors[0]:.0f}× the bench's nominal 891 N·m/rad (J_m {factors[1]:.0f}×, J_l {factors[2]:.0f}×): "
+        "the torque is scaled — check the current's unit and scale (amperes: [daq] sensor_A_per_V or sensor_A_per_A; "
+        "an imported current column in A) and the torque constant ([motor] torque_constant_Nm_per_A)")
+
+
+def test_nominal_fault_names_an_order_of_magnitude_and_not_the_scenario_familys_factor_two() -> None:
+    from analysis.diagnose import nominal_fault
+    from analysis.model import TwoMassParams
+    nominal = TwoMassParams(891.0, 0.003027, 0.00748, 0.0)
+    free = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")
+    assert nominal_fault(TwoMassParams(2 * 891.0, 0.5 * 0.003027, 2 * 0.00748, 0.1), nominal, free) is None
+    assert nominal_fault(TwoMassParams(9.9 * 891.0, 0.003027, 0.00748, 0.1), nominal, free) is None
+    assert nominal_fault(TwoMassParams(891.0, 0.003027, 0.00748 / 100.0, 0.1), nominal, free) == (
+        "J_l is 1/100 of the bench's nominal 0.00748 kg·m²: check the [nominal] values (motor-side, SI units: a "
+        "load-side value is [gear] ratio² larger) and that the bench file is this joint's")
+    assert nominal_fault(TwoMassParams(0.1 * 891.0, 0.003027, 0.00748, 0.1), nominal, ("K_Nm_per_rad",)).startswith(
+        "K is 1/10 of the bench's nominal 891 N·m/rad: the torque is scaled")
