@@ -128,6 +128,16 @@ BAD_CURRENT = [
     pytest.param(lambda p: p.write_text(p.read_text().replace(",", ";")),
                  "line 1, column t_s;i_a_A;i_b_A: unknown column (the columns are separated by ';'; acq reads "
                  f"comma-separated files: {EXPECTED_COLUMNS})", id="semicolons"),
+    pytest.param(lambda p: p.write_text(p.read_text().replace(",", ";").replace(".", ",")),
+                 "line 1, column t_s;i_a_A;i_b_A: unknown column (the columns are separated by ';' and the numbers have "
+                 "decimal commas (line 2: '0,000000000'); acq reads comma-separated files with '.' decimals: "
+                 f"{EXPECTED_COLUMNS})", id="semicolons-decimal-commas"),
+    pytest.param(lambda p: p.write_text(p.read_text().replace(".", ",")),
+                 "line 2 has 6 fields for 3 columns — decimal commas? (0,000000000,0,0,-2,598076211353316): write the "
+                 "file with '.' decimals (acq reads ',' between columns and '.' as the decimal point)",
+                 id="decimal-commas"),
+    pytest.param(lambda p: p.write_text(p.read_text().replace("\n", ",1.0\n").replace("i_b_A,1.0", "i_b_A")),
+                 "line 2: 4 fields, the header has 3", id="every-row-wider-than-the-header"),
     pytest.param(lambda p: _with_row_changed(p, 57, "0.002187500,abc,1.0"),
                  "line 57, column i_a_A: 'abc' is not a number", id="non-numeric"),
     pytest.param(lambda p: _with_row_changed(p, 100, "0.003867188,0.5,"),
@@ -171,6 +181,10 @@ BAD_ENCODER = [
                  "line 30, column index: 27 does not increase (previous row: 27)", id="index-repeated"),
     pytest.param(lambda p: write_csv(p, "t_s,position_counts,index", encoder_columns(1.899), ["%.9f", "%d", "%d"]),
                  "line 1901, column t_s: only 1.900 s of data (at least 2 s needed)", id="too-short"),
+    pytest.param(lambda p: p.write_text("t_s,position_counts,index\n" + "".join(
+        f"{t:.3f},{c}\n".replace(".", ",") for t, c in zip(*encoder_columns()[:2]))),
+                 "line 2: '0,001' looks like a number with a decimal comma — write the file with '.' decimals (acq "
+                 "reads ',' between columns and '.' as the decimal point)", id="decimal-commas-as-many-fields"),
 ]
 
 
