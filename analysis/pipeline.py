@@ -9,10 +9,10 @@ no alignment, linear interpolation to the encoder rate, uniform weights.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
-from analysis.chain import SignalChain
+from analysis.chain import SignalChain, chain_caveat
 from analysis.clocks import ClockFit
 from analysis.diagnose import nominal_fault, recording_fault, with_fault, with_nominal_fault
 from analysis.fit import FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass
@@ -137,6 +137,9 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
     quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
                      encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None)
+    caveat = chain_caveat(chain, AnalysisRequest().chain(rec))
+    if caveat is not None and quality.verdict != "ok":
+        quality = replace(quality, reasons=(caveat, *quality.reasons))
     quality = with_nominal_fault(quality, nominal_fault(fit.values, request.nominal, fit.fitted))  # a unit or scale
     quality = with_fault(quality, recording_fault(rec))  # a wrong bench constant
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,

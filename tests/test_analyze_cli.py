@@ -71,6 +71,23 @@ def test_papers_pipeline_is_worse_than_ours(session_10s: Path, capsys: pytest.Ca
     assert json.loads(Path(f"{stem}.paper.result.json").read_text())["K_Nm_per_rad"] == paper["K_Nm_per_rad"]
 
 
+def test_findings_of_a_chosen_chain_say_first_that_they_are_that_chains(
+        session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    ours = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report").out)["quality"]
+    assert ours["verdict"] == "ok" and not any("findings" in r for r in ours["reasons"])
+    first = {}
+    for option in ("--paper", "--torque=hilbert"):
+        quality = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report", option).out)["quality"]
+        assert quality["verdict"] != "ok"  # the Hilbert envelope's errors: weak coherence, misfit, wide intervals
+        first[option] = quality["reasons"][0]
+    assert first == {
+        "--paper": "these findings are of the paper's chain (Hilbert torque, no clock alignment, linear interpolation, "
+                   "uniform weights) and may be its own errors: acq analyze without --paper judges the session with "
+                   "acq's chain",
+        "--torque=hilbert": "these findings are of the chain chosen (--torque hilbert) and may be its own errors: acq "
+                            "analyze without it judges the session with acq's default (encoder torque)"}
+
+
 @pytest.mark.parametrize(("band", "message"), [
     ("500,10", "--band 500,10: must be LO,HI in Hz with 0 < LO < HI"),
     ("ten,400", "--band ten,400: must be LO,HI in Hz, e.g. 10,400"),
