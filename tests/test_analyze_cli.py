@@ -119,6 +119,37 @@ def test_record_then_too_short_session_fails_with_one_line(tmp_path: Path, capsy
     assert "Traceback" not in again.err
 
 
+def _profile(folder: Path, name: str, top_speed_rpm: float, ramp_s: float) -> Path:
+    path = folder / f"{name}.toml"
+    path.write_text(f'kind = "triangle"\ntop_speed_rpm = {top_speed_rpm}\naccel_time_s = {ramp_s}\n'
+                    f'decel_time_s = {ramp_s}\nduration_s = 2\n')
+    return path
+
+
+def test_a_profile_too_slow_or_too_short_to_find_the_currents_phase_is_refused_and_its_session_says_what_to_change(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    slow, tiny = _profile(tmp_path, "slow", 300, 0.2), _profile(tmp_path, "tiny", 1000, 0.002)
+    run = run_cli(capsys, "record", "--profile", str(slow), "--fast", "--out", str(tmp_path / "s"))
+    assert (run.code, run.err) == (2, f"acq: error: profile {slow}: top_speed_rpm = 300: the identification needs the "
+                                      "motor faster than 375 rpm for 20 ms at a time (half an electrical revolution, 4 "
+                                      "pole pairs) — raise top_speed_rpm, or add --no-analyze\n")
+    run = run_cli(capsys, "record", "--profile", str(tiny), "--fast", "--out", str(tmp_path / "s"))
+    assert (run.code, run.err) == (2, f"acq: error: profile {tiny}: the motor swings 12° per half-cycle (top_speed_rpm, "
+                                      "accel_time_s, cruise_s, decel_time_s), the identification needs half an "
+                                      "electrical revolution (45°, 4 pole pairs) — lengthen the ramps or raise "
+                                      "top_speed_rpm, or add --no-analyze\n")
+    assert not (tmp_path / "s").exists()
+    run = run_cli(capsys, "record", "--profile", str(slow), "--fast", "--no-analyze", "--out", str(tmp_path / "s"))
+    assert run.code == 0, run.err
+    (path,) = (tmp_path / "s").glob("*.h5")
+    run = run_cli(capsys, "analyze", str(path), "--no-report")
+    assert (run.code, run.err) == (2, f"acq: error: {path}: the motor never turns half an electrical revolution within "
+                                      "20 ms, so the current's phase (θ_0) and DC cannot be estimated: the motor must "
+                                      "run faster than 375 rpm for 20 ms at a time (4 pole pairs) — raise the profile's "
+                                      "top_speed_rpm, and lengthen accel_time_s and decel_time_s if the drive cannot "
+                                      "follow them\n")
+
+
 def test_missing_session_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = run_cli(capsys, "analyze", str(tmp_path / "nope.h5"))
     assert run.code == 2
