@@ -52,6 +52,16 @@ def test_analyze_json_has_documented_keys_and_finds_K(session_10s: Path, capsys:
     assert written["session"]["session_id"] == load(session_10s).attrs["session_id"]
 
 
+def test_readme_documents_every_key_of_the_result_json(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    doc = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report").out)
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    table = readme.split("### The result: `--json` and `<session>.result.json`")[1].split("\n\n")[1]
+    documented = set(re.findall(r"`([A-Za-z_0-9.]+)`", table))
+    keys = {k for k in doc if k not in ("clock", "quality")} | {f"{g}.{k}" for g in ("clock", "quality") for k in doc[g]}
+    assert keys <= documented, keys - documented
+    assert "motor-side" in table.split("`C_Nms_per_rad` |")[1].splitlines()[0]
+
+
 def test_params_K_fixes_inertias_to_nominal(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report", "--params", "K")
     doc = json.loads(run.out)

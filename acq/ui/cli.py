@@ -285,7 +285,8 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
 @click.option("--band", default=None, help="Fit band LO,HI in Hz (default 10 … min(0.4·f_enc, 500)).")
 @click.option("--paper", is_flag=True, help="The paper's chain: Hilbert torque, no clock alignment, linear "
                                             "resampling, uniform weights (for comparison).")
-@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout (keys: README, \"The result\"; "
+                                                    "K, J_m, J_l, C are motor-side).")
 @click.option("--no-report", is_flag=True, help="Do not draw <session>.report.png.")
 @click.option("--wait-report", is_flag=True,
               help="With --json: exit only once <session>.report.png is written (default: the JSON is printed at "
