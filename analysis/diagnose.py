@@ -259,8 +259,12 @@ def with_fault(quality: Quality, fault: str | None) -> Quality:
     return replace(quality, verdict="failed", reasons=(fault,))
 
 
-def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: tuple[str, ...]) -> str | None:
+def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: tuple[str, ...],
+                  ci95: dict[str, tuple[float, float]] | None = None) -> str | None:
     """The words for fitted K, J_m, J_l :data:`NOMINAL_FACTOR` or more off the bench's ``nominal`` (None if none is).
+
+    With ``ci95`` (the fit's 95 % intervals) a parameter counts only when its whole interval lies that far off: a
+    value the data hardly determine is no evidence of a scale mistake.
 
     When every fitted one of them is off by about the same factor (within 2×), the torque is scaled — the
     current's unit or sensor scale, or k_t — because H = speed/torque scales K, J_m and J_l alike; otherwise the
@@ -270,7 +274,8 @@ def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: 
         return None
     names = [n for n in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2") if n in fitted]
     factors = {n: getattr(values, n) / getattr(nominal, n) for n in names}
-    off = [n for n, f in factors.items() if math.isfinite(f) and f > 0 and max(f, 1 / f) >= NOMINAL_FACTOR]
+    off = [n for n, f in factors.items() if _side(f) != 0
+           and all(_side(b / getattr(nominal, n)) == _side(f) for b in (ci95 or {}).get(n, ()) if math.isfinite(b))]
     if not off:
         return None
     first, rest = off[0], off[1:]
@@ -286,6 +291,13 @@ def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: 
             "and that the bench file is this joint's")
 
 
+def _side(factor: float) -> int:
+    """+1 for a factor ≥ :data:`NOMINAL_FACTOR`, −1 for ≤ its inverse, 0 between (or not a positive number)."""
+    if not (math.isfinite(factor) and factor > 0):
+        return 0
+    return 1 if factor >= NOMINAL_FACTOR else -1 if factor <= 1.0 / NOMINAL_FACTOR else 0
+
+
 def _times(factor: float) -> str:
     """``1002×`` for a factor above 1, ``1/1002 of`` below."""
     return f"{factor:.0f}×" if factor >= 1.0 else f"1/{1.0 / factor:.0f} of"
@@ -293,11 +305,12 @@ def _times(factor: float) -> str:
 
 def with_nominal_fault(quality: Quality, fault: str | None) -> Quality:
     """``quality`` at least poor with ``fault`` (:func:`nominal_fault`) as its first reason: a value an order of
-    magnitude off is a mistake however well the data hold together."""
-    if fault is None:
+    magnitude off is a mistake however well the data hold together. A failed ``quality``: unchanged — its reasons
+    say why the numbers cannot be trusted, and a value far off follows from them (20 µs of SYNC jitter gave
+    J_m 1/14 of nominal)."""
+    if fault is None or quality.verdict == "failed":
         return quality
-    return replace(quality, verdict="failed" if quality.verdict == "failed" else "poor",
-                   reasons=(fault, *quality.reasons))
+    return replace(quality, verdict="poor", reasons=(fault, *quality.reasons))
 
 
 def first_move_sign(position_counts: np.ndarray) -> int:

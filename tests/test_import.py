@@ -578,3 +578,8 @@ def test_nominal_fault_names_an_order_of_magnitude_and_not_the_scenario_familys_
         "load-side value is [gear] ratio² larger) and that the bench file is this joint's")
     assert nominal_fault(TwoMassParams(0.1 * 891.0, 0.003027, 0.00748, 0.1), nominal, ("K_Nm_per_rad",)).startswith(
         "K is 1/10 of the bench's nominal 891 N·m/rad: the torque is scaled")
+    # a value the data hardly determine (its interval reaches within 10× of nominal) is no evidence of a mistake
+    assert nominal_fault(TwoMassParams(891.0, 0.003027, 0.00748 / 100.0, 0.1), nominal, free,
+                         {"Jl_kgm2": (0.00748 / 300.0, 0.00748 / 5.0)}) is None
+    assert nominal_fault(TwoMassParams(891.0, 0.003027, 0.00748 / 100.0, 0.1), nominal, free,
+                         {"Jl_kgm2": (0.00748 / 120.0, 0.00748 / 80.0)}) is not None
