@@ -193,7 +193,7 @@ def _require_enough_motion(profile: Profile, name: str, pole_pairs: int) -> None
     """Refuse a profile whose own numbers make the identification certain to fail: the motor must turn half an
     electrical revolution within the torque estimator's window (:func:`analysis.torque.min_speed_rpm`); at most
     the top speed for the whole window, and never more than one half-cycle's swing (a slower drive only moves less)."""
-    from analysis.torque import PHASE_WINDOW_S, min_speed_rpm
+    from analysis import PHASE_WINDOW_S, min_speed_rpm
     from drivers.motion import half_swing_rad
 
     need_rpm, window_ms = min_speed_rpm(pole_pairs), 1e3 * PHASE_WINDOW_S
