@@ -11,8 +11,8 @@ Everything outside ``analysis/`` (the application ``acq``) imports from here onl
   encoder instants (:class:`PreparedSignals`).
 - :class:`Result`, :class:`FigureData`, :class:`TwoMassParams`, :data:`PARAM_NAMES`,
   :data:`PARAM_LABELS`, :data:`Z95`, :class:`Thresholds` — what a result holds and how it is judged.
-- :func:`encoder_period_problem`, :func:`min_current_rate_hz`, :func:`min_duration_s` — what a bench and a
-  record must offer before it records.
+- :func:`encoder_period_problem`, :func:`min_current_rate_hz`, :func:`min_duration_s`, :func:`min_speed_rpm`
+  (within :data:`PHASE_WINDOW_S`) — what a bench, a record and a profile must offer before it records.
 - The bench checks of ``acq selftest`` (:mod:`analysis.diagnose`, :mod:`analysis.encoder`).
 """
 
@@ -32,12 +32,13 @@ from analysis.recording import Recording
 from analysis.report import FigureData
 from analysis.request import AnalysisRequest, code_fingerprint
 from analysis.signals import PreparedSignals, prepare_signals
+from analysis.torque import PHASE_WINDOW_S, min_speed_rpm
 
 __all__ = [
-    "PAPER_CHAIN", "PARAM_LABELS", "PARAM_NAMES", "AnalysisRequest", "FigureData", "Pipeline", "PreparedSignals",
+    "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "FigureData", "Pipeline", "PreparedSignals",
     "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TorqueMethod", "TwoMassParams", "Z95",
     "analyze", "code_fingerprint", "electrical_speed_ratio", "encoder_period_problem", "min_current_rate_hz",
-    "min_duration_s", "first_move_sign", "inertia_from_torque",
+    "min_duration_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",
     "likely_counts_per_rev", "longest_gap_free_span", "our_chain", "phase_sequence_agreement", "prepare_signals",
     "ratio_fault", "sequence_fault", "speed_from_counts",
 ]

@@ -68,3 +68,19 @@ def our_chain(torque_method: TorqueMethod = "encoder", align: bool = True) -> Si
 #: The paper's chain, kept for comparison: Hilbert torque, no clock alignment, linear interpolation onto the
 #: encoder's grid (the speed keeps its samples, only the torque is interpolated), uniform weights.
 PAPER_CHAIN = SignalChain("hilbert", False, "linear", "uniform", "paper")
+
+
+def chain_caveat(chain: SignalChain, default: SignalChain) -> str | None:
+    """The first reason of a verdict that is not ok when ``chain`` is not acq's ``default`` for the recording (None if
+    it is): the findings that follow (weak excitation, misfit, encoder noise) may be that chain's own errors — the
+    Hilbert envelope's ripple, an unaligned clock — and their advice would send the technician after the joint."""
+    if chain == default:
+        return None
+    if chain.pipeline == "paper":
+        return ("these findings are of the paper's chain (Hilbert torque, no clock alignment, linear interpolation, "
+                "uniform weights) and may be its own errors: acq analyze without --paper judges the session with "
+                "acq's chain")
+    what = [f"--torque {chain.torque_method}"] if chain.torque_method != default.torque_method else []
+    what += [] if chain.align == default.align else ["no clock alignment"]
+    return (f"these findings are of the chain chosen ({', '.join(what)}) and may be its own errors: acq analyze "
+            f"without it judges the session with acq's default ({default.torque_method} torque)")

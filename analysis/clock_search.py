@@ -207,8 +207,8 @@ def starting_relation(host: tuple[float, float] | None, wide: WideSearch | None,
 
     Host stamps within ``narrow_s`` (the frequency stage's reach, s) of an offset the data supports are
     kept, with their drift; farther off, the data wins. Among offsets the data supports equally (whole
-    periods of the motion apart) the host stamps choose; without them the best fit is taken and the
-    other shifts, s, are returned and noted. ``together_s`` is the offset of "both streams started
+    periods of the motion apart) the host stamps choose (nothing is noted: the offset is then unique); without
+    them the best fit is taken and the other shifts, s, are returned and noted. ``together_s`` is the offset of "both streams started
     together", s, used when the wide search found nothing.
     """
     if wide is not None and host is not None and not wide.range_s[0] <= host[0] <= wide.range_s[1]:
@@ -224,8 +224,9 @@ def starting_relation(host: tuple[float, float] | None, wide: WideSearch | None,
     if host is None and others:
         notes.append(f"clock: offset ambiguous by repeats of the motion: shifted by {shifts} the streams match as "
                      "well and no shared host clock tells them apart (K and the inertias do not depend on it)")
-    elif others:
-        notes.append(f"clock: the host stamps chose among offsets the data supports equally (shifted by {shifts})")
+    # with host stamps the offset is not ambiguous: real stamps on one host clock place it to tens of ms, the
+    # alternatives lie a repeat of the motion (≥ 0.4 s) away — no note, as ambiguous_by_s is empty (a note
+    # "chose among offsets the data supports equally" read as an ambiguity the result did not have)
     if host is not None and abs(chosen - host[0]) <= narrow_s:
         return host[0], host[1], "host", (), notes
     if host is not None:

@@ -6,7 +6,8 @@ speed from the encoder counts scaled by the stated ``counts_per_rev``. A wrong c
 r = f_e / (p·|ω|/2π) = (p_true/p)·(counts_per_rev/counts_per_rev_true) differ from 1 — the clock
 alignment then fails without saying why. :func:`electrical_speed_ratio` measures r (the clock lag is
 searched) and :func:`ratio_fault` words it; the selftest and ``acq analyze`` print the same text.
-Also here: the encoder's first move direction, the phase sequence of 2–3 phases against the encoder,
+Also here: an identified K, J_m or J_l an order of magnitude off the bench's nominal (:func:`nominal_fault`: a unit
+or scale mistake), the encoder's first move direction, the phase sequence of 2–3 phases against the encoder,
 and the rigid-body inertia the torque implies (k_t and the sensor scale against a known inertia).
 """
 
@@ -22,6 +23,7 @@ from scipy.ndimage import median_filter
 
 from analysis.clocks import crossing_frequency_hz, current_crossings_s
 from analysis.encoder import longest_gap_free_span, speed_from_counts
+from analysis.model import PARAM_LABELS, TwoMassParams
 from analysis.quality import Quality
 from analysis.recording import Recording
 
@@ -44,6 +46,14 @@ MAX_RELATIVE_SCATTER = 0.25
 REFINE_LAG_S, REFINE_STEP_S = 0.015, 0.0005  # lag refinement ±, step, s: three grid steps of the search, 0.5 ms
 REFINE_SPAN_S = 20.0  # record span the ratio uses, s: 100 ppm of clock drift moves the lag ≤ 2 ms over it
 SEQUENCE_MAX_S = 60.0  # the phase sequence is judged on at most the first minute, s
+#: An identified K, J_m or J_l this many times the bench's nominal value, or 1/this, is a unit or scale mistake,
+#: not the joint: such mistakes are powers of ten (a current in mA read as A, a sensor's A/V off by a decade, a
+#: load-side value where a motor-side one belongs is ratio² off), while wear changes K by percent and real joints
+#: differ from their datasheet by tens of percent. The scenario family's plants, scaled ×0.5…×2 against the
+#: unchanged nominal, stay 5× inside it; its "heavy arm 20 kg" adds only the arm's weight (gravity torque), not
+#: inertia, in the simulator: fitted J_l 0.998× nominal (seed 0). A real arm left out of [nominal] Jl_kgm2 can come
+#: closer: 20 kg as a 0.75 m rod about its end is 0.0375 kg·m² motor-side at ratio 10, J_l 6× the paper's.
+NOMINAL_FACTOR = 10.0
 
 
 @dataclass(frozen=True)
@@ -252,6 +262,60 @@ def with_fault(quality: Quality, fault: Callable[[], str | None]) -> Quality:
     if found is None:
         return quality
     return replace(quality, verdict="failed", reasons=(found,))
+
+
+def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: tuple[str, ...],
+                  ci95: dict[str, tuple[float, float]] | None = None) -> str | None:
+    """The words for fitted K, J_m, J_l :data:`NOMINAL_FACTOR` or more off the bench's ``nominal`` (None if none is).
+
+    With ``ci95`` (the fit's 95 % intervals) a parameter counts only when its whole interval lies that far off: a
+    value the data hardly determine is no evidence of a scale mistake.
+
+    When every fitted one of them is off by about the same factor (within 2×), the torque is scaled — the
+    current's unit or sensor scale, or k_t — because H = speed/torque scales K, J_m and J_l alike; otherwise the
+    nominal values themselves are suspect (a load-side value, another unit).
+    """
+    if nominal is None:
+        return None
+    names = [n for n in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2") if n in fitted]
+    factors = {n: getattr(values, n) / getattr(nominal, n) for n in names}
+    off = [n for n, f in factors.items() if _side(f) != 0
+           and all(_side(b / getattr(nominal, n)) == _side(f) for b in (ci95 or {}).get(n, ()) if math.isfinite(b))]
+    if not off:
+        return None
+    first, rest = off[0], off[1:]
+    label, unit = PARAM_LABELS[first]
+    text = f"{label} is {_times(factors[first])} the bench's nominal {getattr(nominal, first):.4g} {unit}"
+    if rest:
+        text += f" ({', '.join(f'{PARAM_LABELS[n][0]} {_times(factors[n])}' for n in rest)})"
+    if off == names and max(factors[n] for n in off) / min(factors[n] for n in off) < 2.0:
+        return (text + ": the torque is scaled — check the current's unit and scale (amperes: [daq] sensor_A_per_V "
+                "or sensor_A_per_A; an imported current column in A) and the torque constant ([motor] "
+                "torque_constant_Nm_per_A)")
+    return (text + ": check the [nominal] values (motor-side, SI units: a load-side value is [gear] ratio² larger) "
+            "and that the bench file is this joint's")
+
+
+def _side(factor: float) -> int:
+    """+1 for a factor ≥ :data:`NOMINAL_FACTOR`, −1 for ≤ its inverse, 0 between (or not a positive number)."""
+    if not (math.isfinite(factor) and factor > 0):
+        return 0
+    return 1 if factor >= NOMINAL_FACTOR else -1 if factor <= 1.0 / NOMINAL_FACTOR else 0
+
+
+def _times(factor: float) -> str:
+    """``1002×`` for a factor above 1, ``1/1002 of`` below."""
+    return f"{factor:.0f}×" if factor >= 1.0 else f"1/{1.0 / factor:.0f} of"
+
+
+def with_nominal_fault(quality: Quality, fault: str | None) -> Quality:
+    """``quality`` at least poor with ``fault`` (:func:`nominal_fault`) as its first reason: a value an order of
+    magnitude off is a mistake however well the data hold together. A failed ``quality``: unchanged — its reasons
+    say why the numbers cannot be trusted, and a value far off follows from them (20 µs of SYNC jitter gave
+    J_m 1/14 of nominal)."""
+    if fault is None or quality.verdict == "failed":
+        return quality
+    return replace(quality, verdict="poor", reasons=(fault, *quality.reasons))
 
 
 def first_move_sign(position_counts: np.ndarray) -> int:

@@ -9,12 +9,12 @@ no alignment, linear interpolation to the encoder rate, uniform weights.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
-from analysis.chain import SignalChain
+from analysis.chain import SignalChain, chain_caveat
 from analysis.clocks import ClockFit
-from analysis.diagnose import recording_fault, with_fault
+from analysis.diagnose import nominal_fault, recording_fault, with_fault, with_nominal_fault
 from analysis.fit import FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass
 from analysis.encoder import longest_gap_free_span
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
@@ -135,9 +135,14 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
                                        weighting=chain.weighting), nominal=request.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
-    quality = with_fault(assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
-                                encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None),
-                         lambda: recording_fault(rec))  # a wrong bench constant
+    quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
+                     encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None)
+    caveat = chain_caveat(chain, AnalysisRequest().chain(rec))
+    if caveat is not None and quality.verdict != "ok":
+        quality = replace(quality, reasons=(caveat, *quality.reasons))
+    scale_fault = nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95)  # a unit or scale mistake
+    quality = with_nominal_fault(quality, scale_fault)
+    quality = with_fault(quality, lambda: recording_fault(rec))  # a wrong bench constant (looked for when not ok)
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual)),

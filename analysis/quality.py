@@ -23,6 +23,10 @@ from analysis.model import PARAM_LABELS
 from analysis.sample_instants import EncoderJitter
 
 Verdict = Literal["ok", "poor", "failed"]
+#: The remedy for a weakly exciting motion, naming the profile's keys: the torque's spectrum reaches f_r only when
+#: the speed ramps are short (the paper's 0.5 s ramps do not excite its bench, 0.2 s do).
+SHORTEN_RAMPS = ("shorten the acceleration time (accel_time_s and decel_time_s in the profile file, e.g. 0.2 s as in "
+                 "triangle_0.2s)")
 _RANK: dict[Verdict, int] = {"ok": 0, "poor": 1, "failed": 2}
 
 
@@ -187,13 +191,12 @@ def assess(
                 what = "does not excite" if level == "failed" else "barely excites"
                 findings.append((level, f"coherence {exc_coh:.2f} between f_a {fit.f_a:.0f} Hz and f_r "
                                         f"{fit.f_r:.0f} Hz (torque {exc_db:.0f} dB re 1 N²m²/Hz there): the "
-                                        f"motion {what} the joint — shorten the acceleration time"))
+                                        f"motion {what} the joint — {SHORTEN_RAMPS}"))
 
     level = _grade(mean_coh, th.coherence_poor, th.coherence_failed)
     if level != "ok":
         findings.append((level, f"mean coherence {mean_coh:.2f} in {lo:g}…{hi:g} Hz: the motion excites the band "
-                                f"weakly (in closed loop that biases |H|, not only scatters it) — shorten the "
-                                f"acceleration time"))
+                                f"weakly (in closed loop that biases |H|, not only scatters it) — {SHORTEN_RAMPS}"))
 
     ratio = fit.residual_rms / _noise_rms(frf, in_band)
     # without the encoder's resolution the share of |H|'s misfit that its quantisation repeats with every
@@ -205,8 +208,9 @@ def assess(
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
                                  f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
                                  f"{worst.t:.0f} σ beyond what noise and the encoder's quantisation explain — a third "
-                                 f"mode or backlash in the band: K, J_m, J_l are the two-mass model's compromise, "
-                                 f"not the joint's"))
+                                 f"mode or backlash in the band: check the gear and the coupling for play and for a "
+                                 f"loose part; until then K, J_m, J_l are the two-mass model's compromise, not the "
+                                 f"joint's"))
     elif np.isfinite(fit.residual_rms):
         level = _grade(-fit.residual_rms, -th.residual_poor, -th.residual_failed)
         if level != "ok" and ratio > th.misfit_ratio_poor:
@@ -318,9 +322,10 @@ def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray
             "it predicts")
     if np.sum(resolution) > np.sum(timing):
         counts = 2.0 * np.pi / jitter.lsb_rad
+        advice = ("record longer or use a finer encoder; raise [encoder] counts_per_rev only if the drive really "
+                  "reports finer position units (changing the key alone breaks a correct bench)")
         return [(level, f"the encoder's resolution ({counts:.0f} counts/rev) leaves speed noise that limits the FRF "
-                        f"({cost}): use the drive's finer position units ([encoder] counts_per_rev) or a finer "
-                        "encoder, or longer records")], False
+                        f"({cost}): {advice}")], False
     if jitter.stamped:
         return [(level, f"the encoder's sample instants still scatter by ≈ {sigma_us:.1f} µs after the drive's time "
                         f"stamps ({cost}): check that the drive's time stamp (0x1013 or the frame's drive time) is "

@@ -111,8 +111,18 @@ def window_phasors(current_a: np.ndarray, theta_e_rad: np.ndarray, window_len: i
     return WindowPhasors(centre, sol[:, 0] + 1j * sol[:, 1], sol[:, 2], valid)
 
 
+#: Window of :func:`phase_offset`, s: the motor must turn half an electrical revolution within it.
+PHASE_WINDOW_S = 0.02
+
+
+def min_speed_rpm(pole_pairs: int, window_s: float = PHASE_WINDOW_S) -> float:
+    """Slowest motor speed, rpm, that turns half an electrical revolution (1/(2·pole_pairs) rev) within ``window_s``:
+    the joint must run faster for that long at a time or :func:`phase_offset` cannot estimate θ_0."""
+    return 60.0 * 0.5 / pole_pairs / window_s
+
+
 def phase_offset(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float,
-                 window_s: float = 0.02) -> PhaseOffset:
+                 window_s: float = PHASE_WINDOW_S, pole_pairs: int | None = None) -> PhaseOffset:
     """Estimate θ_0 (mod π) and the sensor DC of one phase by windowed least squares.
 
     θ_0 is the argument of Σ phasor² / 2 (each window weighted by i_q²); dc the median of the windows'
@@ -126,11 +136,17 @@ def phase_offset(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float,
         Sampling rate, Hz.
     window_s : float
         Window length, s.
+    pole_pairs : int, optional
+        The motor's pole pairs: the error then says how fast the motor must run.
     """
     w = window_phasors(current_a, theta_e_rad, max(8, int(round(window_s * rate_hz))))
     if not w.valid.any():
-        raise ValueError("the motor never turns half an electrical revolution within a window: "
-                         "θ_0 and the current's DC cannot be estimated")
+        need = "" if pole_pairs is None else (
+            f": the motor must run faster than {min_speed_rpm(pole_pairs, window_s):.0f} rpm for {1e3 * window_s:.0f} ms "
+            f"at a time ({pole_pairs} pole pairs) — raise the profile's top_speed_rpm, and lengthen accel_time_s and "
+            "decel_time_s if the drive cannot follow them")
+        raise ValueError(f"the motor never turns half an electrical revolution within {1e3 * window_s:.0f} ms, so the "
+                         f"current's phase (θ_0) and DC cannot be estimated{need}")
     z = np.sum(w.phasor_a[w.valid] ** 2)
     return PhaseOffset(float(np.angle(z) / 2.0), float(np.median(w.dc_a[w.valid])), int(w.valid.sum()))
 

@@ -92,7 +92,24 @@ def test_a_backlash_like_low_frequency_misfit_makes_the_verdict_poor_and_names_t
     low, high = q.misfit_band_hz
     assert low == 10.0 and 24.0 <= high <= 60.0
     assert q.reasons[0].startswith(f"the two-mass model does not fit |H| between 10 and {high:.0f} Hz: it misses by")
-    assert "a third mode or backlash in the band" in q.reasons[0]
+    assert q.reasons[0].endswith("explain — a third mode or backlash in the band: check the gear and the coupling for "
+                                 "play and for a loose part; until then K, J_m, J_l are the two-mass model's "
+                                 "compromise, not the joint's")
+
+
+def test_weak_excitation_and_encoder_resolution_advice_name_the_keys_and_when_to_change_them():
+    rec = simulate(PAPER, 1, accel_time_s=0.5)
+    frf = estimate_frf(rec.torque_Nm, rec.speed_rad_s, PERIOD_S, jackknife_blocks=10)
+    q = assess(frf, fit_two_mass(frf), encoder_jitter=RESOLUTION)
+    assert q.verdict == "poor" and len(q.reasons) == 2
+    assert q.reasons[0].endswith("the motion excites the band weakly (in closed loop that biases |H|, not only "
+                                 "scatters it) — shorten the acceleration time (accel_time_s and decel_time_s in the "
+                                 "profile file, e.g. 0.2 s as in triangle_0.2s)")
+    assert q.reasons[1].startswith(f"the encoder's resolution ({COUNTS_PER_REV} counts/rev) leaves speed noise")
+    assert q.reasons[1].endswith("without the speed noise it predicts): record longer or use a finer encoder; raise "
+                                 "[encoder] counts_per_rev only if the drive really reports finer position units "
+                                 "(changing the key alone breaks a correct bench)")
+
 
 
 def test_quantisation_carried_through_a_fit_of_a_constant_leaves_its_residual_covariance():

@@ -52,6 +52,16 @@ def test_analyze_json_has_documented_keys_and_finds_K(session_10s: Path, capsys:
     assert written["session"]["session_id"] == load(session_10s).attrs["session_id"]
 
 
+def test_readme_documents_every_key_of_the_result_json(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    doc = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report").out)
+    readme = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+    table = readme.split("### The result: `--json` and `<session>.result.json`")[1].split("\n\n")[1]
+    documented = set(re.findall(r"`([A-Za-z_0-9.]+)`", table))
+    keys = {k for k in doc if k not in ("clock", "quality")} | {f"{g}.{k}" for g in ("clock", "quality") for k in doc[g]}
+    assert keys <= documented, keys - documented
+    assert "motor-side" in table.split("`C_Nms_per_rad` |")[1].splitlines()[0]
+
+
 def test_params_K_fixes_inertias_to_nominal(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report", "--params", "K")
     doc = json.loads(run.out)
@@ -69,6 +79,23 @@ def test_papers_pipeline_is_worse_than_ours(session_10s: Path, capsys: pytest.Ca
     stem = session_10s.with_suffix("")
     assert json.loads(Path(f"{stem}.result.json").read_text())["K_Nm_per_rad"] == ours["K_Nm_per_rad"]
     assert json.loads(Path(f"{stem}.paper.result.json").read_text())["K_Nm_per_rad"] == paper["K_Nm_per_rad"]
+
+
+def test_findings_of_a_chosen_chain_say_first_that_they_are_that_chains(
+        session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    ours = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report").out)["quality"]
+    assert ours["verdict"] == "ok" and not any("findings" in r for r in ours["reasons"])
+    first = {}
+    for option in ("--paper", "--torque=hilbert"):
+        quality = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report", option).out)["quality"]
+        assert quality["verdict"] != "ok"  # the Hilbert envelope's errors: weak coherence, misfit, wide intervals
+        first[option] = quality["reasons"][0]
+    assert first == {
+        "--paper": "these findings are of the paper's chain (Hilbert torque, no clock alignment, linear interpolation, "
+                   "uniform weights) and may be its own errors: acq analyze without --paper judges the session with "
+                   "acq's chain",
+        "--torque=hilbert": "these findings are of the chain chosen (--torque hilbert) and may be its own errors: acq "
+                            "analyze without it judges the session with acq's default (encoder torque)"}
 
 
 @pytest.mark.parametrize(("band", "message"), [
@@ -100,6 +127,37 @@ def test_record_then_too_short_session_fails_with_one_line(tmp_path: Path, capsy
     assert again.err.startswith(f"acq: error: {path}: signals last ")
     assert again.err.strip().endswith("the FRF needs at least 0.750 s (two 0.5 s Welch segments)")
     assert "Traceback" not in again.err
+
+
+def _profile(folder: Path, name: str, top_speed_rpm: float, ramp_s: float) -> Path:
+    path = folder / f"{name}.toml"
+    path.write_text(f'kind = "triangle"\ntop_speed_rpm = {top_speed_rpm}\naccel_time_s = {ramp_s}\n'
+                    f'decel_time_s = {ramp_s}\nduration_s = 2\n')
+    return path
+
+
+def test_a_profile_too_slow_or_too_short_to_find_the_currents_phase_is_refused_and_its_session_says_what_to_change(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    slow, tiny = _profile(tmp_path, "slow", 300, 0.2), _profile(tmp_path, "tiny", 1000, 0.002)
+    run = run_cli(capsys, "record", "--profile", str(slow), "--fast", "--out", str(tmp_path / "s"))
+    assert (run.code, run.err) == (2, f"acq: error: profile {slow}: top_speed_rpm = 300: the identification needs the "
+                                      "motor faster than 375 rpm for 20 ms at a time (half an electrical revolution, 4 "
+                                      "pole pairs) — raise top_speed_rpm, or add --no-analyze\n")
+    run = run_cli(capsys, "record", "--profile", str(tiny), "--fast", "--out", str(tmp_path / "s"))
+    assert (run.code, run.err) == (2, f"acq: error: profile {tiny}: the motor swings 12° per half-cycle (top_speed_rpm, "
+                                      "accel_time_s, cruise_s, decel_time_s), the identification needs half an "
+                                      "electrical revolution (45°, 4 pole pairs) — lengthen the ramps or raise "
+                                      "top_speed_rpm, or add --no-analyze\n")
+    assert not (tmp_path / "s").exists()
+    run = run_cli(capsys, "record", "--profile", str(slow), "--fast", "--no-analyze", "--out", str(tmp_path / "s"))
+    assert run.code == 0, run.err
+    (path,) = (tmp_path / "s").glob("*.h5")
+    run = run_cli(capsys, "analyze", str(path), "--no-report")
+    assert (run.code, run.err) == (2, f"acq: error: {path}: the motor never turns half an electrical revolution within "
+                                      "20 ms, so the current's phase (θ_0) and DC cannot be estimated: the motor must "
+                                      "run faster than 375 rpm for 20 ms at a time (4 pole pairs) — raise the profile's "
+                                      "top_speed_rpm, and lengthen accel_time_s and decel_time_s if the drive cannot "
+                                      "follow them\n")
 
 
 def test_missing_session_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

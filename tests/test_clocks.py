@@ -125,6 +125,7 @@ def test_an_offset_the_periodic_motion_leaves_open_is_reported_or_resolved_by_th
     assert any(n.startswith("clock: offset ambiguous by repeats of the motion: shifted by ") for n in alone.notes)
     shared = prepare_signals(rec).clock
     assert abs(shared.offset_s - 1.9) <= 50e-6 and shared.ambiguous_by_s == ()
+    assert shared.notes == ()  # resolved: no note of alternatives that the JSON's empty ambiguous_by_s denies
 
 
 def test_a_mismatch_every_lag_shares_does_not_drop_the_true_lag_from_the_wide_search(tmp_path: Path) -> None:

@@ -97,6 +97,17 @@ def test_trend_table_at_80_columns_keeps_K_change_and_spelled_out_states() -> No
     assert "not shown" not in wide
 
 
+def test_trend_without_a_baseline_says_what_it_needs_and_shows_a_missing_interval_as_one_dash() -> None:
+    failed = Entry("id0", "id0", "/s/0.h5", "joint1", "2026-11-29T19:50:02.5+00:00", {}, None, [], "0.h5: too short",
+                   None, (None, None), None, None, "{}", "2026-11-30T00:00:00+00:00", None)
+    trend = compute_trend("joint1", [failed])
+    wide = render(trend_table(trend), width=200)
+    assert "—–—" not in wide and re.search(r"│ +— +│", wide)
+    assert ("no baseline yet (it needs 1 session of verdict ok, 0 so far); ALARM below −10 % (threshold) or EWMA "
+            "(λ = 0.2) below its −3σ limit (EWMA) #1 skipped") in " ".join(wide.split())
+    assert "σ =" not in wide and "baseline —" not in wide
+
+
 def test_batch_table_wraps_a_long_error_and_keeps_K_whole() -> None:
     done = {"K_Nm_per_rad": 893.41, "quality": {"verdict": "ok"}}
     error = ("/srv/sessions/2026-11-29T19-55-04_joint1.h5: signals last 0.600 s; the FRF needs at least 0.750 s "

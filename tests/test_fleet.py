@@ -4,6 +4,7 @@ another site, on both catalogue back ends."""
 from __future__ import annotations
 
 import io
+import re
 import json
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -65,7 +66,7 @@ def test_fleet_table_and_the_stale_limit(catalogue_location: Path | str, capsys:
     assert "-28.6" in rows[0] and "495.0–505.0" in rows[0] and "ALARM threshold" in rows[0]
     assert "-0.4" in rows[2] and rows[2].rstrip().endswith("ok")  # not stale within 20 days; largest drop first
     quiet = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--tag", "robot=r2")
-    assert quiet.code == 0 and "1 joints" in quiet.out
+    assert quiet.code == 0 and re.search(r"fleet — 1 joint *\n", quiet.out)
     none = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--tag", "site=C")
     assert none.code == 2 and none.err.strip().endswith(": no sessions of any joint tagged site=C")
 
@@ -91,3 +92,18 @@ def test_fleet_table_shows_every_value_at_80_columns(catalogue_location: Path | 
                     "r1/j2": ["498.0", "± 1.0", "-0.4", "500.0", times["r1/j2"], "0/0", "stale"],
                     "r2/j1": ["1001.0", "± 0.5", "+0.1", "1000.0", times["r2/j1"], "3/4", "ok"]}
     assert run.out.count("threshold") == 2  # "ALARM threshold + EWMA" wrapped at spaces, in both alarm rows
+
+
+def test_fleet_at_80_columns_splits_long_names_at_the_slash_never_inside_a_word(
+        catalogue_location: Path | str, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(f"{__name__}.SESSIONS", [(r, j.replace("j", "joint"), *rest) for r, j, *rest in SESSIONS])
+    _fill(catalogue_location)
+    statuses = load_fleet(None, catalogue_location, now=datetime.now(UTC), stale_days=7.0)
+    console = Console(width=80, file=io.StringIO(), color_system=None)
+    console.print(fleet_table(statuses, stale_days=7.0))
+    out = console.file.getvalue()  # type: ignore[attr-defined]
+    assert max(len(line) for line in out.splitlines()) <= 80
+    first_cells = [line.split("│")[0].strip() for line in out.splitlines() if "│" in line]
+    assert [c for c in first_cells if c] == ["r3/", "joint1", "r1/", "joint1", "r1/", "joint2", "r2/", "joint1"]
+    states = [line.split("│")[-1].strip() for line in out.splitlines() if "│" in line]
+    assert states[:3] == ["ALARM", "threshold", "+ EWMA"]

@@ -128,6 +128,16 @@ BAD_CURRENT = [
     pytest.param(lambda p: p.write_text(p.read_text().replace(",", ";")),
                  "line 1, column t_s;i_a_A;i_b_A: unknown column (the columns are separated by ';'; acq reads "
                  f"comma-separated files: {EXPECTED_COLUMNS})", id="semicolons"),
+    pytest.param(lambda p: p.write_text(p.read_text().replace(",", ";").replace(".", ",")),
+                 "line 1, column t_s;i_a_A;i_b_A: unknown column (the columns are separated by ';' and the numbers have "
+                 "decimal commas (line 2: '0,000000000'); acq reads comma-separated files with '.' decimals: "
+                 f"{EXPECTED_COLUMNS})", id="semicolons-decimal-commas"),
+    pytest.param(lambda p: p.write_text(p.read_text().replace(".", ",")),
+                 "line 2 has 6 fields for 3 columns — decimal commas? (0,000000000,0,0,-2,598076211353316): write the "
+                 "file with '.' decimals (acq reads ',' between columns and '.' as the decimal point)",
+                 id="decimal-commas"),
+    pytest.param(lambda p: p.write_text(p.read_text().replace("\n", ",1.0\n").replace("i_b_A,1.0", "i_b_A")),
+                 "line 2: 4 fields, the header has 3", id="every-row-wider-than-the-header"),
     pytest.param(lambda p: _with_row_changed(p, 57, "0.002187500,abc,1.0"),
                  "line 57, column i_a_A: 'abc' is not a number", id="non-numeric"),
     pytest.param(lambda p: _with_row_changed(p, 100, "0.003867188,0.5,"),
@@ -171,6 +181,10 @@ BAD_ENCODER = [
                  "line 30, column index: 27 does not increase (previous row: 27)", id="index-repeated"),
     pytest.param(lambda p: write_csv(p, "t_s,position_counts,index", encoder_columns(1.899), ["%.9f", "%d", "%d"]),
                  "line 1901, column t_s: only 1.900 s of data (at least 2 s needed)", id="too-short"),
+    pytest.param(lambda p: p.write_text("t_s,position_counts,index\n" + "".join(
+        f"{t:.3f},{c}\n".replace(".", ",") for t, c in zip(*encoder_columns()[:2]))),
+                 "line 2: '0,001' looks like a number with a decimal comma — write the file with '.' decimals (acq "
+                 "reads ',' between columns and '.' as the decimal point)", id="decimal-commas-as-many-fields"),
 ]
 
 
@@ -533,3 +547,39 @@ def test_a_mistyped_current_file_is_named_before_the_bench_is_asked_for(capsys: 
     run = run_cli(capsys, "import", "--current", str(tmp_path / "nofile.csv"), "--encoder", str(enc),
                   "-o", str(tmp_path / "imported.h5"))
     assert (run.code, run.err) == (2, f"acq: error: {tmp_path / 'nofile.csv'}: no such file\n")
+
+
+def test_a_current_in_milliamperes_is_named_as_a_scale_mistake_not_an_ok_stiffness(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, separate_tools) -> None:
+    from dataclasses import replace
+    in_mA = replace(separate_tools, current_a={"i_a": 1000.0 * separate_tools.current_a["i_a"]})
+    cur, enc = write_pair(tmp_path / "csv", in_mA)
+    assert run_import(capsys, cur, enc, tmp_path / "s.h5").code == 0
+    r = run_cli(capsys, "analyze", str(tmp_path / "s.h5"), "--json", "--no-report")
+    doc = json.loads(r.out)
+    factors = [doc[n] / v for n, v in (("K_Nm_per_rad", 891.0), ("Jm_kgm2", 0.003027), ("Jl_kgm2", 0.00748))]
+    assert factors == pytest.approx([1000.0] * 3, rel=0.02)  # the data hold together: only the scale is wrong
+    assert doc["quality"]["verdict"] == "poor"
+    assert doc["quality"]["reasons"][0] == (
+        f"K is {factors[0]:.0f}× the bench's nominal 891 N·m/rad (J_m {factors[1]:.0f}×, J_l {factors[2]:.0f}×): "
+        "the torque is scaled — check the current's unit and scale (amperes: [daq] sensor_A_per_V or sensor_A_per_A; "
+        "an imported current column in A) and the torque constant ([motor] torque_constant_Nm_per_A)")
+
+
+def test_nominal_fault_names_an_order_of_magnitude_and_not_the_scenario_familys_factor_two() -> None:
+    from analysis.diagnose import nominal_fault
+    from analysis.model import TwoMassParams
+    nominal = TwoMassParams(891.0, 0.003027, 0.00748, 0.0)
+    free = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")
+    assert nominal_fault(TwoMassParams(2 * 891.0, 0.5 * 0.003027, 2 * 0.00748, 0.1), nominal, free) is None
+    assert nominal_fault(TwoMassParams(9.9 * 891.0, 0.003027, 0.00748, 0.1), nominal, free) is None
+    assert nominal_fault(TwoMassParams(891.0, 0.003027, 0.00748 / 100.0, 0.1), nominal, free) == (
+        "J_l is 1/100 of the bench's nominal 0.00748 kg·m²: check the [nominal] values (motor-side, SI units: a "
+        "load-side value is [gear] ratio² larger) and that the bench file is this joint's")
+    assert nominal_fault(TwoMassParams(0.1 * 891.0, 0.003027, 0.00748, 0.1), nominal, ("K_Nm_per_rad",)).startswith(
+        "K is 1/10 of the bench's nominal 891 N·m/rad: the torque is scaled")
+    # a value the data hardly determine (its interval reaches within 10× of nominal) is no evidence of a mistake
+    assert nominal_fault(TwoMassParams(891.0, 0.003027, 0.00748 / 100.0, 0.1), nominal, free,
+                         {"Jl_kgm2": (0.00748 / 300.0, 0.00748 / 5.0)}) is None
+    assert nominal_fault(TwoMassParams(891.0, 0.003027, 0.00748 / 100.0, 0.1), nominal, free,
+                         {"Jl_kgm2": (0.00748 / 120.0, 0.00748 / 80.0)}) is not None

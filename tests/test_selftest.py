@@ -14,7 +14,7 @@ import pytest
 
 from acq.commissioning.selftest_checks import Check
 from acq.config import DEFAULT_BENCH
-from acq.ui.selftest_cli import selftest_json
+from acq.ui.selftest_cli import next_step, selftest_json
 from analysis.diagnose import SpeedRatio, likely_counts_per_rev, ratio_fault
 from tests.helpers import run_cli
 from tests.nidaqmx_standin import StandinHardware
@@ -183,6 +183,19 @@ def test_ratio_fault_words_and_suggestions() -> None:
     # a scattered estimate is not named even if its value is off
     assert ratio_fault(SpeedRatio(1.2, 0.05, 0.0, 3.0), 4, 131072) is None
     assert likely_counts_per_rev(64470.0, 0.05) == 65536 and likely_counts_per_rev(10000.0, 0.02) == 10000
+
+
+def test_the_summary_at_80_columns_ends_with_the_fix_keys_and_all_or_the_command_for_this_bench(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("COLUMNS", "80")
+    run = run_cli(capsys, "selftest", "--fast", "--bench", str(bench_file(tmp_path, "pole_pairs = 8")))
+    assert run.code == 1
+    assert run.out.splitlines()[-1] == ("stopped at motion · electrical speed: check [motor] pole_pairs = 8 or [encoder] "
+                                        "counts_per_rev = 65536")
+    passed = [Check("devices", "DAQ", "pass", "ok")]
+    assert next_step(passed, Path("lab.toml"), "triangle_0.2s") == ("the bench is ready: acq record --profile "
+                                                                    "triangle_0.2s --bench lab.toml")
+    assert next_step(passed, None, "fast.toml") == "the bench is ready: acq record --profile fast.toml"
 
 
 def test_json_document_of_a_stopped_run() -> None:

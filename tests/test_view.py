@@ -261,3 +261,14 @@ def test_ctrl_c_under_the_live_view_ends_the_recording_as_interrupted(tmp_path: 
     assert (result.status, result.stop_reason) == ("interrupted", "interrupted by user (Ctrl-C)")
     assert 0 < result.current_samples < 30 * RATE_HZ
     assert load(result.path).status == "interrupted"
+
+
+def test_the_side_panel_says_the_values_are_motor_side() -> None:
+    from types import SimpleNamespace
+
+    from acq.ui.plots import SessionFigure, values_html
+
+    figures = SimpleNamespace(phase_valid=True)  # the panel reads only whether the phase is shown
+    doc = {"K_Nm_per_rad": 891.0, "ci95": {}, "clock": {"residual_s": 1e-5}}
+    html = values_html([SessionFigure("s", figures, doc)])  # type: ignore[arg-type]
+    assert html.startswith("<h3>Identified two-mass model (motor side)</h3>") and "891" in html

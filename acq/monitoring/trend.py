@@ -173,7 +173,8 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
     if len(baseline) < (1 if baseline_id else baseline_sessions):
         points = [TrendPoint(e, "skipped", skip[id(e)] or "") if skip[id(e)] else TrendPoint(e, "before baseline")
                   for e in entries]
-        return Trend(joint, points, None, f"not yet: {note} needs {baseline_sessions}, {len(good)} so far", None,
+        wanted = f"{baseline_sessions} session{'s' if baseline_sessions > 1 else ''} of verdict ok"
+        return Trend(joint, points, None, f"it needs {wanted}, {len(good)} so far", None,
                      threshold_pct, ewma_lambda)
     base = statistics.fmean(e.K_Nm_per_rad for e in baseline)  # type: ignore[misc]
     sigma = _sigma(baseline)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import difflib
+import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +26,11 @@ from acqcore.errors import ConfigError
 #: Largest block Arrow's CSV reader parses at once: a 60 s file of one phase at 25.6 kS/s (49 MB) is one block.
 #: Bounds the reader's buffer for longer files (read in blocks of this size, their columns joined once).
 BLOCK_BYTES = 64 << 20
+#: Data lines looked at for decimal commas (:func:`_decimal_comma`): a tool writes every line alike.
+DECIMAL_COMMA_LINES = 20
+_INTEGER = re.compile(r"-?\d+(?:[eE][-+]?\d+)?")  # what a decimal-comma number's two halves look like
+_WITH_LEADING_ZERO = re.compile(r"0\d+(?:[eE][-+]?\d+)?")  # "0374" of "0,0374": no integer is written so
+_READS_DECIMAL_COMMA = "write the file with '.' decimals (acq reads ',' between columns and '.' as the decimal point)"
 
 
 @dataclass(frozen=True)
@@ -87,6 +93,9 @@ def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = 
         is not a number, or a cell that is NaN or infinite.
     """
     names = _header(path, required, optional)
+    fault = _decimal_comma(path, len(names))
+    if fault is not None:
+        raise ConfigError(f"{path}: {fault}")
     columns = _parse_with_arrow(path, names, data)
     if columns is None:
         rows = _parse_with_numpy(path, names)
@@ -167,6 +176,8 @@ def _parse_with_numpy(path: Path, names: list[str]) -> np.ndarray:
                               dtype=np.float64, encoding="utf-8-sig")
         except ValueError as e:
             raise _first_bad_cell(path, names) or ConfigError(f"{path}: {e}") from None
+    if data.shape[0] and data.shape[1] != len(names):  # every row wider than the header: loadtxt reads them all
+        raise _first_bad_cell(path, names) or ConfigError(f"{path}: {data.shape[1]} fields, the header has {len(names)}")
     return data if data.shape[0] else np.zeros((0, len(names)))
 
 
@@ -185,7 +196,9 @@ def _header(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) ->
         if name not in known:
             close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
             other = next((sep for sep in (";", "\t", "|") if any(n in known for n in name.split(sep))), None)
-            hint = (f"the columns are separated by {other!r}; acq reads comma-separated files: "
+            commas = "" if other is None else _decimal_comma_in(path, other)
+            decimals = " with '.' decimals" if commas else ""
+            hint = (f"the columns are separated by {other!r}{commas}; acq reads comma-separated files{decimals}: "
                     if other is not None else f"did you mean {close[0]}? " if close else "")
             raise ConfigError(f"{path}: line 1, column {name or '(empty)'}: unknown column ({hint}expected {expected})")
         if names.count(name) > 1:
@@ -194,6 +207,54 @@ def _header(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) ->
         if name not in names:
             raise ConfigError(f"{path}: line 1, column {name}: missing (the header is {first.strip()!r})")
     return names
+
+
+def _data_lines(path: Path) -> list[tuple[int, str]]:
+    """The first :data:`DECIMAL_COMMA_LINES` non-blank data lines with their line numbers (empty if unreadable)."""
+    found: list[tuple[int, str]] = []
+    try:
+        with path.open(encoding="utf-8-sig", newline="") as f:
+            for line, text in enumerate(f, start=1):
+                if line > 1 and text.strip():
+                    found.append((line, text.strip()))
+                    if len(found) == DECIMAL_COMMA_LINES:
+                        break
+    except (OSError, UnicodeDecodeError):
+        pass  # the parser names what is wrong with the file
+    return found
+
+
+def _decimal_comma(path: Path, columns: int) -> str | None:
+    """What is wrong when the first data lines read as numbers written with a decimal comma, else None.
+
+    A comma-separated line without any '.' whose fields are all integers, either more of them than the header
+    has columns (each "0,0374" became two fields) or one with a leading zero after another ("0,0374": no tool
+    writes the integer 0374) — a line of equal width would otherwise parse into wrong numbers (a current of
+    3.7·10⁷ A, an index that does not increase) and be blamed on the value.
+    """
+    for line, text in _data_lines(path):
+        if "." in text:
+            continue
+        fields = [f.strip() for f in text.split(",")]
+        if not all(_INTEGER.fullmatch(f) for f in fields):
+            continue
+        if len(fields) > columns:
+            return f"line {line} has {len(fields)} fields for {columns} columns — decimal commas? ({text}): " + \
+                _READS_DECIMAL_COMMA
+        pair = next((f"{a},{b}" for a, b in zip(fields, fields[1:]) if _WITH_LEADING_ZERO.fullmatch(b)), None)
+        if pair is not None:
+            return f"line {line}: {pair!r} looks like a number with a decimal comma — {_READS_DECIMAL_COMMA}"
+    return None
+
+
+def _decimal_comma_in(path: Path, separator: str) -> str:
+    """`` and the numbers have decimal commas (line L: 'x,y')`` when a data line separated by ``separator`` has a
+    field like ``0,0374``, else ``""``."""
+    for line, text in _data_lines(path)[:1]:
+        field = next((f.strip() for f in text.split(separator) if re.fullmatch(r"-?\d+,\d+", f.strip())), None)
+        if field is not None:
+            return f" and the numbers have decimal commas (line {line}: {field!r})"
+    return ""
 
 
 def _first_bad_cell(path: Path, names: list[str]) -> ConfigError | None:

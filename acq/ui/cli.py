@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import math
 import os
 import signal
 import sys
@@ -32,6 +33,7 @@ if TYPE_CHECKING:
     from acq.offline.analyze import SessionResult
     from acq.recording.recorder import Recorder, RecordingResult
     from acq.recording.session import Session
+    from drivers.profile import Profile
 
 # numpy, scipy, h5py, pydantic and Qt are imported inside the commands that use them: `acq --help`, a command's
 # --help and a mistyped path print at once (1.1 s of imports before; bench/cli_start.py measures it)
@@ -150,6 +152,7 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
             given = f"--duration {duration:g}" if duration_s is not None else f"the profile's duration_s = {duration:g}"
             raise ConfigError(f"{given}: the identification needs at least {min_duration_s(segment_s):g} s of both "
                               f"streams (two {segment_s:g} s Welch segments); record longer, or add --no-analyze")
+        _require_enough_motion(profile, profile_name, bench.motor.pole_pairs)
     check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))
@@ -184,6 +187,26 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
                f"{result.path} ({result.current_samples} current samples, {result.encoder_samples} encoder samples)",
                err=True)  # one plain line (rich would wrap it)
     return EXIT_INTERRUPTED if result.status == "interrupted" else 1
+
+
+def _require_enough_motion(profile: Profile, name: str, pole_pairs: int) -> None:
+    """Refuse a profile whose own numbers make the identification certain to fail: the motor must turn half an
+    electrical revolution within the torque estimator's window (:func:`analysis.torque.min_speed_rpm`); at most
+    the top speed for the whole window, and never more than one half-cycle's swing (a slower drive only moves less)."""
+    from analysis import PHASE_WINDOW_S, min_speed_rpm
+    from drivers.motion import half_swing_rad
+
+    need_rpm, window_ms = min_speed_rpm(pole_pairs), 1e3 * PHASE_WINDOW_S
+    if profile.top_speed_rpm < need_rpm:
+        raise ConfigError(f"profile {name}: top_speed_rpm = {profile.top_speed_rpm:g}: the identification needs the motor "
+                          f"faster than {need_rpm:.0f} rpm for {window_ms:.0f} ms at a time (half an electrical revolution, "
+                          f"{pole_pairs} pole pairs) — raise top_speed_rpm, or add --no-analyze")
+    swing_deg, half_turn_deg = math.degrees(half_swing_rad(profile)), 180.0 / pole_pairs
+    if swing_deg < half_turn_deg:
+        raise ConfigError(f"profile {name}: the motor swings {swing_deg:.0f}° per half-cycle (top_speed_rpm, "
+                          f"accel_time_s, cruise_s, decel_time_s), the identification needs half an electrical revolution "
+                          f"({half_turn_deg:.0f}°, {pole_pairs} pole pairs) — lengthen the ramps or raise top_speed_rpm, "
+                          "or add --no-analyze")
 
 
 def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_path: Path | str | None) -> SessionResult:
@@ -262,7 +285,8 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
 @click.option("--band", default=None, help="Fit band LO,HI in Hz (default 10 … min(0.4·f_enc, 500)).")
 @click.option("--paper", is_flag=True, help="The paper's chain: Hilbert torque, no clock alignment, linear "
                                             "resampling, uniform weights (for comparison).")
-@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout.")
+@click.option("--json", "as_json", is_flag=True, help="Print the result as JSON on stdout (keys: README, \"The result\"; "
+                                                    "K, J_m, J_l, C are motor-side).")
 @click.option("--no-report", is_flag=True, help="Do not draw <session>.report.png.")
 @click.option("--wait-report", is_flag=True,
               help="With --json: exit only once <session>.report.png is written (default: the JSON is printed at "

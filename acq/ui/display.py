@@ -76,6 +76,9 @@ class Column:
         0: always shown; 1, 2, …: left out in this order while the table is too wide.
     narrow : Column or None
         A narrower form of the column, used before any column is left out.
+    narrow_rank : int
+        Narrow forms are taken in this order (then left to right): a column whose narrow form reads worse (a
+        name split over two lines) comes after the others.
     """
 
     header: str
@@ -84,6 +87,7 @@ class Column:
     wrap: bool = False
     drop: int = 0
     narrow: Column | None = None
+    narrow_rank: int = 0
 
 
 class FittedTable:
@@ -112,10 +116,9 @@ class FittedTable:
         """The column sets to try, widest first: every narrow form in turn, then the optional columns left out."""
         columns = list(self.columns)
         yield columns
-        for i, c in enumerate(columns):
-            if c.narrow is not None:
-                columns = [*columns[:i], c.narrow, *columns[i + 1:]]
-                yield columns
+        for i in sorted((i for i, c in enumerate(columns) if c.narrow is not None), key=lambda i: columns[i].narrow_rank):
+            columns = [*columns[:i], columns[i].narrow, *columns[i + 1:]]  # type: ignore[list-item]
+            yield columns
         for rank in sorted({c.drop for c in columns if c.drop}):
             columns = [c for c in columns if c.drop != rank]
             yield columns
@@ -274,7 +277,8 @@ def trend_table(trend: Trend) -> FittedTable:
     columns = [Column("#", [str(i) for i in range(1, len(pts) + 1)]),
                replace(wide_time, narrow=short_time),
                Column("K\nN·m/rad", [f1(p.entry.K_Nm_per_rad) for p in pts]),
-               Column("K 95 % interval\nN·m/rad", [f"{f1(p.entry.K_ci95[0])}–{f1(p.entry.K_ci95[1])}" for p in pts],
+               Column("K 95 % interval\nN·m/rad", ["—" if None in p.entry.K_ci95 else
+                                                   f"{f1(p.entry.K_ci95[0])}–{f1(p.entry.K_ci95[1])}" for p in pts],
                       narrow=Column("95 %\n± %", rel), drop=5),
                Column("ΔK\n%", [format_value(p.change_pct, "+.1f") for p in pts]),
                Column("EWMA\n%", [format_value(p.ewma_change_pct, "+.1f") for p in pts], drop=4),
@@ -288,10 +292,11 @@ def trend_table(trend: Trend) -> FittedTable:
     elif any(tags):
         columns.append(Column("tags", tags, "left", wrap=True, drop=1))
     columns.append(Column("state", states, "left", wrap=True))
-    base = "—" if trend.baseline_K_Nm_per_rad is None else f"{trend.baseline_K_Nm_per_rad:.1f} N·m/rad"
-    caption += [f"baseline {base} ({trend.baseline_note}); ALARM below −{trend.threshold_pct:g} % (threshold) or "
-                f"EWMA (λ = {trend.ewma_lambda:g}) below its −{trend.ewma_L:g}σ limit (EWMA), "
-                f"σ = {f1(trend.sigma_K_Nm_per_rad)} N·m/rad",
+    base = (f"no baseline yet ({trend.baseline_note})" if trend.baseline_K_Nm_per_rad is None else
+            f"baseline {trend.baseline_K_Nm_per_rad:.1f} N·m/rad ({trend.baseline_note})")
+    sigma = "" if trend.sigma_K_Nm_per_rad is None else f", σ = {f1(trend.sigma_K_Nm_per_rad)} N·m/rad"
+    caption += [f"{base}; ALARM below −{trend.threshold_pct:g} % (threshold) or "
+                f"EWMA (λ = {trend.ewma_lambda:g}) below its −{trend.ewma_L:g}σ limit (EWMA){sigma}",
                 *(f"#{i} skipped: {p.reason}" for i, p in enumerate(pts, 1) if p.state == "skipped")]
     title = f"stiffness trend — {escape(trend.joint)}" + ("  [bold red]ALARM[/]" if trend.alarm else "")
     return FittedTable(title, columns, caption, row_styles=[_TREND_STYLES[p.state] for p in pts])

@@ -37,12 +37,15 @@ def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> FittedTab
     shown, the state wraps at spaces.
     """
     alarms = sum(s.state == "alarm" for s in statuses)
-    title = f"fleet — {len(statuses)} joints" + (f"  [bold red]{alarms} in ALARM[/]" if alarms else "")
+    title = (f"fleet — {len(statuses)} joint{'s' if len(statuses) != 1 else ''}"
+             + (f"  [bold red]{alarms} in ALARM[/]" if alarms else ""))
     f1 = functools.partial(format_value, spec=".1f")
     entries = [None if s.latest is None else s.latest.entry for s in statuses]
     wide_time, short_time = start_times([None if s.last_session_utc is None else s.last_session_utc.isoformat()
                                          for s in statuses])
-    columns = [Column("robot/\njoint", [f"{s.robot}/{s.joint}" for s in statuses], "left", wrap=True),
+    names = [f"{s.robot}/{s.joint}" for s in statuses]
+    columns = [Column("robot/\njoint", names, "left",  # split at the "/" when too wide, never inside a name
+                      narrow=Column("robot/\njoint", [n.replace("/", "/\n", 1) for n in names], "left"), narrow_rank=1),
                Column("K\nN·m/rad", [f1(None if e is None else e.K_Nm_per_rad) for e in entries]),
                Column("95 % interval\nN·m/rad",
                       ["—" if e is None else f"{f1(e.K_ci95[0])}–{f1(e.K_ci95[1])}" for e in entries],

@@ -344,7 +344,7 @@ def _positive(f_hz: np.ndarray, *ys: np.ndarray) -> tuple[np.ndarray, ...]:
 
 def values_html(sessions: Sequence[SessionFigure]) -> str:
     """The side panel: identified values with 95 % intervals, f_a, f_r, clock and verdict, one block per session."""
-    parts = ["<h3>Identified two-mass model</h3>"]
+    parts = ["<h3>Identified two-mass model (motor side)</h3>"]  # K, J through the gear as the motor sees them
     for i, s in enumerate(sessions):
         color = COLORS[i % len(COLORS)]
         parts.append(f"<p><b style='color:{color}'>{escape(s.name)}</b></p>")

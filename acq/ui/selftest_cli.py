@@ -27,20 +27,27 @@ def check_line(check: Check) -> str:
 
 
 def summary_table(checks: list[Check]) -> Table:
-    """Per stage: checks passed / warned / failed, or not run; the caption says what to do next."""
+    """Per stage: checks passed / warned / failed, or not run (what to do next: :func:`next_step`)."""
     table = Table(title="selftest")
     for column in ("stage", "✓", "⚠", "✗", "result"):
         table.add_column(column, justify="left" if column in ("stage", "result") else "right")
-    failed = next((c for c in checks if c.status == "fail"), None)
     for stage in STAGES:
         mine = [c for c in checks if c.stage == stage]
         n = {s: sum(c.status == s for c in mine) for s in MARK}
         result = ("not run" if not mine else "✗ " + ", ".join(c.name for c in mine if c.status == "fail")
                   if n["fail"] else "⚠ " + ", ".join(c.name for c in mine if c.status == "warn") if n["warn"] else "✓")
         table.add_row(stage, str(n["pass"]), str(n["warn"]), str(n["fail"]), escape(result))
-    table.caption = (f"stopped at {failed.stage} · {failed.name}: {failed.fix}" if failed else
-                     "the bench is ready: acq record --profile NAME --bench B")
     return table
+
+
+def next_step(checks: list[Check], bench_path: Path | None, profile_name: str) -> str:
+    """What to do next, plain text: the first failed check's fix, or the command that records on this bench (printed
+    under the summary at the terminal's width: as the table's caption it wrapped to the table's)."""
+    failed = next((c for c in checks if c.status == "fail"), None)
+    if failed is not None:
+        return f"stopped at {failed.stage} · {failed.name}: {failed.fix}"
+    bench = "" if bench_path is None else f" --bench {bench_path}"
+    return f"the bench is ready: acq record --profile {profile_name}{bench}"
 
 
 def selftest_json(checks: list[Check], bench_path: str) -> dict[str, object]:
@@ -84,5 +91,6 @@ def selftest_command(bench_path: Path | None, profile_name: str, fast: bool, kee
         click.echo(json.dumps(selftest_json(checks, str(bench_path or "configs/benches/sim.toml")), indent=2))
     else:
         out.print(summary_table(checks))
+        out.print(escape(next_step(checks, bench_path, profile_name)), soft_wrap=True)  # "[motor]" is not markup
     failed = next((c for c in checks if c.status == "fail"), None)
     return 0 if failed is None else int(failed.values.get("exit_code", 1))  # 2: a config the devices refused
