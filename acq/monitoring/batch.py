@@ -171,18 +171,39 @@ def _start_forkserver_without_cwd() -> None:
     folder first on sys.path, so a folder named ``acq``, ``analysis`` or ``drivers`` where the user stands would be
     imported by every worker in place of ours (they then die: BrokenProcessPool). The server and its workers keep
     the variable (they run no program of the user's); acq's own process has it only while the server starts, so
-    the commands it runs later (``--on-alarm``) see the user's environment."""
+    the commands it runs later (``--on-alarm``) see the user's environment.
+
+    The server (and the resource tracker it starts) begin with SIGINT ignored, which they and every worker forked
+    from them keep: a Ctrl-C at the terminal reaches the whole process group, and only acq's own process stops the
+    workers (a worker or the server's preload stopped mid-import printed tracebacks, Qt a fatal error)."""
     from multiprocessing import forkserver
 
     before = os.environ.get("PYTHONSAFEPATH")
     os.environ["PYTHONSAFEPATH"] = "1"
     try:
-        forkserver.ensure_running()
+        with _sigint_ignored_by_children():
+            forkserver.ensure_running()
     finally:
         if before is None:
             del os.environ["PYTHONSAFEPATH"]
         else:
             os.environ["PYTHONSAFEPATH"] = before
+
+
+@contextmanager
+def _sigint_ignored_by_children() -> Iterator[None]:
+    """Processes started inside the block begin with SIGINT ignored (the disposition survives exec; Python then
+    installs no KeyboardInterrupt handler). A Ctrl-C meanwhile is held (blocked) and reaches this process after it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only change in the main thread (acq starts its pools there)
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 @contextmanager
@@ -246,8 +267,9 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequ
     on_progress : callable, optional
         Told (done, to analyse, failed) when the analyses start and as each outcome is recorded.
 
-    Ctrl-C cancels the queued analyses, stops the running ones (a result file a stopped worker wrote without its
-    catalogue row is removed), records every outcome received and returns with ``interrupted`` set.
+    Ctrl-C (the workers ignore it) cancels the queued analyses, stops the running ones (a result file a stopped
+    worker wrote without its catalogue row is removed), records every outcome received and returns with
+    ``interrupted`` set; a Ctrl-C while the files are hashed, before any analysis, raises KeyboardInterrupt.
     """
     start = time.perf_counter()
     started_at = time.time()
@@ -257,23 +279,28 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequ
     todo = [p for p in paths if hashes[p] not in current and p not in not_ready]
     outcomes: list[Outcome] = []
     interrupted = False
-    if todo:
-        with analysis_executor(jobs or os.cpu_count() or 1, scheduler) as executor:
-            futures: dict[Future[Outcome], Path] = {
-                executor.submit(analyze_one, str(p.resolve()), hashes[p], request, draw_report): p for p in todo}
-            tell = on_progress or (lambda done, total, failed: None)
-            tell(0, len(todo), 0)
-            try:
-                for future in as_completed(futures):
-                    outcome = _outcome(future, futures[future], hashes, request)
-                    catalogue.record(outcome)
-                    outcomes.append(outcome)
-                    tell(len(outcomes), len(todo), sum(o.error is not None for o in outcomes))
-            except KeyboardInterrupt:
-                interrupted = True
-                with _signals_ignored():
-                    _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at)
-                raise
+    try:
+        if todo:
+            with analysis_executor(jobs or os.cpu_count() or 1, scheduler) as executor:
+                futures: dict[Future[Outcome], Path] = {}
+                try:
+                    with _sigint_deferred():  # a submit starts a worker: one cut short would outlive the pool
+                        for p in todo:
+                            futures[executor.submit(analyze_one, str(p.resolve()), hashes[p], request,
+                                                    draw_report)] = p
+                    tell = on_progress or (lambda done, total, failed: None)
+                    tell(0, len(todo), 0)
+                    for future in as_completed(futures):
+                        outcome = _outcome(future, futures[future], hashes, request)
+                        catalogue.record(outcome)
+                        outcomes.append(outcome)
+                        tell(len(outcomes), len(todo), sum(o.error is not None for o in outcomes))
+                except KeyboardInterrupt:
+                    with _signals_ignored():
+                        _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at)
+                    raise
+    except KeyboardInterrupt:  # the pool is shut down and every outcome received is recorded
+        interrupted = True
     return BatchReport(outcomes, [p for p in paths if p not in todo and p not in not_ready],
                        time.perf_counter() - start, not_ready, interrupted)
 
@@ -298,12 +325,32 @@ def _signals_ignored() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
 
 
+@contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """A Ctrl-C inside the block is raised (KeyboardInterrupt) when the block has run to its end."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
+
+
 def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outcomes: list[Outcome],
                   catalogue: Catalogue, hashes: dict[Path, str], request: AnalysisRequest, started_at: float) -> None:
     """Cancel what is queued, give what runs :data:`STOP_GRACE_S` to finish, kill the rest, record what finished;
     no result file (nor a temp file) is left without its catalogue row."""
-    for future in futures:
-        future.cancel()
+    pool = executor if isinstance(executor, ProcessPoolExecutor) else None
+    if pool is None:
+        for future in futures:
+            future.cancel()
+    # a local pool's queued analyses are cancelled by its shutdown below, in the pool's own thread: a future cancelled
+    # here would make that thread fail on it when the workers are killed (Python 3.11: InvalidStateError: CANCELLED)
     processes = list(getattr(executor, "_processes", None) or {})  # the local pool's worker pids (Dask: none)
     recorded = {o.path for o in outcomes}
     deadline = time.monotonic() + STOP_GRACE_S
@@ -321,6 +368,8 @@ def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outc
     for pid in processes:
         with contextlib.suppress(OSError):
             os.kill(pid, signal.SIGKILL)
+    if pool is not None:
+        pool.shutdown(wait=True, cancel_futures=True)  # the killed workers reaped: none writes after this
     for path in futures.values():  # a worker killed after writing its result but before the row: remove it
         if str(path.resolve()) in recorded:
             continue

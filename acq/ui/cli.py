@@ -25,7 +25,7 @@ from acq import __version__
 from acq.recording.paths import is_batch, require_session_file
 from acq.recording.tags import parse_tags
 from acq.ui.options import CatalogueLocation, tag_option
-from acqcore.errors import AcqError, ConfigError
+from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 
 if TYPE_CHECKING:
     from analysis import AnalysisRequest
@@ -36,7 +36,6 @@ if TYPE_CHECKING:
 # numpy, scipy, h5py, pydantic and Qt are imported inside the commands that use them: `acq --help`, a command's
 # --help and a mistyped path print at once (1.1 s of imports before; bench/cli_start.py measures it)
 
-EXIT_INTERRUPTED = 130
 out = Console()
 err = Console(stderr=True)
 
@@ -67,8 +66,19 @@ LAZY_COMMANDS: dict[str, tuple[str, str, str]] = {
 }
 
 
+class _Interrupted(BaseException):
+    """A Ctrl-C inside a command, carried past click (whose own handling writes an empty line before its Abort):
+    acq says ``acq: interrupted`` in one line."""
+
+
 class LazyGroup(click.Group):
     """A group whose :data:`LAZY_COMMANDS` load on first use (click's documented "lazy loading" pattern)."""
+
+    def invoke(self, ctx: click.Context) -> object:
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            raise _Interrupted from None
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted([*super().list_commands(ctx), *LAZY_COMMANDS])
@@ -421,7 +431,7 @@ def _run(argv: list[str] | None) -> None:
     except click.exceptions.Abort:  # click's name for a KeyboardInterrupt inside a command
         click.echo("acq: interrupted", err=True)
         _exit_now(EXIT_INTERRUPTED)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, _Interrupted):
         click.echo("acq: interrupted", err=True)
         _exit_now(EXIT_INTERRUPTED)
     except click.UsageError as e:  # one line, like every other error (click's own adds usage and a hint)
@@ -433,4 +443,6 @@ def _run(argv: list[str] | None) -> None:
     except OSError as e:
         click.echo(f"acq: error: {e}", err=True)
         sys.exit(ConfigError("").exit_code)
+    if code == EXIT_INTERRUPTED:  # a command that tidied up after a Ctrl-C (a batch, a recording, a monitor)
+        _exit_now(code)
     sys.exit(code if isinstance(code, int) else 0)
