@@ -3,8 +3,13 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import signal
 import sqlite3
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -222,13 +227,44 @@ def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Pa
             monitor.request_stop("interrupted by user (Ctrl-C)")
 
     monitor = Monitor(settings, on_status=stop_after_first)
-    assert monitor.run() == 0
+    assert monitor.run() == 130 and monitor.stopped_by == "interrupted by user (Ctrl-C)"
     rows = _rows(tmp_path)
     assert [r["window"] for r in rows] == [0]  # analysed before ending; no second window captured
     assert monitor.status.message == "stopped: interrupted by user (Ctrl-C)"
     # one good window of the two the baseline needs: its K is shown while the baseline is learned
     assert rows[0]["verdict"] == "ok" and monitor.status.state == "learning baseline"
     assert monitor.status.last_K == rows[0]["K_Nm_per_rad"] and monitor.status.change_pct is None
+
+
+def test_ctrl_c_ends_the_monitor_with_exit_130_and_one_line_of_what_it_kept(tmp_path: Path) -> None:
+    """README's exit codes: 130 interrupted (the monitor exited 0); the windows catalogued stay, a restart resumes."""
+    out = tmp_path / "monitor"
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "monitor", "--bench", str(ROBOT), "--fast", "--window", "2",
+                             "--every", "5", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline and not (
+            (out / "catalogue.sqlite").exists() and _rows_or_none(out)):
+        time.sleep(0.1)
+    assert proc.poll() is None, proc.communicate()
+    os.killpg(proc.pid, signal.SIGINT)  # the terminal's Ctrl-C: to the monitor and its analysis workers
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "Error" not in err, err
+    verdicts = [r["verdict"] for r in _rows(out)]
+    captured = sum(v != "interrupted" for v in verdicts)
+    analysed = sum(v not in ("interrupted", "not analysed") for v in verdicts)
+    assert captured >= 1
+    assert err.splitlines()[-1] == (f"acq: interrupted by user (Ctrl-C): {captured} windows captured, {analysed} "
+                                    f"analysed, all kept in {out / 'catalogue.sqlite'} (trend state: learning "
+                                    "baseline); the same command resumes")
+
+
+def _rows_or_none(folder: Path) -> list[dict[str, object]] | None:
+    try:
+        return _rows(folder)
+    except sqlite3.OperationalError:  # the catalogue's tables not made yet
+        return None
 
 
 def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None:

@@ -38,7 +38,7 @@ from acq.monitoring.window_judge import analyse_window, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
 from acq.recording.session import load, repair
-from acqcore.errors import ConfigError
+from acqcore.errors import EXIT_INTERRUPTED, ConfigError
 from analysis import AnalysisRequest
 from drivers.config import Bench
 from drivers.registry import open_bench
@@ -136,6 +136,11 @@ class Monitor:
         self._in_alarm = False
         self._size = expected_window_bytes(settings.bench, settings.window_s)
 
+    @property
+    def stopped_by(self) -> str | None:
+        """Why the monitor was stopped before its ``for_s`` (Ctrl-C, SIGTERM, a stop request); None if it was not."""
+        return self._stop
+
     def request_stop(self, reason: str) -> None:
         """End after the window being captured (which ends as interrupted) and the analyses under way."""
         self._stop = self._stop or reason
@@ -144,7 +149,10 @@ class Monitor:
 
     # ---- the loop ------------------------------------------------------------------------------------
     def run(self) -> int:
-        """Monitor until ``for_s`` has passed or a stop is requested; always leaves the catalogue consistent."""
+        """Monitor until ``for_s`` has passed or a stop is requested; always leaves the catalogue consistent.
+
+        Returns 130 when stopped (:attr:`stopped_by`: Ctrl-C, SIGTERM, a stop request), else 3 when the last
+        state is alarm, else 0."""
         with _folder_lock(self.s.out_dir), Catalogue(self.s.out_dir / CATALOGUE_NAME) as catalogue, \
                 analysis_executor(self.s.jobs, None) as pool, self._signals():
             self.catalogue = catalogue
@@ -163,6 +171,8 @@ class Monitor:
             self.status.state = "alarm" if self._in_alarm else self.status.state
             self.status.message = f"stopped: {self._stop}" if self._stop else "done"
             self._show()
+        if self._stop is not None:
+            return EXIT_INTERRUPTED
         return 3 if self._in_alarm else 0
 
     def _window(self, n: int, pool: Any) -> None:
