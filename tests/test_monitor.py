@@ -10,6 +10,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -208,6 +209,25 @@ def test_disk_budget_frees_the_oldest_unprotected_windows_or_refuses(tmp_path: P
     assert fits and [w.index for w in victims] == [1, 2]
     victims, fits = make_room(windows, tmp_path, need_bytes=3500, budget_bytes=4000)
     assert not fits  # even without 1, 2, 3 the protected window 0 leaves no room
+
+
+def test_a_disk_budget_that_cannot_hold_one_window_is_refused_before_anything_is_captured(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """It ran on, capturing nothing ("not captured: the disk budget would be exceeded" every window), exit 0."""
+    from acq.monitoring.monitor import Monitor, MonitorSettings
+
+    out = tmp_path / "monitor"
+    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--fast", "--for", "1m", "--max-disk", "1MB",
+                  "--out", str(out))
+    assert (run.code, run.err) == (2, "acq: error: --max-disk 1 MB: one --window of 10 s needs 3.9 MB (current "
+                                      "25600 Hz × 1 channel(s), encoder 1000 Hz, with the files' overhead) — raise "
+                                      "--max-disk or shorten --window\n")
+    assert not out.exists() or not list(out.glob("*.h5"))
+    # the size named is the one the capture loop asks room for: 3.9 MB is enough, a byte less of 3.872 MB is not
+    settings = MonitorSettings(bench=_bench(), out_dir=out, window_s=10.0, every_s=60.0, max_disk_bytes=3_900_000)
+    with pytest.raises(ConfigError, match="needs 3.9 MB"):
+        Monitor(replace(settings, max_disk_bytes=3_871_999))
+    Monitor(replace(settings, max_disk_bytes=3_872_000))
 
 
 def test_sizes_parse_and_a_bad_one_is_named() -> None:

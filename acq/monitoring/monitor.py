@@ -19,6 +19,7 @@ does not sleep, and waits for the analysis instead of skipping (no real time pas
 from __future__ import annotations
 
 import fcntl
+import math
 import os
 import shlex
 import subprocess
@@ -135,6 +136,12 @@ class Monitor:
         self._alarm_procs: list[subprocess.Popen[bytes]] = []
         self._in_alarm = False
         self._size = expected_window_bytes(settings.bench, settings.window_s)
+        if settings.max_disk_bytes is not None and settings.max_disk_bytes < self._size:  # no window would be captured
+            daq, drive = settings.bench.daq, settings.bench.drive
+            raise ConfigError(f"--max-disk {settings.max_disk_bytes / 1e6:g} MB: one --window of {settings.window_s:g} s "
+                              f"needs {math.ceil(self._size / 1e5) / 10:g} MB (current {daq.rate_hz:g} Hz × "
+                              f"{len(daq.channels)} channel(s), encoder {1 / drive.period_s:g} Hz, with the files' "
+                              "overhead) — raise --max-disk or shorten --window")
 
     @property
     def stopped_by(self) -> str | None:
