@@ -58,6 +58,8 @@ def _message(error: dict[str, Any]) -> str:
         return f"unknown driver (expected one of {error.get('ctx', {}).get('expected_tags', '')})"
     if kind == "union_tag_not_found":
         return "missing key 'driver'"
+    if kind == "value_error" and "error" in error.get("ctx", {}):  # a validator's own words, without pydantic's prefix
+        return str(error["ctx"]["error"])
     return error["msg"].lower().replace("input should be", "must be")
 
 
