@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from acq.recording.session import load
-from tests.helpers import run_cli
+from tests.helpers import read_only_view, run_cli
 
 KEYS = {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "ci95", "antiresonance_hz", "resonance_hz",
         "clock", "quality", "options"}
@@ -210,3 +210,41 @@ def test_help_and_a_mistyped_path_load_no_numerical_library() -> None:
     missing = subprocess.run([sys.executable, "-c", probe, "analyze", "missing.h5"], capture_output=True, text=True,
                              timeout=60)
     assert missing.stderr.splitlines() == ["acq: error: missing.h5: no such session file", "loaded: [] exit: 2"]
+
+
+def test_a_read_only_session_folder_shows_the_result_fails_the_write_and_result_dir_writes_elsewhere(
+        session_10s: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """It said only `read-only file system: ro/s.result.json`, exit 1, no numbers."""
+    archive = tmp_path / "archive"
+    archive.mkdir()
+    for name in ("a.h5", "b.h5"):
+        (archive / name).write_bytes(session_10s.read_bytes())
+    with read_only_view(archive) as ro:
+        not_saved = f"acq: error: read-only file system: {ro}/a.result.json — the result above is not saved " \
+                    "(--result-dir DIR writes it elsewhere)\n"
+        table = run_cli(capsys, "analyze", str(ro / "a.h5"), "--no-report")
+        assert (table.code, table.err) == (1, not_saved)
+        as_json = run_cli(capsys, "analyze", str(ro / "a.h5"), "--no-report", "--json")
+        assert (as_json.code, as_json.err) == (1, not_saved)
+        doc = json.loads(as_json.out)
+        assert abs(doc["K_Nm_per_rad"] / 891.0 - 1) < 0.02
+        assert f"{doc['K_Nm_per_rad']:.1f}" in table.out.split("K [N·m/rad]")[1].split("\n")[0]  # the same numbers
+        elsewhere = tmp_path / "results"
+        saved = run_cli(capsys, "analyze", str(ro / "a.h5"), "--no-report", "--json", "--result-dir", str(elsewhere))
+        assert saved.code == 0, saved.err
+        assert json.loads((elsewhere / "a.result.json").read_text())["K_Nm_per_rad"] == doc["K_Nm_per_rad"]
+        assert (elsewhere / "catalogue.sqlite").exists()  # the default catalogue goes with the results
+        # a batch of the read-only archive, its catalogue elsewhere: every result fails to be written …
+        catalogue = tmp_path / "cat.sqlite"
+        batch = run_cli(capsys, "analyze", str(ro), "--catalogue", str(catalogue), "--no-report", "--jobs", "1",
+                        "--json")
+        assert batch.code == 1
+        assert [(d["outcome"], d["error"]) for d in json.loads(batch.out)] == [
+            ("failed", f"read-only file system: {ro}/{n}.result.json") for n in ("a", "b")]
+        # … and with --result-dir it works
+        batch = run_cli(capsys, "analyze", str(ro), "--catalogue", str(catalogue), "--no-report", "--jobs", "1",
+                        "--json", "--result-dir", str(tmp_path / "batch_results"))
+        assert batch.code == 0, batch.err
+        assert [d["outcome"] for d in json.loads(batch.out)] == ["analysed", "analysed"]
+        assert sorted(p.name for p in (tmp_path / "batch_results").iterdir()) == ["a.result.json", "b.result.json"]
+        assert sorted(p.name for p in ro.iterdir()) == ["a.h5", "b.h5"]

@@ -98,10 +98,10 @@ def record_outcome(done: SessionResult, request: AnalysisRequest, catalogue_path
                    seconds: float) -> Path | str:
     """Put one session's analysis (done outside a batch) into its catalogue; return the catalogue's path.
 
-    The catalogue is ``catalogue_path`` or ``catalogue.sqlite`` in the session's folder, so a later
-    ``acq analyze FOLDER`` finds the session current and ``acq trend`` sees it at once.
+    The catalogue is ``catalogue_path`` or ``catalogue.sqlite`` in the folder of the result (the session's, or
+    ``--result-dir``), so a later ``acq analyze FOLDER`` finds the session current and ``acq trend`` sees it at once.
     """
-    path = catalogue_path or done.session.path.parent / CATALOGUE_NAME
+    path = catalogue_path or done.json_path.parent / CATALOGUE_NAME
     with Catalogue(path) as catalogue:
         catalogue.record(succeeded(str(done.session.path), done, request, seconds))
     return path
@@ -130,7 +130,7 @@ def quiet_numerics() -> Iterator[None]:
 
 
 def analyze_one(path: str, sha256: str, request: AnalysisRequest, draw_report: DrawReport | None = None, *,
-                write: bool = True) -> Outcome:
+                write: bool = True, result_dir: Path | None = None) -> Outcome:
     """Analyse one session (runs in a worker process or on a Dask worker); never raises.
 
     Parameters
@@ -145,11 +145,13 @@ def analyze_one(path: str, sha256: str, request: AnalysisRequest, draw_report: D
         Draws ``<session>.report.png`` once the result is written (None: no report).
     write : bool, optional
         Write ``<session>.result.json`` (False: the caller writes the document it makes of the outcome).
+    result_dir : Path, optional
+        Where the result and report go (None: beside the session).
     """
     start = time.perf_counter()
     try:
         with quiet_numerics():
-            done = analyze_session(path, request, write=write, report=draw_report is not None)
+            done = analyze_session(path, request, write=write, report=draw_report is not None, result_dir=result_dir)
     except Exception as e:  # noqa: BLE001 — a batch records any session's failure and goes on
         error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
         return Outcome(path, sha256, request.key(), _meta_if_readable(path), None, error,
@@ -246,7 +248,7 @@ STOP_GRACE_S = 0.5
 
 def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequest, *, jobs: int | None = None,
               scheduler: str | None = None, draw_report: DrawReport | None = None,
-              on_progress: OnProgress | None = None) -> BatchReport:
+              on_progress: OnProgress | None = None, result_dir: Path | None = None) -> BatchReport:
     """Analyse the sessions not yet current in ``catalogue``, recording each outcome as it arrives.
 
     Parameters
@@ -266,6 +268,8 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequ
         Draws each session's report PNG in its worker (None: no reports).
     on_progress : callable, optional
         Told (done, to analyse, failed) when the analyses start and as each outcome is recorded.
+    result_dir : Path, optional
+        Where the results and reports go (None: beside each session).
 
     Ctrl-C (the workers ignore it) cancels the queued analyses, stops the running ones (a result file a stopped
     worker wrote without its catalogue row is removed), records every outcome received and returns with
@@ -287,7 +291,7 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequ
                     with _sigint_deferred():  # a submit starts a worker: one cut short would outlive the pool
                         for p in todo:
                             futures[executor.submit(analyze_one, str(p.resolve()), hashes[p], request,
-                                                    draw_report)] = p
+                                                    draw_report, result_dir=result_dir)] = p
                     tell = on_progress or (lambda done, total, failed: None)
                     tell(0, len(todo), 0)
                     for future in as_completed(futures):
@@ -297,7 +301,8 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequ
                         tell(len(outcomes), len(todo), sum(o.error is not None for o in outcomes))
                 except KeyboardInterrupt:
                     with _signals_ignored():
-                        _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at)
+                        _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at,
+                                      result_dir)
                     raise
     except KeyboardInterrupt:  # the pool is shut down and every outcome received is recorded
         interrupted = True
@@ -342,7 +347,8 @@ def _sigint_deferred() -> Iterator[None]:
 
 
 def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outcomes: list[Outcome],
-                  catalogue: Catalogue, hashes: dict[Path, str], request: AnalysisRequest, started_at: float) -> None:
+                  catalogue: Catalogue, hashes: dict[Path, str], request: AnalysisRequest, started_at: float,
+                  result_dir: Path | None) -> None:
     """Cancel what is queued, give what runs :data:`STOP_GRACE_S` to finish, kill the rest, record what finished;
     no result file (nor a temp file) is left without its catalogue row."""
     pool = executor if isinstance(executor, ProcessPoolExecutor) else None
@@ -373,7 +379,7 @@ def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outc
     for path in futures.values():  # a worker killed after writing its result but before the row: remove it
         if str(path.resolve()) in recorded:
             continue
-        for output in output_paths(path, request):
+        for output in output_paths(path, request, result_dir):
             remove_temp_files(output)
             with contextlib.suppress(OSError):
                 if output.stat().st_mtime >= started_at:

@@ -16,7 +16,7 @@ from acq.monitoring.batch import CATALOGUE_NAME, BatchReport, OnProgress, find_s
 from acq.monitoring.catalogue import Catalogue
 from acq.ui.display import batch_table
 from acq.ui.report_png import draw_report
-from acqcore.errors import EXIT_INTERRUPTED
+from acqcore.errors import EXIT_INTERRUPTED, ConfigError
 from analysis import AnalysisRequest
 
 
@@ -49,16 +49,20 @@ def batch_progress(console: Console | None = None) -> Iterator[OnProgress]:
 
 
 def analyze_many(spec: Path, request: AnalysisRequest, *, jobs: int | None, catalogue_path: Path | str | None,
-                 scheduler: str | None, report: bool, as_json: bool, out: Console) -> int:
+                 scheduler: str | None, report: bool, as_json: bool, out: Console, result_dir: Path | None = None) -> int:
     """``acq analyze FOLDER|GLOB``: the batch, its table (or JSON) on ``out``; 1 when a session failed, else 0; 130
-    when Ctrl-C stopped it (one line on stderr says how far it got)."""
+    when Ctrl-C stopped it (one line on stderr says how far it got). With ``result_dir`` the results, reports and the
+    default catalogue go there (the sessions' folders may be read-only)."""
     paths, base = find_sessions(spec)
+    if result_dir is not None:
+        _one_result_name_each(paths, result_dir)
     done: BatchReport | None = None
-    with Catalogue(catalogue_path or base / CATALOGUE_NAME) as catalogue:
+    with Catalogue(catalogue_path or (result_dir or base) / CATALOGUE_NAME) as catalogue:
         try:
             with batch_progress() as on_progress:
                 done = run_batch(paths, catalogue, request, jobs=jobs, scheduler=scheduler,
-                                 draw_report=draw_report if report else None, on_progress=on_progress)
+                                 draw_report=draw_report if report else None, on_progress=on_progress,
+                                 result_dir=result_dir)
                 if done.interrupted:
                     raise KeyboardInterrupt
         except KeyboardInterrupt:
@@ -70,6 +74,17 @@ def analyze_many(spec: Path, request: AnalysisRequest, *, jobs: int | None, cata
         out.print(batch_table(done))
         out.print(f"catalogue: {catalogue.path}")
     return 1 if done.failed else 0
+
+
+def _one_result_name_each(paths: list[Path], result_dir: Path) -> None:
+    """Refuse a batch whose sessions (from several folders) share a file name: their results would overwrite each
+    other in ``result_dir``."""
+    seen: dict[str, Path] = {}
+    for p in paths:
+        if p.name in seen:
+            raise ConfigError(f"--result-dir {result_dir}: {seen[p.name]} and {p} have the same name, so their "
+                              "results would overwrite each other; analyse them into separate folders")
+        seen[p.name] = p
 
 
 def interrupted_line(paths: list[Path], done: BatchReport | None, catalogue: Path | str) -> str:
