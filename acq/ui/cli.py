@@ -153,13 +153,14 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
         raise ConfigError(f"--out {out_dir}: is a file, not a folder")
     duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
     if not no_analyze:
-        from analysis import AnalysisRequest, min_duration_s
+        from acq.config import min_record_duration_s
+        from analysis import AnalysisRequest
 
-        segment_s = AnalysisRequest().segment_s
-        if duration < min_duration_s(segment_s):  # of both streams: the alignment trims what only one covers
+        need_s, parts = min_record_duration_s(bench, AnalysisRequest().segment_s)
+        if duration < need_s:  # what the analysis will have after its trims, not the raw length
             given = f"--duration {duration:g}" if duration_s is not None else f"the profile's duration_s = {duration:g}"
-            raise ConfigError(f"{given}: the identification needs at least {min_duration_s(segment_s):g} s of both "
-                              f"streams (two {segment_s:g} s Welch segments); record longer, or add --no-analyze")
+            raise ConfigError(f"{given}: the identification needs --duration {need_s:g} s or more ({parts}); record "
+                              "longer, or add --no-analyze")
     check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))
