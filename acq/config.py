@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import difflib
 import json
+import math
 import tomllib
 from pathlib import Path
 from typing import Any, TypeVar
@@ -58,6 +59,8 @@ def _message(error: dict[str, Any]) -> str:
         return f"unknown driver (expected one of {error.get('ctx', {}).get('expected_tags', '')})"
     if kind == "union_tag_not_found":
         return "missing key 'driver'"
+    if kind == "value_error" and "error" in error.get("ctx", {}):  # a validator's own words, without pydantic's prefix
+        return str(error["ctx"]["error"])
     return error["msg"].lower().replace("input should be", "must be")
 
 
@@ -172,6 +175,28 @@ def check_duration(duration_s: float, source: str = "--duration") -> float:
     if not (0.0 < duration_s <= MAX_DURATION_S):  # also false for NaN
         raise ConfigError(f"{source} {duration_s:g}: must be a number of seconds in (0, {MAX_DURATION_S:g}]")
     return duration_s
+
+
+#: The streams' start offset a recording of real devices must allow for before it knows it, s: the recorder starts the
+#: DAQ task and then the drive's stream (a CANopen SYNC producer / NMT start, a serial stream-on command: round trips
+#: of milliseconds), so the first samples of the two lie apart by that start-up. An assumption with a wide margin, not
+#: measured on hardware; the simulated bench states its own offset ([sim] daq_offset_s).
+STREAM_START_ALLOWANCE_S = 0.1
+
+
+def min_record_duration_s(bench: Bench, segment_s: float) -> tuple[float, str]:
+    """The shortest ``--duration`` (s) after which the identification still has two Welch segments of ``segment_s``
+    (:func:`analysis.min_record_s`), and what it is made of (for the message)."""
+    from analysis import min_duration_s, min_record_s  # the analysis's libraries only when a duration is checked
+
+    simulated = bench.sim is not None and bench.daq.driver == "sim" and bench.drive.driver == "sim"
+    offset_s = abs(bench.sim.daq_offset_s) if simulated and bench.sim is not None else STREAM_START_ALLOWANCE_S
+    need_s = min_record_s(bench.daq.rate_hz, bench.drive.period_s, segment_s, offset_s)
+    trims_s = need_s - min_duration_s(segment_s) - offset_s
+    parts = (f"two {segment_s:g} s Welch segments = {min_duration_s(segment_s):g} s, the streams' start offset "
+             f"{offset_s:g} s{' ([sim] daq_offset_s)' if simulated else ''} and {trims_s:.3f} s the analysis trims at "
+             "the ends")
+    return math.ceil(need_s * 100.0) / 100.0, parts
 
 
 #: Copies of one block the recording path may hold at once (device read, reader queue, pending flush, writer);

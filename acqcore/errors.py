@@ -16,6 +16,9 @@ from typing import Literal
 
 ErrorKind = Literal["input", "device", "storage"]
 
+#: Exit code of a command stopped by Ctrl-C or SIGTERM (128 + SIGINT, as a shell reports a process it interrupted).
+EXIT_INTERRUPTED = 130
+
 
 class AcqError(Exception):
     """An error with a one-line message meant for the person at the bench."""

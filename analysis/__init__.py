@@ -11,8 +11,9 @@ Everything outside ``analysis/`` (the application ``acq``) imports from here onl
   encoder instants (:class:`PreparedSignals`).
 - :class:`Result`, :class:`FigureData`, :class:`TwoMassParams`, :data:`PARAM_NAMES`,
   :data:`PARAM_LABELS`, :data:`Z95`, :class:`Thresholds` — what a result holds and how it is judged.
-- :func:`encoder_period_problem`, :func:`min_current_rate_hz`, :func:`min_duration_s`, :func:`min_speed_rpm`
-  (within :data:`PHASE_WINDOW_S`) — what a bench, a record and a profile must offer before it records.
+- :func:`encoder_period_problem`, :func:`min_current_rate_hz`, :func:`min_duration_s`, :func:`min_record_s`,
+  :func:`min_speed_rpm` (within :data:`PHASE_WINDOW_S`) — what a bench, a record and a profile must offer
+  before it records.
 - The bench checks of ``acq selftest`` (:mod:`analysis.diagnose`, :mod:`analysis.encoder`).
 """
 
@@ -24,7 +25,7 @@ from analysis.diagnose import (SpeedRatio, electrical_speed_ratio, first_move_si
 from analysis.encoder import longest_gap_free_span, speed_from_counts
 from analysis.fit import PARAM_NAMES, Z95
 from analysis.frf import min_duration_s
-from analysis.limits import encoder_period_problem, min_current_rate_hz
+from analysis.limits import encoder_period_problem, min_current_rate_hz, min_record_s
 from analysis.model import PARAM_LABELS, TwoMassParams
 from analysis.pipeline import Result, analyze
 from analysis.quality import Thresholds
@@ -38,7 +39,7 @@ __all__ = [
     "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "FigureData", "Pipeline", "PreparedSignals",
     "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TorqueMethod", "TwoMassParams", "Z95",
     "analyze", "code_fingerprint", "electrical_speed_ratio", "encoder_period_problem", "min_current_rate_hz",
-    "min_duration_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",
+    "min_duration_s", "min_record_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",
     "likely_counts_per_rev", "longest_gap_free_span", "our_chain", "phase_sequence_agreement", "prepare_signals",
     "ratio_fault", "sequence_fault", "speed_from_counts",
 ]

@@ -13,7 +13,7 @@ from __future__ import annotations
 import unicodedata
 from typing import Annotated, Literal, Union
 
-from pydantic import Field, PositiveFloat, PositiveInt, field_validator, model_validator
+from pydantic import AfterValidator, Field, PositiveFloat, PositiveInt, field_validator, model_validator
 
 # Profile (and the Strict base, MAX_DURATION_S, Seconds) are defined in drivers.profile and used from here
 from drivers.profile import MAX_DURATION_S, Profile, Seconds, Strict
@@ -56,6 +56,18 @@ def check_joint_name(name: str) -> str:
     return name
 
 
+def _distinct_phases(channels: list[str]) -> list[str]:
+    """Each phase at most once: the session stores one dataset per phase (a phase twice made HDF5 fail mid-start)."""
+    twice = next((c for i, c in enumerate(channels) if c in channels[:i]), None)
+    if twice is not None:
+        raise ValueError(f"{twice} is listed twice (each phase is one channel)")
+    return channels
+
+
+#: ``[daq] channels``: the phases wired to the DAQ, in its channel order, each once.
+PhaseChannels = Annotated[list[PhaseName], Field(min_length=1, max_length=3), AfterValidator(_distinct_phases)]
+
+
 class Motor(Strict):
     torque_constant_Nm_per_A: float = Field(gt=0.0, le=1000.0)
     pole_pairs: int = Field(gt=0, le=1000)
@@ -83,7 +95,7 @@ class DaqSim(Strict):
 
     driver: Literal["sim"]
     rate_hz: RateHz
-    channels: list[PhaseName] = Field(min_length=1, max_length=3)
+    channels: PhaseChannels
     block_s: float = Field(default=0.1, gt=0.0, le=10.0)
 
 
@@ -104,7 +116,7 @@ class DaqNidaqmx(Strict):
 
     driver: Literal["nidaqmx"]
     rate_hz: RateHz
-    channels: list[PhaseName] = Field(min_length=1, max_length=3)
+    channels: PhaseChannels
     physical_channels: list[str] = Field(min_length=1, max_length=3)
     block_s: float = Field(default=0.1, gt=0.0, le=10.0)
     buffer_s: float = Field(default=5.0, gt=0.0, le=600.0)

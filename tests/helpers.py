@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -37,3 +39,18 @@ def record_session_in_subprocess(out: Path, duration_s: float) -> Path:
     assert proc.returncode == 0, proc.stderr
     (path,) = out.glob("*.h5")
     return path
+
+
+@contextlib.contextmanager
+def read_only_view(folder: Path) -> Iterator[Path]:
+    """``folder`` seen through a read-only bind mount (``<folder>.ro``): every write there fails with a real EROFS
+    (as root chmod does not stop a write). Skips the test where this process may not mount."""
+    view = folder.with_name(folder.name + ".ro")
+    view.mkdir()
+    mounted = subprocess.run(["mount", "-o", "bind,ro", str(folder), str(view)], capture_output=True, text=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"needs a read-only bind mount (root): {mounted.stderr.strip()}")
+    try:
+        yield view
+    finally:
+        subprocess.run(["umount", "-l", str(view)], check=False)

@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 
 from acq.recording.session import load
-from tests.helpers import run_cli
+from tests.helpers import read_only_view, run_cli
 
 KEYS = {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "ci95", "antiresonance_hz", "resonance_hz",
         "clock", "quality", "options"}
@@ -111,16 +111,27 @@ def test_bad_band_is_one_line_exit_2(session_10s: Path, capsys: pytest.CaptureFi
     assert run.err.strip() == f"acq: error: {message.format(name=session_10s.name)}"
 
 
-def test_record_then_too_short_session_fails_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    # shorter than the identification needs: refused before anything is recorded
-    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.5", "--fast", "--out", str(tmp_path))
-    assert run.code == 2 and not list(tmp_path.glob("*.h5"))
-    assert run.err.strip() == ("acq: error: --duration 0.5: the identification needs at least 0.75 s of both streams (two "
-                               "0.5 s Welch segments); record longer, or add --no-analyze")
-    # long enough on paper, but the streams overlap less: the recording stands, the exit code says no result came
-    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.76", "--fast", "--out", str(tmp_path))
-    assert run.code == 1, "a complete recording whose identification could not run"
-    assert "acq: analysis:" in run.err and "the FRF needs at least 0.750 s" in run.err
+def test_record_refuses_a_duration_the_identification_cannot_use_and_the_one_it_names_works(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The pre-check counts what the analysis trims: --duration 0.8 passed the old check (0.75 s), recorded, then
+    failed with `signals last 0.709 s; the FRF needs at least 0.750 s` (exit 1)."""
+    need = ("the identification needs --duration 0.85 s or more (two 0.5 s Welch segments = 0.75 s, the streams' start "
+            "offset 0.037 s ([sim] daq_offset_s) and 0.055 s the analysis trims at the ends); record longer, or add "
+            "--no-analyze")
+    for duration in ("0.5", "0.8"):  # refused before anything is recorded
+        run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", duration, "--fast", "--out",
+                      str(tmp_path))
+        assert (run.code, run.err) == (2, f"acq: error: --duration {duration}: {need}\n")
+    assert not list(tmp_path.glob("*.h5"))
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.85", "--fast", "--out",
+                  str(tmp_path / "named"))
+    assert run.code == 0 and "acq:" not in run.err, run.err  # the duration named is enough: identified
+    (result,) = (tmp_path / "named").glob("*.result.json")
+    assert abs(json.loads(result.read_text())["K_Nm_per_rad"] / 891.0 - 1) < 0.1
+    # recorded without the identification, a session too short for it is refused by acq analyze in one line
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.76", "--fast", "--no-analyze",
+                  "--out", str(tmp_path))
+    assert run.code == 0
     (path,) = tmp_path.glob("*.h5")
     again = run_cli(capsys, "analyze", str(path))
     assert again.code == 2
@@ -268,3 +279,41 @@ def test_help_and_a_mistyped_path_load_no_numerical_library() -> None:
     missing = subprocess.run([sys.executable, "-c", probe, "analyze", "missing.h5"], capture_output=True, text=True,
                              timeout=60)
     assert missing.stderr.splitlines() == ["acq: error: missing.h5: no such session file", "loaded: [] exit: 2"]
+
+
+def test_a_read_only_session_folder_shows_the_result_fails_the_write_and_result_dir_writes_elsewhere(
+        session_10s: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """It said only `read-only file system: ro/s.result.json`, exit 1, no numbers."""
+    archive = tmp_path / "archive"
+    archive.mkdir()
+    for name in ("a.h5", "b.h5"):
+        (archive / name).write_bytes(session_10s.read_bytes())
+    with read_only_view(archive) as ro:
+        not_saved = f"acq: error: read-only file system: {ro}/a.result.json — the result above is not saved " \
+                    "(--result-dir DIR writes it elsewhere)\n"
+        table = run_cli(capsys, "analyze", str(ro / "a.h5"), "--no-report")
+        assert (table.code, table.err) == (1, not_saved)
+        as_json = run_cli(capsys, "analyze", str(ro / "a.h5"), "--no-report", "--json")
+        assert (as_json.code, as_json.err) == (1, not_saved)
+        doc = json.loads(as_json.out)
+        assert abs(doc["K_Nm_per_rad"] / 891.0 - 1) < 0.02
+        assert f"{doc['K_Nm_per_rad']:.1f}" in table.out.split("K [N·m/rad]")[1].split("\n")[0]  # the same numbers
+        elsewhere = tmp_path / "results"
+        saved = run_cli(capsys, "analyze", str(ro / "a.h5"), "--no-report", "--json", "--result-dir", str(elsewhere))
+        assert saved.code == 0, saved.err
+        assert json.loads((elsewhere / "a.result.json").read_text())["K_Nm_per_rad"] == doc["K_Nm_per_rad"]
+        assert (elsewhere / "catalogue.sqlite").exists()  # the default catalogue goes with the results
+        # a batch of the read-only archive, its catalogue elsewhere: every result fails to be written …
+        catalogue = tmp_path / "cat.sqlite"
+        batch = run_cli(capsys, "analyze", str(ro), "--catalogue", str(catalogue), "--no-report", "--jobs", "1",
+                        "--json")
+        assert batch.code == 1
+        assert [(d["outcome"], d["error"]) for d in json.loads(batch.out)] == [
+            ("failed", f"read-only file system: {ro}/{n}.result.json") for n in ("a", "b")]
+        # … and with --result-dir it works
+        batch = run_cli(capsys, "analyze", str(ro), "--catalogue", str(catalogue), "--no-report", "--jobs", "1",
+                        "--json", "--result-dir", str(tmp_path / "batch_results"))
+        assert batch.code == 0, batch.err
+        assert [d["outcome"] for d in json.loads(batch.out)] == ["analysed", "analysed"]
+        assert sorted(p.name for p in (tmp_path / "batch_results").iterdir()) == ["a.result.json", "b.result.json"]
+        assert sorted(p.name for p in ro.iterdir()) == ["a.h5", "b.h5"]

@@ -43,6 +43,14 @@ def test_shipped_configs_validate() -> None:
          "[daq] driver = \"labview\": unknown driver (expected one of 'sim', 'nidaqmx')"),
         ("counts_per_rev = 131072", "counts_per_rev = 131072.5",
          "[encoder] counts_per_rev = 131072.5: must be a valid integer"),
+        # a phase twice: HDF5 failed at the start ("Unable to synchronously create dataset (name already exists)")
+        ('channels = ["i_a"]', 'channels = ["i_a", "i_a"]',
+         '[daq] channels = ["i_a", "i_a"]: i_a is listed twice (each phase is one channel)'),
+        ('channels = ["i_a"]', 'channels = ["i_a", "i_b", "i_b"]',
+         '[daq] channels = ["i_a", "i_b", "i_b"]: i_b is listed twice (each phase is one channel)'),
+        # a validator's words without pydantic's "value error, " before them
+        ('joint = "joint1"', 'joint = "a b"', "joint = \"a b\": may hold only letters, digits, '-', '_' and '.' "
+                                              "(not ' ')"),
         # rules between the bench and the analysis: refused before a sample is recorded
         ("rate_hz = 25600", "rate_hz = 25.6",  # a kHz/Hz mix-up
          "[daq] rate_hz = 25.6: must be above 1200 Hz for [drive] period_s = 0.001 (the current is filtered up to "

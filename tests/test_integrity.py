@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import re
 import shutil
 import subprocess
 import time
@@ -15,7 +16,7 @@ import pytest
 
 import acq.recording.session
 from acq.recording.session import load
-from tests.helpers import record_session_in_subprocess, run_cli
+from tests.helpers import read_only_view, record_session_in_subprocess, run_cli
 
 RATE_HZ = 25600
 
@@ -207,3 +208,31 @@ def test_atomic_write_on_a_full_disk_names_the_file_and_leaves_no_temp(tmp_path:
             write_text_atomically(disk / "x.result.json", "x" * (2 << 20))
         assert str(e.value) == f"disk full: {disk / 'x.result.json'}"
         assert list(disk.iterdir()) == []
+
+
+def test_every_output_to_a_read_only_folder_is_a_failed_write_exit_1_named_by_the_users_path(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """README: exit 1 is a failed write. Before: record --out exit 1, --out ro/sub exit 2, export exit 1, import -o
+    exit 2 with `[Errno 30] Read-only file system: 'rofs/.i.h5.importing'` (a temp name)."""
+    session = record_session_in_subprocess(tmp_path / "s", 3.0)
+    pair = tmp_path / "pair"
+    assert run_cli(capsys, "export", str(session), "--csv", str(pair)).code == 0
+    folder = tmp_path / "archive"
+    folder.mkdir()
+    with read_only_view(folder) as ro:
+        record = ("record", "--profile", "triangle_0.2s", "--fast", "--duration", "1", "--no-analyze", "--out")
+        run = run_cli(capsys, *record, str(ro))
+        assert run.code == 1 and re.fullmatch(rf"acq: error: read-only file system: {re.escape(str(ro))}/"
+                                              r"[0-9T:-]+_joint1\.h5\n", run.err), run.err
+        cases = {
+            (*record, str(ro / "sub")): ro / "sub",
+            ("export", str(session), "--csv", str(ro)): ro / f"{session.stem}.current.csv",
+            ("export", str(session), "--csv", str(ro / "sub")): ro / "sub",
+            ("import", "--current", str(pair / f"{session.stem}.current.csv"), "--encoder",
+             str(pair / f"{session.stem}.encoder.csv"), "--profile", "triangle_0.2s", "-o", str(ro / "i.h5")):
+                ro / "i.h5",
+        }
+        for args, named in cases.items():
+            run = run_cli(capsys, *args)
+            assert (run.code, run.err) == (1, f"acq: error: read-only file system: {named}\n"), args
+        assert list(ro.iterdir()) == []

@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import signal
 import sqlite3
+import subprocess
+import sys
+import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -205,6 +211,25 @@ def test_disk_budget_frees_the_oldest_unprotected_windows_or_refuses(tmp_path: P
     assert not fits  # even without 1, 2, 3 the protected window 0 leaves no room
 
 
+def test_a_disk_budget_that_cannot_hold_one_window_is_refused_before_anything_is_captured(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """It ran on, capturing nothing ("not captured: the disk budget would be exceeded" every window), exit 0."""
+    from acq.monitoring.monitor import Monitor, MonitorSettings
+
+    out = tmp_path / "monitor"
+    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--fast", "--for", "1m", "--max-disk", "1MB",
+                  "--out", str(out))
+    assert (run.code, run.err) == (2, "acq: error: --max-disk 1 MB: one --window of 10 s needs 3.9 MB (current "
+                                      "25600 Hz × 1 channel(s), encoder 1000 Hz, with the files' overhead) — raise "
+                                      "--max-disk or shorten --window\n")
+    assert not out.exists() or not list(out.glob("*.h5"))
+    # the size named is the one the capture loop asks room for: 3.9 MB is enough, a byte less of 3.872 MB is not
+    settings = MonitorSettings(bench=_bench(), out_dir=out, window_s=10.0, every_s=60.0, max_disk_bytes=3_900_000)
+    with pytest.raises(ConfigError, match="needs 3.9 MB"):
+        Monitor(replace(settings, max_disk_bytes=3_871_999))
+    Monitor(replace(settings, max_disk_bytes=3_872_000))
+
+
 def test_sizes_parse_and_a_bad_one_is_named() -> None:
     assert parse_size("2GB") == 2_000_000_000 and parse_size("1.5MiB") == 1_572_864
     with pytest.raises(ValueError, match="'2 parsecs' is not a size"):
@@ -222,13 +247,44 @@ def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Pa
             monitor.request_stop("interrupted by user (Ctrl-C)")
 
     monitor = Monitor(settings, on_status=stop_after_first)
-    assert monitor.run() == 0
+    assert monitor.run() == 130 and monitor.stopped_by == "interrupted by user (Ctrl-C)"
     rows = _rows(tmp_path)
     assert [r["window"] for r in rows] == [0]  # analysed before ending; no second window captured
     assert monitor.status.message == "stopped: interrupted by user (Ctrl-C)"
     # one good window of the two the baseline needs: its K is shown while the baseline is learned
     assert rows[0]["verdict"] == "ok" and monitor.status.state == "learning baseline"
     assert monitor.status.last_K == rows[0]["K_Nm_per_rad"] and monitor.status.change_pct is None
+
+
+def test_ctrl_c_ends_the_monitor_with_exit_130_and_one_line_of_what_it_kept(tmp_path: Path) -> None:
+    """README's exit codes: 130 interrupted (the monitor exited 0); the windows catalogued stay, a restart resumes."""
+    out = tmp_path / "monitor"
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "monitor", "--bench", str(ROBOT), "--fast", "--window", "2",
+                             "--every", "5", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, start_new_session=True)
+    deadline = time.monotonic() + 120
+    while proc.poll() is None and time.monotonic() < deadline and not (
+            (out / "catalogue.sqlite").exists() and _rows_or_none(out)):
+        time.sleep(0.1)
+    assert proc.poll() is None, proc.communicate()
+    os.killpg(proc.pid, signal.SIGINT)  # the terminal's Ctrl-C: to the monitor and its analysis workers
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "Error" not in err, err
+    verdicts = [r["verdict"] for r in _rows(out)]
+    captured = sum(v != "interrupted" for v in verdicts)
+    analysed = sum(v not in ("interrupted", "not analysed") for v in verdicts)
+    assert captured >= 1
+    assert err.splitlines()[-1] == (f"acq: interrupted by user (Ctrl-C): {captured} windows captured, {analysed} "
+                                    f"analysed, all kept in {out / 'catalogue.sqlite'} (trend state: learning "
+                                    "baseline); the same command resumes")
+
+
+def _rows_or_none(folder: Path) -> list[dict[str, object]] | None:
+    try:
+        return _rows(folder)
+    except sqlite3.OperationalError:  # the catalogue's tables not made yet
+        return None
 
 
 def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None:

@@ -98,10 +98,10 @@ def record_outcome(done: SessionResult, request: AnalysisRequest, catalogue_path
                    seconds: float) -> Path | str:
     """Put one session's analysis (done outside a batch) into its catalogue; return the catalogue's path.
 
-    The catalogue is ``catalogue_path`` or ``catalogue.sqlite`` in the session's folder, so a later
-    ``acq analyze FOLDER`` finds the session current and ``acq trend`` sees it at once.
+    The catalogue is ``catalogue_path`` or ``catalogue.sqlite`` in the folder of the result (the session's, or
+    ``--result-dir``), so a later ``acq analyze FOLDER`` finds the session current and ``acq trend`` sees it at once.
     """
-    path = catalogue_path or done.session.path.parent / CATALOGUE_NAME
+    path = catalogue_path or done.json_path.parent / CATALOGUE_NAME
     with Catalogue(path) as catalogue:
         catalogue.record(succeeded(str(done.session.path), done, request, seconds))
     return path
@@ -130,7 +130,7 @@ def quiet_numerics() -> Iterator[None]:
 
 
 def analyze_one(path: str, sha256: str, request: AnalysisRequest, draw_report: DrawReport | None = None, *,
-                write: bool = True) -> Outcome:
+                write: bool = True, result_dir: Path | None = None) -> Outcome:
     """Analyse one session (runs in a worker process or on a Dask worker); never raises.
 
     Parameters
@@ -145,11 +145,13 @@ def analyze_one(path: str, sha256: str, request: AnalysisRequest, draw_report: D
         Draws ``<session>.report.png`` once the result is written (None: no report).
     write : bool, optional
         Write ``<session>.result.json`` (False: the caller writes the document it makes of the outcome).
+    result_dir : Path, optional
+        Where the result and report go (None: beside the session).
     """
     start = time.perf_counter()
     try:
         with quiet_numerics():
-            done = analyze_session(path, request, write=write, report=draw_report is not None)
+            done = analyze_session(path, request, write=write, report=draw_report is not None, result_dir=result_dir)
     except Exception as e:  # noqa: BLE001 — a batch records any session's failure and goes on
         error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
         return Outcome(path, sha256, request.key(), _meta_if_readable(path), None, error,
@@ -171,18 +173,39 @@ def _start_forkserver_without_cwd() -> None:
     folder first on sys.path, so a folder named ``acq``, ``analysis`` or ``drivers`` where the user stands would be
     imported by every worker in place of ours (they then die: BrokenProcessPool). The server and its workers keep
     the variable (they run no program of the user's); acq's own process has it only while the server starts, so
-    the commands it runs later (``--on-alarm``) see the user's environment."""
+    the commands it runs later (``--on-alarm``) see the user's environment.
+
+    The server (and the resource tracker it starts) begin with SIGINT ignored, which they and every worker forked
+    from them keep: a Ctrl-C at the terminal reaches the whole process group, and only acq's own process stops the
+    workers (a worker or the server's preload stopped mid-import printed tracebacks, Qt a fatal error)."""
     from multiprocessing import forkserver
 
     before = os.environ.get("PYTHONSAFEPATH")
     os.environ["PYTHONSAFEPATH"] = "1"
     try:
-        forkserver.ensure_running()
+        with _sigint_ignored_by_children():
+            forkserver.ensure_running()
     finally:
         if before is None:
             del os.environ["PYTHONSAFEPATH"]
         else:
             os.environ["PYTHONSAFEPATH"] = before
+
+
+@contextmanager
+def _sigint_ignored_by_children() -> Iterator[None]:
+    """Processes started inside the block begin with SIGINT ignored (the disposition survives exec; Python then
+    installs no KeyboardInterrupt handler). A Ctrl-C meanwhile is held (blocked) and reaches this process after it."""
+    if threading.current_thread() is not threading.main_thread():
+        yield  # signal handlers can only change in the main thread (acq starts its pools there)
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 @contextmanager
@@ -225,7 +248,7 @@ STOP_GRACE_S = 0.5
 
 def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequest, *, jobs: int | None = None,
               scheduler: str | None = None, draw_report: DrawReport | None = None,
-              on_progress: OnProgress | None = None) -> BatchReport:
+              on_progress: OnProgress | None = None, result_dir: Path | None = None) -> BatchReport:
     """Analyse the sessions not yet current in ``catalogue``, recording each outcome as it arrives.
 
     Parameters
@@ -245,9 +268,12 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequ
         Draws each session's report PNG in its worker (None: no reports).
     on_progress : callable, optional
         Told (done, to analyse, failed) when the analyses start and as each outcome is recorded.
+    result_dir : Path, optional
+        Where the results and reports go (None: beside each session).
 
-    Ctrl-C cancels the queued analyses, stops the running ones (a result file a stopped worker wrote without its
-    catalogue row is removed), records every outcome received and returns with ``interrupted`` set.
+    Ctrl-C (the workers ignore it) cancels the queued analyses, stops the running ones (a result file a stopped
+    worker wrote without its catalogue row is removed), records every outcome received and returns with
+    ``interrupted`` set; a Ctrl-C while the files are hashed, before any analysis, raises KeyboardInterrupt.
     """
     start = time.perf_counter()
     started_at = time.time()
@@ -257,23 +283,29 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequ
     todo = [p for p in paths if hashes[p] not in current and p not in not_ready]
     outcomes: list[Outcome] = []
     interrupted = False
-    if todo:
-        with analysis_executor(jobs or os.cpu_count() or 1, scheduler) as executor:
-            futures: dict[Future[Outcome], Path] = {
-                executor.submit(analyze_one, str(p.resolve()), hashes[p], request, draw_report): p for p in todo}
-            tell = on_progress or (lambda done, total, failed: None)
-            tell(0, len(todo), 0)
-            try:
-                for future in as_completed(futures):
-                    outcome = _outcome(future, futures[future], hashes, request)
-                    catalogue.record(outcome)
-                    outcomes.append(outcome)
-                    tell(len(outcomes), len(todo), sum(o.error is not None for o in outcomes))
-            except KeyboardInterrupt:
-                interrupted = True
-                with _signals_ignored():
-                    _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at)
-                raise
+    try:
+        if todo:
+            with analysis_executor(jobs or os.cpu_count() or 1, scheduler) as executor:
+                futures: dict[Future[Outcome], Path] = {}
+                try:
+                    with _sigint_deferred():  # a submit starts a worker: one cut short would outlive the pool
+                        for p in todo:
+                            futures[executor.submit(analyze_one, str(p.resolve()), hashes[p], request,
+                                                    draw_report, result_dir=result_dir)] = p
+                    tell = on_progress or (lambda done, total, failed: None)
+                    tell(0, len(todo), 0)
+                    for future in as_completed(futures):
+                        outcome = _outcome(future, futures[future], hashes, request)
+                        catalogue.record(outcome)
+                        outcomes.append(outcome)
+                        tell(len(outcomes), len(todo), sum(o.error is not None for o in outcomes))
+                except KeyboardInterrupt:
+                    with _signals_ignored():
+                        _stop_workers(executor, futures, outcomes, catalogue, hashes, request, started_at,
+                                      result_dir)
+                    raise
+    except KeyboardInterrupt:  # the pool is shut down and every outcome received is recorded
+        interrupted = True
     return BatchReport(outcomes, [p for p in paths if p not in todo and p not in not_ready],
                        time.perf_counter() - start, not_ready, interrupted)
 
@@ -298,12 +330,33 @@ def _signals_ignored() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
 
 
+@contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """A Ctrl-C inside the block is raised (KeyboardInterrupt) when the block has run to its end."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if caught:
+        raise KeyboardInterrupt
+
+
 def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outcomes: list[Outcome],
-                  catalogue: Catalogue, hashes: dict[Path, str], request: AnalysisRequest, started_at: float) -> None:
+                  catalogue: Catalogue, hashes: dict[Path, str], request: AnalysisRequest, started_at: float,
+                  result_dir: Path | None) -> None:
     """Cancel what is queued, give what runs :data:`STOP_GRACE_S` to finish, kill the rest, record what finished;
     no result file (nor a temp file) is left without its catalogue row."""
-    for future in futures:
-        future.cancel()
+    pool = executor if isinstance(executor, ProcessPoolExecutor) else None
+    if pool is None:
+        for future in futures:
+            future.cancel()
+    # a local pool's queued analyses are cancelled by its shutdown below, in the pool's own thread: a future cancelled
+    # here would make that thread fail on it when the workers are killed (Python 3.11: InvalidStateError: CANCELLED)
     processes = list(getattr(executor, "_processes", None) or {})  # the local pool's worker pids (Dask: none)
     recorded = {o.path for o in outcomes}
     deadline = time.monotonic() + STOP_GRACE_S
@@ -321,10 +374,12 @@ def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outc
     for pid in processes:
         with contextlib.suppress(OSError):
             os.kill(pid, signal.SIGKILL)
+    if pool is not None:
+        pool.shutdown(wait=True, cancel_futures=True)  # the killed workers reaped: none writes after this
     for path in futures.values():  # a worker killed after writing its result but before the row: remove it
         if str(path.resolve()) in recorded:
             continue
-        for output in output_paths(path, request):
+        for output in output_paths(path, request, result_dir):
             remove_temp_files(output)
             with contextlib.suppress(OSError):
                 if output.stat().st_mtime >= started_at:

@@ -19,6 +19,7 @@ does not sleep, and waits for the analysis instead of skipping (no real time pas
 from __future__ import annotations
 
 import fcntl
+import math
 import os
 import shlex
 import subprocess
@@ -38,7 +39,7 @@ from acq.monitoring.window_judge import analyse_window, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
 from acq.recording.session import load, repair
-from acqcore.errors import ConfigError
+from acqcore.errors import EXIT_INTERRUPTED, ConfigError
 from analysis import AnalysisRequest
 from drivers.config import Bench
 from drivers.registry import open_bench
@@ -135,6 +136,17 @@ class Monitor:
         self._alarm_procs: list[subprocess.Popen[bytes]] = []
         self._in_alarm = False
         self._size = expected_window_bytes(settings.bench, settings.window_s)
+        if settings.max_disk_bytes is not None and settings.max_disk_bytes < self._size:  # no window would be captured
+            daq, drive = settings.bench.daq, settings.bench.drive
+            raise ConfigError(f"--max-disk {settings.max_disk_bytes / 1e6:g} MB: one --window of {settings.window_s:g} s "
+                              f"needs {math.ceil(self._size / 1e5) / 10:g} MB (current {daq.rate_hz:g} Hz × "
+                              f"{len(daq.channels)} channel(s), encoder {1 / drive.period_s:g} Hz, with the files' "
+                              "overhead) — raise --max-disk or shorten --window")
+
+    @property
+    def stopped_by(self) -> str | None:
+        """Why the monitor was stopped before its ``for_s`` (Ctrl-C, SIGTERM, a stop request); None if it was not."""
+        return self._stop
 
     def request_stop(self, reason: str) -> None:
         """End after the window being captured (which ends as interrupted) and the analyses under way."""
@@ -144,7 +156,10 @@ class Monitor:
 
     # ---- the loop ------------------------------------------------------------------------------------
     def run(self) -> int:
-        """Monitor until ``for_s`` has passed or a stop is requested; always leaves the catalogue consistent."""
+        """Monitor until ``for_s`` has passed or a stop is requested; always leaves the catalogue consistent.
+
+        Returns 130 when stopped (:attr:`stopped_by`: Ctrl-C, SIGTERM, a stop request), else 3 when the last
+        state is alarm, else 0."""
         with _folder_lock(self.s.out_dir), Catalogue(self.s.out_dir / CATALOGUE_NAME) as catalogue, \
                 analysis_executor(self.s.jobs, None) as pool, self._signals():
             self.catalogue = catalogue
@@ -163,6 +178,8 @@ class Monitor:
             self.status.state = "alarm" if self._in_alarm else self.status.state
             self.status.message = f"stopped: {self._stop}" if self._stop else "done"
             self._show()
+        if self._stop is not None:
+            return EXIT_INTERRUPTED
         return 3 if self._in_alarm else 0
 
     def _window(self, n: int, pool: Any) -> None:

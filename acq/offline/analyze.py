@@ -16,7 +16,7 @@ from typing import Any
 
 from acq import __version__
 from acq.recording.session import Session, load, utc_now_iso
-from acq.recording.storage import free_bytes, write_text_atomically
+from acq.recording.storage import free_bytes, storage_error, write_text_atomically
 from analysis import AnalysisRequest, Recording, Result, TwoMassParams, analyze, code_fingerprint
 from acqcore.errors import ConfigError, StorageError
 
@@ -33,6 +33,15 @@ class SessionResult:
     json_dict: dict[str, Any]
     json_path: Path
     report_path: Path | None
+
+
+class ResultNotWritten(StorageError):
+    """The identification ran but its ``.result.json`` could not be written (read-only folder, disk full): a failure
+    named by the file, with the result in ``done`` (no report path) so the caller can still show the numbers."""
+
+    def __init__(self, message: str, done: SessionResult) -> None:
+        super().__init__(message)
+        self.done = done
 
 
 def recording_from_session(session: Session) -> Recording:
@@ -114,15 +123,15 @@ def result_json(session: Session, result: Result) -> dict[str, Any]:
 
 
 def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest(), *, write: bool = True,
-                    report: bool = True) -> SessionResult:
+                    report: bool = True, result_dir: Path | None = None) -> SessionResult:
     """Identify the joint of one session as ``request`` asks (with the bench's nominal plant unless it names one);
-    write ``<session>.result.json`` (:func:`output_paths`).
+    write ``<session>.result.json`` (:func:`output_paths`: beside the session, or in ``result_dir``).
 
     The report PNG is not drawn here: with ``report`` its path is set, and :func:`acq.ui.report_png.draw_report`
     draws it once the result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
     :class:`ConfigError` naming the session; so does a session still ``recording`` or damaged unless ``request.partial``
     (then its intact part is analysed and the result says ``"partial": true``). A failed write raises
-    :class:`StorageError` naming the file, leaving no temp file.
+    :class:`ResultNotWritten` naming the file (and holding the result), leaving no temp file.
     """
     session = load(path)
     session.require_usable(partial=request.partial)
@@ -139,25 +148,31 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     doc = result_json(session, result)
     doc["partial"] = bool(session.damage) or session.status == "recording"
     doc["session"]["damage"] = list(session.damage)
-    json_path, png_path = output_paths(session.path, request)
+    json_path, png_path = output_paths(session.path, request, result_dir)
     report_path = png_path if report and write else None
     if write:
-        if report_path is not None and free_bytes(report_path.parent) < REPORT_ROOM_BYTES:
-            # before anything is written (no result without its report) and before Qt's PNG writer, whose libpng
-            # prints its own line on stderr when the disk fills under it
-            raise StorageError(f"disk full: {report_path}")
-        write_json(doc, json_path)
+        try:
+            if report_path is not None and free_bytes(report_path.parent) < REPORT_ROOM_BYTES:
+                # before anything is written (no result without its report) and before Qt's PNG writer, whose libpng
+                # prints its own line on stderr when the disk fills under it
+                raise StorageError(f"disk full: {report_path}")
+            write_json(doc, json_path)
+        except (StorageError, OSError) as e:
+            message = str(e) if isinstance(e, StorageError) else str(storage_error(e, json_path))
+            raise ResultNotWritten(message, SessionResult(session, result, doc, json_path, None)) from None
         if report_path is None:  # no picture of this result: one of an earlier result would be taken for it
             png_path.unlink(missing_ok=True)
     return SessionResult(session, result, doc, json_path, report_path)
 
 
-def output_paths(session_path: Path, request: AnalysisRequest) -> tuple[Path, Path]:
+def output_paths(session_path: Path, request: AnalysisRequest, result_dir: Path | None = None) -> tuple[Path, Path]:
     """The result document and report PNG of ``request`` on a session: ``<session>.result.json`` and
-    ``<session>.report.png``; the paper's chain (a comparison, not the session's result) writes
-    ``<session>.paper.result.json`` and ``<session>.paper.report.png`` beside them instead of replacing them."""
+    ``<session>.report.png`` beside the session, or in ``result_dir`` (``--result-dir``: a read-only archive); the
+    paper's chain (a comparison, not the session's result) writes ``<session>.paper.result.json`` and
+    ``<session>.paper.report.png`` beside them instead of replacing them."""
     stem = session_path.stem + (".paper" if request.pipeline == "paper" else "")
-    return session_path.with_name(stem + ".result.json"), session_path.with_name(stem + ".report.png")
+    folder = session_path.parent if result_dir is None else result_dir
+    return folder / (stem + ".result.json"), folder / (stem + ".report.png")
 
 
 def write_json(doc: dict[str, Any], path: Path) -> None:

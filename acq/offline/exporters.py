@@ -29,7 +29,7 @@ import numpy as np
 from acq.offline.analyze import sha256_of
 from acq.offline.export_metadata import metadata_path, metadata_text
 from acq.recording.session import Session, load
-from acq.recording.storage import atomic_path, write_text_synced
+from acq.recording.storage import WRITE_FAILURES, atomic_path, storage_error, write_text_synced
 from acqcore.errors import ConfigError
 
 PHASE_COLUMNS = ("i_a", "i_b", "i_c")
@@ -90,7 +90,12 @@ def export_csv(session_path: Path, out_dir: Path, *, force: bool = False,
     existing = [path for path in targets if path.exists()]
     if existing and not force:
         raise ConfigError(f"{existing[0]}: exists (not overwritten; --force replaces it)")
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        if e.errno in WRITE_FAILURES:  # read-only, full, no permission: a failed write named by the folder asked for
+            raise storage_error(e, out_dir) from None
+        raise ConfigError(f"--csv {out_dir}: {e.strerror or e}") from None
     cur, enc = session.current, session.encoder
     with ExitStack() as stack:  # every temp file removed on an error; all three renamed at the end
         tmp_current, tmp_encoder, tmp_meta = (stack.enter_context(atomic_path(path)) for path in targets)

@@ -15,6 +15,7 @@ the current is shifted to start with the encoder. Every choice is written into t
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -214,8 +215,8 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
                                  n.detail) for n in notes), key=lambda e: e.host_ns)  # file times onto the host timeline
     cpr = getattr(bench.drive, "counts_per_rev", None) or bench.encoder.counts_per_rev
     tmp = out.with_name(f".{out.name}.importing")
-    tmp.unlink(missing_ok=True)
     try:
+        tmp.unlink(missing_ok=True)  # an earlier import's, killed (on a read-only disk this fails: a failed write)
         writer = SessionWriter(
             tmp, bench=bench, profile=profile,
             current_info=CurrentSourceInfo(cur.rate_hz, tuple(cur.phases_a), f"imported: {current_path.name}"),
@@ -237,6 +238,7 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
     except OSError as e:
         raise storage_error(e, out) from None
     finally:
-        tmp.unlink(missing_ok=True)
+        with contextlib.suppress(OSError):  # nothing to remove where nothing could be written
+            tmp.unlink(missing_ok=True)
     return ImportResult(out, [*([meta_warning] if meta_warning else []), *(n.detail for n in notes
                                                                            if n.kind == "warning")])

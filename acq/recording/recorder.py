@@ -28,6 +28,7 @@ from acq.recording.session import SessionExists, SessionWriter, Status, new_sess
 from drivers.base import (CurrentBlock, CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock,
                           StreamEvent)
 from drivers.config import Bench, Profile
+from acq.recording.storage import WRITE_FAILURES, storage_error
 from acqcore.errors import AcqError, ConfigError, DeviceError
 
 FLUSH_INTERVAL_S = 0.5
@@ -325,6 +326,8 @@ class Recorder:
             return self._writer
         except OSError as e:
             self._release_devices()
+            if e.errno in WRITE_FAILURES:  # the folder could not be made or written (read-only, full): a failed write
+                raise storage_error(e, self.out_dir) from None
             raise ConfigError(f"{self.out_dir}: cannot write a session there ({e.strerror or e})") from None
         except BaseException:
             self._release_devices()

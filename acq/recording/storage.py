@@ -29,6 +29,10 @@ _CAUSES = {
 }
 
 
+#: errnos of a write the storage refused (read-only, full, I/O, no permission): a failed write (exit 1), not bad input.
+WRITE_FAILURES = frozenset(_CAUSES) - {errno.ENOENT}
+
+
 def cause_of(e: BaseException) -> str:
     """A short cause for an OS error ("disk full", "I/O error", …), else its first line."""
     code = getattr(e, "errno", None)

@@ -7,14 +7,16 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+import click
 from rich.console import Console
 from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn,
                            TimeRemainingColumn)
 
-from acq.monitoring.batch import CATALOGUE_NAME, OnProgress, find_sessions, report_json, run_batch
+from acq.monitoring.batch import CATALOGUE_NAME, BatchReport, OnProgress, find_sessions, report_json, run_batch
 from acq.monitoring.catalogue import Catalogue
 from acq.ui.display import batch_table
 from acq.ui.report_png import draw_report
+from acqcore.errors import EXIT_INTERRUPTED, ConfigError
 from analysis import AnalysisRequest
 
 
@@ -35,21 +37,65 @@ def batch_progress(console: Console | None = None) -> Iterator[OnProgress]:
 
     try:
         yield update
+    except KeyboardInterrupt:
+        if tasks:  # stopped: the bar goes (Progress.stop would leave it, or an empty line), the caller's line says
+            progress.live.transient = True  # what was done
+            progress.live.stop()
+            tasks.clear()
+        raise
     finally:
         if tasks:
             progress.stop()
 
 
 def analyze_many(spec: Path, request: AnalysisRequest, *, jobs: int | None, catalogue_path: Path | str | None,
-                 scheduler: str | None, report: bool, as_json: bool, out: Console) -> int:
-    """``acq analyze FOLDER|GLOB``: the batch, its table (or JSON) on ``out``; 1 when a session failed, else 0."""
+                 scheduler: str | None, report: bool, as_json: bool, out: Console, result_dir: Path | None = None) -> int:
+    """``acq analyze FOLDER|GLOB``: the batch, its table (or JSON) on ``out``; 1 when a session failed, else 0; 130
+    when Ctrl-C stopped it (one line on stderr says how far it got). With ``result_dir`` the results, reports and the
+    default catalogue go there (the sessions' folders may be read-only)."""
     paths, base = find_sessions(spec)
-    with Catalogue(catalogue_path or base / CATALOGUE_NAME) as catalogue, batch_progress() as on_progress:
-        done = run_batch(paths, catalogue, request, jobs=jobs, scheduler=scheduler,
-                         draw_report=draw_report if report else None, on_progress=on_progress)
+    if result_dir is not None:
+        _one_result_name_each(paths, result_dir)
+    done: BatchReport | None = None
+    with Catalogue(catalogue_path or (result_dir or base) / CATALOGUE_NAME) as catalogue:
+        try:
+            with batch_progress() as on_progress:
+                done = run_batch(paths, catalogue, request, jobs=jobs, scheduler=scheduler,
+                                 draw_report=draw_report if report else None, on_progress=on_progress,
+                                 result_dir=result_dir)
+                if done.interrupted:
+                    raise KeyboardInterrupt
+        except KeyboardInterrupt:
+            click.echo(interrupted_line(paths, done, catalogue.path), err=True)
+            return EXIT_INTERRUPTED
     if as_json:
         out.print_json(json.dumps(report_json(done)))
     else:
         out.print(batch_table(done))
         out.print(f"catalogue: {catalogue.path}")
     return 1 if done.failed else 0
+
+
+def _one_result_name_each(paths: list[Path], result_dir: Path) -> None:
+    """Refuse a batch whose sessions (from several folders) share a file name: their results would overwrite each
+    other in ``result_dir``."""
+    seen: dict[str, Path] = {}
+    for p in paths:
+        if p.name in seen:
+            raise ConfigError(f"--result-dir {result_dir}: {seen[p.name]} and {p} have the same name, so their "
+                              "results would overwrite each other; analyse them into separate folders")
+        seen[p.name] = p
+
+
+def interrupted_line(paths: list[Path], done: BatchReport | None, catalogue: Path | str) -> str:
+    """The one line of a batch stopped by Ctrl-C: how many sessions stand analysed in the catalogue and that the same
+    command goes on (a session analysed with the same options is skipped). ``done`` is None when the batch stopped
+    before comparing the sessions with the catalogue."""
+    if done is None:
+        return (f"acq: interrupted before any analysis started ({len(paths)} sessions found); run the same command "
+                "again to analyse them")
+    analysed = len(done.skipped) + sum(o.error is None for o in done.outcomes)
+    failed = f", {len(done.failed)} failed" if done.failed else ""
+    return (f"acq: interrupted: {analysed} of {len(paths)} sessions analysed ({len(done.outcomes) - len(done.failed)} "
+            f"by this run{failed}), in {catalogue}; run the same command again to analyse the other "
+            f"{len(paths) - analysed}")

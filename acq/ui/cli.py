@@ -26,7 +26,7 @@ from acq import __version__
 from acq.recording.paths import is_batch, require_session_file
 from acq.recording.tags import parse_tags
 from acq.ui.options import CatalogueLocation, tag_option
-from acqcore.errors import AcqError, ConfigError
+from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError, StorageError
 
 if TYPE_CHECKING:
     from analysis import AnalysisRequest
@@ -38,7 +38,6 @@ if TYPE_CHECKING:
 # numpy, scipy, h5py, pydantic and Qt are imported inside the commands that use them: `acq --help`, a command's
 # --help and a mistyped path print at once (1.1 s of imports before; bench/cli_start.py measures it)
 
-EXIT_INTERRUPTED = 130
 out = Console()
 err = Console(stderr=True)
 
@@ -69,8 +68,19 @@ LAZY_COMMANDS: dict[str, tuple[str, str, str]] = {
 }
 
 
+class _Interrupted(BaseException):
+    """A Ctrl-C inside a command, carried past click (whose own handling writes an empty line before its Abort):
+    acq says ``acq: interrupted`` in one line."""
+
+
 class LazyGroup(click.Group):
     """A group whose :data:`LAZY_COMMANDS` load on first use (click's documented "lazy loading" pattern)."""
+
+    def invoke(self, ctx: click.Context) -> object:
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            raise _Interrupted from None
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted([*super().list_commands(ctx), *LAZY_COMMANDS])
@@ -145,13 +155,14 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
         raise ConfigError(f"--out {out_dir}: is a file, not a folder")
     duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
     if not no_analyze:
-        from analysis import AnalysisRequest, min_duration_s
+        from acq.config import min_record_duration_s
+        from analysis import AnalysisRequest
 
-        segment_s = AnalysisRequest().segment_s
-        if duration < min_duration_s(segment_s):  # of both streams: the alignment trims what only one covers
+        need_s, parts = min_record_duration_s(bench, AnalysisRequest().segment_s)
+        if duration < need_s:  # what the analysis will have after its trims, not the raw length
             given = f"--duration {duration:g}" if duration_s is not None else f"the profile's duration_s = {duration:g}"
-            raise ConfigError(f"{given}: the identification needs at least {min_duration_s(segment_s):g} s of both "
-                              f"streams (two {segment_s:g} s Welch segments); record longer, or add --no-analyze")
+            raise ConfigError(f"{given}: the identification needs --duration {need_s:g} s or more ({parts}); record "
+                              "longer, or add --no-analyze")
         _require_enough_motion(profile, profile_name, bench.motor.pole_pairs)
     check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
@@ -209,15 +220,17 @@ def _require_enough_motion(profile: Profile, name: str, pole_pairs: int) -> None
                           "or add --no-analyze")
 
 
-def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_path: Path | str | None) -> SessionResult:
+def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_path: Path | str | None,
+              result_dir: Path | None = None) -> SessionResult:
     """Analyse one session with ``request`` and put the result into its folder's catalogue; the report PNG is drawn
-    after both (:func:`acq.ui.report_png.draw_report`: a picture that fails is only a note), by the caller."""
+    after both (:func:`acq.ui.report_png.draw_report`: a picture that fails is only a note), by the caller. A result
+    that could not be written raises :class:`acq.offline.analyze.ResultNotWritten` (nothing catalogued)."""
     from acq.offline.analyze import analyze_session
     from acq.monitoring.batch import quiet_numerics, record_outcome
 
     start = time.perf_counter()
     with quiet_numerics():
-        done = analyze_session(path, request, report=report)
+        done = analyze_session(path, request, report=report, result_dir=result_dir)
     try:
         record_outcome(done, request, catalogue_path, time.perf_counter() - start)
     except BaseException:  # no result without its catalogue row (a later batch analyses the session again)
@@ -302,9 +315,13 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Folder or glob: run on a Dask distributed cluster (tcp://host:8786); the workers must reach "
                    "the session files at the same paths.")
+@click.option("--result-dir", type=click.Path(path_type=Path), default=None, metavar="DIR",
+              help="Write the .result.json and .report.png (and the default catalogue) into DIR instead of beside "
+                   "the session, e.g. for a read-only archive.")
 def analyze_command(session_path: Path, torque: str | None, params: str, fit_kind: str, band: str | None,
                     paper: bool, as_json: bool, no_report: bool, wait_report: bool, jobs: int | None,
-                    catalogue_path: Path | str | None, partial: bool, scheduler: str | None) -> int:
+                    catalogue_path: Path | str | None, partial: bool, scheduler: str | None,
+                    result_dir: Path | None) -> int:
     """Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png.
 
     SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
@@ -317,15 +334,48 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
 
     request = AnalysisRequest(torque_method=torque, params=params, fit=fit_kind,  # type: ignore[arg-type]
                               band_hz=_parse_band(band), pipeline="paper" if paper else "acq", partial=partial)
+    if result_dir is not None:
+        result_dir = _result_folder(result_dir)
     if batch:
         from acq.ui.batch_cli import analyze_many
 
         return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
-                            report=not no_report, as_json=as_json, out=out)
+                            report=not no_report, as_json=as_json, out=out, result_dir=result_dir)
+    from acq.offline.analyze import ResultNotWritten
+
+    try:
+        return _analyze_one_session(session_path, request, as_json=as_json, report=not no_report,
+                                    wait_report=wait_report, catalogue_path=catalogue_path, result_dir=result_dir)
+    except ResultNotWritten as e:  # the numbers first (the analysis ran), then the failed write: exit 1
+        if as_json:
+            click.echo(json.dumps(e.done.json_dict, indent=2))
+        else:
+            from acq.ui.display import result_table
+
+            out.print(result_table(e.done.json_dict))
+        raise StorageError(f"{e} — the result above is not saved (--result-dir DIR writes it elsewhere)") from None
+
+
+def _result_folder(result_dir: Path) -> Path:
+    """``--result-dir``: the folder, made if missing, as an absolute path (the batch's workers are handed it)."""
+    if result_dir.exists() and not result_dir.is_dir():
+        raise ConfigError(f"--result-dir {result_dir}: is a file, not a folder")
+    try:
+        result_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        from acq.recording.storage import storage_error
+
+        raise storage_error(e, f"--result-dir {result_dir}") from None
+    return result_dir.resolve()
+
+
+def _analyze_one_session(session_path: Path, request: AnalysisRequest, *, as_json: bool, report: bool,
+                         wait_report: bool, catalogue_path: Path | str | None, result_dir: Path | None) -> int:
+    """``acq analyze SESSION``: the result as a table (or JSON), then its report PNG."""
     if as_json:
         from acq.ui.report_png import draw_report, draw_report_detached
 
-        done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)
+        done = _identify(session_path, request, report=report, catalogue_path=catalogue_path, result_dir=result_dir)
         click.echo(json.dumps(done.json_dict, indent=2))
         sys.stdout.flush()  # the numbers reach the reader before the picture is drawn
         # a picture that fails is a note in the .result.json, and a line on stderr (here) or in <session>.report.log
@@ -335,7 +385,7 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
             draw_report_detached(done)
         return 0
     with err.status(f"analysing {session_path} …"):
-        done = _identify(session_path, request, report=not no_report, catalogue_path=catalogue_path)
+        done = _identify(session_path, request, report=report, catalogue_path=catalogue_path, result_dir=result_dir)
     _print_result_and_draw(done)
     return 0
 
@@ -445,7 +495,7 @@ def _run(argv: list[str] | None) -> None:
     except click.exceptions.Abort:  # click's name for a KeyboardInterrupt inside a command
         click.echo("acq: interrupted", err=True)
         _exit_now(EXIT_INTERRUPTED)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, _Interrupted):
         click.echo("acq: interrupted", err=True)
         _exit_now(EXIT_INTERRUPTED)
     except click.UsageError as e:  # one line, like every other error (click's own adds usage and a hint)
@@ -457,4 +507,6 @@ def _run(argv: list[str] | None) -> None:
     except OSError as e:
         click.echo(f"acq: error: {e}", err=True)
         sys.exit(ConfigError("").exit_code)
+    if code == EXIT_INTERRUPTED:  # a command that tidied up after a Ctrl-C (a batch, a recording, a monitor)
+        _exit_now(code)
     sys.exit(code if isinstance(code, int) else 0)

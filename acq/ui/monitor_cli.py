@@ -12,6 +12,7 @@ from rich.live import Live
 from rich.table import Table
 
 from acq.config import load_bench
+from acq.monitoring.batch import CATALOGUE_NAME
 from acq.monitoring.monitor import Monitor, MonitorSettings, MonitorStatus
 from acq.monitoring.retention import parse_size
 from acq.ui.values import format_value
@@ -121,7 +122,9 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
     if console.is_terminal:
         with Live(status_table(MonitorStatus(bench.joint)), console=console, refresh_per_second=2) as live:
             monitor = Monitor(settings, on_status=lambda st: live.update(status_table(st)))
-            return monitor.run()
+            code = monitor.run()
+        _say_if_stopped(monitor, out_dir)
+        return code
     last = [""]
 
     def log(st: MonitorStatus) -> None:  # one line per change when not on a terminal (a service, a log file)
@@ -135,4 +138,14 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
     monitor = Monitor(settings, on_status=log)
     code = monitor.run()
     console.print(status_table(monitor.status))
+    _say_if_stopped(monitor, out_dir)
     return code
+
+
+def _say_if_stopped(monitor: Monitor, out_dir: Path) -> None:
+    """The one line of a monitor stopped by Ctrl-C / SIGTERM (exit 130): what it kept and that a restart resumes."""
+    if monitor.stopped_by is None:
+        return
+    st = monitor.status
+    click.echo(f"acq: {monitor.stopped_by}: {st.captured} windows captured, {st.analysed} analysed, all kept in "
+               f"{out_dir / CATALOGUE_NAME} (trend state: {st.state}); the same command resumes", err=True)
