@@ -150,11 +150,14 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
         mean_b = reps[:, w].mean(axis=1)
         noise = float(np.sqrt((b - 1) / b * np.sum((mean_b - mean_b.mean()) ** 2)))
         quant = 0.0 if systematic_cov is None else float(np.sqrt(max(np.mean(systematic_cov[w, w]), 0.0)))
-        if blind is not None and np.any(blind[w]):
-            quant = np.inf
+        if (blind is not None and np.any(blind[w])) or not np.isfinite(quant):
+            quant = np.inf  # unbounded (or not computable): the window is not judged
         m = float(np.mean(misfit[w]))
         scale = float(np.hypot(noise, quant))
-        t = abs(m) / scale if scale > 0 else (np.inf if m != 0 else 0.0)
+        if not (np.isfinite(m) and np.isfinite(noise)):
+            t = 0.0  # a window with a non-finite misfit or scatter is not judged, never "missed"
+        else:
+            t = abs(m) / scale if scale > 0 else (np.inf if m != 0 else 0.0)
         out.append(BandMisfit(float(f_hz[i]), float(f_hz[i + WINDOW_BINS - 1]), m, noise, quant, float(t)))
     return tuple(out)
 
@@ -168,7 +171,9 @@ def motion_lines(torque_psd_fine: np.ndarray, fine_step_hz: float, low_hz: float
     f = np.arange(torque_psd_fine.size) * fine_step_hz
     p = torque_psd_fine[(f >= low_hz) & (f <= high_hz)]
     total = float(np.sum(p ** 2))
-    return max(float(np.sum(p)) ** 2 / total / 2.0, 1.0) if total > 0 else 1.0
+    if not (np.isfinite(total) and total > 0):
+        return 1.0  # no torque there, or a non-finite PSD: one line (the most a quantisation error can be)
+    return max(float(np.sum(p)) ** 2 / total / 2.0, 1.0)
 
 
 def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray,
@@ -197,11 +202,14 @@ def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.n
     Returns
     -------
     ndarray, shape (n, n)
-        Covariance of the amplitude residual ln|H_model| − ln|H_measured|.
+        Covariance of the amplitude residual ln|H_model| − ln|H_measured|. A bin without weight or a finite bound
+        adds no error and is given none (its residual's dependence on the fit is not in the weighted Jacobian): the
+        caller must not judge it.
     """
     parts = jac.shape[0] // quant_rel.size
-    d = np.tile(sqrt_w, parts)
-    s2 = np.tile(np.nan_to_num(quant_rel, nan=0.0, posinf=0.0) ** 2 / (2.0 * lines), parts)
+    judged = np.isfinite(quant_rel) & np.isfinite(lines) & (lines > 0) & (sqrt_w > 0)
+    d = np.tile(np.where(judged, sqrt_w, 1.0), parts)  # a bin without weight or bound adds nothing (not judged)
+    s2 = np.tile(np.where(judged, quant_rel, 0.0) ** 2 / (2.0 * np.where(judged, lines, 1.0)), parts)
     hat = (jac / d[:, None]) @ np.linalg.pinv(jac.T @ jac) @ (jac * d[:, None]).T
     rest = np.eye(d.size) - hat
     cov = (rest * s2[None, :]) @ rest.T

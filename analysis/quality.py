@@ -271,22 +271,38 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult,
     the quantisation's pull on the fit (``bench/chain_bias.py --allowance``).
     """
     f, misfit, reps = amplitude_misfits(frf, fit)
-    sel = fitted_bins(frf, fit.band)
-    signal = np.abs(frf.H[sel] * difference_response(f, frf.period_s)) ** 2 * frf.torque_psd[sel]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        quant = np.sqrt(jitter.quantisation_noise_psd(f, frf.period_s) / signal)
-    blind = ~np.isfinite(quant)
-    lines = np.ones_like(f)  # the motion's lines per bin, counted per window of the test's width
-    df = frf.f_hz[1]
-    for i in range(0, f.size, WINDOW_BINS):
-        w = slice(i, i + WINDOW_BINS)
-        n = motion_lines(frf.torque_psd_fine, df / KERNEL_PER_BIN, f[w][0] - df / 2, f[w][-1] + df / 2)
-        lines[w] = n / f[w].size
+    quant = quantisation_bound(frf, fit.band, jitter)
     jac, sqrt_w = residual_jacobian(frf, fit)
-    carried = quantisation_through_fit(np.where(blind, 0.0, quant), lines, jac, sqrt_w)
+    lines = lines_per_bin(frf, f)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        carried = quantisation_through_fit(quant, lines, jac, sqrt_w)
+    blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
     windows = band_misfits(f, misfit, reps, carried, blind)
     spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
     return spans[0] if spans else None
+
+
+def quantisation_bound(frf: FrequencyResponse, band: tuple[float, float], jitter: EncoderJitter) -> np.ndarray:
+    """The white-quantisation bound of |H| at a fit's bins: √(N_q/|H·D|²G_xx), the speed noise the encoder's
+    resolution ``jitter.lsb_rad`` leaves (:meth:`EncoderJitter.quantisation_noise_psd`) over the speed the torque
+    drives (D the backward difference), relative (0.05 = 5 %); inf where there is no signal."""
+    sel = fitted_bins(frf, band)
+    f = frf.f_hz[sel]
+    signal = np.abs(frf.H[sel] * difference_response(f, frf.period_s)) ** 2 * frf.torque_psd[sel]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.sqrt(jitter.quantisation_noise_psd(f, frf.period_s) / signal)
+
+
+def lines_per_bin(frf: FrequencyResponse, f_hz: np.ndarray) -> np.ndarray:
+    """The motion's lines (:func:`analysis.adequacy.motion_lines`) per bin of ``f_hz`` (a fit's bins, Hz), counted
+    per window of the misfit test's width and shared among its bins."""
+    lines = np.ones_like(f_hz)
+    df = frf.f_hz[1]
+    for i in range(0, f_hz.size, WINDOW_BINS):
+        w = slice(i, i + WINDOW_BINS)
+        n = motion_lines(frf.torque_psd_fine, df / KERNEL_PER_BIN, f_hz[w][0] - df / 2, f_hz[w][-1] + df / 2)
+        lines[w] = n / f_hz[w].size
+    return lines
 
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,

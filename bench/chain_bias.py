@@ -95,10 +95,10 @@ if str(ROOT) not in sys.path:  # this checkout's bench package
 
 from analysis import resample
 from analysis.clocks import ClockFit
-from analysis.encoder import difference_response
-from analysis.fit import CHAIN_REL_STD, FitOptions, _Problem, fit_two_mass, fitted_bins
+from analysis.fit import CHAIN_REL_STD, FitOptions, _Problem, fit_two_mass
 from analysis.frf import FrequencyResponse, estimate_frf
 from analysis.model import TwoMassParams
+from analysis.quality import quantisation_bound
 from analysis.sample_instants import EncoderJitter
 from analysis.signals import _alias_terms, _band_edges_hz, spans_and_clock, torque_on_instants
 from bench.misfit_structure import lines_in
@@ -147,9 +147,7 @@ def window_chi2(frf: FrequencyResponse, chain: FrequencyResponse, lsb_rad: float
     (pc, zc, fc), (ps, zs, _) = parts
     reps = np.asarray([_Problem(r, fc.band, opts, fc.values).log_ratio(pc.x0(fc.values)) for r in chain.replicates])
     f = pc.f
-    sel = fitted_bins(chain, fc.band)
-    sig = np.abs(chain.H[sel] * difference_response(f, chain.period_s)) ** 2 * chain.torque_psd[sel]
-    white = np.sqrt(resolution.quantisation_noise_psd(f, chain.period_s) / sig)
+    white = quantisation_bound(chain, fc.band, resolution)
     out = np.zeros((2, len(BANDS_HZ)))
     for i in range(0, f.size - WINDOW_BINS + 1, WINDOW_BINS):
         w = slice(i, i + WINDOW_BINS)
@@ -202,9 +200,7 @@ def allowance_tests(frf: FrequencyResponse, lsb_rad: float) -> dict[str, tuple[f
             z = problem.log_ratio(x)
             reps = np.asarray([_with_free(_Problem(r, fit.band, opts, problem.fixed), problem.free).log_ratio(x)
                                for r in frf.replicates])
-            sel = fitted_bins(frf, fit.band)
-            sig = np.abs(frf.H[sel] * difference_response(f, frf.period_s)) ** 2 * frf.torque_psd[sel]
-            white2 = resolution.quantisation_noise_psd(f, frf.period_s) / sig
+            white2 = quantisation_bound(frf, fit.band, resolution) ** 2
             starts = np.arange(0, n - WINDOW_BINS + 1, WINDOW_BINS)
             s2 = np.empty(n)
             q2 = np.empty(starts.size)

@@ -125,6 +125,15 @@ def test_quantisation_carried_through_a_fit_of_a_constant_leaves_its_residual_co
     jac = np.vstack([np.zeros((n, 1)), np.ones((n, 1))])
     np.testing.assert_allclose(quantisation_through_fit(np.full(n, q), np.full(n, lines), jac, np.ones(n)),
                                s2 * np.eye(n), atol=1e-15)
+    # weights w_i: the weighted mean absorbs e_i with w_i/Σw, so bin i's residual e_i − Σ w_j e_j/Σw has variance
+    # s²(1 − 2 w_i/Σw + Σw²/(Σw)²); a bin without weight or bound adds nothing and is given nothing
+    w = np.array([1.0, 4.0, 9.0, 1.0, 0.0, 2.0])
+    bound = np.array([q, q, q, q, np.inf, q])
+    cov = quantisation_through_fit(bound, np.full(n, lines), np.sqrt(w)[:, None], np.sqrt(w))
+    sw, sw2 = w.sum(), (w**2).sum()
+    expected = s2 * (1.0 - 2.0 * w / sw + sw2 / sw**2)
+    expected[4] = 0.0  # without weight its residual's dependence on the fit is not in the weighted Jacobian: not judged
+    np.testing.assert_allclose(np.diag(cov), expected, rtol=1e-12)
 
 
 def test_motion_lines_counts_the_harmonics_of_a_periodic_torque_and_many_for_a_broad_one():
