@@ -352,12 +352,17 @@ def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outc
     """Cancel what is queued, give what runs :data:`STOP_GRACE_S` to finish, kill the rest, record what finished;
     no result file (nor a temp file) is left without its catalogue row."""
     pool = executor if isinstance(executor, ProcessPoolExecutor) else None
+    processes = list(getattr(executor, "_processes", None) or {})  # the local pool's worker pids (Dask: none)
+    # what a local pool's shutdown(wait=True) would join and close, kept: shutdown(wait=False) lets go of them
+    manager, results = getattr(pool, "_executor_manager_thread", None), getattr(pool, "_result_queue", None)
     if pool is None:
         for future in futures:
             future.cancel()
-    # a local pool's queued analyses are cancelled by its shutdown below, in the pool's own thread: a future cancelled
-    # here would make that thread fail on it when the workers are killed (Python 3.11: InvalidStateError: CANCELLED)
-    processes = list(getattr(executor, "_processes", None) or {})  # the local pool's worker pids (Dask: none)
+    else:
+        # the queued analyses are cancelled by the pool itself (its shutdown, in its own thread), before the grace
+        # below would let the workers take them up (then nothing queued was cancelled: all ran); a future cancelled
+        # from here instead makes that thread fail on it when the workers are killed (Python 3.11: InvalidStateError)
+        pool.shutdown(wait=False, cancel_futures=True)
     recorded = {o.path for o in outcomes}
     deadline = time.monotonic() + STOP_GRACE_S
     for future, path in futures.items():
@@ -374,8 +379,10 @@ def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outc
     for pid in processes:
         with contextlib.suppress(OSError):
             os.kill(pid, signal.SIGKILL)
-    if pool is not None:
-        pool.shutdown(wait=True, cancel_futures=True)  # the killed workers reaped: none writes after this
+    if manager is not None:  # the killed workers reaped: none writes after this
+        manager.join()
+    if results is not None:
+        results.close()
     for path in futures.values():  # a worker killed after writing its result but before the row: remove it
         if str(path.resolve()) in recorded:
             continue
