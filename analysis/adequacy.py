@@ -176,6 +176,35 @@ def motion_lines(torque_psd_fine: np.ndarray, fine_step_hz: float, low_hz: float
     return max(float(np.sum(p)) ** 2 / total / 2.0, 1.0)
 
 
+def lines_per_bin(torque_psd_fine: np.ndarray, fine_step_hz: float, f_hz: np.ndarray, bin_hz: float) -> np.ndarray:
+    """The motion's lines (:func:`motion_lines`) per bin of ``f_hz`` (a fit's bins, Hz, ``bin_hz`` apart), counted
+    per window of :data:`WINDOW_BINS` bins and shared among its bins."""
+    lines = np.ones_like(f_hz)
+    for i in range(0, f_hz.size, WINDOW_BINS):
+        w = slice(i, i + WINDOW_BINS)
+        n = motion_lines(torque_psd_fine, fine_step_hz, f_hz[w][0] - bin_hz / 2, f_hz[w][-1] + bin_hz / 2)
+        lines[w] = n / f_hz[w].size
+    return lines
+
+
+def quantisation_pull(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray, sqrt_w: np.ndarray) -> np.ndarray:
+    """Covariance of the fitted log parameters that the encoder's quantisation causes: the same random-phase error
+    per line as :func:`quantisation_through_fit`, the part the fit absorbs, (JᵀJ)⁻¹Jᵀ·W·S·J(JᵀJ)⁻¹ (J the Jacobian of
+    the weighted residuals, W the weights). The jackknife cannot see it (it repeats with every motion period) and the
+    residual does not show it (the fit took it); bins without a finite bound add nothing.
+
+    Returns
+    -------
+    ndarray, shape (p, p)
+    """
+    parts = jac.shape[0] // quant_rel.size
+    judged = np.isfinite(quant_rel) & np.isfinite(lines) & (lines > 0)
+    s2 = np.where(judged, quant_rel, 0.0) ** 2 / (2.0 * np.where(judged, lines, 1.0))
+    weighted = np.tile(s2 * sqrt_w**2, parts)
+    a = np.linalg.pinv(jac.T @ jac) @ jac.T
+    return (a * weighted[None, :]) @ a.T
+
+
 def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray,
                              sqrt_w: np.ndarray) -> np.ndarray:
     """Covariance of the fit's log-amplitude residual that the encoder's quantisation leaves, bins × bins.

@@ -153,3 +153,24 @@ def angle_spline(first_cycle: int, period_s: float, theta_rad: np.ndarray) -> Cu
     if th.size < 4:
         raise ValueError("need at least four encoder samples for an angle spline")
     return CubicSpline((first_cycle + np.arange(th.size)) * period_s, th)
+
+
+def quantisation_speed_psd(f_hz: np.ndarray, period_s: float, lsb_rad: float) -> np.ndarray:
+    """One-sided PSD, (rad/s)²/Hz, of the backward-difference speed noise of a position quantised to ``lsb_rad``.
+
+    White position errors of variance lsb²/12 (the position moving several counts a cycle; slower they are
+    correlated and smaller, so this is an upper bound) through (1 − z⁻¹)/T.
+    """
+    s = np.sin(np.pi * np.asarray(f_hz, dtype=np.float64) * period_s)
+    return 8.0 * lsb_rad**2 / 12.0 * s * s / period_s
+
+
+def quantisation_bound(f_hz: np.ndarray, h: np.ndarray, torque_psd: np.ndarray, period_s: float,
+                       lsb_rad: float) -> np.ndarray:
+    """The white-quantisation bound of |H| at ``f_hz``: √(N_q/|H·D|²G_xx), the speed noise of the encoder's resolution
+    over the speed the torque drives (D the backward difference), relative (0.05 = 5 %); inf where there is no
+    signal. ``h`` the measured torque → speed response, ``torque_psd`` G_xx, (N·m)²/Hz."""
+    signal = np.abs(h * difference_response(f_hz, period_s)) ** 2 * torque_psd
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.sqrt(quantisation_speed_psd(f_hz, period_s, lsb_rad) / signal)
+

@@ -25,8 +25,11 @@ four blocks) that Jacobian covariance is used, with the normal 1.96. Then the mi
 what the residual leaves unexplained, propagated to the parameters with its own size and correlation along
 frequency (:func:`analysis.adequacy.misfit_covariance`, a HAC sandwich) — the part no scatter between
 blocks shows because every period repeats it (the chain's small errors, a mode or a nonlinearity the
-two-mass model lacks). Where that share is below the chain's own accuracy (:data:`CHAIN_REL_STD`), the
-latter is taken instead. The 95 % interval is exp(ln θ ± half-width) on each value.
+two-mass model lacks). Where that share is below the pull of the encoder's quantisation on the parameters
+(:func:`analysis.adequacy.quantisation_pull`: the quantisation error repeats with the motion, so no scatter shows
+it, and the part the fit absorbed leaves no residual), the latter is taken instead — computed from the session's
+own spectra and the encoder's resolution (:attr:`FitOptions.speed_lsb_rad`); without the resolution, the constant
+:data:`CHAIN_REL_STD`. The 95 % interval is exp(ln θ ± half-width) on each value.
 
 The model is compared with the measurement as the Welch estimator sees it: H convolved with the
 Hann window's spectral kernel |W(ν)|², weighted by the finely resolved torque spectrum
@@ -43,7 +46,8 @@ import numpy as np
 from scipy import optimize, sparse, stats
 from scipy.ndimage import median_filter
 
-from analysis.adequacy import misfit_covariance
+from analysis.adequacy import lines_per_bin, misfit_covariance, quantisation_pull
+from analysis.encoder import quantisation_bound
 from analysis.frf import KERNEL_PER_BIN, FrequencyResponse, window_kernel
 from analysis.model import TwoMassParams, antiresonance_hz, frequency_response, resonance_hz
 
@@ -58,16 +62,14 @@ BAND_HIGH_MAX_HZ = 500.0
 BAND_HIGH_FRACTION_OF_FENC = 0.4
 COHERENCE_CLIP = 0.99
 Z95 = 1.959963984540054
-# 1σ relative accuracy of the chain's torque and speed estimates, the lower bound of the systematic part of
-# every interval: a scale error of the torque (k_t, the current sensor's gain, the torque estimate's gain)
-# multiplies K, J_m, J_l and C alike and leaves the FRF's shape — so every residual — untouched, so no
-# session can show it. Where it comes from: on the simulated bench (8 plants with K, J_m, J_l scaled
-# 0.5…2, 10 seeds each, 10 s sessions) every seed of a plant shares an error, −0.6…+0.6 % (0.4…0.6 % on
-# four plants), mostly such a common scale. It assumes the real chain's torque is no less accurate than the simulated
-# one — a k_t off by more (datasheets give ±5…10 %) is a wrong bench constant, not a noisy session. The
-# verdict's misfit test no longer uses it: the 0.2…0.6 % it allowed at the bottom of the band on healthy
-# simulated sessions was the encoder quantisation's pull on the fit, which the test now carries through the fit
-# from the session's own spectra (:func:`analysis.adequacy.quantisation_through_fit`).
+# 1σ relative floor of the systematic part of an interval, used only when the fit is not given the encoder's
+# resolution (a direct call of fit_two_mass; the pipeline always gives it). Where it comes from: on the simulated
+# bench (8 plants with K, J_m, J_l scaled 0.5…2, 10 seeds each, 10 s sessions) every seed of a plant shares an
+# error, −0.6…+0.6 % — which session 5 traced to the 2^17 counts/rev encoder's quantisation pulling the fit
+# (bench/chain_bias.py; with 2^20 counts the shared error is ≤ 0.1 %): what analysis.adequacy.quantisation_pull
+# now computes from each session's own spectra (0.35…0.71 % on those plants, 0.17…0.20 % at 2^20 counts). A
+# torque scale error (k_t, a sensor gain) multiplies K, J_m, J_l, C alike and no session can show it: it is a bench
+# constant (acq selftest checks k_t against a known inertia), not part of these intervals.
 CHAIN_REL_STD = 0.004
 _START_DAMPING_RATIOS = (0.01, 0.05, 0.2)
 
@@ -91,12 +93,16 @@ class FitOptions:
         Fit band (low, high), Hz; None for 10 Hz … min(0.4·f_enc, 500 Hz).
     weighting : {"coherence", "uniform"}
         Bin weights γ²/(1−γ²) (ours) or all 1 (the paper's).
+    speed_lsb_rad : float or None
+        The encoder's resolution, rad (2π/counts per rev): the intervals then allow for the quantisation's pull
+        on the parameters (:func:`analysis.adequacy.quantisation_pull`) instead of :data:`CHAIN_REL_STD`.
     """
 
     params: FitParams = "K,Jm,Jl"
     kind: FitKind = "amplitude"
     band_hz: tuple[float, float] | None = None
     weighting: FitWeighting = "coherence"
+    speed_lsb_rad: float | None = None
 
 
 @dataclass(frozen=True)
@@ -363,7 +369,18 @@ def fit_two_mass(
                 best = res
         if best is None:
             return _failed(problem, band, options, "no start gave a finite cost")
-        return _result(problem, best, band, options, n_res)
+        return _result(problem, best, band, options, n_res, _quantisation(frf, problem, options))
+
+
+def _quantisation(frf: FrequencyResponse, problem: _Problem,
+                  options: FitOptions) -> tuple[np.ndarray, np.ndarray] | None:
+    """The white-quantisation bound and the motion's lines per bin of the fit (None without the encoder's
+    resolution): what :func:`analysis.adequacy.quantisation_pull` needs besides the Jacobian."""
+    if not options.speed_lsb_rad:
+        return None
+    sel = fitted_bins(frf, problem.band)
+    bound = quantisation_bound(problem.f, frf.H[sel], frf.torque_psd[sel], frf.period_s, options.speed_lsb_rad)
+    return bound, lines_per_bin(frf.torque_psd_fine, frf.f_hz[1] / KERNEL_PER_BIN, problem.f, frf.f_hz[1])
 
 
 def _starts_inertias_fixed(guess: TwoMassParams, nominal: TwoMassParams) -> list[TwoMassParams]:
@@ -376,7 +393,7 @@ def _starts_inertias_fixed(guess: TwoMassParams, nominal: TwoMassParams) -> list
 
 
 def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, float],
-            options: FitOptions, n_res: int) -> FitResult:
+            options: FitOptions, n_res: int, quantisation: tuple[np.ndarray, np.ndarray] | None = None) -> FitResult:
     """Package the best least-squares solution with its covariance and intervals."""
     values = problem.params(res.x)
     n_free = res.x.size
@@ -389,9 +406,12 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
         cov, quantile = _jackknife(problem, res.x, options)
     cov = cov * (quantile / Z95) ** 2  # the interval below is ±1.96 σ of this covariance
     misfit = misfit_covariance(res.fun, jac, problem.f.size)
-    # at least the chain's accuracy: it was measured as the chain's whole systematic error, the part a
-    # residual shows included, so it only tops up what the misfit leaves below it
-    cov += misfit + np.diag(np.clip(np.log1p(CHAIN_REL_STD) ** 2 - np.diag(misfit), 0.0, None))
+    # at least the quantisation's pull on the parameters (what the fit absorbed of an error no scatter and no residual
+    # shows), or without the encoder's resolution the chain's accuracy: each stands for the systematic error as a
+    # whole, the part a residual shows included, so it only tops up what the misfit leaves below it
+    floor = (np.diag(quantisation_pull(*quantisation, jac, problem.sqrt_w)) if quantisation is not None
+             else np.full(n_free, np.log1p(CHAIN_REL_STD) ** 2))
+    cov += misfit + np.diag(np.clip(floor - np.diag(misfit), 0.0, None))
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     ci = {n: (getattr(values, n), getattr(values, n)) for n in PARAM_NAMES}
     for name, x, s in zip(problem.free, res.x, sigma):

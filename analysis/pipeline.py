@@ -132,7 +132,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
         describe_moves(sig.t_s, sig.speed_rad_s, sig.period_s, rec.counts_per_rev, math.pi / rec.pole_pairs,
                        frf.selection))
     fit = fit_two_mass(frf, FitOptions(params=request.params, kind=request.fit, band_hz=request.band_hz,
-                                       weighting=chain.weighting), nominal=request.nominal)
+                                       weighting=chain.weighting, speed_lsb_rad=2.0 * math.pi / rec.counts_per_rev),
+                       nominal=request.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
     quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,

@@ -14,9 +14,9 @@ from typing import Literal
 
 import numpy as np
 
-from analysis.adequacy import (WINDOW_BINS, BandMisfit, band_misfits, critical_t, missed_spans, motion_lines,
+from analysis.adequacy import (BandMisfit, band_misfits, critical_t, lines_per_bin, missed_spans,
                                quantisation_through_fit)
-from analysis.encoder import difference_response
+from analysis.encoder import difference_response, quantisation_bound as encoder_quantisation_bound
 from analysis.fit import COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask, fitted_bins, residual_jacobian
 from analysis.frf import KERNEL_PER_BIN, FrequencyResponse
 from analysis.model import PARAM_LABELS
@@ -49,8 +49,9 @@ class Thresholds:
         failed.
     ci_K_poor, ci_K_failed : float
         Relative half-width of the 95 % interval of K. The interval comes from the session's own
-        scatter (jackknife over blocks of Welch segments), the fit's misfit (HAC) and the chain's
-        accuracy :data:`analysis.fit.CHAIN_REL_STD`, so its width is the precision; 10 s simulated
+        scatter (jackknife over blocks of Welch segments), the fit's misfit (HAC) and the encoder
+        quantisation's pull on the fit (:func:`analysis.adequacy.quantisation_pull`), so its width is the
+        precision; 10 s simulated
         sessions of plants scaled 0.5…2 give ±0.5…1.7 % on K, J_m, J_l. These limits remain
         constants: what precision is "ok" is the user's requirement (K to a few % to see wear), not
         something the data can tell.
@@ -273,7 +274,7 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult,
     f, misfit, reps = amplitude_misfits(frf, fit)
     quant = quantisation_bound(frf, fit.band, jitter)
     jac, sqrt_w = residual_jacobian(frf, fit)
-    lines = lines_per_bin(frf, f)
+    lines = lines_per_bin(frf.torque_psd_fine, frf.f_hz[1] / KERNEL_PER_BIN, f, frf.f_hz[1])
     with np.errstate(invalid="ignore", divide="ignore"):
         carried = quantisation_through_fit(quant, lines, jac, sqrt_w)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
@@ -283,26 +284,10 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult,
 
 
 def quantisation_bound(frf: FrequencyResponse, band: tuple[float, float], jitter: EncoderJitter) -> np.ndarray:
-    """The white-quantisation bound of |H| at a fit's bins: √(N_q/|H·D|²G_xx), the speed noise the encoder's
-    resolution ``jitter.lsb_rad`` leaves (:meth:`EncoderJitter.quantisation_noise_psd`) over the speed the torque
-    drives (D the backward difference), relative (0.05 = 5 %); inf where there is no signal."""
+    """The white-quantisation bound of |H| at a fit's bins (:func:`analysis.encoder.quantisation_bound`) for the
+    encoder's resolution ``jitter.lsb_rad``; inf where there is no signal."""
     sel = fitted_bins(frf, band)
-    f = frf.f_hz[sel]
-    signal = np.abs(frf.H[sel] * difference_response(f, frf.period_s)) ** 2 * frf.torque_psd[sel]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        return np.sqrt(jitter.quantisation_noise_psd(f, frf.period_s) / signal)
-
-
-def lines_per_bin(frf: FrequencyResponse, f_hz: np.ndarray) -> np.ndarray:
-    """The motion's lines (:func:`analysis.adequacy.motion_lines`) per bin of ``f_hz`` (a fit's bins, Hz), counted
-    per window of the misfit test's width and shared among its bins."""
-    lines = np.ones_like(f_hz)
-    df = frf.f_hz[1]
-    for i in range(0, f_hz.size, WINDOW_BINS):
-        w = slice(i, i + WINDOW_BINS)
-        n = motion_lines(frf.torque_psd_fine, df / KERNEL_PER_BIN, f_hz[w][0] - df / 2, f_hz[w][-1] + df / 2)
-        lines[w] = n / f_hz[w].size
-    return lines
+    return encoder_quantisation_bound(frf.f_hz[sel], frf.H[sel], frf.torque_psd[sel], frf.period_s, jitter.lsb_rad)
 
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,

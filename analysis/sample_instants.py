@@ -27,6 +27,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicSpline
 
+from analysis.encoder import quantisation_speed_psd
+
 _D3 = np.array([-1.0, 3.0, -3.0, 1.0])  # third difference
 _D3_GAIN = float(np.sum(_D3**2))  # 20: variance gain of the third difference on white errors
 _BINS = 16
@@ -70,13 +72,9 @@ class EncoderJitter:
         return 8.0 * self.mean_speed2 * self.sigma_s**2 * s * s / period_s
 
     def quantisation_noise_psd(self, f_hz: np.ndarray, period_s: float) -> np.ndarray:
-        """One-sided PSD, (rad/s)²/Hz, of the backward-difference speed noise of the position's quantisation.
-
-        White position errors of variance lsb²/12 (the position moving several counts a cycle; slower they
-        are correlated and smaller, so this is an upper bound) through (1 − z⁻¹)/T.
-        """
-        s = np.sin(np.pi * np.asarray(f_hz, dtype=np.float64) * period_s)
-        return 8.0 * self.lsb_rad**2 / 12.0 * s * s / period_s
+        """One-sided PSD, (rad/s)²/Hz, of the backward-difference speed noise of the position's quantisation
+        (:func:`analysis.encoder.quantisation_speed_psd`)."""
+        return quantisation_speed_psd(f_hz, period_s, self.lsb_rad)
 
 
 def stamp_deviation_s(index: np.ndarray, drive_time_s: np.ndarray, period_s: float) -> np.ndarray | None:

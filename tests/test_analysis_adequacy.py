@@ -10,7 +10,7 @@ import pytest
 
 from analysis.adequacy import (band_misfits, bandwidth_bins, critical_t, misfit_covariance, motion_lines,
                                quantisation_through_fit)
-from analysis.fit import amplitude_misfits, fit_two_mass
+from analysis.fit import FitOptions, amplitude_misfits, fit_two_mass
 from analysis.frf import estimate_frf
 from analysis.quality import assess
 from analysis.sample_instants import EncoderJitter
@@ -78,6 +78,21 @@ def test_clean_session_fits_within_noise_and_its_intervals_hold_the_truth(clean_
     assert covers(fit, PAPER)
     half = {n: 0.5 * (hi - lo) / getattr(fit.values, n) for n, (lo, hi) in fit.ci95.items()}
     assert all(0.0078 < half[n] < 0.015 for n in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2"))  # ≥ the chain floor ±0.78 %
+
+
+def test_the_intervals_floor_is_the_quantisation_pull_of_the_encoders_resolution(clean_session):
+    # the same session fitted knowing its 2^17 counts/rev, and as if read through 2^20: the floor of the systematic
+    # part is the quantisation's pull on the parameters, so the finer encoder's intervals are narrower; both hold
+    # the truth, and the 2^17 ones sit near the former constant floor (±0.78 %) they replace
+    frf, _ = clean_session
+    half = {}
+    for counts in (COUNTS_PER_REV, 2**20):
+        fit = fit_two_mass(frf, FitOptions(speed_lsb_rad=2.0 * np.pi / counts))
+        assert covers(fit, PAPER)
+        half[counts] = {n: 0.5 * (hi - lo) / getattr(fit.values, n) for n, (lo, hi) in fit.ci95.items()
+                        if n in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2")}
+    assert all(0.005 < h < 0.015 for h in half[COUNTS_PER_REV].values()), half
+    assert all(half[2**20][n] < 0.8 * half[COUNTS_PER_REV][n] for n in half[2**20]), half
 
 
 def test_a_backlash_like_low_frequency_misfit_makes_the_verdict_poor_and_names_the_band(clean_session):
