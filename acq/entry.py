@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 import sys
 
+from acq.environment import set_default_env
+
 #: BLAS threads of one acq process, set before numpy loads its BLAS (a variable the user set wins). The analysis
 #: multiplies many small, wide matrices (the torque's spline solves): there a second BLAS thread only spins.
 #: Measured on 2 cores, `acq analyze` of a 10 min session: 14.5 s wall either way, 12.4 s CPU with one thread and
@@ -31,23 +33,6 @@ BLAS_THREADS = "1"
 MALLOPT_SETTINGS = ((-3, 32 << 20), (-1, 256 << 20))  # (glibc's M_MMAP_THRESHOLD, bytes), (M_TRIM_THRESHOLD, bytes)
 #: Commands whose process runs once and ends: they keep freed memory (:func:`keep_freed_memory`).
 ONE_SHOT_COMMANDS = ("analyze", "record")
-
-#: Environment variables acq set itself (:func:`set_default_env`) and their values: not passed to commands run for
-#: the user.
-_SET_BY_ACQ: dict[str, str] = {}
-
-
-def set_default_env(name: str, value: str) -> None:
-    """Set environment variable ``name`` to ``value`` unless the user set it; remember that acq did."""
-    if name not in os.environ:
-        os.environ[name] = _SET_BY_ACQ[name] = value
-
-
-def user_environment() -> dict[str, str]:
-    """The environment without the variables acq set (:func:`set_default_env`, still at acq's value): for commands
-    acq runs for the user (``--on-alarm``), which must see the user's settings, not acq's BLAS threads."""
-    return {name: value for name, value in os.environ.items() if _SET_BY_ACQ.get(name) != value}
-
 
 def user_tuned_malloc() -> bool:
     """Whether the user set glibc's malloc parameters (GLIBC_TUNABLES glibc.malloc.*, or a MALLOC_* variable)."""

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from acq.entry import set_default_env
+from acq.environment import set_default_env
 from acq.monitoring.catalogue import Catalogue, Outcome
 from acq.offline.analyze import SessionResult, analyze_session, output_paths, sha256_of
 from acq.recording.paths import GLOB_CHARS

@@ -30,7 +30,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from acq.entry import user_environment
+from acq.environment import user_environment
 from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
