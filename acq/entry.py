@@ -5,6 +5,8 @@ from __future__ import annotations
 import os
 import sys
 
+from acq.environment import set_default_env
+
 #: BLAS threads of one acq process, set before numpy loads its BLAS (a variable the user set wins). The analysis
 #: multiplies many small, wide matrices (the torque's spline solves): there a second BLAS thread only spins.
 #: Measured on 2 cores, `acq analyze` of a 10 min session: 14.5 s wall either way, 12.4 s CPU with one thread and
@@ -20,36 +22,45 @@ BLAS_THREADS = "1"
 #: and 18 700 in each further one (0.05 s of system time on 0.43 s of CPU). Arrays up to 32 MB (glibc's own ceiling
 #: for its dynamic mmap threshold) from the heap and up to 256 MB of freed memory kept for the next ones: 22 000 faults
 #: in the first analysis, none in the next (bench/analysis_speed.py; peak RSS of a 10 min session 507 MB instead of
-#: 504). Set for this process (mallopt) and, through the environment, for its children (batch and monitor workers);
-#: a variable the user set wins. Other C libraries read neither.
-MALLOC_SETTINGS = {"MALLOC_MMAP_THRESHOLD_": str(32 << 20), "MALLOC_TRIM_THRESHOLD_": str(256 << 20)}
-_MALLOPT_PARAMS = {"MALLOC_MMAP_THRESHOLD_": -3, "MALLOC_TRIM_THRESHOLD_": -1}  # glibc's M_MMAP_/M_TRIM_THRESHOLD
+#: 504). Measured again (bench/analysis_speed.py --repeat 3 --threads 1 --sizes 60, load 4): 60 s session 0.36–0.37 s
+#: CPU with it, 0.39–0.40 s with glibc's defaults (--default-allocator). The price is memory kept while idle
+#: (bench/idle_memory.py, 3 analyses, VmRSS afterwards): 60 s session 289 MB against 174 MB with the defaults (157 MB
+#: with malloc_trim), 10 min 512 MB against 340 MB (318 MB); the peaks are the same (288 MB, 507–512 MB). So only a
+#: one-shot ``acq analyze``/``acq record`` process sets it (mallopt, for itself alone: nothing is exported to its
+#: children, so batch and monitor workers, the report drawer and ``--on-alarm`` commands run with glibc's defaults),
+#: never the long-running ``acq monitor``; and not at all when the user tuned malloc (GLIBC_TUNABLES glibc.malloc.*,
+#: or a MALLOC_* variable): a mallopt would override their setting. Other C libraries read neither.
+MALLOPT_SETTINGS = ((-3, 32 << 20), (-1, 256 << 20))  # (glibc's M_MMAP_THRESHOLD, bytes), (M_TRIM_THRESHOLD, bytes)
+#: Commands whose process runs once and ends: they keep freed memory (:func:`keep_freed_memory`).
+ONE_SHOT_COMMANDS = ("analyze", "record")
+
+def user_tuned_malloc() -> bool:
+    """Whether the user set glibc's malloc parameters (GLIBC_TUNABLES glibc.malloc.*, or a MALLOC_* variable)."""
+    return "glibc.malloc" in os.environ.get("GLIBC_TUNABLES", "") or any(name.startswith("MALLOC_")
+                                                                          for name in os.environ)
 
 
-def keep_freed_memory() -> None:
-    """:data:`MALLOC_SETTINGS` into the environment (unless set) and, on glibc, into this process's allocator."""
-    for name, value in MALLOC_SETTINGS.items():
-        os.environ.setdefault(name, value)
-    if not sys.platform.startswith("linux"):
-        return
+def keep_freed_memory() -> bool:
+    """:data:`MALLOPT_SETTINGS` into this process's allocator (glibc: mallopt), unless the user tuned malloc; return
+    whether they were set. Child processes are not affected."""
+    if not sys.platform.startswith("linux") or user_tuned_malloc():
+        return False
     import ctypes
 
     try:
         mallopt = ctypes.CDLL(None).mallopt
     except (OSError, AttributeError):  # no C library symbols to look up, or no mallopt
-        return
-    for name, param in _MALLOPT_PARAMS.items():
-        value = os.environ[name]
-        if value.isdigit():
-            mallopt(param, int(value))
+        return False
+    return all(mallopt(param, value) == 1 for param, value in MALLOPT_SETTINGS)
 
 
 def main() -> None:
     """Import the command line (numpy, scipy, h5py: seconds on a loaded machine), then run it; a Ctrl-C during
     the imports is the usual one line and exit 130."""
     for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        os.environ.setdefault(name, BLAS_THREADS)
-    keep_freed_memory()
+        set_default_env(name, BLAS_THREADS)
+    if sys.argv[1:2] and sys.argv[1] in ONE_SHOT_COMMANDS:  # the command line's only options come after its command
+        keep_freed_memory()
     try:
         from acq.ui.cli import main as run_cli
     except KeyboardInterrupt:

@@ -212,6 +212,11 @@ def _damping_for_ratio(k: float, jm: float, jl: float, zeta: float) -> float:
     return 2.0 * zeta * k / (2.0 * np.pi * resonance_hz(k, jm, jl))
 
 
+def _free_params(options: FitOptions) -> tuple[str, ...]:
+    """Names of the parameters a fit with ``options`` adjusts."""
+    return ("K_Nm_per_rad", "C_Nms_per_rad") if options.params == "K" else PARAM_NAMES
+
+
 class _Problem:
     """Residuals of one fit: which parameters are free, the data, the weights."""
 
@@ -224,7 +229,7 @@ class _Problem:
         self.w = g2 / (1.0 - g2) if options.weighting == "coherence" else np.ones_like(g2)
         self.sqrt_w = np.sqrt(self.w)
         self.kind = options.kind
-        self.free = ("K_Nm_per_rad", "C_Nms_per_rad") if options.params == "K" else PARAM_NAMES
+        self.free = _free_params(options)
         self.fixed = fixed
         self.band = band
         self.replicates = frf.replicates or ()
@@ -335,6 +340,12 @@ def fit_two_mass(
         raise FitInputError(f"fit band {band[0]:g}…{band[1]:g} Hz is empty")
     if options.params == "K" and nominal is None:
         raise FitInputError("--params K needs the bench's nominal J_m and J_l")
+    n_bins, n_free = int(np.count_nonzero(fitted_bins(frf, band))), len(_free_params(options))
+    if n_bins < 3 * n_free:  # also before the initial guess, whose search needs bins
+        raise FitInputError(
+            f"fit band {band[0]:g}…{band[1]:g} Hz holds {n_bins} FRF bin{'' if n_bins == 1 else 's'} (the "
+            f"{frf.segment_s:g} s segments give {1.0 / frf.segment_s:g} Hz bins); need at least {3 * n_free}"
+        )
     guess = initial_guess(frf, band)
     if options.params == "K":
         starts = _starts_inertias_fixed(guess, nominal)
@@ -347,12 +358,7 @@ def fit_two_mass(
                 nominal.K_Nm_per_rad, nominal.Jm_kgm2, nominal.Jl_kgm2, 0.05), bm_Nms_per_rad=0.0,
                 bl_Nms_per_rad=0.0))
     problem = _Problem(frf, band, options, starts[0])
-    n_free = len(problem.free)
     n_res = problem.f.size * (1 if options.kind == "amplitude" else 2)
-    if problem.f.size < 3 * n_free:
-        raise FitInputError(
-            f"fit band {band[0]:g}…{band[1]:g} Hz holds {problem.f.size} FRF bins; need at least {3 * n_free}"
-        )
     # a start or a jackknife replicate may wander to log-parameters whose exp overflows: such a solution has a
     # non-finite cost or spread and is judged by that, so numpy's warnings about it would only reach the user
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):

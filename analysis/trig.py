@@ -1,4 +1,12 @@
-"""Sine and cosine of many angles at once, 5–8× faster than ``np.sin`` + ``np.cos`` and equal to them to ≈ 1 ulp.
+"""Sine and cosine of many angles at once, about 4× faster than ``np.sin`` + ``np.cos`` and equal to them to ≈ 1 ulp.
+
+Measured on 1.5·10⁶ angles in ±300 rad (a minute of current), 2 cores at load average 1.0: 12.3 ms against 48.8 ms
+(4.0×; 3.7× measured at a higher load), best of 5 of::
+
+    python -m timeit -s "import numpy as np; from analysis.trig import sin_cos; \\
+        x = np.random.default_rng(0).uniform(-300, 300, 1_536_000)" "sin_cos(x)"
+    python -m timeit -s "import numpy as np; x = np.random.default_rng(0).uniform(-300, 300, 1_536_000)" \\
+        "np.sin(x); np.cos(x)"
 
 NumPy's float64 sin and cos call the C library once per element (16 ns per sample on this 2-core machine, about
 100× an array multiply); the encoder torque and the clock's angle stage take the sine and cosine of every DAQ sample's
@@ -51,8 +59,8 @@ _ROUND = 1.5 * 2.0**52  # adding and subtracting it rounds a double of magnitude
 
 def sin_cos(x_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """sin and cos of every element of ``x_rad`` (rad, any shape), as ``np.sin`` and ``np.cos`` to ≈ 1 ulp."""
-    x = np.asarray(x_rad, dtype=np.float64)
-    s, c = np.empty_like(x), np.empty_like(x)
+    x = np.ascontiguousarray(x_rad, dtype=np.float64)  # C order: the flat views below are views, not copies
+    s, c = np.empty(x.shape), np.empty(x.shape)
     if x.size and not (x.max() <= MAX_FAST_RAD and x.min() >= -MAX_FAST_RAD):  # also NaN, ±inf
         np.sin(x, out=s)
         np.cos(x, out=c)

@@ -17,9 +17,9 @@ processes measure:
 
 Thread settings: ``1`` sets ``OPENBLAS_NUM_THREADS``/``OMP_NUM_THREADS``/``MKL_NUM_THREADS`` to 1 in the child (what
 the ``acq`` command and the batch/monitor workers do, ``acq/entry.py``); ``default`` removes them (OpenBLAS then
-starts one thread per core). Either way the child starts with glibc's allocator as the ``acq`` command sets it
-(``acq.entry.MALLOC_SETTINGS``: freed memory kept for the next arrays instead of page-faulted back in; without it a
-60 s session's analysis spent ~0.05 s of its CPU in page faults). Targets (issue 17): 60 s ≤ 0.4 s CPU; 10 min ≤ 4 s
+starts one thread per core). Either way the child sets glibc's allocator as the ``acq analyze`` process does
+(``acq.entry.keep_freed_memory``: freed memory kept for the next arrays instead of page-faulted back in; without it a
+60 s session's analysis spent ~0.05 s of its CPU in page faults), unless ``--default-allocator``. Targets (issue 17): 60 s ≤ 0.4 s CPU; 10 min ≤ 4 s
 CPU and ≤ 600 MB peak RSS; cost linear in duration (the CPU per minute of session is printed). ``--profile`` adds a
 cProfile of the first size.
 
@@ -27,7 +27,7 @@ Measured (one BLAS thread, 2 cores shared with other work; CPU is less sensitive
 main at 1ef86d5 60 s 0.47 s and 10 min 4.10 s CPU at load ≈ 1 (0.48 s and 4.27 s at load ≈ 8); with the sine/cosine
 table (analysis/trig.py), the BLAS decimating FIR (analysis/resample.fir_decimate), the diagnosis only for a
 poor/failed verdict and the allocator setting 0.36 s and 3.57 s at load ≈ 8 (without the allocator setting 60 s
-0.40 s against 0.37–0.38 s, the same load).
+0.40 s against 0.37–0.38 s, the same load; again at load 4: 0.39–0.40 s with --default-allocator, 0.36–0.37 s without).
 """
 
 from __future__ import annotations
@@ -154,15 +154,11 @@ def child_floor(path: str, repeat: int) -> dict:
 
 
 def run_child(path: Path, threads: str, *flags: str) -> dict:
-    from acq.entry import MALLOC_SETTINGS
-
     env = dict(os.environ)
     for var in _BLAS_VARS:
         env.pop(var, None)
         if threads != "default":
             env[var] = threads
-    for var, value in MALLOC_SETTINGS.items():  # the allocator as the acq command sets it (read at the child's start)
-        env.setdefault(var, value)
     proc = subprocess.run([sys.executable, __file__, "--child", str(path), *flags], check=True, cwd=ROOT, env=env,
                           capture_output=True, text=True)
     return json.loads(proc.stdout.strip().splitlines()[-1])
@@ -178,10 +174,16 @@ def main() -> int:
     parser.add_argument("--sessions", type=Path, default=None,
                         help="folder to keep (and reuse) the recorded sessions (default: a temporary one)")
     parser.add_argument("--profile", action="store_true", help="print a cProfile of the first size (1 thread)")
+    parser.add_argument("--default-allocator", action="store_true",
+                        help="glibc's malloc defaults in the children, not acq analyze's (acq.entry.keep_freed_memory)")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     parser.add_argument("--floor", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
+        if not args.default_allocator:
+            from acq.entry import keep_freed_memory
+
+            keep_freed_memory()  # as the acq analyze process does
         out = child_floor(args.child, args.repeat) if args.floor else child_acq(args.child, args.repeat, args.profile)
         print(json.dumps(out))
         return 0
@@ -200,8 +202,9 @@ def main() -> int:
                 repeat = str(args.repeat if seconds <= 120 else 1)
                 for threads in settings:
                     progress.update(task, description=f"{seconds:g} s, BLAS threads {threads}: acq, then the floor")
-                    acq = run_child(path, threads, "--repeat", repeat)
-                    floor = run_child(path, threads, "--repeat", repeat, "--floor")
+                    allocator = ("--default-allocator",) if args.default_allocator else ()
+                    acq = run_child(path, threads, "--repeat", repeat, *allocator)
+                    floor = run_child(path, threads, "--repeat", repeat, "--floor", *allocator)
                     rows.append((seconds, threads, acq, floor))
                 progress.update(task, description=f"{seconds:g} s: done", completed=1, total=1)
             if args.profile:

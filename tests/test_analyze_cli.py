@@ -103,12 +103,13 @@ def test_findings_of_a_chosen_chain_say_first_that_they_are_that_chains(
     ("ten,400", "--band ten,400: must be LO,HI in Hz, e.g. 10,400"),
     ("300,600", "--band 300,600: HI must not exceed 500 Hz, the Nyquist frequency of {name}'s encoder "
                 "(period 0.001 s)"),
+    ("100,101", "{path}: fit band 100…101 Hz holds 1 FRF bin (the 0.5 s segments give 2 Hz bins); need at least 12"),
 ])
 def test_bad_band_is_one_line_exit_2(session_10s: Path, capsys: pytest.CaptureFixture[str], band: str,
                                      message: str) -> None:
     run = run_cli(capsys, "analyze", str(session_10s), "--band", band)
     assert run.code == 2
-    assert run.err.strip() == f"acq: error: {message.format(name=session_10s.name)}"
+    assert run.err.strip() == f"acq: error: {message.format(name=session_10s.name, path=session_10s)}"
 
 
 def test_record_refuses_a_duration_the_identification_cannot_use_and_the_one_it_names_works(

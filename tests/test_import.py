@@ -367,6 +367,26 @@ def test_export_refuses_to_replace_files_unless_forced_and_a_failed_export_chang
                                         "sha256": hashlib.sha256(exported["s.current.csv"]).hexdigest()}
 
 
+def test_a_failed_rename_of_a_forced_export_keeps_the_metadata_and_names_the_target_in_one_line(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    """A folder where the encoder CSV goes: exit 1, one line naming that path (not the temp file), and the old
+    <stem>.session.json kept (it was renamed first and replaced before)."""
+    assert run_import(capsys, *pair, tmp_path / "s.h5").code == 0
+    out = tmp_path / "csv"
+    assert run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out)).code == 0
+    meta_before = (out / "s.session.json").read_bytes()
+    (out / "s.encoder.csv").unlink()
+    (out / "s.encoder.csv").mkdir()
+    (out / "s.encoder.csv" / "keep").write_text("x")  # a non-empty folder: no rename replaces it
+    (out / "s.session.json").write_bytes(meta_before.replace(b'"joint"', b'"joint" ', 1))  # marks the old file
+    marked = (out / "s.session.json").read_bytes()
+    failed = run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out), "--force")
+    assert failed.code == 1
+    assert failed.err == f"acq: error: is a directory: {out / 's.encoder.csv'}\n"
+    assert (out / "s.session.json").read_bytes() == marked
+    assert sorted(p.name for p in out.iterdir()) == ["s.current.csv", "s.encoder.csv", "s.session.json"]  # no temp
+
+
 def test_export_metadata_carries_every_field_of_the_sessions_history(
         capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
     imported = run_import(capsys, *pair, tmp_path / "s.h5", "--tag", "pose=home", "--started", "2026-11-20T10:15:03Z")

@@ -226,7 +226,7 @@ def test_every_output_to_a_read_only_folder_is_a_failed_write_exit_1_named_by_th
                                               r"[0-9T:-]+_joint1\.h5\n", run.err), run.err
         cases = {
             (*record, str(ro / "sub")): ro / "sub",
-            ("export", str(session), "--csv", str(ro)): ro / f"{session.stem}.current.csv",
+            ("export", str(session), "--csv", str(ro)): ro / f"{session.stem}.session.json",  # its temp file first
             ("export", str(session), "--csv", str(ro / "sub")): ro / "sub",
             ("import", "--current", str(pair / f"{session.stem}.current.csv"), "--encoder",
              str(pair / f"{session.stem}.encoder.csv"), "--profile", "triangle_0.2s", "-o", str(ro / "i.h5")):

@@ -174,16 +174,27 @@ def test_a_window_of_a_paused_robot_is_not_excited_and_has_no_K(capsys: pytest.C
 
 
 def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: pytest.CaptureFixture[str],
-                                                                       tmp_path: Path) -> None:
+                                                                       tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """The command gets the user's environment and the ACQ_ variables: not the BLAS threads acq set for its
+    workers (it had them, and the allocator's MALLOC_* variables), and a BLAS setting of the user's as it was."""
     # K falls 5 % per simulated minute: windows at 0, 1, 2, 3 min have K −0, −5, −10, −15 %
     bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0, seed=EXCITING_SEED)
     env_file = tmp_path / "alarm.env"
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "3")
+    for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        monkeypatch.delenv(name, raising=False)
+    users = dict(os.environ)
     run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "4m", "--baseline-windows", "2",
                   "--keep", "0", "--out", str(tmp_path / "m"),
-                  "--on-alarm", f"sh -c 'env | grep ^ACQ_ | sort > {env_file}'")
+                  "--on-alarm", f"sh -c 'env -0 > {env_file}'")
     assert run.code == 3
-    env = dict(line.split("=", 1) for line in env_file.read_text().splitlines())
+    seen = dict(item.split("=", 1) for item in env_file.read_text().split("\0") if item)
+    env = {name: value for name, value in seen.items() if name.startswith("ACQ_")}
     assert set(env) == {"ACQ_JOINT", "ACQ_K", "ACQ_BASELINE_K", "ACQ_CHANGE_PCT", "ACQ_SESSION"}
+    assert {name: value for name, value in seen.items() if name not in env and name not in ("PWD", "SHLVL", "_")} \
+        == {name: value for name, value in users.items() if name not in ("PWD", "SHLVL", "_")}
+    assert seen["OPENBLAS_NUM_THREADS"] == "3"
     rows = _rows(tmp_path / "m")
     alarming = next(r for r in rows if r["path"] == env["ACQ_SESSION"])
     assert env["ACQ_JOINT"] == "joint1" and float(env["ACQ_K"]) == pytest.approx(alarming["K_Nm_per_rad"], rel=1e-5)

@@ -24,3 +24,12 @@ def test_fir_decimate_equals_resample_poly(n: int, q: int) -> None:
         np.testing.assert_allclose(fir_decimate(x[1], h, q), ref[1], rtol=0.0, atol=2e-15 * np.abs(ref).max())
     np.testing.assert_allclose(fir_decimate(x, own, q), resample_poly(x, 1, q, axis=-1), rtol=0.0,
                                atol=2e-15 * np.abs(x).max())
+
+
+def test_fir_decimate_refuses_q_below_2_and_complex_input() -> None:
+    """q = 1 gave wrong values and complex x lost its imaginary part, silently: now one clear ValueError each."""
+    h = firwin(21, 0.5)
+    with pytest.raises(ValueError, match=r"^fir_decimate: needs a real x and an integer factor q ≥ 2 \(got q = 1, real x\)$"):
+        fir_decimate(np.ones(100), h, 1)
+    with pytest.raises(ValueError, match=r"^fir_decimate: needs a real x and an integer factor q ≥ 2 \(got q = 2, complex x\)$"):
+        fir_decimate(np.ones(100) * (1 + 1j), h, 2)

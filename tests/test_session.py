@@ -72,25 +72,31 @@ def test_round_trip_layout_and_footer(tmp_path: Path) -> None:
 
 def test_appends_are_stored_once_in_order_across_flushes_and_bulk_appends(tmp_path: Path) -> None:
     """Small appends are copied into buffers the writer reuses from flush to flush (the block handed in is free at
-    once), large ones (an import's) held by reference: each sample is stored once, in the order appended."""
+    once), large ones (an import's) into parts of their own: each sample is stored once, in the order appended, and
+    a caller that reuses its arrays before the flush changes nothing stored (large appends were held by reference:
+    zeros in the file)."""
     path = tmp_path / "s.h5"
     w = _writer(path)
     w.append_current(_current(0, 100))
-    n = (1 << 20) // 8 + 10  # one channel's part above the copy limit
+    n = (1 << 20) // 8 + 10  # one channel's part above the limit for a part of its own
     bulk = np.arange(100, 100 + n, dtype=float)
     w.append_current_blocks([bulk, -bulk], np.array([100]), np.array([n]), np.array([7]))
+    bulk[:] = 0.0
     block = _current(100 + n, 100)
     w.append_current(block)
     block.current_a[:] = 0.0  # the caller reuses its array: what was appended is kept
+    large = _current(200 + n, n)
+    w.append_current(large)
+    large.current_a[:] = 0.0
     w.flush()
-    w.append_current(_current(200 + n, 30))  # into the same buffer again, after the flush
+    w.append_current(_current(200 + 2 * n, 30))  # into the same buffer again, after the flush
     w.finish("complete", "recorded")
     s = load(path)
-    expected = np.arange(230 + n)
+    expected = np.arange(230 + 2 * n)
     np.testing.assert_array_equal(s.current.sample_index(), expected)
     np.testing.assert_array_equal(s.current.phases_a["i_a"], expected)
     np.testing.assert_array_equal(s.current.phases_a["i_b"], -expected)
-    np.testing.assert_array_equal(s.current.block_count, [100, n, 100, 30])
+    np.testing.assert_array_equal(s.current.block_count, [100, n, 100, n, 30])
 
 
 KILLED_WRITER = textwrap.dedent(

@@ -42,3 +42,15 @@ def test_sin_cos_shape_large_and_special_values() -> None:
         special = sin_cos(np.array([np.nan, np.inf, 1.0]))
     assert np.isnan(special[0][:2]).all() and np.isnan(special[1][:2]).all()
     assert sin_cos(np.array([]))[0].shape == (0,)
+
+
+@pytest.mark.parametrize("layout", ["transposed", "fortran", "strided"])
+def test_sin_cos_of_non_contiguous_arrays(layout: str) -> None:
+    """Transposed, Fortran-ordered and strided input: every output element written (once the outputs were
+    Fortran-ordered, the blocks went into a flat copy and the caller got uninitialised memory, error ≈ 1)."""
+    x = np.random.default_rng(7).uniform(-10.0, 10.0, (300, 400))
+    angles = {"transposed": x.T, "fortran": np.asfortranarray(x), "strided": x[:, ::3]}[layout]
+    s, c = sin_cos(angles)
+    assert s.shape == c.shape == angles.shape
+    assert np.max(np.abs(s - np.sin(angles))) <= 2.3e-16
+    assert np.max(np.abs(c - np.cos(angles))) <= 2.3e-16

@@ -30,6 +30,7 @@ from typing import Any
 
 import numpy as np
 
+from acq.environment import set_default_env
 from acq.monitoring.catalogue import Catalogue, Outcome
 from acq.offline.analyze import SessionResult, analyze_session, output_paths, sha256_of
 from acq.recording.paths import GLOB_CHARS
@@ -217,7 +218,7 @@ def analysis_executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
         # of this process inherits the locks its threads — recorder, progress, BLAS — may hold, and can hang);
         # one BLAS thread per worker, as Dask's workers have, so N jobs do not fight over the cores
         for var in _BLAS_THREADS:
-            os.environ.setdefault(var, "1")
+            set_default_env(var, "1")
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["acq.monitoring.batch"])
         _start_forkserver_without_cwd()

@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import fcntl
 import math
-import os
 import shlex
 import subprocess
 import time
@@ -31,6 +30,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+from acq.environment import user_environment
 from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
@@ -308,7 +308,7 @@ class Monitor:
         self.status.message = f"ALARM: K {entry.K_Nm_per_rad:.1f} N·m/rad ({entry.path})"
         if not self.s.on_alarm:
             return
-        env = {**os.environ, "ACQ_JOINT": trend.joint, "ACQ_K": f"{entry.K_Nm_per_rad:.6g}",
+        env = {**user_environment(), "ACQ_JOINT": trend.joint, "ACQ_K": f"{entry.K_Nm_per_rad:.6g}",
                "ACQ_BASELINE_K": f"{trend.baseline_K_Nm_per_rad:.6g}", "ACQ_SESSION": entry.path,
                "ACQ_CHANGE_PCT": f"{100 * (entry.K_Nm_per_rad / trend.baseline_K_Nm_per_rad - 1):.3g}"}  # type: ignore
         try:

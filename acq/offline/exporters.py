@@ -15,13 +15,15 @@ bench and profile as used, and whether the two ``t_s`` columns are stamps on one
 ``acq import`` restores the session's history.
 
 An existing file is not replaced unless asked (``force``); the three are written under temp names in
-the output folder and renamed only when all three are complete, so a failed export leaves the folder
-as it was.
+the output folder and renamed only when all three are complete, so a failed write leaves the folder as
+it was. The metadata is renamed last: a rename that fails (a folder in a CSV's place) leaves the old
+metadata, whose checksums then no longer match a CSV replaced before it (``acq import`` says so).
 """
 
 from __future__ import annotations
 
-from contextlib import ExitStack
+from collections.abc import Iterator
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -47,6 +49,16 @@ def _write_columns(path: Path, columns: dict[str, list[str]]) -> None:
     """Write ``name -> formatted cells`` as a CSV."""
     body = "\n".join(map(",".join, zip(*columns.values())))
     write_text_synced(path, ",".join(columns) + "\n" + body + "\n")
+
+
+@contextmanager
+def _failure_named(target: Path) -> Iterator[None]:
+    """An :class:`OSError` writing ``target``'s temp file becomes the :class:`StorageError` naming ``target`` (in
+    the nested temp files' contexts it would reach the innermost one first and name that file)."""
+    try:
+        yield
+    except OSError as e:
+        raise storage_error(e, target) from None
 
 
 def _host_ns_at_start(session: Session) -> int:
@@ -78,7 +90,7 @@ def export_csv(session_path: Path, out_dir: Path, *, force: bool = False,
     ConfigError
         One of the three files exists and ``force`` is false (nothing is written).
     StorageError
-        A write failed (the folder is left as it was).
+        A write failed (the folder is left as it was) or a rename did (the metadata, renamed last, is kept).
     """
     session = load(session_path)
     session.require_samples()
@@ -97,18 +109,23 @@ def export_csv(session_path: Path, out_dir: Path, *, force: bool = False,
             raise storage_error(e, out_dir) from None
         raise ConfigError(f"--csv {out_dir}: {e.strerror or e}") from None
     cur, enc = session.current, session.encoder
-    with ExitStack() as stack:  # every temp file removed on an error; all three renamed at the end
-        tmp_current, tmp_encoder, tmp_meta = (stack.enter_context(atomic_path(path)) for path in targets)
+    with ExitStack() as stack:  # every temp file removed on an error; all three renamed at the end, in reverse order:
+        # the metadata last, so a failed rename of a CSV never leaves new metadata beside it
+        tmp_meta, tmp_encoder, tmp_current = (stack.enter_context(atomic_path(path))
+                                              for path in (meta_path, encoder_path, current_path))
         t_cur = current_t0_s(session) + cur.sample_index() / cur.rate_hz
         phases = {f"{p}_A": _exact(cur.phases_a[p]) for p in PHASE_COLUMNS if p in cur.phases_a}
-        _write_columns(tmp_current, {"t_s": _seconds(t_cur), **phases})
+        with _failure_named(current_path):
+            _write_columns(tmp_current, {"t_s": _seconds(t_cur), **phases})
         t_enc = (enc.host_ns - _host_ns_at_start(session)) * 1e-9
         columns = {"t_s": _seconds(t_enc), "position_counts": [str(v) for v in enc.position_counts.tolist()],
                    "index": [str(v) for v in enc.index.tolist()]}
         if enc.drive_time_s is not None:
             columns["drive_time_s"] = _exact(enc.drive_time_s)
-        _write_columns(tmp_encoder, columns)
-        write_text_synced(tmp_meta, metadata_text(session, (current_path.name, sha256_of(tmp_current)),
-                                                  (encoder_path.name, sha256_of(tmp_encoder))))
+        with _failure_named(encoder_path):
+            _write_columns(tmp_encoder, columns)
+        with _failure_named(meta_path):
+            write_text_synced(tmp_meta, metadata_text(session, (current_path.name, sha256_of(tmp_current)),
+                                                      (encoder_path.name, sha256_of(tmp_encoder))))
     left_out = tuple(name for name in NOT_EXPORTED if getattr(enc, name, None) is not None)
     return targets, left_out

@@ -43,6 +43,8 @@ def cause_of(e: BaseException) -> str:
         return "disk full"
     if "errno = 5," in full or "Input/output error" in full:
         return "I/O error"
+    if isinstance(e, OSError) and e.strerror and e.filename is not None:  # the caller names the path (not a temp one)
+        return e.strerror[0].lower() + e.strerror[1:]
     return full.splitlines()[0] if full else type(e).__name__
 
 
