@@ -71,17 +71,52 @@ class SpeedRatio:
         match best, s (to the lag grid; searched ±``MAX_LAG_S`` around "both streams started together").
     cycles : float
         Electrical cycles (half-periods / 2) that entered the ratio.
+    crossings : int
+        Zero crossings of the current counted inside the moves (the encoder turning one way faster than 20 % of
+        its peak) of the span the ratio used.
+    half_turns : float
+        Electrical half-turns the encoder travelled in those moves (the stated constants: 2·p·revolutions).
+    moves : int
+        Number of those moves.
+    moving_s : float
+        Their total duration, s.
     """
 
     ratio: float
     spread: float
     lag_s: float
     cycles: float
+    crossings: int = 0
+    half_turns: float = 0.0
+    moves: int = 0
+    moving_s: float = 0.0
+
+    @property
+    def tolerance(self) -> float:
+        """How far off 1 the ratio may be on a correct bench: :data:`RATIO_SIGMAS` standard errors, at least
+        :data:`MIN_RATIO_ERROR` (the estimator's bias)."""
+        return max(MIN_RATIO_ERROR, RATIO_SIGMAS * self.spread)
 
     @property
     def mismatched(self) -> bool:
-        """True when the ratio is off 1 by more than :data:`RATIO_SIGMAS` standard errors and :data:`MIN_RATIO_ERROR`."""
-        return abs(self.ratio - 1.0) > max(MIN_RATIO_ERROR, RATIO_SIGMAS * self.spread)
+        """True when the ratio is off 1 by more than :attr:`tolerance`."""
+        return abs(self.ratio - 1.0) > self.tolerance
+
+    @property
+    def needed_crossings(self) -> float:
+        """The fewest zero crossings the current must make in the moves if ``ratio`` (less its :attr:`tolerance`)
+        is its rotation: (ratio − tolerance) · ``half_turns`` − ``moves`` (a move through h electrical
+        half-turns holds at least h − 1 of them)."""
+        return (self.ratio - self.tolerance) * self.half_turns - self.moves
+
+    @property
+    def counted(self) -> bool:
+        """True when the crossings counted in the moves account for the ratio (``crossings`` ≥
+        :attr:`needed_crossings`). Rotation puts a crossing at every electrical half-turn and a torque reversal
+        only adds crossings; so a ratio the count cannot reach was read off half-periods that are not rotation
+        (moves shorter than the torque's sign changes, all alike because the motion repeats), not off a wrong
+        constant. Vacuous (True) when nothing was counted (``half_turns`` 0)."""
+        return self.crossings >= self.needed_crossings
 
 
 def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index: np.ndarray,
@@ -150,7 +185,34 @@ def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index:
     if scatter > MAX_RELATIVE_SCATTER * ratio:
         return None
     spread = scatter / math.sqrt(per_interval.size)
-    return SpeedRatio(ratio, spread, best_lag, 0.5 * per_interval.size)
+    count = _count_in_moves(crossings[early] + best_lag, cycles, counts, period_s, counts_per_rev, pole_pairs)
+    return SpeedRatio(ratio, spread, best_lag, 0.5 * per_interval.size, *count)
+
+
+def _count_in_moves(crossings_drive_s: np.ndarray, cycles: np.ndarray, counts: np.ndarray, period_s: float,
+                    counts_per_rev: int, pole_pairs: int) -> tuple[int, float, int, float]:
+    """(crossings, electrical half-turns, moves, seconds) of the moves within the crossings' span.
+
+    A move is a run of encoder cycles turning one way faster than 20 % of the peak speed (the threshold of
+    :func:`_moving`); ``crossings_drive_s`` are the current's zero crossings on the drive's clock. The lag's
+    error (≤ ``REFINE_STEP_S``/2) moves a move's ends by less than a crossing below a few kHz electrical.
+    """
+    omega = speed_from_counts(counts, counts_per_rev, period_s)  # belongs to the instant of the later sample
+    t_s = cycles[1:] * period_s
+    inside = (t_s - period_s >= crossings_drive_s[0]) & (t_s <= crossings_drive_s[-1])
+    fast = np.abs(omega) >= 0.2 * float(np.max(np.abs(omega)))
+    theta_rev = counts / counts_per_rev
+    found, half_turns, moves, moving_s = 0, 0.0, 0, 0.0
+    for sign in (1.0, -1.0):
+        run = np.concatenate(([0], (inside & fast & (np.sign(omega) == sign)).astype(np.int8), [0]))
+        edges = np.diff(run)
+        for first, stop in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            t0, t1 = t_s[first] - period_s, t_s[stop - 1]
+            found += int(np.count_nonzero((crossings_drive_s >= t0) & (crossings_drive_s <= t1)))
+            half_turns += 2.0 * pole_pairs * abs(float(theta_rev[stop] - theta_rev[first]))
+            moves += 1
+            moving_s += t1 - t0
+    return found, half_turns, moves, moving_s
 
 
 def _half_periods(crossings: np.ndarray, lag_s: float, cycles: np.ndarray, counts: np.ndarray, period_s: float,
@@ -209,9 +271,10 @@ def ratio_fault(r: SpeedRatio, pole_pairs: int, counts_per_rev: int) -> str | No
     """The words for a mismatched ratio (None when it matches): what turns faster, and the values to check.
 
     The suggested ``pole_pairs`` is given only when p·r is near a whole number; ``counts_per_rev`` is
-    counts_per_rev/r (snapped to a power of two within 2 %, as most encoders are).
+    counts_per_rev/r (snapped to a power of two within 2 %, as most encoders are). A ratio the crossings counted
+    in the moves do not account for (:attr:`SpeedRatio.counted`) names no constant: see :func:`ratio_doubt`.
     """
-    if not r.mismatched:
+    if not r.mismatched or not r.counted:
         return None
     word = f"{r.ratio:.2f}× faster" if r.ratio > 1 else f"{1 / r.ratio:.2f}× slower"
     candidates = []
@@ -221,6 +284,20 @@ def ratio_fault(r: SpeedRatio, pole_pairs: int, counts_per_rev: int) -> str | No
     candidates.append(f"[encoder] counts_per_rev = {likely_counts_per_rev(counts_per_rev / r.ratio, 0.02)}")
     return (f"the current turns {word} than pole_pairs·ω (pole_pairs = {pole_pairs}, counts_per_rev = "
             f"{counts_per_rev}): check {' or '.join(candidates)}")
+
+
+def ratio_doubt(r: SpeedRatio, pole_pairs: int) -> str | None:
+    """The words for a mismatched ratio the count does not support (None otherwise): the motion the encoder saw
+    and why it cannot check the constants, instead of a constant to change."""
+    if not r.mismatched or r.counted:
+        return None
+    half_turns = r.half_turns / r.moves
+    return (f"pole_pairs and counts_per_rev cannot be checked on this record: the current's half-periods read "
+            f"{r.ratio:.2f}× pole_pairs·ω, but it crossed zero {r.crossings} times in the moves where that needs "
+            f"≥ {math.ceil(r.needed_crossings)} — each of the {r.moves} moves turns the motor only "
+            f"{half_turns / (2 * pole_pairs):.2g} rev ({half_turns:.1f} electrical half-turns at pole_pairs = "
+            f"{pole_pairs}) in {1e3 * r.moving_s / r.moves:.0f} ms, so the current's zero crossings follow its "
+            "torque's sign changes, not the rotation")
 
 
 def sequence_fault(agreement: float, phases: list[str]) -> str | None:
@@ -233,35 +310,47 @@ def sequence_fault(agreement: float, phases: list[str]) -> str | None:
             "counting direction")
 
 
-def recording_fault(rec: Recording) -> str | None:
-    """:func:`ratio_fault` of a raw recording's phase i_a and encoder, then (2–3 phases)
-    :func:`sequence_fault`; None if both match or it cannot tell."""
+def recording_diagnosis(rec: Recording) -> tuple[str | None, str | None]:
+    """(fault, doubt) of a raw recording: :func:`ratio_fault` of its phase i_a and encoder, then (2–3 phases)
+    :func:`sequence_fault`; and :func:`ratio_doubt` when a mismatched ratio is no evidence. (None, None) if all
+    match or it cannot tell."""
     r = electrical_speed_ratio(rec.current_a["i_a"], rec.rate_hz, rec.encoder_index, rec.position_counts,
                                rec.period_s, rec.counts_per_rev, rec.pole_pairs)
     if r is None:
-        return None
+        return None, None
+    doubt = ratio_doubt(r, rec.pole_pairs)
+    if doubt is not None:  # its slow move turns the motor through many electrical turns
+        doubt += "; check the constants with acq selftest"
     fault = ratio_fault(r, rec.pole_pairs, rec.counts_per_rev)
-    if fault is None and len(rec.current_a) >= 2:
+    if fault is None and doubt is None and len(rec.current_a) >= 2:
         agreement = phase_sequence_agreement(rec.current_a, rec.rate_hz, rec.encoder_index, rec.position_counts,
                                              rec.period_s, r.lag_s)
         fault = sequence_fault(agreement, list(rec.current_a))
-    return fault
+    return fault, doubt
 
 
-def with_fault(quality: Quality, fault: Callable[[], str | None]) -> Quality:
-    """A poor / failed ``quality`` becomes failed with the fault ``fault()`` finds as its only reason, so it says why
-    instead of a bare failed. The other findings (low coherence, wide intervals, misfit, clock residual) follow from
-    the wrong constant, and their advice ("shorten the acceleration time", "try --band") would send the
-    technician after the motion instead of the bench config. An ``ok`` verdict (the data hold together:
-    clocks aligned, model fits) or no fault: unchanged — the diagnosis explains failures, it never overrules
-    a consistent identification, so for an ``ok`` verdict ``fault`` is not called (:func:`recording_fault` is ~5 %
-    of a 60 s session's analysis)."""
+def recording_fault(rec: Recording) -> str | None:
+    """The fault of :func:`recording_diagnosis`: a bench constant named, or None."""
+    return recording_diagnosis(rec)[0]
+
+
+def with_fault(quality: Quality, diagnosis: Callable[[], tuple[str | None, str | None]]) -> Quality:
+    """A poor / failed ``quality`` becomes failed with the fault ``diagnosis()`` finds as its only reason, so it says
+    why instead of a bare failed. The other findings (low coherence, wide intervals, misfit, clock residual) follow
+    from the wrong constant, and their advice ("shorten the acceleration time", "try --band") would send the
+    technician after the motion instead of the bench config. No fault but a doubt (a mismatch the data do not
+    support, :func:`ratio_doubt`): the doubt becomes the first reason, the others stay. An ``ok`` verdict (the data
+    hold together: clocks aligned, model fits) or neither: unchanged — the diagnosis explains failures, it never
+    overrules a consistent identification, so for an ``ok`` verdict ``diagnosis`` is not called
+    (:func:`recording_diagnosis` is ~5 % of a 60 s session's analysis)."""
     if quality.verdict == "ok":
         return quality
-    found = fault()
-    if found is None:
-        return quality
-    return replace(quality, verdict="failed", reasons=(found,))
+    fault, doubt = diagnosis()
+    if fault is not None:
+        return replace(quality, verdict="failed", reasons=(fault,))
+    if doubt is not None:
+        return replace(quality, reasons=(doubt, *quality.reasons))
+    return quality
 
 
 def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: tuple[str, ...],

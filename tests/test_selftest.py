@@ -228,3 +228,43 @@ def test_ni_daq_missing_device_and_coerced_rate_are_named(capsys: pytest.Capture
     daq = next(c for c in json.loads(run.out)["checks"] if c["name"] == "DAQ")
     assert daq["status"] == "warn" and daq["values"]["rate_hz"] == 25600.0
     assert daq["fix"] == "[daq] rate_hz = 25000: the card runs 25600 Hz — state that rate"
+
+
+FAST_RAMPS = """kind = "triangle"
+top_speed_rpm = 1000
+accel_time_s = 0.01
+decel_time_s = 0.01
+dwell_s = 0
+duration_s = 5
+"""
+
+
+@pytest.mark.parametrize("sim_line", ["", "pole_pairs = 8"])
+def test_ramps_too_fast_to_turn_the_motor_blame_no_bench_constant(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, sim_line: str) -> None:
+    """10 ms ramps to 1000 rpm: the motor swings ±0.08 rev (0.66 electrical turns) every 40 ms and the current's zero
+    crossings follow the torque's sign changes. The half-periods read 2.96× pole_pairs·ω on the correct bench (3.70×
+    with 8 true pole pairs), all alike because the motion repeats — that once read "check [encoder] counts_per_rev =
+    44326". The crossings counted in the moves cannot reach such a ratio, so no constant is named: the record says
+    why it cannot check them."""
+    profile = tmp_path / "fast.toml"
+    profile.write_text(FAST_RAMPS)
+    record = run_cli(capsys, "record", "--profile", str(profile), "--bench", str(bench_file(tmp_path, sim_line)),
+                     "--fast", "--no-analyze", "--out", str(tmp_path / "s"))
+    assert record.code == 0
+    (session,) = (tmp_path / "s").glob("*.h5")
+    quality = json.loads(run_cli(capsys, "analyze", str(session), "--json", "--no-report").out)["quality"]
+    assert quality["verdict"] == "failed"
+    assert not any("check [encoder]" in r or "check [motor]" in r for r in quality["reasons"]), quality["reasons"]
+    doubt, *others = quality["reasons"]
+    if not sim_line:
+        assert doubt == (
+            "pole_pairs and counts_per_rev cannot be checked on this record: the current's half-periods read 2.96× "
+            "pole_pairs·ω, but it crossed zero 514 times in the moves where that needs ≥ 673 — each of the 240 moves "
+            "turns the motor only 0.16 rev (1.3 electrical half-turns at pole_pairs = 4) in 19 ms, so the current's "
+            "zero crossings follow its torque's sign changes, not the rotation; check the constants with acq selftest")
+    else:
+        assert re.fullmatch(r"pole_pairs and counts_per_rev cannot be checked on this record: the current's "
+                            r"half-periods read 3\.\d\d× pole_pairs·ω, but it crossed zero \d+ times in the moves "
+                            r"where that needs ≥ \d+ — each of the 240 moves turns the motor only 0\.16 rev .*", doubt)
+    assert others  # the identification's own findings stay beside it
