@@ -103,20 +103,41 @@ class SpeedRatio:
         return abs(self.ratio - 1.0) > self.tolerance
 
     @property
-    def needed_crossings(self) -> float:
-        """The fewest zero crossings the current must make in the moves if ``ratio`` (less its :attr:`tolerance`)
-        is its rotation: (ratio − tolerance) · ``half_turns`` − ``moves`` (a move through h electrical
-        half-turns holds at least h − 1 of them)."""
-        return (self.ratio - self.tolerance) * self.half_turns - self.moves
+    def count_range(self) -> tuple[float, float]:
+        """The ratios the crossings counted in the moves allow, each end widened by :attr:`tolerance`.
+
+        Rotation puts a crossing at every electrical half-turn, so a move through h of them holds h ± 1 (its
+        ends cut half-periods); the torque's reversal — once in a move from rest to rest, which accelerates,
+        then brakes — adds one, and only adds. Over M moves, H half-turns and n crossings: ratio in
+        [(n − 2M)/H, (n + M)/H]. Nothing counted (``half_turns`` 0): ``ratio`` ± tolerance.
+        """
+        if self.half_turns <= 0:
+            return self.ratio - self.tolerance, self.ratio + self.tolerance
+        return ((self.crossings - 2 * self.moves) / self.half_turns - self.tolerance,
+                (self.crossings + self.moves) / self.half_turns + self.tolerance)
 
     @property
     def counted(self) -> bool:
-        """True when the crossings counted in the moves account for the ratio (``crossings`` ≥
-        :attr:`needed_crossings`). Rotation puts a crossing at every electrical half-turn and a torque reversal
-        only adds crossings; so a ratio the count cannot reach was read off half-periods that are not rotation
-        (moves shorter than the torque's sign changes, all alike because the motion repeats), not off a wrong
-        constant. Vacuous (True) when nothing was counted (``half_turns`` 0)."""
-        return self.crossings >= self.needed_crossings
+        """True when the count allows the ratio the half-periods read (it lies in :attr:`count_range`). The
+        half-periods' median is carried by non-rotation intervals when the moves hold few half-turns (a torque
+        reversal cuts one in two; all moves alike when the motion repeats: their scatter stays small); the count
+        cannot be: it needs no half-period to be whole."""
+        low, high = self.count_range
+        return low <= self.ratio <= high
+
+    @property
+    def whole(self) -> bool:
+        """True when the moves hold mostly whole half-periods, so their median is the rotation's: more than twice
+        the crossings a move can hold that do not end one (a torque reversal cuts one in two, each end cuts one:
+        4), on average. Vacuous (True) when nothing was counted."""
+        return self.crossings > 2 * 4 * self.moves
+
+    @property
+    def named(self) -> bool:
+        """True when the data establish a wrong constant: :attr:`mismatched`, :attr:`counted`, and 1 outside the
+        :attr:`count_range`."""
+        low, high = self.count_range
+        return self.mismatched and self.counted and not low <= 1.0 <= high
 
 
 def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index: np.ndarray,
@@ -268,36 +289,49 @@ def likely_counts_per_rev(estimate: float, tolerance: float) -> int:
 
 
 def ratio_fault(r: SpeedRatio, pole_pairs: int, counts_per_rev: int) -> str | None:
-    """The words for a mismatched ratio (None when it matches): what turns faster, and the values to check.
+    """The words for a wrong constant the ratio establishes (:attr:`SpeedRatio.named`; None otherwise): what turns
+    faster, and the values to check.
 
-    The suggested ``pole_pairs`` is given only when p·r is near a whole number; ``counts_per_rev`` is
-    counts_per_rev/r (snapped to a power of two within 2 %, as most encoders are). A ratio the crossings counted
-    in the moves do not account for (:attr:`SpeedRatio.counted`) names no constant: see :func:`ratio_doubt`.
+    The suggested ``pole_pairs`` is given only when p·r is near a whole number the :attr:`~SpeedRatio.count_range`
+    allows, and the only one or the half-periods mostly :attr:`~SpeedRatio.whole`; ``counts_per_rev`` is counts_per_rev/r (snapped to a power of two
+    within 2 %, as most encoders are), given when no other power of two lies in the range — or, not a power of two,
+    when ``pole_pairs`` is named (the ratio is then a whole pole-pair ratio). Neither: the range is too wide to name a value, and the
+    words say so. A mismatch the count does not establish: :func:`ratio_doubt`.
     """
-    if not r.mismatched or not r.counted:
+    if not r.named:
         return None
     word = f"{r.ratio:.2f}× faster" if r.ratio > 1 else f"{1 / r.ratio:.2f}× slower"
+    low, high = r.count_range
     candidates = []
     p = pole_pairs * r.ratio
-    if round(p) >= 1 and abs(p - round(p)) < 0.1:
+    allowed = [q for q in range(1, math.floor(pole_pairs * high) + 1) if q >= pole_pairs * low]
+    if round(p) >= 1 and abs(p - round(p)) < 0.1 and (allowed == [round(p)] or r.whole and round(p) in allowed):
         candidates.append(f"[motor] pole_pairs = {round(p)}")
-    candidates.append(f"[encoder] counts_per_rev = {likely_counts_per_rev(counts_per_rev / r.ratio, 0.02)}")
-    return (f"the current turns {word} than pole_pairs·ω (pole_pairs = {pole_pairs}, counts_per_rev = "
-            f"{counts_per_rev}): check {' or '.join(candidates)}")
+    cpr = likely_counts_per_rev(counts_per_rev / r.ratio, 0.02)
+    powers = [2 ** k for k in range(1, 64) if counts_per_rev / high <= 2 ** k <= counts_per_rev / max(low, 1e-18)]
+    if powers == [cpr] or (cpr & (cpr - 1) and candidates):  # another value: as pinned as the pole-pair ratio
+        candidates.append(f"[encoder] counts_per_rev = {cpr}")
+    stated = f"pole_pairs = {pole_pairs}, counts_per_rev = {counts_per_rev}"
+    if not candidates:
+        return (f"the current turns {word} than pole_pairs·ω ({stated}; its zero crossings in the moves allow "
+                f"{low:.2f}–{high:.2f}×, too wide to name a value): check [motor] pole_pairs and [encoder] "
+                "counts_per_rev with acq selftest")
+    return f"the current turns {word} than pole_pairs·ω ({stated}): check {' or '.join(candidates)}"
 
 
 def ratio_doubt(r: SpeedRatio, pole_pairs: int) -> str | None:
-    """The words for a mismatched ratio the count does not support (None otherwise): the motion the encoder saw
+    """The words for a mismatched ratio the count does not establish (None otherwise): the motion the encoder saw
     and why it cannot check the constants, instead of a constant to change."""
-    if not r.mismatched or r.counted:
+    if not r.mismatched or r.named:
         return None
+    low, high = r.count_range
     half_turns = r.half_turns / r.moves
     return (f"pole_pairs and counts_per_rev cannot be checked on this record: the current's half-periods read "
-            f"{r.ratio:.2f}× pole_pairs·ω, but it crossed zero {r.crossings} times in the moves where that needs "
-            f"≥ {math.ceil(r.needed_crossings)} — each of the {r.moves} moves turns the motor only "
+            f"{r.ratio:.2f}× pole_pairs·ω, but its {r.crossings} zero crossings in the moves allow "
+            f"{max(low, 0.0):.2f}–{high:.2f}× — each of the {r.moves} moves turns the motor only "
             f"{half_turns / (2 * pole_pairs):.2g} rev ({half_turns:.1f} electrical half-turns at pole_pairs = "
             f"{pole_pairs}) in {1e3 * r.moving_s / r.moves:.0f} ms, so the current's zero crossings follow its "
-            "torque's sign changes, not the rotation")
+            "torque's sign changes as much as the rotation")
 
 
 def sequence_fault(agreement: float, phases: list[str]) -> str | None:
