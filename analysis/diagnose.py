@@ -293,10 +293,11 @@ def ratio_fault(r: SpeedRatio, pole_pairs: int, counts_per_rev: int) -> str | No
     faster, and the values to check.
 
     The suggested ``pole_pairs`` is given only when p·r is near a whole number the :attr:`~SpeedRatio.count_range`
-    allows, and the only one or the half-periods mostly :attr:`~SpeedRatio.whole`; ``counts_per_rev`` is counts_per_rev/r (snapped to a power of two
-    within 2 %, as most encoders are), given when no other power of two lies in the range — or, not a power of two,
-    when ``pole_pairs`` is named (the ratio is then a whole pole-pair ratio). Neither: the range is too wide to name a value, and the
-    words say so. A mismatch the count does not establish: :func:`ratio_doubt`.
+    allows, and the only one or the half-periods mostly :attr:`~SpeedRatio.whole`; ``counts_per_rev`` is
+    counts_per_rev/r (snapped to a power of two within 2 %, as most encoders are), given when no other power of two
+    lies in the range — or, not a power of two, when ``pole_pairs`` is named (the ratio is then a whole pole-pair
+    ratio). Neither: the range is too wide to name a value, and the words say so. A mismatch the count does not
+    establish: :func:`ratio_doubt`.
     """
     if not r.named:
         return None
