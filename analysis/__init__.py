@@ -21,7 +21,8 @@ from __future__ import annotations
 
 from analysis.chain import PAPER_CHAIN, Pipeline, SignalChain, TorqueMethod, our_chain
 from analysis.diagnose import (SpeedRatio, electrical_speed_ratio, first_move_sign, inertia_from_torque,
-                               likely_counts_per_rev, phase_sequence_agreement, ratio_fault, sequence_fault)
+                               likely_counts_per_rev, phase_sequence_agreement, ratio_doubt, ratio_fault,
+                               sequence_fault)
 from analysis.encoder import longest_gap_free_span, speed_from_counts
 from analysis.fit import PARAM_NAMES, Z95
 from analysis.frf import min_duration_s
@@ -41,5 +42,5 @@ __all__ = [
     "analyze", "code_fingerprint", "electrical_speed_ratio", "encoder_period_problem", "min_current_rate_hz",
     "min_duration_s", "min_record_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",
     "likely_counts_per_rev", "longest_gap_free_span", "our_chain", "phase_sequence_agreement", "prepare_signals",
-    "ratio_fault", "sequence_fault", "speed_from_counts",
+    "ratio_doubt", "ratio_fault", "sequence_fault", "speed_from_counts",
 ]

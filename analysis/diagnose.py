@@ -71,17 +71,73 @@ class SpeedRatio:
         match best, s (to the lag grid; searched ±``MAX_LAG_S`` around "both streams started together").
     cycles : float
         Electrical cycles (half-periods / 2) that entered the ratio.
+    crossings : int
+        Zero crossings of the current counted inside the moves (the encoder turning one way faster than 20 % of
+        its peak) of the span the ratio used.
+    half_turns : float
+        Electrical half-turns the encoder travelled in those moves (the stated constants: 2·p·revolutions).
+    moves : int
+        Number of those moves.
+    moving_s : float
+        Their total duration, s.
     """
 
     ratio: float
     spread: float
     lag_s: float
     cycles: float
+    crossings: int = 0
+    half_turns: float = 0.0
+    moves: int = 0
+    moving_s: float = 0.0
+
+    @property
+    def tolerance(self) -> float:
+        """How far off 1 the ratio may be on a correct bench: :data:`RATIO_SIGMAS` standard errors, at least
+        :data:`MIN_RATIO_ERROR` (the estimator's bias)."""
+        return max(MIN_RATIO_ERROR, RATIO_SIGMAS * self.spread)
 
     @property
     def mismatched(self) -> bool:
-        """True when the ratio is off 1 by more than :data:`RATIO_SIGMAS` standard errors and :data:`MIN_RATIO_ERROR`."""
-        return abs(self.ratio - 1.0) > max(MIN_RATIO_ERROR, RATIO_SIGMAS * self.spread)
+        """True when the ratio is off 1 by more than :attr:`tolerance`."""
+        return abs(self.ratio - 1.0) > self.tolerance
+
+    @property
+    def count_range(self) -> tuple[float, float]:
+        """The ratios the crossings counted in the moves allow, each end widened by :attr:`tolerance`.
+
+        Rotation puts a crossing at every electrical half-turn, so a move through h of them holds h ± 1 (its
+        ends cut half-periods); the torque's reversal — once in a move from rest to rest, which accelerates,
+        then brakes — adds one, and only adds. Over M moves, H half-turns and n crossings: ratio in
+        [(n − 2M)/H, (n + M)/H]. Nothing counted (``half_turns`` 0): ``ratio`` ± tolerance.
+        """
+        if self.half_turns <= 0:
+            return self.ratio - self.tolerance, self.ratio + self.tolerance
+        return ((self.crossings - 2 * self.moves) / self.half_turns - self.tolerance,
+                (self.crossings + self.moves) / self.half_turns + self.tolerance)
+
+    @property
+    def counted(self) -> bool:
+        """True when the count allows the ratio the half-periods read (it lies in :attr:`count_range`). The
+        half-periods' median is carried by non-rotation intervals when the moves hold few half-turns (a torque
+        reversal cuts one in two; all moves alike when the motion repeats: their scatter stays small); the count
+        cannot be: it needs no half-period to be whole."""
+        low, high = self.count_range
+        return low <= self.ratio <= high
+
+    @property
+    def whole(self) -> bool:
+        """True when the moves hold mostly whole half-periods, so their median is the rotation's: more than twice
+        the crossings a move can hold that do not end one (a torque reversal cuts one in two, each end cuts one:
+        4), on average. Vacuous (True) when nothing was counted."""
+        return self.crossings > 2 * 4 * self.moves
+
+    @property
+    def named(self) -> bool:
+        """True when the data establish a wrong constant: :attr:`mismatched`, :attr:`counted`, and 1 outside the
+        :attr:`count_range`."""
+        low, high = self.count_range
+        return self.mismatched and self.counted and not low <= 1.0 <= high
 
 
 def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index: np.ndarray,
@@ -150,7 +206,34 @@ def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index:
     if scatter > MAX_RELATIVE_SCATTER * ratio:
         return None
     spread = scatter / math.sqrt(per_interval.size)
-    return SpeedRatio(ratio, spread, best_lag, 0.5 * per_interval.size)
+    count = _count_in_moves(crossings[early] + best_lag, cycles, counts, period_s, counts_per_rev, pole_pairs)
+    return SpeedRatio(ratio, spread, best_lag, 0.5 * per_interval.size, *count)
+
+
+def _count_in_moves(crossings_drive_s: np.ndarray, cycles: np.ndarray, counts: np.ndarray, period_s: float,
+                    counts_per_rev: int, pole_pairs: int) -> tuple[int, float, int, float]:
+    """(crossings, electrical half-turns, moves, seconds) of the moves within the crossings' span.
+
+    A move is a run of encoder cycles turning one way faster than 20 % of the peak speed (the threshold of
+    :func:`_moving`); ``crossings_drive_s`` are the current's zero crossings on the drive's clock. The lag's
+    error (≤ ``REFINE_STEP_S``/2) moves a move's ends by less than a crossing below a few kHz electrical.
+    """
+    omega = speed_from_counts(counts, counts_per_rev, period_s)  # belongs to the instant of the later sample
+    t_s = cycles[1:] * period_s
+    inside = (t_s - period_s >= crossings_drive_s[0]) & (t_s <= crossings_drive_s[-1])
+    fast = np.abs(omega) >= 0.2 * float(np.max(np.abs(omega)))
+    theta_rev = counts / counts_per_rev
+    found, half_turns, moves, moving_s = 0, 0.0, 0, 0.0
+    for sign in (1.0, -1.0):
+        run = np.concatenate(([0], (inside & fast & (np.sign(omega) == sign)).astype(np.int8), [0]))
+        edges = np.diff(run)
+        for first, stop in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            t0, t1 = t_s[first] - period_s, t_s[stop - 1]
+            found += int(np.count_nonzero((crossings_drive_s >= t0) & (crossings_drive_s <= t1)))
+            half_turns += 2.0 * pole_pairs * abs(float(theta_rev[stop] - theta_rev[first]))
+            moves += 1
+            moving_s += t1 - t0
+    return found, half_turns, moves, moving_s
 
 
 def _half_periods(crossings: np.ndarray, lag_s: float, cycles: np.ndarray, counts: np.ndarray, period_s: float,
@@ -206,21 +289,50 @@ def likely_counts_per_rev(estimate: float, tolerance: float) -> int:
 
 
 def ratio_fault(r: SpeedRatio, pole_pairs: int, counts_per_rev: int) -> str | None:
-    """The words for a mismatched ratio (None when it matches): what turns faster, and the values to check.
+    """The words for a wrong constant the ratio establishes (:attr:`SpeedRatio.named`; None otherwise): what turns
+    faster, and the values to check.
 
-    The suggested ``pole_pairs`` is given only when p·r is near a whole number; ``counts_per_rev`` is
-    counts_per_rev/r (snapped to a power of two within 2 %, as most encoders are).
+    The suggested ``pole_pairs`` is given only when p·r is near a whole number the :attr:`~SpeedRatio.count_range`
+    allows, and the only one or the half-periods mostly :attr:`~SpeedRatio.whole`; ``counts_per_rev`` is
+    counts_per_rev/r (snapped to a power of two within 2 %, as most encoders are), given when no other power of two
+    lies in the range — or, not a power of two, when ``pole_pairs`` is named (the ratio is then a whole pole-pair
+    ratio). Neither: the range is too wide to name a value, and the words say so. A mismatch the count does not
+    establish: :func:`ratio_doubt`.
     """
-    if not r.mismatched:
+    if not r.named:
         return None
     word = f"{r.ratio:.2f}× faster" if r.ratio > 1 else f"{1 / r.ratio:.2f}× slower"
+    low, high = r.count_range
     candidates = []
     p = pole_pairs * r.ratio
-    if round(p) >= 1 and abs(p - round(p)) < 0.1:
+    allowed = [q for q in range(1, math.floor(pole_pairs * high) + 1) if q >= pole_pairs * low]
+    if round(p) >= 1 and abs(p - round(p)) < 0.1 and (allowed == [round(p)] or r.whole and round(p) in allowed):
         candidates.append(f"[motor] pole_pairs = {round(p)}")
-    candidates.append(f"[encoder] counts_per_rev = {likely_counts_per_rev(counts_per_rev / r.ratio, 0.02)}")
-    return (f"the current turns {word} than pole_pairs·ω (pole_pairs = {pole_pairs}, counts_per_rev = "
-            f"{counts_per_rev}): check {' or '.join(candidates)}")
+    cpr = likely_counts_per_rev(counts_per_rev / r.ratio, 0.02)
+    powers = [2 ** k for k in range(1, 64) if counts_per_rev / high <= 2 ** k <= counts_per_rev / max(low, 1e-18)]
+    if powers == [cpr] or (cpr & (cpr - 1) and candidates):  # another value: as pinned as the pole-pair ratio
+        candidates.append(f"[encoder] counts_per_rev = {cpr}")
+    stated = f"pole_pairs = {pole_pairs}, counts_per_rev = {counts_per_rev}"
+    if not candidates:
+        return (f"the current turns {word} than pole_pairs·ω ({stated}; its zero crossings in the moves allow "
+                f"{low:.2f}–{high:.2f}×, too wide to name a value): check [motor] pole_pairs and [encoder] "
+                "counts_per_rev with acq selftest")
+    return f"the current turns {word} than pole_pairs·ω ({stated}): check {' or '.join(candidates)}"
+
+
+def ratio_doubt(r: SpeedRatio, pole_pairs: int) -> str | None:
+    """The words for a mismatched ratio the count does not establish (None otherwise): the motion the encoder saw
+    and why it cannot check the constants, instead of a constant to change."""
+    if not r.mismatched or r.named:
+        return None
+    low, high = r.count_range
+    half_turns = r.half_turns / r.moves
+    return (f"pole_pairs and counts_per_rev cannot be checked on this record: the current's half-periods read "
+            f"{r.ratio:.2f}× pole_pairs·ω, but its {r.crossings} zero crossings in the moves allow "
+            f"{max(low, 0.0):.2f}–{high:.2f}× — each of the {r.moves} moves turns the motor only "
+            f"{half_turns / (2 * pole_pairs):.2g} rev ({half_turns:.1f} electrical half-turns at pole_pairs = "
+            f"{pole_pairs}) in {1e3 * r.moving_s / r.moves:.0f} ms, so the current's zero crossings follow its "
+            "torque's sign changes as much as the rotation")
 
 
 def sequence_fault(agreement: float, phases: list[str]) -> str | None:
@@ -233,35 +345,47 @@ def sequence_fault(agreement: float, phases: list[str]) -> str | None:
             "counting direction")
 
 
-def recording_fault(rec: Recording) -> str | None:
-    """:func:`ratio_fault` of a raw recording's phase i_a and encoder, then (2–3 phases)
-    :func:`sequence_fault`; None if both match or it cannot tell."""
+def recording_diagnosis(rec: Recording) -> tuple[str | None, str | None]:
+    """(fault, doubt) of a raw recording: :func:`ratio_fault` of its phase i_a and encoder, then (2–3 phases)
+    :func:`sequence_fault`; and :func:`ratio_doubt` when a mismatched ratio is no evidence. (None, None) if all
+    match or it cannot tell."""
     r = electrical_speed_ratio(rec.current_a["i_a"], rec.rate_hz, rec.encoder_index, rec.position_counts,
                                rec.period_s, rec.counts_per_rev, rec.pole_pairs)
     if r is None:
-        return None
+        return None, None
+    doubt = ratio_doubt(r, rec.pole_pairs)
+    if doubt is not None:  # its slow move turns the motor through many electrical turns
+        doubt += "; check the constants with acq selftest"
     fault = ratio_fault(r, rec.pole_pairs, rec.counts_per_rev)
-    if fault is None and len(rec.current_a) >= 2:
+    if fault is None and doubt is None and len(rec.current_a) >= 2:
         agreement = phase_sequence_agreement(rec.current_a, rec.rate_hz, rec.encoder_index, rec.position_counts,
                                              rec.period_s, r.lag_s)
         fault = sequence_fault(agreement, list(rec.current_a))
-    return fault
+    return fault, doubt
 
 
-def with_fault(quality: Quality, fault: Callable[[], str | None]) -> Quality:
-    """A poor / failed ``quality`` becomes failed with the fault ``fault()`` finds as its only reason, so it says why
-    instead of a bare failed. The other findings (low coherence, wide intervals, misfit, clock residual) follow from
-    the wrong constant, and their advice ("shorten the acceleration time", "try --band") would send the
-    technician after the motion instead of the bench config. An ``ok`` verdict (the data hold together:
-    clocks aligned, model fits) or no fault: unchanged — the diagnosis explains failures, it never overrules
-    a consistent identification, so for an ``ok`` verdict ``fault`` is not called (:func:`recording_fault` is ~5 %
-    of a 60 s session's analysis)."""
+def recording_fault(rec: Recording) -> str | None:
+    """The fault of :func:`recording_diagnosis`: a bench constant named, or None."""
+    return recording_diagnosis(rec)[0]
+
+
+def with_fault(quality: Quality, diagnosis: Callable[[], tuple[str | None, str | None]]) -> Quality:
+    """A poor / failed ``quality`` becomes failed with the fault ``diagnosis()`` finds as its only reason, so it says
+    why instead of a bare failed. The other findings (low coherence, wide intervals, misfit, clock residual) follow
+    from the wrong constant, and their advice ("shorten the acceleration time", "try --band") would send the
+    technician after the motion instead of the bench config. No fault but a doubt (a mismatch the data do not
+    support, :func:`ratio_doubt`): the doubt becomes the first reason, the others stay. An ``ok`` verdict (the data
+    hold together: clocks aligned, model fits) or neither: unchanged — the diagnosis explains failures, it never
+    overrules a consistent identification, so for an ``ok`` verdict ``diagnosis`` is not called
+    (:func:`recording_diagnosis` is ~5 % of a 60 s session's analysis)."""
     if quality.verdict == "ok":
         return quality
-    found = fault()
-    if found is None:
-        return quality
-    return replace(quality, verdict="failed", reasons=(found,))
+    fault, doubt = diagnosis()
+    if fault is not None:
+        return replace(quality, verdict="failed", reasons=(fault,))
+    if doubt is not None:
+        return replace(quality, reasons=(doubt, *quality.reasons))
+    return quality
 
 
 def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: tuple[str, ...],

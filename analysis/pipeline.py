@@ -14,7 +14,7 @@ from typing import Any
 
 from analysis.chain import SignalChain, chain_caveat
 from analysis.clocks import ClockFit
-from analysis.diagnose import nominal_fault, recording_fault, with_fault, with_nominal_fault
+from analysis.diagnose import nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
 from analysis.fit import FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass
 from analysis.encoder import longest_gap_free_span
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
@@ -143,7 +143,7 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
         quality = replace(quality, reasons=(caveat, *quality.reasons))
     scale_fault = nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95)  # a unit or scale mistake
     quality = with_nominal_fault(quality, scale_fault)
-    quality = with_fault(quality, lambda: recording_fault(rec))  # a wrong bench constant (looked for when not ok)
+    quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual)),

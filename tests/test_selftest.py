@@ -8,6 +8,7 @@ import os
 import re
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -15,7 +16,7 @@ import pytest
 from acq.commissioning.selftest_checks import Check
 from acq.config import DEFAULT_BENCH
 from acq.ui.selftest_cli import next_step, selftest_json
-from analysis.diagnose import SpeedRatio, likely_counts_per_rev, ratio_fault
+from analysis.diagnose import SpeedRatio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from tests.helpers import run_cli
 from tests.nidaqmx_standin import StandinHardware
 from tests.test_nidaq import hardware, write_bench  # noqa: F401 - the stand-in NI 9234 fixture
@@ -183,6 +184,28 @@ def test_ratio_fault_words_and_suggestions() -> None:
     # a scattered estimate is not named even if its value is off
     assert ratio_fault(SpeedRatio(1.2, 0.05, 0.0, 3.0), 4, 131072) is None
     assert likely_counts_per_rev(64470.0, 0.05) == 65536 and likely_counts_per_rev(10000.0, 0.02) == 10000
+    # 8 pole pairs on a 10 s triangle_0.2s: 1273 crossings in 25 moves through 627 half-turns allow
+    # (1273 − 50)/627 − 0.03 = 1.92 … (1273 + 25)/627 + 0.03 = 2.10: one pole-pair count (8), one power of two
+    named = SpeedRatio(2.003, 0.001, 0.0, 600.0, crossings=1273, half_turns=627.0, moves=25, moving_s=7.85)
+    assert named.named and ratio_doubt(named, 4) is None and ratio_fault(named, 4, 131072).endswith(
+        "check [motor] pole_pairs = 8 or [encoder] counts_per_rev = 65536")
+    # 1212 crossings allow at most (1212 + 25)/627 + 0.03 = 2.0029 < 2.003: not a rotation ratio, no constant named
+    short = replace(named, crossings=1212)
+    assert not short.counted and ratio_fault(short, 4, 131072) is None
+    assert ratio_doubt(short, 4) == (
+        "pole_pairs and counts_per_rev cannot be checked on this record: the current's half-periods read 2.00× "
+        "pole_pairs·ω, but its 1212 zero crossings in the moves allow 1.82–2.00× — each of the 25 moves turns the "
+        "motor only 3.1 rev (25.1 electrical half-turns at pole_pairs = 4) in 314 ms, so the current's zero "
+        "crossings follow its torque's sign changes as much as the rotation")
+    # few half-turns per move: 300 crossings in 40 moves through 100 allow 2.15–3.45× (tolerance 5 σ = 0.05): a
+    # constant is wrong, but 9…13 pole pairs and no power of two fit — no value named
+    wide = SpeedRatio(2.3, 0.01, 0.0, 100.0, crossings=300, half_turns=100.0, moves=40, moving_s=4.0)
+    assert wide.named and ratio_fault(wide, 4, 131072) == (
+        "the current turns 2.30× faster than pole_pairs·ω (pole_pairs = 4, counts_per_rev = 131072; its zero "
+        "crossings in the moves allow 2.15–3.45×, too wide to name a value): check [motor] pole_pairs and "
+        "[encoder] counts_per_rev with acq selftest")
+    # the same crossings in 100 moves allow 0.95–4.05×, 1 included: neither a fault nor a value
+    assert ratio_fault(replace(wide, moves=100), 4, 131072) is None and ratio_doubt(replace(wide, moves=100), 4)
 
 
 def test_the_summary_at_80_columns_ends_with_the_fix_keys_and_all_or_the_command_for_this_bench(
@@ -228,3 +251,44 @@ def test_ni_daq_missing_device_and_coerced_rate_are_named(capsys: pytest.Capture
     daq = next(c for c in json.loads(run.out)["checks"] if c["name"] == "DAQ")
     assert daq["status"] == "warn" and daq["values"]["rate_hz"] == 25600.0
     assert daq["fix"] == "[daq] rate_hz = 25000: the card runs 25600 Hz — state that rate"
+
+
+FAST_RAMPS = """kind = "triangle"
+top_speed_rpm = 1000
+accel_time_s = 0.01
+decel_time_s = 0.01
+dwell_s = 0
+duration_s = 5
+"""
+
+
+@pytest.mark.parametrize("sim_line", ["", "pole_pairs = 8"])
+def test_ramps_too_fast_to_turn_the_motor_blame_no_bench_constant(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, sim_line: str) -> None:
+    """10 ms ramps to 1000 rpm: the motor swings ±0.08 rev (0.66 electrical turns) every 40 ms and the current's zero
+    crossings follow the torque's sign changes. The half-periods read 2.96× pole_pairs·ω on the correct bench (3.70×
+    with 8 true pole pairs), all alike because the motion repeats — that once read "check [encoder] counts_per_rev =
+    44326". The crossings counted in the moves cannot reach such a ratio, so no constant is named: the record says
+    why it cannot check them."""
+    profile = tmp_path / "fast.toml"
+    profile.write_text(FAST_RAMPS)
+    record = run_cli(capsys, "record", "--profile", str(profile), "--bench", str(bench_file(tmp_path, sim_line)),
+                     "--fast", "--no-analyze", "--out", str(tmp_path / "s"))
+    assert record.code == 0
+    (session,) = (tmp_path / "s").glob("*.h5")
+    quality = json.loads(run_cli(capsys, "analyze", str(session), "--json", "--no-report").out)["quality"]
+    assert quality["verdict"] == "failed"
+    assert not any("check [encoder]" in r or "check [motor]" in r for r in quality["reasons"]), quality["reasons"]
+    doubt, *others = quality["reasons"]
+    if not sim_line:
+        assert doubt == (
+            "pole_pairs and counts_per_rev cannot be checked on this record: the current's half-periods read 2.96× "
+            "pole_pairs·ω, but its 514 zero crossings in the moves allow 0.06–2.45× — each of the 240 moves "
+            "turns the motor only 0.16 rev (1.3 electrical half-turns at pole_pairs = 4) in 19 ms, so the current's "
+            "zero crossings follow its torque's sign changes as much as the rotation; check the constants with acq "
+            "selftest")
+    else:
+        assert re.fullmatch(r"pole_pairs and counts_per_rev cannot be checked on this record: the current's "
+                            r"half-periods read 3\.\d\d× pole_pairs·ω, but its \d+ zero crossings in the moves allow "
+                            r"0\.\d\d–[23]\.\d\d× — each of the 240 moves turns the motor only 0\.16 rev .*", doubt)
+    assert others  # the identification's own findings stay beside it

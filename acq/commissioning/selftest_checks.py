@@ -15,7 +15,7 @@ import numpy as np
 from acq.recording.session import Session
 from acq.recording.summary import summarize
 from analysis import (SpeedRatio, first_move_sign, inertia_from_torque, likely_counts_per_rev, longest_gap_free_span,
-                      phase_sequence_agreement, ratio_fault, sequence_fault, speed_from_counts)
+                      phase_sequence_agreement, ratio_doubt, ratio_fault, sequence_fault, speed_from_counts)
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen
 
 CheckStatus = Literal["pass", "warn", "fail"]
@@ -208,6 +208,11 @@ def speed_ratio_check(ratio: SpeedRatio | None, bench: Bench) -> Check:
                      "sensor's wiring")
     values = {"ratio": ratio.ratio, "spread": ratio.spread, "lag_s": ratio.lag_s}
     figure = f"the current turns at {ratio.ratio:.3f}× pole_pairs·ω (pole_pairs = {p}, counts_per_rev = {cpr})"
+    doubt = ratio_doubt(ratio, p)
+    if doubt is not None:
+        return Check("motion", "electrical speed", "warn", doubt,
+                     "pole_pairs and counts_per_rev stay unchecked: check that the motor turns freely through the slow "
+                     "move and that the current sensor reads a phase current", values)
     fault = ratio_fault(ratio, p, cpr)
     if fault is not None:
         figure, what = fault.split(": check ", 1)
