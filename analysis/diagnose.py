@@ -290,34 +290,21 @@ def likely_counts_per_rev(estimate: float, tolerance: float) -> int:
 
 def ratio_fault(r: SpeedRatio, pole_pairs: int, counts_per_rev: int) -> str | None:
     """The words for a wrong constant the ratio establishes (:attr:`SpeedRatio.named`; None otherwise): what turns
-    faster, and the values to check.
-
-    The suggested ``pole_pairs`` is given only when p·r is near a whole number the :attr:`~SpeedRatio.count_range`
-    allows, and the only one or the half-periods mostly :attr:`~SpeedRatio.whole`; ``counts_per_rev`` is
-    counts_per_rev/r (snapped to a power of two within 2 %, as most encoders are), given when no other power of two
-    lies in the range — or, not a power of two, when ``pole_pairs`` is named (the ratio is then a whole pole-pair
-    ratio). Neither: the range is too wide to name a value, and the words say so. A mismatch the count does not
-    establish: :func:`ratio_doubt`.
+    faster, and the values to check — ``pole_pairs`` when p·r is near a whole number, and ``counts_per_rev`` =
+    counts_per_rev/r (snapped to a power of two within 2 %, as most encoders are). The ratio alone cannot tell which
+    of the two is wrong, so both are offered (``acq selftest``'s encoder-speed check tells the encoder's apart).
+    A mismatch the count does not establish: :func:`ratio_doubt`.
     """
     if not r.named:
         return None
     word = f"{r.ratio:.2f}× faster" if r.ratio > 1 else f"{1 / r.ratio:.2f}× slower"
-    low, high = r.count_range
     candidates = []
     p = pole_pairs * r.ratio
-    allowed = [q for q in range(1, math.floor(pole_pairs * high) + 1) if q >= pole_pairs * low]
-    if round(p) >= 1 and abs(p - round(p)) < 0.1 and (allowed == [round(p)] or r.whole and round(p) in allowed):
+    if round(p) >= 1 and abs(p - round(p)) < 0.1:
         candidates.append(f"[motor] pole_pairs = {round(p)}")
-    cpr = likely_counts_per_rev(counts_per_rev / r.ratio, 0.02)
-    powers = [2 ** k for k in range(1, 64) if counts_per_rev / high <= 2 ** k <= counts_per_rev / max(low, 1e-18)]
-    if powers == [cpr] or (cpr & (cpr - 1) and candidates):  # another value: as pinned as the pole-pair ratio
-        candidates.append(f"[encoder] counts_per_rev = {cpr}")
-    stated = f"pole_pairs = {pole_pairs}, counts_per_rev = {counts_per_rev}"
-    if not candidates:
-        return (f"the current turns {word} than pole_pairs·ω ({stated}; its zero crossings in the moves allow "
-                f"{low:.2f}–{high:.2f}×, too wide to name a value): check [motor] pole_pairs and [encoder] "
-                "counts_per_rev with acq selftest")
-    return f"the current turns {word} than pole_pairs·ω ({stated}): check {' or '.join(candidates)}"
+    candidates.append(f"[encoder] counts_per_rev = {likely_counts_per_rev(counts_per_rev / r.ratio, 0.02)}")
+    return (f"the current turns {word} than pole_pairs·ω (pole_pairs = {pole_pairs}, counts_per_rev = "
+            f"{counts_per_rev}): check {' or '.join(candidates)}")
 
 
 def ratio_doubt(r: SpeedRatio, pole_pairs: int) -> str | None:

@@ -375,18 +375,26 @@ def fit_two_mass(
                 best = res
         if best is None:
             return _failed(problem, band, options, "no start gave a finite cost")
-        return _result(problem, best, band, options, n_res, _quantisation(frf, problem, options))
+        return _result(problem, best, band, options, n_res, _quantisation_floor(frf, problem, best.x, options))
 
 
-def _quantisation(frf: FrequencyResponse, problem: _Problem,
-                  options: FitOptions) -> tuple[np.ndarray, np.ndarray] | None:
-    """The white-quantisation bound and the motion's lines per bin of the fit (None without the encoder's
-    resolution): what :func:`analysis.adequacy.quantisation_pull` needs besides the Jacobian."""
+def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
+                        options: FitOptions) -> np.ndarray | None:
+    """Variance of each free log parameter that the encoder's quantisation pulls it by
+    (:func:`analysis.adequacy.quantisation_pull`; None without the encoder's resolution).
+
+    Always with K, J_m, J_l and C free: with the inertias held at nominal values (``params="K"``) the pull on K alone
+    would be a fraction of what the data can tell K to, and the interval would lean on inertias known exactly.
+    """
     if not options.speed_lsb_rad:
         return None
     sel = fitted_bins(frf, problem.band)
     bound = quantisation_bound(problem.f, frf.H[sel], frf.torque_psd[sel], frf.period_s, options.speed_lsb_rad)
-    return bound, lines_per_bin(frf.torque_psd_fine, frf.f_hz[1] / KERNEL_PER_BIN, problem.f, frf.f_hz[1])
+    lines = lines_per_bin(frf.torque_psd_fine, frf.f_hz[1] / KERNEL_PER_BIN, problem.f, frf.f_hz[1])
+    values = problem.params(x)
+    full = _Problem(frf, problem.band, replace(options, params="K,Jm,Jl"), values)
+    pull = np.diag(quantisation_pull(bound, lines, _jacobian(full, full.x0(values)), full.sqrt_w))
+    return pull[[full.free.index(name) for name in problem.free]]
 
 
 def _starts_inertias_fixed(guess: TwoMassParams, nominal: TwoMassParams) -> list[TwoMassParams]:
@@ -399,7 +407,7 @@ def _starts_inertias_fixed(guess: TwoMassParams, nominal: TwoMassParams) -> list
 
 
 def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, float],
-            options: FitOptions, n_res: int, quantisation: tuple[np.ndarray, np.ndarray] | None = None) -> FitResult:
+            options: FitOptions, n_res: int, quantisation_floor: np.ndarray | None = None) -> FitResult:
     """Package the best least-squares solution with its covariance and intervals."""
     values = problem.params(res.x)
     n_free = res.x.size
@@ -415,7 +423,7 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
     # at least the quantisation's pull on the parameters (what the fit absorbed of an error no scatter and no residual
     # shows), or without the encoder's resolution the chain's accuracy: each stands for the systematic error as a
     # whole, the part a residual shows included, so it only tops up what the misfit leaves below it
-    floor = (np.diag(quantisation_pull(*quantisation, jac, problem.sqrt_w)) if quantisation is not None
+    floor = (quantisation_floor if quantisation_floor is not None
              else np.full(n_free, np.log1p(CHAIN_REL_STD) ** 2))
     cov += misfit + np.diag(np.clip(floor - np.diag(misfit), 0.0, None))
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
@@ -496,12 +504,16 @@ def residual_jacobian(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarra
     sqrt_w : ndarray, shape (n,)
     """
     problem = _Problem(frf, fit.band, fit.options, fit.values)
-    x = problem.x0(fit.values)
+    return _jacobian(problem, problem.x0(fit.values)), problem.sqrt_w
+
+
+def _jacobian(problem: _Problem, x: np.ndarray) -> np.ndarray:
+    """Jacobian of ``problem``'s weighted residuals at the log parameters ``x`` by central differences."""
     step = 1e-6  # in ln(parameter): a 1 ppm change, far above rounding (the residuals are ~1e-3…1) and far below
     # the curvature's scale (the cost changes by ≪ 1 % of its value over it); central differences, error O(step²)
     cols = [(problem.residuals(x + step * e) - problem.residuals(x - step * e)) / (2.0 * step)
             for e in np.eye(x.size)]
-    return np.stack(cols, axis=1), problem.sqrt_w
+    return np.stack(cols, axis=1)
 
 
 def amplitude_misfits(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -198,12 +198,17 @@ def test_ratio_fault_words_and_suggestions() -> None:
         "motor only 3.1 rev (25.1 electrical half-turns at pole_pairs = 4) in 314 ms, so the current's zero "
         "crossings follow its torque's sign changes as much as the rotation")
     # few half-turns per move: 300 crossings in 40 moves through 100 allow 2.15–3.45× (tolerance 5 σ = 0.05): a
-    # constant is wrong, but 9…13 pole pairs and no power of two fit — no value named
+    # constant is wrong; 4 × 2.3 is no whole pole-pair count, so the encoder's value is the one offered
     wide = SpeedRatio(2.3, 0.01, 0.0, 100.0, crossings=300, half_turns=100.0, moves=40, moving_s=4.0)
     assert wide.named and ratio_fault(wide, 4, 131072) == (
-        "the current turns 2.30× faster than pole_pairs·ω (pole_pairs = 4, counts_per_rev = 131072; its zero "
-        "crossings in the moves allow 2.15–3.45×, too wide to name a value): check [motor] pole_pairs and "
-        "[encoder] counts_per_rev with acq selftest")
+        "the current turns 2.30× faster than pole_pairs·ω (pole_pairs = 4, counts_per_rev = 131072): check "
+        "[encoder] counts_per_rev = 56988")
+    # the selftest's slow move with pole_pairs = 2 stated on a 4-pole-pair motor: 20 crossings in 3 moves through
+    # 11.1 half-turns allow 1.23–2.11×, which pins neither value — both are offered, the pole pairs first (the
+    # review of session 5 found "counts_per_rev = 65536" alone here: a technician following it breaks the encoder)
+    slow = SpeedRatio(2.04, 0.005, 0.0, 30.0, crossings=20, half_turns=11.1, moves=3, moving_s=1.5)
+    assert slow.named and ratio_fault(slow, 2, 131072).endswith(
+        "check [motor] pole_pairs = 4 or [encoder] counts_per_rev = 65536")
     # the same crossings in 100 moves allow 0.95–4.05×, 1 included: neither a fault nor a value
     assert ratio_fault(replace(wide, moves=100), 4, 131072) is None and ratio_doubt(replace(wide, moves=100), 4)
 
