@@ -59,16 +59,17 @@ _ROUND = 1.5 * 2.0**52  # adding and subtracting it rounds a double of magnitude
 
 def sin_cos(x_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """sin and cos of every element of ``x_rad`` (rad, any shape), as ``np.sin`` and ``np.cos`` to ≈ 1 ulp."""
+    shape = np.shape(x_rad)  # a 0-d input comes back 0-d (ascontiguousarray makes it 1-d)
     x = np.ascontiguousarray(x_rad, dtype=np.float64)  # C order: the flat views below are views, not copies
     s, c = np.empty(x.shape), np.empty(x.shape)
     if x.size and not (x.max() <= MAX_FAST_RAD and x.min() >= -MAX_FAST_RAD):  # also NaN, ±inf
         np.sin(x, out=s)
         np.cos(x, out=c)
-        return s, c
+        return s.reshape(shape), c.reshape(shape)
     flat, s_flat, c_flat = x.reshape(-1), s.reshape(-1), c.reshape(-1)
     for a in range(0, flat.size, _BLOCK):
         _block(flat[a:a + _BLOCK], s_flat[a:a + _BLOCK], c_flat[a:a + _BLOCK])
-    return s, c
+    return s.reshape(shape), c.reshape(shape)
 
 
 def _block(x: np.ndarray, s: np.ndarray, c: np.ndarray) -> None:

@@ -54,3 +54,10 @@ def test_sin_cos_of_non_contiguous_arrays(layout: str) -> None:
     assert s.shape == c.shape == angles.shape
     assert np.max(np.abs(s - np.sin(angles))) <= 2.3e-16
     assert np.max(np.abs(c - np.cos(angles))) <= 2.3e-16
+
+
+def test_sin_cos_of_a_scalar_keeps_its_shape():
+    for x in (np.float64(0.5), np.float64(np.nan)):
+        s, c = sin_cos(x)
+        assert s.shape == () and c.shape == ()
+        np.testing.assert_allclose([s, c], [np.sin(x), np.cos(x)], rtol=0, atol=3e-16)
