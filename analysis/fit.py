@@ -388,13 +388,22 @@ def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray
     """
     if not options.speed_lsb_rad:
         return None
-    sel = fitted_bins(frf, problem.band)
-    bound = quantisation_bound(problem.f, frf.H[sel], frf.torque_psd[sel], frf.period_s, options.speed_lsb_rad)
-    lines = lines_per_bin(frf.torque_psd_fine, frf.f_hz[1] / KERNEL_PER_BIN, problem.f, frf.f_hz[1])
+    bound, lines = quantisation_terms(frf, problem.band, options.speed_lsb_rad)
     values = problem.params(x)
     full = _Problem(frf, problem.band, replace(options, params="K,Jm,Jl"), values)
     pull = np.diag(quantisation_pull(bound, lines, _jacobian(full, full.x0(values)), full.sqrt_w))
     return pull[[full.free.index(name) for name in problem.free]]
+
+
+def quantisation_terms(frf: FrequencyResponse, band: tuple[float, float],
+                       lsb_rad: float) -> tuple[np.ndarray, np.ndarray]:
+    """At a fit's bins in ``band`` (Hz): the white-quantisation bound of |H| for the encoder's resolution ``lsb_rad``
+    (:func:`analysis.encoder.quantisation_bound`; inf where there is no signal) and the motion's lines per bin
+    (:func:`analysis.adequacy.lines_per_bin`) — what the intervals' floor and the misfit test carry through the fit."""
+    sel = fitted_bins(frf, band)
+    f = frf.f_hz[sel]
+    bound = quantisation_bound(f, frf.H[sel], frf.torque_psd[sel], frf.period_s, lsb_rad)
+    return bound, lines_per_bin(frf.torque_psd_fine, frf.f_hz[1] / KERNEL_PER_BIN, f, frf.f_hz[1])
 
 
 def _starts_inertias_fixed(guess: TwoMassParams, nominal: TwoMassParams) -> list[TwoMassParams]:

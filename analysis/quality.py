@@ -14,11 +14,11 @@ from typing import Literal
 
 import numpy as np
 
-from analysis.adequacy import (BandMisfit, band_misfits, critical_t, lines_per_bin, missed_spans,
-                               quantisation_through_fit)
-from analysis.encoder import difference_response, quantisation_bound as encoder_quantisation_bound
-from analysis.fit import COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask, fitted_bins, residual_jacobian
-from analysis.frf import KERNEL_PER_BIN, FrequencyResponse
+from analysis.adequacy import BandMisfit, band_misfits, critical_t, missed_spans, quantisation_through_fit
+from analysis.encoder import difference_response
+from analysis.fit import (COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask, quantisation_terms,
+                          residual_jacobian)
+from analysis.frf import FrequencyResponse
 from analysis.model import PARAM_LABELS
 from analysis.sample_instants import EncoderJitter
 
@@ -272,22 +272,14 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult,
     the quantisation's pull on the fit (``bench/chain_bias.py --allowance``).
     """
     f, misfit, reps = amplitude_misfits(frf, fit)
-    quant = quantisation_bound(frf, fit.band, jitter)
+    quant, lines = quantisation_terms(frf, fit.band, jitter.lsb_rad)
     jac, sqrt_w = residual_jacobian(frf, fit)
-    lines = lines_per_bin(frf.torque_psd_fine, frf.f_hz[1] / KERNEL_PER_BIN, f, frf.f_hz[1])
     with np.errstate(invalid="ignore", divide="ignore"):
         carried = quantisation_through_fit(quant, lines, jac, sqrt_w)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
     windows = band_misfits(f, misfit, reps, carried, blind)
     spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
     return spans[0] if spans else None
-
-
-def quantisation_bound(frf: FrequencyResponse, band: tuple[float, float], jitter: EncoderJitter) -> np.ndarray:
-    """The white-quantisation bound of |H| at a fit's bins (:func:`analysis.encoder.quantisation_bound`) for the
-    encoder's resolution ``jitter.lsb_rad``; inf where there is no signal."""
-    sel = fitted_bins(frf, band)
-    return encoder_quantisation_bound(frf.f_hz[sel], frf.H[sel], frf.torque_psd[sel], frf.period_s, jitter.lsb_rad)
 
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,

@@ -95,11 +95,9 @@ if str(ROOT) not in sys.path:  # this checkout's bench package
 
 from analysis import resample
 from analysis.clocks import ClockFit
-from analysis.fit import CHAIN_REL_STD, FitOptions, _Problem, fit_two_mass
+from analysis.fit import CHAIN_REL_STD, FitOptions, _jacobian, _Problem, fit_two_mass, quantisation_terms
 from analysis.frf import FrequencyResponse, estimate_frf
 from analysis.model import TwoMassParams
-from analysis.quality import quantisation_bound
-from analysis.sample_instants import EncoderJitter
 from analysis.signals import _alias_terms, _band_edges_hz, spans_and_clock, torque_on_instants
 from bench.misfit_structure import lines_in
 from bench.scenarios import SCENARIOS, clock_for, scenario_bench
@@ -138,7 +136,6 @@ def window_chi2(frf: FrequencyResponse, chain: FrequencyResponse, lsb_rad: float
     and ``chain_std`` (0 or :data:`analysis.fit.CHAIN_REL_STD`) — so a stage fed truth is judged against the same
     noise as the session it came from."""
     opts = FitOptions(kind=kind)  # type: ignore[arg-type]
-    resolution = EncoderJitter(sigma_s=float("nan"), mean_speed2=0.0, stamped=False, lsb_rad=lsb_rad)
     parts = []
     for source in (chain, frf):
         fit = fit_two_mass(replace(source, replicates=None), opts)
@@ -147,7 +144,7 @@ def window_chi2(frf: FrequencyResponse, chain: FrequencyResponse, lsb_rad: float
     (pc, zc, fc), (ps, zs, _) = parts
     reps = np.asarray([_Problem(r, fc.band, opts, fc.values).log_ratio(pc.x0(fc.values)) for r in chain.replicates])
     f = pc.f
-    white = quantisation_bound(chain, fc.band, resolution)
+    white = quantisation_terms(chain, fc.band, lsb_rad)[0]
     out = np.zeros((2, len(BANDS_HZ)))
     for i in range(0, f.size - WINDOW_BINS + 1, WINDOW_BINS):
         w = slice(i, i + WINDOW_BINS)
@@ -160,16 +157,6 @@ def window_chi2(frf: FrequencyResponse, chain: FrequencyResponse, lsb_rad: float
             if band:
                 out[row, band[0]] += take(zs[w]).mean() ** 2 / (noise2 + q ** 2 + chain_std ** 2)
     return out
-
-
-def _jacobian(problem: _Problem, x: np.ndarray) -> np.ndarray:
-    """Jacobian of ``problem.residuals`` at ``x`` by central differences (step 1e-6 in the log parameters)."""
-    cols = []
-    for k in range(x.size):
-        dx = np.zeros_like(x)
-        dx[k] = 1e-6
-        cols.append((problem.residuals(x + dx) - problem.residuals(x - dx)) / 2e-6)
-    return np.stack(cols, axis=1)
 
 
 def allowance_tests(frf: FrequencyResponse, lsb_rad: float) -> dict[str, tuple[float, float, int]]:
@@ -185,7 +172,6 @@ def allowance_tests(frf: FrequencyResponse, lsb_rad: float) -> dict[str, tuple[f
     ``… + b_m``     the same with the motor's viscous friction b_m fitted too (complex fit only: |H| does not see it)
     """
     out: dict[str, tuple[float, float, int]] = {}
-    resolution = EncoderJitter(sigma_s=float("nan"), mean_speed2=0.0, stamped=False, lsb_rad=lsb_rad)
     for kind in ("amplitude", "complex"):
         opts = FitOptions(kind=kind)  # type: ignore[arg-type]
         fit = fit_two_mass(replace(frf, replicates=None), opts)
@@ -200,7 +186,7 @@ def allowance_tests(frf: FrequencyResponse, lsb_rad: float) -> dict[str, tuple[f
             z = problem.log_ratio(x)
             reps = np.asarray([_with_free(_Problem(r, fit.band, opts, problem.fixed), problem.free).log_ratio(x)
                                for r in frf.replicates])
-            white2 = quantisation_bound(frf, fit.band, resolution) ** 2
+            white2 = quantisation_terms(frf, fit.band, lsb_rad)[0] ** 2
             starts = np.arange(0, n - WINDOW_BINS + 1, WINDOW_BINS)
             s2 = np.empty(n)
             q2 = np.empty(starts.size)

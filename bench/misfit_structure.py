@@ -70,11 +70,10 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:  # this checkout's bench package
     sys.path.insert(0, str(ROOT))
 
-from analysis.fit import CHAIN_REL_STD, COHERENCE_CLIP, FitResult, _Problem, band_mask, fit_two_mass, fitted_bins
+from analysis.fit import (CHAIN_REL_STD, COHERENCE_CLIP, FitResult, _Problem, band_mask, fit_two_mass, fitted_bins,
+                          quantisation_terms)
 from analysis.frf import KERNEL_PER_BIN, FrequencyResponse
 from analysis.adequacy import motion_lines
-from analysis.quality import quantisation_bound
-from analysis.sample_instants import EncoderJitter
 from bench.scenarios import SCENARIOS, analyse, clock_for, errors_pct, record
 
 # Bands of the residual table, as multiples of the fitted resonance f_r (the last one runs to the band's top).
@@ -100,7 +99,7 @@ def quantisation_aware_weights(problem: _Problem, frf: FrequencyResponse, lsb_ra
     |H| at each bin (the fit's own weights γ²/(1−γ²) trust bins whose error is quantisation locked to the motion)."""
     sel = fitted_bins(frf, problem.band)
     g2 = np.clip(frf.coherence[sel], 0.0, COHERENCE_CLIP)
-    var = (1.0 - g2) / (2.0 * frf.n_segments * g2) + quantisation_bound(frf, problem.band, _resolution(lsb_rad)) ** 2
+    var = (1.0 - g2) / (2.0 * frf.n_segments * g2) + quantisation_terms(frf, problem.band, lsb_rad)[0] ** 2
     problem.w = 1.0 / (var + CHAIN_REL_STD**2)
     problem.sqrt_w = np.sqrt(problem.w)
 
@@ -133,11 +132,6 @@ def refit_three_mass(frf: FrequencyResponse, fit: FitResult,
             float(best.cost / two_cost), 2.0 * (two_cost - float(best.cost)))
 
 
-def _resolution(lsb_rad: float) -> EncoderJitter:
-    """The encoder's resolution alone, as the verdict's quantisation bound takes it."""
-    return EncoderJitter(sigma_s=float("nan"), mean_speed2=0.0, stamped=False, lsb_rad=lsb_rad)
-
-
 def lines_in(frf: FrequencyResponse, low_hz: float, high_hz: float) -> float:
     """How many lines of the motion's spectrum the bins low…high Hz hold (:func:`analysis.adequacy.motion_lines`)."""
     df = frf.f_hz[1]
@@ -155,7 +149,7 @@ def window_tests(frf: FrequencyResponse, fit: FitResult, lsb_rad: float, width: 
         reps = [p.log_ratio(x) for p in (_Problem(r, this.band, this.options, this.values)
                                          for r in frf.replicates or ()) if np.array_equal(p.f, f)]
         zr = np.asarray(reps)
-        white = quantisation_bound(frf, this.band, _resolution(lsb_rad))
+        white = quantisation_terms(frf, this.band, lsb_rad)[0]
         parts = [(z.real, zr.real)] + ([(np.angle(np.exp(1j * z.imag)), np.angle(np.exp(1j * zr.imag)))]
                                        if kind == "complex" else [])
         t = []
