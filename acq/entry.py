@@ -5,7 +5,7 @@ from __future__ import annotations
 import os
 import sys
 
-from acq.environment import set_default_env
+from acq.environment import pin_blas_threads
 
 #: BLAS threads of one acq process, set before numpy loads its BLAS (a variable the user set wins). The analysis
 #: multiplies many small, wide matrices (the torque's spline solves): there a second BLAS thread only spins.
@@ -57,8 +57,7 @@ def keep_freed_memory() -> bool:
 def main() -> None:
     """Import the command line (numpy, scipy, h5py: seconds on a loaded machine), then run it; a Ctrl-C during
     the imports is the usual one line and exit 130."""
-    for name in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-        set_default_env(name, BLAS_THREADS)
+    pin_blas_threads(BLAS_THREADS)
     if sys.argv[1:2] and sys.argv[1] in ONE_SHOT_COMMANDS:  # the command line's only options come after its command
         keep_freed_memory()
     try:

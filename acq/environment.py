@@ -20,3 +20,14 @@ def user_environment() -> dict[str, str]:
     """The environment without the variables acq set (:func:`set_default_env`, still at acq's value): for commands
     acq runs for the user (``--on-alarm``), which must see the user's settings, not acq's BLAS threads."""
     return {name: value for name, value in os.environ.items() if _SET_BY_ACQ.get(name) != value}
+
+
+#: The variables that set the BLAS libraries' thread count (OpenBLAS, OpenMP, MKL).
+BLAS_THREAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def pin_blas_threads(threads: str = "1") -> None:
+    """Start BLAS with ``threads`` threads in this process and those it starts, unless the user chose (before numpy
+    loads its BLAS: the count is read then)."""
+    for name in BLAS_THREAD_VARIABLES:
+        set_default_env(name, threads)

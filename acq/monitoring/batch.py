@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from acq.environment import set_default_env
+from acq.environment import pin_blas_threads
 from acq.monitoring.catalogue import Catalogue, Outcome
 from acq.offline.analyze import SessionResult, analyze_session, output_paths, sha256_of
 from acq.recording.paths import GLOB_CHARS
@@ -40,7 +40,6 @@ from acqcore.errors import AcqError, ConfigError
 from analysis import AnalysisRequest
 
 CATALOGUE_NAME = "catalogue.sqlite"
-_BLAS_THREADS = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
 
 #: Draws a written result's report PNG and returns the result (with a note if the picture failed), e.g.
 #: :func:`acq.ui.report_png.draw_report`; a module-level function, so it reaches the workers by name.
@@ -222,8 +221,7 @@ def analysis_executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
         # forkserver: workers fork from a clean single-threaded server that has imported acq once (a plain fork
         # of this process inherits the locks its threads — recorder, progress, BLAS — may hold, and can hang);
         # one BLAS thread per worker, as Dask's workers have, so N jobs do not fight over the cores
-        for var in _BLAS_THREADS:
-            set_default_env(var, "1")
+        pin_blas_threads()
         context = multiprocessing.get_context("forkserver")
         context.set_forkserver_preload(["acq.monitoring.batch"])
         _start_forkserver_without_cwd()
