@@ -38,6 +38,17 @@ from scipy import stats
 WINDOW_BINS = 8
 # Family-wise level of the misfit test: the same 95 % as the intervals.
 MISFIT_LEVEL = 0.05
+# What the chain's own approximations may leave in a window's mean misfit of ln|H| (1σ). Measured stage by stage
+# against the simulator's truth (bench/chain_bias.py, paper plant, seeds 0–2, 10 s and 60 s): the Welch estimator's
+# model (window kernel over the fine torque spectrum; it is exact for a stationary spectrum, not for the few strong
+# lines of a periodic motion whose cross terms and per-segment detrend leak into the lowest bins) 0.07–0.30 % RMS of
+# the window means, largest at 10–100 Hz; the one-phase torque estimate ≤ 0.25 % per band; the viscous frictions the
+# fit fixes at 0 −0.16 % at 100–160 Hz. It matters only where nothing else is allowed: on long records, and where the
+# quantisation error does not repeat with the motion (a dithered profile, a real loop's disturbances), so that the
+# jackknife's scatter is the only other allowance (60 s, 2^17 counts/rev, dithered: misfits of ±0.1…0.2 % at
+# 10–40 Hz against a scatter of 0.02 %). It is 1/20 of the smallest misfit the test must see (a third mode's
+# ±6 % dipole). A bench whose chain is less exact (another estimator, a coarser torque model) needs it re-measured.
+CHAIN_WINDOW_STD = 0.003
 
 
 def misfit_covariance(residual: np.ndarray, jac: np.ndarray, n_bins: int) -> np.ndarray:
@@ -101,7 +112,8 @@ class BandMisfit:
         Its standard error from the scatter between the delete-one-block replicates.
     systematic : float
         Standard deviation of the window mean's bias that the session cannot show by scatter but allows for (the
-        encoder's quantisation carried through the fit; 0 when none is given, infinite where it is unbounded).
+        share of the encoder's quantisation that repeats with the motion, carried through the fit, and the chain's
+        own approximations; 0 when none is given, infinite where it is unbounded).
     t : float
         |misfit| / √(noise² + systematic²).
     """
@@ -116,7 +128,8 @@ class BandMisfit:
 
 def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarray,
                  systematic_cov: np.ndarray | None = None,
-                 blind: np.ndarray | None = None) -> tuple[BandMisfit, ...]:
+                 blind: np.ndarray | None = None,
+                 chain_std: float = 0.0) -> tuple[BandMisfit, ...]:
     """The misfit of ln|H| per window of :data:`WINDOW_BINS` bins, stepped by half a window.
 
     Parameters
@@ -134,6 +147,9 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
     blind : ndarray of bool, shape (n,), optional
         Bins whose bias is unbounded (no signal to compare the quantisation with): a window holding one is not
         judged.
+    chain_std : float, optional
+        Standard deviation of every window's mean that the chain's own approximations allow
+        (:data:`CHAIN_WINDOW_STD`); 0: none.
 
     Returns
     -------
@@ -150,6 +166,7 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
         mean_b = reps[:, w].mean(axis=1)
         noise = float(np.sqrt((b - 1) / b * np.sum((mean_b - mean_b.mean()) ** 2)))
         quant = 0.0 if systematic_cov is None else float(np.sqrt(max(np.mean(systematic_cov[w, w]), 0.0)))
+        quant = float(np.hypot(quant, chain_std))
         if (blind is not None and np.any(blind[w])) or not np.isfinite(quant):
             quant = np.inf  # unbounded (or not computable): the window is not judged
         m = float(np.mean(misfit[w]))
@@ -203,6 +220,25 @@ def quantisation_pull(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray,
     weighted = np.tile(s2 * sqrt_w**2, parts)
     a = np.linalg.pinv(jac.T @ jac) @ jac.T
     return (a * weighted[None, :]) @ a.T
+
+
+def chain_pull(jac: np.ndarray, sqrt_w: np.ndarray, std: float = CHAIN_WINDOW_STD) -> np.ndarray:
+    """Covariance of the fitted log parameters that the chain's own approximations (:data:`CHAIN_WINDOW_STD`) may
+    cause: an error of ``std`` in ln H shared by the bins of each window of :data:`WINDOW_BINS` (the chain's errors
+    vary smoothly along frequency) and independent between windows, in amplitude and (for a complex fit) in phase,
+    carried to the parameters as :func:`quantisation_pull` carries the quantisation's.
+
+    Returns
+    -------
+    ndarray, shape (p, p)
+    """
+    n = sqrt_w.size
+    parts = jac.shape[0] // n
+    window = np.arange(n) // WINDOW_BINS
+    shared = (window[:, None] == window[None, :]).astype(float) * std**2
+    weighted = np.kron(np.eye(parts), sqrt_w[:, None] * shared * sqrt_w[None, :])
+    a = np.linalg.pinv(jac.T @ jac) @ jac.T
+    return a @ weighted @ a.T
 
 
 def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray,

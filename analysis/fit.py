@@ -46,7 +46,7 @@ import numpy as np
 from scipy import optimize, sparse, stats
 from scipy.ndimage import median_filter
 
-from analysis.adequacy import lines_per_bin, misfit_covariance, quantisation_pull
+from analysis.adequacy import chain_pull, lines_per_bin, misfit_covariance, quantisation_pull
 from analysis.encoder import quantisation_bound
 from analysis.frf import KERNEL_PER_BIN, FrequencyResponse, window_kernel
 from analysis.model import TwoMassParams, antiresonance_hz, frequency_response, resonance_hz
@@ -96,6 +96,10 @@ class FitOptions:
     speed_lsb_rad : float or None
         The encoder's resolution, rad (2π/counts per rev): the intervals then allow for the quantisation's pull
         on the parameters (:func:`analysis.adequacy.quantisation_pull`) instead of :data:`CHAIN_REL_STD`.
+    quantisation_repeating_share : float
+        Share (0…1) of the quantisation error that repeats with the motion
+        (:func:`analysis.quantisation_lock.locked_share`): only that share is a bias the jackknife cannot see; the
+        rest scatters from period to period and is in the jackknife's spread. 1 (all of it) when not measured.
     """
 
     params: FitParams = "K,Jm,Jl"
@@ -103,6 +107,7 @@ class FitOptions:
     band_hz: tuple[float, float] | None = None
     weighting: FitWeighting = "coherence"
     speed_lsb_rad: float | None = None
+    quantisation_repeating_share: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -380,8 +385,10 @@ def fit_two_mass(
 
 def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
                         options: FitOptions) -> np.ndarray | None:
-    """Variance of each free log parameter that the encoder's quantisation pulls it by
-    (:func:`analysis.adequacy.quantisation_pull`; None without the encoder's resolution).
+    """Variance of each free log parameter that the systematic errors no scatter shows may pull it by: the encoder's
+    quantisation (:func:`analysis.adequacy.quantisation_pull`, times the share of the error that repeats with the
+    motion) and the chain's own approximations (:func:`analysis.adequacy.chain_pull`); None without the encoder's
+    resolution.
 
     Always with K, J_m, J_l and C free: with the inertias held at nominal values (``params="K"``) the pull on K alone
     would be a fraction of what the data can tell K to, and the interval would lean on inertias known exactly.
@@ -391,7 +398,9 @@ def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray
     bound, lines = quantisation_terms(frf, problem.band, options.speed_lsb_rad)
     values = problem.params(x)
     full = _Problem(frf, problem.band, replace(options, params="K,Jm,Jl"), values)
-    pull = np.diag(quantisation_pull(bound, lines, _jacobian(full, full.x0(values)), full.sqrt_w))
+    jac = _jacobian(full, full.x0(values))
+    pull = options.quantisation_repeating_share * np.diag(quantisation_pull(bound, lines, jac, full.sqrt_w))
+    pull = pull + np.diag(chain_pull(jac, full.sqrt_w))
     return pull[[full.free.index(name) for name in problem.free]]
 
 
@@ -523,6 +532,13 @@ def _jacobian(problem: _Problem, x: np.ndarray) -> np.ndarray:
     cols = [(problem.residuals(x + step * e) - problem.residuals(x - step * e)) / (2.0 * step)
             for e in np.eye(x.size)]
     return np.stack(cols, axis=1)
+
+
+def kernel_model_log_ratio(frf: FrequencyResponse, fit: FitResult) -> np.ndarray:
+    """ln(H_model/H_meas) of a fit's values against ``frf`` (complex, at the fit band's bins of ``frf``), the model as
+    the fit sees the Welch estimate (:meth:`_Problem.log_ratio`)."""
+    problem = _Problem(frf, fit.band, fit.options, fit.values)
+    return problem.log_ratio(problem.x0(fit.values))
 
 
 def amplitude_misfits(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

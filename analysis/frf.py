@@ -147,6 +147,7 @@ def estimate_frf(
     torque_alias_Nm: np.ndarray | None = None,
     jackknife_blocks: int = 0,
     select_band_hz: tuple[float, float] | None = None,
+    reuse_selection: SegmentSelection | None = None,
 ) -> FrequencyResponse:
     """Estimate H1 = G_xy/G_xx and the coherence from torque and backward-difference speed.
 
@@ -173,6 +174,9 @@ def estimate_frf(
     select_band_hz : tuple of float or None, optional
         Average only the segments that excite the joint in this band (low, high), Hz
         (:func:`analysis.segments.select_segments`; ``selection`` says which); None: every segment.
+    reuse_selection : SegmentSelection or None, optional
+        Average the segments another estimate selected (the same stretches of other signals) instead of
+        selecting; None: every segment, or those ``select_band_hz`` selects.
 
     Returns
     -------
@@ -199,10 +203,11 @@ def estimate_frf(
     N = None if torque_noise_Nm is None else seg.fft(np.asarray(torque_noise_Nm, dtype=float))
     U = None if torque_alias_Nm is None else [seg.fft(uk) for uk in np.atleast_2d(torque_alias_Nm)]
     n_fine = KERNEL_PER_BIN * nperseg
-    selection = None
-    if select_band_hz is not None:
+    selection = reuse_selection
+    if selection is None and select_band_hz is not None:
         f = np.fft.rfftfreq(nperseg, period_s)
         selection = select_segments(X, Y, (f >= select_band_hz[0]) & (f <= select_band_hz[1]), nperseg, step)
+    if selection is not None:
         keep = selection.keep
         X, Y = X[keep], Y[keep]
         N = None if N is None else N[keep]

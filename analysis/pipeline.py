@@ -17,6 +17,7 @@ from analysis.clocks import ClockFit
 from analysis.diagnose import nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
 from analysis.fit import FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass
 from analysis.encoder import longest_gap_free_span
+from analysis.estimator_check import kernel_model_error
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
 from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.recording import Recording
@@ -132,12 +133,16 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
         describe_moves(sig.t_s, sig.speed_rad_s, sig.period_s, rec.counts_per_rev, math.pi / rec.pole_pairs,
                        frf.selection))
     fit = fit_two_mass(frf, FitOptions(params=request.params, kind=request.fit, band_hz=request.band_hz,
-                                       weighting=chain.weighting, speed_lsb_rad=2.0 * math.pi / rec.counts_per_rev),
+                                       weighting=chain.weighting, speed_lsb_rad=2.0 * math.pi / rec.counts_per_rev,
+                                       quantisation_repeating_share=1.0 if sig.encoder_jitter is None
+                                       else sig.encoder_jitter.repeating_share),
                        nominal=request.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
+    kernel_error = None if fit.status == "failed" else kernel_model_error(frf, fit, sig.torque_Nm)
     quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
-                     encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None)
+                     encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None,
+                     kernel_error=kernel_error)
     caveat = chain_caveat(chain, AnalysisRequest().chain(rec))
     if caveat is not None and quality.verdict != "ok":
         quality = replace(quality, reasons=(caveat, *quality.reasons))

@@ -14,7 +14,8 @@ from typing import Literal
 
 import numpy as np
 
-from analysis.adequacy import BandMisfit, band_misfits, critical_t, missed_spans, quantisation_through_fit
+from analysis.adequacy import (CHAIN_WINDOW_STD, BandMisfit, band_misfits, critical_t, missed_spans,
+                               quantisation_through_fit)
 from analysis.encoder import difference_response
 from analysis.fit import (COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask, quantisation_terms,
                           residual_jacobian)
@@ -142,6 +143,7 @@ def assess(
     thresholds: Thresholds = Thresholds(),
     encoder_jitter: EncoderJitter | None = None,
     clock_failure: str | None = None,
+    kernel_error: np.ndarray | None = None,
 ) -> Quality:
     """Judge an identification from its FRF, its fit and the clock alignment.
 
@@ -160,6 +162,10 @@ def assess(
         Limits of the verdict.
     encoder_jitter : EncoderJitter or None, optional
         The encoder's sample-instant jitter estimated from the data (not judged if None).
+    kernel_error : ndarray or None, optional
+        ln|H| the Welch estimator makes of the fitted model less the fit's model of it, at the fit's bins
+        (:func:`analysis.estimator_check.kernel_model_error`): the misfit test judges the measurement against the
+        model so corrected; None: uncorrected.
     clock_failure : str or None, optional
         Why the clock alignment failed (:attr:`analysis.clocks.ClockFit.failure`): the verdict is then failed
         with it as the first reason — low coherence and wide intervals follow from it, not from the motion.
@@ -203,15 +209,16 @@ def assess(
     # without the encoder's resolution the share of |H|'s misfit that its quantisation repeats with every
     # motion period is unknown (±8 % at 200–250 Hz on a healthy 2^17 counts/rev bench): no misfit test then
     known_resolution = encoder_jitter is not None and encoder_jitter.lsb_rad > 0.0
-    missed = _missed_band(frf, fit, encoder_jitter) if fit.status != "failed" and known_resolution else None
+    missed = (_missed_band(frf, fit, encoder_jitter, kernel_error) if fit.status != "failed" and known_resolution
+              else None)
     if missed is not None:
         low, high, worst = missed
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
                                  f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
-                                 f"{worst.t:.0f} σ beyond what noise and the encoder's quantisation explain — a third "
-                                 f"mode or backlash in the band: check the gear and the coupling for play and for a "
-                                 f"loose part; until then K, J_m, J_l are the two-mass model's compromise, not the "
-                                 f"joint's"))
+                                 f"{worst.t:.0f} σ beyond what noise, the chain and the encoder's quantisation explain "
+                                 f"— a third mode, backlash or friction in the joint: check the gear and the coupling "
+                                 f"for play and for a loose part and the load side for friction; until then K, J_m, "
+                                 f"J_l are the two-mass model's compromise, not the joint's"))
     elif np.isfinite(fit.residual_rms):
         level = _grade(-fit.residual_rms, -th.residual_poor, -th.residual_failed)
         if level != "ok" and ratio > th.misfit_ratio_poor:
@@ -259,25 +266,28 @@ def assess(
     )
 
 
-def _missed_band(frf: FrequencyResponse, fit: FitResult,
-                 jitter: EncoderJitter) -> tuple[float, float, BandMisfit] | None:
+def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter,
+                 kernel_error: np.ndarray | None) -> tuple[float, float, BandMisfit] | None:
     """The worst stretch of the band where the model misses |H| beyond noise and the encoder's quantisation
     (:mod:`analysis.adequacy`): (low Hz, high Hz, worst window), or None.
 
-    The allowance per window: the jackknife's scatter of its mean misfit, and the bias of the encoder's resolution
-    ``jitter.lsb_rad`` that repeats with every motion period (which the scatter cannot show) — a random-phase
-    error of the white-quantisation bound √(N_q/|H·D|²G_xx) at each line of the motion, carried through the fit
-    (:func:`analysis.adequacy.quantisation_through_fit`). It replaces a 0.4 % allowance per window measured on the
-    simulated bench (:data:`analysis.fit.CHAIN_REL_STD`): on healthy simulated sessions that constant stood for
-    the quantisation's pull on the fit (``bench/chain_bias.py --allowance``).
+    The measurement is judged against the model as the Welch estimator really sees it (the fit's kernel model
+    corrected by ``kernel_error``, :mod:`analysis.estimator_check`). The allowance per window: the jackknife's
+    scatter of its mean misfit; the share of the encoder's quantisation error that repeats with every motion period
+    (``jitter.repeating_share``; the scatter cannot show it) — a random-phase error of the white-quantisation bound
+    √(N_q/|H·D|²G_xx) at each line of the motion, carried through the fit
+    (:func:`analysis.adequacy.quantisation_through_fit`); and the chain's own approximations
+    (:data:`analysis.adequacy.CHAIN_WINDOW_STD`).
     """
     f, misfit, reps = amplitude_misfits(frf, fit)
+    if kernel_error is not None and kernel_error.shape == misfit.shape:
+        misfit, reps = misfit + kernel_error, reps + kernel_error[None, :]
     quant, lines = quantisation_terms(frf, fit.band, jitter.lsb_rad)
     jac, sqrt_w = residual_jacobian(frf, fit)
     with np.errstate(invalid="ignore", divide="ignore"):
-        carried = quantisation_through_fit(quant, lines, jac, sqrt_w)
+        carried = jitter.repeating_share * quantisation_through_fit(quant, lines, jac, sqrt_w)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
-    windows = band_misfits(f, misfit, reps, carried, blind)
+    windows = band_misfits(f, misfit, reps, carried, blind, CHAIN_WINDOW_STD)
     spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
     return spans[0] if spans else None
 

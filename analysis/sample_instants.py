@@ -32,7 +32,7 @@ from analysis.encoder import quantisation_speed_psd
 _D3 = np.array([-1.0, 3.0, -3.0, 1.0])  # third difference
 _D3_GAIN = float(np.sum(_D3**2))  # 20: variance gain of the third difference on white errors
 _BINS = 16
-_QUANTISATION_COUNTS = 2.0  # counts a cycle above which neighbouring quantisation errors count as independent
+QUANTISATION_COUNTS = 2.0  # counts a cycle above which neighbouring quantisation errors count as independent
 _MEDIAN_CHI2_1 = 0.454936  # median of χ²(1): median(x²) = 0.4549·σ² for Gaussian x
 
 
@@ -54,6 +54,9 @@ class EncoderJitter:
         jitter the stamps corrected.
     lsb_rad : float
         One encoder count, rad (0: not known).
+    locked_share : float
+        Share (0…1) of the quantisation error that repeats one motion period later
+        (:func:`analysis.quantisation_lock.locked_share`); NaN: not measured.
     """
 
     sigma_s: float
@@ -61,6 +64,12 @@ class EncoderJitter:
     stamped: bool
     stamp_spread_s: float = float("nan")
     lsb_rad: float = 0.0
+    locked_share: float = float("nan")
+
+    @property
+    def repeating_share(self) -> float:
+        """:attr:`locked_share`, or 1 (all of it repeats, the cautious reading) where it was not measured."""
+        return self.locked_share if np.isfinite(self.locked_share) else 1.0
 
     def speed_noise_psd(self, f_hz: np.ndarray, period_s: float) -> np.ndarray:
         """One-sided PSD, (rad/s)²/Hz, of the backward-difference speed noise the jitter causes.
@@ -136,7 +145,7 @@ def estimate_jitter(theta_rad: np.ndarray, period_s: float, *, lsb_rad: float = 
         Drive cycle T, s.
     lsb_rad : float, optional
         One count of the encoder, rad. Only samples where the position moves at least
-        ``_QUANTISATION_COUNTS`` counts a cycle are regressed: there the quantisation errors of
+        ``QUANTISATION_COUNTS`` counts a cycle are regressed: there the quantisation errors of
         neighbouring samples are nearly independent (variance lsb²/12 whatever the speed), while slower
         they are correlated and their third difference grows with speed — which would read as jitter
         (≈ 3 µs on a 10 000-count encoder that has none). 0: every sample.
@@ -150,7 +159,7 @@ def estimate_jitter(theta_rad: np.ndarray, period_s: float, *, lsb_rad: float = 
         return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s, lsb_rad)
     d3 = np.convolve(th, _D3[::-1], mode="valid")  # d3[i] = θ[i+3] − 3θ[i+2] + 3θ[i+1] − θ[i]
     w2 = np.convolve(speed**2, _D3[::-1] ** 2, mode="valid") / _D3_GAIN  # ω² seen by each d3, weighted
-    fast = np.abs(speed) * period_s >= _QUANTISATION_COUNTS * lsb_rad
+    fast = np.abs(speed) * period_s >= QUANTISATION_COUNTS * lsb_rad
     usable = np.flatnonzero(np.convolve(fast, np.ones(_D3.size), mode="valid") == _D3.size)
     if usable.size < 8 * _BINS:
         return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s, lsb_rad)

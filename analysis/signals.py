@@ -24,6 +24,7 @@ from analysis.chain import SignalChain, TorqueMethod
 from analysis.clocks import ClockFit, fit_clock, host_relation
 from analysis.recording import Recording
 from analysis.fit import Z95
+from analysis.quantisation_lock import locked_share
 from analysis.sample_instants import EncoderJitter
 
 _CHUNK_S = 20.0
@@ -173,6 +174,7 @@ def spans_and_clock(rec: Recording, chain: SignalChain = SignalChain()) -> Spans
         notes.append(daq_note)
     current = {name: a[lo:hi] for name, a in rec.current_a.items()}
     theta, jitter = _angle_on_grid(rec, span, notes)
+    jitter = replace(jitter, locked_share=locked_share(rec.position_counts[span.start:span.stop]))
     angle = encoder.angle_spline(int(cycles[0]), rec.period_s, theta)
     if chain.align:
         clock = fit_clock(current["i_a"], rec.rate_hz, n0, angle, rec.pole_pairs, _host(rec))

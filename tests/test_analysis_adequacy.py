@@ -120,9 +120,9 @@ def test_a_backlash_like_low_frequency_misfit_makes_the_verdict_poor_and_names_t
     low, high = q.misfit_band_hz
     assert low == 10.0 and 24.0 <= high <= 60.0
     assert q.reasons[0].startswith(f"the two-mass model does not fit |H| between 10 and {high:.0f} Hz: it misses by")
-    assert q.reasons[0].endswith("explain — a third mode or backlash in the band: check the gear and the coupling for "
-                                 "play and for a loose part; until then K, J_m, J_l are the two-mass model's "
-                                 "compromise, not the joint's")
+    assert q.reasons[0].endswith("explain — a third mode, backlash or friction in the joint: check the gear and the "
+                                 "coupling for play and for a loose part and the load side for friction; until then "
+                                 "K, J_m, J_l are the two-mass model's compromise, not the joint's")
 
 
 def test_weak_excitation_and_encoder_resolution_advice_name_the_keys_and_when_to_change_them():

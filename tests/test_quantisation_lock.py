@@ -1,0 +1,56 @@
+"""The share of the encoder's quantisation error that repeats with the motion (analysis.quantisation_lock)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from analysis.quantisation_lock import locked_share, motion_period_samples
+
+PERIOD = 800  # samples per motion period (0.8 s at 1 kHz)
+CYCLES = 12
+
+
+def triangle_counts(amplitudes: np.ndarray, noise_counts: float = 0.0, seed: int = 0) -> np.ndarray:
+    """Encoder counts of a motion of triangle speed, one amplitude (counts per sample at top speed) per period:
+    out and back, so every period returns to the start; ``noise_counts`` of white position noise before the
+    quantisation (a loop's disturbances)."""
+    quarter = PERIOD // 4
+    ramp = np.concatenate([np.arange(quarter), quarter - np.arange(quarter)]) / quarter
+    unit = np.concatenate([ramp, -ramp])  # speed of one period, ±1
+    speed = np.concatenate([a * unit for a in amplitudes])
+    position = 12345.3 + np.cumsum(speed)
+    position += np.random.default_rng(seed).normal(0.0, noise_counts, position.size) if noise_counts else 0.0
+    return np.floor(position).astype(np.int64)
+
+
+def test_the_motion_period_is_found_from_the_speed():
+    counts = triangle_counts(np.full(CYCLES, 500.0))
+    assert abs(motion_period_samples(np.diff(counts.astype(float))) - PERIOD) <= 0.01 * PERIOD
+
+
+def test_a_trajectory_that_repeats_exactly_repeats_its_quantisation_error():
+    assert locked_share(triangle_counts(np.full(CYCLES, 500.0))) > 0.95
+
+
+@pytest.mark.parametrize("dither", [0.005, 0.02])
+def test_an_amplitude_dithered_motion_decorrelates_it(dither):
+    amplitudes = 500.0 * (1.0 + dither * np.random.default_rng(1).uniform(-1.0, 1.0, CYCLES))
+    assert locked_share(triangle_counts(amplitudes)) < 0.1
+
+
+def test_disturbances_of_a_few_counts_decorrelate_it():
+    assert locked_share(triangle_counts(np.full(CYCLES, 500.0), noise_counts=2.0)) < 0.1
+
+
+def test_a_tenth_of_a_count_already_takes_much_of_it_away():
+    # two errors a fraction f of a count apart correlate by 1 − 6 f (1 − f): 0.1 count RMS leaves about half
+    share = locked_share(triangle_counts(np.full(CYCLES, 500.0), noise_counts=0.1))
+    assert 0.2 < share < 0.8
+
+
+def test_no_periodic_motion_is_not_measured():
+    speed = np.cumsum(np.random.default_rng(2).normal(0.0, 50.0, PERIOD * CYCLES))  # a wandering speed
+    share = locked_share(np.floor(np.cumsum(speed)).astype(np.int64))
+    assert np.isnan(share) or share < 0.1
+    assert np.isnan(locked_share(np.zeros(100, dtype=np.int64)))
