@@ -46,7 +46,7 @@ import numpy as np
 from scipy import optimize, sparse, stats
 from scipy.ndimage import median_filter
 
-from analysis.adequacy import chain_pull, lines_per_bin, misfit_covariance, quantisation_pull
+from analysis.adequacy import chain_pull, lines_per_bin, misfit_covariance, quantisation_pull, systematic_std
 from analysis.encoder import quantisation_bound
 from analysis.frf import KERNEL_PER_BIN, FrequencyResponse, window_kernel
 from analysis.model import TwoMassParams, antiresonance_hz, frequency_response, resonance_hz
@@ -387,8 +387,8 @@ def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray
                         options: FitOptions) -> np.ndarray | None:
     """Variance of each free log parameter that the systematic errors no scatter shows may pull it by: the encoder's
     quantisation (:func:`analysis.adequacy.quantisation_pull`, times the share of the error that repeats with the
-    motion) and the chain's own approximations (:func:`analysis.adequacy.chain_pull`); None without the encoder's
-    resolution.
+    motion) and the smooth systematic errors of the chain and of the loop's feedback of the rest of the quantisation
+    (:func:`analysis.adequacy.chain_pull`); None without the encoder's resolution.
 
     Always with K, J_m, J_l and C free: with the inertias held at nominal values (``params="K"``) the pull on K alone
     would be a fraction of what the data can tell K to, and the interval would lean on inertias known exactly.
@@ -399,8 +399,9 @@ def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray
     values = problem.params(x)
     full = _Problem(frf, problem.band, replace(options, params="K,Jm,Jl"), values)
     jac = _jacobian(full, full.x0(values))
-    pull = options.quantisation_repeating_share * np.diag(quantisation_pull(bound, lines, jac, full.sqrt_w))
-    pull = pull + np.diag(chain_pull(jac, full.sqrt_w))
+    share = options.quantisation_repeating_share
+    pull = share * np.diag(quantisation_pull(bound, lines, jac, full.sqrt_w))
+    pull = pull + np.diag(chain_pull(jac, full.sqrt_w, systematic_std(bound, share)))
     return pull[[full.free.index(name) for name in problem.free]]
 
 

@@ -30,6 +30,9 @@ from scipy import signal
 
 from analysis.sample_instants import QUANTISATION_COUNTS
 
+# From this share on the analysis says so in its notes: the misfit test's allowance for the quantisation (a standard
+# deviation ∝ √share) is then at least 70 % of what a fully repeating error needs, and a few-percent mode can hide in it
+NOTED_LOCKED_SHARE = 0.5
 _D3 = np.array([-1.0, 3.0, -3.0, 1.0])
 _D3_MAX_COUNTS = 4.0  # the largest third difference errors of ±½ count can make
 # the autocorrelation's peak of a few periods of a triangle lies up to ~1 % off the period (measured: 805 samples for

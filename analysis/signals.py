@@ -24,7 +24,7 @@ from analysis.chain import SignalChain, TorqueMethod
 from analysis.clocks import ClockFit, fit_clock, host_relation
 from analysis.recording import Recording
 from analysis.fit import Z95
-from analysis.quantisation_lock import locked_share
+from analysis.quantisation_lock import NOTED_LOCKED_SHARE, locked_share
 from analysis.sample_instants import EncoderJitter
 
 _CHUNK_S = 20.0
@@ -175,6 +175,11 @@ def spans_and_clock(rec: Recording, chain: SignalChain = SignalChain()) -> Spans
     current = {name: a[lo:hi] for name, a in rec.current_a.items()}
     theta, jitter = _angle_on_grid(rec, span, notes)
     jitter = replace(jitter, locked_share=locked_share(rec.position_counts[span.start:span.stop]))
+    if jitter.locked_share >= NOTED_LOCKED_SHARE:
+        notes.append(f"encoder: {100 * jitter.locked_share:.0f} % of its quantisation error repeats with every motion "
+                     "period (the trajectory repeats to a fraction of a count), so no average removes it and the "
+                     "check for a mode the two-mass model lacks must allow for it: a mode of a few percent can hide "
+                     "behind it at high frequencies — a profile with speed_dither (as triangle_0.2s) decorrelates it")
     angle = encoder.angle_spline(int(cycles[0]), rec.period_s, theta)
     if chain.align:
         clock = fit_clock(current["i_a"], rec.rate_hz, n0, angle, rec.pole_pairs, _host(rec))

@@ -8,8 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from analysis.adequacy import (band_misfits, bandwidth_bins, critical_t, misfit_covariance, motion_lines,
-                               quantisation_through_fit)
+from analysis.adequacy import (CHAIN_WINDOW_STD, WINDOW_BINS, band_misfits, bandwidth_bins, chain_pull, critical_t,
+                               misfit_covariance, motion_lines, quantisation_through_fit, systematic_std)
 from analysis.fit import FitOptions, amplitude_misfits, fit_two_mass
 from analysis.frf import estimate_frf
 from analysis.quality import assess
@@ -172,3 +172,21 @@ def test_motion_lines_counts_the_harmonics_of_a_periodic_torque_and_many_for_a_b
     assert motion_lines(periodic, step, 100.0, 120.0) == pytest.approx(9 * 0.5 * (2.0**2 / 1.5), rel=0.2)
     assert motion_lines(np.ones_like(f), step, 100.0, 120.0) == pytest.approx(41 / 2.0)
     assert motion_lines(np.zeros_like(f), step, 100.0, 120.0) == 1.0
+
+
+def test_the_smooth_systematic_error_is_the_chains_and_the_loop_feedback_of_the_quantisation_that_does_not_repeat():
+    # q = 30 % (a 4 kHz encoder at 2^17 counts/rev near 450 Hz): the loop's feedback may bias |H| by up to q² = 9 %
+    q = np.array([0.01, 0.3, np.inf])
+    np.testing.assert_allclose(systematic_std(q, 0.0), np.hypot(CHAIN_WINDOW_STD, [1e-4, 0.09, 0.0]), rtol=1e-12)
+    # all of it repeating with the motion: carried by quantisation_through_fit instead, only the chain's remains
+    np.testing.assert_allclose(systematic_std(q, 1.0), CHAIN_WINDOW_STD, rtol=1e-12)
+
+
+def test_an_error_shared_by_the_bins_of_a_window_pulls_a_fitted_constant_by_its_size_over_the_windows():
+    # one constant fitted to 3 windows of bins with equal weights: each window's shared error s enters its mean
+    # whole, the windows are independent, so the constant's variance is s²/3; a complex fit (a phase row per bin,
+    # the constant only in amplitude) sees the amplitude part alone
+    n, s = 3 * WINDOW_BINS, 0.004
+    np.testing.assert_allclose(chain_pull(np.ones((n, 1)), np.ones(n), np.full(n, s)), [[s**2 / 3]], rtol=1e-12)
+    jac = np.vstack([np.ones((n, 1)), np.zeros((n, 1))])
+    np.testing.assert_allclose(chain_pull(jac, np.ones(n), np.full(n, s)), [[s**2 / 3]], rtol=1e-12)
