@@ -210,3 +210,14 @@ def test_serial_drive_over_a_pty_runs_each_cycle_at_its_factor(tmp_path: Path,
     s = speed_factors(session.profile, np.arange(swings.size))
     assert swings.size >= 3 and np.ptp(s) > 0.02  # seed 3: factors far enough apart for the check to see them
     np.testing.assert_allclose(swings, s, atol=1e-3)
+
+
+# ---- the scenario family can run a dithered motion ---------------------------------------------------------
+def test_a_scenario_with_a_dithered_profile_takes_the_runs_seed_and_no_existing_scenario_is_dithered() -> None:
+    from bench.scenarios import SCENARIOS, Scenario, scenario_bench
+
+    _, p = scenario_bench(Scenario("dithered", profile={"speed_dither": 0.02}), 5, 0.01, 20.0)
+    assert (p.speed_dither, p.dither_seed) == (0.02, 5)
+    _, p = scenario_bench(Scenario("dithered", profile={"speed_dither": 0.02, "dither_seed": 8}), 5, 0.01, 20.0)
+    assert p.dither_seed == 8
+    assert all(scenario_bench(sc, 0, 0.01, 20.0)[1].speed_dither == 0.0 for sc in SCENARIOS)
