@@ -8,6 +8,16 @@ lower bit 4. With change-set-immediately (bit 5) clear the drive buffers the nex
 present move runs, so its own generator makes back-to-back ramps (0x6081/0x6083/0x6084). A
 ``dwell_s`` waits for target reached (bit 10) and the dwell before the next target.
 
+Speed dither (profile ``speed_dither`` > 0): full cycle c runs to p0 + round(s_c·swing) and back to p0 (the
+same start every cycle: no drift), with 0x6081/0x6083/0x6084 at s_c times the nominal ones
+(:func:`drivers.motion.speed_factors`), each written and read back before the cycle's first target. They are
+written once the set-point buffer is free (bit 12 clear), while the previous cycle's return move runs, so
+they must act from the next new set-point on: CiA 402 drives latch the profile parameters with the
+set-point (the simulated drive, :mod:`drivers.sim.can_node`, does). A drive that applied them to the move in
+progress would run the end of each return move at the next cycle's ramps — its position targets, and so the
+return to p0, stay exact; with a ``dwell_s`` the parameters are written at rest and any drive applies them
+to the intended move.
+
 All SDO traffic of the motion goes through one lock (the motion thread and a stop from any other
 thread share canopen's SDO client). Every stop is a quick stop on the 0x6085 ramp, a wait for rest
 (SWITCH ON DISABLED, or QUICK STOP ACTIVE with target reached), then disable voltage, verified.
@@ -25,7 +35,7 @@ from typing import Any
 from drivers import canopen_od as od
 from drivers.config import DriveCanopen, Profile
 from acqcore.errors import AcqError, ConfigError, DeviceError
-from drivers.motion import half_swing_rad
+from drivers.motion import half_swing_rad, speed_factors, with_dither_seed
 
 STATUS_POLL_S = 0.01
 SW_TARGET_REACHED = 1 << 10
@@ -87,20 +97,19 @@ class ProfilePositionMotion:
         self._stop_time_s = settings.state_timeout_s
 
     def start(self, profile: Profile) -> None:
-        """Set the ramps from ``profile``, enable, and run the triangle in a thread until :meth:`stop`."""
+        """Set the ramps from ``profile``, enable, and run the triangle in a thread until :meth:`stop`.
+
+        A dithered profile without a ``dither_seed`` gets one drawn here (the recorder draws it before)."""
         if profile.jerk_time_s:
             raise ConfigError(f"profile: jerk_time_s = {profile.jerk_time_s:g} s, but profile position mode "
                               "(0x6083/0x6084) has no jerk limit; set jerk_time_s = 0 for a CANopen drive")
+        profile = with_dither_seed(profile)
         s, node = self._s, self._node
-        top_rpm = profile.top_speed_rpm
-        decel = round(top_rpm / profile.decel_time_s * s.acceleration_units_per_rpm_per_s)
-        self._stop_time_s = s.state_timeout_s + profile.decel_time_s
+        decel = round(profile.top_speed_rpm / profile.decel_time_s * s.acceleration_units_per_rpm_per_s)
+        self._stop_time_s = s.state_timeout_s + profile.decel_time_s * profile.max_speed_factor  # the fastest cycle
         try:
             with self.sdo_lock, device_step(self._name, "setting the profile-position parameters failed"):
-                node.sdo[od.PROFILE_VELOCITY].raw = round(top_rpm * s.velocity_units_per_rpm)
-                node.sdo[od.PROFILE_ACCELERATION].raw = round(
-                    top_rpm / profile.accel_time_s * s.acceleration_units_per_rpm_per_s)
-                node.sdo[od.PROFILE_DECELERATION].raw = decel
+                self._set_ramps(profile, float(speed_factors(profile, 0)))
                 node.sdo[od.QUICK_STOP_DECELERATION].raw = decel
                 p0 = int(node.sdo[od.POSITION_ACTUAL].raw)
             with self.sdo_lock, device_step(self._name, f"did not reach OPERATION ENABLED within {s.state_timeout_s:g} s"):
@@ -109,11 +118,24 @@ class ProfilePositionMotion:
         except BaseException:
             self.quick_stop_and_disable()
             raise
-        swing = round(half_swing_rad(profile) / (2 * math.pi) * self._cpr)
         self._stop.clear()
-        self._thread = threading.Thread(target=self._run_triangle, args=(p0, swing, profile.dwell_s),
+        self._thread = threading.Thread(target=self._run_triangle, args=(p0, profile),
                                         name="acq-canopen-motion", daemon=True)
         self._thread.start()
+
+    def _set_ramps(self, profile: Profile, factor: float) -> None:
+        """Write 0x6081/0x6083/0x6084 for ``profile`` at ``factor`` times its top speed and read them back (a drive
+        that clamps a value, e.g. to its 0x607F limit, would run another motion than the one recorded)."""
+        s, top_rpm = self._s, profile.top_speed_rpm * factor
+        wanted = {od.PROFILE_VELOCITY: round(top_rpm * s.velocity_units_per_rpm),
+                  od.PROFILE_ACCELERATION: round(top_rpm / profile.accel_time_s * s.acceleration_units_per_rpm_per_s),
+                  od.PROFILE_DECELERATION: round(top_rpm / profile.decel_time_s * s.acceleration_units_per_rpm_per_s)}
+        for index, value in wanted.items():
+            self._node.sdo[index].raw = value
+        for index, value in wanted.items():
+            if (got := int(self._node.sdo[index].raw)) != value:
+                raise DeviceError(f"{self._name}: 0x{index:04X} reads back {got} after {value} was written "
+                                  f"(the drive limits it?)")
 
     def stop(self) -> None:
         """Stop issuing targets, then quick stop and disable. Idempotent."""
@@ -157,20 +179,27 @@ class ProfilePositionMotion:
             self._stop.wait(STATUS_POLL_S)
         return False
 
-    def _run_triangle(self, p0: int, swing: int, dwell_s: float) -> None:
-        """Alternate absolute targets p0 + swing and p0 with the new-set-point handshake until stopped."""
-        targets = (p0 + swing, p0)
+    def _run_triangle(self, p0: int, profile: Profile) -> None:
+        """Alternate absolute targets p0 + round(s_c·swing) and p0 with the new-set-point handshake until stopped;
+        with dither the ramps of cycle c ≥ 1 are set before its first target."""
+        swing = round(half_swing_rad(profile) / (2 * math.pi) * self._cpr)
+        dithered = profile.speed_dither > 0
         try:
             for n in range(2**62):
-                if dwell_s > 0:
+                cycle, back = divmod(n, 2)
+                if profile.dwell_s > 0:
                     if not self._wait_status(SW_TARGET_REACHED, SW_TARGET_REACHED, None, "target not reached"):
                         return
-                    if self._stop.wait(dwell_s):
+                    if self._stop.wait(profile.dwell_s):
                         return
                 if not self._wait_status(SW_SETPOINT_ACK, 0, None, "set-point buffer never freed"):
                     return
+                factor = float(speed_factors(profile, cycle))
                 with self.sdo_lock:
-                    self._node.sdo[od.TARGET_POSITION].raw = _int32(targets[n % 2])
+                    if dithered and cycle > 0 and not back:
+                        with device_step(self._name, f"setting the ramps of cycle {cycle} failed"):
+                            self._set_ramps(profile, factor)
+                    self._node.sdo[od.TARGET_POSITION].raw = _int32(p0 if back else p0 + round(factor * swing))
                     self._node.controlword = CW_ENABLE | CW_NEW_SETPOINT
                 acked = self._wait_status(SW_SETPOINT_ACK, SW_SETPOINT_ACK, self._s.state_timeout_s,
                                           "set-point not acknowledged")

@@ -8,15 +8,54 @@ rests again. The motor torque is then a rectangular wave (paper §3.1). The swin
 S-curve (``jerk_time_s`` = t_j > 0): each ramp of duration t_r keeps its duration and end speeds, but
 its acceleration rises linearly over t_j, holds A = top/(t_r − t_j) and falls linearly over t_j (jerk
 limit A/t_j); the ramp is point-symmetric, so the swing is unchanged. t_j is capped at half a ramp.
+
+Speed dither (``speed_dither`` = d > 0): full cycle c (c = 0, 1, … from the start) runs at s_c times the
+nominal speed and acceleration, s_c = :func:`speed_factors` — the same timing, s_c times the swing out and
+back, so every cycle ends where it started.
 """
 
 from __future__ import annotations
+
+import functools
+import secrets
 
 import numpy as np
 
 from drivers.config import Profile
 
 RPM_TO_RAD_S = 2.0 * np.pi / 60.0
+
+
+def with_dither_seed(profile: Profile) -> Profile:
+    """``profile`` itself, or — if it is dithered without a ``dither_seed`` — a copy with a seed drawn from the
+    operating system's entropy (the one that must be stored with the session)."""
+    if profile.speed_dither == 0.0 or profile.dither_seed is not None:
+        return profile
+    return profile.model_copy(update={"dither_seed": secrets.randbelow(2**63)})
+
+
+def speed_factors(profile: Profile, cycles: np.ndarray | int) -> np.ndarray:
+    """The factors s_c of full cycles ``cycles`` (numbered 0, 1, … from the start), of the shape of ``cycles``.
+
+    ``numpy.random.default_rng(dither_seed).uniform(1 − d, 1 + d, size)``: one draw per cycle in order (the
+    first n draws do not depend on how many are asked for — numpy's generator fills the array in order), so a
+    drive, the simulator and an audit all compute the same s_c. All ones for d = 0.
+    """
+    c = np.asarray(cycles, dtype=np.int64)
+    d = profile.speed_dither
+    if d == 0.0:
+        return np.ones(c.shape)
+    if profile.dither_seed is None:
+        raise ValueError("a dithered profile needs its dither_seed (drivers.motion.with_dither_seed)")
+    count = 1 << max(int(c.max(initial=0)), 1).bit_length()  # a power of two above the last cycle: few cached arrays
+    return _factors(profile.dither_seed, d, count)[c]
+
+
+@functools.lru_cache(maxsize=8)
+def _factors(seed: int, dither: float, count: int) -> np.ndarray:
+    factors = np.random.default_rng(seed).uniform(1.0 - dither, 1.0 + dither, count)
+    factors.flags.writeable = False
+    return factors
 
 
 def half_swing_rad(profile: Profile) -> float:
@@ -26,11 +65,14 @@ def half_swing_rad(profile: Profile) -> float:
 
 
 def _phase(t_s: np.ndarray | float, profile: Profile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t, direction ±1 of the current half-cycle, time u into that half-cycle), s."""
+    """(t, ±s_c: direction of the current half-cycle times its cycle's factor, time u into that half-cycle), s."""
     t = np.asarray(t_s, dtype=float)
     half = profile.accel_time_s + profile.cruise_s + profile.decel_time_s + profile.dwell_s
     tau = np.mod(np.maximum(t, 0.0), 2.0 * half)
-    return t, np.where(tau < half, 1.0, -1.0), np.mod(tau, half)
+    sign = np.where(tau < half, 1.0, -1.0)
+    if profile.speed_dither:
+        sign = sign * speed_factors(profile, np.floor_divide(np.maximum(t, 0.0), 2.0 * half).astype(np.int64))
+    return t, sign, np.mod(tau, half)
 
 
 def _ramp(u_s: np.ndarray, ramp_s: float, jerk_s: float) -> tuple[np.ndarray, np.ndarray]:

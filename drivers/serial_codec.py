@@ -24,7 +24,11 @@ Frame types and payloads:
   register, wraps at ±2³¹);
 * ``0x10`` stream on, ``0x11`` stream off, ``0x21`` stop motion (host → device): no payload;
 * ``0x20`` start triangle (host → device): top speed ``i32`` milli-rpm, accel, decel and dwell
-  ``u32`` µs, duration ``u32`` ms;
+  ``u32`` µs, duration ``u32`` ms (20 bytes); a speed-dithered profile adds speed dither d ``u32`` in
+  millionths and the dither seed ``u64`` (32 bytes, a 38-byte frame): the device runs full cycle c at
+  s_c times the top speed and swing, s_c the c-th draw of ``numpy.random.default_rng(seed).uniform(1 − d,
+  1 + d)`` (PCG64 seeded by NumPy's SeedSequence; s = 1 − d + 2d·(u64 >> 11)·2⁻⁵³ per draw), see
+  :func:`drivers.motion.speed_factors`;
 * ``0x80`` acknowledge (device → host): the command's type ``u8``, status ``u8`` (0 = done).
 
 Frames are at most :data:`MAX_FRAME_BYTES` long. The parser finds a start, checks the length bound
@@ -111,6 +115,7 @@ class Acq1Codec:
     _CMD_NAMES: ClassVar[dict[int, str]] = {v: k for k, v in COMMANDS.items()}
     _TEL = struct.Struct("<HIi")
     _TRI = struct.Struct("<iIIII")
+    _DITHER = struct.Struct("<IQ")  # appended to _TRI for a speed-dithered profile
     _ACK = struct.Struct("<BB")
     telemetry_bytes: ClassVar[int] = 2 + 1 + 1 + _TEL.size + 2
 
@@ -131,6 +136,10 @@ class Acq1Codec:
                 payload = self._TRI.pack(round(p.top_speed_rpm * 1e3), round(p.accel_time_s * 1e6),
                                          round(p.decel_time_s * 1e6), round(p.dwell_s * 1e6),
                                          round(p.duration_s * 1e3))
+                if p.speed_dither:
+                    if p.dither_seed is None:
+                        raise ValueError("start_triangle of a dithered profile needs its dither_seed")
+                    payload += self._DITHER.pack(round(p.speed_dither * 1e6), p.dither_seed)
         body = bytes((1 + len(payload), kind)) + payload
         return self.start + body + binascii.crc_hqx(body, 0xFFFF).to_bytes(2, "big")
 
@@ -169,9 +178,13 @@ class Acq1Codec:
             name = self._CMD_NAMES[kind]
             if name != "start_triangle":
                 return Command(name) if not payload else None
-            mrpm, acc, dec, dwell, dur = self._TRI.unpack(payload)
+            mrpm, acc, dec, dwell, dur = self._TRI.unpack(payload[:self._TRI.size])
+            dither = {}
+            if len(payload) > self._TRI.size:
+                ppm, seed = self._DITHER.unpack(payload[self._TRI.size:])
+                dither = {"speed_dither": ppm / 1e6, "dither_seed": seed}
             return Command(name, Profile(kind="triangle", top_speed_rpm=mrpm / 1e3, accel_time_s=acc / 1e6,
-                                         decel_time_s=dec / 1e6, dwell_s=dwell / 1e6, duration_s=dur / 1e3))
+                                         decel_time_s=dec / 1e6, dwell_s=dwell / 1e6, duration_s=dur / 1e3, **dither))
         except (struct.error, KeyError, ValueError):
             return None
 

@@ -37,6 +37,7 @@ import numpy as np
 
 from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent
 from drivers.config import Bench, DriveSerial, Profile
+from drivers.motion import with_dither_seed
 from acqcore.errors import ConfigError, DeviceError
 from drivers.serial_codec import CODECS, Ack, Codec, Command, ParserStats, StreamParser, Telemetry
 
@@ -150,14 +151,15 @@ class SerialDrive:
                          timestamp_kind="frame_sequence", device=f"{self.port_name} ({self.codec.name})")
 
     def start_motion(self, profile: Profile) -> None:
-        """Send the triangle's parameters; the drive starts it and acknowledges."""
+        """Send the triangle's parameters (with a speed dither, its d and seed — one drawn here if the profile has
+        none; the recorder draws it before); the drive starts it and acknowledges."""
         if self.settings.motion == "external":
             raise ConfigError("[drive] motion = \"external\": the machine's controller moves the drive, acq never "
                               "commands motion")
         if profile.cruise_s or profile.jerk_time_s:
             raise ConfigError(f"profile: cruise_s = {profile.cruise_s:g} s, jerk_time_s = {profile.jerk_time_s:g} s "
                               "cannot be sent in the serial protocol's start_triangle; set both to 0")
-        self._command(Command("start_triangle", profile))
+        self._command(Command("start_triangle", with_dither_seed(profile)))
 
     def stop_motion(self) -> None:
         """Tell the drive to ramp to rest. Idempotent; does nothing if the port is not open."""

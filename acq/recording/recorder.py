@@ -28,6 +28,7 @@ from acq.recording.session import SessionExists, SessionWriter, Status, new_sess
 from drivers.base import (CurrentBlock, CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock,
                           StreamEvent)
 from drivers.config import Bench, Profile
+from drivers.motion import with_dither_seed
 from acq.recording.storage import WRITE_FAILURES, storage_error
 from acqcore.errors import AcqError, ConfigError, DeviceError
 
@@ -229,6 +230,7 @@ class Recorder:
     ----------
     bench, profile : the configs (stored in the session). ``profile`` None records passively: no motion command
         at all (``[drive] motion = "external"``: the machine's controller moves the joint); it must be None then.
+        A dithered profile without a ``dither_seed`` gets one drawn here, so the session stores the seed the drive uses.
     current, drive : the devices (real or simulated; the recorder cannot tell).
     out_dir : folder for the session file, named ``<UTC start>_<joint>.h5``.
     duration_s : seconds of data wanted in each stream (counted in samples, not wall time).
@@ -254,7 +256,7 @@ class Recorder:
         if external != (profile is None):
             raise ConfigError("[drive] motion = \"external\": acq must not command motion, record without a profile"
                               if external else "a recording without a profile needs [drive] motion = \"external\"")
-        self.bench, self.profile = bench, profile
+        self.bench, self.profile = bench, (with_dither_seed(profile) if profile is not None else None)
         self.current, self.drive = current, drive
         self.out_dir = Path(out_dir)
         self.duration_s = duration_s

@@ -7,6 +7,8 @@ Layout (``format = "acq-session"``, ``format_version = 1``)::
                                bench_json, profile_json, joint, operator, tags_json, origin_json,
                                host_clock_shared (both streams' host_ns on one host clock; absent in
                                older files: true for recordings, false for imports)
+                               (profile_json holds the profile as executed: a dithered motion's speed_dither
+                               and the dither_seed its drive used, drawn by the recorder if the file had none)
     /current            attrs: rate_hz (coerced by the card), device, channels, units
         i_a_A [, i_b_A, i_c_A]   float64, A, one entry per stored sample
         blocks/first_index       int64, cumulative DAQ sample index of each read's first sample

@@ -203,16 +203,19 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
 def _require_enough_motion(profile: Profile, name: str, pole_pairs: int) -> None:
     """Refuse a profile whose own numbers make the identification certain to fail: the motor must turn half an
     electrical revolution within the torque estimator's window (:func:`analysis.torque.min_speed_rpm`); at most
-    the top speed for the whole window, and never more than one half-cycle's swing (a slower drive only moves less)."""
+    the top speed for the whole window, and never more than one half-cycle's swing (a slower drive only moves less).
+    A speed-dithered profile is judged by its slowest cycle (``min_speed_factor`` times top speed and swing)."""
     from analysis import PHASE_WINDOW_S, min_speed_rpm
     from drivers.motion import half_swing_rad
 
     need_rpm, window_ms = min_speed_rpm(pole_pairs), 1e3 * PHASE_WINDOW_S
-    if profile.top_speed_rpm < need_rpm:
-        raise ConfigError(f"profile {name}: top_speed_rpm = {profile.top_speed_rpm:g}: the identification needs the motor "
-                          f"faster than {need_rpm:.0f} rpm for {window_ms:.0f} ms at a time (half an electrical revolution, "
-                          f"{pole_pairs} pole pairs) — raise top_speed_rpm, or add --no-analyze")
-    swing_deg, half_turn_deg = math.degrees(half_swing_rad(profile)), 180.0 / pole_pairs
+    slowest = profile.min_speed_factor
+    dithered = f" (× {slowest:g} in the slowest cycle, speed_dither = {profile.speed_dither:g})" if profile.speed_dither else ""
+    if profile.top_speed_rpm * slowest < need_rpm:
+        raise ConfigError(f"profile {name}: top_speed_rpm = {profile.top_speed_rpm:g}{dithered}: the identification needs "
+                          f"the motor faster than {need_rpm:.0f} rpm for {window_ms:.0f} ms at a time (half an electrical "
+                          f"revolution, {pole_pairs} pole pairs) — raise top_speed_rpm, or add --no-analyze")
+    swing_deg, half_turn_deg = math.degrees(half_swing_rad(profile) * slowest), 180.0 / pole_pairs
     if swing_deg < half_turn_deg:
         raise ConfigError(f"profile {name}: the motor swings {swing_deg:.0f}° per half-cycle (top_speed_rpm, "
                           f"accel_time_s, cruise_s, decel_time_s), the identification needs half an electrical revolution "

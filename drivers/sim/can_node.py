@@ -8,7 +8,10 @@ lacks: TPDOs sent on SYNC by their mapping in 0x1800…/0x1A00… (remappable ov
 1…240 = every n-th SYNC, in NMT OPERATIONAL only), a minimal CiA 402 state machine (controlword →
 statusword, quick stop ending in SWITCH ON DISABLED once at rest) and Profile Position: the
 new-set-point handshake feeds :class:`drivers.sim.pp_generator.ProfileGenerator`, which becomes the
-:class:`~drivers.sim.bench.SimBench` speed reference (0x607A, 0x6081, 0x6083, 0x6084, 0x6085).
+:class:`~drivers.sim.bench.SimBench` speed reference (0x607A, 0x6081, 0x6083, 0x6084, 0x6085). A set-point
+latches 0x6081/0x6083/0x6084 as they are when it is accepted (as CiA 402 drives do): a change written while a
+move runs or is buffered acts from the next new set-point on — what a speed-dithered profile relies on
+(:mod:`drivers.canopen_motion`).
 
 The drive's CAN controller answers SYNC "in hardware": :class:`_ControllerBus` queues the synchronous
 TPDOs on the virtual bus right behind the SYNC that triggers them, in the sender's thread, as a real

@@ -1,7 +1,8 @@
 """The drive's speed reference: triangle profiles started and stopped at given times (drive clock, s).
 
 A stop ramps the reference to zero at the profile's deceleration (top speed / ``decel_time_s``), never
-a step. The schedule only grows forwards in time, so the past of a running simulation never changes.
+a step. A dithered profile (``speed_dither``) without a ``dither_seed`` gets one drawn at its start
+(:func:`drivers.motion.with_dither_seed`; the recorder draws it before, so that the session keeps it). The schedule only grows forwards in time, so the past of a running simulation never changes.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from drivers.config import Profile
-from drivers.motion import RPM_TO_RAD_S, triangle_accel_rad_s2, triangle_speed_rad_s
+from drivers.motion import RPM_TO_RAD_S, triangle_accel_rad_s2, triangle_speed_rad_s, with_dither_seed
 
 
 @dataclass
@@ -38,7 +39,7 @@ class MotionSchedule:
             raise RuntimeError("a motion is already running; stop it first")
         if self._segments:
             t_start_s = max(t_start_s, self.rest_from_s(self._segments[-1]))
-        self._segments.append(_Segment(profile, t_start_s))
+        self._segments.append(_Segment(with_dither_seed(profile), t_start_s))
         return t_start_s
 
     def stop(self, t_stop_s: float) -> float | None:

@@ -2,7 +2,8 @@
 
 :class:`SimSerialDevice` opens a pty (``os.openpty``, raw mode) and serves the host end's path
 (``port_name``, e.g. ``/dev/pts/7``) to :mod:`drivers.serial_drive`, which opens it like any port.
-Its thread answers the host's command frames (stream on/off, start triangle, stop) and, while
+Its thread answers the host's command frames (stream on/off, start triangle — with its speed dither and
+seed, executed by the source's motion, :func:`drivers.motion.speed_factors` —, stop) and, while
 streaming, sends one telemetry frame per drive cycle k, encoded by the same codec class the host
 decodes with: sequence k, the drive's time stamp of cycle k (µs: k·period, or the instant the position was
 latched when the source's SYNC latch jitters), the source's int32 position register at cycle k.
