@@ -37,8 +37,9 @@ class Scenario:
     ----------
     name : what is special about this bench.
     expect : ``ok`` (within ``tol_K``/``tol_J``, %) or ``not ok`` (``reason`` says why the data cannot tell).
-    sim, profile, daq, drive : overrides of ``[sim]``, the 0.2 s triangle profile, ``[daq]``, ``[drive]``
-        (``profile={"speed_dither": 0.02}``: a dithered motion, its ``dither_seed`` the run's seed unless given).
+    sim, profile, daq, drive : overrides of ``[sim]``, the shipped 0.2 s triangle profile (2 % speed dither, its
+        ``dither_seed`` the run's seed unless given; ``profile={"speed_dither": 0.0}``: a motion that repeats exactly),
+        ``[daq]``, ``[drive]``.
     counts_per_rev : encoder resolution (None: the bench's 2^17).
     plant : factors on the paper's K, J_m, J_l (the bench's nominal values stay the paper's).
     clock : DAQ offset (s) and drift (ppm); None: |offset| 10–60 ms, |drift| 20–60 ppm of random signs.
@@ -176,7 +177,7 @@ def scenario_bench(sc: Scenario, seed: int, offset_s: float, drift_ppm: float) -
     bench = type(bench).model_validate(data)
     profile = load_profile("triangle_0.2s")
     profile = type(profile).model_validate({**profile.model_dump(), "duration_s": sc.duration_s, **sc.profile})
-    if profile.speed_dither and profile.dither_seed is None:  # e.g. profile={"speed_dither": 0.02}: the run's seed
+    if profile.speed_dither and profile.dither_seed is None:  # a dithered motion repeats with the run's seed
         profile = profile.model_copy(update={"dither_seed": seed})
     return bench, profile
 

@@ -27,7 +27,7 @@ def test_shipped_configs_validate() -> None:
     bench = load_bench()
     assert bench.sim is not None and bench.sim.K_Nm_per_rad == 891.0
     assert bench.daq.rate_hz == 25600 and bench.drive.period_s == 0.001
-    for name in ("triangle_0.2s", "triangle_0.2s_dither", "triangle_0.5s"):
+    for name in ("triangle_0.2s", "triangle_0.5s"):
         profile = load_profile(name)
         assert profile.kind == "triangle" and profile.duration_s == 10
 
@@ -83,7 +83,7 @@ def test_toml_syntax_error_names_file(tmp_path: Path, capsys: pytest.CaptureFixt
 def test_unknown_profile_lists_known_ones(capsys: pytest.CaptureFixture[str]) -> None:
     run = run_cli(capsys, "record", "--profile", "sawtooth")
     assert run.code == 2
-    assert run.err.strip() == ("acq: error: --profile sawtooth: no such profile (known: triangle_0.2s, triangle_0.2s_dither, "
+    assert run.err.strip() == ("acq: error: --profile sawtooth: no such profile (known: triangle_0.2s, "
                                "triangle_0.5s)")
 
 

@@ -92,7 +92,7 @@ def test_undithered_profile_and_seed_handling() -> None:
 ])
 def test_a_bad_dither_is_one_line_naming_the_file_key_and_value(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                                 edit: str, message: str) -> None:
-    text = (CONFIGS / "profiles" / "triangle_0.2s_dither.toml").read_text()
+    text = (CONFIGS / "profiles" / "triangle_0.2s.toml").read_text()
     new = {"speed_dither = 0.02": "speed_dither = 0.06", "dwell_s = 0": "dwell_s = 0\ndither_seed = -1",
            "top_speed_rpm = 1000": "top_speed_rpm = 99000"}[edit]
     path = tmp_path / "p.toml"
@@ -102,13 +102,15 @@ def test_a_bad_dither_is_one_line_naming_the_file_key_and_value(tmp_path: Path, 
     assert not list(tmp_path.glob("*.h5"))
 
 
-def test_the_shipped_dither_profile_is_the_papers_triangle_at_two_percent() -> None:
-    with (CONFIGS / "profiles" / "triangle_0.2s_dither.toml").open("rb") as f:
+def test_the_shipped_profiles_are_the_papers_triangles_at_two_percent_dither() -> None:
+    with (CONFIGS / "profiles" / "triangle_0.2s.toml").open("rb") as f:
         raw = tomllib.load(f)
-    p = load_profile("triangle_0.2s_dither")
-    assert p.model_copy(update={"speed_dither": 0.0}) == load_profile("triangle_0.2s")
+    p = load_profile("triangle_0.2s")
+    assert (p.top_speed_rpm, p.accel_time_s, p.decel_time_s, p.dwell_s, p.cruise_s, p.jerk_time_s) == \
+        (1000, 0.2, 0.2, 0, 0, 0)
     assert (p.speed_dither, p.dither_seed, "dither_seed" in raw) == (0.02, None, False)
-    assert load_profile("triangle_0.2s").speed_dither == load_profile("triangle_0.5s").speed_dither == 0.0
+    slow = load_profile("triangle_0.5s")
+    assert (slow.accel_time_s, slow.speed_dither, slow.dither_seed) == (0.5, 0.02, None)
 
 
 # ---- the simulated bench: the quantisation lock and its break ---------------------------------------------
@@ -140,7 +142,7 @@ def test_dither_breaks_the_lock_between_encoder_quantisation_and_the_motion_peri
 
 def test_a_fast_recording_keeps_the_seed_its_simulated_drive_used(tmp_path: Path,
                                                                    capsys: pytest.CaptureFixture[str]) -> None:
-    run = run_cli(capsys, "record", "--profile", "triangle_0.2s_dither", "--fast", "--duration", "3", "--no-analyze",
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--duration", "3", "--no-analyze",
                   "--out", str(tmp_path))
     assert run.code == 0, run.err
     (path,) = tmp_path.glob("*.h5")
@@ -207,7 +209,7 @@ def test_start_triangle_carries_dither_and_seed_and_still_fits_a_frame() -> None
 def test_serial_drive_over_a_pty_runs_each_cycle_at_its_factor(tmp_path: Path,
                                                                capsys: pytest.CaptureFixture[str]) -> None:
     profile = tmp_path / "dither.toml"
-    profile.write_text((CONFIGS / "profiles" / "triangle_0.2s_dither.toml").read_text() + "dither_seed = 3\n")
+    profile.write_text((CONFIGS / "profiles" / "triangle_0.2s.toml").read_text() + "dither_seed = 3\n")
     run = run_cli(capsys, "record", "--bench", str(CONFIGS / "benches" / "sim_serial.toml"), "--profile", str(profile),
                   "--duration", "3", "--fast", "--no-analyze", "--out", str(tmp_path))
     assert run.code == 0, run.err
@@ -222,11 +224,14 @@ def test_serial_drive_over_a_pty_runs_each_cycle_at_its_factor(tmp_path: Path,
 
 
 # ---- the scenario family can run a dithered motion ---------------------------------------------------------
-def test_a_scenario_with_a_dithered_profile_takes_the_runs_seed_and_no_existing_scenario_is_dithered() -> None:
+def test_a_scenario_runs_the_shipped_dithered_profile_with_the_runs_seed_unless_it_says_otherwise() -> None:
     from bench.scenarios import SCENARIOS, Scenario, scenario_bench
 
     _, p = scenario_bench(Scenario("dithered", profile={"speed_dither": 0.02}), 5, 0.01, 20.0)
     assert (p.speed_dither, p.dither_seed) == (0.02, 5)
     _, p = scenario_bench(Scenario("dithered", profile={"speed_dither": 0.02, "dither_seed": 8}), 5, 0.01, 20.0)
     assert p.dither_seed == 8
-    assert all(scenario_bench(sc, 0, 0.01, 20.0)[1].speed_dither == 0.0 for sc in SCENARIOS)
+    assert all((scenario_bench(sc, 3, 0.01, 20.0)[1].speed_dither, scenario_bench(sc, 3, 0.01, 20.0)[1].dither_seed)
+               == (0.02, 3) for sc in SCENARIOS)
+    _, p = scenario_bench(Scenario("undithered", profile={"speed_dither": 0.0}), 5, 0.01, 20.0)
+    assert p.speed_dither == 0.0
