@@ -9,7 +9,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class Recording:
-    """One session's raw data as plain arrays (what ``acq.recording.session`` reads; nothing resampled).
+    """One session's raw data as plain arrays (what ``acq.recording.reader`` reads; nothing resampled).
 
     Attributes
     ----------

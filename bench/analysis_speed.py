@@ -6,7 +6,7 @@ For each size a session is recorded by the simulated bench (``acq record --fast 
 on one phase, 1 kHz encoder, the 0.2 s triangle all along). Then, for each BLAS thread setting, fresh Python
 processes measure:
 
-* acq: reading the session (:func:`acq.recording.session.load`) and :func:`analysis.pipeline.analyze` with the options
+* acq: reading the session (:func:`acq.recording.reader.load`) and :func:`analysis.pipeline.analyze` with the options
   ``acq analyze`` uses (clock alignment, encoder torque, FRF, fit, verdict — no PNG): CPU and wall time of the
   analysis (best of ``--repeat``), and the process's peak RSS (``ru_maxrss``: interpreter, libraries, the loaded
   session and the analysis);
@@ -77,7 +77,7 @@ def _peak_rss_mb() -> float:
 def child_acq(path: str, repeat: int, profile: bool) -> dict:
     """In a fresh process: load and analyse ``path`` as ``acq analyze`` does; figures as a dict."""
     from acq.offline.analyze import request_for, recording_from_session
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from analysis.pipeline import analyze
 
     rss_start = _peak_rss_mb()

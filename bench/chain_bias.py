@@ -265,7 +265,7 @@ def record(spec: str, seed: int) -> tuple[Any, Any, Any, Any, TwoMassParams, Any
     result, true two-mass plant — J_l + J_3 with a third mass behind the load —, bench)."""
     from acq.offline.analyze import recording_from_session, request_for
     from acq.recording.recorder import Recorder
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from analysis import analyze
     from drivers.registry import open_bench
     from drivers.sim.bench import SimBench

@@ -34,7 +34,7 @@ from rich.console import Console
 from rich.table import Table
 
 from acq.config import DEFAULT_BENCH, resolve_profile_path
-from acq.recording.session import load
+from acq.recording.reader import load
 
 RATE_HZ = 25600
 _PROGRESS = re.compile(r"━|^\s*(recording|analysing|identifying)\b")
@@ -180,7 +180,7 @@ def disk_full_record(lab: Lab, size: str, inside_hdf5: bool = False) -> Row:
         args = ["record", "--profile", "triangle_0.5s", "--fast", "--duration", "120", "--no-analyze", "--out",
                 str(out)]
         if inside_hdf5:  # the free-space guard off: the error reaches HDF5 mid-flush
-            code = ("import sys, acq.recording.session as s; s.RESERVE_BYTES = -(1 << 40); from acq.ui.cli import main; "
+            code = ("import sys, acq.recording.writer as s; s.RESERVE_BYTES = -(1 << 40); from acq.ui.cli import main; "
                     "main(sys.argv[1:])")
             p = subprocess.run([sys.executable, "-c", code, *args], capture_output=True, text=True, timeout=120)
             run = Run(p.returncode, p.stdout, p.stderr, 0.0)
@@ -280,7 +280,7 @@ def cut_file(lab: Lab, percent: int) -> Row:
 
 
 def detection_seconds(path: Path) -> float:
-    """Seconds :func:`acq.recording.session.load` takes to read ``path`` or refuse it (the interpreter's start-up, several
+    """Seconds :func:`acq.recording.reader.load` takes to read ``path`` or refuse it (the interpreter's start-up, several
     seconds on a loaded 2-core machine, is not part of it)."""
     start = time.monotonic()
     with contextlib.suppress(Exception):

@@ -68,7 +68,7 @@ def main() -> None:
     args = ap.parse_args()
     from acq.offline.analyze import recording_from_session
     from acq.recording.recorder import Recorder
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from drivers.registry import open_bench
     from drivers.sim.bench import SimBench
 

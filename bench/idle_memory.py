@@ -47,7 +47,7 @@ def child(path: str, analyses: int, allocator: str) -> dict:
 
         keep_freed_memory()
     from acq.offline.analyze import recording_from_session, request_for
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from analysis.pipeline import analyze
 
     session = load(path)

@@ -46,7 +46,7 @@ from acq.monitoring.monitor import WINDOW_TAG, Monitor, MonitorSettings, Monitor
 from acq.monitoring.retention import folder_bytes
 from acq.monitoring.trend import ELAPSED_TAG, Trend, TrendPoint, compute_trend
 from acq.ui.trend_plot import render_trend_png
-from acq.recording.session import load
+from acq.recording.reader import load
 from acq.ui.values import format_value
 
 ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"

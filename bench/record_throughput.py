@@ -10,22 +10,29 @@
    the other; what contention is left is the simulator's, counted alike in the recorder's figure and this
    floor) — and their ratios (target, issue 17: ≥ 0.9), per wall second and per CPU second of the process;
    and the recording thread's own rate (its CPU alone: the index checks, the handoff from the readers and the
-   writing) and its readers' (the rest of the process's CPU: the simulator as the recorder reads it, to set
-   beside the floor); medians of ``--repeat`` runs, interleaved so that the machine's
-   load hits all alike.
+   writing), the same writing alone (:func:`writer_alone`: the blocks of a recording replayed into a writer, no
+   simulator beside it) and its readers' rate (the rest of the process's CPU: the simulator as the recorder reads
+   it, to set beside the floor); medians of ``--repeat`` runs, interleaved so that the machine's load hits all
+   alike.
 2. real time: CPU seconds the whole process spends per recorded second at the same rates.
 
-Measured (2026-11-30, this 2-core machine shared with other work, ``--repeat 5``, BLAS 1 thread, six runs at load 2–9):
-per CPU second the recorder is 0.84–0.87 of the simulator alone read in one thread and 0.87–0.90 of it read a thread per
-stream (the code before, in the same interleaved runs: 0.81–0.84 and 0.83–0.88; per wall second, which the load moves
-most, 0.83–0.98 and 0.87–1.07); 13–30 × real time. The recording thread alone: 39–54 M samples/s, 29–40 ms CPU per
-10 s session (1.58 M samples; before: 35–45 ms) — about 13 ms of it the HDF5 writes themselves (HDF5's chunk copies,
-Fletcher32, the kernel's copy into the page cache; a writer fed without a simulator: 21 ms for the whole file), 5 ms
-creating and finishing the file, the rest the handoff, the index checks and the joining of encoder batches. Its readers
-spend 5–15 ms more than the floor: ≈ 4 ms of it is what handing each block to another thread costs the simulator's
-threads (the floor read so, with a consumer that only sums the blocks), the rest follows the writing. The target
-(≥ 0.9 per CPU second) is not met: at ≈ 300 ms for the floor it leaves ≈ 33 ms for the recording thread and the
-readers' extra together. Real time: 0.07–0.09 CPU s per recorded second.
+Measured (2026-11-30, this 2-core machine shared with other work, ``--repeat 5``, BLAS 1 thread, six runs at load 4–6
+interleaved with six of the code before the session module was split, which records alike): per CPU second the
+recorder is 0.82–0.88 of the simulator alone read in one thread and 0.84–0.88 of it read a thread per stream (the
+code before: 0.83–0.88 and 0.84–0.90; per wall second, which the load moves most, 0.79–0.94 and 0.76–0.91); 14–22 ×
+real time. The recording thread: 43–53 M samples/s, 30–36 ms CPU per 10 s session (1.58 M samples). The same writing
+alone: 73–78 M samples/s, 20–22 ms — creating the file 3 ms, copying the blocks into the write buffers 3 ms, the HDF5
+writes 10.5 ms (7.5 ms the three current columns: HDF5 copies each chunk into a buffer of its own, its Fletcher32
+filter copies it again and checksums it, ≈ 2.6 ms by perf, the kernel copies it into the page cache), finishing 2 ms.
+Beside the simulator the thread adds ≈ 4 ms for the handoff, the index checks and the joining of encoder batches (a
+recorder that only drains the queue), and its writing costs 5–11 ms more than alone: the two share caches and memory
+bandwidth, and h5py lets go of the GIL in every ``set_extent`` and write (26 times a commit), where a waiting reader
+takes it. Its readers spend 6–20 ms more than the floor. Tried and measured without gain (A/B, load 4–8): copies into
+the write buffers that keep the GIL, a 25 ms handoff instead of 10 ms, 8 MiB commits (the recording thread −3 ms, its
+readers +5 ms) or 0.5–1 MiB ones (both dearer), pausing the readers during a commit, a 20 ms GIL switch interval. The
+target (≥ 0.9 per CPU second) is not met: at ≈ 290 ms for the floor it leaves ≈ 32 ms for the recording thread and
+the readers' extra together, and the writing alone takes 20 of them, most of it set by what the file holds and checks
+(every sample through HDF5's chunk copies and Fletcher32). Real time: 0.06–0.08 CPU s per recorded second.
 
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
@@ -44,12 +51,14 @@ import tempfile
 import threading
 import time
 from pathlib import Path
+from typing import Any
 
 from rich.console import Console
 from rich.table import Table
 
 from acq.config import load_bench, load_profile
-from acq.recording.recorder import Recorder
+from acq.recording.recorder import FLUSH_BYTES, Recorder
+from acq.recording.writer import SessionWriter
 from drivers.base import CurrentSource, Drive
 from drivers.config import Bench
 from drivers.registry import open_bench
@@ -135,6 +144,30 @@ def record(bench: Bench, seconds: float, fast: bool, out: Path) -> tuple[float, 
     return wall, cpu, result.current_samples * len(bench.daq.channels) + result.encoder_samples, own
 
 
+def writer_alone(bench: Bench, seconds: float, out: Path) -> float:
+    """CPU s of the session writer alone: the blocks of one ``--fast`` recording (as its listeners saw them, encoder
+    batches joined) replayed into a new :class:`SessionWriter` with the recorder's flush rule by size
+    (``FLUSH_BYTES``; in ``--fast`` its 0.5 s rule commits at most once more), no simulator running beside it: what
+    the recording thread's writing costs by itself, file creation and footer included."""
+    written: list[tuple[str, Any]] = []
+    current, drive = open_bench(bench, fast=True)
+    recorder = Recorder(bench, load_profile("triangle_0.2s"), current, drive, out, seconds,
+                        listeners=[lambda kind, item: written.append((kind, item))])
+    assert recorder.run().status == "complete"
+    append = {"current": "append_current", "encoder": "append_encoder", "event": "add_event"}
+    cpu0 = time.thread_time()
+    writer = SessionWriter(out / "replay.h5", bench=bench, profile=recorder.profile, current_info=recorder.current_info,
+                           drive_info=recorder.drive_info, host_ns_at_start=time.monotonic_ns())
+    for kind, item in written:
+        getattr(writer, append[kind])(item)
+        if writer.pending_bytes >= FLUSH_BYTES:
+            writer.flush()
+    writer.finish("complete", "replayed")
+    cpu = time.thread_time() - cpu0
+    (out / "replay.h5").unlink()
+    return cpu
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=10.0, help="recorded seconds in --fast mode")
@@ -150,6 +183,7 @@ def main() -> None:
     runs: dict[str, list[tuple[float, float, int]]] = {"sim": [], "sim2": [], "recorder": []}
     own_rates: list[float] = []
     reader_rates: list[float] = []
+    alone_rates: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(args.repeat):
             runs["sim"].append(generate_only(bench, args.seconds))
@@ -158,6 +192,7 @@ def main() -> None:
             runs["recorder"].append((wall, cpu, samples))
             own_rates.append(samples / own)
             reader_rates.append(samples / (cpu - own))
+            alone_rates.append(samples / writer_alone(bench, args.seconds, Path(tmp)))
         rt_wall, rt_cpu, _, _ = record(bench, args.realtime_seconds, False, Path(tmp))
     rates = {name: (statistics.median(n / wall for wall, _, n in r), statistics.median(n / cpu for _, cpu, n in r))
              for name, r in runs.items()}
@@ -172,6 +207,8 @@ def main() -> None:
     table.add_row(f"recorder, --fast, {args.seconds:g} s session [samples/s]", *(f"{v:,.0f}" for v in rates["recorder"]))
     table.add_row("  its recording thread alone: checks, handoff, writing [samples/s]", "",
                   f"{statistics.median(own_rates):,.0f}")
+    table.add_row("    the same writing alone: its blocks replayed, no simulator beside it [samples/s]", "",
+                  f"{statistics.median(alone_rates):,.0f}")
     table.add_row("  its readers: the simulator as the recorder reads it (the rest of its CPU) [samples/s]", "",
                   f"{statistics.median(reader_rates):,.0f}")
     for name, floor in (("one thread", "sim"), ("a thread per stream", "sim2")):

@@ -202,7 +202,7 @@ def record(sc: Scenario, seed: int, offset_s: float, drift_ppm: float, out_dir: 
 def analyse(path: Path, pipeline: str = "acq") -> Any:
     """Analyse a session file as ``acq analyze`` does (``pipeline="paper"``: the paper's chain)."""
     from acq.offline.analyze import request_for, recording_from_session
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from analysis import AnalysisRequest, analyze
 
     session = load(path)

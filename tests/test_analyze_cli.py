@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from acq.recording.session import load
+from acq.recording.reader import load
 from tests.helpers import read_only_view, run_cli
 
 KEYS = {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "ci95", "antiresonance_hz", "resonance_hz",
@@ -180,7 +180,7 @@ def test_missing_session_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixtu
 
 def test_a_session_with_an_empty_stream_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     from acq.config import load_bench, load_profile
-    from acq.recording.session import SessionWriter
+    from acq.recording.writer import SessionWriter
     from drivers.base import CurrentSourceInfo, DriveInfo
 
     path = tmp_path / "empty.h5"

@@ -18,7 +18,7 @@ import pytest
 from acq.config import load_bench, load_profile, validate
 from acq.offline.analyze import request_for, recording_from_session
 from acq.recording.recorder import Recorder
-from acq.recording.session import load
+from acq.recording.reader import load
 from drivers.canopen_drive import CanopenDrive, bus_load, check_bus_load
 from drivers.sim.peers import open_canopen_with_sim_node as open_drive
 from analysis.pipeline import analyze

@@ -133,7 +133,7 @@ def test_a_mismatch_every_lag_shares_does_not_drop_the_true_lag_from_the_wide_se
     # at the half-cycle lags and 10 at the true one; "no longer than the best's" kept only the half cycles (a
     # mirrored angle, residual ~490 µs) and the analysis failed with K +504 %
     from acq.offline.analyze import recording_from_session
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from bench.scenarios import SCENARIOS, clock_for, record
 
     index = next(i for i, sc in enumerate(SCENARIOS) if sc.name == "trapezoid: 0.1 s cruise, 0.1 s dwell")

@@ -20,7 +20,7 @@ from scipy.signal import find_peaks
 
 from acq.config import load_bench, load_profile
 from acq.recording.recorder import Recorder
-from acq.recording.session import load
+from acq.recording.reader import load
 from drivers.config import Profile
 from drivers.motion import (RPM_TO_RAD_S, half_swing_rad, speed_factors, triangle_accel_rad_s2, triangle_speed_rad_s,
                             with_dither_seed)

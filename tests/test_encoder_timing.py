@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from acq.offline.analyze import request_for, recording_from_session, result_json, simulated_truth
-from acq.recording.session import load
+from acq.recording.reader import load
 from analysis import AnalysisRequest, analyze
 from analysis.sample_instants import angle_at_nominal_instants, estimate_jitter, stamp_deviation_s
 from drivers.config import Bench, Profile

@@ -16,7 +16,8 @@ from acq.config import DEFAULT_BENCH
 from acq.monitoring.catalogue import Catalogue
 from acq.offline.analyze import analyze_session
 from acq.offline.export_metadata import read_metadata
-from acq.recording.session import SessionHistory, load
+from acq.recording.reader import load
+from acq.recording.session import SessionHistory
 from tests.helpers import run_cli
 
 RATE_HZ = 25600.0

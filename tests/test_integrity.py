@@ -14,8 +14,8 @@ import h5py
 import numpy as np
 import pytest
 
-import acq.recording.session
-from acq.recording.session import load
+import acq.recording.writer
+from acq.recording.reader import load
 from tests.helpers import read_only_view, record_session_in_subprocess, run_cli
 
 RATE_HZ = 25600
@@ -41,7 +41,7 @@ def small_disk(folder: Path, size: str, monkeypatch: pytest.MonkeyPatch) -> Iter
             calls["n"] += 1
             return 1 << 40 if calls["n"] <= 4 else 0
 
-        monkeypatch.setattr(acq.recording.session, "free_bytes", shrinking_free)
+        monkeypatch.setattr(acq.recording.writer, "free_bytes", shrinking_free)
     try:
         yield "tmpfs" if mounted else "injected"
     finally:
@@ -87,7 +87,7 @@ def test_write_error_inside_hdf5_keeps_only_committed_samples(tmp_path: Path, ca
     with small_disk(out, "3m", monkeypatch) as kind:
         if kind != "tmpfs":
             pytest.skip("needs a real full file system (mount a tmpfs as root)")
-        monkeypatch.setattr(acq.recording.session, "RESERVE_BYTES", -(1 << 40))
+        monkeypatch.setattr(acq.recording.writer, "RESERVE_BYTES", -(1 << 40))
         run = run_cli(capsys, "record", "--profile", "triangle_0.5s", "--fast", "--duration", "120", "--out", str(out))
         path = _only_session(out)
         assert run.code == 1
@@ -180,7 +180,7 @@ def test_writer_stops_when_its_file_vanishes(tmp_path: Path) -> None:
     from acqcore.errors import StorageError
 
     path = tmp_path / "s.h5"
-    w = acq.recording.session.SessionWriter(path, bench=load_bench(), profile=load_profile("triangle_0.2s"),
+    w = acq.recording.writer.SessionWriter(path, bench=load_bench(), profile=load_profile("triangle_0.2s"),
                                   current_info=CurrentSourceInfo(1000.0, ("i_a",), "test"),
                                   drive_info=DriveInfo(0.001, 4096, "sim", "cycle", "test"), host_ns_at_start=0)
     w.append_current(CurrentBlock(0, np.ones((1, 100)), 1))

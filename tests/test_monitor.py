@@ -19,7 +19,8 @@ import acq.offline.analyze
 from acq.config import load_bench
 from acq.monitoring.retention import WindowFiles, make_room, parse_size, to_delete
 from acq.recording.recorder import Recorder
-from acq.recording.session import SessionWriter, load
+from acq.recording.reader import load
+from acq.recording.writer import SessionWriter
 from drivers.base import CurrentSourceInfo, DriveInfo
 from drivers.config import Bench
 from acqcore.errors import ConfigError

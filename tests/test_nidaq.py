@@ -18,7 +18,7 @@ import acq.commissioning.devices
 import drivers.nidaq
 from acq.config import DEFAULT_BENCH, load_bench, load_profile
 from acq.recording.recorder import Recorder
-from acq.recording.session import load
+from acq.recording.reader import load
 from drivers.nidaq import DRIVER_MISSING, NidaqCurrentSource
 from drivers.sim.bench import SimBench
 from drivers.sim.drive import SimDrive

@@ -17,7 +17,7 @@ import pytest
 
 from acq.config import load_bench
 from acq.recording.recorder import Recorder
-from acq.recording.session import load
+from acq.recording.reader import load
 from acqcore.errors import ConfigError
 from drivers import canopen_od as od
 from drivers.canopen_eds import tpdo_from_eds

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from acq.config import DEFAULT_BENCH
-from acq.recording.session import load
+from acq.recording.reader import load
 from tests.helpers import run_cli
 
 RATE_HZ, PERIOD_S, BLOCK = 25600, 0.001, 2560

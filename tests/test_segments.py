@@ -126,7 +126,7 @@ def test_a_robot_window_whose_half_periods_share_no_ratio_names_no_bench_constan
     and the half-periods' ratios scatter from 0.8 to 10⁵ around 6.6 — that once read "check counts_per_rev =
     19879" on a correctly configured bench."""
     from acq.offline.analyze import recording_from_session
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from analysis.diagnose import electrical_speed_ratio, recording_fault
 
     bench = load_bench(ROBOT)
@@ -144,7 +144,7 @@ def test_an_idle_robot_window_names_no_bench_constant(tmp_path: Path) -> None:
     "the current turns 500000000000.00× faster … check [motor] pole_pairs = 2000000000000 or [encoder]
     counts_per_rev = 0"; only half-periods in which the encoder travels count now."""
     from acq.offline.analyze import recording_from_session
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from analysis.diagnose import recording_fault
 
     bench = load_bench(ROBOT)

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from acq.config import validate
-from acq.recording.session import load
+from acq.recording.reader import load
 from drivers.config import DriveSerial, Profile
 from acqcore.errors import ConfigError, DeviceError
 from drivers.serial_codec import Ack, Acq1Codec, Command, StreamParser, Telemetry

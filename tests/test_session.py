@@ -13,7 +13,10 @@ import numpy as np
 import pytest
 
 from acq.config import load_bench, load_profile
-from acq.recording.session import FORMAT, SessionWriter, load, repair
+from acq.recording.layout import FORMAT
+from acq.recording.reader import load
+from acq.recording.repair import repair
+from acq.recording.writer import SessionWriter
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from tests.helpers import run_cli
 
@@ -189,7 +192,7 @@ def test_not_a_session(tmp_path: Path) -> None:
 
 
 def test_sessions_started_in_the_same_second_get_distinct_files(tmp_path: Path) -> None:
-    from acq.recording.session import new_session_path
+    from acq.recording.paths import new_session_path
 
     first = new_session_path(tmp_path, "joint1", "2026-11-22T10:15:03+00:00")
     assert first.name == "2026-11-22T10-15-03_joint1.h5"

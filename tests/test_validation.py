@@ -10,7 +10,7 @@ import h5py
 import pytest
 
 from acq.config import DEFAULT_BENCH, check_memory, load_bench
-from acq.recording.session import new_session_path
+from acq.recording.paths import new_session_path
 from acqcore.errors import ConfigError
 from tests.helpers import record_session_in_subprocess, run_cli
 from tests.test_import import _with_row_changed, pair, run_import  # noqa: F401 - the fixture is used below

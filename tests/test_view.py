@@ -251,7 +251,7 @@ def test_ctrl_c_under_the_live_view_ends_the_recording_as_interrupted(tmp_path: 
     from pyqtgraph.Qt import QtCore
 
     from acq.ui.live import LiveView
-    from acq.recording.session import load
+    from acq.recording.reader import load
 
     recorder = _recorder(tmp_path, 30.0)
     view = LiveView(recorder)

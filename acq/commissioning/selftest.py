@@ -27,7 +27,7 @@ from acq.commissioning.selftest_checks import (Check, blf_check, daq_blocks_chec
                                                standstill_current_check, torque_constant_check)
 from acq.offline.analyze import analyze_session, recording_from_session
 from acq.recording.recorder import Recorder
-from acq.recording.session import load
+from acq.recording.reader import load
 from analysis import AnalysisRequest, electrical_speed_ratio, prepare_signals
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen, DriveSerial, Profile
 from acqcore.errors import AcqError

@@ -34,7 +34,8 @@ from acq.environment import pin_blas_threads
 from acq.monitoring.catalogue import Catalogue, Outcome
 from acq.offline.analyze import SessionResult, analyze_session, output_paths, sha256_of
 from acq.recording.paths import GLOB_CHARS
-from acq.recording.session import Session, load, read_status
+from acq.recording.reader import load, read_status
+from acq.recording.session import Session
 from acq.recording.storage import remove_temp_files
 from acqcore.errors import AcqError, ConfigError
 from analysis import AnalysisRequest

@@ -202,7 +202,7 @@ class Catalogue:
 
     def record(self, outcome: Outcome) -> None:
         """Store one analysis (replacing that session's earlier one with the same request)."""
-        from acq.recording.session import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
+        from acq.recording.layout import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
 
         meta, doc = outcome.session, outcome.doc or {}
         key = meta.get("session_id") or f"path:{Path(outcome.path).resolve()}"

@@ -38,7 +38,8 @@ from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
 from acq.monitoring.window_judge import analyse_window, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
-from acq.recording.session import load, repair
+from acq.recording.reader import load
+from acq.recording.repair import repair
 from acqcore.errors import EXIT_INTERRUPTED, ConfigError
 from analysis import AnalysisRequest
 from drivers.config import Bench

@@ -17,7 +17,7 @@ from typing import Any
 from acq.monitoring.batch import analyze_one, session_meta
 from acq.monitoring.catalogue import Outcome
 from acq.offline.analyze import output_paths, write_json
-from acq.recording.session import load
+from acq.recording.reader import load
 from acqcore.errors import StorageError
 from analysis import AnalysisRequest, Thresholds
 

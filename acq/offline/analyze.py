@@ -15,7 +15,9 @@ from pathlib import Path
 from typing import Any
 
 from acq import __version__
-from acq.recording.session import Session, load, utc_now_iso
+from acq.recording.layout import utc_now_iso
+from acq.recording.reader import load
+from acq.recording.session import Session
 from acq.recording.storage import free_bytes, storage_error, write_text_atomically
 from analysis import AnalysisRequest, Recording, Result, TwoMassParams, analyze, code_fingerprint
 from acqcore.errors import ConfigError, StorageError

@@ -16,7 +16,8 @@ from pathlib import Path
 
 from acq import __version__
 from acq.offline.analyze import sha256_of
-from acq.recording.session import Session, SessionHistory, utc_now_iso
+from acq.recording.layout import utc_now_iso
+from acq.recording.session import Session, SessionHistory
 from acqcore.errors import ConfigError
 
 FORMAT = "acq-export-metadata"

@@ -30,7 +30,8 @@ import numpy as np
 
 from acq.offline.analyze import sha256_of
 from acq.offline.export_metadata import metadata_path, metadata_text
-from acq.recording.session import Session, load
+from acq.recording.reader import load
+from acq.recording.session import Session
 from acq.recording.storage import WRITE_FAILURES, atomic_path, storage_error, write_text_synced
 from acqcore.errors import ConfigError
 

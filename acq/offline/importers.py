@@ -34,7 +34,7 @@ from acq.offline.csvtable import file_bytes
 from acq.offline.export_metadata import ExportMetadata, read_metadata
 from acq.offline.import_files import (CurrentTable, EncoderTable, host_ns, read_current_csv, read_current_tdms,
                                       read_encoder_csv)
-from acq.recording.session import SessionWriter
+from acq.recording.writer import SessionWriter
 from acq.recording.storage import storage_error
 from drivers.base import CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile

@@ -1,6 +1,6 @@
 """HDF5 with bounds: open damaged files without hanging, drop a writer after a failed write without crashing.
 
-Nothing here knows the session layout (that is :mod:`acq.recording.session`); these are the library-level
+Nothing here knows the session layout (that is :mod:`acq.recording.layout`); these are the library-level
 guards it needs, each written by hand because h5py has no binding for it:
 
 * **Truncation before opening.** The superblock records the file's end-of-file address; a file

@@ -1,4 +1,5 @@
-"""Session paths as given on the command line: one session file, or a batch (a folder or a glob).
+"""Session paths: as given on the command line (one session file, or a batch: a folder or a glob), and the name of
+a new session file.
 
 Light on purpose (no numpy, h5py or analysis): the command line checks a path here before it loads
 the libraries that read or analyse the file, so a mistyped path is one line at once.
@@ -24,3 +25,16 @@ def require_session_file(path: Path) -> None:
         raise ConfigError(f"{path}: no such session file")
     if path.is_dir():
         raise ConfigError(f"{path}: is a folder, not a session file")
+
+
+def new_session_path(out_dir: Path, joint: str, created_utc: str) -> Path:
+    """``<out_dir>/<UTC start>_<joint>.h5`` (file-system safe), ``_2``, ``_3`` … if taken."""
+    stamp = created_utc.replace("+00:00", "").replace(":", "-")
+    path = Path(out_dir) / f"{stamp}_{joint}.h5"
+    if path.resolve().parent != Path(out_dir).resolve() or "/" in joint or "\0" in joint:
+        raise ConfigError(f"joint {joint!r}: not usable in a file name (the session must stay in {out_dir})")
+    n = 2
+    while path.exists():
+        path = Path(out_dir) / f"{stamp}_{joint}_{n}.h5"
+        n += 1
+    return path

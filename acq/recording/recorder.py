@@ -2,7 +2,7 @@
 
 One reader thread per stream only reads its device and queues what it got; the calling thread
 checks stream indices (gaps by counters, never by timing), writes through
-:class:`acq.recording.session.SessionWriter`, flushes at least every 0.5 s and always finishes the file:
+:class:`acq.recording.writer.SessionWriter`, flushes at least every 0.5 s and always finishes the file:
 ``complete`` when both streams have the requested duration, ``interrupted`` on Ctrl-C / SIGTERM,
 ``failed`` on a device error or a failed write (disk full, I/O error: the drive is stopped at once and
 only the samples committed before the failure count). Timestamps are never altered: raw indices and
@@ -24,7 +24,9 @@ from typing import Any
 
 import numpy as np
 
-from acq.recording.session import SessionExists, SessionWriter, Status, new_session_path, utc_now_iso
+from acq.recording.layout import Status, utc_now_iso
+from acq.recording.paths import new_session_path
+from acq.recording.writer import SessionExists, SessionWriter
 from drivers.base import (CurrentBlock, CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock,
                           StreamEvent)
 from drivers.config import Bench, Profile

@@ -145,7 +145,7 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     from acq.config import check_duration, check_memory, load_bench, load_profile, with_joint
     from acq.ui.display import summary_table
     from acq.recording.recorder import Recorder
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from acq.recording.summary import summarize
     from drivers.registry import open_bench
 
@@ -400,7 +400,7 @@ def info(session_path: Path, as_json: bool) -> int:
     """Summarise a session: samples, durations, effective rates, gaps."""
     require_session_file(session_path)
     from acq.ui.display import summary_table
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from acq.recording.summary import summarize
 
     session = load(session_path)
@@ -436,7 +436,8 @@ def check(session_path: Path) -> int:
     """
     require_session_file(session_path)
     from acq.ui.display import summary_table
-    from acq.recording.session import load, repair
+    from acq.recording.reader import load
+    from acq.recording.repair import repair
     from acq.recording.summary import summarize
 
     session = load(session_path)

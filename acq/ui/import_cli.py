@@ -38,7 +38,7 @@ def import_command(current_path: Path, current_channels: tuple[str, ...], encode
     """Turn a current file and an encoder CSV recorded by other tools into a session."""
     from acq.config import load_bench, load_profile  # numpy, h5py and pydantic only when the command runs
     from acq.offline.importers import import_session, parse_started
-    from acq.recording.session import load
+    from acq.recording.reader import load
     from acq.recording.summary import summarize
     from acq.ui.display import summary_table
 

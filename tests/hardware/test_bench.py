@@ -14,7 +14,7 @@ import pytest
 from acq.commissioning.selftest_checks import Check
 from acq.config import load_profile
 from acq.recording.recorder import Recorder
-from acq.recording.session import load
+from acq.recording.reader import load
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen, DriveSerial
 from drivers.registry import open_bench
 

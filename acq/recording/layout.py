@@ -1,0 +1,90 @@
+"""The session file's layout: HDF5 via h5py. Only the modules of ``acq.recording`` that write it
+(:mod:`~acq.recording.writer`), read it (:mod:`~acq.recording.reader`, :mod:`~acq.recording.session`) and rewrite it
+(:mod:`~acq.recording.repair`) know it; everything else goes through :class:`acq.recording.session.Session`.
+
+Layout (``format = "acq-session"``, ``format_version = 1``)::
+
+    /                   attrs: format, format_version, session_id, created_utc, stopped_utc,
+                               host_monotonic_ns_at_start, acq_version, status, stop_reason,
+                               bench_json, profile_json, joint, operator, tags_json, origin_json,
+                               host_clock_shared (both streams' host_ns on one host clock; absent in
+                               older files: true for recordings, false for imports)
+                               (profile_json holds the profile as executed: a dithered motion's speed_dither
+                               and the dither_seed its drive used, drawn by the recorder if the file had none)
+    /current            attrs: rate_hz (coerced by the card), device, channels, units
+        i_a_A [, i_b_A, i_c_A]   float64, A, one entry per stored sample
+        blocks/first_index       int64, cumulative DAQ sample index of each read's first sample
+        blocks/count             int64, samples per channel in that read
+        blocks/host_ns           int64, host monotonic time when the read returned
+    /encoder            attrs: period_s, counts_per_rev, transport, timestamp_kind, device
+        position_counts          int64, unwrapped raw position register
+        index                    int64, cumulative drive cycle (SYNC counter / sequence)
+        host_ns                  int64, host arrival time of each sample
+        drive_time_s             float64, optional (the drive's own stamp)
+        velocity_counts_per_s    float64, optional
+        velocity_demand_counts_per_s  float64, optional (the drive's speed reference, CiA 402 0x606B)
+    /events             compound rows (host_ns, stream, kind, detail)
+
+    /flushes            compound rows (host_ns, current_samples, current_blocks, encoder_samples, events):
+                        the totals committed by each flush, written after the samples they count
+
+Integrity: every dataset carries HDF5 Fletcher32 checksums per chunk.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from datetime import UTC, datetime
+from typing import Literal
+
+import h5py
+import numpy as np
+
+FORMAT = "acq-session"
+FORMAT_VERSION = 1
+LIBVER = ("v110", "latest")
+Status = Literal["recording", "complete", "interrupted", "failed"]
+
+EVENT_DTYPE = np.dtype([("host_ns", "<i8"), ("stream", "S16"), ("kind", "S16"), ("detail", "S240")])
+FLUSH_DTYPE = np.dtype([("host_ns", "<i8"), ("current_samples", "<i8"), ("current_blocks", "<i8"),
+                        ("encoder_samples", "<i8"), ("events", "<i8")])
+#: The encoder columns a drive may not give (see the layout above).
+OPTIONAL_ENCODER = ("drive_time_s", "velocity_counts_per_s", "velocity_demand_counts_per_s")
+
+
+def utc_now_iso() -> str:
+    """The current UTC time as ISO 8601 with seconds."""
+    return datetime.now(UTC).isoformat(timespec="seconds")
+
+
+def _datasets(f: h5py.File) -> list[h5py.Dataset]:
+    found: list[h5py.Dataset] = []
+    f.visititems(lambda name, obj: found.append(obj) if isinstance(obj, h5py.Dataset) else None)
+    return found
+
+
+def committed_rows(name: str, committed: dict[str, int]) -> int | None:
+    """Rows of dataset ``name`` (no leading /) that the ``committed`` totals count; None for one they do not."""
+    group = name.rsplit("/", 1)[0] if "/" in name else name
+    return {"current/blocks": committed["current_blocks"], "current": committed["current_samples"],
+            "encoder": committed["encoder_samples"], "events": committed["events"]}.get(group)
+
+
+def write_footer(f: h5py.File, status: Status, stop_reason: str, filled_optional: set[str],
+                 committed: dict[str, int] | None = None, datasets: Sequence[str] | None = None) -> None:
+    """Status, reason, stop time and sample counts; with ``committed``, the ``datasets`` named (default: every
+    dataset in the file) are first cut to the committed totals (rows written by a flush that did not complete are
+    not kept)."""
+    if committed is not None:
+        for ds in _datasets(f) if datasets is None else [f[name] for name in datasets]:
+            n = committed_rows(ds.name.lstrip("/"), committed)
+            if n is not None and ds.shape[0] > n:
+                ds.resize((n,))
+    for name in OPTIONAL_ENCODER:
+        if name in f["encoder"] and name not in filled_optional:
+            del f["encoder"][name]
+    f.attrs["status"] = status
+    f.attrs["stop_reason"] = stop_reason
+    f.attrs["stopped_utc"] = utc_now_iso()
+    f.attrs["current_samples"] = np.int64(f["current/blocks/count"][...].sum())
+    f.attrs["encoder_samples"] = np.int64(f["encoder/index"].shape[0])

@@ -1,0 +1,293 @@
+"""Read a session file (layout: :mod:`acq.recording.layout`) into a :class:`~acq.recording.session.Session`.
+
+Integrity: every dataset carries HDF5 Fletcher32 checksums per chunk. A reader trusts only what
+was committed (the footer's counts, or the last ``/flushes`` row of a session still ``recording``),
+reads chunk by chunk with bounded metadata reads (:mod:`acq.recording.h5safe`) and reports what it could not
+read as :attr:`Session.damage` ("current: samples 62 550–102 399 unreadable"), keeping the intact
+part before the first damaged sample of each stream.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+from pydantic import ValidationError
+
+from acq.recording.h5safe import open_read, superblock_eof
+from acq.recording.layout import FLUSH_DTYPE, FORMAT, FORMAT_VERSION, OPTIONAL_ENCODER
+from acq.recording.paths import require_session_file
+from acq.recording.session import CurrentData, EncoderData, Session
+from acq.recording.storage import cause_of
+from drivers.base import StreamEvent
+from drivers.config import Bench, Profile
+from acqcore.errors import ConfigError
+
+
+def _attr(value: Any) -> Any:
+    if isinstance(value, bytes):
+        return value.decode()
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
+    """Open a session for reading with bounds; a file shorter than its superblock says is reported as cut."""
+    require_session_file(path)
+    notes: list[str] = []
+    size = path.stat().st_size
+    try:
+        eof = superblock_eof(path)
+    except OSError as e:
+        raise ConfigError(f"{path}: cannot read ({cause_of(e)})") from None
+    if eof is not None and size < eof:
+        notes.append(f"file cut: {size:,} of {eof:,} bytes".replace(",", " "))
+    try:
+        return open_read(path), notes
+    except (OSError, RuntimeError) as e:
+        first_line = str(e).splitlines()[0] if str(e) else type(e).__name__
+        why = notes[0] if notes else first_line
+        raise ConfigError(f"{path}: not a readable HDF5 session file ({why})") from None
+
+
+def _span(stream: str, first: int, end: int, what: str = "unreadable") -> str:
+    return f"{stream}: samples {first:,}–{end - 1:,} {what}".replace(",", " ")
+
+
+class _Reader:
+    """Reads datasets of one open file chunk by chunk, up to the committed length; never past the file's end."""
+
+    def __init__(self, f: h5py.File, path: Path, notes: list[str]) -> None:
+        self.f, self.path, self.notes = f, path, notes
+        self.size = path.stat().st_size
+
+    def node(self, name: str) -> Any:
+        try:
+            return self.f[name]
+        except (KeyError, OSError, RuntimeError):
+            what = "damaged" if self.notes else "malformed session"
+            why = f" ({self.notes[0]})" if self.notes else ""
+            raise ConfigError(f"{self.path}: {what}: /{name} is missing or unreadable{why}") from None
+
+    def column(self, name: str, n: int | None) -> tuple[np.ndarray, int | None]:
+        """The first ``n`` rows (all stored if None) of dataset ``name`` and the first row not readable (or None).
+
+        Rows are read one chunk at a time; a chunk whose checksum fails, that lies beyond the end of the file,
+        or that was never written (its rows would read as zeros) ends the intact part.
+        """
+        ds = self.node(name)
+        if not isinstance(ds, h5py.Dataset) or ds.ndim != 1:
+            raise ConfigError(f"{self.path}: malformed session: /{name} is not a 1-D dataset")
+        stored = ds.shape[0]
+        want = stored if n is None else n
+        have = min(want, stored)
+        out = np.empty(have, dtype=ds.dtype)
+        step = ds.chunks[0] if ds.chunks else max(have, 1)
+        if have and ds.chunks and self._all_on_disk(ds, have, step):
+            try:  # the usual case, an intact file: one read (checksums verified), 4× faster than chunk by chunk
+                ds.read_direct(out, np.s_[0:have], np.s_[0:have])
+                return out, (have if have < want else None)
+            except (OSError, RuntimeError, ValueError):
+                pass  # a checksum fails somewhere: find where, chunk by chunk
+        for start in range(0, have, step):
+            stop = min(start + step, have)
+            try:
+                if ds.chunks and not self._on_disk(ds.id.get_chunk_info_by_coord((start,))):
+                    return out[:start], start
+                out[start:stop] = ds[start:stop]
+            except (OSError, RuntimeError, ValueError):
+                return out[:start], start
+        return out, (have if have < want else None)
+
+    def _on_disk(self, info: Any) -> bool:
+        """A chunk (HDF5's chunk info) was written and lies inside the file (a never-written one reads as zeros)."""
+        return info.byte_offset is not None and info.byte_offset + info.size <= self.size
+
+    def _all_on_disk(self, ds: h5py.Dataset, rows: int, step: int) -> bool:
+        """Every chunk holding the first ``rows`` rows was written and lies inside the file (HDF5's chunk
+        iteration: one pass over the chunk index, ≈ 1 µs a chunk); False when it cannot tell."""
+        if not hasattr(ds.id, "chunk_iter"):  # HDF5 < 1.12.3
+            return False
+        inside: list[bool] = []
+
+        def visit(info: Any) -> None:
+            if info.chunk_offset[0] < rows:
+                inside.append(self._on_disk(info))
+
+        try:
+            ds.id.chunk_iter(visit)
+        except (OSError, RuntimeError, ValueError):
+            return False
+        return len(inside) == -(-rows // step) and all(inside)
+
+
+def _committed(f: h5py.File, reader: _Reader) -> dict[str, int] | None:
+    """What the writer committed: the footer's counts, else the last ``/flushes`` row; None if neither exists."""
+    status = _attr(f.attrs.get("status"))
+    if status != "recording" and "current_samples" in f.attrs and "encoder_samples" in f.attrs:
+        return {"current_samples": int(f.attrs["current_samples"]), "encoder_samples": int(f.attrs["encoder_samples"])}
+    if "flushes" not in f:
+        return None
+    rows, _ = reader.column("flushes", None)
+    if rows.size == 0:
+        return {"current_samples": 0, "current_blocks": 0, "encoder_samples": 0, "events": 0}
+    return {name: int(rows[-1][name]) for name in FLUSH_DTYPE.names if name != "host_ns"}
+
+
+def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: list[str]) -> CurrentData:
+    g = reader.node("current")
+    n_blocks = None if committed is None else committed.get("current_blocks")
+    counts, bad_c = reader.column("current/blocks/count", n_blocks)
+    first, bad_f = reader.column("current/blocks/first_index", n_blocks)
+    host, bad_h = reader.column("current/blocks/host_ns", n_blocks)
+    try:
+        rate_hz, device = float(g.attrs["rate_hz"]), str(_attr(g.attrs["device"]))
+        channels = [c for c in str(_attr(g.attrs["channels"])).split(",") if c]
+    except (KeyError, ValueError, TypeError):
+        raise ConfigError(f"{reader.path}: malformed session: /current lacks a valid rate_hz, device or channels "
+                          "attribute") from None
+    if not channels:
+        raise ConfigError(f"{reader.path}: malformed session: /current names no channels")
+    want = None if committed is None else committed["current_samples"]
+    phases: dict[str, np.ndarray] = {}
+    bad_samples: int | None = None
+    for ch in channels:
+        phases[ch], bad = reader.column(f"current/{ch}_A", want)
+        if bad is not None:
+            bad_samples = bad if bad_samples is None else min(bad_samples, bad)
+    stored = min(len(first), len(counts), len(host))
+    counts, first, host = counts[:stored], first[:stored], host[:stored]
+    n = min([int(counts.sum())] + [len(v) for v in phases.values()])
+    while stored and int(counts.sum()) > n:  # a kill between writing samples and the block row, or damage
+        stored -= 1
+        counts, first, host = counts[:stored], first[:stored], host[:stored]
+    n = int(counts.sum())
+    total = want if want is not None else max([n] + [len(v) for v in phases.values()])
+    if (bad_samples is not None or any(b is not None for b in (bad_c, bad_f, bad_h))) and n < total:
+        damage.append(_span("current", n, total))
+    return CurrentData(rate_hz=rate_hz, device=device, phases_a={ch: v[:n] for ch, v in phases.items()},
+                       block_first_index=first, block_count=counts, block_host_ns=host)
+
+
+def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: list[str]) -> EncoderData:
+    g = reader.node("encoder")
+    want = None if committed is None else committed["encoder_samples"]
+    columns = {name: reader.column(f"encoder/{name}", want) for name in ("position_counts", "index", "host_ns")}
+    for name in OPTIONAL_ENCODER:
+        if name in g:
+            columns[name] = reader.column(f"encoder/{name}", want)
+    n = min(len(v) for v, _ in columns.values())
+    total = want if want is not None else max(len(v) for v, _ in columns.values())
+    if any(bad is not None for _, bad in columns.values()) and n < total:
+        damage.append(_span("encoder", n, total))
+
+    def optional(name: str) -> np.ndarray | None:
+        """The column, None when absent or all NaN: the writer creates every optional column and fills what a drive
+        does not give with NaN until :func:`acq.recording.layout.write_footer` deletes it, so while a session records
+        (or after its recorder was killed) a column of NaN only is one the drive has not given."""
+        values = columns[name][0][:n] if name in columns else None
+        return None if values is None or np.isnan(values).all() else values
+
+    try:
+        period_s, counts_per_rev = float(g.attrs["period_s"]), int(g.attrs["counts_per_rev"])
+        transport, kind = str(_attr(g.attrs["transport"])), str(_attr(g.attrs["timestamp_kind"]))
+        device = str(_attr(g.attrs["device"]))
+    except (KeyError, ValueError, TypeError):
+        raise ConfigError(f"{reader.path}: malformed session: /encoder lacks a valid period_s, counts_per_rev, "
+                          "transport, timestamp_kind or device attribute") from None
+    return EncoderData(
+        period_s=period_s, counts_per_rev=counts_per_rev, transport=transport, timestamp_kind=kind, device=device,
+        position_counts=columns["position_counts"][0][:n], index=columns["index"][0][:n],
+        host_ns=columns["host_ns"][0][:n], **{name: optional(name) for name in OPTIONAL_ENCODER},
+    )
+
+
+def _read_events(reader: _Reader, committed: dict[str, int] | None, damage: list[str]) -> list[StreamEvent]:
+    rows, bad = reader.column("events", None if committed is None else committed.get("events"))
+    if bad is not None:
+        damage.append(_span("events", len(rows), bad + 1 if bad >= len(rows) else len(rows) + 1, "lost"))
+    return [
+        StreamEvent(int(r["host_ns"]), r["stream"].decode("utf-8", "replace"), r["kind"].decode("utf-8", "replace"),  # type: ignore[arg-type]
+                    r["detail"].decode("utf-8", "replace"))
+        for r in rows
+    ]
+
+
+def _config_attr(p: Path, attrs: dict[str, Any], name: str, model: type[Bench] | type[Profile]) -> Any:
+    text = attrs.get(name)
+    if not isinstance(text, str):
+        raise ConfigError(f"{p}: malformed session: attribute {name} is missing")
+    try:
+        return model.model_validate_json(text)
+    except ValidationError as e:
+        err = e.errors()[0]
+        where = ".".join(str(part) for part in err["loc"])
+        detail = f"{where}: {err['msg']}" if where else err["msg"]
+        raise ConfigError(f"{p}: malformed session: attribute {name} is not a valid {model.__name__.lower()} "
+                          f"({detail})") from None
+
+
+def read_status(path: Path | str) -> str:
+    """The ``status`` attribute alone (cheap: no data read); ``""`` when the file has none."""
+    p = Path(path)
+    f, _ = _open_for_reading(p)
+    with f:
+        try:
+            return str(_attr(f.attrs.get("status", "")))
+        except (OSError, RuntimeError):
+            return ""
+
+
+def load(path: Path | str) -> Session:
+    """Read a whole session (also one still being recorded, left by a killed recorder, or damaged).
+
+    Only committed samples are read (see the module doc); what cannot be read is listed in
+    :attr:`Session.damage`. A file that is not a session, or lacks a group or attribute, raises
+    :class:`ConfigError` naming the file and what is wrong.
+    """
+    p = Path(path)
+    f, notes = _open_for_reading(p)
+    try:
+        with f:
+            return _load_open(p, f, notes)
+    except (OSError, RuntimeError, KeyError, ValueError) as e:  # h5py's errors for metadata it cannot read
+        first = (str(e).splitlines() or [type(e).__name__])[0].strip("'\"")
+        why = f"{notes[0]}: {first}" if notes else first
+        raise ConfigError(f"{p}: damaged, cannot be read ({why})") from None
+
+
+def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
+    try:
+        raw = dict(f.attrs.items())
+    except (OSError, RuntimeError, KeyError):
+        why = f"{notes[0]}, root attributes lost" if notes else "root attributes unreadable"
+        raise ConfigError(f"{p}: not a readable HDF5 session file ({why})") from None
+    attrs = {k: _attr(v) for k, v in raw.items()}
+    if attrs.get("format") != FORMAT:
+        raise ConfigError(f"{p}: not an acq session (format attribute is {attrs.get('format')!r})")
+    try:
+        version = int(attrs.get("format_version", 0))
+    except (TypeError, ValueError):
+        raise ConfigError(f"{p}: malformed session: format_version {attrs.get('format_version')!r}") from None
+    if version > FORMAT_VERSION:
+        raise ConfigError(f"{p}: format_version {version} is newer than this acq reads ({FORMAT_VERSION})")
+    try:
+        json.loads(attrs.get("tags_json", "{}"))
+    except (TypeError, ValueError):
+        raise ConfigError(f"{p}: malformed session: attribute tags_json is not JSON") from None
+    bench = _config_attr(p, attrs, "bench_json", Bench)
+    profile = None if attrs.get("profile_json") == "null" else _config_attr(p, attrs, "profile_json", Profile)
+    reader = _Reader(f, p, notes)
+    committed = _committed(f, reader)
+    damage: list[str] = []
+    current = _read_current(reader, committed, damage)
+    encoder = _read_encoder(reader, committed, damage)
+    events = _read_events(reader, committed, damage)
+    if notes and not damage:
+        damage.extend(notes)
+    return Session(path=p, attrs=attrs, bench=bench, profile=profile, current=current, encoder=encoder,
+                   events=events, damage=tuple(damage))
