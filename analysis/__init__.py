@@ -7,7 +7,7 @@ Everything outside ``analysis/`` (the application ``acq``) imports from here onl
 - :class:`AnalysisRequest` — what is asked (torque method, free parameters, fit, band, chain, …) and
   :meth:`AnalysisRequest.key`, the catalogue's key; :func:`code_fingerprint` is the code part of it.
 - :class:`SignalChain`, :func:`our_chain`, :data:`PAPER_CHAIN` — the signal chain as a strategy.
-- :class:`Recording` — one session's raw arrays; :func:`prepare_signals` — its torque and speed on the
+- :class:`Recording` — one session's raw arrays (:class:`CommandedProfile`: the motion acq commanded); :func:`prepare_signals` — its torque and speed on the
   encoder instants (:class:`PreparedSignals`).
 - :class:`Result`, :class:`FigureData`, :class:`TwoMassParams`, :data:`PARAM_NAMES`,
   :data:`PARAM_LABELS`, :data:`Z95`, :class:`Thresholds` — what a result holds and how it is judged.
@@ -30,14 +30,14 @@ from analysis.limits import encoder_period_problem, min_current_rate_hz, min_rec
 from analysis.model import PARAM_LABELS, TwoMassParams
 from analysis.pipeline import Result, analyze
 from analysis.quality import Thresholds
-from analysis.recording import Recording
+from analysis.recording import CommandedProfile, Recording
 from analysis.report import FigureData
 from analysis.request import AnalysisRequest, code_fingerprint
 from analysis.signals import PreparedSignals, prepare_signals
 from analysis.torque import PHASE_WINDOW_S, min_speed_rpm
 
 __all__ = [
-    "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "FigureData", "Pipeline", "PreparedSignals",
+    "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",
     "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TorqueMethod", "TwoMassParams", "Z95",
     "analyze", "code_fingerprint", "electrical_speed_ratio", "encoder_period_problem", "min_current_rate_hz",
     "min_duration_s", "min_record_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",

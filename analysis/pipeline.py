@@ -137,7 +137,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
     quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
-                     encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None)
+                     encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None, profile=rec.profile,
+                     interference=sig.interference)
     caveat = chain_caveat(chain, AnalysisRequest().chain(rec))
     if caveat is not None and quality.verdict != "ok":
         quality = replace(quality, reasons=(caveat, *quality.reasons))
