@@ -54,6 +54,13 @@ SEQUENCE_MAX_S = 60.0  # the phase sequence is judged on at most the first minut
 #: inertia, in the simulator: fitted J_l 0.998× nominal (seed 0). A real arm left out of [nominal] Jl_kgm2 can come
 #: closer: 20 kg as a 0.75 m rod about its end is 0.0375 kg·m² motor-side at ratio 10, J_l 6× the paper's.
 NOMINAL_FACTOR = 10.0
+#: Half-width, in half-periods of the rotation, within which a crossing counts as on the lattice of a ratio: the
+#: current crosses zero at fixed electrical angles, so at the true ratio a move's crossings sit on one lattice of
+#: spacing ½/(p·r) revolutions. ±1/8 is 3× the spread of a correct bench's crossings about theirs on the selftest's slow
+#: move (±0.04: the current's offset against the hysteresis, the lag's 0.5 ms step), and a ratio of small whole
+#: numbers p'/p spreads the crossings over p' phases ≥ 1/4 apart at the other's lattice, one of which it counts.
+#: On the 49 correctly configured scenarios (seed 0) ratio 1's lattice holds all crossings but 24…27 in 25 moves.
+LATTICE_HALF_WIDTH = 0.125
 
 
 @dataclass(frozen=True)
@@ -80,6 +87,9 @@ class SpeedRatio:
         Number of those moves.
     moving_s : float
         Their total duration, s.
+    on_lattice : tuple of int
+        Crossings in the moves on one lattice per move (:data:`LATTICE_HALF_WIDTH`) at ratio 1 and at the best ratio
+        within :attr:`tolerance` of ``ratio`` (:func:`_on_lattice`); (0, 0) when not counted.
     """
 
     ratio: float
@@ -90,6 +100,7 @@ class SpeedRatio:
     half_turns: float = 0.0
     moves: int = 0
     moving_s: float = 0.0
+    on_lattice: tuple[int, int] = (0, 0)
 
     @property
     def tolerance(self) -> float:
@@ -133,11 +144,23 @@ class SpeedRatio:
         return self.crossings > 2 * 4 * self.moves
 
     @property
+    def lattice_excludes_one(self) -> bool:
+        """True when the crossings' positions hold ``ratio`` and rule out 1: the current crosses zero at fixed
+        electrical angles, so the rotation's crossings sit on one lattice per move at the true ratio, and only the
+        others (a torque reversal: one a move, a few more where the torque rings) leave it. At least
+        ``crossings − moves`` on the lattice at ``ratio``, and more than one a move fewer at 1, is a rotation at
+        ``ratio``: on a correct bench ratio 1's lattice holds every rotation crossing, as many as any other ratio's.
+        A count that allows both (few half-turns per move, where each move's ends and reversal weigh) cannot tell
+        them apart; the positions can."""
+        at_one, at_ratio = self.on_lattice
+        return self.crossings > 0 and at_ratio >= self.crossings - self.moves and at_one < at_ratio - self.moves
+
+    @property
     def named(self) -> bool:
         """True when the data establish a wrong constant: :attr:`mismatched`, :attr:`counted`, and 1 outside the
-        :attr:`count_range`."""
+        :attr:`count_range` or ruled out by the crossings' positions (:attr:`lattice_excludes_one`)."""
         low, high = self.count_range
-        return self.mismatched and self.counted and not low <= 1.0 <= high
+        return self.mismatched and self.counted and (not low <= 1.0 <= high or self.lattice_excludes_one)
 
 
 def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index: np.ndarray,
@@ -206,13 +229,36 @@ def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index:
     if scatter > MAX_RELATIVE_SCATTER * ratio:
         return None
     spread = scatter / math.sqrt(per_interval.size)
-    count = _count_in_moves(crossings[early] + best_lag, cycles, counts, period_s, counts_per_rev, pole_pairs)
-    return SpeedRatio(ratio, spread, best_lag, 0.5 * per_interval.size, *count)
+    *count, positions = _count_in_moves(crossings[early] + best_lag, cycles, counts, period_s, counts_per_rev,
+                                        pole_pairs)
+    tolerance = SpeedRatio(ratio, spread, best_lag, 0.0).tolerance
+    on_lattice = (_on_lattice(positions, [1.0], pole_pairs),
+                  _on_lattice(positions, np.linspace(ratio - tolerance, ratio + tolerance, 41), pole_pairs))
+    return SpeedRatio(ratio, spread, best_lag, 0.5 * per_interval.size, *count, on_lattice=on_lattice)
+
+
+def _on_lattice(positions_rev: list[np.ndarray], ratios: np.ndarray | list[float], pole_pairs: int) -> int:
+    """The most crossings, over ``ratios``, that sit on one lattice per move: positions (revolutions at the stated
+    constants) within :data:`LATTICE_HALF_WIDTH` of c + k·½/(p·r), c chosen per move (the clocks' lag and drift shift
+    a move's crossings alike, and forward and backward moves oppositely)."""
+    best = 0
+    for r in ratios:
+        if r <= 0:
+            continue
+        held = 0
+        for x in positions_rev:
+            if x.size:
+                phase = np.mod(x * 2.0 * pole_pairs * r, 1.0)
+                apart = np.abs(np.mod(phase[:, None] - phase[None, :] + 0.5, 1.0) - 0.5)
+                held += int(np.max(np.count_nonzero(apart <= LATTICE_HALF_WIDTH, axis=0)))
+        best = max(best, held)
+    return best
 
 
 def _count_in_moves(crossings_drive_s: np.ndarray, cycles: np.ndarray, counts: np.ndarray, period_s: float,
-                    counts_per_rev: int, pole_pairs: int) -> tuple[int, float, int, float]:
-    """(crossings, electrical half-turns, moves, seconds) of the moves within the crossings' span.
+                    counts_per_rev: int, pole_pairs: int) -> tuple[int, float, int, float, list[np.ndarray]]:
+    """(crossings, electrical half-turns, moves, seconds, the crossings' positions per move in revolutions) of the
+    moves within the crossings' span.
 
     A move is a run of encoder cycles turning one way faster than 20 % of the peak speed (the threshold of
     :func:`_moving`); ``crossings_drive_s`` are the current's zero crossings on the drive's clock. The lag's
@@ -223,17 +269,19 @@ def _count_in_moves(crossings_drive_s: np.ndarray, cycles: np.ndarray, counts: n
     inside = (t_s - period_s >= crossings_drive_s[0]) & (t_s <= crossings_drive_s[-1])
     fast = np.abs(omega) >= 0.2 * float(np.max(np.abs(omega)))
     theta_rev = counts / counts_per_rev
-    found, half_turns, moves, moving_s = 0, 0.0, 0, 0.0
+    found, half_turns, moves, moving_s, positions = 0, 0.0, 0, 0.0, []
     for sign in (1.0, -1.0):
         run = np.concatenate(([0], (inside & fast & (np.sign(omega) == sign)).astype(np.int8), [0]))
         edges = np.diff(run)
         for first, stop in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
             t0, t1 = t_s[first] - period_s, t_s[stop - 1]
-            found += int(np.count_nonzero((crossings_drive_s >= t0) & (crossings_drive_s <= t1)))
+            inside_move = crossings_drive_s[(crossings_drive_s >= t0) & (crossings_drive_s <= t1)]
+            found += inside_move.size
+            positions.append(np.interp(inside_move, cycles * period_s, theta_rev))
             half_turns += 2.0 * pole_pairs * abs(float(theta_rev[stop] - theta_rev[first]))
             moves += 1
             moving_s += t1 - t0
-    return found, half_turns, moves, moving_s
+    return found, half_turns, moves, moving_s, positions
 
 
 def _half_periods(crossings: np.ndarray, lag_s: float, cycles: np.ndarray, counts: np.ndarray, period_s: float,
