@@ -14,15 +14,14 @@ Everything outside ``analysis/`` (the application ``acq``) imports from here onl
 - :func:`encoder_period_problem`, :func:`min_current_rate_hz`, :func:`min_duration_s`, :func:`min_record_s`,
   :func:`min_speed_rpm` (within :data:`PHASE_WINDOW_S`) — what a bench, a record and a profile must offer
   before it records.
-- The bench checks of ``acq selftest`` (:mod:`analysis.diagnose`, :mod:`analysis.encoder`).
+- The bench checks of ``acq selftest`` (:mod:`analysis.speed_ratio`, :mod:`analysis.bench_checks`,
+  :mod:`analysis.encoder`).
 """
 
 from __future__ import annotations
 
 from analysis.chain import PAPER_CHAIN, Pipeline, SignalChain, TorqueMethod, our_chain
-from analysis.diagnose import (SpeedRatio, electrical_speed_ratio, first_move_sign, inertia_from_torque,
-                               likely_counts_per_rev, phase_sequence_agreement, ratio_doubt, ratio_fault,
-                               sequence_fault)
+from analysis.bench_checks import first_move_sign, inertia_from_torque, phase_sequence_agreement, sequence_fault
 from analysis.encoder import longest_gap_free_span, speed_from_counts
 from analysis.fit import PARAM_NAMES, Z95
 from analysis.frf import min_duration_s
@@ -34,6 +33,7 @@ from analysis.recording import CommandedProfile, Recording
 from analysis.report import FigureData
 from analysis.request import AnalysisRequest, code_fingerprint
 from analysis.signals import PreparedSignals, prepare_signals
+from analysis.speed_ratio import SpeedRatio, electrical_speed_ratio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from analysis.torque import PHASE_WINDOW_S, min_speed_rpm
 
 __all__ = [

@@ -16,7 +16,7 @@ import pytest
 from acq.commissioning.selftest_checks import Check
 from acq.config import DEFAULT_BENCH
 from acq.ui.selftest_cli import next_step, selftest_json
-from analysis.diagnose import SpeedRatio, likely_counts_per_rev, ratio_doubt, ratio_fault
+from analysis.speed_ratio import SpeedRatio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from tests.helpers import run_cli
 from tests.nidaqmx_standin import StandinHardware
 from tests.test_nidaq import hardware, write_bench  # noqa: F401 - the stand-in NI 9234 fixture
