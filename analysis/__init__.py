@@ -7,22 +7,21 @@ Everything outside ``analysis/`` (the application ``acq``) imports from here onl
 - :class:`AnalysisRequest` — what is asked (torque method, free parameters, fit, band, chain, …) and
   :meth:`AnalysisRequest.key`, the catalogue's key; :func:`code_fingerprint` is the code part of it.
 - :class:`SignalChain`, :func:`our_chain`, :data:`PAPER_CHAIN` — the signal chain as a strategy.
-- :class:`Recording` — one session's raw arrays; :func:`prepare_signals` — its torque and speed on the
+- :class:`Recording` — one session's raw arrays (:class:`CommandedProfile`: the motion acq commanded); :func:`prepare_signals` — its torque and speed on the
   encoder instants (:class:`PreparedSignals`).
 - :class:`Result`, :class:`FigureData`, :class:`TwoMassParams`, :data:`PARAM_NAMES`,
   :data:`PARAM_LABELS`, :data:`Z95`, :class:`Thresholds` — what a result holds and how it is judged.
 - :func:`encoder_period_problem`, :func:`min_current_rate_hz`, :func:`min_duration_s`, :func:`min_record_s`,
   :func:`min_speed_rpm` (within :data:`PHASE_WINDOW_S`) — what a bench, a record and a profile must offer
   before it records.
-- The bench checks of ``acq selftest`` (:mod:`analysis.diagnose`, :mod:`analysis.encoder`).
+- The bench checks of ``acq selftest`` (:mod:`analysis.speed_ratio`, :mod:`analysis.bench_checks`,
+  :mod:`analysis.encoder`).
 """
 
 from __future__ import annotations
 
 from analysis.chain import PAPER_CHAIN, Pipeline, SignalChain, TorqueMethod, our_chain
-from analysis.diagnose import (SpeedRatio, electrical_speed_ratio, first_move_sign, inertia_from_torque,
-                               likely_counts_per_rev, phase_sequence_agreement, ratio_doubt, ratio_fault,
-                               sequence_fault)
+from analysis.bench_checks import first_move_sign, inertia_from_torque, phase_sequence_agreement, sequence_fault
 from analysis.encoder import longest_gap_free_span, speed_from_counts
 from analysis.fit import PARAM_NAMES, Z95
 from analysis.frf import min_duration_s
@@ -30,14 +29,15 @@ from analysis.limits import encoder_period_problem, min_current_rate_hz, min_rec
 from analysis.model import PARAM_LABELS, TwoMassParams
 from analysis.pipeline import Result, analyze
 from analysis.quality import Thresholds
-from analysis.recording import Recording
+from analysis.recording import CommandedProfile, Recording
 from analysis.report import FigureData
 from analysis.request import AnalysisRequest, code_fingerprint
 from analysis.signals import PreparedSignals, prepare_signals
+from analysis.speed_ratio import SpeedRatio, electrical_speed_ratio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from analysis.torque import PHASE_WINDOW_S, min_speed_rpm
 
 __all__ = [
-    "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "FigureData", "Pipeline", "PreparedSignals",
+    "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",
     "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TorqueMethod", "TwoMassParams", "Z95",
     "analyze", "code_fingerprint", "electrical_speed_ratio", "encoder_period_problem", "min_current_rate_hz",
     "min_duration_s", "min_record_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",

@@ -141,8 +141,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
     kernel_error = None if fit.status == "failed" else kernel_model_error(frf, fit, sig.torque_Nm)
     quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
-                     encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None,
-                     kernel_error=kernel_error)
+                     encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None, profile=rec.profile,
+                     interference=sig.interference, kernel_error=kernel_error)
     caveat = chain_caveat(chain, AnalysisRequest().chain(rec))
     if caveat is not None and quality.verdict != "ok":
         quality = replace(quality, reasons=(caveat, *quality.reasons))

@@ -17,17 +17,16 @@ import numpy as np
 from analysis.adequacy import (BandMisfit, band_misfits, critical_t, missed_spans, quantisation_through_fit,
                                systematic_std)
 from analysis.encoder import difference_response
+from analysis.excitation import RESOLUTION_NAMED, weak_coherence_cause
 from analysis.fit import (COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask, quantisation_terms,
                           residual_jacobian)
 from analysis.frf import FrequencyResponse
 from analysis.model import PARAM_LABELS
+from analysis.recording import CommandedProfile
 from analysis.sample_instants import EncoderJitter
+from analysis.torque import Interference
 
 Verdict = Literal["ok", "poor", "failed"]
-#: The remedy for a weakly exciting motion, naming the profile's keys: the torque's spectrum reaches f_r only when
-#: the speed ramps are short (the paper's 0.5 s ramps do not excite its bench, 0.2 s do).
-SHORTEN_RAMPS = ("shorten the acceleration time (accel_time_s and decel_time_s in the profile file, e.g. 0.2 s as in "
-                 "triangle_0.2s)")
 _RANK: dict[Verdict, int] = {"ok": 0, "poor": 1, "failed": 2}
 
 
@@ -143,6 +142,8 @@ def assess(
     thresholds: Thresholds = Thresholds(),
     encoder_jitter: EncoderJitter | None = None,
     clock_failure: str | None = None,
+    profile: CommandedProfile | None = None,
+    interference: tuple[Interference, ...] = (),
     kernel_error: np.ndarray | None = None,
 ) -> Quality:
     """Judge an identification from its FRF, its fit and the clock alignment.
@@ -169,12 +170,24 @@ def assess(
     clock_failure : str or None, optional
         Why the clock alignment failed (:attr:`analysis.clocks.ClockFit.failure`): the verdict is then failed
         with it as the first reason — low coherence and wide intervals follow from it, not from the motion.
+    profile : CommandedProfile or None, optional
+        The profile acq commanded: a weak coherence's advice names its keys only when known
+        (:func:`analysis.excitation.weak_coherence_cause`).
+    interference : tuple of Interference, optional
+        What the torque estimate removed from the current, named when the torque carries power the speed does not
+        follow.
 
     Returns
     -------
     Quality
     """
     th = thresholds
+    lsb_rad = encoder_jitter.lsb_rad if encoder_jitter is not None else 0.0
+
+    def cause(check: np.ndarray, limit: float) -> str:
+        return weak_coherence_cause(frf, check, limit, lsb_rad=lsb_rad, profile=profile, f_a_hz=fit.f_a,
+                                    band_mask_all=in_band, interference=interference)
+
     findings: list[tuple[Verdict, str]] = []
     in_band = band_mask(frf.f_hz, fit.band)
     mean_coh = float(np.mean(frf.coherence[in_band])) if np.any(in_band) else float("nan")
@@ -195,15 +208,14 @@ def assess(
             exc_db = float(10.0 * np.log10(np.mean(frf.torque_psd[sel])))
             level = _grade(exc_coh, th.excitation_poor, th.excitation_failed)
             if level != "ok":
-                what = "does not excite" if level == "failed" else "barely excites"
                 findings.append((level, f"coherence {exc_coh:.2f} between f_a {fit.f_a:.0f} Hz and f_r "
-                                        f"{fit.f_r:.0f} Hz (torque {exc_db:.0f} dB re 1 N²m²/Hz there): the "
-                                        f"motion {what} the joint — {SHORTEN_RAMPS}"))
+                                        f"{fit.f_r:.0f} Hz (torque {exc_db:.0f} dB re 1 N²m²/Hz there), "
+                                        f"{cause(sel, th.excitation_poor)}"))
 
     level = _grade(mean_coh, th.coherence_poor, th.coherence_failed)
     if level != "ok":
-        findings.append((level, f"mean coherence {mean_coh:.2f} in {lo:g}…{hi:g} Hz: the motion excites the band "
-                                f"weakly (in closed loop that biases |H|, not only scatters it) — {SHORTEN_RAMPS}"))
+        findings.append((level, f"mean coherence {mean_coh:.2f} in {lo:g}…{hi:g} Hz (in closed loop that biases |H|, "
+                                f"not only scatters it), {cause(in_band, th.coherence_poor)}"))
 
     ratio = fit.residual_rms / _noise_rms(frf, in_band)
     # without the encoder's resolution the share of |H|'s misfit that its quantisation repeats with every
@@ -243,6 +255,8 @@ def assess(
 
     if encoder_jitter is not None and np.any(in_band):
         found, timing_defect = _jitter_findings(frf, fit, in_band, encoder_jitter, th)
+        if any(RESOLUTION_NAMED in text for _, text in findings):
+            found = [] if not timing_defect else found  # the coherence's reason already names the resolution
         if timing_defect:
             findings[:0] = found  # a timing defect is the cause: first
         else:

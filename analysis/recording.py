@@ -8,6 +8,23 @@ import numpy as np
 
 
 @dataclass(frozen=True)
+class CommandedProfile:
+    """The motion profile acq commanded for the record (the session's profile), as far as the analysis reads it.
+
+    Attributes
+    ----------
+    accel_time_s, decel_time_s : float
+        Ramp times from standstill to the top speed and back, s.
+    jerk_time_s : float
+        S-curve jerk time (the time the acceleration takes to reach its level), s; 0 for plain ramps.
+    """
+
+    accel_time_s: float
+    decel_time_s: float
+    jerk_time_s: float = 0.0
+
+
+@dataclass(frozen=True)
 class Recording:
     """One session's raw data as plain arrays (what ``acq.recording.reader`` reads; nothing resampled).
 
@@ -41,6 +58,8 @@ class Recording:
     drive_time_s : ndarray of float64 or None
         The drive's own time stamp of each encoder sample, s (serial frame drive time, CANopen 0x1013):
         the instant it really sampled; its origin and 1 µs quantisation do not matter. None: not recorded.
+    profile : CommandedProfile or None
+        The profile acq commanded; None when the machine's own controller moved the joint (or not recorded).
     """
 
     current_a: dict[str, np.ndarray]
@@ -57,3 +76,4 @@ class Recording:
     encoder_host_ns: np.ndarray | None = None
     host_clock_shared: bool = True
     drive_time_s: np.ndarray | None = None
+    profile: CommandedProfile | None = None

@@ -19,7 +19,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from acq.offline.analyze import recording_from_session  # noqa: E402
 from acq.recording.reader import load  # noqa: E402
-from analysis.diagnose import electrical_speed_ratio, recording_fault  # noqa: E402
+from analysis.diagnose import recording_fault  # noqa: E402
+from analysis.speed_ratio import electrical_speed_ratio  # noqa: E402
 from bench.scenarios import SCENARIOS, clock_for, record  # noqa: E402
 
 

@@ -15,7 +15,7 @@ MAX_DURATION_S = 24 * 3600.0  # one day: a session file of ~17 GB per phase at 2
 MAX_TOP_SPEED_RPM = 100_000.0  # fastest servo motors run ~60 000 rpm
 #: Largest speed dither: ±5 % on each cycle's speed, acceleration and swing stays a margin a bench's speed and travel
 #: limits can carry rather than a different motion (2 % already moves the paper's swing by thousands of counts at 2^17
-#: counts/rev between cycles; see configs/profiles/triangle_0.2s_dither.toml).
+#: counts/rev between cycles; see configs/profiles/triangle_0.2s.toml).
 MAX_SPEED_DITHER = 0.05
 MAX_SEED = 2**63 - 1  # a TOML integer is a signed 64-bit number
 Seconds = Annotated[float, Field(gt=0.0, le=MAX_DURATION_S)]

@@ -13,6 +13,7 @@ from analysis.adequacy import (CHAIN_WINDOW_STD, WINDOW_BINS, band_misfits, band
 from analysis.fit import FitOptions, amplitude_misfits, fit_two_mass
 from analysis.frf import estimate_frf
 from analysis.quality import assess
+from analysis.recording import CommandedProfile
 from analysis.sample_instants import EncoderJitter
 from tests.test_analysis_fit import COUNTS_PER_REV, PAPER, PERIOD_S, covers, simulate
 
@@ -125,19 +126,20 @@ def test_a_backlash_like_low_frequency_misfit_makes_the_verdict_poor_and_names_t
                                  "K, J_m, J_l are the two-mass model's compromise, not the joint's")
 
 
-def test_weak_excitation_and_encoder_resolution_advice_name_the_keys_and_when_to_change_them():
+def test_a_slow_profile_at_the_encoders_floor_names_the_resolution_and_the_ramps_it_would_take():
     rec = simulate(PAPER, 1, accel_time_s=0.5)
     frf = estimate_frf(rec.torque_Nm, rec.speed_rad_s, PERIOD_S, jackknife_blocks=10)
-    q = assess(frf, fit_two_mass(frf), encoder_jitter=RESOLUTION)
-    assert q.verdict == "poor" and len(q.reasons) == 2
-    assert q.reasons[0].endswith("the motion excites the band weakly (in closed loop that biases |H|, not only "
-                                 "scatters it) — shorten the acceleration time (accel_time_s and decel_time_s in the "
-                                 "profile file, e.g. 0.2 s as in triangle_0.2s)")
-    assert q.reasons[1].startswith(f"the encoder's resolution ({COUNTS_PER_REV} counts/rev) leaves speed noise")
-    assert q.reasons[1].endswith("without the speed noise it predicts): record longer or use a finer encoder; raise "
-                                 "[encoder] counts_per_rev only if the drive really reports finer position units "
-                                 "(changing the key alone breaks a correct bench)")
-
+    q = assess(frf, fit_two_mass(frf), encoder_jitter=RESOLUTION, profile=CommandedProfile(0.5, 0.5))
+    assert q.verdict == "poor"
+    assert q.reasons == (  # the encoder's own finding would repeat the resolution: left out
+        "mean coherence 0.59 in 10…400 Hz (in closed loop that biases |H|, not only scatters it), below 0.72 in "
+        f"192…400 Hz, where the encoder's resolution ({COUNTS_PER_REV} counts/rev, [encoder] counts_per_rev) limits "
+        "it: the speed there is only 2 dB above its quantisation floor — a finer encoder (≈ 240000 counts/rev; "
+        "changing counts_per_rev alone breaks a correct bench), or ≈ 3× the torque power above 192 Hz: shorten "
+        "accel_time_s and decel_time_s in the profile to ≈ 0.34 s from 0.5 s, at 1.5× the peak torque",)
+    # without the profile no key is named
+    assert assess(frf, fit_two_mass(frf), encoder_jitter=RESOLUTION).reasons[0].endswith(
+        "≈ 3× the torque power above 192 Hz: a motion with larger torque steps")
 
 
 def test_quantisation_carried_through_a_fit_of_a_constant_leaves_its_residual_covariance():

@@ -198,7 +198,9 @@ def test_good_excitation_gives_ok_and_the_slow_profile_does_not():
     slow = assess(slow_frf, slow_fit, clock_residual_s=2e-5)
     assert slow.verdict in ("poor", "failed")
     assert slow.mean_coherence < 0.7
-    assert "shorten the acceleration time" in slow.reasons[0]
+    assert slow.reasons[0] == ("mean coherence 0.59 in 10…400 Hz (in closed loop that biases |H|, not only scatters "
+                               "it), below 0.72 in 192…400 Hz (the encoder's resolution and the torque estimate's "
+                               "noise unknown: no cause judged)")  # neither noise known: no advice
     assert slow.excitation_torque_db < fast.excitation_torque_db - 6.0
 
 
@@ -206,8 +208,7 @@ def test_a_noisy_slow_profile_fails_on_the_excitation_between_fa_and_fr():
     frf, fit = identify(simulate(PAPER, 1, accel_time_s=0.5, disturbance_Nm=3.0))
     q = assess(frf, fit)
     assert q.verdict == "failed" and q.excitation_coherence < 0.4
-    assert any(r.startswith(f"coherence {q.excitation_coherence:.2f} between f_a") and "does not excite" in r
-               for r in q.reasons)
+    assert any(r.startswith(f"coherence {q.excitation_coherence:.2f} between f_a") for r in q.reasons)
 
 
 def test_unmodelled_mode_and_clock_residual_are_reported():

@@ -11,7 +11,7 @@ import pytest
 
 from analysis.model import TwoMassParams
 from analysis import AnalysisRequest, analyze
-from analysis.recording import Recording
+from analysis.recording import CommandedProfile, Recording
 from drivers.config import Bench, Profile
 from drivers.sim.bench import SimBench
 
@@ -44,6 +44,7 @@ def sim_recording(accel_time_s: float = 0.2, duration_s: float = 10.0, daq_rate_
                                            bench_sim.host_jitter_s("daq_host", 0, first.size)),
         encoder_host_ns=bench_sim.host_ns_at(index * bench_sim.drive_period_s,
                                              bench_sim.host_jitter_s("drive_host", 0, m)),
+        profile=CommandedProfile(accel_time_s, accel_time_s),
     )
     nominal = TwoMassParams(bench.nominal.K_Nm_per_rad, bench.nominal.Jm_kgm2, bench.nominal.Jl_kgm2, 0.0)
     return rec, bench_sim.truth, nominal
@@ -90,4 +91,4 @@ def test_the_papers_slow_profile_is_not_reported_as_ok():
     rec, _, nominal = sim_recording(accel_time_s=0.5, seed=1)
     q = analyze(rec, AnalysisRequest(nominal=nominal)).quality
     assert q.verdict in ("poor", "failed")
-    assert "shorten the acceleration time" in q.reasons[0]
+    assert "shorten accel_time_s and decel_time_s in the profile to ≈ 0." in q.reasons[0]

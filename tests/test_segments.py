@@ -127,7 +127,8 @@ def test_a_robot_window_whose_half_periods_share_no_ratio_names_no_bench_constan
     19879" on a correctly configured bench."""
     from acq.offline.analyze import recording_from_session
     from acq.recording.reader import load
-    from analysis.diagnose import electrical_speed_ratio, recording_fault
+    from analysis.diagnose import recording_fault
+    from analysis.speed_ratio import electrical_speed_ratio
 
     bench = load_bench(ROBOT)
     bench = bench.model_copy(update={"sim": bench.sim.model_copy(update={"robot_s_curve_fraction": 0.5})})

@@ -16,7 +16,7 @@ import pytest
 from acq.commissioning.selftest_checks import Check
 from acq.config import DEFAULT_BENCH
 from acq.ui.selftest_cli import next_step, selftest_json
-from analysis.diagnose import SpeedRatio, likely_counts_per_rev, ratio_doubt, ratio_fault
+from analysis.speed_ratio import SpeedRatio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from tests.helpers import run_cli
 from tests.nidaqmx_standin import StandinHardware
 from tests.test_nidaq import hardware, write_bench  # noqa: F401 - the stand-in NI 9234 fixture
@@ -170,6 +170,31 @@ def test_a_bench_that_cannot_be_opened_fails_the_devices_stage_in_one_line(
     assert run.code == 2
     assert failed_check(json.loads(run.out))["figure"] == ("--fast: the simulated CANopen drive runs on the bus in "
                                                            "real time; record without --fast")
+
+
+def test_pole_pairs_3_stated_on_a_4_pole_pair_motor_is_named_on_the_slow_move(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """The slow move's 3 moves hold 20 crossings through 16.6 half-turns (at pole_pairs = 3): the count allows
+    0.81–1.41×, 1 and 1.36 alike, but the crossings' positions sit on the lattice of 4/3 and not on that of 1."""
+    path = bench_file(tmp_path, "pole_pairs = 4")  # the motor's truth
+    path.write_text(path.read_text().replace("pole_pairs = 4", "pole_pairs = 3", 1))  # [motor] comes first
+    code, doc = selftest(capsys, path)
+    fail = failed_check(doc)
+    assert code == 1 and doc["stopped_at"] == "motion · electrical speed"
+    assert fail["figure"] == "the current turns 1.36× faster than pole_pairs·ω (pole_pairs = 3, counts_per_rev = 131072)"
+    assert fail["fix"] == "check [motor] pole_pairs = 4 or [encoder] counts_per_rev = 96446"
+
+
+def test_the_crossings_lattice_rules_out_ratio_1_only_when_it_holds_the_other() -> None:
+    # the slow move above: 21 crossings in 3 moves, all on the lattice of 1.36, 6 on that of 1
+    wrong = SpeedRatio(1.359, 0.005, 0.0, 10.5, crossings=21, half_turns=16.6, moves=3, moving_s=1.36,
+                       on_lattice=(6, 21))
+    low, high = wrong.count_range
+    assert low <= 1.0 <= high and wrong.lattice_excludes_one and wrong.named
+    # a correct bench's lattice of 1 holds as many as any other: 1 not ruled out, whatever the count allows
+    assert not replace(wrong, on_lattice=(21, 21)).named
+    # one crossing a move in the moves (a 10 ms triangle: 1062 in 487 moves): both lattices hold them by chance
+    assert not replace(wrong, crossings=1062, moves=487, on_lattice=(576, 917)).lattice_excludes_one
 
 
 def test_ratio_fault_words_and_suggestions() -> None:

@@ -200,7 +200,7 @@ def encoder_speed_check(session: Session, top_speed_rpm: float) -> Check:
 
 
 def speed_ratio_check(ratio: SpeedRatio | None, bench: Bench) -> Check:
-    """The current's electrical frequency against pole_pairs·ω (see :mod:`analysis.diagnose`)."""
+    """The current's electrical frequency against pole_pairs·ω (see :mod:`analysis.speed_ratio`)."""
     p, cpr = bench.motor.pole_pairs, bench.encoder.counts_per_rev
     if ratio is None:
         return Check("motion", "electrical speed", "fail", "no electrical frequency in the current during the move",

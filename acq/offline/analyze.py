@@ -19,7 +19,7 @@ from acq.recording.layout import utc_now_iso
 from acq.recording.reader import load
 from acq.recording.session import Session
 from acq.recording.storage import free_bytes, storage_error, write_text_atomically
-from analysis import AnalysisRequest, Recording, Result, TwoMassParams, analyze, code_fingerprint
+from analysis import AnalysisRequest, CommandedProfile, Recording, Result, TwoMassParams, analyze, code_fingerprint
 from acqcore.errors import ConfigError, StorageError
 
 #: Free bytes needed before drawing a report PNG: the reports are 0.2–0.6 MB (1600×1000 px); ×4 margin.
@@ -65,6 +65,8 @@ def recording_from_session(session: Session) -> Recording:
         encoder_host_ns=enc.host_ns,
         host_clock_shared=session.host_clock_shared,
         drive_time_s=enc.drive_time_s,
+        profile=None if session.profile is None else CommandedProfile(
+            session.profile.accel_time_s, session.profile.decel_time_s, session.profile.jerk_time_s),
     )
 
 
