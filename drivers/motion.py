@@ -65,14 +65,20 @@ def half_swing_rad(profile: Profile) -> float:
 
 
 def _phase(t_s: np.ndarray | float, profile: Profile) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(t, ±s_c: direction of the current half-cycle times its cycle's factor, time u into that half-cycle), s."""
+    """(t, ±s_c: direction of the current half-cycle times its cycle's factor, time u into that half-cycle), s.
+
+    The phase is counted in whole nanoseconds, as a drive's generator counts whole cycles: in floating point,
+    t mod the cycle puts an instant at a corner (the apex, where the acceleration reverses) on either side of it
+    in different cycles, and the motion would not repeat — measured on the simulated bench: 8 control steps with
+    the feed-forward reversed in 10 s, the joint 44 counts (2^17/rev) off its previous period there.
+    """
     t = np.asarray(t_s, dtype=float)
-    half = profile.accel_time_s + profile.cruise_s + profile.decel_time_s + profile.dwell_s
-    tau = np.mod(np.maximum(t, 0.0), 2.0 * half)
-    sign = np.where(tau < half, 1.0, -1.0)
+    half_ns = round((profile.accel_time_s + profile.cruise_s + profile.decel_time_s + profile.dwell_s) * 1e9)
+    cycle, tau_ns = np.divmod(np.round(np.maximum(t, 0.0) * 1e9).astype(np.int64), 2 * half_ns)
+    sign = np.where(tau_ns < half_ns, 1.0, -1.0)
     if profile.speed_dither:
-        sign = sign * speed_factors(profile, np.floor_divide(np.maximum(t, 0.0), 2.0 * half).astype(np.int64))
-    return t, sign, np.mod(tau, half)
+        sign = sign * speed_factors(profile, cycle)
+    return t, sign, np.mod(tau_ns, half_ns) / 1e9
 
 
 def _ramp(u_s: np.ndarray, ramp_s: float, jerk_s: float) -> tuple[np.ndarray, np.ndarray]:

@@ -25,10 +25,10 @@ def test_a_coarse_encoder_is_named_with_the_band_it_limits_and_its_key(tmp_path:
     verdict, reasons = _reasons(tmp_path, "encoder 10 000 counts/rev")
     assert verdict == "poor"
     assert reasons[0] == (
-        "mean coherence 0.48 in 10…400 Hz (in closed loop that biases |H|, not only scatters it), below 0.72 in "
-        "158…400 Hz, where the encoder's resolution (10000 counts/rev, [encoder] counts_per_rev) limits it: the speed "
-        "there is only 1 dB above its quantisation floor — a finer encoder (≈ 24000 counts/rev; changing "
-        "counts_per_rev alone breaks a correct bench), or ≈ 6× the torque power above 158 Hz: shorten accel_time_s "
+        "mean coherence 0.47 in 10…400 Hz (in closed loop that biases |H|, not only scatters it), below 0.72 in "
+        "160…400 Hz, where the encoder's resolution (10000 counts/rev, [encoder] counts_per_rev) limits it: the speed "
+        "there is only 1 dB above its quantisation floor — a finer encoder (≈ 25000 counts/rev; changing "
+        "counts_per_rev alone breaks a correct bench), or ≈ 6× the torque power above 160 Hz: shorten accel_time_s "
         "and decel_time_s in the profile to ≈ 0.11 s from 0.2 s, at 1.8× the peak torque")
     assert not any("leaves speed noise" in r for r in reasons)  # said once, not twice
 
@@ -41,11 +41,11 @@ def test_ramps_already_short_get_no_advice_to_shorten_them(tmp_path: Path) -> No
     weak = [r for r in reasons if r.startswith("mean coherence")]
     assert verdict == "failed" and len(weak) == 1
     assert weak[0] == (
-        "mean coherence 0.22 in 10…400 Hz (in closed loop that biases |H|, not only scatters it), below 0.72 in "
-        "130…400 Hz, though the speed there is 36 dB above the encoder's quantisation floor and the torque 28 dB above "
+        "mean coherence 0.23 in 10…400 Hz (in closed loop that biases |H|, not only scatters it), below 0.72 in "
+        "230…400 Hz, though the speed there is 18 dB above the encoder's quantisation floor and the torque 52 dB above "
         "its estimate's noise: the torque estimate carries power the speed does not follow — interference on the "
-        "phase current that the torque model leaves in it (it removed 8 lines at 3825…4225 Hz and an offset moving by "
-        "569 mA), or a drive that does not respond linearly: remove interference at its source (PWM ripple: the "
+        "phase current that the torque model leaves in it (it removed 8 lines at 3125…4625 Hz and an offset moving by "
+        "758 mA), or a drive that does not respond linearly: remove interference at its source (PWM ripple: the "
         "DAQ's anti-alias filter)")
     assert not any("shorten" in r for r in reasons)
 
@@ -70,7 +70,7 @@ def test_interference_in_the_torque_estimate_is_named_not_the_motion(tmp_path: P
     weak = next(r for r in reasons if r.startswith("mean coherence"))
     assert verdict != "ok"
     assert weak.endswith(
-        "though the speed there is 16 dB above the encoder's quantisation floor and the torque 25 dB above its "
+        "though the speed there is 15 dB above the encoder's quantisation floor and the torque 24 dB above its "
         "estimate's noise: the torque estimate carries power the speed does not follow — interference on the phase "
         "current that the torque model leaves in it (it removed an offset moving by 102 mA), or a drive that does not "
         "respond linearly: remove interference at its source (PWM ripple: the DAQ's anti-alias filter)")
