@@ -98,7 +98,8 @@ def model_band(fit: FitResult, f_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray
                       - np.log(np.abs(frequency_response(down, f_hz)))) / (2.0 * _LOG_STEP))
     g = np.array(grads)
     sigma = np.sqrt(np.clip(np.einsum("if,ij,jf->f", g, fit.covariance, g), 0.0, None))
-    return np.exp(log_abs), np.exp(log_abs - Z95 * sigma), np.exp(log_abs + Z95 * sigma)
+    with np.errstate(over="ignore"):  # a failed fit's band may be wider than a float holds: unbounded (inf) there
+        return np.exp(log_abs), np.exp(log_abs - Z95 * sigma), np.exp(log_abs + Z95 * sigma)
 
 
 def figure_data(

@@ -20,8 +20,9 @@ NAMES = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")
 
 
 def sim_recording(accel_time_s: float = 0.2, duration_s: float = 10.0, daq_rate_hz: float | None = None,
-                  **sim: object) -> tuple[Recording, dict, TwoMassParams]:
-    """A recording of the simulated bench (blocks of 0.1 s, host stamps with jitter), its truth, nominal."""
+                  speed_dither: float = 0.0, **sim: object) -> tuple[Recording, dict, TwoMassParams]:
+    """A recording of the simulated bench (blocks of 0.1 s, host stamps with jitter), its truth, nominal; a motion
+    that repeats exactly, or one dithered by ``speed_dither`` as the shipped profiles are (its seed the bench's)."""
     with SIM_TOML.open("rb") as f:
         bench = Bench.model_validate(tomllib.load(f))
     bench = bench.model_copy(update={"sim": bench.sim.model_copy(update=sim)})
@@ -29,7 +30,8 @@ def sim_recording(accel_time_s: float = 0.2, duration_s: float = 10.0, daq_rate_
         bench = bench.model_copy(update={"daq": bench.daq.model_copy(update={"rate_hz": daq_rate_hz})})
     bench_sim = SimBench(bench, realtime=False)
     bench_sim.start_motion(Profile(kind="triangle", top_speed_rpm=1000.0, accel_time_s=accel_time_s,
-                                   decel_time_s=accel_time_s, duration_s=duration_s), 0.0)
+                                   decel_time_s=accel_time_s, duration_s=duration_s, speed_dither=speed_dither,
+                                   dither_seed=bench.sim.seed), 0.0)
     n, m, blk = int(duration_s * bench_sim.daq_rate_hz), int(duration_s / bench_sim.drive_period_s), 2560
     first = np.arange(0, n, blk)
     count = np.minimum(blk, n - first)

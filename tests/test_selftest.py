@@ -296,7 +296,7 @@ duration_s = 5
 def test_ramps_too_fast_to_turn_the_motor_blame_no_bench_constant(
         capsys: pytest.CaptureFixture[str], tmp_path: Path, sim_line: str) -> None:
     """10 ms ramps to 1000 rpm: the motor swings ±0.08 rev (0.66 electrical turns) every 40 ms and the current's zero
-    crossings follow the torque's sign changes. The half-periods read 2.96× pole_pairs·ω on the correct bench (3.70×
+    crossings follow the torque's sign changes. The half-periods read 2.99× pole_pairs·ω on the correct bench (3.70×
     with 8 true pole pairs), all alike because the motion repeats — that once read "check [encoder] counts_per_rev =
     44326". The crossings counted in the moves cannot reach such a ratio, so no constant is named: the record says
     why it cannot check them."""
@@ -312,9 +312,9 @@ def test_ramps_too_fast_to_turn_the_motor_blame_no_bench_constant(
     doubt, *others = quality["reasons"]
     if not sim_line:
         assert doubt == (
-            "pole_pairs and counts_per_rev cannot be checked on this record: the current's half-periods read 2.96× "
-            "pole_pairs·ω, but its 514 zero crossings in the moves allow 0.06–2.45× — each of the 240 moves "
-            "turns the motor only 0.16 rev (1.3 electrical half-turns at pole_pairs = 4) in 19 ms, so the current's "
+            "pole_pairs and counts_per_rev cannot be checked on this record: the current's half-periods read 2.99× "
+            "pole_pairs·ω, but its 480 zero crossings in the moves allow 0.00–2.38× — each of the 240 moves "
+            "turns the motor only 0.16 rev (1.3 electrical half-turns at pole_pairs = 4) in 18 ms, so the current's "
             "zero crossings follow its torque's sign changes as much as the rotation; check the constants with acq "
             "selftest")
     else:
