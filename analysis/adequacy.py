@@ -115,8 +115,11 @@ class BandMisfit:
         share of the encoder's quantisation that repeats with the motion, carried through the fit, the chain's own
         approximations and the loop's feedback of the rest of the quantisation; 0 when none is given, infinite where
         it is unbounded).
+    bound : float
+        The most a bias of known sign-less size can move the window's mean (the speed loop's feedback of the
+        quantisation noise, :func:`loop_feedback_bound`): taken off |misfit| before it is compared.
     t : float
-        |misfit| / √(noise² + systematic²).
+        max(|misfit| − bound, 0) / √(noise² + systematic²).
     """
 
     low_hz: float
@@ -125,12 +128,14 @@ class BandMisfit:
     noise: float
     systematic: float
     t: float
+    bound: float = 0.0
 
 
 def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarray,
                  systematic_cov: np.ndarray | None = None,
                  blind: np.ndarray | None = None,
-                 chain_std: np.ndarray | None = None) -> tuple[BandMisfit, ...]:
+                 chain_std: np.ndarray | None = None,
+                 bias_bound: np.ndarray | None = None) -> tuple[BandMisfit, ...]:
     """The misfit of ln|H| per window of :data:`WINDOW_BINS` bins, stepped by half a window.
 
     Parameters
@@ -149,8 +154,11 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
         Bins whose bias is unbounded (no signal to compare the quantisation with): a window holding one is not
         judged.
     chain_std : ndarray, shape (n,), optional
-        Standard deviation per bin of the smooth systematic errors (:func:`systematic_std`), shared by a window's
+        Standard deviation per bin of the chain's smooth errors (:data:`CHAIN_WINDOW_STD`), shared by a window's
         bins: a window allows its mean; None: none.
+    bias_bound : ndarray, shape (n,), optional
+        The most a bias may move each bin (:func:`loop_feedback_bound`): a window takes its mean off |misfit|;
+        None: none.
 
     Returns
     -------
@@ -172,12 +180,14 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
         if (blind is not None and np.any(blind[w])) or not np.isfinite(quant):
             quant = np.inf  # unbounded (or not computable): the window is not judged
         m = float(np.mean(misfit[w]))
+        bound = 0.0 if bias_bound is None else float(np.mean(bias_bound[w]))
+        excess = max(abs(m) - bound, 0.0) if np.isfinite(bound) else 0.0
         scale = float(np.hypot(noise, quant))
         if not (np.isfinite(m) and np.isfinite(noise)):
             t = 0.0  # a window with a non-finite misfit or scatter is not judged, never "missed"
         else:
-            t = abs(m) / scale if scale > 0 else (np.inf if m != 0 else 0.0)
-        out.append(BandMisfit(float(f_hz[i]), float(f_hz[i + WINDOW_BINS - 1]), m, noise, quant, float(t)))
+            t = excess / scale if scale > 0 else (np.inf if excess > 0 else 0.0)
+        out.append(BandMisfit(float(f_hz[i]), float(f_hz[i + WINDOW_BINS - 1]), m, noise, quant, float(t), bound))
     return tuple(out)
 
 
@@ -224,10 +234,9 @@ def quantisation_pull(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray,
     return (a * weighted[None, :]) @ a.T
 
 
-def systematic_std(quant_rel: np.ndarray, repeating_share: float) -> np.ndarray:
-    """Standard deviation per bin of the errors of ln|H| that vary smoothly along frequency and that no scatter
-    between blocks shows: the chain's own (:data:`CHAIN_WINDOW_STD`) and the speed loop's feedback of the
-    quantisation noise that does not repeat with the motion.
+def loop_feedback_bound(quant_rel: np.ndarray, repeating_share: float) -> np.ndarray:
+    """The most the speed loop's feedback of the quantisation noise that does not repeat with the motion can bias
+    ln|H| per bin: (1 − share)·q².
 
     The drive closes its speed loop on the quantised angle, so its torque carries −C·n/(1 + C·H) of the speed noise
     n it measures, and that torque is correlated with the n in the recorded speed: H1 = G_xy/G_xx is biased by
@@ -236,7 +245,10 @@ def systematic_std(quant_rel: np.ndarray, repeating_share: float) -> np.ndarray:
     most q² — of either sign, depending on T's phase. It matters only where q is large, near the band's top: with a
     4 kHz encoder at 2^17 counts/rev the speed's q² reaches ~9 % at 410–480 Hz, where the recorded |H| reads 6–11 %
     high and J_m 0.4 % low; at 2^20 counts/rev neither. The share that repeats with the motion is carried separately
-    (:func:`quantisation_through_fit`), so only the rest, (1 − share)·q², is counted here.
+    (:func:`quantisation_through_fit`), so only the rest counts here. The misfit test takes it off a window's misfit
+    as the bound it is (allowing it as a standard deviation would let a third mode's +7 % dipole through at a 500 Hz
+    encoder, where q² is 1–3 % at 170–184 Hz); the intervals carry it as a standard deviation
+    (:func:`systematic_std`), which is wider.
 
     Parameters
     ----------
@@ -247,7 +259,16 @@ def systematic_std(quant_rel: np.ndarray, repeating_share: float) -> np.ndarray:
         Share of the quantisation error that repeats with the motion (0…1).
     """
     q = np.where(np.isfinite(quant_rel), quant_rel, 0.0)
-    return np.hypot(CHAIN_WINDOW_STD, (1.0 - repeating_share) * q**2)
+    return (1.0 - repeating_share) * q**2
+
+
+def systematic_std(quant_rel: np.ndarray, repeating_share: float) -> np.ndarray:
+    """Standard deviation per bin of the errors of ln|H| that vary smoothly along frequency and that no scatter
+    between blocks shows, as the intervals carry them (:func:`chain_pull`): the chain's own
+    (:data:`CHAIN_WINDOW_STD`) and the loop's feedback of the quantisation noise that does not repeat
+    (:func:`loop_feedback_bound`, its bound taken as a standard deviation).
+    """
+    return np.hypot(CHAIN_WINDOW_STD, loop_feedback_bound(quant_rel, repeating_share))
 
 
 def chain_pull(jac: np.ndarray, sqrt_w: np.ndarray, std: np.ndarray) -> np.ndarray:

@@ -14,8 +14,8 @@ from typing import Literal
 
 import numpy as np
 
-from analysis.adequacy import (BandMisfit, band_misfits, critical_t, missed_spans, quantisation_through_fit,
-                               systematic_std)
+from analysis.adequacy import (CHAIN_WINDOW_STD, BandMisfit, band_misfits, critical_t, loop_feedback_bound,
+                               missed_spans, quantisation_through_fit)
 from analysis.encoder import difference_response
 from analysis.excitation import RESOLUTION_NAMED, weak_coherence_cause
 from analysis.fit import (COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask, quantisation_terms,
@@ -293,8 +293,9 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter,
     scatter of its mean misfit; the share of the encoder's quantisation error that repeats with every motion period
     (``jitter.repeating_share``; the scatter cannot show it) — a random-phase error of the white-quantisation bound
     √(N_q/|H·D|²G_xx) at each line of the motion, carried through the fit
-    (:func:`analysis.adequacy.quantisation_through_fit`); and the smooth errors of the chain and of the speed loop's
-    feedback of the rest of the quantisation (:func:`analysis.adequacy.systematic_std`).
+    (:func:`analysis.adequacy.quantisation_through_fit`); the chain's smooth errors
+    (:data:`analysis.adequacy.CHAIN_WINDOW_STD`); and, taken off the misfit as the bound it is, the speed loop's
+    feedback of the rest of the quantisation (:func:`analysis.adequacy.loop_feedback_bound`).
     """
     f, misfit, reps = amplitude_misfits(frf, fit)
     if kernel_error is not None and kernel_error.shape == misfit.shape:
@@ -304,7 +305,8 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter,
     with np.errstate(invalid="ignore", divide="ignore"):
         carried = jitter.repeating_share * quantisation_through_fit(quant, lines, jac, sqrt_w)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
-    windows = band_misfits(f, misfit, reps, carried, blind, systematic_std(quant, jitter.repeating_share))
+    windows = band_misfits(f, misfit, reps, carried, blind, np.full(f.size, CHAIN_WINDOW_STD),
+                           loop_feedback_bound(quant, jitter.repeating_share))
     spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
     return spans[0] if spans else None
 
