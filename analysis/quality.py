@@ -228,9 +228,8 @@ def assess(
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
                                  f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
                                  f"{worst.t:.0f} σ beyond what noise, the chain and the encoder's quantisation explain "
-                                 f"— a third mode, backlash or friction in the joint: check the gear and the coupling "
-                                 f"for play and for a loose part and the load side for friction; until then K, J_m, "
-                                 f"J_l are the two-mass model's compromise, not the joint's"))
+                                 f"— {_misfit_cause(low, high, fit)}; until then K, J_m, J_l are the two-mass model's "
+                                 f"compromise, not the joint's"))
     elif np.isfinite(fit.residual_rms):
         # the RMS misfit against the coherence's noise alone: where the window test ran (it allows for the
         # quantisation that repeats with the motion, which this ratio does not — 8 % RMS on a healthy 2^17 counts/rev
@@ -281,6 +280,20 @@ def assess(
         encoder_time_stamps=encoder_jitter is not None and encoder_jitter.stamped,
         misfit_band_hz=None if missed is None else missed[:2],
     )
+
+
+def _misfit_cause(low_hz: float, high_hz: float, fit: FitResult) -> str:
+    """What a misfit between ``low_hz`` and ``high_hz`` points to, by where it lies against the fit's anti-resonance
+    and resonance: friction and backlash on the load side damp and bend the anti-resonance; a part beyond the joint
+    that is not rigid adds a mode above the resonance; elsewhere any of them."""
+    if low_hz <= fit.f_a <= high_hz:
+        return (f"at the anti-resonance (f_a = {fit.f_a:.0f} Hz), which friction and backlash on the load side damp "
+                "and bend: check the load side for friction and the gear and the coupling for play")
+    if low_hz > fit.f_r:
+        return (f"above the resonance (f_r = {fit.f_r:.0f} Hz): a third mode — a part beyond the joint that is not "
+                "rigid, or a loose one: check the arm, the tool and their mountings")
+    return ("a third mode, backlash or friction in the joint: check the gear and the coupling for play and for a loose "
+            "part and the load side for friction")
 
 
 def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter,

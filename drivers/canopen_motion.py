@@ -125,7 +125,8 @@ class ProfilePositionMotion:
 
     def _set_ramps(self, profile: Profile, factor: float) -> None:
         """Write 0x6081/0x6083/0x6084 for ``profile`` at ``factor`` times its top speed and read them back (a drive
-        that clamps a value, e.g. to its 0x607F limit, would run another motion than the one recorded)."""
+        that clamps a value, e.g. to its 0x607F limit, would run another motion than the one recorded). A read-back
+        one unit off is accepted: a drive that keeps the value in its own internal units rounds it on the way back."""
         s, top_rpm = self._s, profile.top_speed_rpm * factor
         wanted = {od.PROFILE_VELOCITY: round(top_rpm * s.velocity_units_per_rpm),
                   od.PROFILE_ACCELERATION: round(top_rpm / profile.accel_time_s * s.acceleration_units_per_rpm_per_s),
@@ -133,7 +134,7 @@ class ProfilePositionMotion:
         for index, value in wanted.items():
             self._node.sdo[index].raw = value
         for index, value in wanted.items():
-            if (got := int(self._node.sdo[index].raw)) != value:
+            if abs((got := int(self._node.sdo[index].raw)) - value) > 1:
                 raise DeviceError(f"{self._name}: 0x{index:04X} reads back {got} after {value} was written "
                                   f"(the drive limits it?)")
 

@@ -234,10 +234,10 @@ class SerialDrive:
                 if ack.command == command.kind:
                     if ack.status != 0:
                         raise DeviceError(f"serial port {self.port_name}: drive refused {command.kind} "
-                                          f"(status {ack.status})")
+                                          f"(status {ack.status}){_dither_hint(command)}")
                     return
             raise DeviceError(f"serial port {self.port_name}: no acknowledgement of {command.kind} within "
-                              f"{self.settings.read_timeout_s:g} s")
+                              f"{self.settings.read_timeout_s:g} s{_dither_hint(command)}")
 
     def _read_loop(self) -> None:
         """Reader thread: drain the port, cut frames, unwrap, queue; never blocks longer than a timeout."""
@@ -288,6 +288,15 @@ class SerialDrive:
                                             f"serial sequence gap: {skipped} frame(s) missing before index {index}"))
         self._pending.append((index, self._unwrap.time_us, self._unwrap.position, host_ns))
         return True
+
+
+def _dither_hint(command: Command) -> str:
+    """What to try when a drive neither takes nor acknowledges a dithered start: its firmware may predate the longer
+    start_triangle frame that carries speed_dither and dither_seed."""
+    if command.kind != "start_triangle" or command.profile is None or not command.profile.speed_dither:
+        return ""
+    return (f" — the profile dithers (speed_dither = {command.profile.speed_dither:g}): a drive firmware that predates "
+            "the dithered start_triangle frame refuses it; set speed_dither = 0 in the profile or update the firmware")
 
 
 def open_drive(bench: Bench, sim_bench: object, fast: bool) -> SerialDrive:

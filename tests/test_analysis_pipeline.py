@@ -31,7 +31,7 @@ def sim_recording(accel_time_s: float = 0.2, duration_s: float = 10.0, daq_rate_
     bench_sim = SimBench(bench, realtime=False)
     bench_sim.start_motion(Profile(kind="triangle", top_speed_rpm=1000.0, accel_time_s=accel_time_s,
                                    decel_time_s=accel_time_s, duration_s=duration_s, speed_dither=speed_dither,
-                                   dither_seed=bench.sim.seed), 0.0)
+                                   dither_seed=bench.sim.seed if speed_dither else None), 0.0)
     n, m, blk = int(duration_s * bench_sim.daq_rate_hz), int(duration_s / bench_sim.drive_period_s), 2560
     first = np.arange(0, n, blk)
     count = np.minimum(blk, n - first)

@@ -37,7 +37,8 @@ _channels = itertools.count()
 
 
 def dithered(d: float = 0.02, seed: int | None = 7, **changes: object) -> Profile:
-    return Profile.model_validate({**PAPER.model_dump(), "speed_dither": d, "dither_seed": seed, **changes})
+    return Profile.model_validate({**PAPER.model_dump(), "speed_dither": d, "dither_seed": seed if d else None,
+                                   **changes})
 
 
 def cycle_swings(position_counts: np.ndarray, nominal_counts: float) -> np.ndarray:
@@ -89,14 +90,19 @@ def test_undithered_profile_and_seed_handling() -> None:
     ("dwell_s = 0", "dither_seed = -1: must be greater than or equal to 0"),
     ("top_speed_rpm = 1000", "top_speed_rpm = 99000 with speed_dither = 0.02: the fastest cycle would run at 100980 rpm, "
                              "above 100000 rpm"),
+    ("duration_s = 10", "dither_seed = 5 without speed_dither: the seed only chooses the cycles of a dithered motion "
+                        "(speed_dither = 0, the default, repeats exactly) — set speed_dither (e.g. 0.02) or remove "
+                        "dither_seed"),
 ])
 def test_a_bad_dither_is_one_line_naming_the_file_key_and_value(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                                 edit: str, message: str) -> None:
     text = (CONFIGS / "profiles" / "triangle_0.2s.toml").read_text()
     new = {"speed_dither = 0.02": "speed_dither = 0.06", "dwell_s = 0": "dwell_s = 0\ndither_seed = -1",
-           "top_speed_rpm = 1000": "top_speed_rpm = 99000"}[edit]
+           "top_speed_rpm = 1000": "top_speed_rpm = 99000",
+           "duration_s = 10": "duration_s = 10\ndither_seed = 5"}[edit]
     path = tmp_path / "p.toml"
-    path.write_text(text.replace(edit, new, 1))
+    text = text.replace(edit, new, 1)
+    path.write_text(text.replace("speed_dither = 0.02", "speed_dither = 0") if "dither_seed = 5" in text else text)
     run = run_cli(capsys, "record", "--profile", str(path), "--fast", "--out", str(tmp_path))
     assert (run.code, run.err) == (2, f"acq: error: {path}: {message}\n")
     assert not list(tmp_path.glob("*.h5"))
