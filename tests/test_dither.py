@@ -9,6 +9,7 @@ the serial drive (acq1 frames over a real pty) run the same factors; a recording
 from __future__ import annotations
 
 import itertools
+import json
 import struct
 import tomllib
 from pathlib import Path
@@ -158,6 +159,12 @@ def test_a_fast_recording_keeps_the_seed_its_simulated_drive_used(tmp_path: Path
     swings = cycle_swings(session.encoder.position_counts, half_swing_rad(p) / (2 * np.pi) * CPR)
     assert swings.size >= 3
     np.testing.assert_allclose(swings, speed_factors(p, np.arange(swings.size)), atol=1e-3)  # the loop lags ~4e-4
+    # a user finds the seed to repeat the motion with: acq info (table and --json)
+    info = run_cli(capsys, "info", str(path))
+    assert f"motion: speed dither ±2 % per cycle, dither_seed {p.dither_seed}" in [
+        line.strip() for line in info.out.splitlines()]
+    doc = json.loads(run_cli(capsys, "info", str(path), "--json").out)
+    assert (doc["commanded"], doc["speed_dither"], doc["dither_seed"]) == (True, 0.02, p.dither_seed)
 
 
 # ---- CANopen: Profile Position on the simulated drive, checked on the wire ------------------------------

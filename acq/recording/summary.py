@@ -25,7 +25,9 @@ class StreamSummary:
 @dataclass(frozen=True)
 class SessionSummary:
     """A session at a glance; ``encoder_extras`` names the optional encoder columns the drive gave (the drive's time
-    stamps ``drive_time_s``, ``velocity_counts_per_s``, ``velocity_demand_counts_per_s``)."""
+    stamps ``drive_time_s``, ``velocity_counts_per_s``, ``velocity_demand_counts_per_s``); ``speed_dither`` and
+    ``dither_seed`` are those of the profile as executed (0 and None: a motion that repeats exactly, or none
+    commanded — ``commanded`` False when the machine's own controller moved the joint)."""
 
     path: str
     joint: str
@@ -35,6 +37,9 @@ class SessionSummary:
     streams: tuple[StreamSummary, ...]
     events: int
     encoder_extras: tuple[str, ...] = ()
+    commanded: bool = True
+    speed_dither: float = 0.0
+    dither_seed: int | None = None
 
     def to_json_dict(self) -> dict[str, object]:
         return asdict(self)
@@ -78,4 +83,7 @@ def summarize(session: Session) -> SessionSummary:
         events=len(session.events),
         encoder_extras=tuple(name for name in ("drive_time_s", "velocity_counts_per_s", "velocity_demand_counts_per_s")
                              if getattr(enc, name) is not None),
+        commanded=session.profile is not None,
+        speed_dither=0.0 if session.profile is None else session.profile.speed_dither,
+        dither_seed=None if session.profile is None else session.profile.dither_seed,
     )

@@ -222,6 +222,10 @@ def summary_table(summary: SessionSummary) -> FittedTable:
         title += f" ({escape(summary.stop_reason)})"
     if summary.encoder_extras:
         title += "\nencoder also: " + ", ".join(_EXTRA_TEXT.get(n, n) for n in summary.encoder_extras)
+    if summary.commanded and summary.speed_dither:
+        title += f"\nmotion: speed dither ±{100 * summary.speed_dither:g} % per cycle, dither_seed {summary.dither_seed}"
+    elif summary.commanded:
+        title += "\nmotion: no speed dither (repeats exactly)"
     s = summary.streams
     columns = [Column("stream", [x.name for x in s], "left"), Column("samples", [f"{x.samples}" for x in s]),
                Column("duration\ns", [f"{x.duration_s:.3f}" for x in s]),
