@@ -25,11 +25,13 @@ four blocks) that Jacobian covariance is used, with the normal 1.96. Then the mi
 what the residual leaves unexplained, propagated to the parameters with its own size and correlation along
 frequency (:func:`analysis.adequacy.misfit_covariance`, a HAC sandwich) — the part no scatter between
 blocks shows because every period repeats it (the chain's small errors, a mode or a nonlinearity the
-two-mass model lacks). Where that share is below the pull of the encoder's quantisation on the parameters
-(:func:`analysis.adequacy.quantisation_pull`: the quantisation error repeats with the motion, so no scatter shows
-it, and the part the fit absorbed leaves no residual), the latter is taken instead — computed from the session's
-own spectra and the encoder's resolution (:attr:`FitOptions.speed_lsb_rad`); without the resolution, the constant
-:data:`CHAIN_REL_STD`. The 95 % interval is exp(ln θ ± half-width) on each value.
+two-mass model lacks). Where that share is below the pull of the systematic errors no scatter shows, the latter is
+taken instead: the share of the encoder's quantisation error that repeats with the motion
+(:func:`analysis.adequacy.quantisation_pull` times :attr:`FitOptions.quantisation_repeating_share`: the part the fit
+absorbed leaves no residual) and the smooth errors of the chain and of the speed loop's feedback of the rest of the
+quantisation (:func:`analysis.adequacy.chain_pull`) — computed from the session's own spectra and the encoder's
+resolution (:attr:`FitOptions.speed_lsb_rad`); without the resolution, the constant :data:`CHAIN_REL_STD`. The 95 %
+interval is exp(ln θ ± half-width) on each value.
 
 The model is compared with the measurement as the Welch estimator sees it: H convolved with the
 Hann window's spectral kernel |W(ν)|², weighted by the finely resolved torque spectrum
