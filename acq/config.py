@@ -154,9 +154,16 @@ def resolve_profile_path(name_or_path: str) -> Path:
 
 
 def load_profile(name_or_path: str) -> Profile:
-    """Load a motion profile by name or path."""
+    """Load a motion profile by name or path. A profile file that sets ``dither_seed`` without ``speed_dither`` is an
+    error (the seed would choose nothing: the motion repeats exactly); a session file's profile as executed is not
+    judged so (a recorded file is what it is)."""
     p = resolve_profile_path(name_or_path)
-    return validate(Profile, read_toml(p), p)
+    profile = validate(Profile, read_toml(p), p)
+    if profile.dither_seed is not None and profile.speed_dither == 0.0:
+        raise ConfigError(f"{p}: dither_seed = {profile.dither_seed} without speed_dither: the seed only chooses the "
+                          "cycles of a dithered motion (speed_dither = 0, the default, repeats exactly) — set "
+                          "speed_dither (e.g. 0.02) or remove dither_seed")
+    return profile
 
 
 def with_joint(bench: Bench, joint: str | None) -> Bench:

@@ -228,7 +228,7 @@ def assess(
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
                                  f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
                                  f"{worst.t:.0f} σ beyond what noise, the chain and the encoder's quantisation explain "
-                                 f"— {_misfit_cause(low, high, fit)}; until then K, J_m, J_l are the two-mass model's "
+                                 f"— {_misfit_cause(worst, fit)}; until then K, J_m, J_l are the two-mass model's "
                                  f"compromise, not the joint's"))
     elif np.isfinite(fit.residual_rms):
         # the RMS misfit against the coherence's noise alone: where the window test ran (it allows for the
@@ -282,16 +282,16 @@ def assess(
     )
 
 
-def _misfit_cause(low_hz: float, high_hz: float, fit: FitResult) -> str:
-    """What a misfit between ``low_hz`` and ``high_hz`` points to, by where it lies against the fit's anti-resonance
-    and resonance: friction and backlash on the load side damp and bend the anti-resonance; a part beyond the joint
-    that is not rigid adds a mode above the resonance; elsewhere any of them."""
-    if low_hz <= fit.f_a <= high_hz:
+def _misfit_cause(worst: BandMisfit, fit: FitResult) -> str:
+    """What the worst window's misfit points to, by where it lies against the fit's anti-resonance and resonance:
+    friction and backlash on the load side damp and bend the anti-resonance; a compliant or loose part adds a mode
+    above the resonance; elsewhere any of them."""
+    if worst.low_hz <= fit.f_a <= worst.high_hz:
         return (f"at the anti-resonance (f_a = {fit.f_a:.0f} Hz), which friction and backlash on the load side damp "
                 "and bend: check the load side for friction and the gear and the coupling for play")
-    if low_hz > fit.f_r:
-        return (f"above the resonance (f_r = {fit.f_r:.0f} Hz): a third mode — a part beyond the joint that is not "
-                "rigid, or a loose one: check the arm, the tool and their mountings")
+    if worst.low_hz > fit.f_r:
+        return (f"above the resonance (f_r = {fit.f_r:.0f} Hz): a third mode — a compliant or loose part (the "
+                "coupling, the arm, the tool or their mountings): check them")
     return ("a third mode, backlash or friction in the joint: check the gear and the coupling for play and for a loose "
             "part and the load side for friction")
 

@@ -19,9 +19,9 @@ difference beyond ±4 counts cannot come from errors of ±½ count (|−1| + 3 +
 motion's own corners and ringing, which repeat as signal, and are left out, as are samples moving less than
 :data:`analysis.sample_instants.QUANTISATION_COUNTS` counts a cycle (their errors are correlated along the record).
 What of the motion's own third difference stays within ±4 counts still reads as repeating (a dithered 500 Hz
-encoder: 0.10), so the share of samples whose count one period later is offset by exactly the usual number of counts
-bounds it from the other side (a dithered motion: ~0.01; it reads high only where trajectories differ by a
-fraction of a count, which the correlation sees). The motion's period is taken at every high peak of the speed's
+encoder: 0.10), so the share of neighbouring samples whose counts one period later are offset by the same whole
+number of counts bounds it from the other side (a dithered motion: ~0.01; it reads high only where trajectories
+differ by a fraction of a count, which the correlation sees). The motion's period is taken at every high peak of the speed's
 autocorrelation (a program of unlike strokes repeats at the whole program, not at a stroke), each refined within
 ±1 % (at least ±3 samples: a drive's profile may run on a cycle a little off the encoder's), and the highest share
 over them counts.
@@ -44,28 +44,33 @@ _D3_MAX_COUNTS = 4.0  # the largest third difference errors of ±½ count can ma
 # its own scatter (≈ 2.5/√pairs, 0.035 at 5 000 pairs) at most
 _REFINE_FRACTION = 0.01
 _REFINE_MIN_SAMPLES = 3
-# Candidate periods: every autocorrelation peak at least half the highest (a program of unlike strokes repeats at
-# the whole program, whose peak may be lower than a stroke's; an exact repetition is a peak as high as any), at most
-# this many of the highest — each candidate costs ~2·1 % of its lag in dot products
+# Candidate periods: the autocorrelation's peaks of at least half the highest, within a third of the record (the
+# per-pair normalisation makes longer lags noisy), the shortest first — the motion's period, or one stroke of a
+# program of unlike strokes, which repeats at a few strokes (its whole period): each candidate is also taken ×2…×4,
+# refined within k times its reach. Peaks near a multiple of a shorter candidate add nothing; at most this many
 _PEAK_SHARE = 0.5
-_MAX_CANDIDATES = 8
+_MAX_CANDIDATES = 4
+_MULTIPLES = 4
 # The share is a property of the motion, not of the record's length: it is measured on at most this many samples
-# (4.4 min at 4 kHz, 17 min at 1 kHz), which bounds the time and memory on hour-long records
-_MAX_SAMPLES = 2**20
+# (65 s at 4 kHz, 4.4 min at 1 kHz: tens of thousands of pairs, a scatter of the share below 0.01), which bounds the
+# time and memory on hour-long records
+_MAX_SAMPLES = 2**18
 _MIN_PAIRS = 200  # fewer pairs than this: the correlation's own scatter (1/√n) is above 0.07, not measured
 
 
 def candidate_periods(speed: np.ndarray) -> list[int]:
     """Lags, in samples, at which the speed may repeat: the peaks of its autocorrelation after its first negative
-    lobe that reach half the highest, the highest first (at most :data:`_MAX_CANDIDATES`); empty when the speed
-    does not repeat within half the record."""
+    lobe that reach half the highest within a third of the record, the shortest first, none near a multiple of a
+    shorter one (at most :data:`_MAX_CANDIDATES`); empty when the speed does not repeat within a third of the
+    record."""
     x = np.asarray(speed, dtype=float)[:_MAX_SAMPLES]
     x = x - x.mean()
     n = x.size
     if n < 8 or not np.any(x):
         return []
+    reach = n // 3
     # per pair of samples (the sum over n − lag of them), so that the peak is not pulled towards short lags
-    ac = signal.correlate(x, x, mode="full", method="fft")[n - 1:n - 1 + n // 2] / (n - np.arange(n // 2))
+    ac = signal.correlate(x, x, mode="full", method="fft")[n - 1:n - 1 + reach] / (n - np.arange(reach))
     negative = np.flatnonzero(ac < 0.0)
     if negative.size == 0:
         return []
@@ -73,21 +78,32 @@ def candidate_periods(speed: np.ndarray) -> list[int]:
     peaks, _ = signal.find_peaks(tail)
     if peaks.size == 0 or not tail[peaks].max() > 0.0:
         return []
-    high = peaks[tail[peaks] >= _PEAK_SHARE * tail[peaks].max()]
-    high = high[np.argsort(-tail[high], kind="stable")][:_MAX_CANDIDATES]
-    return [int(negative[0] + k) for k in high]
+    kept: list[int] = []
+    for lag in negative[0] + peaks[tail[peaks] >= _PEAK_SHARE * tail[peaks].max()]:
+        if not any(abs(lag - round(lag / k) * k) <= _refine_reach(lag) for k in kept):
+            kept.append(int(lag))
+        if len(kept) == _MAX_CANDIDATES:
+            break
+    return kept
+
+
+def _refine_reach(lag: int) -> int:
+    """Samples either side of ``lag`` over which a period is refined."""
+    return max(_REFINE_MIN_SAMPLES, int(np.ceil(_REFINE_FRACTION * lag)))
 
 
 def locked_share(position_counts: np.ndarray) -> float:
     """Share (0…1) of the encoder's quantisation error that repeats with the motion; NaN when it cannot be measured
     (no repeating motion, too few moving samples).
 
-    At each candidate period (:func:`candidate_periods`) the lower of two readings, each of which can only read high:
-    the correlation of the angle's third differences one period apart (high also where the motion's own third
-    differences repeat — its corners and ringing within ±4 counts), and the share of moving samples whose count
-    one period later differs by exactly the record's usual offset (high also where the trajectories differ by a
-    fraction of a count, which already decorrelates the errors). The highest over the candidates is returned: a
-    period taken for the motion's that is not would read a low share and hide a repeating error.
+    At each candidate period (:func:`candidate_periods`) the lower of two readings: the correlation of the angle's
+    third differences one period apart, at the lag within ±1 % where it is highest (it reads high also where the
+    motion's own third differences repeat — its corners and ringing within ±4 counts), and, at that lag, the share of
+    neighbouring moving samples whose counts one period later are offset by the same whole number of counts (a
+    trajectory that starts each period a whole count away from the last keeps its errors and reads 1; it reads high
+    also where trajectories differ by a fraction of a count, which the correlation sees). The highest over the
+    candidates is returned: a period taken for the motion's that is not would read a low share and hide a repeating
+    error.
 
     Parameters
     ----------
@@ -103,28 +119,47 @@ def locked_share(position_counts: np.ndarray) -> float:
     # every step the third difference spans moves at least QUANTISATION_COUNTS: their errors are independent
     moving = np.convolve(step >= QUANTISATION_COUNTS, np.ones(_D3.size - 1), mode="valid") == _D3.size - 1
     usable = moving & (np.abs(d3) <= _D3_MAX_COUNTS)
+    correlation = _correlations(d3, usable)
     best = float("nan")
     for period in periods:
-        reach = max(_REFINE_MIN_SAMPLES, int(np.ceil(_REFINE_FRACTION * period)))
-        for lag in range(max(period - reach, 1), period + reach + 1):
-            share = _share_at(p, d3, usable, lag)
-            if np.isfinite(share):
-                best = share if not np.isfinite(best) else max(best, share)
+        for k in range(1, _MULTIPLES + 1):  # a program of unlike strokes repeats at a few of them
+            reach = k * _refine_reach(period)
+            window = correlation[max(k * period - reach, 1):min(k * period + reach + 1, correlation.size)]
+            if not np.any(np.isfinite(window)):
+                continue
+            lag = max(k * period - reach, 1) + int(np.nanargmax(window))
+            share = min(float(correlation[lag]), _same_offset_share(p, usable, lag, d3.size))
+            best = share if not np.isfinite(best) else max(best, share)
     return float(np.clip(best, 0.0, 1.0)) if np.isfinite(best) else float("nan")
 
 
-def _share_at(p: np.ndarray, d3: np.ndarray, usable: np.ndarray, lag: int) -> float:
-    """The lower of the two readings of :func:`locked_share` at one lag (samples); NaN with too few pairs."""
-    if lag >= d3.size:
-        return float("nan")
-    pair = usable[:-lag] & usable[lag:]
-    if np.count_nonzero(pair) < _MIN_PAIRS:
-        return float("nan")
-    a, b = d3[:-lag][pair], d3[lag:][pair]
-    denom = float(np.sqrt(np.dot(a, a) * np.dot(b, b)))
-    if not denom > 0.0:
-        return float("nan")
-    m = d3.size - lag
-    offset = (p[lag:lag + m] - p[:m])[pair]
-    same_count = float(np.mean(offset == np.median(offset)))
-    return min(float(np.dot(a, b)) / denom, same_count)
+def _correlations(d3: np.ndarray, usable: np.ndarray) -> np.ndarray:
+    """Correlation of the usable third differences ``lag`` samples apart, for every lag (index = lag; NaN where
+    fewer than :data:`_MIN_PAIRS` pairs): sums over the pairs usable at both ends, all lags at once by FFT
+    (scipy.signal.correlate) — a dot product per lag would cost the record's length for each of thousands."""
+    m = usable.astype(float)
+    am, a2m = d3 * m, d3 * d3 * m
+    n = d3.size
+
+    def at_lags(x: np.ndarray, y: np.ndarray) -> np.ndarray:  # Σ_k x[k + lag]·y[k], lag = 0 … n − 1
+        return signal.correlate(x, y, mode="full", method="fft")[n - 1:]
+
+    pairs, products = at_lags(m, m), at_lags(am, am)
+    later, earlier = at_lags(a2m, m), at_lags(m, a2m)  # Σ of the squares at the later / the earlier end
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = products / np.sqrt(later * earlier)
+    out[(np.rint(pairs) < _MIN_PAIRS) | ~(later > 0) | ~(earlier > 0)] = np.nan
+    return out
+
+
+def _same_offset_share(p: np.ndarray, usable: np.ndarray, lag: int, n: int) -> float:
+    """Share of neighbouring usable samples whose counts ``lag`` samples later are offset by the same whole number
+    of counts (the positions one period apart differ by a constant, so their quantisation errors are the same — also
+    where a motion starts each period a whole count away from the last); 1 where there are no neighbours to tell."""
+    m = n - lag
+    pair = np.flatnonzero(usable[:m] & usable[lag:lag + m])
+    offset = p[lag + pair] - p[pair]
+    neighbours = pair[1:] == pair[:-1] + 1
+    if not np.any(neighbours):
+        return 1.0
+    return float(np.mean(offset[1:][neighbours] == offset[:-1][neighbours]))

@@ -17,11 +17,14 @@ class CommandedProfile:
         Ramp times from standstill to the top speed and back, s.
     jerk_time_s : float
         S-curve jerk time (the time the acceleration takes to reach its level), s; 0 for plain ramps.
+    speed_dither : float
+        Each cycle's speed scaled within 1 ± this (0: a motion that repeats exactly).
     """
 
     accel_time_s: float
     decel_time_s: float
     jerk_time_s: float = 0.0
+    speed_dither: float = 0.0
 
 
 @dataclass(frozen=True)

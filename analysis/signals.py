@@ -176,10 +176,14 @@ def spans_and_clock(rec: Recording, chain: SignalChain = SignalChain()) -> Spans
     theta, jitter = _angle_on_grid(rec, span, notes)
     jitter = replace(jitter, locked_share=locked_share(rec.position_counts[span.start:span.stop]))
     if jitter.locked_share >= NOTED_LOCKED_SHARE:
-        remedy = ("set speed_dither (e.g. 0.02, as the shipped triangle_0.2s) in the profile so that it averages out"
-                  if rec.profile is not None else
-                  "the machine repeats its motion that exactly; a recording of motions that vary from cycle to cycle "
-                  "averages it out")
+        if rec.profile is None:
+            remedy = ("the machine repeats its motion that exactly; a recording of motions that vary from cycle to "
+                      "cycle averages it out")
+        elif rec.profile.speed_dither:
+            remedy = (f"though the profile dithers (speed_dither = {rec.profile.speed_dither:g}), the motion did not "
+                      "vary: check that the drive runs the dithered profile")
+        else:
+            remedy = "set speed_dither (e.g. 0.02, as the shipped triangle_0.2s) in the profile so that it averages out"
         notes.append(f"encoder: {100 * jitter.locked_share:.0f} % of its quantisation error repeats with every motion "
                      "period (the trajectory repeats to a fraction of a count), so no average removes it and the "
                      "check for a mode the two-mass model lacks must allow for it: a mode of a few percent can hide "

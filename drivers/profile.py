@@ -70,8 +70,4 @@ class Profile(Strict):
             raise ValueError(f"top_speed_rpm = {self.top_speed_rpm:g} with speed_dither = {self.speed_dither:g}: the "
                              f"fastest cycle would run at {self.top_speed_rpm * self.max_speed_factor:g} rpm, above "
                              f"{MAX_TOP_SPEED_RPM:g} rpm")
-        if self.dither_seed is not None and self.speed_dither == 0.0:
-            raise ValueError(f"dither_seed = {self.dither_seed} without speed_dither: the seed only chooses the cycles "
-                             "of a dithered motion (speed_dither = 0, the default, repeats exactly) — set speed_dither "
-                             "(e.g. 0.02) or remove dither_seed")
         return self

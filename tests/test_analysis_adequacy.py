@@ -192,3 +192,17 @@ def test_an_error_shared_by_the_bins_of_a_window_pulls_a_fitted_constant_by_its_
     np.testing.assert_allclose(chain_pull(np.ones((n, 1)), np.ones(n), np.full(n, s)), [[s**2 / 3]], rtol=1e-12)
     jac = np.vstack([np.ones((n, 1)), np.zeros((n, 1))])
     np.testing.assert_allclose(chain_pull(jac, np.ones(n), np.full(n, s)), [[s**2 / 3]], rtol=1e-12)
+
+
+def test_a_bias_bound_is_taken_off_the_window_misfit_before_it_is_compared():
+    # 8 bins of +5 % misfit, scatter 1 %: t = 5; with a bound of 2 % (the loop's feedback of the quantisation) the
+    # window can be explained down to 3 %, t = 3; a bound above the misfit explains it all
+    f = np.arange(WINDOW_BINS) * 2.0 + 100.0
+    misfit = np.full(WINDOW_BINS, 0.05)
+    reps = misfit + np.array([[-1.0], [1.0]]) * 0.01 / np.sqrt(1.0)  # 2 replicates: scatter √(1/2·Σ) = 0.01
+    (plain,) = band_misfits(f, misfit, reps)
+    (bounded,) = band_misfits(f, misfit, reps, bias_bound=np.full(WINDOW_BINS, 0.02))
+    (explained,) = band_misfits(f, misfit, reps, bias_bound=np.full(WINDOW_BINS, 0.06))
+    assert plain.noise == pytest.approx(0.01) and plain.t == pytest.approx(5.0)
+    assert (bounded.bound, bounded.t) == (pytest.approx(0.02), pytest.approx(3.0))
+    assert explained.t == 0.0

@@ -248,3 +248,14 @@ def test_a_scenario_runs_the_shipped_dithered_profile_with_the_runs_seed_unless_
                == (0.02, 3) for sc in SCENARIOS)
     _, p = scenario_bench(Scenario("undithered", profile={"speed_dither": 0.0}), 5, 0.01, 20.0)
     assert p.speed_dither == 0.0
+
+
+def test_a_drive_that_refuses_or_ignores_a_dithered_start_is_told_what_to_change() -> None:
+    from drivers.serial_codec import Command
+    from drivers.serial_drive import _dither_hint
+
+    assert _dither_hint(Command("start_triangle", dithered(0.02, seed=3))) == (
+        " — the profile dithers (speed_dither = 0.02): a drive firmware that predates the dithered start_triangle "
+        "frame refuses it; set speed_dither = 0 in the profile or update the firmware")
+    assert _dither_hint(Command("start_triangle", dithered(0.0))) == ""
+    assert _dither_hint(Command("stream_on")) == ""

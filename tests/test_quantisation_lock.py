@@ -41,11 +41,20 @@ def test_a_trajectory_that_repeats_exactly_repeats_its_quantisation_error():
 @pytest.mark.parametrize("dither", [0.005, 0.02])
 def test_an_amplitude_dithered_motion_decorrelates_it(dither):
     amplitudes = TOP * (1.0 + dither * np.random.default_rng(1).uniform(-1.0, 1.0, CYCLES))
-    assert locked_share(triangle_counts(amplitudes)) < 0.1
+    # the third differences alone read 0.07 here (the motion's own); the counts' offsets one period apart vary
+    assert locked_share(triangle_counts(amplitudes)) < 0.03
 
 
 def test_disturbances_of_a_few_counts_decorrelate_it():
-    assert locked_share(triangle_counts(np.full(CYCLES, TOP), noise_counts=2.0)) < 0.1
+    assert locked_share(triangle_counts(np.full(CYCLES, TOP), noise_counts=2.0)) < 0.03
+
+
+def test_a_motion_that_starts_each_period_whole_counts_away_keeps_its_quantisation_error():
+    # relative moves from the count the last one ended on: the same errors, shifted by whole counts (the review of
+    # session 6: an offset compared with the record's median read 0.45–0.55 here)
+    counts = triangle_counts(np.full(CYCLES, TOP))
+    shifts = np.repeat(np.cumsum(np.random.default_rng(3).integers(-2, 3, CYCLES)), PERIOD)
+    assert locked_share(counts + shifts) > 0.9
 
 
 def test_a_tenth_of_a_count_already_takes_much_of_it_away():

@@ -51,3 +51,16 @@ def test_scenario_is_ok_within_tolerance_or_not_ok(name: str, seed: int, tmp_pat
             res.quality.reasons
     if sc.expect == "ok" and res.quality.verdict == "ok":
         assert abs(res.clock.offset_s - truth["daq_offset_s"]) < 50e-6
+
+
+@pytest.mark.parametrize(("name", "cause"), [
+    ("third mass 150 Hz (inside band), J_3 = 0.5 J_l",
+     "above the resonance (f_r = 95 Hz): a third mode — a compliant or loose part (the coupling, the arm, the tool "
+     "or their mountings): check them; until then"),
+    ("backlash 0.2 mrad", "at the anti-resonance (f_a = "),
+])
+def test_a_misfit_names_what_its_place_points_to(name: str, cause: str, tmp_path: Path) -> None:
+    index, sc = BY_NAME[name]
+    path, _ = record(sc, 0, *clock_for(0, index), tmp_path)
+    misfit = next(r for r in analyse(path).quality.reasons if r.startswith("the two-mass model does not fit"))
+    assert cause in misfit, misfit

@@ -66,7 +66,8 @@ def recording_from_session(session: Session) -> Recording:
         host_clock_shared=session.host_clock_shared,
         drive_time_s=enc.drive_time_s,
         profile=None if session.profile is None else CommandedProfile(
-            session.profile.accel_time_s, session.profile.decel_time_s, session.profile.jerk_time_s),
+            session.profile.accel_time_s, session.profile.decel_time_s, session.profile.jerk_time_s,
+            session.profile.speed_dither),
     )
 
 
