@@ -134,7 +134,7 @@ class BandMisfit:
 def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarray,
                  systematic_cov: np.ndarray | None = None,
                  blind: np.ndarray | None = None,
-                 chain_std: np.ndarray | None = None,
+                 chain_std: float = 0.0,
                  bias_bound: np.ndarray | None = None) -> tuple[BandMisfit, ...]:
     """The misfit of ln|H| per window of :data:`WINDOW_BINS` bins, stepped by half a window.
 
@@ -153,9 +153,9 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
     blind : ndarray of bool, shape (n,), optional
         Bins whose bias is unbounded (no signal to compare the quantisation with): a window holding one is not
         judged.
-    chain_std : ndarray, shape (n,), optional
-        Standard deviation per bin of the chain's smooth errors (:data:`CHAIN_WINDOW_STD`), shared by a window's
-        bins: a window allows its mean; None: none.
+    chain_std : float, optional
+        Standard deviation of every window's mean that the chain's smooth errors allow (:data:`CHAIN_WINDOW_STD`);
+        0: none.
     bias_bound : ndarray, shape (n,), optional
         The most a bias may move each bin (:func:`loop_feedback_bound`): a window takes its mean off |misfit|;
         None: none.
@@ -175,8 +175,7 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
         mean_b = reps[:, w].mean(axis=1)
         noise = float(np.sqrt((b - 1) / b * np.sum((mean_b - mean_b.mean()) ** 2)))
         quant = 0.0 if systematic_cov is None else float(np.sqrt(max(np.mean(systematic_cov[w, w]), 0.0)))
-        if chain_std is not None:
-            quant = float(np.hypot(quant, np.mean(chain_std[w])))
+        quant = float(np.hypot(quant, chain_std))
         if (blind is not None and np.any(blind[w])) or not np.isfinite(quant):
             quant = np.inf  # unbounded (or not computable): the window is not judged
         m = float(np.mean(misfit[w]))

@@ -318,7 +318,7 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter,
     with np.errstate(invalid="ignore", divide="ignore"):
         carried = jitter.repeating_share * quantisation_through_fit(quant, lines, jac, sqrt_w)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
-    windows = band_misfits(f, misfit, reps, carried, blind, np.full(f.size, CHAIN_WINDOW_STD),
+    windows = band_misfits(f, misfit, reps, carried, blind, CHAIN_WINDOW_STD,
                            loop_feedback_bound(quant, jitter.repeating_share))
     spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
     return spans[0] if spans else None

@@ -32,13 +32,13 @@ from __future__ import annotations
 import numpy as np
 from scipy import signal
 
-from analysis.sample_instants import QUANTISATION_COUNTS
+from analysis.sample_instants import QUANTISATION_COUNTS, THIRD_DIFFERENCE, third_difference
 
 # From this share on the analysis says so in its notes: the misfit test's allowance for the quantisation (a standard
 # deviation ∝ √share) is then at least 70 % of what a fully repeating error needs, and a few-percent mode can hide in it
 NOTED_LOCKED_SHARE = 0.5
-_D3 = np.array([-1.0, 3.0, -3.0, 1.0])
-_D3_MAX_COUNTS = 4.0  # the largest third difference errors of ±½ count can make
+# the largest third difference errors of ±½ count can make: ½·(1 + 3 + 3 + 1) = 4 counts
+_D3_MAX_COUNTS = 0.5 * float(np.abs(THIRD_DIFFERENCE).sum())
 # the autocorrelation's peak of a few periods of a triangle lies up to ~1 % off the period (measured: 805 samples for
 # 800 on a 3 s record): the lag is refined within that, and the maximum over ~2·1 % of the lags raises the share by
 # its own scatter (≈ 2.5/√pairs, 0.035 at 5 000 pairs) at most
@@ -114,10 +114,11 @@ def locked_share(position_counts: np.ndarray) -> float:
     periods = candidate_periods(np.diff(p))
     if not periods:
         return float("nan")
-    d3 = np.convolve(p, _D3[::-1], mode="valid")  # d3[i] from p[i] … p[i + 3]
+    d3 = third_difference(p)  # d3[i] from p[i] … p[i + 3]
     step = np.abs(np.diff(p))
     # every step the third difference spans moves at least QUANTISATION_COUNTS: their errors are independent
-    moving = np.convolve(step >= QUANTISATION_COUNTS, np.ones(_D3.size - 1), mode="valid") == _D3.size - 1
+    spans = THIRD_DIFFERENCE.size - 1
+    moving = np.convolve(step >= QUANTISATION_COUNTS, np.ones(spans), mode="valid") == spans
     usable = moving & (np.abs(d3) <= _D3_MAX_COUNTS)
     correlation = _correlations(d3, usable)
     best = float("nan")

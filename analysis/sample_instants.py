@@ -29,8 +29,8 @@ from scipy.interpolate import CubicSpline
 
 from analysis.encoder import quantisation_speed_psd
 
-_D3 = np.array([-1.0, 3.0, -3.0, 1.0])  # third difference
-_D3_GAIN = float(np.sum(_D3**2))  # 20: variance gain of the third difference on white errors
+THIRD_DIFFERENCE = np.array([-1.0, 3.0, -3.0, 1.0])  # its weights, oldest sample first
+_D3_GAIN = float(np.sum(THIRD_DIFFERENCE**2))  # 20: variance gain of the third difference on white errors
 _BINS = 16
 QUANTISATION_COUNTS = 2.0  # counts a cycle above which neighbouring quantisation errors count as independent
 _MEDIAN_CHI2_1 = 0.454936  # median of χ²(1): median(x²) = 0.4549·σ² for Gaussian x
@@ -133,6 +133,12 @@ def angle_at_nominal_instants(theta_rad: np.ndarray, index: np.ndarray, period_s
     return CubicSpline(t_nominal + deviation_s, theta_rad)(t_nominal)
 
 
+def third_difference(x: np.ndarray) -> np.ndarray:
+    """d[i] = x[i+3] − 3x[i+2] + 3x[i+1] − x[i]: removes a motion up to a parabola, keeps white errors ×20 in
+    variance (length ``x.size − 3``)."""
+    return np.convolve(x, THIRD_DIFFERENCE[::-1], mode="valid")
+
+
 def estimate_jitter(theta_rad: np.ndarray, period_s: float, *, lsb_rad: float = 0.0, stamped: bool = False,
                     stamp_spread_s: float = float("nan")) -> EncoderJitter:
     """σ_δ from the growth of the angle's high-pass noise with speed (see the module docstring).
@@ -157,10 +163,11 @@ def estimate_jitter(theta_rad: np.ndarray, period_s: float, *, lsb_rad: float = 
     mean_speed2 = float(np.mean(speed**2)) if th.size else float("nan")
     if th.size < 8 * _BINS:
         return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s, lsb_rad)
-    d3 = np.convolve(th, _D3[::-1], mode="valid")  # d3[i] = θ[i+3] − 3θ[i+2] + 3θ[i+1] − θ[i]
-    w2 = np.convolve(speed**2, _D3[::-1] ** 2, mode="valid") / _D3_GAIN  # ω² seen by each d3, weighted
+    d3 = third_difference(th)
+    w2 = np.convolve(speed**2, THIRD_DIFFERENCE[::-1] ** 2, mode="valid") / _D3_GAIN  # ω² seen by each d3, weighted
     fast = np.abs(speed) * period_s >= QUANTISATION_COUNTS * lsb_rad
-    usable = np.flatnonzero(np.convolve(fast, np.ones(_D3.size), mode="valid") == _D3.size)
+    n3 = THIRD_DIFFERENCE.size
+    usable = np.flatnonzero(np.convolve(fast, np.ones(n3), mode="valid") == n3)
     if usable.size < 8 * _BINS:
         return EncoderJitter(float("nan"), mean_speed2, stamped, stamp_spread_s, lsb_rad)
     d3, w2 = d3[usable], w2[usable]

@@ -22,7 +22,7 @@ import numpy as np
 from analysis import encoder, resample, sample_instants, torque
 from analysis.chain import SignalChain, TorqueMethod
 from analysis.clocks import ClockFit, fit_clock, host_relation
-from analysis.recording import Recording
+from analysis.recording import CommandedProfile, Recording
 from analysis.fit import Z95
 from analysis.quantisation_lock import NOTED_LOCKED_SHARE, locked_share
 from analysis.sample_instants import EncoderJitter
@@ -176,18 +176,7 @@ def spans_and_clock(rec: Recording, chain: SignalChain = SignalChain()) -> Spans
     theta, jitter = _angle_on_grid(rec, span, notes)
     jitter = replace(jitter, locked_share=locked_share(rec.position_counts[span.start:span.stop]))
     if jitter.locked_share >= NOTED_LOCKED_SHARE:
-        if rec.profile is None:
-            remedy = ("the machine repeats its motion that exactly; a recording of motions that vary from cycle to "
-                      "cycle averages it out")
-        elif rec.profile.speed_dither:
-            remedy = (f"though the profile dithers (speed_dither = {rec.profile.speed_dither:g}), the motion did not "
-                      "vary: check that the drive runs the dithered profile")
-        else:
-            remedy = "set speed_dither (e.g. 0.02, as the shipped triangle_0.2s) in the profile so that it averages out"
-        notes.append(f"encoder: {100 * jitter.locked_share:.0f} % of its quantisation error repeats with every motion "
-                     "period (the trajectory repeats to a fraction of a count), so no average removes it and the "
-                     "check for a mode the two-mass model lacks must allow for it: a mode of a few percent can hide "
-                     f"behind it at high frequencies — {remedy}")
+        notes.append(_repeating_quantisation_note(jitter.locked_share, rec.profile))
     angle = encoder.angle_spline(int(cycles[0]), rec.period_s, theta)
     if chain.align:
         clock = fit_clock(current["i_a"], rec.rate_hz, n0, angle, rec.pole_pairs, _host(rec))
@@ -327,6 +316,23 @@ def _validate(rec: Recording, torque_method: TorqueMethod) -> None:
         raise ValueError("encoder_index and position_counts differ in length")
     if rec.drive_time_s is not None and rec.drive_time_s.size != rec.encoder_index.size:
         raise ValueError("drive_time_s and encoder_index differ in length")
+
+
+def _repeating_quantisation_note(share: float, profile: CommandedProfile | None) -> str:
+    """The note for a record whose quantisation error mostly repeats with the motion (``share`` of it), with what
+    to change: the profile's speed_dither, or — for a machine's own motion — nothing acq can set."""
+    if profile is None:
+        remedy = ("the machine repeats its motion that exactly; a recording of motions that vary from cycle to cycle "
+                  "averages it out")
+    elif profile.speed_dither:
+        remedy = (f"though the profile dithers (speed_dither = {profile.speed_dither:g}), the motion did not vary: "
+                  "check that the drive runs the dithered profile")
+    else:
+        remedy = "set speed_dither (e.g. 0.02, as the shipped triangle_0.2s) in the profile so that it averages out"
+    return (f"encoder: {100 * share:.0f} % of its quantisation error repeats with every motion period (the "
+            "trajectory repeats to a fraction of a count), so no average removes it and the check for a mode the "
+            "two-mass model lacks must allow for it: a mode of a few percent can hide behind it at high frequencies "
+            f"— {remedy}")
 
 
 def _angle_on_grid(rec: Recording, span: encoder.Span, notes: list[str]) -> tuple[np.ndarray, EncoderJitter]:

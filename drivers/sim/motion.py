@@ -2,7 +2,8 @@
 
 A stop ramps the reference to zero at the profile's deceleration (top speed / ``decel_time_s``), never
 a step. A dithered profile (``speed_dither``) without a ``dither_seed`` gets one drawn at its start
-(:func:`drivers.motion.with_dither_seed`; the recorder draws it before, so that the session keeps it). The schedule only grows forwards in time, so the past of a running simulation never changes.
+(:func:`drivers.motion.with_dither_seed`; the recorder draws it before, so that the session keeps it). The
+schedule only grows forwards in time, so the past of a running simulation never changes.
 """
 
 from __future__ import annotations
