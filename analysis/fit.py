@@ -41,6 +41,7 @@ few bins wide; fitting the raw H there biased J_l by −1 % and C by +3 %.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from typing import Literal
 
@@ -254,6 +255,7 @@ class _Problem:
         # ones, then per order f + k/T and k/T − f
         self.f_eval = np.concatenate((f_fine, *fold_f))
         self.n_fine = f_fine.size
+        self.load_factor: Callable[[np.ndarray], np.ndarray] | None = None  # the fit's model: a rigid load
 
     def params(self, x: np.ndarray) -> TwoMassParams:
         """Model parameters from the log vector ``x`` of the free ones."""
@@ -264,8 +266,10 @@ class _Problem:
         return np.log([getattr(p, n) for n in self.free])
 
     def response(self, x: np.ndarray, f_hz: np.ndarray) -> np.ndarray:
-        """The model's torque → motor speed response, (rad/s)/(N·m), at ``f_hz`` (Hz) for the log vector ``x``."""
-        return frequency_response(self.params(x), f_hz)
+        """The model's torque → motor speed response, (rad/s)/(N·m), at ``f_hz`` (Hz) for the log vector ``x``
+        (with the load inertia's factor :attr:`load_factor` of f_hz when one is set)."""
+        factor = None if self.load_factor is None else self.load_factor(f_hz)
+        return frequency_response(self.params(x), f_hz, factor)
 
     def log_ratio(self, x: np.ndarray) -> np.ndarray:
         """ln(H_model/H_meas) at the band's bins (complex).
@@ -540,8 +544,23 @@ def _jacobian(problem: _Problem, x: np.ndarray) -> np.ndarray:
 def kernel_model_log_ratio(frf: FrequencyResponse, fit: FitResult) -> np.ndarray:
     """ln(H_model/H_meas) of a fit's values against ``frf`` (complex, at the fit band's bins of ``frf``), the model as
     the fit sees the Welch estimate (:meth:`_Problem.log_ratio`)."""
+    return model_log_ratios(frf, fit)(None)
+
+
+def model_log_ratios(frf: FrequencyResponse,
+                     fit: FitResult) -> Callable[[Callable[[np.ndarray], np.ndarray] | None], np.ndarray]:
+    """ln(H_model/H_meas) of a fit's values against ``frf`` as the fit sees the Welch estimate, for any load: a
+    function of the load inertia's factor (a function of f_hz, :func:`analysis.model.frequency_response`; None: the
+    fit's rigid load) returning the complex log ratio at the fit band's bins. The fit's kernel and fold-over model is
+    built once for all the loads asked for."""
     problem = _Problem(frf, fit.band, fit.options, fit.values)
-    return problem.log_ratio(problem.x0(fit.values))
+    x = problem.x0(fit.values)
+
+    def at(load_factor: Callable[[np.ndarray], np.ndarray] | None) -> np.ndarray:
+        problem.load_factor = load_factor
+        return problem.log_ratio(x)
+
+    return at
 
 
 def amplitude_misfits(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -92,7 +92,7 @@ def transfer_function(p: TwoMassParams) -> tuple[np.ndarray, np.ndarray]:
     return num, den
 
 
-def frequency_response(p: TwoMassParams, f_hz: np.ndarray) -> np.ndarray:
+def frequency_response(p: TwoMassParams, f_hz: np.ndarray, load_factor: np.ndarray | None = None) -> np.ndarray:
     """The model's frequency response H(j2πf) from torque to motor speed.
 
     Parameters
@@ -101,6 +101,10 @@ def frequency_response(p: TwoMassParams, f_hz: np.ndarray) -> np.ndarray:
         Model parameters, SI units.
     f_hz : array_like
         Frequencies, Hz.
+    load_factor : ndarray of complex, optional
+        The load inertia's dependence on frequency at ``f_hz``: J_l·load_factor takes J_l's place (the load's
+        J_l s² becomes the dynamic stiffness of whatever hangs behind it, e.g. :func:`third_mass_load_factor`);
+        None: the rigid load.
 
     Returns
     -------
@@ -108,7 +112,38 @@ def frequency_response(p: TwoMassParams, f_hz: np.ndarray) -> np.ndarray:
         H at ``f_hz``, (rad/s)/(N·m), same shape as ``f_hz``.
     """
     s = 2j * np.pi * np.asarray(f_hz, dtype=float)
+    if load_factor is not None:
+        K, Jm, C = p.K_Nm_per_rad, p.Jm_kgm2, p.C_Nms_per_rad
+        bm, bl = p.bm_Nms_per_rad, p.bl_Nms_per_rad
+        Jl = p.Jl_kgm2 * np.asarray(load_factor)
+        den = ((Jm * Jl * s + (Jm + Jl) * C + Jl * bm + Jm * bl) * s + (Jm + Jl) * K + (bm + bl) * C + bm * bl) * s
+        return ((Jl * s + C + bl) * s + K) / (den + K * (bm + bl))
     num, den = transfer_function(p)
     # Horner's scheme written out: np.polyval's arithmetic (0·s + c₀ = c₀ exactly) without its per-call overhead
     # (the fit evaluates this ~1400 times per analysis)
     return ((num[0] * s + num[1]) * s + num[2]) / (((den[0] * s + den[1]) * s + den[2]) * s + den[3])
+
+
+def third_mass_load_factor(f_hz: np.ndarray, mass_ratio: float, third_hz: float, damping_ratio: float) -> np.ndarray:
+    """The load's inertia factor (:func:`frequency_response`) with a third mass J_3 = ``mass_ratio``·J_l behind it on a
+    spring K_2 = J_3 (2π f_3)² and a damper C_2 = 2ζ√(K_2 J_3): the load then needs J_l s² + J_3 s² R(s) to turn,
+
+        1 + (J_3/J_l)·R(s),  R(s) = ω_3² (1 + 2ζ s/ω_3) / (s² + 2ζ ω_3 s + ω_3²),  ω_3 = 2π f_3,
+
+    (J_3 s² θ_3 = (K_2 + C_2 s)(θ_l − θ_3)); below f_3 the third mass moves with the load (factor 1 + J_3/J_l),
+    well above it the spring holds it back (factor → 1).
+
+    Parameters
+    ----------
+    f_hz : array_like
+        Frequencies, Hz.
+    mass_ratio : float
+        J_3/J_l.
+    third_hz : float
+        f_3 = √(K_2/J_3)/2π, Hz: the third mass's natural frequency on its spring with the load held.
+    damping_ratio : float
+        ζ of that spring's damper.
+    """
+    s = 2j * np.pi * np.asarray(f_hz, dtype=float)
+    w3 = 2.0 * np.pi * third_hz
+    return 1.0 + mass_ratio * w3**2 * (1.0 + 2.0 * damping_ratio * s / w3) / (s**2 + 2.0 * damping_ratio * w3 * s + w3**2)

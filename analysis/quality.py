@@ -18,12 +18,13 @@ from analysis.adequacy import (CHAIN_WINDOW_STD, BandMisfit, band_misfits, criti
                                missed_spans, quantisation_through_fit)
 from analysis.encoder import difference_response
 from analysis.excitation import RESOLUTION_NAMED, weak_coherence_cause
-from analysis.fit import (COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask, quantisation_terms,
-                          residual_jacobian)
+from analysis.fit import (COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask, model_log_ratios,
+                          quantisation_terms, residual_jacobian)
 from analysis.frf import FrequencyResponse
 from analysis.model import PARAM_LABELS
 from analysis.recording import CommandedProfile
 from analysis.sample_instants import EncoderJitter
+from analysis.third_mode import ThirdMode, candidate_frequencies, third_mode
 from analysis.torque import Interference
 
 Verdict = Literal["ok", "poor", "failed"]
@@ -221,8 +222,15 @@ def assess(
     # without the encoder's resolution the share of |H|'s misfit that its quantisation repeats with every
     # motion period is unknown (±8 % at 200–250 Hz on a healthy 2^17 counts/rev bench): no misfit test then
     known_resolution = encoder_jitter is not None and encoder_jitter.lsb_rad > 0.0
-    missed = (_missed_band(frf, fit, encoder_jitter, kernel_error) if fit.status != "failed" and known_resolution
-              else None)
+    missed, mode = (_missed_band(frf, fit, encoder_jitter, kernel_error) if fit.status != "failed" and known_resolution
+                    else (None, None))
+    if missed is None and mode is not None and mode.found:
+        findings.append(("poor", f"the two-mass model misses a third mode near {mode.f_hz:.0f} Hz ({mode.t:.1f} σ "
+                                 f"beyond what noise, the chain and the encoder's quantisation explain, level "
+                                 f"{mode.t_crit:.1f}): it pulls K by ≈ {100 * mode.k_shift:+.0f} %, beyond K's interval "
+                                 f"(±{100 * mode.k_halfwidth:.1f} %) — a compliant or loose part (the coupling, the arm, "
+                                 f"the tool or their mountings): check them; until then K, J_m, J_l are the two-mass "
+                                 f"model's compromise, not the joint's"))
     if missed is not None:
         low, high, worst = missed
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
@@ -297,16 +305,16 @@ def _misfit_cause(worst: BandMisfit, fit: FitResult) -> str:
 
 
 def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter,
-                 kernel_error: np.ndarray | None) -> tuple[float, float, BandMisfit] | None:
-    """The worst stretch of the band where the model misses |H| beyond noise and the encoder's quantisation
-    (:mod:`analysis.adequacy`): (low Hz, high Hz, worst window), or None.
+                 kernel_error: np.ndarray | None) -> tuple[tuple[float, float, BandMisfit] | None, ThirdMode | None]:
+    """Where the model misses |H| beyond noise and the encoder's quantisation (:mod:`analysis.adequacy`): the worst
+    stretch of the band (low Hz, high Hz, worst window) or None, and the most evident third mode
+    (:mod:`analysis.third_mode`) or None.
 
     The measurement is judged against the model as the Welch estimator really sees it (the fit's kernel model
-    corrected by ``kernel_error``, :mod:`analysis.estimator_check`). The allowance per window: the jackknife's
-    scatter of its mean misfit; the share of the encoder's quantisation error that repeats with every motion period
-    (``jitter.repeating_share``; the scatter cannot show it) — a random-phase error of the white-quantisation bound
-    √(N_q/|H·D|²G_xx) at each line of the motion, carried through the fit
-    (:func:`analysis.adequacy.quantisation_through_fit`); the chain's smooth errors
+    corrected by ``kernel_error``, :mod:`analysis.estimator_check`). The allowance: the jackknife's scatter; the share
+    of the encoder's quantisation error that repeats with every motion period (``jitter.repeating_share``; the scatter
+    cannot show it) — a random-phase error of the white-quantisation bound √(N_q/|H·D|²G_xx) at each line of the
+    motion, carried through the fit (:func:`analysis.adequacy.quantisation_through_fit`); the chain's smooth errors
     (:data:`analysis.adequacy.CHAIN_WINDOW_STD`); and, taken off the misfit as the bound it is, the speed loop's
     feedback of the rest of the quantisation (:func:`analysis.adequacy.loop_feedback_bound`).
     """
@@ -318,10 +326,16 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter,
     with np.errstate(invalid="ignore", divide="ignore"):
         carried = jitter.repeating_share * quantisation_through_fit(quant, lines, jac, sqrt_w)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
-    windows = band_misfits(f, misfit, reps, carried, blind, CHAIN_WINDOW_STD,
-                           loop_feedback_bound(quant, jitter.repeating_share))
+    bound = loop_feedback_bound(quant, jitter.repeating_share)
+    windows = band_misfits(f, misfit, reps, carried, blind, CHAIN_WINDOW_STD, bound)
     spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
-    return spans[0] if spans else None
+    mode = None
+    if "K_Nm_per_rad" in fit.fitted:
+        mode = third_mode(f, misfit, reps, model_log_ratios(frf, fit), jac, sqrt_w,
+                          fit.fitted.index("K_Nm_per_rad"), _rel_halfwidth(fit, "K_Nm_per_rad"),
+                          candidate_frequencies(fit.f_a, fit.band), systematic_cov=carried, blind=blind,
+                          chain_std=CHAIN_WINDOW_STD, bias_bound=bound)
+    return (spans[0] if spans else None), mode
 
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,
