@@ -414,6 +414,28 @@ def test_import_tags_the_session(capsys: pytest.CaptureFixture[str], tmp_path: P
     assert not (tmp_path / "u.h5").exists()
 
 
+def test_import_makes_the_missing_folder_of_its_session_file_as_record_does_for_its_out_folder(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    """Before: ``-o new/deeper/s.h5`` was refused (``new/deeper: no such folder for the session file``, exit 2) while
+    ``acq record --out`` and ``acq export --csv`` make theirs. Bad input still makes nothing; a file where the folder
+    must be is one line before the inputs are read."""
+    cur, enc = pair
+    made = run_import(capsys, cur, enc, tmp_path / "new" / "deeper" / "s.h5")
+    assert made.code == 0, made.err
+    assert "".join(made.out.split()).endswith(f"imported→{tmp_path / 'new' / 'deeper' / 's.h5'}")  # rich wraps
+    assert load(tmp_path / "new" / "deeper" / "s.h5").status == "complete"
+    assert sorted(p.name for p in (tmp_path / "new" / "deeper").iterdir()) == ["s.h5"]  # no temp file left
+    cur.write_text(cur.read_text().replace("i_a_A", "i_a_a", 1))
+    bad = run_import(capsys, cur, enc, tmp_path / "other" / "s.h5")
+    assert bad.code == 2 and bad.err.startswith(f"acq: error: {cur}: line 1, column i_a_a: unknown column")
+    assert not (tmp_path / "other").exists()
+    (tmp_path / "plain").write_text("not a folder")
+    for out in (tmp_path / "plain" / "s.h5", tmp_path / "plain" / "sub" / "s.h5"):
+        refused = run_import(capsys, tmp_path / "cur.csv", enc, out)
+        assert (refused.code, refused.err) == (2, f"acq: error: -o {out}: {tmp_path / 'plain'} is a file, not a "
+                                                  "folder\n")
+
+
 # ------------------------------------------------------------------------------------ files as real tools write them
 
 

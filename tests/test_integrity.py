@@ -231,6 +231,9 @@ def test_every_output_to_a_read_only_folder_is_a_failed_write_exit_1_named_by_th
             ("import", "--current", str(pair / f"{session.stem}.current.csv"), "--encoder",
              str(pair / f"{session.stem}.encoder.csv"), "--profile", "triangle_0.2s", "-o", str(ro / "i.h5")):
                 ro / "i.h5",
+            ("import", "--current", str(pair / f"{session.stem}.current.csv"), "--encoder",
+             str(pair / f"{session.stem}.encoder.csv"), "--profile", "triangle_0.2s", "-o", str(ro / "sub" / "i.h5")):
+                ro / "sub",
         }
         for args, named in cases.items():
             run = run_cli(capsys, *args)

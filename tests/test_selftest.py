@@ -24,11 +24,15 @@ from tests.test_nidaq import hardware, write_bench  # noqa: F401 - the stand-in 
 SIM = DEFAULT_BENCH.read_text()
 
 
-def bench_file(tmp_path: Path, sim_lines: str = "", *, channels: str = '["i_a"]', inertia_known: bool = False) -> Path:
-    """The default simulated bench with extra ``[sim]`` truth lines (appended: [sim] is the last table)."""
+INERTIA_KNOWN = re.search(r"^inertia_known = true .*\n", SIM, re.M)[0]  # the shipped bench's [nominal] line
+
+
+def bench_file(tmp_path: Path, sim_lines: str = "", *, channels: str = '["i_a"]', inertia_known: bool = True) -> Path:
+    """The default simulated bench with extra ``[sim]`` truth lines (appended: [sim] is the last table);
+    ``inertia_known=False``: without its ``[nominal] inertia_known = true``, as a bench whose inertias nobody stated."""
     text = SIM.replace('channels = ["i_a"]', f"channels = {channels}")
-    if inertia_known:
-        text = text.replace("[nominal]", "[nominal]\ninertia_known = true", 1)
+    if not inertia_known:
+        text = text.replace(INERTIA_KNOWN, "", 1)
     path = tmp_path / "bench.toml"
     path.write_text(text + "\n" + sim_lines + "\n")
     return path
@@ -64,10 +68,36 @@ def test_correct_bench_passes_every_check_in_order_with_figures(capsys: pytest.C
     assert by["encoder speed"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
     assert by["identification (10 s)"]["values"]["verdict"] == "ok"
     assert by["identification (10 s)"]["values"]["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
-    # no known inertia on the default bench: k_t is not checked, and the line says why
-    assert by["torque constant"]["status"] == "warn"
-    assert "inertia_known = true" in by["torque constant"]["fix"]
+    # the shipped bench states its inertias known (they are its [sim] truth): k_t is checked, and holds
+    assert [c["name"] for c in doc["checks"] if c["status"] != "pass"] == []
     assert by["torque constant"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
+
+
+def test_a_new_users_first_selftest_on_the_shipped_bench_shows_no_warning(capsys: pytest.CaptureFixture[str]) -> None:
+    """``acq selftest`` as README's new user runs it (no --bench): before, its last check was ``⚠ identification ·
+    torque constant`` because the shipped config left inertia_known unset although its inertias are the simulator's."""
+    run = run_cli(capsys, "selftest", "--fast")
+    assert run.code == 0, run.out + run.err
+    lines = run.out.splitlines()
+    assert [line for line in lines if line.startswith(("⚠", "✗"))] == []  # the checks' own lines
+    assert any(line.startswith("✓ identification · torque constant") for line in lines)
+    rows = {cells[0]: cells[1:] for line in lines if line.startswith("│")
+            for cells in [[c.strip() for c in line.strip("│").split("│")]]}
+    assert {stage: (warned, failed, result) for stage, (_, warned, failed, result) in rows.items()} == {
+        stage: ("0", "0", "✓") for stage in ("devices", "streams", "motion", "identification")}  # the summary table
+    assert lines[-1] == "the bench is ready: acq record --profile triangle_0.2s"
+
+
+def test_a_bench_without_known_inertias_is_told_what_to_set_to_check_k_t(capsys: pytest.CaptureFixture[str],
+                                                                         tmp_path: Path) -> None:
+    code, doc = selftest(capsys, bench_file(tmp_path, inertia_known=False))
+    assert code == 0 and doc["passed"]
+    warned = [c for c in doc["checks"] if c["status"] != "pass"]
+    assert [(c["name"], c["status"]) for c in warned] == [("torque constant", "warn")]
+    assert warned[0]["fix"] == ("k_t and the current sensor's scale are not checked (a wrong one scales K, J_m, J_l and "
+                                "C alike): set [nominal] Jm_kgm2 and Jl_kgm2 from the datasheet or CAD and "
+                                "inertia_known = true")
+    assert warned[0]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
 
 
 @pytest.mark.parametrize("sim_line", ["pole_pairs = 8", "counts_per_rev = 65536"])
@@ -136,7 +166,7 @@ def test_swapped_phases_are_named_with_the_channels_to_set(capsys: pytest.Captur
 
 
 def test_correct_three_phases_pass_the_phase_order(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    code, doc = selftest(capsys, bench_file(tmp_path, channels='["i_a", "i_b"]', inertia_known=True))
+    code, doc = selftest(capsys, bench_file(tmp_path, channels='["i_a", "i_b"]'))
     by = {c["name"]: c for c in doc["checks"]}
     assert code == 0, doc["stopped_at"]
     assert by["phase order"]["status"] == "pass" and by["phase order"]["values"]["agreement"] > 0.5
@@ -145,7 +175,7 @@ def test_correct_three_phases_pass_the_phase_order(capsys: pytest.CaptureFixture
 
 def test_wrong_sensor_scale_is_named_against_a_known_inertia(capsys: pytest.CaptureFixture[str],
                                                              tmp_path: Path) -> None:
-    code, doc = selftest(capsys, bench_file(tmp_path, "current_sensor_gain = 2.0", inertia_known=True))
+    code, doc = selftest(capsys, bench_file(tmp_path, "current_sensor_gain = 2.0"))
     fail = failed_check(doc)
     assert code == 1 and doc["stopped_at"] == "identification · torque constant"
     assert fail["values"]["ratio"] == pytest.approx(2.0, rel=0.05)

@@ -259,8 +259,8 @@ def torque_constant_check(t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: n
     figure = f"torque/acceleration gives J = {fit.J_kgm2:.4g} kg·m², {q:.2f}× [nominal] Jm + Jl = {nominal:.4g}"
     if not bench.nominal.inertia_known:
         return Check("identification", "torque constant", "warn", figure,
-                     "k_t and the current sensor's scale scale K, J_m, J_l and C alike and are not checked: state a "
-                     "known inertia ([nominal] Jm_kgm2, Jl_kgm2 from datasheet/CAD and inertia_known = true)", values)
+                     "k_t and the current sensor's scale are not checked (a wrong one scales K, J_m, J_l and C alike): "
+                     "set [nominal] Jm_kgm2 and Jl_kgm2 from the datasheet or CAD and inertia_known = true", values)
     if abs(q - 1.0) > max(INERTIA_TOLERANCE, 4.0 * fit.J_std_kgm2 / nominal):
         kt = bench.motor.torque_constant_Nm_per_A
         daq = bench.daq

@@ -35,7 +35,7 @@ from acq.offline.export_metadata import ExportMetadata, read_metadata
 from acq.offline.import_files import (CurrentTable, EncoderTable, host_ns, read_current_csv, read_current_tdms,
                                       read_encoder_csv)
 from acq.recording.writer import SessionWriter
-from acq.recording.storage import storage_error
+from acq.recording.storage import WRITE_FAILURES, storage_error
 from drivers.base import CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from acqcore.errors import ConfigError, StorageError
@@ -131,8 +131,8 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
                    joint: str | None = None, same_clock: bool = False, started_utc: str | None = None) -> ImportResult:
     """Turn a current file (CSV or TDMS) and an encoder CSV into the session file ``out``.
 
-    Every check runs before anything is written; the file is written under a temporary name and
-    renamed at the end, so bad input never leaves a session file behind.
+    Every check runs before anything is written (``out``'s folder is made only then, if missing); the file
+    is written under a temporary name and renamed at the end, so bad input never leaves a session file behind.
 
     Parameters
     ----------
@@ -150,6 +150,7 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
     """
     if out.exists():
         raise ConfigError(f"-o {out}: exists (not overwritten)")
+    _require_folder_possible(out)
     for given in (current_path, encoder_path):  # a mistyped name before anything that looks beside it
         if not given.exists():
             raise ConfigError(f"{given}: no such file")
@@ -172,6 +173,25 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
                   hashing.submit(_sha256_hex, data[path]) for path in (current_path, encoder_path)}
         return _import(current_path, encoder_path, bench, profile, out, current_channels, tags, meta, meta_warning,
                        same_clock, started_utc, sha256, data)
+
+
+def _require_folder_possible(out: Path) -> None:
+    """Refuse ``out`` when a file stands where its folder (or one of the folders above it) must be: one line before
+    the input files are read. A folder that does not exist yet is made when the session is written."""
+    existing = next(folder for folder in out.parents if folder.exists())  # "." or "/" at the latest
+    if not existing.is_dir():
+        raise ConfigError(f"-o {out}: {existing} is a file, not a folder")
+
+
+def _make_folder(out: Path) -> None:
+    """Make the folder of the session file ``out`` (and those above it) if missing, as ``acq record --out`` and
+    ``acq export --csv`` do; a folder the storage refuses is a failed write, any other failure bad input."""
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        if e.errno in WRITE_FAILURES:  # read-only, full, no permission
+            raise storage_error(e, out.parent) from None
+        raise ConfigError(f"-o {out}: cannot make its folder {out.parent} ({e.strerror or e})") from None
 
 
 def _sha256_hex(data: pa.Buffer) -> str:
@@ -214,6 +234,7 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
     events = sorted((StreamEvent(int(host_ns(n.t_s + (shift if n.stream == "current" else 0.0))), n.stream, n.kind,
                                  n.detail) for n in notes), key=lambda e: e.host_ns)  # file times onto the host timeline
     cpr = getattr(bench.drive, "counts_per_rev", None) or bench.encoder.counts_per_rev
+    _make_folder(out)
     tmp = out.with_name(f".{out.name}.importing")
     try:
         tmp.unlink(missing_ok=True)  # an earlier import's, killed (on a read-only disk this fails: a failed write)

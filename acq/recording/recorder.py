@@ -1,12 +1,12 @@
 """Record a session: run both streams, execute the profile, write everything raw, end cleanly.
 
-One reader thread per stream only reads its device and queues what it got; the calling thread
-checks stream indices (gaps by counters, never by timing), writes through
-:class:`acq.recording.writer.SessionWriter`, flushes at least every 0.5 s and always finishes the file:
-``complete`` when both streams have the requested duration, ``interrupted`` on Ctrl-C / SIGTERM,
-``failed`` on a device error or a failed write (disk full, I/O error: the drive is stopped at once and
-only the samples committed before the failure count). Timestamps are never altered: raw indices and
-host stamps go to disk.
+One reader thread per stream (:mod:`acq.recording.device_reader`) only reads its device and queues what it
+got; the calling thread checks stream indices (:mod:`acq.recording.stream_check`: gaps by counters, never
+by timing), writes through :class:`acq.recording.writer.SessionWriter`, flushes at least every 0.5 s and
+always finishes the file: ``complete`` when both streams have the requested duration, ``interrupted`` on
+Ctrl-C / SIGTERM, ``failed`` on a device error or a failed write (disk full, I/O error: the drive is
+stopped at once and only the samples committed before the failure count). Timestamps are never altered:
+raw indices and host stamps go to disk.
 """
 
 from __future__ import annotations
@@ -22,13 +22,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from acq.recording.device_reader import READ_TIMEOUT_S, DeviceReader
 from acq.recording.layout import Status, utc_now_iso
 from acq.recording.paths import new_session_path
+from acq.recording.stream_check import StreamChecker, join_encoder_blocks
 from acq.recording.writer import SessionExists, SessionWriter
-from drivers.base import (CurrentBlock, CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock,
-                          StreamEvent)
+from drivers.base import CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from drivers.motion import with_dither_seed
 from acq.recording.storage import WRITE_FAILURES, storage_error
@@ -42,7 +41,6 @@ FLUSH_INTERVAL_S = 0.5
 #: falls from 38.4 to 29.5 ms (4 MiB: 27.0; medians of 10, bench/record_throughput.py rates, load 2–3). Not more:
 #: a commit needs twice its size free (SessionWriter's room check), 4 MiB kept nothing on an 8 MB disk.
 FLUSH_BYTES = 2 << 20
-READ_TIMEOUT_S = 0.2
 #: The recording thread takes what the readers queued once per this interval, all of it, instead of waking for each
 #: block: a wake-up (and the GIL handed over to it) per batch. Real time: a block waits at most this long (the
 #: flush interval is 0.5 s, a display frame ~30 ms); --fast: ~35 blocks a batch instead of one.
@@ -72,133 +70,6 @@ class RecordingResult:
     current_gaps: int
     encoder_gaps: int
     write_failed: bool = False  # a write to the session file failed (disk full, I/O error): nothing more is stored
-
-
-class _Reader(threading.Thread):
-    """Reads one device until it has ``target`` samples or is told to stop; queues everything."""
-
-    def __init__(self, name: str, device: CurrentSource | Drive, target: int, out: queue.SimpleQueue[tuple[str, Any]]):
-        super().__init__(name=f"acq-{name}-reader", daemon=True)
-        self.stream = name
-        self.device = device
-        self.target = target
-        self.out = out
-        self.stop_requested = threading.Event()
-        self.first_index: int | None = None
-        self.covered = 0
-
-    def _advance(self, block: CurrentBlock | EncoderBlock) -> None:
-        """Stream position covered so far, by the stream's own index (drops do not delay the end)."""
-        if isinstance(block, CurrentBlock):
-            first, end = block.first_index, block.first_index + block.count
-        else:
-            first, end = int(block.index[0]), int(block.index[-1]) + 1
-        if self.first_index is None:
-            self.first_index = first
-        self.covered = end - self.first_index
-
-    def run(self) -> None:
-        try:
-            while not self.stop_requested.is_set() and self.covered < self.target:
-                block = self.device.read(READ_TIMEOUT_S)
-                for event in self.device.events():
-                    self.out.put(("event", event))
-                if block is not None and block.count:
-                    self._advance(block)
-                    self.out.put((self.stream, block))
-        except Exception as e:  # noqa: BLE001 - every device failure ends the recording cleanly
-            self.out.put(("error", e))
-        finally:
-            self.out.put(("done", self.stream))
-
-
-class _StreamChecker:
-    """Keeps the stored streams strictly ordered and turns index jumps into gap events."""
-
-    def __init__(self) -> None:
-        self.next_current: int | None = None
-        self.last_cycle: int | None = None
-        self.current_gaps = 0
-        self.encoder_gaps = 0
-
-    def current(self, block: CurrentBlock) -> tuple[CurrentBlock | None, list[StreamEvent]]:
-        events: list[StreamEvent] = []
-        if self.next_current is not None and block.first_index != self.next_current:
-            missing = block.first_index - self.next_current
-            if missing > 0:
-                self.current_gaps += 1
-                events.append(StreamEvent(block.host_ns, "current", "gap",
-                                          f"{missing} samples missing before index {block.first_index}"))
-            else:
-                overlap = min(-missing, block.count)
-                events.append(StreamEvent(block.host_ns, "current", "warning",
-                                          f"{overlap} samples repeated at index {block.first_index} dropped"))
-                if overlap == block.count:
-                    return None, events
-                block = CurrentBlock(block.first_index + overlap, block.current_a[:, overlap:], block.host_ns)
-        self.next_current = block.first_index + block.count
-        return block, events
-
-    def encoder(self, block: EncoderBlock) -> tuple[EncoderBlock | None, list[StreamEvent]]:
-        events: list[StreamEvent] = []
-        idx = np.asarray(block.index, dtype=np.int64)
-        last = self.last_cycle if self.last_cycle is not None else int(idx[0]) - 1
-        # a --fast bench delivers 100 small blocks a second: the usual block (in order, after the last one, no gap)
-        # is recognised in two comparisons, the rest of the checks run only on a block that is not
-        in_order = bool(idx[0] > last) and bool((idx[1:] > idx[:-1]).all())
-        if in_order and int(idx[-1]) - last == idx.size:
-            self.last_cycle = int(idx[-1])
-            return block, events
-        if not in_order:
-            keep = idx > np.maximum.accumulate(np.concatenate(([last], idx[:-1])))
-            events.append(StreamEvent(int(block.host_ns[0]), "encoder", "warning",
-                                      f"{int((~keep).sum())} samples out of order or repeated dropped"))
-            block = _select(block, keep)
-            idx = idx[keep]
-            if idx.size == 0:
-                return None, events
-        steps = np.diff(idx, prepend=last)
-        for pos in np.flatnonzero(steps > 1):
-            self.encoder_gaps += 1
-            events.append(StreamEvent(int(block.host_ns[pos]), "encoder", "gap",
-                                      f"{int(steps[pos] - 1)} frames missing before cycle {int(idx[pos])}"))
-        self.last_cycle = int(idx[-1])
-        return block, events
-
-
-def _select(block: EncoderBlock, keep: np.ndarray) -> EncoderBlock:
-    def pick(a: np.ndarray | None) -> np.ndarray | None:
-        return None if a is None else np.asarray(a)[keep]
-
-    return EncoderBlock(
-        index=np.asarray(block.index)[keep],
-        position_counts=np.asarray(block.position_counts)[keep],
-        host_ns=np.asarray(block.host_ns)[keep],
-        drive_time_s=pick(block.drive_time_s),
-        velocity_counts_per_s=pick(block.velocity_counts_per_s),
-        velocity_demand_counts_per_s=pick(block.velocity_demand_counts_per_s),
-    )
-
-
-def _joined(blocks: list[EncoderBlock]) -> EncoderBlock:
-    """Consecutive encoder blocks as one; an optional column missing from some block is NaN there."""
-    def column(name: str) -> np.ndarray | None:
-        parts = [getattr(b, name) for b in blocks]
-        missing = [p is None for p in parts]
-        if all(missing):
-            return None
-        if not any(missing):  # the usual case: every block has it
-            return np.concatenate(parts)
-        return np.concatenate([np.full(b.count, np.nan) if p is None else p for b, p in zip(blocks, parts)])
-
-    return EncoderBlock(
-        index=np.concatenate([b.index for b in blocks]),
-        position_counts=np.concatenate([b.position_counts for b in blocks]),
-        host_ns=np.concatenate([b.host_ns for b in blocks]),
-        drive_time_s=column("drive_time_s"),
-        velocity_counts_per_s=column("velocity_counts_per_s"),
-        velocity_demand_counts_per_s=column("velocity_demand_counts_per_s"),
-    )
 
 
 @contextmanager
@@ -354,10 +225,10 @@ class Recorder:
         path = writer.path
         inbox: queue.SimpleQueue[tuple[str, Any]] = queue.SimpleQueue()  # C: a fraction of Queue's cost per item
         readers = {
-            "current": _Reader("current", self.current, math.ceil(self.duration_s * cur_info.rate_hz), inbox),
-            "encoder": _Reader("encoder", self.drive, math.ceil(self.duration_s / drive_info.period_s), inbox),
+            "current": DeviceReader("current", self.current, math.ceil(self.duration_s * cur_info.rate_hz), inbox),
+            "encoder": DeviceReader("encoder", self.drive, math.ceil(self.duration_s / drive_info.period_s), inbox),
         }
-        checker = _StreamChecker()
+        checker = StreamChecker()
         counts = {"current": 0, "encoder": 0}
         status: Status = "complete"
         reason = f"recorded {self.duration_s:g} s"
@@ -384,8 +255,8 @@ class Recorder:
         return RecordingResult(path, status, reason, stored["current_samples"], stored["encoder_samples"],
                                checker.current_gaps, checker.encoder_gaps, writer.failure is not None)
 
-    def _pump(self, inbox: queue.SimpleQueue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
-              checker: _StreamChecker, counts: dict[str, int]) -> None:
+    def _pump(self, inbox: queue.SimpleQueue[tuple[str, Any]], readers: dict[str, DeviceReader],
+              writer: SessionWriter, checker: StreamChecker, counts: dict[str, int]) -> None:
         done: set[str] = set()
         last_flush = last_data = time.monotonic()
         while len(done) < len(readers):
@@ -423,16 +294,16 @@ class Recorder:
                 writer.flush()
                 last_flush = now
 
-    def _store_run(self, run: list[EncoderBlock], writer: SessionWriter, checker: _StreamChecker,
+    def _store_run(self, run: list[EncoderBlock], writer: SessionWriter, checker: StreamChecker,
                    counts: dict[str, int]) -> None:
         """Store encoder blocks that arrived one after another as one block (emptying ``run``): one check, one append
         and one call to each listener for the lot (a --fast bench queues ~20 blocks of 40 cycles in a row)."""
         if run:
-            block = run[0] if len(run) == 1 else _joined(run)
+            block = run[0] if len(run) == 1 else join_encoder_blocks(run)
             run.clear()
             self._store("encoder", block, writer, checker, counts)
 
-    def _store(self, kind: str, item: Any, writer: SessionWriter, checker: _StreamChecker,
+    def _store(self, kind: str, item: Any, writer: SessionWriter, checker: StreamChecker,
                counts: dict[str, int]) -> None:
         if kind == "event":
             self._event(writer, item)
@@ -469,8 +340,9 @@ class Recorder:
             if not self._shutting_down:
                 raise
 
-    def _shut_down(self, inbox: queue.SimpleQueue[tuple[str, Any]], readers: dict[str, _Reader], writer: SessionWriter,
-                   checker: _StreamChecker, counts: dict[str, int], status: Status, reason: str) -> tuple[Status, str]:
+    def _shut_down(self, inbox: queue.SimpleQueue[tuple[str, Any]], readers: dict[str, DeviceReader],
+                   writer: SessionWriter, checker: StreamChecker, counts: dict[str, int], status: Status,
+                   reason: str) -> tuple[Status, str]:
         """Stop motion first (safety); store everything the readers still deliver until each has ended; then
         stop the devices, store what is left and finish the file."""
         self._shutting_down = True
@@ -508,7 +380,7 @@ class Recorder:
                 status, reason = "failed", f"{writer.failure} — {writer.seconds_kept:.1f} s kept"
         return status, reason
 
-    def _drain(self, inbox: queue.SimpleQueue[tuple[str, Any]], writer: SessionWriter, checker: _StreamChecker,
+    def _drain(self, inbox: queue.SimpleQueue[tuple[str, Any]], writer: SessionWriter, checker: StreamChecker,
                counts: dict[str, int], status: Status, reason: str, wait_s: float) -> tuple[Status, str]:
         """Store what the readers queued (waiting up to ``wait_s`` for the first item); a late error fails
         a recording that was complete."""
