@@ -215,6 +215,15 @@ def lines_per_bin(torque_psd_fine: np.ndarray, fine_step_hz: float, f_hz: np.nda
     return lines
 
 
+def line_variance(quant_rel: np.ndarray, lines: np.ndarray) -> np.ndarray:
+    """Variance per bin of ln H (in amplitude and alike in phase) that a quantisation error repeating with the motion
+    leaves: q²/(2n) for a bin holding a share n of the motion's lines (``lines``, :func:`lines_per_bin`) with the
+    white-quantisation bound q (``quant_rel``) — a random-phase error of q per line, averaged over the bin's lines;
+    0 where either is not finite or positive (such bins are not judged)."""
+    judged = np.isfinite(quant_rel) & np.isfinite(lines) & (lines > 0)
+    return np.where(judged, quant_rel, 0.0) ** 2 / (2.0 * np.where(judged, lines, 1.0))
+
+
 def quantisation_pull(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray, sqrt_w: np.ndarray) -> np.ndarray:
     """Covariance of the fitted log parameters that the encoder's quantisation causes: the same random-phase error
     per line as :func:`quantisation_through_fit`, the part the fit absorbs, (JᵀJ)⁻¹Jᵀ·W·S·J(JᵀJ)⁻¹ (J the Jacobian of
@@ -226,9 +235,7 @@ def quantisation_pull(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray,
     ndarray, shape (p, p)
     """
     parts = jac.shape[0] // quant_rel.size
-    judged = np.isfinite(quant_rel) & np.isfinite(lines) & (lines > 0)
-    s2 = np.where(judged, quant_rel, 0.0) ** 2 / (2.0 * np.where(judged, lines, 1.0))
-    weighted = np.tile(s2 * sqrt_w**2, parts)
+    weighted = np.tile(line_variance(quant_rel, lines) * sqrt_w**2, parts)
     a = np.linalg.pinv(jac.T @ jac) @ jac.T
     return (a * weighted[None, :]) @ a.T
 
@@ -322,7 +329,7 @@ def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.n
     parts = jac.shape[0] // quant_rel.size
     judged = np.isfinite(quant_rel) & np.isfinite(lines) & (lines > 0) & (sqrt_w > 0)
     d = np.tile(np.where(judged, sqrt_w, 1.0), parts)  # a bin without weight or bound adds nothing (not judged)
-    s2 = np.tile(np.where(judged, quant_rel, 0.0) ** 2 / (2.0 * np.where(judged, lines, 1.0)), parts)
+    s2 = np.tile(np.where(judged, line_variance(quant_rel, lines), 0.0), parts)
     hat = (jac / d[:, None]) @ np.linalg.pinv(jac.T @ jac) @ (jac * d[:, None]).T
     rest = np.eye(d.size) - hat
     cov = (rest * s2[None, :]) @ rest.T

@@ -28,7 +28,7 @@ from analysis.model import frequency_response
 
 
 def kernel_model_error(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.ndarray) -> np.ndarray:
-    """ln|H1 of the model's own speed| − ln|the fit's kernel model of it| at the fit's bins.
+    """ln(H1 of the model's own speed) − ln(the fit's kernel model of it) at the fit's bins (complex).
 
     Parameters
     ----------
@@ -41,9 +41,9 @@ def kernel_model_error(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.nda
 
     Returns
     -------
-    ndarray, shape (n,)
-        At ``frf.f_hz[fitted_bins(frf, fit.band)]``; add it to the kernel model's ln|H| to get what the estimator
-        makes of the model.
+    ndarray of complex, shape (n,)
+        At ``frf.f_hz[fitted_bins(frf, fit.band)]``; add its real part to the kernel model's ln|H| and its imaginary
+        part to its phase to get what the estimator makes of the model.
     """
     x = np.asarray(torque_Nm, dtype=float)
     x = x - x.mean()
@@ -54,5 +54,6 @@ def kernel_model_error(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.nda
     model_frf = estimate_frf(x, speed, frf.period_s, segment_s=frf.segment_s, reuse_selection=frf.selection)
     sel = fitted_bins(frf, fit.band)
     if not np.array_equal(fitted_bins(model_frf, fit.band), sel):
-        return np.zeros(int(np.count_nonzero(sel)))  # a bin empty in one estimate: no correction rather than a shifted one
-    return -kernel_model_log_ratio(model_frf, fit).real
+        return np.zeros(int(np.count_nonzero(sel)), dtype=complex)  # a bin empty in one estimate: no correction
+    error = -kernel_model_log_ratio(model_frf, fit)
+    return error.real + 1j * np.angle(np.exp(1j * error.imag))  # the phase wrapped to ±π as the misfits are

@@ -518,18 +518,30 @@ def _failed(problem: _Problem, band: tuple[float, float], options: FitOptions, m
     )
 
 
-def residual_jacobian(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarray, np.ndarray]:
-    """Jacobian of a fit's weighted residuals with respect to its free log parameters at its optimum (central
-    differences, step 1e-6), and the square roots of its bin weights.
+def log_ratio_jacobian(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarray, np.ndarray]:
+    """d ln(H_model/H_meas)/d x of a fit at its optimum, x its free log parameters (central differences, step 1e-6;
+    the model as the fit sees the Welch estimate), and the square roots of its bin weights.
 
     Returns
     -------
-    jac : ndarray, shape (m, p)
-        m = the band's bins (amplitude fit) or twice that (complex fit: amplitude then phase).
+    jac : ndarray of complex, shape (n, p)
+        At the band's bins: the real part moves ln|H|, the imaginary part the phase.
     sqrt_w : ndarray, shape (n,)
     """
     problem = _Problem(frf, fit.band, fit.options, fit.values)
-    return _jacobian(problem, problem.x0(fit.values)), problem.sqrt_w
+    x = problem.x0(fit.values)
+    step = 1e-6  # as _jacobian's
+    cols = [(problem.log_ratio(x + step * e) - problem.log_ratio(x - step * e)) / (2.0 * step) for e in np.eye(x.size)]
+    return np.stack(cols, axis=1), problem.sqrt_w
+
+
+def weighted_jacobian(jac: np.ndarray, sqrt_w: np.ndarray, kind: FitKind) -> np.ndarray:
+    """The Jacobian of a fit's weighted residuals from :func:`log_ratio_jacobian`: amplitude rows, then (a complex
+    fit) phase rows, each bin times its weight's square root; shape (n, p) or (2n, p)."""
+    rows = [sqrt_w[:, None] * jac.real]
+    if kind == "complex":
+        rows.append(sqrt_w[:, None] * jac.imag)
+    return np.concatenate(rows, axis=0)
 
 
 def _jacobian(problem: _Problem, x: np.ndarray) -> np.ndarray:
@@ -563,8 +575,9 @@ def model_log_ratios(frf: FrequencyResponse,
     return at
 
 
-def amplitude_misfits(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """ln|H_model| − ln|H_measured| of a fit at its band's bins, for the full record and each replicate.
+def model_misfits(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """ln(H_model/H_measured) of a fit at its band's bins, for the full record and each replicate: the real part is
+    ln|H_model| − ln|H_measured|, the imaginary part the phase difference (radians, wrapped to ±π).
 
     Parameters
     ----------
@@ -577,9 +590,9 @@ def amplitude_misfits(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarra
     -------
     f_hz : ndarray, shape (n,)
         The band's bins, Hz.
-    misfit : ndarray, shape (n,)
+    misfit : ndarray of complex, shape (n,)
         The full record's misfit (the model as the Welch estimator sees it, :class:`_Problem`).
-    replicate_misfits : ndarray, shape (B, n)
+    replicate_misfits : ndarray of complex, shape (B, n)
         The same model against each delete-one-block replicate (B = 0 without replicates).
     """
     problem = _Problem(frf, fit.band, fit.options, fit.values)
@@ -587,5 +600,9 @@ def amplitude_misfits(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarra
     # a replicate with an empty (non-finite or zero) bin the full record has would misalign the rows: left out
     same_bins = [p for p in (_Problem(r, fit.band, fit.options, fit.values) for r in frf.replicates or ())
                  if np.array_equal(p.f, problem.f)]
-    reps = [p.log_ratio(x).real for p in same_bins]
-    return problem.f, problem.log_ratio(x).real, np.asarray(reps).reshape(len(reps), problem.f.size)
+
+    def wrapped(z: np.ndarray) -> np.ndarray:
+        return z.real + 1j * np.angle(np.exp(1j * z.imag))
+
+    reps = [wrapped(p.log_ratio(x)) for p in same_bins]
+    return problem.f, wrapped(problem.log_ratio(x)), np.asarray(reps, dtype=complex).reshape(len(reps), problem.f.size)

@@ -15,11 +15,11 @@ from typing import Literal
 import numpy as np
 
 from analysis.adequacy import (CHAIN_WINDOW_STD, BandMisfit, band_misfits, critical_t, loop_feedback_bound,
-                               missed_spans, quantisation_through_fit)
+                               line_variance, missed_spans, quantisation_through_fit)
 from analysis.encoder import difference_response
 from analysis.excitation import RESOLUTION_NAMED, weak_coherence_cause
-from analysis.fit import (COHERENCE_CLIP, FitResult, amplitude_misfits, band_mask, model_log_ratios,
-                          quantisation_terms, residual_jacobian)
+from analysis.fit import (COHERENCE_CLIP, FitResult, band_mask, log_ratio_jacobian, model_log_ratios, model_misfits,
+                          quantisation_terms, weighted_jacobian)
 from analysis.frf import FrequencyResponse
 from analysis.model import PARAM_LABELS
 from analysis.recording import CommandedProfile
@@ -165,8 +165,8 @@ def assess(
     encoder_jitter : EncoderJitter or None, optional
         The encoder's sample-instant jitter estimated from the data (not judged if None).
     kernel_error : ndarray or None, optional
-        ln|H| the Welch estimator makes of the fitted model less the fit's model of it, at the fit's bins
-        (:func:`analysis.estimator_check.kernel_model_error`): the misfit test judges the measurement against the
+        ln H (complex) the Welch estimator makes of the fitted model less the fit's model of it, at the fit's bins
+        (:func:`analysis.estimator_check.kernel_model_error`): the misfit tests judge the measurement against the
         model so corrected; None: uncorrected.
     clock_failure : str or None, optional
         Why the clock alignment failed (:attr:`analysis.clocks.ClockFit.failure`): the verdict is then failed
@@ -222,8 +222,8 @@ def assess(
     # without the encoder's resolution the share of |H|'s misfit that its quantisation repeats with every
     # motion period is unknown (±8 % at 200–250 Hz on a healthy 2^17 counts/rev bench): no misfit test then
     known_resolution = encoder_jitter is not None and encoder_jitter.lsb_rad > 0.0
-    missed, mode = (_missed_band(frf, fit, encoder_jitter, kernel_error) if fit.status != "failed" and known_resolution
-                    else (None, None))
+    missed, mode = (_missed_band(frf, fit, encoder_jitter, kernel_error, phase_is_meaningful(clock_residual_s, th))
+                    if fit.status != "failed" and known_resolution else (None, None))
     if missed is None and mode is not None and mode.found:
         findings.append(("poor", f"the two-mass model misses a third mode near {mode.f_hz:.0f} Hz ({mode.t:.1f} σ "
                                  f"beyond what noise, the chain and the encoder's quantisation explain, level "
@@ -304,11 +304,11 @@ def _misfit_cause(worst: BandMisfit, fit: FitResult) -> str:
             "part and the load side for friction")
 
 
-def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter,
-                 kernel_error: np.ndarray | None) -> tuple[tuple[float, float, BandMisfit] | None, ThirdMode | None]:
+def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, kernel_error: np.ndarray | None,
+                 use_phase: bool) -> tuple[tuple[float, float, BandMisfit] | None, ThirdMode | None]:
     """Where the model misses |H| beyond noise and the encoder's quantisation (:mod:`analysis.adequacy`): the worst
     stretch of the band (low Hz, high Hz, worst window) or None, and the most evident third mode
-    (:mod:`analysis.third_mode`) or None.
+    (:mod:`analysis.third_mode`, judging the phase too when ``use_phase``) or None.
 
     The measurement is judged against the model as the Welch estimator really sees it (the fit's kernel model
     corrected by ``kernel_error``, :mod:`analysis.estimator_check`). The allowance: the jackknife's scatter; the share
@@ -318,23 +318,26 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter,
     (:data:`analysis.adequacy.CHAIN_WINDOW_STD`); and, taken off the misfit as the bound it is, the speed loop's
     feedback of the rest of the quantisation (:func:`analysis.adequacy.loop_feedback_bound`).
     """
-    f, misfit, reps = amplitude_misfits(frf, fit)
+    f, misfit, reps = model_misfits(frf, fit)
     if kernel_error is not None and kernel_error.shape == misfit.shape:
         misfit, reps = misfit + kernel_error, reps + kernel_error[None, :]
     quant, lines = quantisation_terms(frf, fit.band, jitter.lsb_rad)
-    jac, sqrt_w = residual_jacobian(frf, fit)
+    jac, sqrt_w = log_ratio_jacobian(frf, fit)
     with np.errstate(invalid="ignore", divide="ignore"):
-        carried = jitter.repeating_share * quantisation_through_fit(quant, lines, jac, sqrt_w)
+        carried = jitter.repeating_share * quantisation_through_fit(quant, lines,
+                                                                    weighted_jacobian(jac, sqrt_w, fit.options.kind),
+                                                                    sqrt_w)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
     bound = loop_feedback_bound(quant, jitter.repeating_share)
-    windows = band_misfits(f, misfit, reps, carried, blind, CHAIN_WINDOW_STD, bound)
+    windows = band_misfits(f, misfit.real, reps.real, carried, blind, CHAIN_WINDOW_STD, bound)
     spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
     mode = None
     if "K_Nm_per_rad" in fit.fitted:
-        mode = third_mode(f, misfit, reps, model_log_ratios(frf, fit), jac, sqrt_w,
+        mode = third_mode(f, misfit, reps, model_log_ratios(frf, fit), jac, sqrt_w, fit.options.kind,
                           fit.fitted.index("K_Nm_per_rad"), _rel_halfwidth(fit, "K_Nm_per_rad"),
-                          candidate_frequencies(fit.f_a, fit.band), systematic_cov=carried, blind=blind,
-                          chain_std=CHAIN_WINDOW_STD, bias_bound=bound)
+                          candidate_frequencies(fit.f_a, fit.band), use_phase=use_phase, systematic_cov=carried,
+                          blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound,
+                          line_variance=jitter.repeating_share * line_variance(quant, lines))
     return (spans[0] if spans else None), mode
 
 

@@ -14,6 +14,11 @@ low with an `ok` (README "How well it works"). Here the misfit is projected onto
   besides (the jackknife's scatter per bin, the quantisation that repeats with the motion, the chain's smooth error,
   the loop's feedback bound squared); its standard error from the delete-one-block replicates (everything that varies
   along the record) and the systematic terms carried as in the window test, the loop's bound taken off â as a bound;
+* with the clocks aligned the phase is judged too — the trace of a lightly damped mode is as plain in it as in
+  |H| (an amplitude fit leaves it all in the residual) — with a delay common to all bins (what is left of the clock
+  offset) estimated beside the mode and taken out; |H| alone must confirm the mode at the one-sided 95 % level (the
+  phase's own systematic errors near the band's top are not all known: alone it read four healthy runs of the
+  scenario family as a mode near 360–480 Hz that |H| put below zero);
 * a mass is positive: one-sided Student t with B − 1 degrees of freedom at :data:`analysis.adequacy.MISFIT_LEVEL`,
   shared by the effectively independent candidates (Li & Ji's M_eff of the candidates' correlation).
 
@@ -31,6 +36,7 @@ import numpy as np
 from scipy import stats
 
 from analysis.adequacy import MISFIT_LEVEL, WINDOW_BINS
+from analysis.fit import FitKind, weighted_jacobian
 from analysis.model import third_mass_load_factor
 
 #: Damping ratio of the candidate third modes. A bolted or bearing-supported structural mode of a robot arm or tool is
@@ -58,6 +64,11 @@ class ThirdMode:
         Relative shift of the fitted K that a third mass of â causes (−0.04: K reads 4 % low).
     k_halfwidth : float
         K's 95 % interval half-width (relative) it is compared with.
+    t_amplitude, t_confirm : float
+        The t of |H| alone (the same as ``t`` when the phase is not judged) and the one-sided level it must pass: a
+        mode leaves its trace in |H| and in the phase alike, so the phase alone — whose systematic errors near the
+        band's top are not all known (an anti-alias filter's phase curvature, the difference operator's) — does not
+        make a mode.
     """
 
     f_hz: float
@@ -66,11 +77,13 @@ class ThirdMode:
     t_crit: float
     k_shift: float
     k_halfwidth: float
+    t_amplitude: float
+    t_confirm: float
 
     @property
     def found(self) -> bool:
-        """Beyond noise and moving K beyond its interval."""
-        return self.t > self.t_crit and abs(self.k_shift) > self.k_halfwidth
+        """Beyond noise (|H| confirming it) and moving K beyond its interval."""
+        return self.t > self.t_crit and self.t_amplitude > self.t_confirm and abs(self.k_shift) > self.k_halfwidth
 
 
 def candidate_frequencies(f_a_hz: float, band_hz: tuple[float, float]) -> np.ndarray:
@@ -94,78 +107,118 @@ def effective_tests(corr: np.ndarray) -> float:
 
 def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarray,
                log_ratios: Callable[[Callable[[np.ndarray], np.ndarray] | None], np.ndarray],
-               jac: np.ndarray, sqrt_w: np.ndarray, k_column: int, k_halfwidth: float,
-               candidates_hz: np.ndarray, *, systematic_cov: np.ndarray | None = None,
+               jac: np.ndarray, sqrt_w: np.ndarray, kind: FitKind, k_column: int, k_halfwidth: float,
+               candidates_hz: np.ndarray, *, use_phase: bool = False, systematic_cov: np.ndarray | None = None,
                blind: np.ndarray | None = None, chain_std: float = 0.0,
-               bias_bound: np.ndarray | None = None) -> ThirdMode | None:
-    """The candidate third mode with the largest t among those beyond noise (else the largest t of all).
+               bias_bound: np.ndarray | None = None, line_variance: np.ndarray | None = None) -> ThirdMode | None:
+    """The candidate third mode with the largest t among those beyond noise that pull K beyond its interval (else the
+    largest t of all).
 
     Parameters
     ----------
-    f_hz, misfit, replicate_misfits, systematic_cov, blind, chain_std, bias_bound
-        As :func:`analysis.adequacy.band_misfits` takes them (the fit band's bins, Hz; ln|H_model| − ln|H_meas| of the
-        record, shape (n,), and of each delete-one-block replicate, (B, n); the quantisation's carried covariance;
-        bins not to judge; the chain's window error; the loop's bias bound per bin).
+    f_hz : ndarray, shape (n,)
+        The fit band's bins, Hz.
+    misfit, replicate_misfits : ndarray of complex, shapes (n,) and (B, n)
+        ln(H_model/H_meas) of the record and of each delete-one-block replicate (:func:`analysis.fit.model_misfits`,
+        corrected by the estimator check): real part ln|H|, imaginary part the phase.
     log_ratios : callable
         ln(H_model/H_meas) at the bins for a load inertia factor (:func:`analysis.fit.model_log_ratios`).
     jac, sqrt_w : ndarray
-        The fit's weighted Jacobian (m = n or 2n rows: amplitude, then phase) and its bin weights' square roots
-        (:func:`analysis.fit.residual_jacobian`).
+        d ln(H_model/H_meas)/d(log parameters), complex (n, p), and the fit's bin weights' square roots
+        (:func:`analysis.fit.log_ratio_jacobian`).
+    kind : {"amplitude", "complex"}
+        What the fit matched: the part of a third mass's trace it absorbs into K, J, C follows from it.
     k_column : int
         Jacobian column of ln K.
     k_halfwidth : float
         K's 95 % interval half-width, relative.
     candidates_hz : ndarray
         f_3 to look at (:func:`candidate_frequencies`), Hz.
+    use_phase : bool, optional
+        Judge the phase too (only when the clocks were aligned, :func:`analysis.quality.phase_is_meaningful`): a
+        delay common to all bins (what is left of the clock offset) is estimated beside each mode and taken out, and
+        |H| alone must confirm the mode (:attr:`ThirdMode.t_confirm`).
+    systematic_cov, blind, chain_std, bias_bound
+        As :func:`analysis.adequacy.band_misfits` takes them (the quantisation's carried covariance of ln|H|'s
+        residual, n × n; bins not to judge; the chain's window error; the loop's bias bound per bin). The phase is
+        given the same chain error and bound (both bound ln H, a complex number) and the repeating quantisation's
+        variance per bin without the fit's absorption, ``line_variance`` (n,; :func:`analysis.adequacy.line_variance`
+        times the repeating share).
 
     Returns
     -------
     ThirdMode or None
         None with fewer than two replicates, no candidate or no bin to judge.
     """
-    reps = np.asarray(replicate_misfits, dtype=float)
+    reps = np.asarray(replicate_misfits, dtype=complex)
     b = reps.shape[0] if reps.ndim == 2 else 0
     n = f_hz.size
-    judged = np.isfinite(misfit) & (sqrt_w > 0) & np.all(np.isfinite(reps), axis=0) if b else np.zeros(n, bool)
+    judged = (np.isfinite(misfit) & (sqrt_w > 0) & np.all(np.isfinite(reps), axis=0)) if b else np.zeros(n, bool)
     if blind is not None:
         judged &= ~blind
     if b < 2 or candidates_hz.size == 0 or not np.any(judged):
         return None
-    m = np.where(judged, misfit, 0.0)
-    reps = np.where(judged[None, :], reps, 0.0)
+    parts = 2 if use_phase else 1
+    rows_judged = np.tile(judged, parts)
+
+    def stacked(z: np.ndarray) -> np.ndarray:  # amplitude rows, then phase rows (last axis)
+        return np.concatenate([z.real, z.imag], axis=-1) if use_phase else z.real
+
+    m = np.where(rows_judged, stacked(np.where(judged, misfit, 0.0)), 0.0)
+    r = np.where(rows_judged[None, :], stacked(np.where(judged[None, :], reps, 0.0)), 0.0)
     carried = np.zeros((n, n)) if systematic_cov is None else np.where(np.outer(judged, judged), systematic_cov, 0.0)
+    line_var = np.zeros(n) if line_variance is None else np.where(judged & np.isfinite(line_variance), line_variance, 0.0)
+    carried = carried if parts == 1 else _blocks(carried, np.diag(line_var))
     bound = np.zeros(n) if bias_bound is None else np.where(judged & np.isfinite(bias_bound), bias_bound, 0.0)
-    window = np.arange(n) // WINDOW_BINS
+    bound = np.tile(bound, parts)
+    window = np.tile(np.arange(n) // WINDOW_BINS, parts) + np.repeat(np.arange(parts), n) * n
     chain_cov = (window[:, None] == window[None, :]) * chain_std**2
-    variance = (b - 1) / b * np.sum((reps - reps.mean(axis=0)) ** 2, axis=0) + np.diag(carried) + chain_std**2 + bound**2
-    variance = np.where(judged & (variance > 0), variance, np.inf)
+    variance = (b - 1) / b * np.sum((r - r.mean(axis=0)) ** 2, axis=0) + np.diag(carried) + chain_std**2 + bound**2
+    variance = np.where(rows_judged & (variance > 0), variance, np.inf)
+    delay = np.concatenate([np.zeros(n), np.where(judged, 2.0 * np.pi * f_hz, 0.0)]) if use_phase else None
 
     base = log_ratios(None)
-    pinv = np.linalg.pinv(jac)
-    parts = jac.shape[0] // n
+    fit_jac = weighted_jacobian(jac, sqrt_w, kind)
+    pinv = np.linalg.pinv(fit_jac)
+    amplitude_rows = np.arange(parts * n) < n
+
+    def estimate(regressors: np.ndarray) -> tuple[float, float] | None:
+        """â of the first regressor (weighted least squares with the others beside it) and its t after the bound."""
+        normal = regressors.T @ (regressors / variance[:, None])
+        if not (np.all(np.isfinite(normal)) and normal[0, 0] > 0 and abs(np.linalg.det(normal)) > 0):
+            return None
+        v = np.linalg.solve(normal, (regressors / variance[:, None]).T)[0]  # â = v·misfit
+        a_reps = r @ v
+        noise2 = (b - 1) / b * float(np.sum((a_reps - a_reps.mean()) ** 2))
+        scale = float(np.sqrt(noise2 + v @ carried @ v + v @ chain_cov @ v))
+        a = float(v @ m)
+        return a, ((a - float(np.abs(v) @ bound)) / scale if scale > 0 else 0.0)
+
     rows = []
     for f3 in candidates_hz:
         s = (log_ratios(lambda f, f3=f3: third_mass_load_factor(f, SIGNATURE_STEP, f3, THIRD_MODE_DAMPING))
              - base) / SIGNATURE_STEP
-        sv = sqrt_w * s.real if parts == 1 else np.concatenate([sqrt_w * s.real, sqrt_w * s.imag])
-        moved = pinv @ sv  # the log parameters' move per unit J_3/J_l
-        left = (sv - jac @ moved)[:n] / np.where(sqrt_w > 0, sqrt_w, 1.0)  # what stays in ln|H|'s residual
-        left = np.where(judged, left, 0.0)
-        energy = float(np.sum(left**2 / variance))
-        if not energy > 0:
+        moved = pinv @ weighted_jacobian(s[:, None], sqrt_w, kind)[:, 0]  # the log parameters' move per unit J_3/J_l
+        left = np.where(rows_judged, stacked(s - jac @ moved), 0.0)  # what stays in the residual; misfit ≈ −a·left
+        both = estimate(np.stack([-left] if delay is None else [-left, delay], axis=1))
+        alone = both if delay is None else estimate(np.where(amplitude_rows, -left, 0.0)[:, None])
+        if both is None or alone is None:
             continue
-        v = -left / variance / energy  # â = v·misfit: the misfit is −a·left
-        a_hat = float(v @ m)
-        a_reps = reps @ v
-        noise2 = (b - 1) / b * float(np.sum((a_reps - a_reps.mean()) ** 2))
-        systematic2 = float(v @ carried @ v + v @ chain_cov @ v)
-        scale = float(np.sqrt(noise2 + systematic2))
-        t = (a_hat - float(np.abs(v) @ bound)) / scale if scale > 0 else 0.0
-        rows.append((float(f3), a_hat, t, float(a_hat * moved[k_column]), v * np.sqrt(np.where(judged, variance, 0.0))))
+        weights = np.where(rows_judged, left / np.where(np.isfinite(variance), np.sqrt(variance), 1.0), 0.0)
+        rows.append((float(f3), both[0], both[1], float(both[0] * moved[k_column]), alone[1], weights))
     if not rows:
         return None
-    unit = np.array([r[4] / np.linalg.norm(r[4]) for r in rows])
+    unit = np.array([row[5] / np.linalg.norm(row[5]) for row in rows])
     t_crit = float(stats.t.ppf(1.0 - MISFIT_LEVEL / effective_tests(unit @ unit.T), b - 1))
-    beyond = [r for r in rows if r[2] > t_crit and abs(r[3]) > k_halfwidth]
-    f3, a_hat, t, k_shift, _ = max(beyond or rows, key=lambda r: r[2])
-    return ThirdMode(f3, a_hat, t, t_crit, k_shift, k_halfwidth)
+    t_confirm = float(stats.t.ppf(1.0 - MISFIT_LEVEL, b - 1))
+    candidates = [ThirdMode(f3, a, t, t_crit, k_shift, k_halfwidth, t_amp, t_confirm)
+                  for f3, a, t, k_shift, t_amp, _ in rows]
+    return max([c for c in candidates if c.found] or candidates, key=lambda c: c.t)
+
+
+def _blocks(amplitude: np.ndarray, phase: np.ndarray) -> np.ndarray:
+    """The block-diagonal covariance of amplitude rows, then phase rows."""
+    n = amplitude.shape[0]
+    out = np.zeros((2 * n, 2 * n))
+    out[:n, :n], out[n:, n:] = amplitude, phase
+    return out

@@ -10,7 +10,7 @@ import pytest
 
 from analysis.adequacy import (CHAIN_WINDOW_STD, WINDOW_BINS, band_misfits, bandwidth_bins, chain_pull, critical_t,
                                misfit_covariance, motion_lines, quantisation_through_fit, systematic_std)
-from analysis.fit import FitOptions, amplitude_misfits, fit_two_mass
+from analysis.fit import FitOptions, fit_two_mass, model_misfits
 from analysis.frf import estimate_frf
 from analysis.quality import assess
 from analysis.recording import CommandedProfile
@@ -70,7 +70,8 @@ def clean_session():
 
 def test_clean_session_fits_within_noise_and_its_intervals_hold_the_truth(clean_session):
     frf, fit = clean_session
-    f, misfit, reps = amplitude_misfits(frf, fit)
+    f, misfit, reps = model_misfits(frf, fit)
+    misfit, reps = misfit.real, reps.real
     windows = band_misfits(f, misfit, reps, np.full((f.size, f.size), 0.004**2))  # 0.4 % common to a window
     assert reps.shape == (10, f.size)
     assert max(w.t for w in windows) < critical_t(len(windows), 10)  # 3.0 (at the top of the band) < 4.3

@@ -69,3 +69,28 @@ def test_a_healthy_undithered_joint_shows_no_third_mode(tmp_path: Path) -> None:
     res = analyse(path)
     assert res.quality.verdict == "ok", res.quality.reasons
     assert abs(errors_pct(res, truth)["K_Nm_per_rad"]) < 1.0
+
+
+def test_a_delay_left_in_the_phase_is_not_read_as_a_mode() -> None:
+    # what is left of the clock offset turns the phase by 2π f τ: estimated beside each mode, it moves nothing
+    from analysis import AnalysisRequest, analyze
+    from analysis.fit import log_ratio_jacobian, model_log_ratios, model_misfits
+    from analysis.third_mode import third_mode
+    from tests.test_analysis_pipeline import sim_recording
+
+    rec, _, nominal = sim_recording(duration_s=6.0, speed_dither=0.02)
+    res = analyze(rec, AnalysisRequest(nominal=nominal))
+    f, misfit, reps = model_misfits(res.frf, res.fit)
+    jac, sqrt_w = log_ratio_jacobian(res.frf, res.fit)
+    k = res.fit.fitted.index("K_Nm_per_rad")
+    cands = candidate_frequencies(res.fit.f_a, res.fit.band)
+
+    def judged(extra_phase: np.ndarray) -> object:
+        return third_mode(f, misfit + 1j * extra_phase, reps + 1j * extra_phase[None, :],
+                          model_log_ratios(res.frf, res.fit), jac, sqrt_w, res.fit.options.kind, k, 0.01, cands,
+                          use_phase=True, chain_std=0.003)
+
+    plain, delayed = judged(np.zeros(f.size)), judged(2 * np.pi * f * 30e-6)  # 30 µs: 0.04 rad at 200 Hz
+    assert plain is not None and delayed is not None
+    assert delayed.f_hz == plain.f_hz and delayed.t == pytest.approx(plain.t, rel=1e-6, abs=1e-9)
+    assert not plain.found
