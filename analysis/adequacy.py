@@ -297,16 +297,21 @@ def chain_pull(jac: np.ndarray, sqrt_w: np.ndarray, std: np.ndarray) -> np.ndarr
 
 
 def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray,
-                             sqrt_w: np.ndarray) -> np.ndarray:
-    """Covariance of the fit's log-amplitude residual that the encoder's quantisation leaves, bins × bins.
+                             sqrt_w: np.ndarray, phase_jac: np.ndarray | None = None) -> np.ndarray:
+    """Covariance of the fit's log-amplitude residual (and, given ``phase_jac``, of its phase residual) that the
+    encoder's quantisation leaves, bins × bins.
 
     The quantisation error repeats with a periodic motion, so at each of its lines it adds a fixed error whose phase
     has nothing to do with the speed's: ln H moves by E_k/Y_k, of variance q² per line in amplitude and in phase,
     q the white-quantisation bound √(N_q/G_yy) of the bin (``quant_rel``). A bin holding a share of n lines
     (``lines``: the lines of its window over the window's bins) has the variance q²/(2n) of its own line mean
     spread over those bins. The fit then absorbs part of it into K, J, C — and moves the residual elsewhere: the
-    residual is (I − M)·e with M the weighted fit's hat matrix, so its covariance is (I − M)·S·(I − M)ᵀ. Nothing here
-    is measured on a simulator: the encoder's resolution, the session's spectra and the fit's own Jacobian.
+    log parameters move by G·e (G = (JᵀJ)⁻¹Jᵀ·D, J the weighted Jacobian, D the weights' square roots, e the errors
+    of the rows the fit matches), so a residual row with the model's derivative j is e_row − j·G·e, and its
+    covariance is A·S·Aᵀ with A = P − J_rows·G. An amplitude fit leaves the phase error whole and moves the phase
+    residual by its pull on K, J, C (near the resonance, where |H| is steep in them, that pull is most of it).
+    Nothing here is measured on a simulator: the encoder's resolution, the session's spectra and the fit's own
+    Jacobian.
 
     Parameters
     ----------
@@ -318,23 +323,31 @@ def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.n
         Jacobian of the fit's weighted residuals (m = n amplitude rows, or 2n: amplitude then phase).
     sqrt_w : ndarray, shape (n,)
         The fit's bin weights' square roots.
+    phase_jac : ndarray, shape (n, p), optional
+        d arg(H_model)/d(log parameters) at the bins (unweighted): the phase residual's covariance too.
 
     Returns
     -------
-    ndarray, shape (n, n)
-        Covariance of the amplitude residual ln|H_model| − ln|H_measured|. A bin without weight or a finite bound
-        adds no error and is given none (its residual's dependence on the fit is not in the weighted Jacobian): the
-        caller must not judge it.
+    ndarray, shape (n, n) or (2n, 2n)
+        Covariance of the amplitude residual ln|H_model| − ln|H_measured| (then of the phase residual). A bin without
+        weight or a finite bound adds no error and is given none (its residual's dependence on the fit is not in the
+        weighted Jacobian): the caller must not judge it.
     """
-    parts = jac.shape[0] // quant_rel.size
+    n = quant_rel.size
+    parts = jac.shape[0] // n
     judged = np.isfinite(quant_rel) & np.isfinite(lines) & (lines > 0) & (sqrt_w > 0)
     d = np.tile(np.where(judged, sqrt_w, 1.0), parts)  # a bin without weight or bound adds nothing (not judged)
-    s2 = np.tile(np.where(judged, line_variance(quant_rel, lines), 0.0), parts)
-    hat = (jac / d[:, None]) @ np.linalg.pinv(jac.T @ jac) @ (jac * d[:, None]).T
-    rest = np.eye(d.size) - hat
-    cov = (rest * s2[None, :]) @ rest.T
-    n = quant_rel.size
-    return cov[:n, :n]
+    s2 = np.tile(np.where(judged, line_variance(quant_rel, lines), 0.0), 2)  # amplitude, then phase errors
+    moves = np.zeros((jac.shape[1], 2 * n))  # G: the log parameters' move per error of each row
+    moves[:, :parts * n] = np.linalg.pinv(jac.T @ jac) @ (jac * d[:, None]).T
+    rows = jac / d[:, None]  # the fit's rows' model derivatives (unweighted)
+    if phase_jac is None:
+        derivative = rows[:n]
+    else:
+        derivative = np.concatenate([rows[:n], np.where(judged[:, None], phase_jac, 0.0)])
+    k = derivative.shape[0]
+    rest = np.eye(k, 2 * n) - derivative @ moves
+    return (rest * s2[None, :]) @ rest.T
 
 
 def critical_t(n_windows: int, n_replicates: int) -> float:

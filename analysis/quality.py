@@ -15,7 +15,7 @@ from typing import Literal
 import numpy as np
 
 from analysis.adequacy import (CHAIN_WINDOW_STD, BandMisfit, band_misfits, critical_t, loop_feedback_bound,
-                               line_variance, missed_spans, quantisation_through_fit)
+                               missed_spans, quantisation_through_fit)
 from analysis.encoder import difference_response
 from analysis.excitation import RESOLUTION_NAMED, weak_coherence_cause
 from analysis.fit import (COHERENCE_CLIP, FitResult, band_mask, log_ratio_jacobian, model_log_ratios, model_misfits,
@@ -323,21 +323,20 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, 
         misfit, reps = misfit + kernel_error, reps + kernel_error[None, :]
     quant, lines = quantisation_terms(frf, fit.band, jitter.lsb_rad)
     jac, sqrt_w = log_ratio_jacobian(frf, fit)
+    n = f.size
     with np.errstate(invalid="ignore", divide="ignore"):
-        carried = jitter.repeating_share * quantisation_through_fit(quant, lines,
-                                                                    weighted_jacobian(jac, sqrt_w, fit.options.kind),
-                                                                    sqrt_w)
+        carried = jitter.repeating_share * quantisation_through_fit(
+            quant, lines, weighted_jacobian(jac, sqrt_w, fit.options.kind), sqrt_w, jac.imag if use_phase else None)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
     bound = loop_feedback_bound(quant, jitter.repeating_share)
-    windows = band_misfits(f, misfit.real, reps.real, carried, blind, CHAIN_WINDOW_STD, bound)
+    windows = band_misfits(f, misfit.real, reps.real, carried[:n, :n], blind, CHAIN_WINDOW_STD, bound)
     spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
     mode = None
     if "K_Nm_per_rad" in fit.fitted:
         mode = third_mode(f, misfit, reps, model_log_ratios(frf, fit), jac, sqrt_w, fit.options.kind,
                           fit.fitted.index("K_Nm_per_rad"), _rel_halfwidth(fit, "K_Nm_per_rad"),
                           candidate_frequencies(fit.f_a, fit.band), use_phase=use_phase, systematic_cov=carried,
-                          blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound,
-                          line_variance=jitter.repeating_share * line_variance(quant, lines))
+                          blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound)
     return (spans[0] if spans else None), mode
 
 

@@ -110,7 +110,7 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
                jac: np.ndarray, sqrt_w: np.ndarray, kind: FitKind, k_column: int, k_halfwidth: float,
                candidates_hz: np.ndarray, *, use_phase: bool = False, systematic_cov: np.ndarray | None = None,
                blind: np.ndarray | None = None, chain_std: float = 0.0,
-               bias_bound: np.ndarray | None = None, line_variance: np.ndarray | None = None) -> ThirdMode | None:
+               bias_bound: np.ndarray | None = None) -> ThirdMode | None:
     """The candidate third mode with the largest t among those beyond noise that pull K beyond its interval (else the
     largest t of all).
 
@@ -139,11 +139,10 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
         delay common to all bins (what is left of the clock offset) is estimated beside each mode and taken out, and
         |H| alone must confirm the mode (:attr:`ThirdMode.t_confirm`).
     systematic_cov, blind, chain_std, bias_bound
-        As :func:`analysis.adequacy.band_misfits` takes them (the quantisation's carried covariance of ln|H|'s
-        residual, n × n; bins not to judge; the chain's window error; the loop's bias bound per bin). The phase is
-        given the same chain error and bound (both bound ln H, a complex number) and the repeating quantisation's
-        variance per bin without the fit's absorption, ``line_variance`` (n,; :func:`analysis.adequacy.line_variance`
-        times the repeating share).
+        As :func:`analysis.adequacy.band_misfits` takes them (the quantisation's carried covariance of the residual,
+        amplitude rows then, with ``use_phase``, phase rows: :func:`analysis.adequacy.quantisation_through_fit`;
+        bins not to judge; the chain's window error; the loop's bias bound per bin). The phase is given the same
+        chain error and bound as |H| (both bound ln H, a complex number).
 
     Returns
     -------
@@ -166,9 +165,8 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
 
     m = np.where(rows_judged, stacked(np.where(judged, misfit, 0.0)), 0.0)
     r = np.where(rows_judged[None, :], stacked(np.where(judged[None, :], reps, 0.0)), 0.0)
-    carried = np.zeros((n, n)) if systematic_cov is None else np.where(np.outer(judged, judged), systematic_cov, 0.0)
-    line_var = np.zeros(n) if line_variance is None else np.where(judged & np.isfinite(line_variance), line_variance, 0.0)
-    carried = carried if parts == 1 else _blocks(carried, np.diag(line_var))
+    carried = (np.zeros((parts * n, parts * n)) if systematic_cov is None
+               else np.where(np.outer(rows_judged, rows_judged), systematic_cov[:parts * n, :parts * n], 0.0))
     bound = np.zeros(n) if bias_bound is None else np.where(judged & np.isfinite(bias_bound), bias_bound, 0.0)
     bound = np.tile(bound, parts)
     window = np.tile(np.arange(n) // WINDOW_BINS, parts) + np.repeat(np.arange(parts), n) * n
@@ -215,10 +213,3 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
                   for f3, a, t, k_shift, t_amp, _ in rows]
     return max([c for c in candidates if c.found] or candidates, key=lambda c: c.t)
 
-
-def _blocks(amplitude: np.ndarray, phase: np.ndarray) -> np.ndarray:
-    """The block-diagonal covariance of amplitude rows, then phase rows."""
-    n = amplitude.shape[0]
-    out = np.zeros((2 * n, 2 * n))
-    out[:n, :n], out[n:, n:] = amplitude, phase
-    return out
