@@ -15,7 +15,7 @@ import json
 import math
 import tomllib
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, TypeVar, get_args
 
 from pydantic import BaseModel, ValidationError
 
@@ -105,11 +105,47 @@ def validate(model: type[M], data: dict[str, Any], source: Path | str) -> M:
         first = next((err for err in errors if err["type"] == "extra_forbidden"), errors[0])
         message = _format(Path(source), first, data)
         if first["type"] == "extra_forbidden":
+            section = tuple(first["loc"][:-1])
             missing = [str(err["loc"][-1]) for err in errors
-                       if err["type"] == "missing" and tuple(err["loc"][:-1]) == tuple(first["loc"][:-1])]
-            close = difflib.get_close_matches(str(first["loc"][-1]), missing, n=1, cutoff=0.6)
+                       if err["type"] == "missing" and tuple(err["loc"][:-1]) == section]
+            # a missing key first (the typo of a required one); else any key the section accepts that the file does
+            # not set (the typo of an optional one, e.g. [sim] host_jiter_s or speed_ditter)
+            close = (difflib.get_close_matches(str(first["loc"][-1]), missing, n=1, cutoff=0.6)
+                     or difflib.get_close_matches(str(first["loc"][-1]), _unset_keys(model, section, data), n=1,
+                                                  cutoff=0.6))
             message += f" (did you mean {close[0]}?)" if close else ""
         raise ConfigError(message) from None
+
+
+def _unset_keys(model: type[BaseModel], section: tuple[Any, ...], data: dict[str, Any]) -> list[str]:
+    """The keys the section at pydantic location ``section`` accepts and ``data`` does not set there.
+
+    A discriminated union's tag in the location (``("drive", "sim")``) picks the member whose ``driver`` is that tag."""
+    models: list[type[BaseModel]] = [model]
+    node: Any = data
+    for element in section:
+        fields = [m.model_fields[element] for m in models if element in m.model_fields]
+        if fields:
+            models = [m for f in fields for m in _models_in(f.annotation)]
+            node = node.get(element) if isinstance(node, dict) else None
+        else:  # the union's tag: keep the member it names
+            models = [m for m in models if _tag_of(m) == element] or models
+    present = set(node) if isinstance(node, dict) else set()
+    return sorted({key for m in models for key in m.model_fields} - present)
+
+
+def _models_in(annotation: Any) -> list[type[BaseModel]]:
+    """The config models an annotation holds (itself, or the members of an Optional / Union / Annotated)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    return [m for arg in get_args(annotation) for m in _models_in(arg)]
+
+
+def _tag_of(model: type[BaseModel]) -> Any:
+    """The ``driver`` literal of a discriminated union's member, else None."""
+    field = model.model_fields.get("driver")
+    args = get_args(field.annotation) if field is not None else ()
+    return args[0] if len(args) == 1 else None
 
 
 def load_bench(path: Path | str | None = None) -> Bench:
