@@ -40,7 +40,10 @@ def _key_path(loc: tuple[Any, ...], data: dict[str, Any]) -> tuple[str, Any]:
             continue  # the discriminated union's tag (e.g. "nidaqmx") is not a key in the file
         if isinstance(element, str) and element.endswith("]"):
             continue
-        parts.append(str(element))
+        if isinstance(element, int) and parts:  # an item of a list: channels[1], not a key "1"
+            parts[-1] += f"[{element}]"
+        else:
+            parts.append(str(element))
         node = node.get(element) if isinstance(node, dict) else (
             node[element] if isinstance(node, list) and isinstance(element, int) and element < len(node) else None
         )

@@ -44,6 +44,9 @@ def test_shipped_configs_validate() -> None:
         ("inertia_known", "inertia_knwn", "[nominal] inertia_knwn = true: unknown key (did you mean inertia_known?)"),
         ("period_s = 0.001", "period_s = 0.001\nmotoin = \"commanded\"",
          "[drive] motoin = \"commanded\": unknown key (did you mean motion?)"),
+        # an item of a list by its index: before "[daq.channels] 1 = \"i_x\""
+        ('channels = ["i_a"]', 'channels = ["i_a", "i_x"]', "[daq] channels[1] = \"i_x\": must be 'i_a', 'i_b' or "
+                                                           "'i_c'"),
         # the sim DAQ has no buffer: nidaqmx's key is not offered for it
         ("rate_hz = 25600", "rate_hz = 25600\nbufer_s = 5", "[daq] bufer_s = 5: unknown key"),
         ("driver = \"sim\"\nrate_hz", "driver = \"labview\"\nrate_hz",
