@@ -29,6 +29,10 @@ DEFAULT_BENCH = CONFIG_DIR / "benches" / "sim.toml"
 _DRIVERS_OF = {"daq": set(CURRENT_SOURCES), "drive": set(DRIVES)}
 
 M = TypeVar("M", bound=BaseModel)
+#: the sections of a bench file ([motor], [daq], [drive], …): a file with them given as a profile is a bench config
+_BENCH_SECTIONS = frozenset(name for name, field in Bench.model_fields.items()
+                            if any(isinstance(a, type) and issubclass(a, BaseModel)
+                                   for a in (field.annotation, *get_args(field.annotation))))
 
 
 def _key_path(loc: tuple[Any, ...], data: dict[str, Any]) -> tuple[str, Any]:
@@ -155,6 +159,9 @@ def load_bench(path: Path | str | None = None) -> Bench:
     """Load a bench config; ``None`` is the built-in simulated bench."""
     p = Path(path) if path is not None else DEFAULT_BENCH
     data = read_toml(p)
+    if "kind" in data and not _BENCH_SECTIONS & data.keys():
+        raise ConfigError(f"{p}: a motion profile (kind = {json.dumps(data['kind'])}), not a bench config: give it as "
+                          "--profile")
     drive = data.get("drive")
     if isinstance(drive, dict) and isinstance(drive.get("eds"), str) and drive["eds"] \
             and not Path(drive["eds"]).is_absolute():  # a drive's EDS/DCF named beside the bench file
@@ -197,7 +204,12 @@ def load_profile(name_or_path: str) -> Profile:
     error (the seed would choose nothing: the motion repeats exactly); a session file's profile as executed is not
     judged so (a recorded file is what it is)."""
     p = resolve_profile_path(name_or_path)
-    profile = validate(Profile, read_toml(p), p)
+    data = read_toml(p)
+    sections = sorted(_BENCH_SECTIONS & data.keys())
+    if "kind" not in data and sections:
+        shown = ", ".join(f"[{k}]" for k in sections[:2]) + (" …" if len(sections) > 2 else "")
+        raise ConfigError(f"{p}: a bench config (it has {shown}), not a motion profile: give it as --bench")
+    profile = validate(Profile, data, p)
     if profile.dither_seed is not None and profile.speed_dither == 0.0:
         raise ConfigError(f"{p}: dither_seed = {profile.dither_seed} without speed_dither: the seed only chooses the "
                           "cycles of a dithered motion (speed_dither = 0, the default, repeats exactly) — set "

@@ -117,6 +117,23 @@ def test_a_misspelt_optional_profile_key_is_named_with_the_key_meant(tmp_path: P
     assert run.err.strip() == f"acq: error: {path}: speed_ditter = 0.0: unknown key (did you mean speed_dither?)"
 
 
+def test_a_bench_given_as_profile_and_a_profile_given_as_bench_are_named_so(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: 'sim.toml: joint = "joint1": unknown key' and 'triangle_0.2s.toml: kind = "triangle": unknown key'."""
+    profile = Path(__file__).parent.parent / "configs/profiles/triangle_0.2s.toml"
+    as_profile = run_cli(capsys, "record", "--profile", str(DEFAULT_BENCH), "--fast")
+    assert (as_profile.code, as_profile.err.strip()) == (
+        2, f"acq: error: {DEFAULT_BENCH}: a bench config (it has [daq], [drive] …), not a motion profile: give it as "
+           "--bench")
+    as_bench = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(profile), "--fast")
+    assert (as_bench.code, as_bench.err.strip()) == (
+        2, f'acq: error: {profile}: a motion profile (kind = "triangle"), not a bench config: give it as --profile')
+    typo = tmp_path / "p.toml"  # a profile whose kind is misspelt is still judged as a profile
+    typo.write_text(profile.read_text().replace('kind = "triangle"', 'knd = "triangle"'))
+    assert run_cli(capsys, "record", "--profile", str(typo), "--fast").err.strip() == (
+        f'acq: error: {typo}: knd = "triangle": unknown key (did you mean kind?)')
+
+
 def test_missing_bench_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(tmp_path / "nope.toml"))
     assert run.code == 2
