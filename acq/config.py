@@ -15,7 +15,7 @@ import json
 import math
 import tomllib
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, TypeVar, get_args
 
 from pydantic import BaseModel, ValidationError
 
@@ -29,6 +29,10 @@ DEFAULT_BENCH = CONFIG_DIR / "benches" / "sim.toml"
 _DRIVERS_OF = {"daq": set(CURRENT_SOURCES), "drive": set(DRIVES)}
 
 M = TypeVar("M", bound=BaseModel)
+#: the sections of a bench file ([motor], [daq], [drive], …): a file with them given as a profile is a bench config
+_BENCH_SECTIONS = frozenset(name for name, field in Bench.model_fields.items()
+                            if any(isinstance(a, type) and issubclass(a, BaseModel)
+                                   for a in (field.annotation, *get_args(field.annotation))))
 
 
 def _key_path(loc: tuple[Any, ...], data: dict[str, Any]) -> tuple[str, Any]:
@@ -40,7 +44,10 @@ def _key_path(loc: tuple[Any, ...], data: dict[str, Any]) -> tuple[str, Any]:
             continue  # the discriminated union's tag (e.g. "nidaqmx") is not a key in the file
         if isinstance(element, str) and element.endswith("]"):
             continue
-        parts.append(str(element))
+        if isinstance(element, int) and parts:  # an item of a list: channels[1], not a key "1"
+            parts[-1] += f"[{element}]"
+        else:
+            parts.append(str(element))
         node = node.get(element) if isinstance(node, dict) else (
             node[element] if isinstance(node, list) and isinstance(element, int) and element < len(node) else None
         )
@@ -105,17 +112,56 @@ def validate(model: type[M], data: dict[str, Any], source: Path | str) -> M:
         first = next((err for err in errors if err["type"] == "extra_forbidden"), errors[0])
         message = _format(Path(source), first, data)
         if first["type"] == "extra_forbidden":
+            section = tuple(first["loc"][:-1])
             missing = [str(err["loc"][-1]) for err in errors
-                       if err["type"] == "missing" and tuple(err["loc"][:-1]) == tuple(first["loc"][:-1])]
-            close = difflib.get_close_matches(str(first["loc"][-1]), missing, n=1, cutoff=0.6)
+                       if err["type"] == "missing" and tuple(err["loc"][:-1]) == section]
+            # a missing key first (the typo of a required one); else any key the section accepts that the file does
+            # not set (the typo of an optional one, e.g. [sim] host_jiter_s or speed_ditter)
+            close = (difflib.get_close_matches(str(first["loc"][-1]), missing, n=1, cutoff=0.6)
+                     or difflib.get_close_matches(str(first["loc"][-1]), _unset_keys(model, section, data), n=1,
+                                                  cutoff=0.6))
             message += f" (did you mean {close[0]}?)" if close else ""
         raise ConfigError(message) from None
+
+
+def _unset_keys(model: type[BaseModel], section: tuple[Any, ...], data: dict[str, Any]) -> list[str]:
+    """The keys the section at pydantic location ``section`` accepts and ``data`` does not set there.
+
+    A discriminated union's tag in the location (``("drive", "sim")``) picks the member whose ``driver`` is that tag."""
+    models: list[type[BaseModel]] = [model]
+    node: Any = data
+    for element in section:
+        fields = [m.model_fields[element] for m in models if element in m.model_fields]
+        if fields:
+            models = [m for f in fields for m in _models_in(f.annotation)]
+            node = node.get(element) if isinstance(node, dict) else None
+        else:  # the union's tag: keep the member it names
+            models = [m for m in models if _tag_of(m) == element] or models
+    present = set(node) if isinstance(node, dict) else set()
+    return sorted({key for m in models for key in m.model_fields} - present)
+
+
+def _models_in(annotation: Any) -> list[type[BaseModel]]:
+    """The config models an annotation holds (itself, or the members of an Optional / Union / Annotated)."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return [annotation]
+    return [m for arg in get_args(annotation) for m in _models_in(arg)]
+
+
+def _tag_of(model: type[BaseModel]) -> Any:
+    """The ``driver`` literal of a discriminated union's member, else None."""
+    field = model.model_fields.get("driver")
+    args = get_args(field.annotation) if field is not None else ()
+    return args[0] if len(args) == 1 else None
 
 
 def load_bench(path: Path | str | None = None) -> Bench:
     """Load a bench config; ``None`` is the built-in simulated bench."""
     p = Path(path) if path is not None else DEFAULT_BENCH
     data = read_toml(p)
+    if "kind" in data and not _BENCH_SECTIONS & data.keys():
+        raise ConfigError(f"{p}: a motion profile (kind = {json.dumps(data['kind'])}), not a bench config: give it as "
+                          "--profile")
     drive = data.get("drive")
     if isinstance(drive, dict) and isinstance(drive.get("eds"), str) and drive["eds"] \
             and not Path(drive["eds"]).is_absolute():  # a drive's EDS/DCF named beside the bench file
@@ -158,7 +204,12 @@ def load_profile(name_or_path: str) -> Profile:
     error (the seed would choose nothing: the motion repeats exactly); a session file's profile as executed is not
     judged so (a recorded file is what it is)."""
     p = resolve_profile_path(name_or_path)
-    profile = validate(Profile, read_toml(p), p)
+    data = read_toml(p)
+    sections = sorted(_BENCH_SECTIONS & data.keys())
+    if "kind" not in data and sections:
+        shown = ", ".join(f"[{k}]" for k in sections[:2]) + (" …" if len(sections) > 2 else "")
+        raise ConfigError(f"{p}: a bench config (it has {shown}), not a motion profile: give it as --bench")
+    profile = validate(Profile, data, p)
     if profile.dither_seed is not None and profile.speed_dither == 0.0:
         raise ConfigError(f"{p}: dither_seed = {profile.dither_seed} without speed_dither: the seed only chooses the "
                           "cycles of a dithered motion (speed_dither = 0, the default, repeats exactly) — set "

@@ -9,6 +9,7 @@ from pathlib import Path
 import pytest
 
 from acq.recording.reader import load
+from acq.ui.values import format_value
 from tests.helpers import read_only_view, run_cli
 
 KEYS = {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "ci95", "antiresonance_hz", "resonance_hz",
@@ -298,7 +299,8 @@ def test_a_read_only_session_folder_shows_the_result_fails_the_write_and_result_
         assert (as_json.code, as_json.err) == (1, not_saved)
         doc = json.loads(as_json.out)
         assert abs(doc["K_Nm_per_rad"] / 891.0 - 1) < 0.02
-        assert f"{doc['K_Nm_per_rad']:.1f}" in table.out.split("K [N·m/rad]")[1].split("\n")[0]  # the same numbers
+        # the same numbers, as the table writes them (4 significant digits: 889.96 is "890", not "890.0")
+        assert f" {format_value(doc['K_Nm_per_rad'])} " in table.out.split("K [N·m/rad]")[1].split("\n")[0]
         elsewhere = tmp_path / "results"
         saved = run_cli(capsys, "analyze", str(ro / "a.h5"), "--no-report", "--json", "--result-dir", str(elsewhere))
         assert saved.code == 0, saved.err

@@ -39,6 +39,16 @@ def test_shipped_configs_validate() -> None:
         ("rate_hz = 25600", "rate_hz = \"fast\"", "[daq] rate_hz = \"fast\": must be a valid number"),
         ("pole_pairs = 4", "pole_pair = 4", "[motor] pole_pair = 4: unknown key (did you mean pole_pairs?)"),
         ("pole_pairs = 4", "", "[motor] pole_pairs: missing"),
+        # a key with a default misspelt: before, "unknown key" alone (only missing keys were offered)
+        ("host_jitter_s", "host_jiter_s", "[sim] host_jiter_s = 0.0002: unknown key (did you mean host_jitter_s?)"),
+        ("inertia_known", "inertia_knwn", "[nominal] inertia_knwn = true: unknown key (did you mean inertia_known?)"),
+        ("period_s = 0.001", "period_s = 0.001\nmotoin = \"commanded\"",
+         "[drive] motoin = \"commanded\": unknown key (did you mean motion?)"),
+        # an item of a list by its index: before "[daq.channels] 1 = \"i_x\""
+        ('channels = ["i_a"]', 'channels = ["i_a", "i_x"]', "[daq] channels[1] = \"i_x\": must be 'i_a', 'i_b' or "
+                                                           "'i_c'"),
+        # the sim DAQ has no buffer: nidaqmx's key is not offered for it
+        ("rate_hz = 25600", "rate_hz = 25600\nbufer_s = 5", "[daq] bufer_s = 5: unknown key"),
         ("driver = \"sim\"\nrate_hz", "driver = \"labview\"\nrate_hz",
          "[daq] driver = \"labview\": unknown driver (expected one of 'sim', 'nidaqmx')"),
         ("counts_per_rev = 131072", "counts_per_rev = 131072.5",
@@ -95,6 +105,33 @@ def test_bad_profile_value(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
     run = run_cli(capsys, "record", "--profile", str(path))
     assert run.code == 2
     assert run.err.strip() == f"acq: error: {path}: accel_time_s = 0: must be greater than 0"
+
+
+def test_a_misspelt_optional_profile_key_is_named_with_the_key_meant(tmp_path: Path,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "p.toml"
+    text = (Path(__file__).parent.parent / "configs/profiles/triangle_0.2s.toml").read_text()
+    path.write_text(text.replace("speed_dither = 0.02", "speed_ditter = 0.0"))
+    run = run_cli(capsys, "record", "--profile", str(path))
+    assert run.code == 2
+    assert run.err.strip() == f"acq: error: {path}: speed_ditter = 0.0: unknown key (did you mean speed_dither?)"
+
+
+def test_a_bench_given_as_profile_and_a_profile_given_as_bench_are_named_so(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: 'sim.toml: joint = "joint1": unknown key' and 'triangle_0.2s.toml: kind = "triangle": unknown key'."""
+    profile = Path(__file__).parent.parent / "configs/profiles/triangle_0.2s.toml"
+    as_profile = run_cli(capsys, "record", "--profile", str(DEFAULT_BENCH), "--fast")
+    assert (as_profile.code, as_profile.err.strip()) == (
+        2, f"acq: error: {DEFAULT_BENCH}: a bench config (it has [daq], [drive] …), not a motion profile: give it as "
+           "--bench")
+    as_bench = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--bench", str(profile), "--fast")
+    assert (as_bench.code, as_bench.err.strip()) == (
+        2, f'acq: error: {profile}: a motion profile (kind = "triangle"), not a bench config: give it as --profile')
+    typo = tmp_path / "p.toml"  # a profile whose kind is misspelt is still judged as a profile
+    typo.write_text(profile.read_text().replace('kind = "triangle"', 'knd = "triangle"'))
+    assert run_cli(capsys, "record", "--profile", str(typo), "--fast").err.strip() == (
+        f'acq: error: {typo}: knd = "triangle": unknown key (did you mean kind?)')
 
 
 def test_missing_bench_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

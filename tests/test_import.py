@@ -436,6 +436,25 @@ def test_import_makes_the_missing_folder_of_its_session_file_as_record_does_for_
                                                   "folder\n")
 
 
+def test_import_refuses_a_session_name_that_a_batch_would_not_see(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    """Before: ``-o imports/`` (a folder meant; the slash is gone once a path) wrote a session *file* named
+    ``imports``, and ``-o s.csv`` an HDF5 file named s.csv: exit 0, and ``acq analyze FOLDER`` never saw either."""
+    cur, enc = pair
+    for given, example in ((f"{tmp_path / 'imports'}/", f"{tmp_path / 'imports' / 'session.h5'} or "
+                                                        f"{tmp_path / 'imports'}.h5"),
+                           (str(tmp_path / "s.csv"), str(tmp_path / "s.h5"))):
+        refused = run_cli(capsys, "import", "--current", str(cur), "--encoder", str(enc), "--bench",
+                          str(DEFAULT_BENCH), "--profile", "triangle_0.2s", "-o", given)
+        out = given.rstrip("/")
+        assert (refused.code, refused.err) == (2, f"acq: error: -o {out}: a session file's name must end in .h5 "
+                                                  f"(acq analyze FOLDER finds only *.h5), e.g. {example}\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cur.csv", "enc.csv"]  # nothing written
+    made = run_import(capsys, cur, enc, tmp_path / "imports" / "s.h5")
+    assert made.code == 0, made.err
+    assert [p.name for p in (tmp_path / "imports").iterdir()] == ["s.h5"]
+
+
 # ------------------------------------------------------------------------------------ files as real tools write them
 
 

@@ -191,6 +191,20 @@ def test_not_a_session(tmp_path: Path) -> None:
         load(tmp_path / "text.h5")
 
 
+def test_an_empty_file_and_a_file_of_another_kind_are_named_so_not_in_hdf5s_words(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: both said '(Unable to synchronously open file (file signature not found))' — HDF5's words."""
+    empty, text = tmp_path / "empty.h5", tmp_path / "notes.h5"
+    empty.touch()
+    text.write_text("K = 891\n")
+    for command in ("info", "analyze", "check", "export"):
+        extra = ("--csv", str(tmp_path / "csv")) if command == "export" else ()
+        runs = [run_cli(capsys, command, str(path), *extra) for path in (empty, text)]
+        assert [(r.code, r.err) for r in runs] == [
+            (2, f"acq: error: {empty}: empty (0 bytes), not a session file\n"),
+            (2, f"acq: error: {text}: not a readable HDF5 session file (no HDF5 signature: another kind of file)\n")]
+
+
 def test_sessions_started_in_the_same_second_get_distinct_files(tmp_path: Path) -> None:
     from acq.recording.paths import new_session_path
 

@@ -148,6 +148,7 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
     ConfigError
         Bad input, one line naming the file, line (or channel/sample) and column.
     """
+    _require_session_name(out)
     if out.exists():
         raise ConfigError(f"-o {out}: exists (not overwritten)")
     _require_folder_possible(out)
@@ -173,6 +174,16 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
                   hashing.submit(_sha256_hex, data[path]) for path in (current_path, encoder_path)}
         return _import(current_path, encoder_path, bench, profile, out, current_channels, tags, meta, meta_warning,
                        same_clock, started_utc, sha256, data)
+
+
+def _require_session_name(out: Path) -> None:
+    """Refuse an ``out`` not named ``*.h5``: a batch (``acq analyze FOLDER``) and so the catalogue and the trend
+    see only ``*.h5`` files. ``-o imports/`` (a folder meant) reaches here as ``imports`` and would become a
+    session file of that name, invisible to them."""
+    if out.suffix != ".h5":
+        example = out.with_suffix(".h5") if out.suffix else f"{out / 'session.h5'} or {out}.h5"
+        raise ConfigError(f"-o {out}: a session file's name must end in .h5 (acq analyze FOLDER finds only *.h5), "
+                          f"e.g. {example}")
 
 
 def _require_folder_possible(out: Path) -> None:

@@ -40,6 +40,8 @@ def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
     require_session_file(path)
     notes: list[str] = []
     size = path.stat().st_size
+    if size == 0:  # HDF5 would say "file signature not found"
+        raise ConfigError(f"{path}: empty (0 bytes), not a session file")
     try:
         eof = superblock_eof(path)
     except OSError as e:
@@ -50,6 +52,8 @@ def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
         return open_read(path), notes
     except (OSError, RuntimeError) as e:
         first_line = str(e).splitlines()[0] if str(e) else type(e).__name__
+        if "file signature not found" in first_line:  # HDF5's words for a file of another kind
+            first_line = "no HDF5 signature: another kind of file"
         why = notes[0] if notes else first_line
         raise ConfigError(f"{path}: not a readable HDF5 session file ({why})") from None
 

@@ -31,7 +31,7 @@ from acq.ui.options import tag_option
               help="When the recording started, ISO 8601 (UTC if no zone), e.g. 2026-11-20T10:15:03Z (default: "
                    "from the acq export metadata, a TDMS wf_start_time, else now). The catalogue and trend sort by it.")
 @click.option("-o", "--out", "out_path", required=True, type=click.Path(path_type=Path),
-              help="Session file to write (its folder is made if missing).")
+              help="Session file to write, named *.h5 (its folder is made if missing).")
 @tag_option
 def import_command(current_path: Path, current_channels: tuple[str, ...], encoder_path: Path, bench_path: Path | None,
                    profile_name: str | None, joint: str | None, same_clock: bool, started: str | None, out_path: Path,
