@@ -296,22 +296,23 @@ def chain_pull(jac: np.ndarray, sqrt_w: np.ndarray, std: np.ndarray) -> np.ndarr
     return a @ weighted @ a.T
 
 
-def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray,
-                             sqrt_w: np.ndarray, phase_jac: np.ndarray | None = None) -> np.ndarray:
-    """Covariance of the fit's log-amplitude residual (and, given ``phase_jac``, of its phase residual) that the
-    encoder's quantisation leaves, bins × bins.
+def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.ndarray, sqrt_w: np.ndarray,
+                             kind: str = "amplitude", fitted: np.ndarray | None = None,
+                             phase: bool = False) -> np.ndarray:
+    """Covariance of the fit's log-amplitude residual (and with ``phase`` of its phase residual) that the encoder's
+    quantisation leaves, bins × bins.
 
     The quantisation error repeats with a periodic motion, so at each of its lines it adds a fixed error whose phase
     has nothing to do with the speed's: ln H moves by E_k/Y_k, of variance q² per line in amplitude and in phase,
     q the white-quantisation bound √(N_q/G_yy) of the bin (``quant_rel``). A bin holding a share of n lines
     (``lines``: the lines of its window over the window's bins) has the variance q²/(2n) of its own line mean
     spread over those bins. The fit then absorbs part of it into K, J, C — and moves the residual elsewhere: the
-    log parameters move by G·e (G = (JᵀJ)⁻¹Jᵀ·D, J the weighted Jacobian, D the weights' square roots, e the errors
-    of the rows the fit matches), so a residual row with the model's derivative j is e_row − j·G·e, and its
-    covariance is A·S·Aᵀ with A = P − J_rows·G. An amplitude fit leaves the phase error whole and moves the phase
-    residual by its pull on K, J, C (near the resonance, where |H| is steep in them, that pull is most of it).
-    Nothing here is measured on a simulator: the encoder's resolution, the session's spectra and the fit's own
-    Jacobian.
+    log parameters move by G·e (G = (JᵀJ)⁻¹Jᵀ·D, J the weighted Jacobian of the rows the fit matches, D their
+    weights' square roots, e their errors), so a residual row with the model's derivative j is e_row − j·G·e, and
+    its covariance is A·S·Aᵀ with A = P − J_rows·G — also at bins the fit did not match (a band judged beyond the
+    fitted one) and in the phase, which an amplitude fit leaves whole and moves by its pull on K, J, C (near the
+    resonance, where |H| is steep in them, that pull is most of it). Nothing here is measured on a simulator: the
+    encoder's resolution, the session's spectra and the fit's own Jacobian.
 
     Parameters
     ----------
@@ -319,34 +320,35 @@ def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.n
         White-quantisation bound of |H| per bin (relative, 0.05 = 5 %).
     lines : ndarray, shape (n,)
         Lines of the motion per bin (a window's lines over its bins), ≥ 1/bins.
-    jac : ndarray, shape (m, p)
-        Jacobian of the fit's weighted residuals (m = n amplitude rows, or 2n: amplitude then phase).
+    jac : ndarray of complex, shape (n, p)
+        d ln(H_model/H_meas)/d(log parameters) at the bins (:func:`analysis.fit.log_ratio_jacobian`).
     sqrt_w : ndarray, shape (n,)
         The fit's bin weights' square roots.
-    phase_jac : ndarray, shape (n, p), optional
-        d arg(H_model)/d(log parameters) at the bins (unweighted): the phase residual's covariance too.
+    kind : {"amplitude", "complex"}
+        What the fit matched: |H|, or |H| and the phase.
+    fitted : ndarray of bool, shape (n,), optional
+        The bins the fit matched (default all).
+    phase : bool, optional
+        Also the phase residual's rows.
 
     Returns
     -------
     ndarray, shape (n, n) or (2n, 2n)
         Covariance of the amplitude residual ln|H_model| − ln|H_measured| (then of the phase residual). A bin without
-        weight or a finite bound adds no error and is given none (its residual's dependence on the fit is not in the
-        weighted Jacobian): the caller must not judge it.
+        weight or a finite bound adds no error and is given none: the caller must not judge it.
     """
     n = quant_rel.size
-    parts = jac.shape[0] // n
     judged = np.isfinite(quant_rel) & np.isfinite(lines) & (lines > 0) & (sqrt_w > 0)
-    d = np.tile(np.where(judged, sqrt_w, 1.0), parts)  # a bin without weight or bound adds nothing (not judged)
+    fit = np.flatnonzero(np.ones(n, bool) if fitted is None else fitted)
+    matched = [fit, n + fit] if kind == "complex" else [fit]
+    fit_jac = np.concatenate([sqrt_w[fit, None] * part for part in (jac[fit].real, jac[fit].imag)[:len(matched)]])
+    moves = np.zeros((jac.shape[1], 2 * n))  # G: the log parameters' move per error of each row (amplitude, phase)
+    moves[:, np.concatenate(matched)] = (np.linalg.pinv(fit_jac.T @ fit_jac) @ fit_jac.T
+                                         * np.tile(sqrt_w[fit], len(matched))[None, :])
+    observed = [jac.real, jac.imag] if phase else [jac.real]
+    derivative = np.concatenate([np.where(judged[:, None], part, 0.0) for part in observed])
+    rest = np.eye(derivative.shape[0], 2 * n) - derivative @ moves
     s2 = np.tile(np.where(judged, line_variance(quant_rel, lines), 0.0), 2)  # amplitude, then phase errors
-    moves = np.zeros((jac.shape[1], 2 * n))  # G: the log parameters' move per error of each row
-    moves[:, :parts * n] = np.linalg.pinv(jac.T @ jac) @ (jac * d[:, None]).T
-    rows = jac / d[:, None]  # the fit's rows' model derivatives (unweighted)
-    if phase_jac is None:
-        derivative = rows[:n]
-    else:
-        derivative = np.concatenate([rows[:n], np.where(judged[:, None], phase_jac, 0.0)])
-    k = derivative.shape[0]
-    rest = np.eye(k, 2 * n) - derivative @ moves
     return (rest * s2[None, :]) @ rest.T
 
 

@@ -15,7 +15,7 @@ from typing import Any
 from analysis.chain import SignalChain, chain_caveat
 from analysis.clocks import ClockFit
 from analysis.diagnose import nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
-from analysis.fit import FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass
+from analysis.fit import FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit
 from analysis.encoder import longest_gap_free_span
 from analysis.estimator_check import kernel_model_error
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
@@ -139,7 +139,7 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
                        nominal=request.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
-    kernel_error = None if fit.status == "failed" else kernel_model_error(frf, fit, sig.torque_Nm)
+    kernel_error = None if fit.status == "failed" else kernel_model_error(frf, judged_fit(frf, fit), sig.torque_Nm)
     quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
                      encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None, profile=rec.profile,
                      interference=sig.interference, kernel_error=kernel_error)

@@ -18,8 +18,8 @@ from analysis.adequacy import (CHAIN_WINDOW_STD, BandMisfit, band_misfits, criti
                                missed_spans, quantisation_through_fit)
 from analysis.encoder import difference_response
 from analysis.excitation import RESOLUTION_NAMED, weak_coherence_cause
-from analysis.fit import (COHERENCE_CLIP, FitResult, band_mask, log_ratio_jacobian, model_log_ratios, model_misfits,
-                          quantisation_terms, weighted_jacobian)
+from analysis.fit import (COHERENCE_CLIP, FitResult, band_mask, judged_fit, log_ratio_jacobian, model_log_ratios,
+                          model_misfits, quantisation_terms)
 from analysis.frf import FrequencyResponse
 from analysis.model import PARAM_LABELS
 from analysis.recording import CommandedProfile
@@ -226,18 +226,18 @@ def assess(
                     if fit.status != "failed" and known_resolution else (None, None))
     if missed is None and mode is not None and mode.found:
         findings.append(("poor", f"the two-mass model misses a third mode near {mode.f_hz:.0f} Hz ({mode.t:.1f} σ "
-                                 f"beyond what noise, the chain and the encoder's quantisation explain, level "
-                                 f"{mode.t_crit:.1f}): it pulls K by ≈ {100 * mode.k_shift:+.0f} %, beyond K's interval "
-                                 f"(±{100 * mode.k_halfwidth:.1f} %) — a compliant or loose part (the coupling, the arm, "
-                                 f"the tool or their mountings): check them; until then K, J_m, J_l are the two-mass "
-                                 f"model's compromise, not the joint's"))
+                                 f"beyond what noise, the chain and the encoder's quantisation explain): a third mass "
+                                 f"there moves the fitted K beyond its interval (±{100 * mode.k_halfwidth:.1f} %; by "
+                                 f"≈ {100 * mode.k_shift:+.0f} % to first order){_beyond_band(mode.f_hz, fit)} — a "
+                                 f"compliant or loose part (the coupling, the arm, the tool or their mountings): check "
+                                 f"them; until then K, J_m, J_l are the two-mass model's compromise, not the joint's"))
     if missed is not None:
         low, high, worst = missed
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
                                  f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
-                                 f"{worst.t:.0f} σ beyond what noise, the chain and the encoder's quantisation explain "
-                                 f"— {_misfit_cause(worst, fit)}; until then K, J_m, J_l are the two-mass model's "
-                                 f"compromise, not the joint's"))
+                                 f"{worst.t:.0f} σ beyond what noise, the chain and the encoder's quantisation explain"
+                                 f"{_beyond_band(worst.low_hz, fit)} — {_misfit_cause(worst, fit)}; until then K, J_m, "
+                                 f"J_l are the two-mass model's compromise, not the joint's"))
     elif np.isfinite(fit.residual_rms):
         # the RMS misfit against the coherence's noise alone: where the window test ran (it allows for the
         # quantisation that repeats with the motion, which this ratio does not — 8 % RMS on a healthy 2^17 counts/rev
@@ -290,10 +290,26 @@ def assess(
     )
 
 
+def _beyond_band(f_hz: float, fit: FitResult) -> str:
+    """Said of a misfit at ``f_hz`` above the band the fit matched (the tests judge up to the default band's top,
+    :func:`analysis.fit.judged_fit`): a band ended below it does not take its pull off K."""
+    if f_hz <= fit.band[1]:
+        return ""
+    return f", above the band fitted (up to {fit.band[1]:g} Hz): ending the band below it does not take its pull off K"
+
+
 def _misfit_cause(worst: BandMisfit, fit: FitResult) -> str:
     """What the worst window's misfit points to, by where it lies against the fit's anti-resonance and resonance:
     friction and backlash on the load side damp and bend the anti-resonance; a compliant or loose part adds a mode
-    above the resonance; elsewhere any of them."""
+    above the resonance; elsewhere any of them — or, with the inertias held at their nominal values, those values."""
+    if not {"Jm_kgm2", "Jl_kgm2"} <= set(fit.fitted):
+        return ("the inertias held at their nominal values may not be the joint's (fit them too: --params "
+                "K,Jm,Jl), or " + _joint_cause(worst, fit))
+    return _joint_cause(worst, fit)
+
+
+def _joint_cause(worst: BandMisfit, fit: FitResult) -> str:
+    """What in the joint a misfit points to, by where it lies (:func:`_misfit_cause`)."""
     if worst.low_hz <= fit.f_a <= worst.high_hz:
         return (f"at the anti-resonance (f_a = {fit.f_a:.0f} Hz), which friction and backlash on the load side damp "
                 "and bend: check the load side for friction and the gear and the coupling for play")
@@ -318,25 +334,26 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, 
     (:data:`analysis.adequacy.CHAIN_WINDOW_STD`); and, taken off the misfit as the bound it is, the speed loop's
     feedback of the rest of the quantisation (:func:`analysis.adequacy.loop_feedback_bound`).
     """
-    f, misfit, reps = model_misfits(frf, fit)
+    seen = judged_fit(frf, fit)
+    f, misfit, reps = model_misfits(frf, seen)
     if kernel_error is not None and kernel_error.shape == misfit.shape:
         misfit, reps = misfit + kernel_error, reps + kernel_error[None, :]
-    quant, lines = quantisation_terms(frf, fit.band, jitter.lsb_rad)
-    jac, sqrt_w = log_ratio_jacobian(frf, fit)
-    n = f.size
+    quant, lines = quantisation_terms(frf, seen.band, jitter.lsb_rad)
+    jac, sqrt_w = log_ratio_jacobian(frf, seen)
+    fitted = band_mask(f, fit.band)
     with np.errstate(invalid="ignore", divide="ignore"):
-        carried = jitter.repeating_share * quantisation_through_fit(
-            quant, lines, weighted_jacobian(jac, sqrt_w, fit.options.kind), sqrt_w, jac.imag if use_phase else None)
+        carried = jitter.repeating_share * quantisation_through_fit(quant, lines, jac, sqrt_w, fit.options.kind,
+                                                                    fitted, phase=use_phase)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
     bound = loop_feedback_bound(quant, jitter.repeating_share)
-    windows = band_misfits(f, misfit.real, reps.real, carried[:n, :n], blind, CHAIN_WINDOW_STD, bound)
+    windows = band_misfits(f, misfit.real, reps.real, carried[:f.size, :f.size], blind, CHAIN_WINDOW_STD, bound)
     spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
     mode = None
     if "K_Nm_per_rad" in fit.fitted:
-        mode = third_mode(f, misfit, reps, model_log_ratios(frf, fit), jac, sqrt_w, fit.options.kind,
+        mode = third_mode(f, misfit, reps, model_log_ratios(frf, seen), jac, sqrt_w, fit.options.kind,
                           fit.fitted.index("K_Nm_per_rad"), _rel_halfwidth(fit, "K_Nm_per_rad"),
-                          candidate_frequencies(fit.f_a, fit.band), use_phase=use_phase, systematic_cov=carried,
-                          blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound)
+                          candidate_frequencies(fit.f_a, seen.band), fitted=fitted, use_phase=use_phase,
+                          systematic_cov=carried, blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound)
     return (spans[0] if spans else None), mode
 
 

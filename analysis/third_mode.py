@@ -108,7 +108,8 @@ def effective_tests(corr: np.ndarray) -> float:
 def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarray,
                log_ratios: Callable[[Callable[[np.ndarray], np.ndarray] | None], np.ndarray],
                jac: np.ndarray, sqrt_w: np.ndarray, kind: FitKind, k_column: int, k_halfwidth: float,
-               candidates_hz: np.ndarray, *, use_phase: bool = False, systematic_cov: np.ndarray | None = None,
+               candidates_hz: np.ndarray, *, fitted: np.ndarray | None = None, use_phase: bool = False,
+               systematic_cov: np.ndarray | None = None,
                blind: np.ndarray | None = None, chain_std: float = 0.0,
                bias_bound: np.ndarray | None = None) -> ThirdMode | None:
     """The candidate third mode with the largest t among those beyond noise that pull K beyond its interval (else the
@@ -134,6 +135,9 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
         K's 95 % interval half-width, relative.
     candidates_hz : ndarray
         f_3 to look at (:func:`candidate_frequencies`), Hz.
+    fitted : ndarray of bool, shape (n,), optional
+        The bins the fit matched (default all): the fit absorbs a mode's trace there; beyond them (a band judged
+        wider than the one fitted) the trace stays whole.
     use_phase : bool, optional
         Judge the phase too (only when the clocks were aligned, :func:`analysis.quality.phase_is_meaningful`): a
         delay common to all bins (what is left of the clock offset) is estimated beside each mode and taken out, and
@@ -176,8 +180,8 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
     delay = np.concatenate([np.zeros(n), np.where(judged, 2.0 * np.pi * f_hz, 0.0)]) if use_phase else None
 
     base = log_ratios(None)
-    fit_jac = weighted_jacobian(jac, sqrt_w, kind)
-    pinv = np.linalg.pinv(fit_jac)
+    fit = np.ones(n, bool) if fitted is None else fitted
+    pinv = np.linalg.pinv(weighted_jacobian(jac[fit], sqrt_w[fit], kind))
     amplitude_rows = np.arange(parts * n) < n
 
     def estimate(regressors: np.ndarray) -> tuple[float, float] | None:
@@ -196,7 +200,7 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
     for f3 in candidates_hz:
         s = (log_ratios(lambda f, f3=f3: third_mass_load_factor(f, SIGNATURE_STEP, f3, THIRD_MODE_DAMPING))
              - base) / SIGNATURE_STEP
-        moved = pinv @ weighted_jacobian(s[:, None], sqrt_w, kind)[:, 0]  # the log parameters' move per unit J_3/J_l
+        moved = pinv @ weighted_jacobian(s[fit, None], sqrt_w[fit], kind)[:, 0]  # log parameters' move per unit a
         left = np.where(rows_judged, stacked(s - jac @ moved), 0.0)  # what stays in the residual; misfit ≈ −a·left
         both = estimate(np.stack([-left] if delay is None else [-left, delay], axis=1))
         alone = both if delay is None else estimate(np.where(amplitude_rows, -left, 0.0)[:, None])

@@ -110,6 +110,17 @@ def test_a_fit_of_K_alone_keeps_the_floor_the_data_give_K_with_the_inertias_free
         assert 0.0045 < 0.5 * (high - low) / fit.values.K_Nm_per_rad < 0.008
 
 
+def test_with_the_inertias_held_the_misfit_names_their_nominal_values_first(clean_session):
+    # --params K with nominal inertias 30 % low: the misfit is the nominal's, and says so before the joint's causes
+    frf, _ = clean_session
+    nominal = replace(PAPER, Jm_kgm2=PAPER.Jm_kgm2 * 0.7, Jl_kgm2=PAPER.Jl_kgm2 * 0.7)
+    fit = fit_two_mass(frf, FitOptions(params="K", speed_lsb_rad=2.0 * np.pi / COUNTS_PER_REV), nominal=nominal)
+    q = assess(frf, fit, encoder_jitter=RESOLUTION)
+    misfit = next(r for r in q.reasons if r.startswith("the two-mass model does not fit |H|"))
+    assert "explain — the inertias held at their nominal values may not be the joint's (fit them too: --params " \
+           "K,Jm,Jl), or " in misfit, misfit
+
+
 def test_a_backlash_like_low_frequency_misfit_makes_the_verdict_poor_and_names_the_band(clean_session):
     frf, _ = clean_session
     # |H| 4 % low below 40 Hz, as a dead zone softens the joint at the slow, large twists of the motion
@@ -153,14 +164,25 @@ def test_quantisation_carried_through_a_fit_of_a_constant_leaves_its_residual_co
     np.testing.assert_allclose(cov[0, 1:], -s2 / n, rtol=1e-12)
     # a complex fit's Jacobian (amplitude then phase rows) gives the amplitude block; a phase-only column leaves
     # the amplitude residual its full variance
-    jac = np.vstack([np.zeros((n, 1)), np.ones((n, 1))])
-    np.testing.assert_allclose(quantisation_through_fit(np.full(n, q), np.full(n, lines), jac, np.ones(n)),
+    jac = np.full((n, 1), 1j)
+    np.testing.assert_allclose(quantisation_through_fit(np.full(n, q), np.full(n, lines), jac, np.ones(n), "complex"),
                                s2 * np.eye(n), atol=1e-15)
+    # …and the phase block: the constant phase fitted, its residual that of the amplitude above; an amplitude fit
+    # leaves the phase whole
+    both = quantisation_through_fit(np.full(n, q), np.full(n, lines), jac, np.ones(n), "complex", phase=True)
+    np.testing.assert_allclose(np.diag(both)[n:], s2 * (1.0 - 1.0 / n), rtol=1e-12)
+    np.testing.assert_allclose(
+        quantisation_through_fit(np.full(n, q), np.full(n, lines), np.ones((n, 1)), np.ones(n), phase=True)[n:, n:],
+        s2 * np.eye(n), atol=1e-15)
+    # bins the fit did not match keep their error and take the pull of the fitted ones: e_i − mean(e_fitted)
+    fitted = np.arange(n) < 4
+    outside = quantisation_through_fit(np.full(n, q), np.full(n, lines), np.ones((n, 1)), np.ones(n), fitted=fitted)
+    np.testing.assert_allclose(np.diag(outside)[4:], s2 * (1.0 + 1.0 / 4), rtol=1e-12)
     # weights w_i: the weighted mean absorbs e_i with w_i/Σw, so bin i's residual e_i − Σ w_j e_j/Σw has variance
     # s²(1 − 2 w_i/Σw + Σw²/(Σw)²); a bin without weight or bound adds nothing and is given nothing
     w = np.array([1.0, 4.0, 9.0, 1.0, 0.0, 2.0])
     bound = np.array([q, q, q, q, np.inf, q])
-    cov = quantisation_through_fit(bound, np.full(n, lines), np.sqrt(w)[:, None], np.sqrt(w))
+    cov = quantisation_through_fit(bound, np.full(n, lines), np.ones((n, 1)), np.sqrt(w))
     sw, sw2 = w.sum(), (w**2).sum()
     expected = s2 * (1.0 - 2.0 * w / sw + sw2 / sw**2)
     expected[4] = 0.0  # without weight its residual's dependence on the fit is not in the weighted Jacobian: not judged
