@@ -350,9 +350,9 @@ def _angle_on_grid(rec: Recording, span: encoder.Span, notes: list[str]) -> tupl
                      "or off by half a cycle or more); sample instants taken as k·T")
         return theta, on_grid
     spread = float(np.sqrt(np.mean(deviation**2)))
-    if spread <= 1e-9:  # exactly k·T: no clock's reading, just the cycle count
-        notes.append("encoder: the drive's time stamps lie exactly on its cycle grid (a cycle count, not a clock's "
-                     "reading); sample instants taken as k·T")
+    if spread <= 1e-9:
+        # exactly k·T: nothing to move — a cycle count, or a drive that latches on its grid (the simulated one); the
+        # result's encoder_time_stamps says false, and a note on every such session would say nothing more
         return theta, on_grid
     moved = sample_instants.angle_at_nominal_instants(theta, cycles, rec.period_s, deviation)
     jitter = sample_instants.estimate_jitter(moved, rec.period_s, lsb_rad=lsb_rad, stamped=True,
