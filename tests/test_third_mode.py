@@ -115,3 +115,38 @@ def test_a_band_ended_below_the_mode_does_not_hide_it(tmp_path: Path) -> None:
     assert any(r.startswith("the two-mass model does not fit |H| between 1") and
                ", above the band fitted (up to 150 Hz): ending the band below it does not take its pull off K — " in r
                for r in res.quality.reasons), res.quality.reasons
+
+
+def test_on_a_misfit_of_pure_noise_the_test_keeps_near_its_level() -> None:
+    # 10 blocks of a two-mass joint that lacks nothing, each bin's noise smooth along frequency. Weighted by each row's
+    # own replicate scatter (9 degrees of freedom) the t passed its 5 % level in 22 % of 1000 runs (on a recorded
+    # session's own scatter: 25 %); weighted by the scatter averaged over a window of bins in 7 %, by the true
+    # variances in 6 %
+    from analysis.model import TwoMassParams
+    from analysis.third_mode import third_mode
+
+    p = TwoMassParams(1000.0, 2e-3, 4e-3, 0.05, 0.0, 0.0)
+    f = np.linspace(10.0, 400.0, 200)
+    log_h = np.log(frequency_response(p, f))
+
+    def log_ratios(load_factor: object) -> np.ndarray:
+        return np.log(frequency_response(p, f, None if load_factor is None else load_factor(f))) - log_h
+
+    def log_h_at(x: np.ndarray) -> np.ndarray:
+        return np.log(frequency_response(TwoMassParams(*np.exp(x), p.C_Nms_per_rad, 0.0, 0.0), f))
+
+    x0 = np.log([p.K_Nm_per_rad, p.Jm_kgm2, p.Jl_kgm2])
+    jac = np.stack([(log_h_at(x0 + 1e-6 * e) - log_h_at(x0 - 1e-6 * e)) / 2e-6 for e in np.eye(3)], axis=1)
+    f_a = np.sqrt(p.K_Nm_per_rad / p.Jl_kgm2) / (2 * np.pi)
+    cands = candidate_frequencies(f_a, (10.0, 400.0))
+    std = 0.01 * (1.0 + f / 200.0)
+    rng = np.random.default_rng(3)
+    blocks, runs, beyond = 10, 600, 0
+    for _ in range(runs):
+        per_block = std * np.sqrt(blocks) * rng.standard_normal((blocks, f.size))
+        full = per_block.mean(axis=0)
+        reps = (blocks * full - per_block) / (blocks - 1)
+        mode = third_mode(f, full.astype(complex), reps.astype(complex), log_ratios, jac, np.ones(f.size),
+                          "amplitude", 0, 0.01, cands)
+        beyond += mode.t > mode.t_crit
+    assert beyond / runs < 0.12
