@@ -156,7 +156,7 @@ UNDITHERED = {"speed_dither": 0.0}
 # Beyond the family (``bench/accuracy.py --set limits``): a third mass inside the band where the data holds little of it
 # — a motion that repeats to a fraction of a count (its quantisation error repeats with it and no average removes it:
 # a passive capture, or a profile without ``speed_dither``), a 500 Hz encoder (the mode at the band's top), a 3 s record
-# (4 jackknife blocks: a t of 3 degrees of freedom) — and the same without the third mass. Issue 13's criterion (no
+# (5 jackknife blocks: a t of 4 degrees of freedom) — and the same without the third mass. Issue 13's criterion (no
 # confident wrong result) is claimed for the family above, not for these: they measure where the misfit tests stop
 # seeing a mode that moves K by 2.5–4 % (README "How well it works").
 LIMITS: tuple[Scenario, ...] = (
