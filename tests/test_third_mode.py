@@ -150,3 +150,22 @@ def test_on_a_misfit_of_pure_noise_the_test_keeps_near_its_level() -> None:
                           "amplitude", 0, 0.01, cands)
         beyond += mode.t > mode.t_crit
     assert beyond / runs < 0.12
+
+
+def test_a_band_narrower_than_a_window_is_judged_without_error() -> None:
+    # the replicates' scatter is averaged over a window of 8 bins: a band of 5 bins is averaged over what it has
+    from analysis.model import TwoMassParams
+    from analysis.third_mode import third_mode
+
+    p = TwoMassParams(1000.0, 2e-3, 4e-3, 0.05, 0.0, 0.0)
+    f = np.linspace(100.0, 140.0, 5)
+    log_h = np.log(frequency_response(p, f))
+
+    def log_ratios(load_factor: object) -> np.ndarray:
+        return np.log(frequency_response(p, f, None if load_factor is None else load_factor(f))) - log_h
+
+    jac = np.stack([np.log(f), np.ones(5), f / 100.0], axis=1).astype(complex)
+    reps = 0.01 * np.random.default_rng(1).standard_normal((10, 5)) * (1 + 1j)
+    mode = third_mode(f, reps.mean(axis=0), reps, log_ratios, jac, np.ones(5), "amplitude", 0, 0.01,
+                      np.array([110.0, 130.0]), use_phase=True, chain_std=0.003)
+    assert mode is not None and np.isfinite(mode.t) and mode.f_hz in (110.0, 130.0)
