@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from analysis.encoder import difference_response
-from analysis.fit import FitResult, fitted_bins, kernel_model_log_ratio
+from analysis.fit import FitResult, fitted_bins, kernel_model_log_ratio, wrapped
 from analysis.frf import FrequencyResponse, estimate_frf
 from analysis.model import frequency_response
 
@@ -55,5 +55,4 @@ def kernel_model_error(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.nda
     sel = fitted_bins(frf, fit.band)
     if not np.array_equal(fitted_bins(model_frf, fit.band), sel):
         return np.zeros(int(np.count_nonzero(sel)), dtype=complex)  # a bin empty in one estimate: no correction
-    error = -kernel_model_log_ratio(model_frf, fit)
-    return error.real + 1j * np.angle(np.exp(1j * error.imag))  # the phase wrapped to ±π as the misfits are
+    return wrapped(-kernel_model_log_ratio(model_frf, fit))  # the phase wrapped to ±π as the misfits are

@@ -299,7 +299,12 @@ class _Problem:
         z = self.log_ratio(x)
         if self.kind == "amplitude":
             return self.sqrt_w * z.real
-        return np.concatenate([self.sqrt_w * z.real, self.sqrt_w * np.angle(np.exp(1j * z.imag))])
+        return np.concatenate([self.sqrt_w * z.real, self.sqrt_w * wrapped(z).imag])
+
+
+def wrapped(log_h: np.ndarray) -> np.ndarray:
+    """A complex ln H (or a ratio of two) with its phase wrapped to ±π."""
+    return log_h.real + 1j * np.angle(np.exp(1j * log_h.imag))
 
 
 def _kernel_operator(f_hz: np.ndarray, offsets_hz: np.ndarray, kernel: np.ndarray,
@@ -538,10 +543,7 @@ def log_ratio_jacobian(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarr
     sqrt_w : ndarray, shape (n,)
     """
     problem = _Problem(frf, fit.band, fit.options, fit.values)
-    x = problem.x0(fit.values)
-    step = 1e-6  # as _jacobian's
-    cols = [(problem.log_ratio(x + step * e) - problem.log_ratio(x - step * e)) / (2.0 * step) for e in np.eye(x.size)]
-    return np.stack(cols, axis=1), problem.sqrt_w
+    return _central_differences(problem.log_ratio, problem.x0(fit.values)), problem.sqrt_w
 
 
 def weighted_jacobian(jac: np.ndarray, sqrt_w: np.ndarray, kind: FitKind) -> np.ndarray:
@@ -555,11 +557,14 @@ def weighted_jacobian(jac: np.ndarray, sqrt_w: np.ndarray, kind: FitKind) -> np.
 
 def _jacobian(problem: _Problem, x: np.ndarray) -> np.ndarray:
     """Jacobian of ``problem``'s weighted residuals at the log parameters ``x`` by central differences."""
+    return _central_differences(problem.residuals, x)
+
+
+def _central_differences(func: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarray:
+    """d func/d x at the log parameters ``x``, one column per parameter."""
     step = 1e-6  # in ln(parameter): a 1 ppm change, far above rounding (the residuals are ~1e-3…1) and far below
     # the curvature's scale (the cost changes by ≪ 1 % of its value over it); central differences, error O(step²)
-    cols = [(problem.residuals(x + step * e) - problem.residuals(x - step * e)) / (2.0 * step)
-            for e in np.eye(x.size)]
-    return np.stack(cols, axis=1)
+    return np.stack([(func(x + step * e) - func(x - step * e)) / (2.0 * step) for e in np.eye(x.size)], axis=1)
 
 
 def kernel_model_log_ratio(frf: FrequencyResponse, fit: FitResult) -> np.ndarray:
@@ -609,9 +614,6 @@ def model_misfits(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarray, n
     # a replicate with an empty (non-finite or zero) bin the full record has would misalign the rows: left out
     same_bins = [p for p in (_Problem(r, fit.band, fit.options, fit.values) for r in frf.replicates or ())
                  if np.array_equal(p.f, problem.f)]
-
-    def wrapped(z: np.ndarray) -> np.ndarray:
-        return z.real + 1j * np.angle(np.exp(1j * z.imag))
 
     reps = [wrapped(p.log_ratio(x)) for p in same_bins]
     return problem.f, wrapped(problem.log_ratio(x)), np.asarray(reps, dtype=complex).reshape(len(reps), problem.f.size)
