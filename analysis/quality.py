@@ -167,7 +167,7 @@ def assess(
     encoder_jitter : EncoderJitter or None, optional
         The encoder's sample-instant jitter estimated from the data (not judged if None).
     kernel_error : ndarray or None, optional
-        ln H (complex) the Welch estimator makes of the fitted model less the fit's model of it, at the fit's bins
+        ln H (complex) the Welch estimator makes of the fitted model less the fit's model of it, at the judged band's bins (:func:`analysis.fit.judged_fit`)
         (:func:`analysis.estimator_check.kernel_model_error`): the misfit tests judge the measurement against the
         model so corrected; None: uncorrected.
     clock_failure : str or None, optional
@@ -337,8 +337,10 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, 
     stretch of the band (low Hz, high Hz, worst window) or None, and the most evident third mode
     (:mod:`analysis.third_mode`, judging the phase too when ``use_phase``) or None.
 
-    The measurement is judged against the model as the Welch estimator really sees it (the fit's kernel model
-    corrected by ``kernel_error``, :mod:`analysis.estimator_check`). The allowance: the jackknife's scatter; the share
+    The fitted model is judged up to the default band's top even where the fit's band ends below it
+    (:func:`analysis.fit.judged_fit`; ``kernel_error`` at those bins), against the measurement as the Welch estimator
+    really sees it (the fit's kernel model corrected by ``kernel_error``, :mod:`analysis.estimator_check`). The
+    allowance: the jackknife's scatter; the share
     of the encoder's quantisation error that repeats with every motion period (``jitter.repeating_share``; the scatter
     cannot show it) — a random-phase error of the white-quantisation bound √(N_q/|H·D|²G_xx) at each line of the
     motion, carried through the fit (:func:`analysis.adequacy.quantisation_through_fit`); the chain's smooth errors

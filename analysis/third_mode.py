@@ -118,7 +118,7 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
     Parameters
     ----------
     f_hz : ndarray, shape (n,)
-        The fit band's bins, Hz.
+        The judged band's bins (the fit's band, or wider: :func:`analysis.fit.judged_fit`), Hz.
     misfit, replicate_misfits : ndarray of complex, shapes (n,) and (B, n)
         ln(H_model/H_meas) of the record and of each delete-one-block replicate (:func:`analysis.fit.model_misfits`,
         corrected by the estimator check): real part ln|H|, imaginary part the phase.
