@@ -167,9 +167,9 @@ def assess(
     encoder_jitter : EncoderJitter or None, optional
         The encoder's sample-instant jitter estimated from the data (not judged if None).
     kernel_error : ndarray or None, optional
-        ln H (complex) the Welch estimator makes of the fitted model less the fit's model of it, at the judged band's bins (:func:`analysis.fit.judged_fit`)
-        (:func:`analysis.estimator_check.kernel_model_error`): the misfit tests judge the measurement against the
-        model so corrected; None: uncorrected.
+        ln H (complex) the Welch estimator makes of the fitted model less the fit's model of it, at the judged
+        band's bins (:func:`analysis.fit.judged_fit`, :func:`analysis.estimator_check.kernel_model_error`): the
+        misfit tests judge the measurement against the model so corrected; None: uncorrected.
     clock_failure : str or None, optional
         Why the clock alignment failed (:attr:`analysis.clocks.ClockFit.failure`): the verdict is then failed
         with it as the first reason — low coherence and wide intervals follow from it, not from the motion.
