@@ -15,7 +15,7 @@ from typing import Literal
 import numpy as np
 
 from analysis.adequacy import (CHAIN_WINDOW_STD, BandMisfit, band_misfits, critical_t, loop_feedback_bound,
-                               missed_spans, quantisation_through_fit)
+                               missed_spans, quantisation_through_fit, spread_beyond_fit)
 from analysis.encoder import difference_response
 from analysis.excitation import RESOLUTION_NAMED, weak_coherence_cause
 from analysis.fit import (COHERENCE_CLIP, FitResult, band_mask, judged_fit, log_ratio_jacobian, model_log_ratios,
@@ -343,7 +343,8 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, 
     allowance: the jackknife's scatter; the share
     of the encoder's quantisation error that repeats with every motion period (``jitter.repeating_share``; the scatter
     cannot show it) — a random-phase error of the white-quantisation bound √(N_q/|H·D|²G_xx) at each line of the
-    motion, carried through the fit (:func:`analysis.adequacy.quantisation_through_fit`); the chain's smooth errors
+    motion, carried through the fit (:func:`analysis.adequacy.quantisation_through_fit`); beyond the fitted band the
+    model's own spread from its parameters' covariance (:func:`analysis.adequacy.spread_beyond_fit`); the chain's smooth errors
     (:data:`analysis.adequacy.CHAIN_WINDOW_STD`); and, taken off the misfit as the bound it is, the speed loop's
     feedback of the rest of the quantisation (:func:`analysis.adequacy.loop_feedback_bound`).
     """
@@ -357,7 +358,10 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, 
     with np.errstate(invalid="ignore", divide="ignore"):
         carried = jitter.repeating_share * quantisation_through_fit(quant, lines, jac, sqrt_w, fit.options.kind,
                                                                     fitted, phase=use_phase)
-    blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0)
+    beyond = spread_beyond_fit(jac, fit.covariance, fitted, phase=use_phase)
+    unknown = ~np.all(np.isfinite(beyond)) & ~fitted  # the parameters' spread unknown: no judging beyond the fit
+    carried = carried + np.where(np.isfinite(beyond), beyond, 0.0)
+    blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0) | unknown
     bound = loop_feedback_bound(quant, jitter.repeating_share)
     windows = band_misfits(f, misfit.real, reps.real, carried[:f.size, :f.size], blind, CHAIN_WINDOW_STD, bound)
     spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
