@@ -230,7 +230,7 @@ def assess(
         findings.append(("poor", f"the two-mass model misses a third mode near {mode.f_hz:.0f} Hz ({mode.t:.1f} σ "
                                  f"beyond what noise, the chain and the encoder's quantisation explain): a third mass "
                                  f"there moves the fitted K beyond its interval (±{100 * mode.k_halfwidth:.1f} %"
-                                 f"{_first_order_pull(mode)}){_beyond_band(mode.f_hz, fit)} — a "
+                                 f"{_first_order_pull(mode)}){_beyond_band(mode.f_hz, fit, True)} — a "
                                  f"compliant or loose part (the coupling, the arm, the tool or their mountings): check "
                                  f"them; until then K, J_m, J_l are the two-mass model's compromise, not the joint's"))
     if missed is not None:
@@ -238,7 +238,7 @@ def assess(
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
                                  f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
                                  f"{worst.t:.0f} σ beyond what noise, the chain and the encoder's quantisation explain"
-                                 f"{_beyond_band(worst.low_hz, fit)} — {_misfit_cause(worst, fit)}; until then K, J_m, "
+                                 f"{_beyond_band(worst.low_hz, fit, False)} — {_misfit_cause(worst, fit)}; until then K, J_m, "
                                  f"J_l are the two-mass model's compromise, not the joint's"))
     elif np.isfinite(fit.residual_rms):
         # the RMS misfit against the coherence's noise alone: where the window test ran (it allows for the
@@ -298,15 +298,18 @@ def _first_order_pull(mode: ThirdMode) -> str:
     the simulated third mass, whose first-order figure read 1.1–1.8× the real error) is named without one."""
     if mode.mass_ratio > FIRST_ORDER_MASS_RATIO:
         return ""
-    return f"; by ≈ {100 * mode.k_shift:+.1f} % to first order"
+    return f"; by roughly {100 * mode.k_shift:+.1f} %"
 
 
-def _beyond_band(f_hz: float, fit: FitResult) -> str:
-    """Said of a misfit at ``f_hz`` above the band the fit matched (the tests judge up to the default band's top,
-    :func:`analysis.fit.judged_fit`): a band ended below it does not take its pull off K."""
+def _beyond_band(f_hz: float, fit: FitResult, mode: bool) -> str:
+    """Said of a misfit at ``f_hz`` beyond the band the fit matched (the tests judge up to the default band's top,
+    :func:`analysis.fit.judged_fit`): a mode there still moves K; a window there is not described by the model
+    fitted below it."""
     if f_hz <= fit.band[1]:
         return ""
-    return f", above the band fitted (up to {fit.band[1]:g} Hz): ending the band below it does not take its pull off K"
+    if mode:
+        return f", beyond the band fitted (up to {fit.band[1]:g} Hz): narrowing --band does not remove its effect on K"
+    return f", beyond the band fitted (up to {fit.band[1]:g} Hz), which the model fitted below it does not describe"
 
 
 def _misfit_cause(worst: BandMisfit, fit: FitResult) -> str:

@@ -113,7 +113,7 @@ def test_a_band_ended_below_the_mode_does_not_hide_it(tmp_path: Path) -> None:
     assert res.fit.band == (10.0, 150.0) and errors_pct(res, truth)["K_Nm_per_rad"] < -2.0
     assert res.quality.verdict == "poor"
     assert any(r.startswith("the two-mass model does not fit |H| between 1") and
-               ", above the band fitted (up to 150 Hz): ending the band below it does not take its pull off K — " in r
+               ", beyond the band fitted (up to 150 Hz), which the model fitted below it does not describe — " in r
                for r in res.quality.reasons), res.quality.reasons
 
 
@@ -176,7 +176,7 @@ def test_the_pull_is_given_as_a_figure_only_where_first_order_holds() -> None:
     from analysis.third_mode import ThirdMode
 
     small = ThirdMode(190.0, 0.2, 5.0, 3.7, -0.021, 0.008, 4.0, 1.8)
-    assert _first_order_pull(small) == "; by ≈ -2.1 % to first order"
+    assert _first_order_pull(small) == "; by roughly -2.1 %"
     assert _first_order_pull(ThirdMode(190.0, 0.9, 5.0, 3.7, -0.06, 0.008, 4.0, 1.8)) == ""
 
 
