@@ -83,12 +83,17 @@ def transfer_function(p: TwoMassParams) -> tuple[np.ndarray, np.ndarray]:
         ``[J_m J_l, (J_m+J_l) C + J_l b_m + J_m b_l, (J_m+J_l) K + (b_m+b_l) C + b_m b_l, K (b_m+b_l)]``.
         Units make H rad/s per N·m (as expected by ``scipy.signal.lti``).
     """
-    K, Jm, Jl, C = p.K_Nm_per_rad, p.Jm_kgm2, p.Jl_kgm2, p.C_Nms_per_rad
+    num, den = _coefficients(p, p.Jl_kgm2)
+    return np.array(num), np.array(den)
+
+
+def _coefficients(p: TwoMassParams, Jl: float | np.ndarray) -> tuple[tuple, tuple]:
+    """:func:`transfer_function`'s coefficients with ``Jl`` (kg·m², a float or one value per frequency) in J_l's
+    place."""
+    K, Jm, C = p.K_Nm_per_rad, p.Jm_kgm2, p.C_Nms_per_rad
     bm, bl = p.bm_Nms_per_rad, p.bl_Nms_per_rad
-    num = np.array([Jl, C + bl, K])
-    den = np.array(
-        [Jm * Jl, (Jm + Jl) * C + Jl * bm + Jm * bl, (Jm + Jl) * K + (bm + bl) * C + bm * bl, K * (bm + bl)]
-    )
+    num = (Jl, C + bl, K)
+    den = (Jm * Jl, (Jm + Jl) * C + Jl * bm + Jm * bl, (Jm + Jl) * K + (bm + bl) * C + bm * bl, K * (bm + bl))
     return num, den
 
 
@@ -112,13 +117,7 @@ def frequency_response(p: TwoMassParams, f_hz: np.ndarray, load_factor: np.ndarr
         H at ``f_hz``, (rad/s)/(N·m), same shape as ``f_hz``.
     """
     s = 2j * np.pi * np.asarray(f_hz, dtype=float)
-    if load_factor is not None:
-        K, Jm, C = p.K_Nm_per_rad, p.Jm_kgm2, p.C_Nms_per_rad
-        bm, bl = p.bm_Nms_per_rad, p.bl_Nms_per_rad
-        Jl = p.Jl_kgm2 * np.asarray(load_factor)
-        den = ((Jm * Jl * s + (Jm + Jl) * C + Jl * bm + Jm * bl) * s + (Jm + Jl) * K + (bm + bl) * C + bm * bl) * s
-        return ((Jl * s + C + bl) * s + K) / (den + K * (bm + bl))
-    num, den = transfer_function(p)
+    num, den = _coefficients(p, p.Jl_kgm2 if load_factor is None else p.Jl_kgm2 * np.asarray(load_factor))
     # Horner's scheme written out: np.polyval's arithmetic (0·s + c₀ = c₀ exactly) without its per-call overhead
     # (the fit evaluates this ~1400 times per analysis)
     return ((num[0] * s + num[1]) * s + num[2]) / (((den[0] * s + den[1]) * s + den[2]) * s + den[3])
