@@ -5,6 +5,7 @@ let a third mass through with an `ok` (an undithered motion: its quantisation re
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -117,20 +118,27 @@ def test_a_band_ended_below_the_mode_does_not_hide_it(tmp_path: Path) -> None:
                for r in res.quality.reasons), res.quality.reasons
 
 
+def _log_ratios_against_itself(p: TwoMassParams, f: np.ndarray) -> Callable[[object], np.ndarray]:
+    """ln(H_model/H_meas) of the two-mass model ``p`` against its own response at ``f`` (Hz), for a load factor (as
+    :func:`analysis.fit.model_log_ratios` gives it for a session)."""
+    log_h = np.log(frequency_response(p, f))
+
+    def log_ratios(load_factor: object) -> np.ndarray:
+        return np.log(frequency_response(p, f, None if load_factor is None else load_factor(f))) - log_h
+
+    return log_ratios
+
+
 def test_on_a_misfit_of_pure_noise_the_test_keeps_near_its_level() -> None:
     # 10 blocks of a two-mass joint that lacks nothing, each bin's noise smooth along frequency. Weighted by each row's
     # own replicate scatter (9 degrees of freedom) the t passed its 5 % level in 22 % of 1000 runs (on a recorded
     # session's own scatter: 25 %); weighted by the scatter averaged over a window of bins in 7 %, by the true
     # variances in 6 %
-    from analysis.model import TwoMassParams
     from analysis.third_mode import third_mode
 
     p = TwoMassParams(1000.0, 2e-3, 4e-3, 0.05, 0.0, 0.0)
     f = np.linspace(10.0, 400.0, 200)
-    log_h = np.log(frequency_response(p, f))
-
-    def log_ratios(load_factor: object) -> np.ndarray:
-        return np.log(frequency_response(p, f, None if load_factor is None else load_factor(f))) - log_h
+    log_ratios = _log_ratios_against_itself(p, f)
 
     def log_h_at(x: np.ndarray) -> np.ndarray:
         return np.log(frequency_response(TwoMassParams(*np.exp(x), p.C_Nms_per_rad, 0.0, 0.0), f))
@@ -154,15 +162,11 @@ def test_on_a_misfit_of_pure_noise_the_test_keeps_near_its_level() -> None:
 
 def test_a_band_narrower_than_a_window_is_judged_without_error() -> None:
     # the replicates' scatter is averaged over a window of 8 bins: a band of 5 bins is averaged over what it has
-    from analysis.model import TwoMassParams
     from analysis.third_mode import third_mode
 
     p = TwoMassParams(1000.0, 2e-3, 4e-3, 0.05, 0.0, 0.0)
     f = np.linspace(100.0, 140.0, 5)
-    log_h = np.log(frequency_response(p, f))
-
-    def log_ratios(load_factor: object) -> np.ndarray:
-        return np.log(frequency_response(p, f, None if load_factor is None else load_factor(f))) - log_h
+    log_ratios = _log_ratios_against_itself(p, f)
 
     jac = np.stack([np.log(f), np.ones(5), f / 100.0], axis=1).astype(complex)
     reps = 0.01 * np.random.default_rng(1).standard_normal((10, 5)) * (1 + 1j)
