@@ -1,7 +1,7 @@
 """Accuracy of the identification on the scenario family, ours next to the paper's pipeline (prints figures).
 
     nice -n 10 python bench/accuracy.py [--seeds 5 | --seed-list 0,1,2] [--jobs 2] [--scenarios 1,7] [--markdown]
-                                        [--set family | limits]
+                                        [--set family | limits] [--fit amplitude | complex]
 
 The scenarios are the table :data:`bench.scenarios.SCENARIOS` (issue 13): the paper's plant and scaled
 plants (K and the inertias ×0.5–2 while the bench's *nominal* values stay the paper's), then load
@@ -14,7 +14,8 @@ the real recorder (``--fast``) with the seed's noise and, unless the scenario fi
 offset of 10–60 ms and a drift of 20–60 ppm of random signs; the same session is analysed twice:
 ``request_for(session)`` (ours: clock alignment, encoder-demodulated or Park torque, anti-alias
 resampling, coherence weights) and ``pipeline="paper"`` (Hilbert torque, no alignment, linear
-resampling, uniform weights). ``--set limits`` runs :data:`bench.scenarios.LIMITS` instead: combinations beyond the
+resampling, uniform weights); ``--fit complex`` makes ours fit the complex FRF (``acq analyze --fit complex``) instead
+of its amplitude. ``--set limits`` runs :data:`bench.scenarios.LIMITS` instead: combinations beyond the
 family that measure where the misfit tests stop seeing a third mode.
 
 Printed: every run (errors on K, J_m, J_l, C in %, whether the 95 % interval holds the truth, clock
@@ -45,7 +46,7 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from bench.scenarios import (LABEL, PARAMS, SCENARIOS, SETS, Scenario, confident_wrong, errors_pct,  # noqa: E402
+from bench.scenarios import (LABEL, PARAMS, SETS, Scenario, confident_wrong, errors_pct,  # noqa: E402
                              interval_holds, run_scenario)
 
 
@@ -89,15 +90,24 @@ def _outcome(sc: Scenario, res, truth: dict, seconds: float, aligned: bool) -> O
                    tuple(confident_wrong(sc, verdict, err, in_ci)))
 
 
-CLOCK_BASE = 0  # clock_for's index of the set's first scenario (bench.scenarios.SETS)
+@dataclass(frozen=True)
+class Task:
+    """One run to do: scenario ``index`` of the set ``set_name`` (:data:`bench.scenarios.SETS`), ``seed``, and the
+    fit ours uses (``acq analyze --fit``)."""
+
+    set_name: str
+    index: int
+    seed: int
+    fit: str = "amplitude"
 
 
-def run_one(task: tuple[int, int]) -> Run:
+def run_one(task: Task) -> Run:
     """Record one scenario run and analyse it with both pipelines."""
-    scenario_index, seed = task
-    sc = SCENARIOS[scenario_index]
-    ours, paper, truth, (offset_s, drift_ppm), (t_ours, t_paper) = run_scenario(sc, seed, CLOCK_BASE + scenario_index)
-    return Run(sc.name, seed, 1e3 * offset_s, drift_ppm, _outcome(sc, ours, truth, t_ours, True),
+    scenarios, clock_base = SETS[task.set_name]
+    sc = scenarios[task.index]
+    ours, paper, truth, (offset_s, drift_ppm), (t_ours, t_paper) = run_scenario(sc, task.seed, clock_base + task.index,
+                                                                                fit=task.fit)
+    return Run(sc.name, task.seed, 1e3 * offset_s, drift_ppm, _outcome(sc, ours, truth, t_ours, True),
                _outcome(sc, paper, truth, t_paper, False), tuple(ours.notes))
 
 
@@ -117,7 +127,7 @@ def _verdict(v: str) -> str:
     return {"ok": "[green]ok[/green]", "poor": "[yellow]poor[/yellow]"}.get(v, f"[red]{v}[/red]")
 
 
-def runs_table(runs: list[Run]) -> Table:
+def runs_table(runs: list[Run], scenarios: tuple[Scenario, ...]) -> Table:
     t = Table(title="every run — errors in %, 95 % CI holds truth for K J_m J_l C (✓/✗), clock error",
               caption="red: past the scenario's tolerance; ok WRONG: a confident wrong result", show_lines=False)
     for col in ("scenario", "seed", "offset\nms", "drift\nppm"):
@@ -130,7 +140,7 @@ def runs_table(runs: list[Run]) -> Table:
             t.add_column("Δoffset\nµs", justify="right")
             t.add_column("Δdrift\nppm", justify="right")
         t.add_column(f"{who}\nverdict")
-    by_name = {s.name: s for s in SCENARIOS}
+    by_name = {s.name: s for s in scenarios}
     for r in runs:
         sc = by_name[r.scenario]
         tol = {"K_Nm_per_rad": sc.tol_K, "Jm_kgm2": sc.tol_J, "Jl_kgm2": sc.tol_J, "C_Nms_per_rad": None}
@@ -165,9 +175,9 @@ class Summary:
         return self.wrong["ours"] == 0
 
 
-def summarize(runs: list[Run]) -> list[Summary]:
+def summarize(runs: list[Run], scenarios: tuple[Scenario, ...]) -> list[Summary]:
     out = []
-    for sc in SCENARIOS:
+    for sc in scenarios:
         rs = [r for r in runs if r.scenario == sc.name]
         if not rs:
             continue
@@ -194,7 +204,7 @@ def _verdicts(d: dict[str, int]) -> str:
     return " ".join(f"{v} {d[v]}" for v in ("ok", "poor", "failed") if d[v])
 
 
-def summary_table(summ: list[Summary]) -> Table:
+def summary_table(summ: list[Summary], scenarios: tuple[Scenario, ...]) -> Table:
     t = Table(title="summary per scenario — worst |error| % over seeds (ours / paper), "
                     "fraction of runs whose 95 % CI holds the truth, confident wrong (ok beyond tolerance or "
                     "truth outside the interval)")
@@ -202,7 +212,7 @@ def summary_table(summ: list[Summary]) -> Table:
                 "clock worst\nµs / ppm", "verdicts ours", "verdicts paper", "confident\nwrong", "as\nexpected"):
         left = col in ("scenario", "expected", "verdicts ours", "verdicts paper")
         t.add_column(col, justify="left" if left else "right")
-    index = {sc.name: i + 1 for i, sc in enumerate(SCENARIOS)}
+    index = {sc.name: i + 1 for i, sc in enumerate(scenarios)}
     for s in summ:
         sc = s.scenario
         expected = f"ok ≤{sc.tol_K:g}/{sc.tol_J:g} %" if sc.expect == "ok" else f"not ok: {sc.reason}"
@@ -246,13 +256,6 @@ def markdown(summ: list[Summary]) -> str:
     return "\n".join(lines)
 
 
-def use_set(name: str) -> None:
-    """Make the set ``name`` of :data:`bench.scenarios.SETS` the one the runs (workers forked after this) and the tables
-    use."""
-    global SCENARIOS, CLOCK_BASE
-    SCENARIOS, CLOCK_BASE = SETS[name]
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=5, help="number of seeds, 0 … N−1 (default 5)")
@@ -264,14 +267,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--brief", action="store_true", help="summary only, not every run")
     parser.add_argument("--set", choices=tuple(SETS), default="family",
                         help="the scenario family (default) or the combinations beyond it (limits)")
+    parser.add_argument("--fit", choices=("amplitude", "complex"), default="amplitude",
+                        help="the fit ours uses, as acq analyze --fit (the paper's chain always fits the amplitude)")
     args = parser.parse_args(argv)
-    use_set(args.set)
+    scenarios = SETS[args.set][0]
     seeds = [int(s) for s in args.seed_list.split(",")] if args.seed_list else list(range(args.seeds))
-    chosen = ([int(s) - 1 for s in args.scenarios.split(",")] if args.scenarios else list(range(len(SCENARIOS))))
-    tasks = [(i, s) for i in chosen for s in seeds]
-    tasks.sort(key=lambda t: -SCENARIOS[t[0]].duration_s)  # the longest first: the pool ends together
+    chosen = ([int(s) - 1 for s in args.scenarios.split(",")] if args.scenarios else list(range(len(scenarios))))
+    tasks = [Task(args.set, i, s, args.fit) for i in chosen for s in seeds]
+    tasks.sort(key=lambda t: -scenarios[t.index].duration_s)  # the longest first: the pool ends together
     console = Console(width=max(Console().width, 200)) if not sys.stdout.isatty() else Console()
-    console.print("scenarios: " + "; ".join(f"{i + 1} {SCENARIOS[i].name}" for i in chosen))
+    console.print(f"set {args.set}, ours fits the {args.fit}; scenarios: "
+                  + "; ".join(f"{i + 1} {scenarios[i].name}" for i in chosen))
 
     t0 = time.perf_counter()
     runs: list[Run] = []
@@ -287,14 +293,14 @@ def main(argv: list[str] | None = None) -> int:
             for task in tasks:
                 runs.append(run_one(task))
                 progress.advance(bar)
-    order = {name: i for i, name in enumerate(s.name for s in SCENARIOS)}
+    order = {name: i for i, name in enumerate(s.name for s in scenarios)}
     runs.sort(key=lambda r: (order[r.scenario], r.seed))
     wall = time.perf_counter() - t0
 
     if not args.brief:
-        console.print(runs_table(runs))
-    summ = summarize(runs)
-    console.print(summary_table(summ))
+        console.print(runs_table(runs, scenarios))
+    summ = summarize(runs, scenarios)
+    console.print(summary_table(summ, scenarios))
     for who in ("ours", "paper"):
         cov = coverage_overall(summ, who)
         if cov:

@@ -34,6 +34,18 @@ target (≥ 0.9 per CPU second) is not met: at ≈ 290 ms for the floor it leave
 the readers' extra together, and the writing alone takes 20 of them, most of it set by what the file holds and checks
 (every sample through HDF5's chunk copies and Fletcher32). Real time: 0.06–0.08 CPU s per recorded second.
 
+Where the rest goes (2026-11-30, load ≈ 1, medians of 7, CPU ms of a 10 s session against a floor of 277–289 ms, the
+recorder patched in a scratch copy): a recorder that drops every block it receives (file, flush rows and footer
+still written) costs 17–21 ms over the floor, 10 of them its own thread; one that keeps the blocks but writes no
+samples 28–31 ms; the whole recorder 40–45 ms (ratio 0.86–0.87). The floor's readers alone pay 5 ms more with a
+third thread waking every 10 ms, 8 ms more when it also holds their blocks until then (cache-cold memory). Two
+structural changes, each measured on the same runs: raw ADC codes stored as the card delivers them (int16 for a
+16-bit card, int32 for a 24-bit NI 9234, with the scaling beside them; the simulated card quantising to codes)
+0.89 against 0.87 interleaved over 9 runs (per-run 0.86–0.92); the readers storing their own blocks under a lock
+and the recording thread only committing (+0.01 on top: 0.92–0.93 against 0.91–0.92 for the codes alone, one run of 7
+each, 16- and 24-bit; runs differ by ±0.02). Together ≈ 0.90–0.91: at the target's edge, and not taken here: each changes a contract (the session format; which thread stores) of the module that guards
+against data loss, and needs its own tests of what an interrupted or failed recording keeps.
+
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
 (7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it

@@ -223,33 +223,34 @@ def record(sc: Scenario, seed: int, offset_s: float, drift_ppm: float, out_dir: 
     return result.path, truth
 
 
-def analyse(path: Path, pipeline: str = "acq") -> Any:
-    """Analyse a session file as ``acq analyze`` does (``pipeline="paper"``: the paper's chain)."""
+def analyse(path: Path, pipeline: str = "acq", fit: str = "amplitude") -> Any:
+    """Analyse a session file as ``acq analyze`` does (``pipeline="paper"``: the paper's chain; ``fit``: as
+    ``acq analyze --fit``)."""
     from acq.offline.analyze import request_for, recording_from_session
     from acq.recording.reader import load
     from analysis import AnalysisRequest, analyze
 
     session = load(path)
     return analyze(recording_from_session(session),
-                   request_for(session, AnalysisRequest(pipeline=pipeline)))  # type: ignore[arg-type]
+                   request_for(session, AnalysisRequest(pipeline=pipeline, fit=fit)))  # type: ignore[arg-type]
 
 
-def analyse_both(path: Path) -> tuple[Any, Any, tuple[float, float]]:
-    """Our analysis and the paper's chain of a session; wall seconds of each."""
+def analyse_both(path: Path, fit: str = "amplitude") -> tuple[Any, Any, tuple[float, float]]:
+    """Our analysis (fitting ``fit``) and the paper's chain of a session; wall seconds of each."""
     t0 = time.perf_counter()
-    ours = analyse(path)
+    ours = analyse(path, fit=fit)
     t1 = time.perf_counter()
     paper = analyse(path, pipeline="paper")
     return ours, paper, (t1 - t0, time.perf_counter() - t1)
 
 
-def run_scenario(sc: Scenario, seed: int, scenario_index: int) -> tuple[Any, Any, dict[str, Any], tuple[float, float],
-                                                                        tuple[float, float]]:
-    """Record and analyse one run: (ours, paper, truth, (offset s, drift ppm), analysis seconds)."""
+def run_scenario(sc: Scenario, seed: int, scenario_index: int, fit: str = "amplitude"
+                 ) -> tuple[Any, Any, dict[str, Any], tuple[float, float], tuple[float, float]]:
+    """Record and analyse one run: (ours, paper, truth, (offset s, drift ppm), analysis seconds); ours fits ``fit``."""
     offset_s, drift_ppm = sc.clock if sc.clock is not None else clock_for(seed, scenario_index)
     with tempfile.TemporaryDirectory(prefix="acq-scenario-") as tmp:
         path, truth = record(sc, seed, offset_s, drift_ppm, Path(tmp))
-        ours, paper, seconds = analyse_both(path)
+        ours, paper, seconds = analyse_both(path, fit)
     return ours, paper, truth, (offset_s, drift_ppm), seconds
 
 
