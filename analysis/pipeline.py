@@ -124,8 +124,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
         (:func:`analysis.limits.band_problem`: one the recording's encoder or the Welch segments cannot support, or
         one with too few bins) or ``params="K"`` without nominal values. Messages are one line.
     """
-    band_refused = None if request.band_hz is None else band_problem(request.band_hz, rec.period_s, request.segment_s)
-    if band_refused is not None:
+    band_refused = band_problem(request.band_hz or default_band_hz(rec.period_s), rec.period_s, request.segment_s)
+    if band_refused is not None:  # the default band too: its 10 Hz bin reaches 0 Hz with segments under 0.5 s
         raise FitInputError(band_refused)
     require_two_segments(longest_gap_free_span(rec.encoder_index).count, rec.period_s, request.segment_s)
     chain = request.chain(rec)

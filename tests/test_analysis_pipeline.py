@@ -78,11 +78,14 @@ def test_default_analysis_of_a_simulated_session_is_accurate_and_ok(paper_sessio
     ((0.0, 200.0), "fit band 0…200 Hz starts at or below 8 Hz: with 0.5 s Welch segments the fit takes each FRF bin as "
                    "the joint averaged over ±8 Hz, which must stay above 0 Hz; start the band above 8 Hz"),
     ((float("nan"), 200.0), "fit band nan…200 Hz is empty"),
+    # the default band with 0.4 s segments: its 10 Hz bin reaches 0 Hz ("the fit did not converge" before)
+    (None, "fit band 10…400 Hz starts at or below 10 Hz: with 0.4 s Welch segments the fit takes each FRF bin as "
+           "the joint averaged over ±10 Hz, which must stay above 0 Hz; start the band above 10 Hz"),
 ])
 def test_the_analysis_refuses_a_band_it_cannot_judge_in_one_line(paper_session, band, message):
     rec, _, nominal = paper_session
     with pytest.raises(FitInputError) as exc:
-        analyze(rec, AnalysisRequest(nominal=nominal, band_hz=band))
+        analyze(rec, AnalysisRequest(nominal=nominal, band_hz=band, segment_s=0.5 if band else 0.4))
     assert str(exc.value) == message
 
 
