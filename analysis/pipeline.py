@@ -15,10 +15,11 @@ from typing import Any
 from analysis.chain import SignalChain, chain_caveat
 from analysis.clocks import ClockFit
 from analysis.diagnose import nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
-from analysis.fit import FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit
+from analysis.fit import FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit
 from analysis.encoder import longest_gap_free_span
 from analysis.estimator_check import kernel_model_error
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
+from analysis.limits import band_problem
 from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.recording import Recording
 from analysis.report import FigureData, figure_data
@@ -120,8 +121,12 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     ValueError
         Bad input; in particular :class:`analysis.frf.RecordTooShortError` when the usable span
         holds fewer than two Welch segments and :class:`analysis.fit.FitInputError` for a bad band
-        or ``params="K"`` without nominal values. Messages are one line.
+        (:func:`analysis.limits.band_problem`: one the recording's encoder or the Welch segments cannot support, or
+        one with too few bins) or ``params="K"`` without nominal values. Messages are one line.
     """
+    band_refused = band_problem(request.band_hz or default_band_hz(rec.period_s), rec.period_s, request.segment_s)
+    if band_refused is not None:  # the default band too: its 10 Hz bin reaches 0 Hz with segments under 0.5 s
+        raise FitInputError(band_refused)
     require_two_segments(longest_gap_free_span(rec.encoder_index).count, rec.period_s, request.segment_s)
     chain = request.chain(rec)
     sig = prepare_signals(rec, chain)

@@ -9,6 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from analysis.fit import FitInputError
+from analysis.limits import band_problem
 from analysis.model import TwoMassParams
 from analysis import AnalysisRequest, analyze
 from analysis.recording import CommandedProfile, Recording
@@ -66,6 +68,36 @@ def test_default_analysis_of_a_simulated_session_is_accurate_and_ok(paper_sessio
         assert low <= truth[name] <= high
     assert res.clock.offset_s == pytest.approx(truth["daq_offset_s"], abs=50e-6)
     assert res.quality.verdict == "ok"
+
+
+@pytest.mark.parametrize(("band", "message"), [
+    ((10.0, 450.0), "fit band 10…450 Hz ends above 400 Hz, the highest frequency the analysis can judge with this "
+                    "recording's 1000 Hz encoder (0.4 × its rate, the anti-alias filter's pass edge: above it the "
+                    "filter and the encoder's sampling, not the joint, shape the FRF); end the band at 400 Hz or below"),
+    # the fit said "Geometric sequence cannot include zero"; from 0.5 to 8 Hz it failed with "no start gave a finite cost"
+    ((0.0, 200.0), "fit band 0…200 Hz starts at or below 8 Hz: with 0.5 s Welch segments the fit takes each FRF bin as "
+                   "the joint averaged over ±8 Hz, which must stay above 0 Hz; start the band above 8 Hz"),
+    ((float("nan"), 200.0), "fit band nan…200 Hz is empty"),
+    # the default band with 0.4 s segments: its 10 Hz bin reaches 0 Hz ("the fit did not converge" before)
+    (None, "fit band 10…400 Hz starts at or below 10 Hz: with 0.4 s Welch segments the fit takes each FRF bin as "
+           "the joint averaged over ±10 Hz, which must stay above 0 Hz; start the band above 10 Hz"),
+])
+def test_the_analysis_refuses_a_band_it_cannot_judge_in_one_line(paper_session, band, message):
+    rec, _, nominal = paper_session
+    with pytest.raises(FitInputError) as exc:
+        analyze(rec, AnalysisRequest(nominal=nominal, band_hz=band, segment_s=0.5 if band else 0.4))
+    assert str(exc.value) == message
+
+
+def test_band_limits_are_the_pass_edge_and_the_fit_kernel_reaching_0_hz_and_take_a_limit_typed_as_printed():
+    assert band_problem((10.0, 200.0), 0.002, 0.5) is None
+    assert band_problem((10.0, 200.01), 0.002, 0.5) is not None
+    assert band_problem((8.5, 200.0), 0.002, 0.5) is None  # the lowest bin, 10 Hz, averages 2…18 Hz
+    assert band_problem((8.0, 200.0), 0.002, 0.5) is not None  # the 8 Hz bin reaches 0 Hz
+    assert band_problem((4.5, 200.0), 0.002, 1.0) is None and band_problem((4.0, 200.0), 0.002, 1.0) is not None
+    assert "end the band at 266.667 Hz or below" in band_problem((10.0, 300.0), 0.0015, 0.5)
+    assert band_problem((10.0, 266.667), 0.0015, 0.5) is None  # 0.4 / 0.0015 s = 266.66666… Hz
+    assert band_problem((10.0, 266.67), 0.0015, 0.5) is not None
 
 
 def test_json_has_exactly_the_documented_keys_and_is_valid_json(paper_session):

@@ -141,11 +141,6 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     session = load(path)
     session.require_usable(partial=request.partial)
     request = request_for(session, request)
-    nyquist_hz = 0.5 / session.encoder.period_s
-    if request.band_hz is not None and request.band_hz[1] > nyquist_hz:
-        lo, hi = request.band_hz
-        raise ConfigError(f"--band {lo:g},{hi:g}: HI must not exceed {nyquist_hz:g} Hz, the Nyquist frequency of "
-                          f"{session.path.name}'s encoder (period {session.encoder.period_s:g} s)")
     try:
         result = analyze(recording_from_session(session), request)
     except ValueError as e:
