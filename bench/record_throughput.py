@@ -41,10 +41,11 @@ samples 28–31 ms; the whole recorder 40–45 ms (ratio 0.86–0.87). The floor
 third thread waking every 10 ms, 8 ms more when it also holds their blocks until then (cache-cold memory). Two
 structural changes, each measured on the same runs: raw ADC codes stored as the card delivers them (int16 for a
 16-bit card, int32 for a 24-bit NI 9234, with the scaling beside them; the simulated card quantising to codes)
-0.89 against 0.87 interleaved over 9 runs (per-run 0.86–0.92); the readers storing their own blocks under a lock
-and the recording thread only committing (+0.01 on top: 0.92–0.93 against 0.91–0.92 for the codes alone, one run of 7
-each, 16- and 24-bit; runs differ by ±0.02). Together ≈ 0.90–0.91: at the target's edge, and not taken here: each changes a contract (the session format; which thread stores) of the module that guards
-against data loss, and needs its own tests of what an interrupted or failed recording keeps.
+0.89 against 0.87 interleaved over 9 runs (per-run 0.86–0.92) — not taken: a format change for 0.02 that leaves the
+target unmet. The readers storing their own blocks under the recorder's lock, each commit made by the store that finds
+it due, no third thread (built and passing the recorder's tests on branch wp/s8-rec): new/old 1.000 per interleaved
+pair over 15 pairs (quartiles 0.97–1.03, load 5) — no gain, not merged. Under load the ratio rises for both (0.90 at
+load 5, 0.91–0.94 at 6–7: the floor's own CPU grows more), so only figures at the same load compare.
 
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
