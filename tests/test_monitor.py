@@ -131,6 +131,27 @@ def test_a_short_fast_monitor_catalogues_every_window_with_K_near_the_truth(four
         assert r["K_Nm_per_rad"] == pytest.approx(truth, rel=0.03)
 
 
+def test_trend_and_fleet_judge_a_monitors_windows_by_the_monitors_rules(four_windows: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """The monitor ran with --baseline-windows 2: acq trend and acq fleet take its baseline (the mean of the first two
+    windows) unless told otherwise, and say whose rules they judged by (the trial: trend's own default, the first
+    window, alarmed five windows before the monitor did)."""
+    rows = _rows(four_windows)
+    monitors = (rows[0]["K_Nm_per_rad"] + rows[1]["K_Nm_per_rad"]) / 2
+    trend = run_cli(capsys, "trend", str(four_windows), "--joint", "joint1", "--json")
+    doc = json.loads(trend.out)
+    assert doc["baseline_K_Nm_per_rad"] == pytest.approx(monitors, rel=1e-9)
+    assert (doc["baseline"], doc["rules"]) == ("mean of the first 2 good sessions", "as acq monitor judged its windows")
+    assert (doc["threshold_pct"], doc["ewma_lambda"]) == (10.0, 0.2)
+    fleet = json.loads(run_cli(capsys, "fleet", str(four_windows), "--json").out)
+    assert [(j["baseline_K_Nm_per_rad"], j["rules"]) for j in fleet] == [(pytest.approx(monitors, rel=1e-9),
+                                                                          "as acq monitor judged its windows")]
+    mine = json.loads(run_cli(capsys, "trend", str(four_windows), "--joint", "joint1", "--json",
+                              "--baseline-sessions", "1").out)
+    assert mine["baseline_K_Nm_per_rad"] == pytest.approx(rows[0]["K_Nm_per_rad"], rel=1e-9)
+    assert mine["rules"] == "baseline_sessions as given, the rest as acq monitor judged its windows"
+
+
 def test_retention_keeps_the_baseline_and_the_last_windows_and_every_catalogue_row(four_windows: Path) -> None:
     rows = _rows(four_windows)
     present = [Path(r["path"]).exists() for r in rows]

@@ -34,7 +34,7 @@ from acq.environment import user_environment
 from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
-from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
+from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, Trend, compute_trend
 from acq.monitoring.window_judge import analyse_window, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
@@ -137,6 +137,8 @@ class Monitor:
         self._alarm_procs: list[subprocess.Popen[bytes]] = []
         self._in_alarm = False
         self._size = expected_window_bytes(settings.bench, settings.window_s)
+        # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
+        self._rules = AlarmRules(settings.baseline_windows, settings.threshold_pct, settings.ewma_lambda)
         if settings.max_disk_bytes is not None and settings.max_disk_bytes < self._size:  # no window would be captured
             daq, drive = settings.bench.daq, settings.bench.drive
             raise ConfigError(f"--max-disk {settings.max_disk_bytes / 1e6:g} MB: one --window of {settings.window_s:g} s "
@@ -197,7 +199,7 @@ class Monitor:
         current, drive = open_bench(bench, fast=self.s.fast)
         machine = getattr(drive, "machine_tags", dict)()  # what the machine says of the window (a robot's payload)
         recorder = Recorder(bench, None, current, drive, self.s.out_dir, self.s.window_s,
-                            tags={**machine, WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s})
+                            tags={**machine, WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s, **self._rules.as_tags()})
         self._recorder = recorder
         if self._stop is not None:
             recorder.request_stop(self._stop)
