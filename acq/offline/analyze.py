@@ -4,6 +4,14 @@ The only place where the application meets the analysis: it turns an :class:`acq
 into the plain arrays of :class:`analysis.Recording`, runs :func:`analysis.analyze` with an
 :class:`analysis.AnalysisRequest`, and writes the results beside the session (the raw groups are
 never touched). On the simulated bench the result also holds the simulated truth.
+
+Where the results go (:func:`output_paths`): the default analysis writes the session's result,
+``<session>.result.json`` and ``<session>.report.png`` — what ``acq view``, the catalogue's default rows and the
+trend take as the session's result. Any other request writes beside it, never over it, under a name that says
+what differs (:func:`variant_label`): ``<session>.<label>.result.json`` and ``<session>.<label>.report.png``, the
+label's parts in a fixed order, joined by ``.``: ``paper`` (the paper's chain), ``torque-<method>``,
+``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (Hz, as given), ``no-align``, ``segment-<s>s``; e.g.
+``S.band-10-150.result.json`` or ``S.params-K.fit-complex.result.json``.
 """
 
 from __future__ import annotations
@@ -130,7 +138,8 @@ def result_json(session: Session, result: Result) -> dict[str, Any]:
 def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest(), *, write: bool = True,
                     report: bool = True, result_dir: Path | None = None) -> SessionResult:
     """Identify the joint of one session as ``request`` asks (with the bench's nominal plant unless it names one);
-    write ``<session>.result.json`` (:func:`output_paths`: beside the session, or in ``result_dir``).
+    write ``<session>.result.json`` (:func:`output_paths`: beside the session, or in ``result_dir``; a request other
+    than the default writes ``<session>.<label>.result.json`` beside it).
 
     The report PNG is not drawn here: with ``report`` its path is set, and :func:`acq.ui.report_png.draw_report`
     draws it once the result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
@@ -167,12 +176,42 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
 
 def output_paths(session_path: Path, request: AnalysisRequest, result_dir: Path | None = None) -> tuple[Path, Path]:
     """The result document and report PNG of ``request`` on a session: ``<session>.result.json`` and
-    ``<session>.report.png`` beside the session, or in ``result_dir`` (``--result-dir``: a read-only archive); the
-    paper's chain (a comparison, not the session's result) writes ``<session>.paper.result.json`` and
-    ``<session>.paper.report.png`` beside them instead of replacing them."""
-    stem = session_path.stem + (".paper" if request.pipeline == "paper" else "")
+    ``<session>.report.png`` beside the session, or in ``result_dir`` (``--result-dir``: a read-only archive); any
+    other request than the default (the paper's chain, ``--band``, ``--params K``, …: a comparison or an experiment,
+    not the session's result) writes ``<session>.<label>.result.json`` and ``<session>.<label>.report.png``
+    (:func:`variant_label`) beside them instead of replacing them."""
+    label = variant_label(request)
+    stem = session_path.stem + (f".{label}" if label else "")
     folder = session_path.parent if result_dir is None else result_dir
     return folder / (stem + ".result.json"), folder / (stem + ".report.png")
+
+
+def variant_label(request: AnalysisRequest) -> str:
+    """What ``request`` asks beyond the default analysis, as a part of a file name ('' for the default request).
+
+    The parts, in this order and joined by ``.``: ``paper`` (the paper's chain), ``torque-<method>`` (a torque
+    method named, even the one the default would pick), ``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (the
+    band as given, Hz, ``%g``), ``no-align``, ``segment-<s>s`` — letters, digits, ``-`` and ``.`` only. The paper's
+    chain ignores the torque method and the alignment, so they are not in its label. Not in the label: ``partial``
+    (the intact part of a session is its result so far), ``select_segments`` (how ``acq monitor`` analyses its
+    windows: their default result) and ``nominal`` (the bench's, filled in by :func:`request_for`).
+    """
+    default = AnalysisRequest()
+    paper = request.pipeline == "paper"
+    parts = ["paper"] if paper else []
+    if request.torque_method is not None and not paper:
+        parts.append(f"torque-{request.torque_method}")
+    if request.params != default.params:
+        parts.append(f"params-{request.params.replace(',', '-')}")
+    if request.fit != default.fit:
+        parts.append(f"fit-{request.fit}")
+    if request.band_hz is not None:
+        parts.append("band-{:g}-{:g}".format(*request.band_hz))
+    if not request.align and not paper:
+        parts.append("no-align")
+    if request.segment_s != default.segment_s:
+        parts.append(f"segment-{request.segment_s:g}s")
+    return ".".join(parts)
 
 
 def write_json(doc: dict[str, Any], path: Path) -> None:
