@@ -108,15 +108,15 @@ def test_a_request_other_than_the_default_writes_beside_the_sessions_result(
 
 
 def test_variant_labels_name_what_differs_from_the_default_request() -> None:
-    from acq.offline.analyze import output_paths, variant_label
+    from acq.offline.analyze import output_paths
     from analysis import AnalysisRequest
 
-    assert variant_label(AnalysisRequest()) == ""
-    assert variant_label(AnalysisRequest(select_segments=True, partial=True)) == ""  # the monitor's; a live session's
-    assert variant_label(AnalysisRequest(torque_method="park", params="K", fit="complex", band_hz=(12.5, 300.0),
-                                         align=False, segment_s=0.25)) == \
+    assert AnalysisRequest().variant_label() == ""
+    assert AnalysisRequest(select_segments=True, partial=True).variant_label() == ""  # the monitor's; a live session's
+    assert AnalysisRequest(torque_method="park", params="K", fit="complex", band_hz=(12.5, 300.0),
+                           align=False, segment_s=0.25).variant_label() == \
         "torque-park.params-K.fit-complex.band-12.5-300.no-align.segment-0.25s"
-    assert variant_label(AnalysisRequest(pipeline="paper", torque_method="park", align=False)) == "paper"
+    assert AnalysisRequest(pipeline="paper", torque_method="park", align=False).variant_label() == "paper"
     assert output_paths(Path("/d/s.h5"), AnalysisRequest(pipeline="paper", band_hz=(10, 150)), Path("/r")) == (
         Path("/r/s.paper.band-10-150.result.json"), Path("/r/s.paper.band-10-150.report.png"))
 

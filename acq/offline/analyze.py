@@ -8,7 +8,7 @@ never touched). On the simulated bench the result also holds the simulated truth
 Where the results go (:func:`output_paths`): the default analysis writes the session's result,
 ``<session>.result.json`` and ``<session>.report.png`` — what ``acq view``, the catalogue's default rows and the
 trend take as the session's result. Any other request writes beside it, never over it, under a name that says
-what differs (:func:`variant_label`): ``<session>.<label>.result.json`` and ``<session>.<label>.report.png``, the
+what differs (:meth:`analysis.AnalysisRequest.variant_label`): ``<session>.<label>.result.json`` and ``<session>.<label>.report.png``, the
 label's parts in a fixed order, joined by ``.``: ``paper`` (the paper's chain), ``torque-<method>``,
 ``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (Hz, as given), ``no-align``, ``segment-<s>s``; e.g.
 ``S.band-10-150.result.json`` or ``S.params-K.fit-complex.result.json``.
@@ -179,39 +179,11 @@ def output_paths(session_path: Path, request: AnalysisRequest, result_dir: Path 
     ``<session>.report.png`` beside the session, or in ``result_dir`` (``--result-dir``: a read-only archive); any
     other request than the default (the paper's chain, ``--band``, ``--params K``, …: a comparison or an experiment,
     not the session's result) writes ``<session>.<label>.result.json`` and ``<session>.<label>.report.png``
-    (:func:`variant_label`) beside them instead of replacing them."""
-    label = variant_label(request)
+    (:meth:`analysis.AnalysisRequest.variant_label`) beside them instead of replacing them."""
+    label = request.variant_label()
     stem = session_path.stem + (f".{label}" if label else "")
     folder = session_path.parent if result_dir is None else result_dir
     return folder / (stem + ".result.json"), folder / (stem + ".report.png")
-
-
-def variant_label(request: AnalysisRequest) -> str:
-    """What ``request`` asks beyond the default analysis, as a part of a file name ('' for the default request).
-
-    The parts, in this order and joined by ``.``: ``paper`` (the paper's chain), ``torque-<method>`` (a torque
-    method named, even the one the default would pick), ``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (the
-    band as given, Hz, ``%g``), ``no-align``, ``segment-<s>s`` — letters, digits, ``-`` and ``.`` only. The paper's
-    chain ignores the torque method and the alignment, so they are not in its label. Not in the label: ``partial``
-    (the intact part of a session is its result so far), ``select_segments`` (how ``acq monitor`` analyses its
-    windows: their default result) and ``nominal`` (the bench's, filled in by :func:`request_for`).
-    """
-    default = AnalysisRequest()
-    paper = request.pipeline == "paper"
-    parts = ["paper"] if paper else []
-    if request.torque_method is not None and not paper:
-        parts.append(f"torque-{request.torque_method}")
-    if request.params != default.params:
-        parts.append(f"params-{request.params.replace(',', '-')}")
-    if request.fit != default.fit:
-        parts.append(f"fit-{request.fit}")
-    if request.band_hz is not None:
-        parts.append("band-{:g}-{:g}".format(*request.band_hz))
-    if not request.align and not paper:
-        parts.append("no-align")
-    if request.segment_s != default.segment_s:
-        parts.append(f"segment-{request.segment_s:g}s")
-    return ".".join(parts)
 
 
 def write_json(doc: dict[str, Any], path: Path) -> None:

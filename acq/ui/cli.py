@@ -396,10 +396,10 @@ def _analyze_one_session(session_path: Path, request: AnalysisRequest, *, as_jso
         return 0
     with err.status(f"analysing {session_path} …"):
         done = _identify(session_path, request, report=report, catalogue_path=catalogue_path, result_dir=result_dir)
-    from acq.offline.analyze import output_paths, variant_label
+    from acq.offline.analyze import output_paths
     from analysis import AnalysisRequest
 
-    default_result = output_paths(session_path, AnalysisRequest(), result_dir)[0] if variant_label(request) else None
+    default_result = output_paths(session_path, AnalysisRequest(), result_dir)[0] if request.variant_label() else None
     _print_result_and_draw(done, default_result)
     return 0
 
