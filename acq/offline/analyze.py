@@ -9,8 +9,9 @@ Where the results go (:func:`output_paths`): the default analysis writes the ses
 ``<session>.result.json`` and ``<session>.report.png`` — what ``acq view``, the catalogue's default rows and the
 trend take as the session's result. Any other request writes beside it, never over it, under a name that says
 what differs (:meth:`analysis.AnalysisRequest.variant_label`): ``<session>.<label>.result.json`` and
-``<session>.<label>.report.png``, the label's parts in a fixed order, joined by ``.``: ``paper`` (the paper's chain), ``torque-<method>``,
-``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (Hz, as given), ``no-align``, ``segment-<s>s``; e.g.
+``<session>.<label>.report.png``, the label's parts in a fixed order, joined by ``.``: ``paper`` (the paper's
+chain), ``torque-<method>``, ``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (Hz, as given), ``no-align``,
+``segment-<s>s``; e.g.
 ``S.band-10-150.result.json`` or ``S.params-K.fit-complex.result.json``.
 """
 
