@@ -21,6 +21,7 @@ defaults, a baseline of the first window where the monitor took the mean of five
 
 from __future__ import annotations
 
+import json
 import math
 import statistics
 from collections import Counter
@@ -34,7 +35,7 @@ from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.catalogue_backends import is_url
 from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
-from analysis import Z95
+from analysis import AnalysisRequest, Z95
 
 EXIT_ALARM = 3
 EWMA_L = 3.0
@@ -154,7 +155,9 @@ class Trend:
 
 
 def like_for_like(entries: Sequence[Entry]) -> tuple[list[Entry], dict[str, str]]:
-    """One analysis per session, all with the same request: the one most sessions have (the latest on a tie).
+    """One analysis per session, all with the same request: of the sessions' own results (the default request, or
+    the monitor's — :meth:`analysis.AnalysisRequest.variant_label` empty), the request most sessions have (the latest
+    on a tie); a comparison (``--paper``, ``--band``, …) only where no session has its own result.
 
     Returns the entries (oldest session first) and, by session key, why a session has none with that
     request (its latest analysis stands in, to be listed as skipped).
@@ -162,8 +165,10 @@ def like_for_like(entries: Sequence[Entry]) -> tuple[list[Entry], dict[str, str]
     sessions: dict[str, list[Entry]] = {}
     for e in entries:
         sessions.setdefault(e.session_key, []).append(e)
-    counts = Counter(e.request_key for e in entries)
-    request = max(counts, key=lambda r: (counts[r], max(e.analyzed_utc for e in entries if e.request_key == r)))
+    own = [e for e in entries if _is_own_result(e.request_key)]
+    pool = own or list(entries)
+    counts = Counter(e.request_key for e in pool)
+    request = max(counts, key=lambda r: (counts[r], max(e.analyzed_utc for e in pool if e.request_key == r)))
     chosen, missing = [], {}
     for key, analyses in sessions.items():
         same = [e for e in analyses if e.request_key == request]
@@ -171,6 +176,15 @@ def like_for_like(entries: Sequence[Entry]) -> tuple[list[Entry], dict[str, str]
         if not same:
             missing[key] = "analysed only with other options than the trend's — run acq analyze on it again"
     return chosen, missing
+
+
+def _is_own_result(request_key: str) -> bool:
+    """Whether a catalogue row's request (:meth:`analysis.AnalysisRequest.key`) gives a session's own result rather
+    than a comparison; a key that is no request (a catalogue of other software) counts as its own result."""
+    try:
+        return AnalysisRequest.from_json_dict(json.loads(request_key)).variant_label() == ""
+    except (ValueError, TypeError, AttributeError):
+        return True
 
 
 def _skip_reason(e: Entry) -> str | None:
