@@ -130,6 +130,7 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     require_two_segments(longest_gap_free_span(rec.encoder_index).count, rec.period_s, request.segment_s)
     chain = request.chain(rec)
     sig = prepare_signals(rec, chain)
+    request = replace(request, select_segments=request.selects_segments(rec))  # the result says what was done
     select = (request.band_hz or default_band_hz(sig.period_s)) if request.select_segments else None
     frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=request.segment_s,
                        torque_noise_Nm=sig.torque_noise_Nm, torque_alias_Nm=sig.torque_alias_Nm,

@@ -50,9 +50,12 @@ class AnalysisRequest:
     partial : bool
         Also analyse the intact part of a session still being recorded or damaged (read by the application
         that turns a session file into a :class:`Recording`; the analysis of a recording ignores it).
-    select_segments : bool
+    select_segments : bool or None
         Average only the Welch segments that excite the joint in the fit band (:mod:`analysis.segments`;
-        for motion that excites in parts, e.g. a robot program); the result then says which moves do.
+        for motion that excites in parts, e.g. a robot program); the result then says which moves do. None: when
+        acq did not command the motion (the recording has no profile: a machine's own program moved the joint, as
+        in ``acq monitor``'s windows, or the data were imported), with our chain (:meth:`selects_segments`) — so
+        ``acq analyze`` of a monitor's window analyses it as the monitor did.
     """
 
     torque_method: TorqueMethod | None = None
@@ -64,7 +67,13 @@ class AnalysisRequest:
     nominal: TwoMassParams | None = None
     pipeline: Pipeline = "acq"
     partial: bool = False
-    select_segments: bool = False
+    select_segments: bool | None = None
+
+    def selects_segments(self, rec: Recording) -> bool:
+        """Whether this request averages only the exciting segments of ``rec`` (see ``select_segments``)."""
+        if self.select_segments is not None:
+            return self.select_segments
+        return self.pipeline == "acq" and rec.profile is None
 
     def chain(self, rec: Recording) -> SignalChain:
         """The signal chain this request asks for on ``rec`` (the torque method resolved by its phases)."""
@@ -86,8 +95,8 @@ class AnalysisRequest:
         method named, even the one the default would pick), ``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (the
         band as given, Hz, ``%g``), ``no-align``, ``segment-<s>s`` — letters, digits, ``-`` and ``.`` only. The paper's
         chain ignores the torque method and the alignment, so they are not in its label. Not in the label: ``partial``
-        (the intact part of a session is its result so far), ``select_segments`` (how ``acq monitor`` analyses its
-        windows: their default result) and ``nominal`` (the bench's, filled in by the application).
+        (the intact part of a session is its result so far), ``select_segments`` (by default decided by the
+        recording: see above) and ``nominal`` (the bench's, filled in by the application).
         """
         default = AnalysisRequest()
         paper = self.pipeline == "paper"

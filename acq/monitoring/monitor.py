@@ -67,8 +67,9 @@ class MonitorSettings:
     baseline_windows: int = 5
     threshold_pct: float = 10.0
     ewma_lambda: float = 0.2
-    # a robot program excites the joint only in parts: the analysis uses the segments that excite (analysis.segments)
-    request: AnalysisRequest = AnalysisRequest(select_segments=True)
+    # a robot program excites the joint only in parts: the default request averages only the segments that excite
+    # (analysis.segments) where acq did not command the motion — as acq analyze of a window does, under the same key
+    request: AnalysisRequest = AnalysisRequest()
 
 
 @dataclass
