@@ -413,3 +413,10 @@ def test_a_read_only_session_folder_shows_the_result_fails_the_write_and_result_
         assert [d["outcome"] for d in json.loads(batch.out)] == ["analysed", "analysed"]
         assert sorted(p.name for p in (tmp_path / "batch_results").iterdir()) == ["a.result.json", "b.result.json"]
         assert sorted(p.name for p in ro.iterdir()) == ["a.h5", "b.h5"]
+
+
+def test_a_result_dir_that_cannot_be_made_is_bad_input(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The trial: `--result-dir /proc/x` said "folder vanished" (exit 1) of a folder that never was."""
+    run = run_cli(capsys, "analyze", str(session_10s), "--no-report", "--result-dir", "/proc/acq-none/x")
+    assert run.code == 2
+    assert run.err == "acq: error: --result-dir /proc/acq-none/x: cannot make a folder there (no such file or directory)\n"

@@ -375,6 +375,9 @@ def _result_folder(result_dir: Path) -> Path:
     except OSError as e:
         from acq.recording.storage import storage_error
 
+        if isinstance(e, FileNotFoundError):  # a folder that cannot be made there (e.g. under /proc): bad input
+            raise ConfigError(f"--result-dir {result_dir}: cannot make a folder there "
+                              f"({(e.strerror or 'no such file or directory').lower()})") from None
         raise storage_error(e, f"--result-dir {result_dir}") from None
     return result_dir.resolve()
 
