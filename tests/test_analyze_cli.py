@@ -419,4 +419,5 @@ def test_a_result_dir_that_cannot_be_made_is_bad_input(session_10s: Path, capsys
     """The trial: `--result-dir /proc/x` said "folder vanished" (exit 1) of a folder that never was."""
     run = run_cli(capsys, "analyze", str(session_10s), "--no-report", "--result-dir", "/proc/acq-none/x")
     assert run.code == 2
-    assert run.err == "acq: error: --result-dir /proc/acq-none/x: cannot make a folder there (no such file or directory)\n"
+    assert run.err == ("acq: error: --result-dir /proc/acq-none/x: cannot make a folder there (no such file or "
+                       "directory)\n")
