@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from acq.environment import pin_blas_threads
+from acq.install import install_hint
 from acq.monitoring.catalogue import Catalogue, Outcome
 from acq.offline.analyze import SessionResult, analyze_session, output_paths, sha256_of
 from acq.recording.paths import GLOB_CHARS
@@ -237,7 +238,7 @@ def analysis_executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
     try:
         from distributed import Client
     except ImportError:
-        raise ConfigError("--scheduler needs Dask distributed: pip install 'acq[cluster]'") from None
+        raise ConfigError(f"--scheduler needs Dask distributed: {install_hint('cluster')}") from None
     try:
         client = Client(scheduler, timeout="10s")
     except OSError as e:
