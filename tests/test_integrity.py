@@ -199,6 +199,33 @@ def test_a_damaged_session_is_exported_only_with_partial_and_its_import_says_wha
     assert json.loads(info.out)["status"] == "interrupted"
 
 
+def test_a_partial_analysis_says_so_on_screen_and_in_its_reasons_naming_the_spans_left_out(
+        recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: 'identification — verdict ok', the only hint 'note: using 0.064–5.610 s, where both streams have
+    data'; the result's reasons did not mention the damage."""
+    from dataclasses import replace
+
+    path = _copy(recorded, tmp_path / "flip.h5")
+    _flip_a_byte_in_chunk(path, 56)
+    span = f"current: samples 143 360–{10 * RATE_HZ - 1:,} unreadable".replace(",", " ")
+    note = f"note: partial: only the readable part of a damaged session was analysed; left out: {span}"
+    run = run_cli(capsys, "analyze", str(path), "--partial", "--no-report")
+    assert run.code == 0, run.err
+    screen = " ".join(run.out.split())
+    assert re.search(r"identification — verdict \w+ — partial: readable part of a damaged session quantity", screen)
+    assert note in screen
+    doc = json.loads((tmp_path / "flip.result.json").read_text())
+    assert doc["partial"] is True and doc["quality"]["reasons"][0] == note
+    assert [r for r in doc["quality"]["reasons"] if "partial" in r] == [note]  # the analysis's own reasons follow
+    from acq.offline.analyze import partial_notes
+
+    session = load(path)
+    recording = replace(session, attrs={**session.attrs, "status": "recording"}, damage=())
+    assert partial_notes(recording) == ["note: partial: the session is still being recorded (status recording); "
+                                        "only what was stored was analysed"]
+    assert partial_notes(replace(session, damage=())) == []
+
+
 @pytest.mark.parametrize(("status", "stop_reason", "damage", "imported"), [
     ("complete", "recorded 10 s", (), ("complete", None)),
     ("recording", "", (), ("interrupted", "the exported session was still recording (status recording): the files "
