@@ -156,7 +156,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
-                                      phase_valid=phase_is_meaningful(residual)),
+                                      phase_valid=phase_is_meaningful(residual), misfit_band_hz=quality.misfit_band_hz,
+                                      third_mode_hz=quality.third_mode_hz),
                   request=request, chain=chain, notes=tuple(sig.notes), moves=moves)
 
 

@@ -78,6 +78,34 @@ class AnalysisRequest:
         (:func:`code_fingerprint`), canonical JSON — a change of either is not current."""
         return json.dumps({**asdict(self), "analysis": code_fingerprint()}, sort_keys=True)
 
+    def variant_label(self) -> str:
+        """What this request asks beyond the default analysis, as a part of a file name ('' for the default request:
+        the session's own result; anything else is a comparison, kept beside it and never trended in its place).
+
+        The parts, in this order and joined by ``.``: ``paper`` (the paper's chain), ``torque-<method>`` (a torque
+        method named, even the one the default would pick), ``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (the
+        band as given, Hz, ``%g``), ``no-align``, ``segment-<s>s`` — letters, digits, ``-`` and ``.`` only. The paper's
+        chain ignores the torque method and the alignment, so they are not in its label. Not in the label: ``partial``
+        (the intact part of a session is its result so far), ``select_segments`` (how ``acq monitor`` analyses its
+        windows: their default result) and ``nominal`` (the bench's, filled in by the application).
+        """
+        default = AnalysisRequest()
+        paper = self.pipeline == "paper"
+        parts = ["paper"] if paper else []
+        if self.torque_method is not None and not paper:
+            parts.append(f"torque-{self.torque_method}")
+        if self.params != default.params:
+            parts.append(f"params-{self.params.replace(',', '-')}")
+        if self.fit != default.fit:
+            parts.append(f"fit-{self.fit}")
+        if self.band_hz is not None:
+            parts.append("band-{:g}-{:g}".format(*self.band_hz))
+        if not self.align and not paper:
+            parts.append("no-align")
+        if self.segment_s != default.segment_s:
+            parts.append(f"segment-{self.segment_s:g}s")
+        return ".".join(parts)
+
     def to_json_dict(self, chain: SignalChain | None = None) -> dict[str, Any]:
         """The options as JSON-ready values: as asked, or with what ``chain`` (this request's) really did."""
         nominal = None if self.nominal is None else {n: getattr(self.nominal, n) for n in PARAM_NAMES[:3]}

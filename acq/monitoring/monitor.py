@@ -18,14 +18,13 @@ does not sleep, and waits for the analysis instead of skipping (no real time pas
 
 from __future__ import annotations
 
-import fcntl
 import math
 import shlex
 import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from concurrent.futures import Future
-from contextlib import AbstractContextManager, contextmanager
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -33,8 +32,9 @@ from typing import Any
 from acq.environment import user_environment
 from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
+from acq.monitoring.folder_lock import folder_lock
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
-from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
+from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, Trend, compute_trend
 from acq.monitoring.window_judge import analyse_window, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
@@ -83,7 +83,7 @@ class MonitorStatus:
     skipped: int = 0
     interrupted: int = 0
     alarms: int = 0
-    machine_time_s: float = 0.0
+    machine_time_s: float = 0.0  # the start of the window being captured; its end once it is captured
     disk_bytes: int = 0
     last_K: float | None = None
     last_K_ci: tuple[float | None, float | None] = (None, None)
@@ -109,18 +109,6 @@ def expected_window_bytes(bench: Bench, window_s: float) -> int:
     return int(_SIZE_MARGIN * window_s * (current + encoder)) + 200_000
 
 
-@contextmanager
-def _folder_lock(folder: Path) -> Iterator[None]:
-    """One monitor per folder (an flock: released by the kernel when the process dies, also on kill -9)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / "monitor.lock", "w") as f:
-        try:
-            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise ConfigError(f"{folder}: another acq monitor is writing there") from None
-        yield
-
-
 class Monitor:
     """The monitor loop; :meth:`run` returns the exit code (3 when the last state is alarm, else 0)."""
 
@@ -137,6 +125,8 @@ class Monitor:
         self._alarm_procs: list[subprocess.Popen[bytes]] = []
         self._in_alarm = False
         self._size = expected_window_bytes(settings.bench, settings.window_s)
+        # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
+        self._rules = AlarmRules(settings.baseline_windows, settings.threshold_pct, settings.ewma_lambda)
         if settings.max_disk_bytes is not None and settings.max_disk_bytes < self._size:  # no window would be captured
             daq, drive = settings.bench.daq, settings.bench.drive
             raise ConfigError(f"--max-disk {settings.max_disk_bytes / 1e6:g} MB: one --window of {settings.window_s:g} s "
@@ -161,7 +151,7 @@ class Monitor:
 
         Returns 130 when stopped (:attr:`stopped_by`: Ctrl-C, SIGTERM, a stop request), else 3 when the last
         state is alarm, else 0."""
-        with _folder_lock(self.s.out_dir), Catalogue(self.s.out_dir / CATALOGUE_NAME) as catalogue, \
+        with folder_lock(self.s.out_dir), Catalogue(self.s.out_dir / CATALOGUE_NAME) as catalogue, \
                 analysis_executor(self.s.jobs, None) as pool, self._signals():
             self.catalogue = catalogue
             first = self._resume(pool)
@@ -197,7 +187,7 @@ class Monitor:
         current, drive = open_bench(bench, fast=self.s.fast)
         machine = getattr(drive, "machine_tags", dict)()  # what the machine says of the window (a robot's payload)
         recorder = Recorder(bench, None, current, drive, self.s.out_dir, self.s.window_s,
-                            tags={**machine, WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s})
+                            tags={**machine, WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s, **self._rules.as_tags()})
         self._recorder = recorder
         if self._stop is not None:
             recorder.request_stop(self._stop)
@@ -214,6 +204,7 @@ class Monitor:
                 self._stop = self._stop or result.stop_reason
             return
         self.status.captured += 1
+        self.status.machine_time_s = n * self.s.every_s + self.s.window_s
         self._collect(at_most=self.s.jobs - 1 if self.s.fast else None)
         if len(self._pending) > self.s.jobs:  # jobs running and one waiting: no more (back-pressure)
             self._mark(key, "not analysed", f"the analysis fell behind the capture ({len(self._pending)} windows "
