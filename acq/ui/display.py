@@ -196,7 +196,11 @@ def result_table(doc: dict[str, Any]) -> FittedTable:
         columns += [Column("sim truth", true_values, drop=2), Column("error", errors, drop=1)]
     quality = doc["quality"]
     caption = [f"options: {options_text(doc)}", *quality["reasons"]]
-    return FittedTable(f"identification — verdict [bold]{escape(quality['verdict'])}[/bold]", columns, caption)
+    title = f"identification — verdict [bold]{escape(quality['verdict'])}[/bold]"
+    if doc.get("partial"):  # why (the spans left out) is the first note of the caption
+        title += (" — [bold]partial[/bold]: readable part of a damaged session" if doc["session"].get("damage")
+                  else " — [bold]partial[/bold]: what was stored of a session still recording")
+    return FittedTable(title, columns, caption)
 
 
 def _lookup(doc: dict[str, Any], path: tuple[str, ...]) -> tuple[bool, Any]:
