@@ -18,6 +18,10 @@ progress would run the end of each return move at the next cycle's ramps — its
 return to p0, stay exact; with a ``dwell_s`` the parameters are written at rest and any drive applies them
 to the intended move.
 
+Travel limit: before the drive is enabled, 0x607D software position limits are set to the start position ∓ the
+bench's ``[limits] max_travel_deg`` (in position units, as 0x6064/0x607A count them) and read back, so the drive itself
+refuses a target beyond them; a range that would leave int32 is refused (home the drive nearer 0).
+
 All SDO traffic of the motion goes through one lock (the motion thread and a stop from any other
 thread share canopen's SDO client). Every stop is a quick stop on the 0x6085 ramp, a wait for rest
 (SWITCH ON DISABLED, or QUICK STOP ACTIVE with target reached), then disable voltage, verified.
