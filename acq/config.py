@@ -185,6 +185,11 @@ def _tag_of(model: type[BaseModel]) -> Any:
     return args[0] if len(args) == 1 else None
 
 
+def bench_label(path: Path | str | None) -> str:
+    """The bench file as messages name it: the path given, or the built-in bench's path relative to the repository."""
+    return str(path) if path is not None else str(DEFAULT_BENCH.relative_to(CONFIG_DIR.parent))
+
+
 def load_bench(path: Path | str | None = None) -> Bench:
     """Load a bench config; ``None`` is the built-in simulated bench."""
     p = Path(path) if path is not None else DEFAULT_BENCH

@@ -45,6 +45,7 @@ class Scenario:
     clock : DAQ offset (s) and drift (ppm); None: |offset| 10–60 ms, |drift| 20–60 ppm of random signs.
     jl_truth : the J_l the fit is scored against (``load+third``: J_l + J_3, the two-mass equivalent).
     realtime : record in real time (a simulated CANopen node on the virtual bus needs it), not ``--fast``.
+    limits : the bench's ``[limits]`` (empty: a simulated bench's default, drivers.config.SIM_LIMITS).
     """
 
     name: str
@@ -62,6 +63,7 @@ class Scenario:
     clock: tuple[float, float] | None = None
     jl_truth: Literal["load", "load+third"] = "load"
     realtime: bool = False
+    limits: dict[str, float] = field(default_factory=dict)
 
     @property
     def must_not_be_ok(self) -> bool:
@@ -198,6 +200,8 @@ def scenario_bench(sc: Scenario, seed: int, offset_s: float, drift_ppm: float) -
     data["drive"].update(sc.drive)  # e.g. {"driver": "canopen", "simulated_node": True}: another transport
     if sc.counts_per_rev is not None:
         data["encoder"]["counts_per_rev"] = sc.counts_per_rev
+    if sc.limits:
+        data["limits"] = sc.limits
     bench = type(bench).model_validate(data)
     profile = load_profile("triangle_0.2s")
     profile = type(profile).model_validate({**profile.model_dump(), "duration_s": sc.duration_s, **sc.profile})

@@ -7,7 +7,9 @@ PRE-OPERATIONAL, producer heartbeat (0x1017), SYNC counter (0x1019 = 240, or pla
 has no 0x1019), TPDO ``tpdo`` mapped to 0x6064 position actual (+ 0x606C velocity actual) with
 transmission type 1 and **read back** (a differing mapping refuses to record) — with ``map_timestamp``
 also 0x1013, the high-resolution time stamp of the sample (µs, refused if the drive lacks it), mode of operation
-Profile Position **verified** on 0x6061 (canopen's own setter only logs a refusal), then NMT
+Profile Position **verified** on 0x6061 (canopen's own setter only logs a refusal), the bench's ``[limits]`` written
+to 0x607F max profile velocity and 0x6072 max torque and **read back** (0x607D software position limits follow
+around the start position when the motion starts), then NMT
 OPERATIONAL and the SYNC producer. Motion (enable, the triangle by Profile Position, quick stop and
 disable) is :mod:`drivers.canopen_motion`; the encoder stream (SYNC counter, notifier-side capture,
 decoding, raw ``.blf`` log) is :mod:`drivers.canopen_stream`.
@@ -30,6 +32,7 @@ encoder's), velocities ``velocity_units_per_rpm``, accelerations ``acceleration_
 """
 from __future__ import annotations
 
+import math
 import queue
 import threading
 import time
@@ -44,7 +47,8 @@ from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent, Stream
 from drivers.canopen_motion import STATUS_POLL_S, ProfilePositionMotion, device_step, node402
 from drivers.canopen_stream import (SYNC_COB_ID, SYNC_COUNTER_OVERFLOW, FrameCapture, RawFrameLog, SyncProducer,
                                     SyncUnwrapper, TpdoDecoder, TpdoLayout)
-from drivers.config import Bench, DriveCanopen, Profile
+from drivers.config import Bench, DriveCanopen, Limits, Profile
+from drivers.limits import missing_limits, travel_counts
 from acqcore.errors import AcqError, ConfigError, DeviceError
 
 QUEUE_FRAMES = 20_000
@@ -90,8 +94,10 @@ class CanopenDrive:
     passive : the master's TPDO to record (``motion = "external"`` with ``configure = false``), else None.
     """
 
-    def __init__(self, settings: DriveCanopen, counts_per_rev: int, passive: PassiveTpdo | None = None) -> None:
+    def __init__(self, settings: DriveCanopen, counts_per_rev: int, passive: PassiveTpdo | None = None,
+                 limits: Limits | None = None, gear_ratio: float = 1.0) -> None:
         self._s, self._cpr, self._passive = settings, counts_per_rev, passive
+        self._limits, self._gear_ratio = limits, gear_ratio
         self.name = f"CANopen node {settings.node_id} on {settings.interface}:{settings.channel}"
         self._network: canopen.Network | None = None
         self._node: canopen.profiles.p402.BaseNode402 | None = None
@@ -119,7 +125,9 @@ class CanopenDrive:
             node = node402(s.node_id)
             self._network.add_node(node)
             self._node = node
-            self._motion = ProfilePositionMotion(node, self.name, s, self._cpr, self._fail, self._info)
+            travel = (None if self._limits is None else
+                      travel_counts(self._limits.max_travel_deg, self._gear_ratio, self._cpr))
+            self._motion = ProfilePositionMotion(node, self.name, s, self._cpr, self._fail, self._info, travel)
             node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
             node.TIMEOUT_SWITCH_STATE_FINAL = s.state_timeout_s
             node.TIMEOUT_SWITCH_STATE_SINGLE = s.state_timeout_s
@@ -135,6 +143,8 @@ class CanopenDrive:
             overflow = self._enable_sync_counter(SYNC_COUNTER_OVERFLOW)
             cob_id, _ = self._map_tpdo()
             self._set_profile_position()
+            if self._limits is not None:
+                self._write_limits(self._limits)
             self._capture = FrameCapture(with_counter=overflow > 0, max_frames=QUEUE_FRAMES)
             self._network.subscribe(SYNC_COB_ID, self._capture.on_sync)
             self._network.subscribe(cob_id, self._capture.on_tpdo)
@@ -342,6 +352,28 @@ class CanopenDrive:
                                       f"is {shown}, not {od.MODE_PROFILE_POSITION}, {timeout:g} s after writing 0x6060")
                 time.sleep(STATUS_POLL_S)
 
+    def _write_limits(self, limits: Limits) -> None:
+        """[limits] into the drive, which then enforces them itself: 0x607F max profile velocity (velocity units) and
+        0x6072 max torque (per mille of the drive's 0x6076 motor rated torque, mN·m), both rounded down, written and
+        read back — a drive that keeps other values is refused, as a differing TPDO mapping is. The travel limit
+        (0x607D) is set around the start position when the motion starts (:mod:`drivers.canopen_motion`)."""
+        node = self._node
+        with device_step(self.name, "reading 0x6076 motor rated torque failed"):
+            rated_mNm = int(node.sdo[od.MOTOR_RATED_TORQUE].raw)
+        if rated_mNm <= 0:
+            raise DeviceError(f"{self.name}: 0x6076 motor rated torque reads {rated_mNm} mN·m: [limits] max_torque_Nm "
+                              "cannot be set as 0x6072 — enter the motor's data in the drive")
+        wanted = {od.MAX_PROFILE_VELOCITY: math.floor(limits.max_speed_rpm * self._s.velocity_units_per_rpm),
+                  od.MAX_TORQUE: min(math.floor(limits.max_torque_Nm * 1e6 / rated_mNm), 0xFFFF)}
+        with device_step(self.name, "writing [limits] to 0x607F / 0x6072 failed"):
+            for index, value in wanted.items():
+                node.sdo[index].raw = value
+            got = {index: int(node.sdo[index].raw) for index in wanted}
+        if got != wanted:
+            shown = ", ".join(f"0x{i:04X} = {v}" for i, v in wanted.items())
+            read = ", ".join(f"0x{i:04X} = {v}" for i, v in got.items())
+            raise DeviceError(f"{self.name}: [limits] read back differ from what was written — wrote {shown}, read {read}")
+
     # ---- streaming health --------------------------------------------------------------------------
     def _on_heartbeat(self, nmt_state: int) -> None:
         self._hb_ns, self._hb_state = time.monotonic_ns(), nmt_state
@@ -416,11 +448,15 @@ def open_drive(bench: Bench, sim_bench: object, fast: bool) -> CanopenDrive:
     """Registry factory: a CANopen drive on ``[drive] interface``/``channel`` (``sim_bench`` and ``fast``
     unused: a simulated node is put on the bus by :mod:`drivers.sim.peers`, chosen by the registry).
     Refuses (``ConfigError``) a bus load above ``max_bus_load`` (the rules between keys are validators of
-    :class:`DriveCanopen`); listening, reads the master's TPDO from the config or the EDS/DCF first."""
+    :class:`DriveCanopen`) and a commanding drive without ``[limits]``; listening, reads the master's TPDO from the
+    config or the EDS/DCF first."""
     s = bench.drive
     assert isinstance(s, DriveCanopen)
     if s.motion == "external":  # acq adds no cyclic traffic: the load is the machine's
         passive = None if s.configure else passive_tpdo(s)
         return CanopenDrive(s, s.counts_per_rev or bench.encoder.counts_per_rev, passive)
     check_bus_load(s)
-    return CanopenDrive(s, s.counts_per_rev or bench.encoder.counts_per_rev)
+    limits = bench.motion_limits()
+    if limits is None:  # acq never enables a drive it has not told the joint's limits
+        raise ConfigError(f"bench config: {missing_limits(bench)}")
+    return CanopenDrive(s, s.counts_per_rev or bench.encoder.counts_per_rev, limits=limits, gear_ratio=bench.gear.ratio)

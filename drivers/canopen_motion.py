@@ -18,6 +18,10 @@ progress would run the end of each return move at the next cycle's ramps — its
 return to p0, stay exact; with a ``dwell_s`` the parameters are written at rest and any drive applies them
 to the intended move.
 
+Travel limit: before the drive is enabled, 0x607D software position limits are set to the start position ∓ the
+bench's ``[limits] max_travel_deg`` (in position units, as 0x6064/0x607A count them) and read back, so the drive itself
+refuses a target beyond them; a range that would leave int32 is refused (home the drive nearer 0).
+
 All SDO traffic of the motion goes through one lock (the motion thread and a stop from any other
 thread share canopen's SDO client). Every stop is a quick stop on the 0x6085 ramp, a wait for rest
 (SWITCH ON DISABLED, or QUICK STOP ACTIVE with target reached), then disable voltage, verified.
@@ -86,8 +90,10 @@ class ProfilePositionMotion:
     """
 
     def __init__(self, node: Any, device: str, settings: DriveCanopen, counts_per_rev: int,
-                 on_failure: Callable[[DeviceError], None], on_info: Callable[[str], None]) -> None:
+                 on_failure: Callable[[DeviceError], None], on_info: Callable[[str], None],
+                 travel_counts: int | None = None) -> None:
         self._node, self._name, self._s, self._cpr = node, device, settings, counts_per_rev
+        self._travel_counts = travel_counts  # [limits] max_travel_deg in position units (0x607D around the start)
         self._on_failure, self._on_info = on_failure, on_info
         self.sdo_lock = threading.RLock()
         self._halt_lock = threading.Lock()
@@ -112,6 +118,8 @@ class ProfilePositionMotion:
                 self._set_ramps(profile, float(speed_factors(profile, 0)))
                 node.sdo[od.QUICK_STOP_DECELERATION].raw = decel
                 p0 = int(node.sdo[od.POSITION_ACTUAL].raw)
+                if self._travel_counts is not None:
+                    self._set_position_limits(p0, self._travel_counts)
             with self.sdo_lock, device_step(self._name, f"did not reach OPERATION ENABLED within {s.state_timeout_s:g} s"):
                 self._enabled = True
                 node.state = "OPERATION ENABLED"
@@ -137,6 +145,21 @@ class ProfilePositionMotion:
             if abs((got := int(self._node.sdo[index].raw)) - value) > 1:
                 raise DeviceError(f"{self._name}: 0x{index:04X} reads back {got} after {value} was written "
                                   f"(the drive limits it?)")
+
+    def _set_position_limits(self, p0: int, travel: int) -> None:
+        """0x607D software position limits p0 ∓ ``travel`` (position units) around the start ``p0``, written while the
+        drive is disabled and read back: the drive itself then refuses to go further than [limits] max_travel_deg."""
+        low, high = p0 - travel, p0 + travel
+        if low < -2**31 or high > 2**31 - 1:
+            raise DeviceError(f"{self._name}: 0x607D software position limits {low} … {high} (start {p0} ± {travel} "
+                              "counts, [limits] max_travel_deg) leave the drive's 32-bit position range — home the "
+                              "drive nearer 0")
+        limits = self._node.sdo[od.SOFTWARE_POSITION_LIMIT]
+        limits[1].raw, limits[2].raw = low, high
+        got = (int(limits[1].raw), int(limits[2].raw))
+        if got != (low, high):
+            raise DeviceError(f"{self._name}: 0x607D software position limits read back {got[0]} … {got[1]} after "
+                              f"{low} … {high} were written ([limits] max_travel_deg)")
 
     def stop(self) -> None:
         """Stop issuing targets, then quick stop and disable. Idempotent."""

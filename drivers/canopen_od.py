@@ -34,6 +34,10 @@ PROFILE_VELOCITY = 0x6081
 PROFILE_ACCELERATION = 0x6083
 PROFILE_DECELERATION = 0x6084
 QUICK_STOP_DECELERATION = 0x6085
+MAX_TORQUE = 0x6072  # per mille of 0x6076
+MOTOR_RATED_TORQUE = 0x6076  # mN·m
+SOFTWARE_POSITION_LIMIT = 0x607D  # sub 1 min, sub 2 max, position units
+MAX_PROFILE_VELOCITY = 0x607F  # velocity units
 SUPPORTED_MODES = 0x6502
 
 MODE_PROFILE_POSITION = 1
@@ -106,10 +110,15 @@ def drive_object_dictionary(node_id: int) -> ObjectDictionary:
         _var("Profile acceleration", PROFILE_ACCELERATION, UNSIGNED32, "rw", 0),
         _var("Profile deceleration", PROFILE_DECELERATION, UNSIGNED32, "rw", 0),
         _var("Quick stop deceleration", QUICK_STOP_DECELERATION, UNSIGNED32, "rw", 0),
+        # the joint's limits (acq writes them from [limits]); power-on: no limit but the motor's 300 % peak torque
+        _var("Max profile velocity", MAX_PROFILE_VELOCITY, UNSIGNED32, "rw", 0xFFFFFFFF),
+        _var("Max torque", MAX_TORQUE, UNSIGNED16, "rw", 3000),
+        _var("Motor rated torque", MOTOR_RATED_TORQUE, UNSIGNED32, "rw", SIM_RATED_TORQUE_MNM),
         _var("Supported drive modes", SUPPORTED_MODES, UNSIGNED32, "ro",
              1 << (MODE_PROFILE_POSITION - 1) | 1 << (MODE_CYCLIC_SYNC_VELOCITY - 1)),
     ):
         od.add_object(var)
+    od.add_object(_position_limits())
     for n in range(1, N_TPDO + 1):
         for record in _tpdo_objects(n, node_id):
             od.add_object(record)
@@ -117,6 +126,19 @@ def drive_object_dictionary(node_id: int) -> ObjectDictionary:
         od.add_object(record)
     od.add_object(_identity())
     return od
+
+
+#: 0x6076 of the simulated drive, mN·m: the paper's motor as drivers.config.SIM_LIMITS takes it (2.3 kW at 3000 rpm)
+SIM_RATED_TORQUE_MNM = 7300
+
+
+def _position_limits() -> ODRecord:
+    """0x607D software position limit: sub 1 min, sub 2 max (position units); power-on: the whole int32 range."""
+    record = ODRecord("Software position limit", SOFTWARE_POSITION_LIMIT)
+    record.add_member(_var("Highest sub-index", SOFTWARE_POSITION_LIMIT, UNSIGNED8, "const", 2))
+    record.add_member(_var("Min position limit", SOFTWARE_POSITION_LIMIT, INTEGER32, "rw", -2**31, 1))
+    record.add_member(_var("Max position limit", SOFTWARE_POSITION_LIMIT, INTEGER32, "rw", 2**31 - 1, 2))
+    return record
 
 
 #: 0x1018 identity of the simulated drive (CiA 301 mandatory object; vendor ID 0: none registered)

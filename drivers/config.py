@@ -16,7 +16,7 @@ from typing import Annotated, Literal, Union
 from pydantic import AfterValidator, Field, PositiveFloat, PositiveInt, field_validator, model_validator
 
 # Profile (and the Strict base, MAX_DURATION_S, Seconds) are defined in drivers.profile and used from here
-from drivers.profile import MAX_DURATION_S, Profile, Seconds, Strict
+from drivers.profile import MAX_DURATION_S, MAX_TOP_SPEED_RPM, Profile, Seconds, Strict
 from drivers.serial_codec import CODECS, bits_per_byte, required_baud
 
 
@@ -377,8 +377,44 @@ class SimSettings(Strict):
         return self.K_Nm_per_rad * max(1.0 - self.K_decay_pct_per_hour * self.elapsed_s / 3600.0 / 100.0, 0.01)
 
 
+class Limits(Strict):
+    """``[limits]``: what the joint may see while acq commands its motion (checked by :mod:`drivers.limits` before any
+    motion against the profile as executed; a CANopen drive is also told them, :mod:`drivers.canopen_drive`).
+
+    Attributes
+    ----------
+    max_speed_rpm : motor speed, either direction, rpm (motor side, before the gear).
+    max_travel_deg : load-side (arm) angle the motion may move the joint away from where it starts, either
+        direction, deg: the mechanical stops or the cables, less a margin.
+    max_torque_Nm : motor torque k_t·i_q, N·m (motor side); the drive's current limit is max_torque_Nm / k_t.
+    """
+
+    max_speed_rpm: float = Field(gt=0.0, le=MAX_TOP_SPEED_RPM)
+    max_travel_deg: float = Field(gt=0.0, le=36_000.0)  # 100 arm turns: a continuous joint's cable reel
+    max_torque_Nm: float = Field(gt=0.0, le=1e5)
+
+
+#: The limits of a simulated joint whose bench states no ``[limits]``: the paper's motor (Xu et al. 2021, Table 2:
+#: a 2.3 kW PMSM, k_t = 3 N·m/A) taken as a 3000 rpm servo — rated torque 2.3 kW / 3000 rpm = 7.3 N·m, peak three
+#: times that (a typical servo datasheet ratio; an assumption, the paper gives neither) — and one arm turn either
+#: way (the simulated arm has no stops). The shipped profiles need 1020 rpm, 306° (triangle_0.5s) and 5.6 N·m.
+SIM_LIMITS = Limits(max_speed_rpm=3000.0, max_travel_deg=360.0, max_torque_Nm=22.0)
+
+
+def moves_real_joint(drive: DriveSim | DriveCanopen | DriveSerial) -> bool:
+    """True if acq commands the motion of a real drive (not simulated, not ``motion = "external"``)."""
+    simulated = isinstance(drive, DriveSim) or getattr(drive, "simulated_node", False) \
+        or getattr(drive, "simulated_device", False)
+    return drive.motion == "commanded" and not simulated
+
+
 class Bench(Strict):
-    """A whole bench: joint name, motor, encoder, gear, nominal plant, DAQ, drive, optional sim truth."""
+    """A whole bench: joint name, motor, encoder, gear, nominal plant, DAQ, drive, joint limits, optional sim truth.
+
+    ``[limits]`` is required before acq moves a real joint (no default can know a real joint's stops, motor or
+    gear: :func:`drivers.limits.refuse_beyond_limits` refuses the motion); a simulated bench without it gets
+    :data:`SIM_LIMITS` (:meth:`motion_limits`). A bench only read (``acq import``, ``acq monitor``) needs none.
+    """
 
     joint: str = Field(min_length=1)  # see check_joint_name
     motor: Motor
@@ -387,10 +423,17 @@ class Bench(Strict):
     nominal: Nominal
     daq: DaqSettings
     drive: DriveSettings
+    limits: Limits | None = None
     sim: SimSettings | None = None
 
     @field_validator("joint")
     @classmethod
     def _safe_joint(cls, name: str) -> str:
         return check_joint_name(name)
+
+    def motion_limits(self) -> Limits | None:
+        """``[limits]``; where the bench states none, :data:`SIM_LIMITS` for a simulated drive, None for a real one."""
+        if self.limits is not None:
+            return self.limits
+        return None if moves_real_joint(self.drive) else SIM_LIMITS
 

@@ -33,10 +33,15 @@ def test_a_coarse_encoder_is_named_with_the_band_it_limits_and_its_key(tmp_path:
     assert not any("leaves speed noise" in r for r in reasons)  # said once, not twice
 
 
+#: [limits] of a simulated motor that can give the 112 N·m of a 10 ms ramp to 1020 rpm (the default's is 22 N·m)
+MOTOR_FOR_10_MS_RAMPS = {"max_speed_rpm": 3000.0, "max_travel_deg": 360.0, "max_torque_Nm": 200.0}
+
+
 def test_ramps_already_short_get_no_advice_to_shorten_them(tmp_path: Path) -> None:
     """10 ms ramps: the speed is far above the encoder's floor and the torque above its estimate's noise, yet they
     are not coherent — not a motion that excites too little."""
-    short = Scenario("ramps 10 ms", profile={"accel_time_s": 0.01, "decel_time_s": 0.01})
+    short = Scenario("ramps 10 ms", profile={"accel_time_s": 0.01, "decel_time_s": 0.01},
+                     limits=MOTOR_FOR_10_MS_RAMPS)
     verdict, reasons = _reasons(tmp_path, "", short)
     weak = [r for r in reasons if r.startswith("mean coherence")]
     assert verdict == "failed" and len(weak) == 1

@@ -217,14 +217,14 @@ def test_real_nidaqmx_without_driver_end_to_end(tmp_path: Path) -> None:
     assert not (tmp_path / "s").exists()  # the driver is probed when the adapter opens, before any file
 
 
-def test_hardware_template_documents_every_daq_and_drive_key() -> None:
-    from drivers.config import DaqNidaqmx, DriveCanopen, DriveSerial
+def test_hardware_template_documents_every_daq_drive_and_limits_key() -> None:
+    from drivers.config import DaqNidaqmx, DriveCanopen, DriveSerial, Limits
 
     path = DEFAULT_BENCH.parent / "template_hardware.toml"
     bench = load_bench(path)
     assert (bench.daq.driver, bench.drive.driver) == ("nidaqmx", "canopen")
     text = path.read_text()
-    for model in (DaqNidaqmx, DriveCanopen, DriveSerial):
+    for model in (DaqNidaqmx, DriveCanopen, DriveSerial, Limits):
         for key in model.model_fields:
             assert f"\n{key} = " in text or f"\n# {key} = " in text, key
 

@@ -188,6 +188,7 @@ def test_wrong_sensor_scale_is_named_against_a_known_inertia(capsys: pytest.Capt
 def test_a_bench_that_cannot_be_opened_fails_the_devices_stage_in_one_line(
         capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     text = SIM.replace('driver = "sim"\nperiod_s = 0.001', 'driver = "serial"\nperiod_s = 0.001\nport = "/dev/acq-none"')
+    text += "\n[limits]\nmax_speed_rpm = 1200.0\nmax_travel_deg = 135.0\nmax_torque_Nm = 20.0\n"  # a real drive's
     bench = tmp_path / "serial.toml"
     bench.write_text(text)
     run = run_cli(capsys, "selftest", "--fast", "--bench", str(bench))
@@ -332,7 +333,8 @@ def test_ramps_too_fast_to_turn_the_motor_blame_no_bench_constant(
     why it cannot check them."""
     profile = tmp_path / "fast.toml"
     profile.write_text(FAST_RAMPS)
-    record = run_cli(capsys, "record", "--profile", str(profile), "--bench", str(bench_file(tmp_path, sim_line)),
+    strong_motor = "\n[limits]\nmax_speed_rpm = 3000.0\nmax_travel_deg = 360.0\nmax_torque_Nm = 200.0"  # 10 ms ramps: 110 N·m
+    record = run_cli(capsys, "record", "--profile", str(profile), "--bench", str(bench_file(tmp_path, sim_line + strong_motor)),
                      "--fast", "--no-analyze", "--out", str(tmp_path / "s"))
     assert record.code == 0
     (session,) = (tmp_path / "s").glob("*.h5")

@@ -227,7 +227,8 @@ def test_a_device_that_vanishes_mid_stream_ends_reads_with_one_device_error(
 def test_a_missing_port_is_one_line_and_exit_code_1(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     bench = tmp_path / "lab_serial.toml"
     bench.write_text(SIM_SERIAL.read_text().replace('port = "/dev/ttyUSB0"', 'port = "/dev/ttyACQ_gone"')
-                     .replace("simulated_device = true", "simulated_device = false"))
+                     .replace("simulated_device = true", "simulated_device = false")
+                     + "\n[limits]\nmax_speed_rpm = 1200.0\nmax_travel_deg = 135.0\nmax_torque_Nm = 20.0\n")
     run = run_cli(capsys, "record", "--bench", str(bench), "--profile", "triangle_0.2s", "--out", str(tmp_path))
     assert run.code == 1
     assert run.err == "acq: error: serial port /dev/ttyACQ_gone: no such device (is the drive connected and powered?)\n"

@@ -29,6 +29,7 @@ from acq.recording.stream_check import StreamChecker, join_encoder_blocks
 from acq.recording.writer import SessionExists, SessionWriter
 from drivers.base import CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
+from drivers.limits import refuse_beyond_limits
 from drivers.motion import with_dither_seed
 from acq.recording.storage import WRITE_FAILURES, storage_error
 from acqcore.errors import AcqError, ConfigError, DeviceError
@@ -129,6 +130,8 @@ class Recorder:
         if external != (profile is None):
             raise ConfigError("[drive] motion = \"external\": acq must not command motion, record without a profile"
                               if external else "a recording without a profile needs [drive] motion = \"external\"")
+        if profile is not None:  # the commands check with the files' names before opening the devices; this for any caller
+            refuse_beyond_limits(profile, bench)
         self.bench, self.profile = bench, (with_dither_seed(profile) if profile is not None else None)
         self.current, self.drive = current, drive
         self.out_dir = Path(out_dir)

@@ -142,11 +142,13 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
            out_dir: Path, operator: str, fast: bool, no_analyze: bool, tags: tuple[str, ...],
            live: bool) -> int:
     """Swing the joint on PROFILE, record current and encoder, write one session file."""
-    from acq.config import check_duration, check_memory, load_bench, load_profile, with_joint
+    from acq.config import (bench_label, check_duration, check_memory, load_bench, load_profile,
+                            resolve_profile_path, with_joint)
     from acq.ui.display import summary_table
     from acq.recording.recorder import Recorder
     from acq.recording.reader import load
     from acq.recording.summary import summarize
+    from drivers.limits import refuse_beyond_limits
     from drivers.registry import open_bench
 
     bench = with_joint(load_bench(bench_path), joint)
@@ -164,6 +166,7 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
             raise ConfigError(f"{given}: the identification needs --duration {need_s:g} s or more ({parts}); record "
                               "longer, or add --no-analyze")
         _require_enough_motion(profile, profile_name, bench.motor.pole_pairs)
+    refuse_beyond_limits(profile, bench, str(resolve_profile_path(profile_name)), bench_label(bench_path))
     check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))

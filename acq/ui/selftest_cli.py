@@ -12,9 +12,10 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from acq.commissioning.selftest import run_selftest
+from acq.commissioning.selftest import SLOW_MOVE, run_selftest
 from acq.commissioning.selftest_checks import Check
-from acq.config import load_bench, load_profile
+from acq.config import bench_label, load_bench, load_profile, resolve_profile_path
+from drivers.limits import refuse_beyond_limits
 
 MARK = {"pass": "[green]✓[/]", "warn": "[yellow]⚠[/]", "fail": "[bold red]✗[/]"}
 STAGES = ("devices", "streams", "motion", "identification")
@@ -76,6 +77,9 @@ def selftest_command(bench_path: Path | None, profile_name: str, fast: bool, kee
     """
     bench = load_bench(bench_path)
     profile = load_profile(profile_name)
+    for motion, name in ((SLOW_MOVE, "acq selftest's slow move (acq/commissioning/selftest.py SLOW_MOVE)"),
+                         (profile, str(resolve_profile_path(profile_name)))):
+        refuse_beyond_limits(motion, bench, name, bench_label(bench_path))  # before any device is opened
     work_dir = keep_dir if keep_dir is not None else Path(tempfile.mkdtemp(prefix="acq-selftest-"))
     out = Console()
     checks: list[Check] = []

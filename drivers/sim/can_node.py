@@ -38,8 +38,13 @@ follows, :data:`SETPOINT_DELAY_CYCLES` after that SYNC.
 
 Fault switches, for tests: :meth:`~SimCanNode.drop_tpdos`, :meth:`~SimCanNode.stop_heartbeat`,
 ``refuse_mode_change`` (0x6060 writes are ignored), ``has_timestamp`` (set False before :meth:`~SimCanNode.start`:
-a drive without 0x1013) and ``reject_mapping`` (0x1A0x keeps its
-power-on mapping while the SDO writes succeed — a mismatch only a read-back finds).
+a drive without 0x1013), ``reject_mapping`` (0x1A0x keeps its
+power-on mapping while the SDO writes succeed — a mismatch only a read-back finds) and ``reject_limits`` (the same
+for the limits 0x607F, 0x6072, 0x607D).
+
+Limits: a set-point's target is clamped to the 0x607D software position limits and its speed to the 0x607F max
+profile velocity, as a CiA 402 drive does. 0x6072 max torque is stored and read back but not enforced: the simulated
+speed loop has no current saturation.
 """
 
 from __future__ import annotations
@@ -56,9 +61,9 @@ import canopen
 import numpy as np
 from can.interfaces.virtual import VirtualBus, channels, channels_lock
 
-from drivers.canopen_od import (HIGH_RES_TIMESTAMP, MODE_CYCLIC_SYNC_VELOCITY, MODE_PROFILE_POSITION, N_TPDO,
-                                 PDO_INVALID, RPDO_COMM, RPDO_MAP, TARGET_VELOCITY, TPDO_COMM, TPDO_MAP,
-                                 drive_object_dictionary)
+from drivers.canopen_od import (HIGH_RES_TIMESTAMP, MAX_PROFILE_VELOCITY, MAX_TORQUE, MODE_CYCLIC_SYNC_VELOCITY,
+                                 MODE_PROFILE_POSITION, N_TPDO, PDO_INVALID, RPDO_COMM, RPDO_MAP,
+                                 SOFTWARE_POSITION_LIMIT, TARGET_VELOCITY, TPDO_COMM, TPDO_MAP, drive_object_dictionary)
 from drivers.config import Bench, DriveCanopen
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
@@ -154,6 +159,7 @@ class SimCanNode:
         self.refuse_mode_change = False
         self.has_timestamp = True
         self.reject_mapping = False
+        self.reject_limits = False
         self.first_cycle: int | None = None  # drive cycle of the first SYNC (SYNC index 0)
         sim_bench.hold_history(self._consumer, 0.0)
 
@@ -252,6 +258,8 @@ class SimCanNode:
             return self._sample()[2]
         if self.reject_mapping and TPDO_MAP <= index < TPDO_MAP + N_TPDO:
             return od.default
+        if self.reject_limits and index in (MAX_PROFILE_VELOCITY, MAX_TORQUE, SOFTWARE_POSITION_LIMIT):
+            return od.default
         return None
 
     def _on_write(self, index: int, subindex: int, od: Any, data: bytes) -> None:
@@ -335,10 +343,12 @@ class SimCanNode:
         if self.generator.pending(now):
             return False
         cmd = self.generator.commanded_rad
-        steps = (self._param(0x607A) - self._register(cmd) + 2**31) % 2**32 - 2**31
+        limits = self.node.sdo[SOFTWARE_POSITION_LIMIT]  # the target clamped to them, the speed to 0x607F
+        target = min(max(self._param(0x607A), int(limits[1].raw)), int(limits[2].raw))
+        steps = (target - self._register(cmd) + 2**31) % 2**32 - 2**31
         v_units, a_units = self._s.velocity_units_per_rpm, self._s.acceleration_units_per_rpm_per_s
         self.generator.move_to(cmd + steps * self._rad_per_count, now,
-                               self._param(0x6081) / v_units * RPM_TO_RAD_S,
+                               min(self._param(0x6081), self._param(MAX_PROFILE_VELOCITY)) / v_units * RPM_TO_RAD_S,
                                max(self._param(0x6083), 1) / a_units * RPM_TO_RAD_S,
                                max(self._param(0x6084), 1) / a_units * RPM_TO_RAD_S)
         return True
