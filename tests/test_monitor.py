@@ -188,7 +188,7 @@ def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: p
     users = dict(os.environ)
     run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "4m", "--baseline-windows", "2",
                   "--keep", "0", "--out", str(tmp_path / "m"),
-                  "--on-alarm", f"sh -c 'env -0 > {env_file}'")
+                  "--on-alarm", f"env -0 > {env_file}")  # a shell's redirection: the command runs through sh -c
     assert run.code == 3
     seen = dict(item.split("=", 1) for item in env_file.read_text().split("\0") if item)
     env = {name: value for name, value in seen.items() if name.startswith("ACQ_")}
@@ -203,6 +203,29 @@ def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: p
     assert float(env["ACQ_BASELINE_K"]) == pytest.approx(baseline, rel=1e-5)
     assert Path(env["ACQ_SESSION"]).exists()  # an alarming window's raw file is kept even with --keep 0
     assert "ALARM" in run.err
+
+
+def test_on_alarm_runs_through_the_shell_and_its_failure_is_reported(capsys: pytest.CaptureFixture[str],
+                                                                      tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """README's own example: the shell expands $ACQ_K (it printed "K $ACQ_K" literally, run without a shell), and a
+    command that fails (here: not found, exit 127) is said in the status line and the final summary (it said nothing)."""
+    bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0, seed=EXCITING_SEED)
+    monkeypatch.setenv("COLUMNS", "200")  # the final table unwrapped
+    said = tmp_path / "said.txt"
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "4m", "--baseline-windows", "2",
+                  "--keep", "0", "--out", str(tmp_path / "m"), "--on-alarm",
+                  f'echo "joint $ACQ_JOINT: K $ACQ_K (baseline $ACQ_BASELINE_K)" | tee {said} && acq-no-such-notifier')
+    assert run.code == 3
+    rows = _rows(tmp_path / "m")
+    baseline = (rows[0]["K_Nm_per_rad"] + rows[1]["K_Nm_per_rad"]) / 2
+    assert said.read_text() == f"joint joint1: K {rows[3]['K_Nm_per_rad']:.6g} (baseline {baseline:.6g})\n"
+    failure = ("alarm command failed: exit 127 (command not found): echo \"joint $ACQ_JOINT: K $ACQ_K (baseline "
+               f"$ACQ_BASELINE_K)\" | tee {said} && acq-no-such-notifier")
+    status_lines = [line for line in run.err.splitlines() if line.startswith("0.05 h: ")]
+    assert any(line.endswith(f" — {failure}") for line in status_lines)  # the status line when it failed
+    summary = " ".join(run.err.split())  # the final table: the failure beside "alarms raised"
+    assert "alarms raised │ 1 · alarm command failed: exit 127 (command not found) │" in summary
 
 
 def test_retention_rules() -> None:
