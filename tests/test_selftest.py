@@ -13,10 +13,13 @@ from pathlib import Path
 
 import pytest
 
+import acq.commissioning.devices
 from acq.commissioning.selftest_checks import Check
 from acq.config import DEFAULT_BENCH
 from acq.ui.selftest_cli import next_step, selftest_json
+from acqcore.errors import DeviceError
 from analysis.speed_ratio import SpeedRatio, likely_counts_per_rev, ratio_doubt, ratio_fault
+from drivers.nidaq import DRIVER_MISSING
 from tests.helpers import run_cli
 from tests.nidaqmx_standin import StandinHardware
 from tests.test_nidaq import hardware, write_bench  # noqa: F401 - the stand-in NI 9234 fixture
@@ -311,6 +314,31 @@ def test_ni_daq_missing_device_and_coerced_rate_are_named(capsys: pytest.Capture
     daq = next(c for c in json.loads(run.out)["checks"] if c["name"] == "DAQ")
     assert daq["status"] == "warn" and daq["values"]["rate_hz"] == 25600.0
     assert daq["fix"] == "[daq] rate_hz = 25000: the card runs 25600 Hz — state that rate"
+
+
+@pytest.mark.parametrize("missing", ["driver", "package"])
+def test_a_missing_ni_driver_or_package_gets_the_fix_that_installs_it(capsys: pytest.CaptureFixture[str],
+                                                                      tmp_path: Path, hardware: StandinHardware,
+                                                                      monkeypatch: pytest.MonkeyPatch,
+                                                                      missing: str) -> None:
+    """The fix said "no device Dev1 — check the cable and NI MAX": no device can be seen without the driver."""
+    if missing == "driver":
+        hardware.driver_installed = False
+    else:
+        def no_package() -> None:
+            raise DeviceError("the nidaqmx Python package is missing (No module named 'nidaqmx') — pip install "
+                              "nidaqmx, or use configs/benches/sim.toml")
+        monkeypatch.setattr(acq.commissioning.devices, "import_nidaqmx", no_package)
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench",
+                  str(write_bench(tmp_path, physical_channels=["Dev1/ai0"])))
+    fail = failed_check(json.loads(run.out))
+    assert run.code == 1 and fail["name"] == "acq devices"
+    install = ("install the NI-DAQmx driver: python -m nidaqmx installdriver (Windows, Linux), or the NI-DAQmx runtime "
+               "from ni.com; then acq devices lists the card — or use configs/benches/sim.toml")
+    if missing == "driver":
+        assert (fail["figure"], fail["fix"]) == (DRIVER_MISSING, install)
+    else:
+        assert fail["fix"] == f"pip install nidaqmx, then {install}"
 
 
 FAST_RAMPS = """kind = "triangle"

@@ -84,6 +84,10 @@ def _listed(bench: Bench) -> Iterator[Check]:
         ni = ni_section()
         seen = {name for name, _, _ in ni.rows}
         wanted = {c.split("/")[0] for c in daq.physical_channels}
+        if ni.install:  # no device can be seen before the package and the driver are there
+            yield Check("devices", "acq devices", "fail", ni.empty_because,
+                        f"{ni.install}; then acq devices lists the card — or use configs/benches/sim.toml")
+            return
         if ni.empty_because or not wanted <= seen:
             yield Check("devices", "acq devices", "fail", ni.empty_because or f"NI-DAQmx sees {sorted(seen)}",
                         f"[daq] physical_channels = {_toml(daq.physical_channels)}: no device "
