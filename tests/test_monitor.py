@@ -334,6 +334,40 @@ def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None
     assert not not_excited({"quality": strong, "clock": {"residual_s": 20e-6}})  # poor for another reason
 
 
+def test_a_window_whose_segments_do_not_excite_is_not_excited_whatever_its_clock_residual() -> None:
+    """The analysis' segment selection decides first: fewer than two segments that excite (selection not applied)."""
+    from acq.monitoring.window_judge import excites, not_excited
+
+    strong = {"verdict": "failed", "mean_coherence": 0.9, "excitation_coherence": 0.95}
+    still = {"excited_fraction": 0.0, "selection_applied": False}
+    moving = {"excited_fraction": 0.8, "selection_applied": True}
+    assert not_excited({"quality": strong, "clock": {"residual_s": 1.75e-3}, "excitation": still})
+    assert not not_excited({"quality": strong, "clock": {"residual_s": 1.75e-3}, "excitation": moving})
+    assert not not_excited({"quality": strong, "clock": {"failure": "clock: no alignment found"}, "excitation": still})
+    assert not not_excited({"quality": {**strong, "verdict": "ok"}, "clock": {}, "excitation": still})
+    assert [excites({"quality": strong, "excitation": e}) for e in (still, moving)] == [False, True]
+    assert not excites({"quality": {"verdict": "not excited"}}) and not excites(None)
+
+
+def test_a_window_the_joint_barely_moved_in_is_not_excited_and_not_counted_as_excited(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The shipped seed 0 at 0 and 12 min: no segment excites in either. The window at 12 min came out `failed`
+    with K 31 084 N·m/rad (truth 891) and the advice "remove interference at its source (PWM ripple…)", and was
+    counted excited: its clock residual (1753 µs, little motion to align on) kept it from `not excited`."""
+    monkeypatch.setenv("COLUMNS", "120")
+    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--fast", "--every", "12m", "--for", "13m",
+                  "--out", str(tmp_path / "m"))
+    assert run.code == 0
+    rows = _rows(tmp_path / "m")
+    assert [(r["verdict"], r["K_Nm_per_rad"]) for r in rows] == [("not excited", None)] * 2
+    assert json.loads(rows[1]["reasons_json"]) == [
+        "0 of 12 moves put torque into 10…400 Hz beyond chance (0 % of the window)",
+        "clock alignment residual 1753 µs exceeds 1000 µs for a amplitude fit"]
+    assert "windows captured / excited / analysed │ 2 / 0 / 2 │" in " ".join(run.err.split())
+    trend = run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1")
+    assert "31084" not in trend.out and "PWM" not in trend.out
+
+
 @pytest.fixture(scope="module")
 def repeating_window(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """The first window of the shipped sim_robot bench (seed 0): moves so alike that the phase of i_a matches the

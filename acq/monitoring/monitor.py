@@ -35,7 +35,7 @@ from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
-from acq.monitoring.window_judge import analyse_window, marked
+from acq.monitoring.window_judge import analyse_window, excites, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
 from acq.recording.reader import load
@@ -263,7 +263,7 @@ class Monitor:
         self.catalogue.record(outcome)
         verdict = (outcome.doc or {}).get("quality", {}).get("verdict")
         self.status.analysed += verdict not in ("not analysed", "interrupted")
-        self.status.excited += verdict in ("ok", "poor", "failed")
+        self.status.excited += excites(outcome.doc)
         self.status.not_excited += verdict == "not excited"
         self.status.interrupted += verdict == "interrupted"
         self._excitation(outcome, verdict)
