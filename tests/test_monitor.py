@@ -90,6 +90,36 @@ def test_passive_capture_never_commands_motion_and_the_robot_moves_the_joint(tmp
     assert abs(counts.max() - counts.min()) > bench.encoder.counts_per_rev  # the robot program moved it > 1 rev
 
 
+def test_acq_record_on_a_listening_bench_records_passively_without_a_profile(capsys: pytest.CaptureFixture[str],
+                                                                           tmp_path: Path) -> None:
+    """`acq record` asked for --profile, then refused it with "record without a profile", which the CLI had no way
+    to do. Now: no --profile, the machine's own motion recorded and identified on the segments that excite."""
+    bench = _bench_file(tmp_path, seed=EXCITING_SEED)
+    run = run_cli(capsys, "record", "--bench", str(bench), "--duration", "10", "--fast", "--out", str(tmp_path / "s"))
+    assert run.code == 0, run.err
+    (path,) = (tmp_path / "s").glob("*.h5")
+    session = load(path)
+    assert session.profile is None and session.status == "complete"
+    assert (session.current.sample_count, session.encoder.position_counts.size) == (256000, 10000)
+    (result,) = (tmp_path / "s").glob("*.result.json")
+    doc = json.loads(result.read_text())
+    assert doc["options"]["select_segments"] is True and doc["quality"]["verdict"] == "ok"
+    assert doc["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
+    refused = run_cli(capsys, "record", "--bench", str(bench), "--duration", "10", "--profile", "triangle_0.2s",
+                      "--out", str(tmp_path / "t"))
+    assert (refused.code, refused.err.strip()) == (2, f"acq: error: --profile triangle_0.2s: {bench} has [drive] motion "
+                                                      "= \"external\": the machine's own controller moves the joint and acq "
+                                                      "never commands motion — leave out --profile to record passively "
+                                                      "what the machine does")
+    no_length = run_cli(capsys, "record", "--bench", str(bench), "--out", str(tmp_path / "t"))
+    assert (no_length.code, no_length.err.strip()) == (2, f"acq: error: {bench} has [drive] motion = \"external\": a "
+                                                          "passive recording has no profile to take its length from — "
+                                                          "give --duration (seconds)")
+    commanded = run_cli(capsys, "record", "--out", str(tmp_path / "t"))
+    assert commanded.code == 2 and "Missing option '--profile'" in commanded.err
+    assert not (tmp_path / "t").exists()
+
+
 def test_passive_bench_refuses_a_profile_and_a_commanded_bench_needs_one(tmp_path: Path) -> None:
     from acq.config import load_profile
 
