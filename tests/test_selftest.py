@@ -76,6 +76,45 @@ def test_correct_bench_passes_every_check_in_order_with_figures(capsys: pytest.C
     assert by["torque constant"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
 
 
+ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
+
+
+@pytest.mark.parametrize("seed", [5, 0])
+def test_a_listening_bench_is_checked_on_the_machines_own_motion_without_commanding_any(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, seed: int) -> None:
+    """sim_robot.toml ([drive] motion = "external") failed `✗ devices · open` with "record without a profile", exit 2.
+    Now the checks that need no commanded motion run; seed 5's first 10 s excite the joint, seed 0's do not (⚠)."""
+    bench = tmp_path / "robot.toml"
+    bench.write_text(ROBOT.read_text().replace("seed = 0 ", f"seed = {seed} "))
+    code, doc = selftest(capsys, bench)
+    assert code == 0 and doc["passed"]
+    by = {c["name"]: c for c in doc["checks"]}
+    assert [(c["stage"], c["name"], c["status"]) for c in doc["checks"]][:8] == [
+        ("devices", "acq devices", "pass"), ("devices", "DAQ", "pass"), ("devices", "drive", "pass"),
+        ("streams", "recording", "pass"), ("streams", "DAQ blocks", "pass"), ("streams", "drive period", "pass"),
+        ("motion", "machine's motion", "pass"), ("motion", "electrical speed", "warn")]
+    assert by["recording"]["figure"] == "3.0 s: 76800 current + 3000 encoder samples, 0 + 0 lost"
+    assert by["machine's motion"]["figure"].endswith(" motor revolutions in 10 s (the machine's own motion; acq "
+                                                    "commanded none)")
+    assert by["electrical speed"]["fix"] == ("pole_pairs, counts_per_rev and the phase order stay unchecked on a "
+                                             "listening bench: take them from the motor's and the encoder's data sheets")
+    ident = by["identification (10 s)"]
+    if seed == 5:
+        assert ident["status"] == "pass" and ident["values"]["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
+        assert by["torque constant"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
+    else:
+        assert (ident["status"], ident["figure"]) == ("warn", "not excited: 0 of 12 moves put torque into 10…400 Hz "
+                                                              "beyond chance (3 % of the window)")
+        assert ident["fix"] == ("run acq selftest again while the machine runs a program with fast moves of this joint "
+                                "(acq commands no motion on a bench with [drive] motion = \"external\")")
+    refused = run_cli(capsys, "selftest", "--fast", "--bench", str(bench), "--profile", "triangle_0.2s")
+    assert (refused.code, refused.err.strip()) == (2, f"acq: error: --profile triangle_0.2s: {bench} has [drive] motion "
+                                                      "= \"external\": acq commands no motion there and checks the bench "
+                                                      "on the machine's own motion — leave out --profile")
+    assert next_step([], Path("robot.toml"), None) == ("the bench is ready: acq monitor --bench robot.toml, or acq record "
+                                                       "--bench robot.toml --duration 10")
+
+
 def test_a_new_users_first_selftest_on_the_shipped_bench_shows_no_warning(capsys: pytest.CaptureFixture[str]) -> None:
     """``acq selftest`` as README's new user runs it (no --bench): before, its last check was ``⚠ identification ·
     torque constant`` because the shipped config left inertia_known unset although its inertias are the simulator's."""

@@ -7,7 +7,8 @@ a window beyond that is not analysed and says so — back-pressure, never an unb
 outcome goes into the catalogue (:mod:`acq.monitoring.catalogue`, the batch's record of an outcome); the trend
 (:mod:`acq.monitoring.trend`: baseline, threshold and EWMA rules) judges it; on entering alarm ``on_alarm`` runs
 through the shell (``sh -c``, in the background) with ``ACQ_JOINT``, ``ACQ_K``, ``ACQ_BASELINE_K``,
-``ACQ_CHANGE_PCT``, ``ACQ_SESSION`` in its environment; a command that fails is reported (:attr:`MonitorStatus.alarm_command_failure`).
+``ACQ_CHANGE_PCT``, ``ACQ_SESSION`` in its environment; a command that fails is reported
+(:attr:`MonitorStatus.alarm_command_failure`).
 
 Each window is judged for excitation (:mod:`acq.monitoring.window_judge`): a window that does not excite is catalogued
 with verdict ``not excited`` and the reason, without K. Windows are numbered (session tag ``monitor_window``) and
@@ -87,7 +88,7 @@ class MonitorStatus:
     skipped: int = 0
     interrupted: int = 0
     alarms: int = 0
-    alarm_command_failure: str | None = None  # how the last failed --on-alarm command failed: "exit 127 (command not found)"
+    alarm_command_failure: str | None = None  # how the last --on-alarm command that failed did: "exit 127 (…)"
     machine_time_s: float = 0.0
     disk_bytes: int = 0
     last_K: float | None = None

@@ -20,6 +20,7 @@ from acq.monitoring.batch import analyze_one, session_meta
 from acq.monitoring.catalogue import Outcome
 from acq.offline.analyze import output_paths, write_json
 from acq.recording.reader import load
+from acq.recording.session import Session
 from acqcore.errors import StorageError
 from analysis import AnalysisRequest, Thresholds
 
@@ -64,7 +65,8 @@ def not_excited(doc: dict[str, Any]) -> bool:
 def excites(doc: dict[str, Any] | None) -> bool:
     """True when an outcome's window excites the joint: analysed to a verdict with numbers, and not with a segment
     selection that found fewer than two segments that excite (the monitor's "excited" count)."""
-    return doc is not None and doc.get("quality", {}).get("verdict") in ("ok", "poor", "failed") and not _unselected(doc)
+    analysed = doc is not None and doc.get("quality", {}).get("verdict") in ("ok", "poor", "failed")
+    return analysed and not _unselected(doc)  # type: ignore[arg-type]
 
 
 def _but(doc: dict[str, Any], excited_moves: int) -> str:
@@ -83,15 +85,21 @@ def marked(path: str, sha256: str, request: AnalysisRequest, meta: dict[str, Any
     return Outcome(path, sha256, request.key(), meta, out, None, 0.0)
 
 
+def joint_travel(session: Session) -> tuple[float, float]:
+    """Encoder counts the joint travelled in ``session`` (back and forth added up), and the least an analysis needs:
+    half an electrical revolution, in counts."""
+    counts = session.encoder.position_counts
+    travel = float(abs(counts[1:] - counts[:-1]).sum()) if counts.size > 1 else 0.0
+    return travel, session.bench.encoder.counts_per_rev / (2 * session.bench.motor.pole_pairs)
+
+
 def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
     """Judge and analyse one window (runs in a worker process); never raises."""
     if multiprocessing.parent_process() is not None:  # a worker: Ctrl-C in the terminal is the monitor's to handle
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         session = load(path)
-        counts = session.encoder.position_counts
-        travel = float(abs(counts[1:] - counts[:-1]).sum()) if counts.size > 1 else 0.0
-        need = session.bench.encoder.counts_per_rev / (2 * session.bench.motor.pole_pairs)
+        travel, need = joint_travel(session)
         if travel < need:
             return marked(path, sha256, request, session_meta(session), "not excited",
                           [f"the joint travelled {travel:.0f} counts, less than half an electrical revolution "
@@ -101,11 +109,11 @@ def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
     outcome = analyze_one(path, sha256, request, write=False)  # no report PNG; the result is written once, below
     if outcome.doc is not None and not_excited(outcome.doc):
         outcome = replace(marked(path, sha256, request, outcome.session, "not excited",
-                                 _not_excited_reasons(outcome.doc), outcome.doc), seconds=outcome.seconds)
+                                 not_excited_reasons(outcome.doc), outcome.doc), seconds=outcome.seconds)
     return _write_result(Path(path), request, outcome)
 
 
-def _not_excited_reasons(doc: dict[str, Any]) -> list[str]:
+def not_excited_reasons(doc: dict[str, Any]) -> list[str]:
     """Why a window does not excite: the moves that excite and the coherence that fell short, then the clock's
     finding (a fact, not advice). The analysis' other reasons are left out: their advice (interference on the
     phase current, play in the gear, the intervals of a K not shown) judges a fit of data without excitation."""

@@ -219,9 +219,9 @@ def _profile_for(bench: Bench, bench_path: Path | None, profile_name: str | None
                                    "records without one).")
         return load_profile(profile_name)
     if profile_name is not None:
-        raise ConfigError(f"--profile {profile_name}: {bench_path} has [drive] motion = \"external\": the machine's own "
-                          "controller moves the joint and acq never commands motion — leave out --profile to record "
-                          "passively what the machine does")
+        raise ConfigError(f"--profile {profile_name}: {bench_path} has [drive] motion = \"external\": the machine's "
+                          "own controller moves the joint and acq never commands motion — leave out --profile to "
+                          "record passively what the machine does")
     if duration_s is None:
         raise ConfigError(f"{bench_path} has [drive] motion = \"external\": a passive recording has no profile to take "
                           "its length from — give --duration (seconds)")
