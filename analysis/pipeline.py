@@ -130,6 +130,7 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     require_two_segments(longest_gap_free_span(rec.encoder_index).count, rec.period_s, request.segment_s)
     chain = request.chain(rec)
     sig = prepare_signals(rec, chain)
+    request = replace(request, select_segments=request.selects_segments(rec))  # the result says what was done
     select = (request.band_hz or default_band_hz(sig.period_s)) if request.select_segments else None
     frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=request.segment_s,
                        torque_noise_Nm=sig.torque_noise_Nm, torque_alias_Nm=sig.torque_alias_Nm,
@@ -156,7 +157,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
-                                      phase_valid=phase_is_meaningful(residual)),
+                                      phase_valid=phase_is_meaningful(residual), misfit_band_hz=quality.misfit_band_hz,
+                                      third_mode_hz=quality.third_mode_hz),
                   request=request, chain=chain, notes=tuple(sig.notes), moves=moves)
 
 

@@ -120,6 +120,9 @@ class Quality:
     misfit_band_hz : tuple of float or None
         The stretch of the band where the two-mass model misses |H| by more than noise and the encoder's
         quantisation explain (:mod:`analysis.adequacy`); None when it fits.
+    third_mode_hz : float or None
+        The frequency of the third mode a reason names (:mod:`analysis.third_mode`), Hz; None when none is named
+        (none found, or the misfit band is named instead).
     """
 
     verdict: Verdict
@@ -134,6 +137,7 @@ class Quality:
     encoder_jitter_s: float | None = None
     encoder_time_stamps: bool = False
     misfit_band_hz: tuple[float, float] | None = None
+    third_mode_hz: float | None = None
 
 
 def assess(
@@ -226,7 +230,8 @@ def assess(
     known_resolution = encoder_jitter is not None and encoder_jitter.lsb_rad > 0.0
     missed, mode = (_missed_band(frf, fit, encoder_jitter, kernel_error, phase_is_meaningful(clock_residual_s, th))
                     if fit.status != "failed" and known_resolution else (None, None))
-    if missed is None and mode is not None and mode.found:
+    named_mode = mode if missed is None and mode is not None and mode.found else None
+    if named_mode is not None:
         findings.append(("poor", f"the two-mass model misses a third mode near {mode.f_hz:.0f} Hz ({mode.t:.1f} σ "
                                  f"beyond what noise, the chain and the encoder's quantisation explain): a third mass "
                                  f"there moves the fitted K beyond its interval (±{100 * mode.k_halfwidth:.1f} %"
@@ -289,6 +294,7 @@ def assess(
         encoder_jitter_s=None if encoder_jitter is None else float(encoder_jitter.sigma_s),
         encoder_time_stamps=encoder_jitter is not None and encoder_jitter.stamped,
         misfit_band_hz=None if missed is None else missed[:2],
+        third_mode_hz=None if named_mode is None else float(named_mode.f_hz),
     )
 
 

@@ -1,12 +1,14 @@
 """The data of the report figures, as plain arrays (no plotting library here).
 
 A viewer or the PNG writer draws: the torque and speed traces (decimated), the measured |H| with
-the fitted model and its 95 % band, f_a and f_r marked, the coherence, and — when the clocks are
-aligned well enough for a phase to mean something — the measured and the model's phase.
+the fitted model and its 95 % band, f_a and f_r marked, the misfit band or third mode a ``poor`` verdict names,
+the coherence, and — when the clocks are aligned well enough for a phase to mean something — the measured and the
+model's phase.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -45,6 +47,11 @@ class FigureData:
     phase_valid : bool
         The clocks were aligned to within the residual a complex fit accepts, so the measured phase is the
         plant's (False: unaligned or poorly aligned streams, the phase carries the clock offset).
+    misfit_band_hz : tuple of float
+        The band where the verdict says the two-mass model misses |H| (:attr:`analysis.quality.Quality.misfit_band_hz`),
+        Hz; (NaN, NaN) when it names none.
+    third_mode_hz : float
+        The third mode the verdict names (:attr:`analysis.quality.Quality.third_mode_hz`), Hz; NaN when none.
     """
 
     t_s: np.ndarray
@@ -63,6 +70,8 @@ class FigureData:
     H_phase_deg: np.ndarray
     model_phase_deg: np.ndarray
     phase_valid: bool
+    misfit_band_hz: tuple[float, float] = (math.nan, math.nan)
+    third_mode_hz: float = math.nan
 
 
 def decimate_trace(n: int, max_points: int = MAX_TRACE_POINTS) -> slice:
@@ -104,7 +113,7 @@ def model_band(fit: FitResult, f_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 def figure_data(
     t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: np.ndarray, frf: FrequencyResponse, fit: FitResult,
-    *, phase_valid: bool = False
+    *, phase_valid: bool = False, misfit_band_hz: tuple[float, float] | None = None, third_mode_hz: float | None = None
 ) -> FigureData:
     """Assemble the report's figure data.
 
@@ -118,6 +127,10 @@ def figure_data(
         The model fitted to it.
     phase_valid : bool, optional
         The clocks are aligned well enough to show the phase (see :attr:`FigureData.phase_valid`).
+    misfit_band_hz : tuple of float, optional
+        The misfit band the verdict names, Hz (None: none).
+    third_mode_hz : float, optional
+        The third mode the verdict names, Hz (None: none).
 
     Returns
     -------
@@ -134,4 +147,6 @@ def figure_data(
         H_phase_deg=np.degrees(np.angle(frf.H)),
         model_phase_deg=np.degrees(np.angle(frequency_response(fit.values, f_model))),
         phase_valid=phase_valid,
+        misfit_band_hz=(math.nan, math.nan) if misfit_band_hz is None else misfit_band_hz,
+        third_mode_hz=math.nan if third_mode_hz is None else third_mode_hz,
     )

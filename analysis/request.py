@@ -50,9 +50,12 @@ class AnalysisRequest:
     partial : bool
         Also analyse the intact part of a session still being recorded or damaged (read by the application
         that turns a session file into a :class:`Recording`; the analysis of a recording ignores it).
-    select_segments : bool
+    select_segments : bool or None
         Average only the Welch segments that excite the joint in the fit band (:mod:`analysis.segments`;
-        for motion that excites in parts, e.g. a robot program); the result then says which moves do.
+        for motion that excites in parts, e.g. a robot program); the result then says which moves do. None: when
+        acq did not command the motion (the recording has no profile: a machine's own program moved the joint, as
+        in ``acq monitor``'s windows, or the data were imported), with our chain (:meth:`selects_segments`) — so
+        ``acq analyze`` of a monitor's window analyses it as the monitor did.
     """
 
     torque_method: TorqueMethod | None = None
@@ -64,7 +67,13 @@ class AnalysisRequest:
     nominal: TwoMassParams | None = None
     pipeline: Pipeline = "acq"
     partial: bool = False
-    select_segments: bool = False
+    select_segments: bool | None = None
+
+    def selects_segments(self, rec: Recording) -> bool:
+        """Whether this request averages only the exciting segments of ``rec`` (see ``select_segments``)."""
+        if self.select_segments is not None:
+            return self.select_segments
+        return self.pipeline == "acq" and rec.profile is None
 
     def chain(self, rec: Recording) -> SignalChain:
         """The signal chain this request asks for on ``rec`` (the torque method resolved by its phases)."""
@@ -77,6 +86,34 @@ class AnalysisRequest:
         """The catalogue's key of this request: its fields as asked and the analysis code that answers them
         (:func:`code_fingerprint`), canonical JSON — a change of either is not current."""
         return json.dumps({**asdict(self), "analysis": code_fingerprint()}, sort_keys=True)
+
+    def variant_label(self) -> str:
+        """What this request asks beyond the default analysis, as a part of a file name ('' for the default request:
+        the session's own result; anything else is a comparison, kept beside it and never trended in its place).
+
+        The parts, in this order and joined by ``.``: ``paper`` (the paper's chain), ``torque-<method>`` (a torque
+        method named, even the one the default would pick), ``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (the
+        band as given, Hz, ``%g``), ``no-align``, ``segment-<s>s`` — letters, digits, ``-`` and ``.`` only. The paper's
+        chain ignores the torque method and the alignment, so they are not in its label. Not in the label: ``partial``
+        (the intact part of a session is its result so far), ``select_segments`` (by default decided by the
+        recording: see above) and ``nominal`` (the bench's, filled in by the application).
+        """
+        default = AnalysisRequest()
+        paper = self.pipeline == "paper"
+        parts = ["paper"] if paper else []
+        if self.torque_method is not None and not paper:
+            parts.append(f"torque-{self.torque_method}")
+        if self.params != default.params:
+            parts.append(f"params-{self.params.replace(',', '-')}")
+        if self.fit != default.fit:
+            parts.append(f"fit-{self.fit}")
+        if self.band_hz is not None:
+            parts.append("band-{:g}-{:g}".format(*self.band_hz))
+        if not self.align and not paper:
+            parts.append("no-align")
+        if self.segment_s != default.segment_s:
+            parts.append(f"segment-{self.segment_s:g}s")
+        return ".".join(parts)
 
     def to_json_dict(self, chain: SignalChain | None = None) -> dict[str, Any]:
         """The options as JSON-ready values: as asked, or with what ``chain`` (this request's) really did."""

@@ -26,14 +26,26 @@ def test_key_is_the_request_as_asked_and_the_code(monkeypatch: pytest.MonkeyPatc
     key = json.loads(asked.key())
     assert key == {"torque_method": None, "params": "K,Jm,Jl", "fit": "amplitude", "band_hz": None, "align": True,
                    "segment_s": 0.5, "nominal": None, "pipeline": "acq", "partial": False,
-                   "select_segments": False, "analysis": code_fingerprint()}
+                   "select_segments": None, "analysis": code_fingerprint()}
     others = [replace(asked, params="K"), replace(asked, band_hz=(20.0, 300.0)), replace(asked, pipeline="paper"),
               replace(asked, partial=True), replace(asked, torque_method="encoder"),
-              replace(asked, select_segments=True),
+              replace(asked, select_segments=True), replace(asked, select_segments=False),
               replace(asked, nominal=TwoMassParams(900.0, 1e-4, 5e-4, 0.0))]
     assert len({asked.key(), *(o.key() for o in others)}) == 1 + len(others)
     monkeypatch.setattr(analysis.request, "code_fingerprint", lambda: "other code")
     assert asked.key() != json.dumps(key, sort_keys=True)
+
+
+def test_segments_are_selected_by_default_where_acq_did_not_command_the_motion() -> None:
+    """A monitor's window or an import has no profile: the default request averages only its exciting segments, as
+    acq monitor does; a recording of acq's own profile, the paper's chain or an explicit choice do not change."""
+    from analysis import CommandedProfile
+
+    commanded = replace(ONE, profile=CommandedProfile(0.05, 0.05, 0.0, 0.02))
+    assert AnalysisRequest().selects_segments(ONE) and not AnalysisRequest().selects_segments(commanded)
+    assert not AnalysisRequest(pipeline="paper").selects_segments(ONE)
+    assert not AnalysisRequest(select_segments=False).selects_segments(ONE)
+    assert AnalysisRequest(select_segments=True).selects_segments(commanded)
 
 
 def test_chain_resolves_the_torque_method_by_the_phases() -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import pytest
@@ -80,6 +81,44 @@ def test_papers_pipeline_is_worse_than_ours(session_10s: Path, capsys: pytest.Ca
     stem = session_10s.with_suffix("")
     assert json.loads(Path(f"{stem}.result.json").read_text())["K_Nm_per_rad"] == ours["K_Nm_per_rad"]
     assert json.loads(Path(f"{stem}.paper.result.json").read_text())["K_Nm_per_rad"] == paper["K_Nm_per_rad"]
+
+
+
+def test_a_request_other_than_the_default_writes_beside_the_sessions_result(
+        session_10s: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--band` or `--params K` rewrote `<session>.result.json` (what `acq view` and the trend show): a technician
+    experimenting lost the session's result. `--no-report` also removed the session's report PNG."""
+    monkeypatch.chdir(tmp_path)
+    shutil.copy(session_10s, "s.h5")
+    assert run_cli(capsys, "analyze", "s.h5", "--json", "--wait-report").code == 0  # the session's result + report
+    default_json, default_png = Path("s.result.json").read_bytes(), Path("s.report.png").read_bytes()
+    run = run_cli(capsys, "analyze", "s.h5", "--band", "10,150", "--params", "K")
+    assert run.code == 0, run.err
+    assert "result: s.params-K.band-10-150.result.json (beside the session's result s.result.json, left as it was) " \
+           "report: s.params-K.band-10-150.report.png" in " ".join(run.out.split())
+    variant = json.loads(Path("s.params-K.band-10-150.result.json").read_text())
+    assert variant["options"]["band_hz"] == [10.0, 150.0] and variant["options"]["params"] == "K"
+    assert Path("s.params-K.band-10-150.report.png").stat().st_size > 0
+    assert run_cli(capsys, "analyze", "s.h5", "--json", "--no-report", "--fit", "complex").code == 0
+    assert Path("s.result.json").read_bytes() == default_json and Path("s.report.png").read_bytes() == default_png
+    assert json.loads(default_json)["options"]["band_hz"] == [10.0, 400.0]
+    assert sorted(p.name for p in tmp_path.glob("s.*")) == [
+        "s.fit-complex.result.json", "s.h5", "s.params-K.band-10-150.report.png",
+        "s.params-K.band-10-150.result.json", "s.report.png", "s.result.json"]
+
+
+def test_variant_labels_name_what_differs_from_the_default_request() -> None:
+    from acq.offline.analyze import output_paths
+    from analysis import AnalysisRequest
+
+    assert AnalysisRequest().variant_label() == ""
+    assert AnalysisRequest(select_segments=True, partial=True).variant_label() == ""  # the monitor's; a live session's
+    assert AnalysisRequest(torque_method="park", params="K", fit="complex", band_hz=(12.5, 300.0),
+                           align=False, segment_s=0.25).variant_label() == \
+        "torque-park.params-K.fit-complex.band-12.5-300.no-align.segment-0.25s"
+    assert AnalysisRequest(pipeline="paper", torque_method="park", align=False).variant_label() == "paper"
+    assert output_paths(Path("/d/s.h5"), AnalysisRequest(pipeline="paper", band_hz=(10, 150)), Path("/r")) == (
+        Path("/r/s.paper.band-10-150.result.json"), Path("/r/s.paper.band-10-150.report.png"))
 
 
 def test_findings_of_a_chosen_chain_say_first_that_they_are_that_chains(

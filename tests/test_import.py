@@ -121,6 +121,12 @@ def _with_row_changed(path: Path, line: int, text: str) -> Path:
 
 
 BAD_CURRENT = [
+    pytest.param(lambda p: p.write_bytes(b""), "the file is empty (expected a header line t_s, i_a_A, i_b_A, i_c_A, "
+                 "then data rows)", id="empty-file"),  # said "line 1, column (empty): unknown column (…)"
+    pytest.param(lambda p: p.write_text("\n \r\n\n"), "the file is empty (expected a header line t_s, i_a_A, i_b_A, "
+                 "i_c_A, then data rows)", id="blank-lines-only"),
+    pytest.param(lambda p: p.write_text("\n" + p.read_text()), "line 1: empty, the header must be the first line "
+                 f"({EXPECTED_COLUMNS})", id="header-not-on-line-1"),
     pytest.param(lambda p: p.write_text(p.read_text().replace("t_s,i_a_A,i_b_A", "i_a_A,i_b_A", 1)),
                  "line 1, column t_s: missing (the header is 'i_a_A,i_b_A')", id="missing-header"),
     pytest.param(lambda p: p.write_text(p.read_text().replace("t_s,i_a_A,i_b_A", "t_s,i_a_a,i_b_A", 1)),
@@ -166,6 +172,8 @@ def test_bad_current_csv_is_one_line_naming_file_line_and_column_exit_2_and_no_s
 
 
 BAD_ENCODER = [
+    pytest.param(lambda p: p.write_bytes(b""), "the file is empty (expected a header line t_s, position_counts, index, "
+                 "drive_time_s, then data rows)", id="empty-file"),
     pytest.param(lambda p: p.write_text(p.read_text().replace("position_counts", "position", 1)),
                  "line 1, column position: unknown column (did you mean position_counts? expected t_s, "
                  "position_counts, index, drive_time_s)", id="misspelt-header"),

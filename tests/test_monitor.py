@@ -103,7 +103,7 @@ def test_acq_record_on_a_listening_bench_records_passively_without_a_profile(cap
     assert (session.current.sample_count, session.encoder.position_counts.size) == (256000, 10000)
     (result,) = (tmp_path / "s").glob("*.result.json")
     doc = json.loads(result.read_text())
-    assert doc["options"]["select_segments"] is True and doc["quality"]["verdict"] == "ok"
+    assert doc["excitation"]["selection_applied"] is True and doc["quality"]["verdict"] == "ok"
     assert doc["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
     refused = run_cli(capsys, "record", "--bench", str(bench), "--duration", "10", "--profile", "triangle_0.2s",
                       "--out", str(tmp_path / "t"))
@@ -159,6 +159,27 @@ def test_a_short_fast_monitor_catalogues_every_window_with_K_near_the_truth(four
         assert r["verdict"] == "ok"
         truth = json.loads(r["truth_json"])["K_Nm_per_rad"]
         assert r["K_Nm_per_rad"] == pytest.approx(truth, rel=0.03)
+
+
+def test_trend_and_fleet_judge_a_monitors_windows_by_the_monitors_rules(four_windows: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    """The monitor ran with --baseline-windows 2: acq trend and acq fleet take its baseline (the mean of the first two
+    windows) unless told otherwise, and say whose rules they judged by (the trial: trend's own default, the first
+    window, alarmed five windows before the monitor did)."""
+    rows = _rows(four_windows)
+    monitors = (rows[0]["K_Nm_per_rad"] + rows[1]["K_Nm_per_rad"]) / 2
+    trend = run_cli(capsys, "trend", str(four_windows), "--joint", "joint1", "--json")
+    doc = json.loads(trend.out)
+    assert doc["baseline_K_Nm_per_rad"] == pytest.approx(monitors, rel=1e-9)
+    assert (doc["baseline"], doc["rules"]) == ("mean of the first 2 good sessions", "as acq monitor judged its windows")
+    assert (doc["threshold_pct"], doc["ewma_lambda"]) == (10.0, 0.2)
+    fleet = json.loads(run_cli(capsys, "fleet", str(four_windows), "--json").out)
+    assert [(j["baseline_K_Nm_per_rad"], j["rules"]) for j in fleet] == [(pytest.approx(monitors, rel=1e-9),
+                                                                          "as acq monitor judged its windows")]
+    mine = json.loads(run_cli(capsys, "trend", str(four_windows), "--joint", "joint1", "--json",
+                              "--baseline-sessions", "1").out)
+    assert mine["baseline_K_Nm_per_rad"] == pytest.approx(rows[0]["K_Nm_per_rad"], rel=1e-9)
+    assert mine["rules"] == "baseline_sessions as given, the rest as acq monitor judged its windows"
 
 
 def test_retention_keeps_the_baseline_and_the_last_windows_and_every_catalogue_row(four_windows: Path) -> None:
@@ -252,7 +273,7 @@ def test_on_alarm_runs_through_the_shell_and_its_failure_is_reported(capsys: pyt
     assert said.read_text() == f"joint joint1: K {rows[3]['K_Nm_per_rad']:.6g} (baseline {baseline:.6g})\n"
     failure = ("alarm command failed: exit 127 (command not found): echo \"joint $ACQ_JOINT: K $ACQ_K (baseline "
                f"$ACQ_BASELINE_K)\" | tee {said} && acq-no-such-notifier")
-    status_lines = [line for line in run.err.splitlines() if line.startswith("0.05 h: ")]
+    status_lines = [line for line in run.err.splitlines() if " captured, " in line]
     assert any(line.endswith(f" — {failure}") for line in status_lines)  # the status line when it failed
     summary = " ".join(run.err.split())  # the final table: the failure beside "alarms raised"
     assert "alarms raised │ 1 · alarm command failed: exit 127 (command not found) │" in summary
@@ -343,6 +364,7 @@ def test_ctrl_c_ends_the_monitor_with_exit_130_and_one_line_of_what_it_kept(tmp_
     assert err.splitlines()[-1] == (f"acq: interrupted by user (Ctrl-C): {captured} windows captured, {analysed} "
                                     f"analysed, all kept in {out / 'catalogue.sqlite'} (trend state: learning "
                                     "baseline); the same command resumes")
+    assert not (out / "monitor.lock").exists()  # released and removed on Ctrl-C too
 
 
 def _rows_or_none(folder: Path) -> list[dict[str, object]] | None:
@@ -480,6 +502,72 @@ def test_the_status_table_shows_the_excited_share_and_the_moves() -> None:
     assert "excited share: last window · all windows" in text and "12 % · 30 %" in text
     assert "moves of the last window: 1 of 2 excite" in text
     assert "1200" in text and "40" in text and "yes" in text  # peak speeds in rpm
+
+
+
+def test_machine_time_reads_in_seconds_minutes_or_hours() -> None:
+    """A 10 s run showed "machine time 0.00 h"."""
+    from rich.console import Console
+
+    from acq.monitoring.monitor import MonitorStatus
+    from acq.ui.monitor_cli import status_table
+    from acq.ui.values import duration_text
+
+    assert [duration_text(t) for t in (0.0, 10.0, 119.0, 150.0, 3599.0, 3600.0, 5400.0, 8 * 3600.0)] == [
+        "0 s", "10 s", "119 s", "2.5 min", "60.0 min", "1.00 h", "1.50 h", "8.00 h"]
+    console = Console(width=120, record=True)
+    console.print(status_table(MonitorStatus("joint1", machine_time_s=10.0)))
+    assert [[cell.strip() for cell in line.split("│")[1:3]] for line in console.export_text().splitlines()
+            if "machine time" in line] == [["machine time", "10 s"]]
+
+
+def test_a_short_monitor_says_its_machine_time_in_seconds_and_leaves_no_lock(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """One 10 s window: every line said "0.00 h", and `monitor.lock` stayed in the folder after the monitor ended."""
+    out = tmp_path / "monitor"
+    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--fast", "--window", "10", "--every", "10", "--for", "10s",
+                  "--out", str(out))
+    assert run.code == 0, run.err
+    lines = [line for line in run.err.splitlines() if " captured, " in line]
+    assert lines and all(line.startswith("10 s: 1 captured, ") for line in lines), lines
+    assert [[cell.strip() for cell in line.split("│")[1:3]] for line in run.err.splitlines()
+            if "machine time" in line] == [["machine time", "10 s"]]
+    assert sorted(p.suffix for p in out.iterdir()) == [".h5", ".json", ".sqlite"]  # no monitor.lock
+
+
+def test_the_folder_lock_is_removed_on_error_and_never_held_by_two_monitors(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The lock file is removed while it is still locked; a monitor that opened it just before (and locks it just
+    after the first let it go) must not run beside a third that made the file anew."""
+    import acq.monitoring.folder_lock as folder_lock
+
+    with pytest.raises(RuntimeError), folder_lock.folder_lock(tmp_path):
+        with pytest.raises(ConfigError, match=f"^{tmp_path}: another acq monitor is writing there$"), \
+                folder_lock.folder_lock(tmp_path):
+            pass
+        raise RuntimeError("the monitor fails")
+    assert list(tmp_path.iterdir()) == []
+
+    first = folder_lock.folder_lock(tmp_path)
+    first.__enter__()
+    real_open, opened = os.open, []
+
+    def open_then_the_first_ends(*args: object, **kwargs: object) -> int:
+        fd = real_open(*args, **kwargs)  # type: ignore[arg-type]
+        opened.append(fd)
+        if len(opened) == 1:
+            first.__exit__(None, None, None)  # removes the file this second monitor has just opened, unlocks it
+        return fd
+
+    with monkeypatch.context() as m:
+        m.setattr(folder_lock.os, "open", open_then_the_first_ends)
+        second = folder_lock.folder_lock(tmp_path)
+        second.__enter__()
+    assert len(opened) == 2  # it locked the removed file, let it go and took the one at the path
+    with pytest.raises(ConfigError, match="another acq monitor is writing there"), folder_lock.folder_lock(tmp_path):
+        pass
+    second.__exit__(None, None, None)
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_the_payload_tag_is_catalogued_and_changes_the_truth_only_with_robot_payload_inertia(

@@ -166,7 +166,7 @@ def test_a_drawer_draws_nothing_over_a_newer_result(session: Path, env: dict[str
     png, result, log = _paths(session)
     job = _write_job(done, png)
     older = _read_job(job.read_bytes())
-    analyze_session(session, AnalysisRequest(band_hz=(20.0, 300.0)))  # a newer result
+    analyze_session(session, AnalysisRequest(select_segments=True))  # a newer result (the monitor's, same file)
     newer = result.read_text()
     log.write_text("")  # as the drawer's process has it
     _draw_job(older)
@@ -191,12 +191,12 @@ def test_a_picture_finished_after_a_newer_result_is_not_put_in_place(session: Pa
 
     def draw_while_a_newer_analysis_comes(*args: object, **kwargs: object) -> None:
         draw(*args, **kwargs)
-        analyze_session(session, AnalysisRequest(band_hz=(20.0, 300.0)), report=False)
+        analyze_session(session, AnalysisRequest(select_segments=True), report=False)
 
     monkeypatch.setattr(plots, "render_report_png", draw_while_a_newer_analysis_comes)
     _draw_job(job)
     assert not png.exists()
-    assert json.loads(result.read_text())["options"]["band_hz"] == [20.0, 300.0]
+    assert json.loads(result.read_text())["options"]["select_segments"] is True
     assert not [p.name for p in session.parent.iterdir() if p.name.startswith(".")]  # no temp picture left
 
 

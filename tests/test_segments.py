@@ -84,8 +84,11 @@ def mostly_idle_window(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def test_selection_on_a_mostly_idle_robot_window_keeps_K_and_raises_the_coherence(mostly_idle_window: Path) -> None:
-    plain = analyze_session(mostly_idle_window, write=False, report=False).json_dict
+    plain = analyze_session(mostly_idle_window, AnalysisRequest(select_segments=False), write=False,
+                            report=False).json_dict
     selected = analyze_session(mostly_idle_window, AnalysisRequest(select_segments=True), write=False, report=False).json_dict
+    default = analyze_session(mostly_idle_window, write=False, report=False).json_dict  # no profile: selected too
+    assert default["K_Nm_per_rad"] == selected["K_Nm_per_rad"] and default["options"]["select_segments"] is True
     truth = selected["simulated_truth"]["K_Nm_per_rad"]
     assert selected["K_Nm_per_rad"] == pytest.approx(truth, rel=0.03)  # the monitor tests' tolerance
     lo, hi = selected["ci95"]["K_Nm_per_rad"]

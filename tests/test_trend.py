@@ -88,6 +88,31 @@ def _entry(i: int, k: float, verdict: str = "ok", error: str | None = None, requ
                  error, k, (k * 0.99, k * 1.01), 55.0, 102.0, request, "2026-01-02T00:00:00+00:00", None)
 
 
+def test_a_comparison_never_takes_the_sessions_own_results_place_in_the_trend() -> None:
+    """The trial: acq analyze S, then acq analyze S --paper — one request each, a tie that the latest (the paper's
+    chain, K 1536) won, so the trend had no baseline. Comparisons count only where no session has its own result."""
+    from analysis import AnalysisRequest
+
+    own, paper = AnalysisRequest().key(), AnalysisRequest(pipeline="paper").key()
+    band = AnalysisRequest(band_hz=(10.0, 150.0)).key()
+    later = "2026-01-03T00:00:00+00:00"  # analysed after the session's own result: the tie's old winner
+    entries = [_entry(0, 889.6, request=own), replace(_entry(0, 1535.7, verdict="failed", request=paper),
+                                                      analyzed_utc=later)]
+    trend = compute_trend("j", entries)
+    assert [(p.entry.K_Nm_per_rad, p.state) for p in trend.points] == [(889.6, "baseline")]
+    three = [e for i in range(3) for e in (_entry(i, 890.0 + i, request=own),
+                                           replace(_entry(i, 1600.0 + i, verdict="failed", request=paper),
+                                                   analyzed_utc=later),
+                                           replace(_entry(i, 870.0, request=band), analyzed_utc=later))]
+    assert [p.entry.K_Nm_per_rad for p in compute_trend("j", three).points] == [890.0, 891.0, 892.0]
+    only_compared = [_entry(0, 880.0, request=band), _entry(1, 881.0, request=band)]
+    assert [p.entry.K_Nm_per_rad for p in compute_trend("j", only_compared).points] == [880.0, 881.0]
+    monitor = AnalysisRequest(select_segments=True).key()  # a monitor's windows: their own results
+    mixed = [_entry(0, 889.0, request=monitor), replace(_entry(0, 700.0, request=paper), analyzed_utc=later),
+             _entry(1, 888.0, request=monitor)]
+    assert [p.entry.K_Nm_per_rad for p in compute_trend("j", mixed).points] == [889.0, 888.0]
+
+
 def test_trend_skips_sessions_not_ok_and_a_stable_joint_raises_no_alarm() -> None:
     ks = [891.0, 893.0, 889.0, 500.0, 890.0, 892.0, 888.0, 891.0, 890.5, 889.5]
     entries = [_entry(i, k, verdict="poor" if k == 500 else "ok") for i, k in enumerate(ks)]

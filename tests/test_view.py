@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -272,3 +273,51 @@ def test_the_side_panel_says_the_values_are_motor_side() -> None:
     doc = {"K_Nm_per_rad": 891.0, "ci95": {}, "clock": {"residual_s": 1e-5}}
     html = values_html([SessionFigure("s", figures, doc)])  # type: ignore[arg-type]
     assert html.startswith("<h3>Identified two-mass model (motor side)</h3>") and "891" in html
+
+
+@pytest.mark.parametrize(("dither", "kind"), [(0.02, "misfit"), (0.0, "third mode")], ids=["misfit", "third-mode"])
+def test_the_report_marks_where_a_poor_verdict_says_the_model_misses(tmp_path: Path, dither: float, kind: str) -> None:
+    """The third mass at 150 Hz: the verdict named a misfit band (shipped dithered profile) or a third mode
+    (undithered) by its frequency, but the report drew nothing there."""
+    import pyqtgraph as pg
+
+    from acq.ui.plots import VERDICT_MARK_COLOR, ReportView, SessionFigure, ensure_app
+    from bench.scenarios import THIRD_INSIDE, Scenario, clock_for, record
+
+    path, _ = record(Scenario("third mass 150 Hz", sim=THIRD_INSIDE, profile={"speed_dither": dither}), 0,
+                     *clock_for(0, 7), tmp_path)
+    done = analyze_session(path)
+    quality = done.result.quality
+    assert quality.verdict == "poor"
+    if kind == "misfit":
+        low, high = quality.misfit_band_hz
+        assert quality.third_mode_hz is None and 160 <= low < high <= 200
+        named, label = f"between {low:.0f} and {high:.0f} Hz", f"misfit {low:.0f}–{high:.0f} Hz"
+    else:
+        low = high = quality.third_mode_hz
+        assert quality.misfit_band_hz is None and 160 <= low <= 200
+        named, label = f"misses a third mode near {low:.0f} Hz", f"third mode ≈ {low:.0f} Hz"
+    assert any(named in r for r in quality.reasons), quality.reasons  # the mark is where the reason says
+
+    ensure_app()
+    view = ReportView([SessionFigure("s", done.result.figures, done.json_dict)])
+    for plot in ("frf", "phase"):
+        (mark,) = [i for i in view.plots[plot].items if getattr(i, "objectName", str)() == kind]
+        if kind == "misfit":
+            assert isinstance(mark, pg.LinearRegionItem)
+            assert mark.getRegion() == pytest.approx((np.log10(low), np.log10(high)), abs=1e-12)
+        else:
+            assert isinstance(mark, pg.InfiniteLine) and mark.value() == pytest.approx(np.log10(low), abs=1e-12)
+    assert [t.toPlainText() for t in view.mark_labels][2:] == [label]  # after f_a and f_r
+
+    def marked_pixels(png: Path) -> int:  # pixels of the mark's colour (its label and edges)
+        mark = np.array([int(VERDICT_MARK_COLOR[i:i + 2], 16) for i in (1, 3, 5)])
+        return int(np.sum(np.abs(_pixels(png)[..., ::-1].astype(int) - mark).sum(axis=-1) < 40))
+
+    assert draw_report(done).report_path == path.with_name(path.stem + ".report.png")
+    from acq.ui.plots import render_report_png
+
+    unmarked = tmp_path / "unmarked.png"
+    render_report_png(replace(done.result.figures, misfit_band_hz=(np.nan, np.nan), third_mode_hz=np.nan), unmarked,
+                      values=done.json_dict)
+    assert marked_pixels(unmarked) == 0 and marked_pixels(path.with_name(path.stem + ".report.png")) > 100

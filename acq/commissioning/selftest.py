@@ -267,7 +267,7 @@ def _identification(bench: Bench, profile: Profile, work_dir: Path, fast: bool) 
     if recorded.status == "fail":  # frames lost while moving: the identification would only echo it
         yield recorded
         return
-    yield from _identified(bench, path, AnalysisRequest())
+    yield from _identified(bench, path)
 
 
 def _passive_motion_and_identification(bench: Bench, profile: Profile | None, work_dir: Path,
@@ -301,7 +301,7 @@ def _passive_motion_and_identification(bench: Bench, profile: Profile | None, wo
     else:
         yield speed_ratio_check(ratio, bench)
         yield phase_order_check(session, ratio.lag_s)
-    yield from _identified(bench, path, AnalysisRequest(select_segments=True))
+    yield from _identified(bench, path)
 
 
 #: What a listening bench's selftest asks for when the machine's motion does not serve (it cannot command any).
@@ -309,12 +309,12 @@ _WHILE_IT_RUNS = ("run acq selftest again while the machine runs a program with 
                   "commands no motion on a bench with [drive] motion = \"external\")")
 
 
-def _identified(bench: Bench, path: Path, request: AnalysisRequest) -> Iterator[Check]:
-    """The identification of a recorded session: its verdict (a passive window that does not excite: a ⚠ saying so)
-    and the torque constant against a known inertia."""
-    done = analyze_session(path, request, report=False)
+def _identified(bench: Bench, path: Path) -> Iterator[Check]:
+    """The identification of a recorded session: its verdict (a passive recording, analysed on the segments that
+    excite, that does not excite: a ⚠ saying so) and the torque constant against a known inertia."""
+    done = analyze_session(path, report=False)
     doc = done.json_dict
-    if request.select_segments and not_excited(doc):  # the machine's motion, not the bench, fell short
+    if "excitation" in doc and not_excited(doc):  # the machine's motion, not the bench, fell short
         yield Check("identification", f"identification ({IDENTIFICATION_S:g} s)", "warn",
                     "not excited: " + "; ".join(not_excited_reasons(doc)), _WHILE_IT_RUNS,
                     {"verdict": "not excited"})

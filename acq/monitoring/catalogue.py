@@ -201,7 +201,9 @@ class Catalogue:
         return {r[0] for r in rows}
 
     def record(self, outcome: Outcome) -> None:
-        """Store one analysis (replacing that session's earlier one with the same request)."""
+        """Store one analysis (replacing that session's earlier one with the same request) — but a failure of
+        another file of the same session (a copy, damaged) does not replace the analysis of a file that succeeded:
+        copies share the session id, and the last one written had hidden an intact copy's result (the trial)."""
         from acq.recording.layout import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
 
         meta, doc = outcome.session, outcome.doc or {}
@@ -233,6 +235,11 @@ class Catalogue:
         columns = ", ".join(values)
         updates = ", ".join(f"{c} = excluded.{c}" for c in values if c not in ("session_key", "request_key"))
         with self._transaction():
+            if outcome.error is not None:
+                analysed = self._execute("SELECT sha256 FROM analyses WHERE session_key = ? AND request_key = ? AND"
+                                         " error IS NULL", (key, outcome.request_key)).fetchone()
+                if analysed is not None and analysed[0] != outcome.sha256:
+                    return  # another file of this session was analysed: the failure of this one does not hide it
             self._execute(
                 "INSERT INTO sessions (session_key, session_id, path, joint, created_utc, start_monotonic_ns, status,"
                 " tags_json) VALUES (?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (session_key) DO UPDATE SET"

@@ -140,6 +140,7 @@ def fleet_json(statuses: Sequence[JointStatus]) -> list[dict[str, Any]]:
                      "K_Nm_per_rad": None if entry is None else entry.K_Nm_per_rad,
                      "K_ci95": None if entry is None else list(entry.K_ci95), "change_pct": s.change_pct,
                      "baseline_K_Nm_per_rad": s.trend.baseline_K_Nm_per_rad,
+                     "rules": s.trend.rules_source,
                      "latest_session_id": None if entry is None else entry.session_id,
                      "last_session_utc": None if s.last_session_utc is None else s.last_session_utc.isoformat(),
                      "analysed_last_day": s.analysed_last_day, "excited_last_day": s.excited_last_day})

@@ -20,13 +20,12 @@ does not sleep, and waits for the analysis instead of skipping (no real time pas
 
 from __future__ import annotations
 
-import fcntl
 import math
 import subprocess
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from concurrent.futures import Future
-from contextlib import AbstractContextManager, contextmanager
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -34,8 +33,9 @@ from typing import Any
 from acq.environment import user_environment
 from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
+from acq.monitoring.folder_lock import folder_lock
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
-from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
+from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, Trend, compute_trend
 from acq.monitoring.window_judge import analyse_window, excites, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
@@ -72,8 +72,9 @@ class MonitorSettings:
     baseline_windows: int = 5
     threshold_pct: float = 10.0
     ewma_lambda: float = 0.2
-    # a robot program excites the joint only in parts: the analysis uses the segments that excite (analysis.segments)
-    request: AnalysisRequest = AnalysisRequest(select_segments=True)
+    # a robot program excites the joint only in parts: the default request averages only the segments that excite
+    # (analysis.segments) where acq did not command the motion — as acq analyze of a window does, under the same key
+    request: AnalysisRequest = AnalysisRequest()
 
 
 @dataclass
@@ -89,7 +90,7 @@ class MonitorStatus:
     interrupted: int = 0
     alarms: int = 0
     alarm_command_failure: str | None = None  # how the last --on-alarm command that failed did: "exit 127 (…)"
-    machine_time_s: float = 0.0
+    machine_time_s: float = 0.0  # the start of the window being captured; its end once it is captured
     disk_bytes: int = 0
     last_K: float | None = None
     last_K_ci: tuple[float | None, float | None] = (None, None)
@@ -115,18 +116,6 @@ def expected_window_bytes(bench: Bench, window_s: float) -> int:
     return int(_SIZE_MARGIN * window_s * (current + encoder)) + 200_000
 
 
-@contextmanager
-def _folder_lock(folder: Path) -> Iterator[None]:
-    """One monitor per folder (an flock: released by the kernel when the process dies, also on kill -9)."""
-    folder.mkdir(parents=True, exist_ok=True)
-    with open(folder / "monitor.lock", "w") as f:
-        try:
-            fcntl.flock(f, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            raise ConfigError(f"{folder}: another acq monitor is writing there") from None
-        yield
-
-
 class Monitor:
     """The monitor loop; :meth:`run` returns the exit code (3 when the last state is alarm, else 0)."""
 
@@ -143,6 +132,8 @@ class Monitor:
         self._alarm_procs: list[subprocess.Popen[bytes]] = []
         self._in_alarm = False
         self._size = expected_window_bytes(settings.bench, settings.window_s)
+        # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
+        self._rules = AlarmRules(settings.baseline_windows, settings.threshold_pct, settings.ewma_lambda)
         if settings.max_disk_bytes is not None and settings.max_disk_bytes < self._size:  # no window would be captured
             daq, drive = settings.bench.daq, settings.bench.drive
             raise ConfigError(f"--max-disk {settings.max_disk_bytes / 1e6:g} MB: one --window of {settings.window_s:g} s "
@@ -167,7 +158,7 @@ class Monitor:
 
         Returns 130 when stopped (:attr:`stopped_by`: Ctrl-C, SIGTERM, a stop request), else 3 when the last
         state is alarm, else 0."""
-        with _folder_lock(self.s.out_dir), Catalogue(self.s.out_dir / CATALOGUE_NAME) as catalogue, \
+        with folder_lock(self.s.out_dir), Catalogue(self.s.out_dir / CATALOGUE_NAME) as catalogue, \
                 analysis_executor(self.s.jobs, None) as pool, self._signals():
             self.catalogue = catalogue
             first = self._resume(pool)
@@ -203,7 +194,7 @@ class Monitor:
         current, drive = open_bench(bench, fast=self.s.fast)
         machine = getattr(drive, "machine_tags", dict)()  # what the machine says of the window (a robot's payload)
         recorder = Recorder(bench, None, current, drive, self.s.out_dir, self.s.window_s,
-                            tags={**machine, WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s})
+                            tags={**machine, WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s, **self._rules.as_tags()})
         self._recorder = recorder
         if self._stop is not None:
             recorder.request_stop(self._stop)
@@ -220,6 +211,7 @@ class Monitor:
                 self._stop = self._stop or result.stop_reason
             return
         self.status.captured += 1
+        self.status.machine_time_s = n * self.s.every_s + self.s.window_s
         self._collect(at_most=self.s.jobs - 1 if self.s.fast else None)
         if len(self._pending) > self.s.jobs:  # jobs running and one waiting: no more (back-pressure)
             self._mark(key, "not analysed", f"the analysis fell behind the capture ({len(self._pending)} windows "

@@ -12,15 +12,21 @@ session (sessions before a pinned baseline are shown, not judged). Two alarm rul
 
 The alarm state is the latest judged session's: exit code 3 while it is in alarm, so a cron job or a
 PLC script can act; re-pin the baseline (``--baseline``) after a repair.
+
+The rules (baseline sessions, threshold, λ) are each the one asked for, else the one ``acq monitor`` judged its
+windows by — it files them with every window as tags (:data:`RULE_TAGS`) — else acq's defaults: ``acq trend``,
+``acq fleet`` and ``acq view --trend`` of a monitor's windows then raise the alarms the monitor raised (with their own
+defaults, a baseline of the first window where the monitor took the mean of five, they alarmed five windows apart).
 """
 
 from __future__ import annotations
 
+import json
 import math
 import statistics
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, fields
 from pathlib import Path
 from typing import Any, Literal
 
@@ -29,7 +35,7 @@ from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.catalogue_backends import is_url
 from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
-from analysis import Z95
+from analysis import AnalysisRequest, Z95
 
 EXIT_ALARM = 3
 EWMA_L = 3.0
@@ -39,6 +45,56 @@ State = Literal["baseline", "ok", "alarm", "skipped", "before baseline"]
 
 #: Tag of a monitor window (set by :mod:`acq.monitoring.monitor`): machine time at its start, s; the x axis of a monitor's trend.
 ELAPSED_TAG = "monitor_elapsed_s"
+
+
+@dataclass(frozen=True)
+class AlarmRules:
+    """How a trend is judged: the baseline is the mean K of the first ``baseline_sessions`` good sessions; an alarm is
+    K more than ``threshold_pct`` % below it, or the EWMA of weight ``ewma_lambda`` below its control limit.
+    ``source`` says where the rules came from (for the table's caption)."""
+
+    baseline_sessions: int = 1
+    threshold_pct: float = 10.0
+    ewma_lambda: float = 0.2
+    source: str = "acq's defaults"
+
+    def as_tags(self) -> dict[str, float]:
+        """The rules as the session tags :func:`rules_for` reads back."""
+        return {tag: getattr(self, name) for name, tag in RULE_TAGS.items()}
+
+
+#: The session tags that carry the alarm rules a session was judged by (set by acq monitor on every window).
+RULE_TAGS = {"baseline_sessions": "alarm_baseline_sessions", "threshold_pct": "alarm_threshold_pct",
+             "ewma_lambda": "alarm_ewma_lambda"}
+
+
+def _tagged_rules(entry: Entry) -> AlarmRules | None:
+    """The rules ``entry``'s session was filed with, or None (no rule tags, or values that are none)."""
+    try:
+        values = {name: entry.tags[tag] for name, tag in RULE_TAGS.items()}
+        rules = AlarmRules(int(values["baseline_sessions"]), float(values["threshold_pct"]),
+                           float(values["ewma_lambda"]), source="as acq monitor judged its windows")
+    except (KeyError, TypeError, ValueError):
+        return None
+    valid = rules.baseline_sessions >= 1 and 0 < rules.threshold_pct <= 100 and 0 < rules.ewma_lambda <= 1
+    return rules if valid else None
+
+
+def rules_for(entries: Sequence[Entry], *, baseline_sessions: int | None = None, threshold_pct: float | None = None,
+              ewma_lambda: float | None = None) -> AlarmRules:
+    """The rules to judge ``entries`` (oldest first) by: each one given here, else the newest session's filed ones
+    (:data:`RULE_TAGS`), else acq's defaults."""
+    filed = next((r for r in map(_tagged_rules, reversed(entries)) if r is not None), None)
+    rules = filed or AlarmRules()
+    given = {name: value for name, value in (("baseline_sessions", baseline_sessions), ("threshold_pct", threshold_pct),
+                                             ("ewma_lambda", ewma_lambda)) if value is not None}
+    if not given:
+        return rules
+    if len(given) == len(RULE_TAGS) or filed is None:
+        source = "as given" if len(given) == len(RULE_TAGS) else f"{', '.join(given)} as given, the rest acq's defaults"
+    else:
+        source = f"{', '.join(given)} as given, the rest as acq monitor judged its windows"
+    return AlarmRules(**{**{f.name: getattr(rules, f.name) for f in fields(rules)}, **given, "source": source})
 
 @dataclass(frozen=True)
 class TrendPoint:
@@ -85,6 +141,7 @@ class Trend:
     threshold_pct: float
     ewma_lambda: float
     ewma_L: float = EWMA_L
+    rules_source: str = AlarmRules.source
 
     @property
     def judged(self) -> list[TrendPoint]:
@@ -98,7 +155,9 @@ class Trend:
 
 
 def like_for_like(entries: Sequence[Entry]) -> tuple[list[Entry], dict[str, str]]:
-    """One analysis per session, all with the same request: the one most sessions have (the latest on a tie).
+    """One analysis per session, all with the same request: of the sessions' own results (the default request, or
+    the monitor's — :meth:`analysis.AnalysisRequest.variant_label` empty), the request most sessions have (the latest
+    on a tie); a comparison (``--paper``, ``--band``, …) only where no session has its own result.
 
     Returns the entries (oldest session first) and, by session key, why a session has none with that
     request (its latest analysis stands in, to be listed as skipped).
@@ -106,8 +165,10 @@ def like_for_like(entries: Sequence[Entry]) -> tuple[list[Entry], dict[str, str]
     sessions: dict[str, list[Entry]] = {}
     for e in entries:
         sessions.setdefault(e.session_key, []).append(e)
-    counts = Counter(e.request_key for e in entries)
-    request = max(counts, key=lambda r: (counts[r], max(e.analyzed_utc for e in entries if e.request_key == r)))
+    own = [e for e in entries if _is_own_result(e.request_key)]
+    pool = own or list(entries)
+    counts = Counter(e.request_key for e in pool)
+    request = max(counts, key=lambda r: (counts[r], max(e.analyzed_utc for e in pool if e.request_key == r)))
     chosen, missing = [], {}
     for key, analyses in sessions.items():
         same = [e for e in analyses if e.request_key == request]
@@ -115,6 +176,15 @@ def like_for_like(entries: Sequence[Entry]) -> tuple[list[Entry], dict[str, str]
         if not same:
             missing[key] = "analysed only with other options than the trend's — run acq analyze on it again"
     return chosen, missing
+
+
+def _is_own_result(request_key: str) -> bool:
+    """Whether a catalogue row's request (:meth:`analysis.AnalysisRequest.key`) gives a session's own result rather
+    than a comparison; a key that is no request (a catalogue of other software) counts as its own result."""
+    try:
+        return AnalysisRequest.from_json_dict(json.loads(request_key)).variant_label() == ""
+    except (ValueError, TypeError, AttributeError):
+        return True
 
 
 def _skip_reason(e: Entry) -> str | None:
@@ -134,8 +204,9 @@ def _sigma(baseline: Sequence[Entry]) -> float:
     return max(from_ci, scatter)
 
 
-def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: int = 1, baseline_id: str | None = None,
-                  threshold_pct: float = 10.0, ewma_lambda: float = 0.2) -> Trend:
+def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: int | None = None,
+                  baseline_id: str | None = None, threshold_pct: float | None = None,
+                  ewma_lambda: float | None = None) -> Trend:
     """Judge a joint's sessions (oldest first) against a baseline with the threshold and EWMA rules.
 
     Parameters
@@ -144,16 +215,22 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
         The joint's name (for the heading).
     entries : sequence of Entry
         The sessions' analyses, oldest session first (see :func:`like_for_like`).
-    baseline_sessions : int
+    baseline_sessions : int, optional
         Baseline = mean K of the first this many good sessions.
     baseline_id : str, optional
         Baseline = this session (its id or a unique prefix); overrides ``baseline_sessions``.
-    threshold_pct : float
+    threshold_pct : float, optional
         Alarm when K drops more than this below the baseline, %.
-    ewma_lambda : float
+    ewma_lambda : float, optional
         Weight of the newest session in the EWMA, 0 < λ ≤ 1.
+
+    A rule not given is the one the sessions were filed with, else acq's default (:func:`rules_for`).
     """
     entries, missing = like_for_like(entries)
+    judged_by = rules_for(entries, baseline_sessions=baseline_sessions, threshold_pct=threshold_pct,
+                          ewma_lambda=ewma_lambda)
+    baseline_sessions, threshold_pct = judged_by.baseline_sessions, judged_by.threshold_pct
+    ewma_lambda = judged_by.ewma_lambda
     skip = {id(e): missing.get(e.session_key) or _skip_reason(e) for e in entries}
     good = [e for e in entries if skip[id(e)] is None]
     if baseline_id is not None:
@@ -175,7 +252,7 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
                   for e in entries]
         wanted = f"{baseline_sessions} session{'s' if baseline_sessions > 1 else ''} of verdict ok"
         return Trend(joint, points, None, f"it needs {wanted}, {len(good)} so far", None,
-                     threshold_pct, ewma_lambda)
+                     threshold_pct, ewma_lambda, rules_source=judged_by.source)
     base = statistics.fmean(e.K_Nm_per_rad for e in baseline)  # type: ignore[misc]
     sigma = _sigma(baseline)
     z, t, points = base, 0, []
@@ -199,7 +276,7 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
         rules += ["EWMA"] if z < base - limit else []
         points.append(TrendPoint(e, "alarm" if rules else "ok", "+".join(rules), change,
                                  100.0 * (z / base - 1.0), -100.0 * limit / base))
-    return Trend(joint, points, base, note, sigma, threshold_pct, ewma_lambda)
+    return Trend(joint, points, base, note, sigma, threshold_pct, ewma_lambda, rules_source=judged_by.source)
 
 
 def trend_json(trend: Trend) -> dict[str, Any]:
@@ -207,6 +284,7 @@ def trend_json(trend: Trend) -> dict[str, Any]:
     return {"joint": trend.joint, "alarm": trend.alarm, "baseline_K_Nm_per_rad": trend.baseline_K_Nm_per_rad,
             "baseline": trend.baseline_note, "sigma_K_Nm_per_rad": trend.sigma_K_Nm_per_rad,
             "threshold_pct": trend.threshold_pct, "ewma_lambda": trend.ewma_lambda, "ewma_L": EWMA_L,
+            "rules": trend.rules_source,
             "points": [{**asdict(p.entry), "state": p.state, "reason": p.reason, "change_pct": p.change_pct,
                         "ewma_change_pct": p.ewma_change_pct, "ewma_limit_pct": p.ewma_limit_pct}
                        for p in trend.points]}

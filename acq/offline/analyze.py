@@ -4,6 +4,15 @@ The only place where the application meets the analysis: it turns an :class:`acq
 into the plain arrays of :class:`analysis.Recording`, runs :func:`analysis.analyze` with an
 :class:`analysis.AnalysisRequest`, and writes the results beside the session (the raw groups are
 never touched). On the simulated bench the result also holds the simulated truth.
+
+Where the results go (:func:`output_paths`): the default analysis writes the session's result,
+``<session>.result.json`` and ``<session>.report.png`` — what ``acq view``, the catalogue's default rows and the
+trend take as the session's result. Any other request writes beside it, never over it, under a name that says
+what differs (:meth:`analysis.AnalysisRequest.variant_label`): ``<session>.<label>.result.json`` and
+``<session>.<label>.report.png``, the label's parts in a fixed order, joined by ``.``: ``paper`` (the paper's
+chain), ``torque-<method>``, ``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (Hz, as given), ``no-align``,
+``segment-<s>s``; e.g.
+``S.band-10-150.result.json`` or ``S.params-K.fit-complex.result.json``.
 """
 
 from __future__ import annotations
@@ -130,7 +139,8 @@ def result_json(session: Session, result: Result) -> dict[str, Any]:
 def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest(), *, write: bool = True,
                     report: bool = True, result_dir: Path | None = None) -> SessionResult:
     """Identify the joint of one session as ``request`` asks (with the bench's nominal plant unless it names one);
-    write ``<session>.result.json`` (:func:`output_paths`: beside the session, or in ``result_dir``).
+    write ``<session>.result.json`` (:func:`output_paths`: beside the session, or in ``result_dir``; a request other
+    than the default writes ``<session>.<label>.result.json`` beside it).
 
     The report PNG is not drawn here: with ``report`` its path is set, and :func:`acq.ui.report_png.draw_report`
     draws it once the result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
@@ -167,10 +177,12 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
 
 def output_paths(session_path: Path, request: AnalysisRequest, result_dir: Path | None = None) -> tuple[Path, Path]:
     """The result document and report PNG of ``request`` on a session: ``<session>.result.json`` and
-    ``<session>.report.png`` beside the session, or in ``result_dir`` (``--result-dir``: a read-only archive); the
-    paper's chain (a comparison, not the session's result) writes ``<session>.paper.result.json`` and
-    ``<session>.paper.report.png`` beside them instead of replacing them."""
-    stem = session_path.stem + (".paper" if request.pipeline == "paper" else "")
+    ``<session>.report.png`` beside the session, or in ``result_dir`` (``--result-dir``: a read-only archive); any
+    other request than the default (the paper's chain, ``--band``, ``--params K``, …: a comparison or an experiment,
+    not the session's result) writes ``<session>.<label>.result.json`` and ``<session>.<label>.report.png``
+    (:meth:`analysis.AnalysisRequest.variant_label`) beside them instead of replacing them."""
+    label = request.variant_label()
+    stem = session_path.stem + (f".{label}" if label else "")
     folder = session_path.parent if result_dir is None else result_dir
     return folder / (stem + ".result.json"), folder / (stem + ".report.png")
 

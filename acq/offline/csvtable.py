@@ -182,16 +182,20 @@ def _parse_with_numpy(path: Path, names: list[str]) -> np.ndarray:
 
 
 def _header(path: Path, required: tuple[str, ...], optional: tuple[str, ...]) -> list[str]:
+    known = (*required, *optional)
+    expected = ", ".join(known)
     try:
         with path.open(encoding="utf-8-sig", newline="") as f:
             first = f.readline()
+            if not first.strip():  # no header: a file with nothing in it, or the header not on line 1
+                if not any(line.strip() for line in f):
+                    raise ConfigError(f"{path}: the file is empty (expected a header line {expected}, then data rows)")
+                raise ConfigError(f"{path}: line 1: empty, the header must be the first line (expected {expected})")
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such file") from None
     except (OSError, UnicodeDecodeError) as e:
         raise ConfigError(f"{path}: cannot be read as text ({e})") from None
     names = [n.strip() for n in first.strip().split(",")]
-    known = (*required, *optional)
-    expected = ", ".join(known)
     for name in names:
         if name not in known:
             close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)

@@ -198,7 +198,7 @@ def record(profile_name: str | None, bench_path: Path | None, duration_s: float 
         if result.status == "interrupted":  # Ctrl-C means stop now: no identification to wait for
             click.echo(f"acq: not identified (interrupted): acq analyze {result.path}", err=True)
         else:
-            identified = _analyze_after_recording(result.path, passive=profile is None)
+            identified = _analyze_after_recording(result.path)
     if result.status == "complete":
         return 0 if identified else 1
     click.echo(f"acq: {result.status}: {result.stop_reason} — everything recorded up to the stop is kept in "
@@ -270,14 +270,16 @@ def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_p
     return done
 
 
-def _print_result_and_draw(done: SessionResult) -> None:
-    """Print the identified values and where the result is, then draw the report PNG and say where it is (the
+def _print_result_and_draw(done: SessionResult, default_result: Path | None = None) -> None:
+    """Print the identified values and where the result is (for a request other than the default, also the
+    session's ``default_result``, which it left as it was), then draw the report PNG and say where it is (the
     person reads the numbers while the picture is drawn)."""
     from acq.ui.display import result_table
     from acq.ui.report_png import draw_report
 
     out.print(result_table(done.json_dict))
-    out.print(f"result: {done.json_path}")
+    kept = "" if default_result is None else f" (beside the session's result {default_result.name}, left as it was)"
+    out.print(f"result: {done.json_path}{kept}")
     if done.report_path is None:
         return
     with err.status("drawing the report …"):
@@ -286,15 +288,14 @@ def _print_result_and_draw(done: SessionResult) -> None:
         out.print(f"report: {done.report_path}")
 
 
-def _analyze_after_recording(path: Path, *, passive: bool) -> bool:
+def _analyze_after_recording(path: Path) -> bool:
     """Identify the joint of a session just recorded; False when no result could be made (said on stderr): the
-    recording stands, the command's exit code says the identification did not run. A ``passive`` recording (the
-    machine's own motion, which excites the joint only in parts) is analysed on the segments that excite."""
+    recording stands, the command's exit code says the identification did not run."""
     with err.status("identifying the joint …"):
         try:
             from analysis import AnalysisRequest
 
-            done = _identify(path, AnalysisRequest(select_segments=passive), report=True, catalogue_path=None)
+            done = _identify(path, AnalysisRequest(), report=True, catalogue_path=None)
         except AcqError as e:
             click.echo(f"acq: analysis: {e}", err=True)
             return False
@@ -355,6 +356,11 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
                     catalogue_path: Path | str | None, partial: bool, scheduler: str | None,
                     result_dir: Path | None) -> int:
     """Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png.
+
+    That is the session's result (acq view, the trend). Any other request writes beside it, never over it:
+    <session>.<label>.result.json and .report.png, the label saying what differs, its parts in this order:
+    paper, torque-<method>, params-K, fit-complex, band-<lo>-<hi>, e.g. --band 10,150 --params K writes
+    <session>.params-K.band-10-150.result.json.
 
     SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
     (same file hash and options) is analysed in parallel and recorded there; exit code 1 if any failed.
@@ -418,7 +424,11 @@ def _analyze_one_session(session_path: Path, request: AnalysisRequest, *, as_jso
         return 0
     with err.status(f"analysing {session_path} …"):
         done = _identify(session_path, request, report=report, catalogue_path=catalogue_path, result_dir=result_dir)
-    _print_result_and_draw(done)
+    from acq.offline.analyze import output_paths
+    from analysis import AnalysisRequest
+
+    default_result = output_paths(session_path, AnalysisRequest(), result_dir)[0] if request.variant_label() else None
+    _print_result_and_draw(done, default_result)
     return 0
 
 

@@ -300,7 +300,8 @@ def trend_table(trend: Trend) -> FittedTable:
             f"baseline {trend.baseline_K_Nm_per_rad:.1f} N·m/rad ({trend.baseline_note})")
     sigma = "" if trend.sigma_K_Nm_per_rad is None else f", σ = {f1(trend.sigma_K_Nm_per_rad)} N·m/rad"
     caption += [f"{base}; ALARM below −{trend.threshold_pct:g} % (threshold) or "
-                f"EWMA (λ = {trend.ewma_lambda:g}) below its −{trend.ewma_L:g}σ limit (EWMA){sigma}",
+                f"EWMA (λ = {trend.ewma_lambda:g}) below its −{trend.ewma_L:g}σ limit (EWMA){sigma}; rules "
+                f"{trend.rules_source}",
                 *(f"#{i} skipped: {p.reason}" for i, p in enumerate(pts, 1) if p.state == "skipped")]
     title = f"stiffness trend — {escape(trend.joint)}" + ("  [bold red]ALARM[/]" if trend.alarm else "")
     return FittedTable(title, columns, caption, row_styles=[_TREND_STYLES[p.state] for p in pts])

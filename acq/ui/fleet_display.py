@@ -140,18 +140,21 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
               help="Only sessions with this tag (repeatable), e.g. --tag site=plant2.")
 @click.option("--stale-days", type=click.FloatRange(0, min_open=True), default=7.0, show_default=True,
               help="A joint with no session for this many days is stale.")
-@click.option("--baseline-sessions", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Baseline = mean K of each joint's first N good sessions.")
-@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=10.0, show_default=True,
-              help="Alarm when K is this many % below the baseline.")
-@click.option("--ewma-lambda", type=click.FloatRange(0, 1, min_open=True), default=0.2, show_default=True,
-              help="EWMA weight of the newest session (alarm at the 3σ control limit).")
+@click.option("--baseline-sessions", type=click.IntRange(min=1), default=None,
+              help="Baseline = mean K of each joint's first N good sessions (default: as acq monitor judged the "
+                   "joint's windows, else 1).")
+@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=None,
+              help="Alarm when K is this many % below the baseline (default: as acq monitor judged the joint's "
+                   "windows, else 10).")
+@click.option("--ewma-lambda", type=click.FloatRange(0, 1, min_open=True), default=None,
+              help="EWMA weight of the newest session, alarm at the 3σ control limit (default: as acq monitor judged "
+                   "the joint's windows, else 0.2).")
 @click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
               help="Also draw the fleet (ΔK over time, one row per joint) into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the fleet as JSON.")
 def fleet_command(folder: Path | None, catalogue_path: Path | str | None, tags: tuple[str, ...], stale_days: float,
-                  baseline_sessions: int, threshold_pct: float, ewma_lambda: float, png_path: Path | None,
-                  as_json: bool) -> int:
+                  baseline_sessions: int | None, threshold_pct: float | None, ewma_lambda: float | None,
+                  png_path: Path | None, as_json: bool) -> int:
     """Every joint (by robot tag): latest K ± 95 %, ΔK to its baseline, sessions of the last day, state
     (alarm / stale / no baseline / ok), worst first; exit code 3 if any joint is in alarm."""
     now = datetime.now(UTC)
@@ -163,7 +166,8 @@ def fleet_command(folder: Path | None, catalogue_path: Path | str | None, tags: 
     else:
         out.print(fleet_table(statuses, stale_days))
     if png_path is not None:
-        render_fleet_png(statuses, png_path, now=now, threshold_pct=threshold_pct, stale_days=stale_days)
+        scale_pct = max(s.trend.threshold_pct for s in statuses)  # each joint's own rules: the widest sets the scale
+        render_fleet_png(statuses, png_path, now=now, threshold_pct=scale_pct, stale_days=stale_days)
         if not as_json:
             out.print(f"plot: {png_path}")
     return EXIT_ALARM if any(s.state == "alarm" for s in statuses) else 0

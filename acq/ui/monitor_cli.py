@@ -16,7 +16,7 @@ from acq.config import load_bench
 from acq.monitoring.batch import CATALOGUE_NAME
 from acq.monitoring.monitor import Monitor, MonitorSettings, MonitorStatus
 from acq.monitoring.retention import parse_size
-from acq.ui.values import format_value
+from acq.ui.values import duration_text, format_value
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
 
@@ -39,11 +39,10 @@ def status_table(st: MonitorStatus) -> Table:
                   show_header=False)
     table.add_column("what")
     table.add_column("value", justify="right")
-    hours = st.machine_time_s / 3600.0
     lo, hi = st.last_K_ci
     k_text = "—" if st.last_K is None else (f"{st.last_K:.1f} ({format_value(lo, '.1f')} … {format_value(hi, '.1f')})")
     rows = [
-        ("machine time", f"{hours:.2f} h"),
+        ("machine time", duration_text(st.machine_time_s)),
         ("windows captured / excited / analysed", f"{st.captured} / {st.excited} / {st.analysed}"),
         ("not excited · skipped · interrupted", f"{st.not_excited} · {st.skipped} · {st.interrupted}"),
         ("last K N·m/rad (95 %)", k_text),
@@ -131,7 +130,7 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
     last = [""]
 
     def log(st: MonitorStatus) -> None:  # one line per change when not on a terminal (a service, a log file)
-        line = (f"{st.machine_time_s / 3600:.2f} h: {st.captured} captured, {st.excited} excited, {st.analysed} "
+        line = (f"{duration_text(st.machine_time_s)}: {st.captured} captured, {st.excited} excited, {st.analysed} "
                 f"analysed, excited {_pct(st.last_excited_fraction)} of the last window, K {format_value(st.last_K, '.1f')}, ΔK {format_value(st.change_pct, '+.1f')} %, "
                 f"{st.state}, {st.disk_bytes / 1e6:.1f} MB" + (f" — {st.message}" if st.message else ""))
         if line != last[0]:

@@ -4,7 +4,9 @@
 
 * ``torque`` and ``speed``: the time traces on the aligned (drive) time base, x axes linked;
 * ``frf``: measured |H| = |ω_m/T_e| on log–log axes with the fitted two-mass model and its 95 % band
-  (shaded; the legend says its width, as it is often a line's width), f_a/f_r marked by vertical lines;
+  (shaded; the legend says its width, as it is often a line's width), f_a/f_r marked by vertical lines, and
+  what a ``poor`` verdict names there in :data:`VERDICT_MARK_COLOR` (also on the phase): the band where the
+  model misses |H| shaded, labelled "misfit LO–HI Hz", a third mode a dash-dot line, "third mode ≈ F Hz";
   the legend and the f_a/f_r labels sit in strips of their own above the plot, so they never cover a
   curve, and the labels are packed into rows so that none overlaps another;
 * ``phase``: measured and model phase, when the clocks were aligned well enough for a phase to be the
@@ -46,6 +48,7 @@ _LOG_TICK_DECADES = range(-6, 7)
 DEFAULT_SIZE_PX = (1600, 1000)
 LEGEND_ROW_PX = 20  # height of a legend row (9 pt text, pyqtgraph's 20 px samples)
 MARK_GAP_PX = 8  # least space between two labels in one row
+VERDICT_MARK_COLOR = "#e6550d"  # what a verdict names on the FRF (misfit, third mode): no session's colour
 
 
 @dataclass(frozen=True)
@@ -294,7 +297,37 @@ class ReportView(QtWidgets.QWidget):
                 text.setPos(math.log10(f_hz), 0.5)
                 self.marks.addItem(text, ignoreBounds=True)
                 self.mark_labels.append(text)
+        for label, low_hz, high_hz in verdict_marks(fd):
+            for plot in (frf, phase):
+                if plot is not None:
+                    plot.addItem(_verdict_mark(low_hz, high_hz, f"{prefix}{label}"), ignoreBounds=True)
+            where = f"≈ {low_hz:.0f} Hz" if low_hz == high_hz else f"{low_hz:.0f}–{high_hz:.0f} Hz"
+            text = pg.TextItem(f"{prefix}{label} {where}", color=VERDICT_MARK_COLOR, anchor=(0.5, 0.5))
+            text.setPos(0.5 * (math.log10(low_hz) + math.log10(high_hz)), 0.5)
+            self.marks.addItem(text, ignoreBounds=True)
+            self.mark_labels.append(text)
         place_marks(self.marks)
+
+
+def verdict_marks(fd: FigureData) -> list[tuple[str, float, float]]:
+    """What the verdict names on the FRF: (label, low Hz, high Hz) of the misfit band and of a third mode (a
+    single frequency: low = high)."""
+    marks = [("misfit", *fd.misfit_band_hz), ("third mode", fd.third_mode_hz, fd.third_mode_hz)]
+    return [(label, lo, hi) for label, lo, hi in marks if math.isfinite(lo) and math.isfinite(hi) and 0 < lo <= hi]
+
+
+def _verdict_mark(low_hz: float, high_hz: float, name: str) -> pg.GraphicsObject:
+    """A verdict's mark at log10(f): a dash-dot line at one frequency, a shaded span over a band."""
+    if low_hz == high_hz:
+        mark = pg.InfiniteLine(pos=math.log10(low_hz), angle=90, movable=False,
+                               pen=pg.mkPen(VERDICT_MARK_COLOR, width=2, style=QtCore.Qt.PenStyle.DashDotLine))
+    else:
+        mark = pg.LinearRegionItem(values=[math.log10(low_hz), math.log10(high_hz)], movable=False,
+                                   brush=pg.mkBrush(_with_alpha(VERDICT_MARK_COLOR, 60)),
+                                   pen=pg.mkPen(VERDICT_MARK_COLOR, width=1))
+        mark.setZValue(-10)  # over the fit band's shade, under the curves
+    mark.setObjectName(name)
+    return mark
 
 
 def place_marks(marks: pg.PlotItem) -> int:

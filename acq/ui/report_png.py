@@ -154,7 +154,8 @@ def _read_job(data: bytes) -> _Job:
         values = {name: npz[name] for name in npz.files}
     scalars = {f.name: values[f.name].item() for f in fields(FigureData) if values[f.name].ndim == 0}
     arrays = {f.name: values[f.name] for f in fields(FigureData) if values[f.name].ndim > 0}
-    arrays["band_hz"] = tuple(float(v) for v in arrays["band_hz"])
+    for name in ("band_hz", "misfit_band_hz"):
+        arrays[name] = tuple(float(v) for v in arrays[name])
     texts = [str(values[name]) for name in _JOB_TEXTS]
     return _Job(FigureData(**scalars, **arrays), texts[0], texts[1], Path(texts[2]), Path(texts[3]))
 

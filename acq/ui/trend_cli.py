@@ -22,23 +22,26 @@ from acqcore.errors import ConfigError
                    "to sessions/).")
 @click.option("--joint", required=True, help="The joint to trend.")
 @click.option("--baseline-sessions", type=click.IntRange(min=1), default=None,
-              help="Baseline = mean K of the first N good sessions (default 1).")
+              help="Baseline = mean K of the first N good sessions (default: as acq monitor judged the windows, else "
+                   "1).")
 @click.option("--baseline", "baseline_id", default=None, help="Baseline = this session id (or a unique prefix).")
-@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=10.0, show_default=True,
-              help="Alarm when K is this many % below the baseline.")
-@click.option("--ewma-lambda", type=click.FloatRange(0, 1, min_open=True), default=0.2, show_default=True,
-              help="EWMA weight of the newest session (alarm at the 3σ control limit).")
+@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=None,
+              help="Alarm when K is this many % below the baseline (default: as acq monitor judged the windows, else "
+                   "10).")
+@click.option("--ewma-lambda", type=click.FloatRange(0, 1, min_open=True), default=None,
+              help="EWMA weight of the newest session, alarm at the 3σ control limit (default: as acq monitor judged "
+                   "the windows, else 0.2).")
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE", help="Only sessions with this tag (repeatable).")
 @click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
               help="Also draw the trend into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the trend as JSON.")
 def trend_command(folder: Path | None, catalogue_path: Path | str | None, joint: str, baseline_sessions: int | None,
-                  baseline_id: str | None, threshold_pct: float, ewma_lambda: float, tags: tuple[str, ...],
+                  baseline_id: str | None, threshold_pct: float | None, ewma_lambda: float | None, tags: tuple[str, ...],
                   png_path: Path | None, as_json: bool) -> int:
     """K of a joint over time (± 95 %), f_a, f_r, baseline and alarms; exit code 3 while in alarm."""
     if baseline_id is not None and baseline_sessions is not None:
         raise ConfigError("--baseline and --baseline-sessions: give one of them")
-    trend = load_trend(folder, catalogue_path, joint, tags, baseline_sessions=baseline_sessions or 1,
+    trend = load_trend(folder, catalogue_path, joint, tags, baseline_sessions=baseline_sessions,
                        baseline_id=baseline_id, threshold_pct=threshold_pct, ewma_lambda=ewma_lambda)
     out = Console()
     if as_json:

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.trend import ELAPSED_TAG, Trend, TrendPoint
+from acq.ui.values import time_unit
 
 
 def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (1400, 900)) -> Path:
@@ -106,7 +107,7 @@ def trend_widget(trend: Trend) -> Any:
     elapsed = [p.entry.tags.get(ELAPSED_TAG) for p in trend.points]
     if trend.points and all(isinstance(e, int | float) for e in elapsed):  # a monitor's windows: its machine time
         span_s = max(elapsed) - min(elapsed)  # type: ignore[type-var,operator]
-        unit, scale = ("h", 3600.0) if span_s >= 3600.0 else ("min", 60.0) if span_s >= 120.0 else ("s", 1.0)
+        unit, scale = time_unit(span_s)
         ticks = [(float(i), f"{e / scale:.1f} {unit}") for i, e in enumerate(elapsed)][::step]  # type: ignore[operator]
         x_label = f"machine time at the window's start ({unit})"
     else:

@@ -15,6 +15,18 @@ from analysis import PARAM_LABELS, PARAM_NAMES
 PARAMS: tuple[tuple[str, str, str], ...] = tuple((key, *PARAM_LABELS[key]) for key in PARAM_NAMES)
 
 
+def time_unit(span_s: float) -> tuple[str, float]:
+    """The unit a time of ``span_s`` seconds reads right in — h from 1 h, min from 2 min, else s — and its seconds."""
+    return ("h", 3600.0) if span_s >= 3600.0 else ("min", 60.0) if span_s >= 120.0 else ("s", 1.0)
+
+
+def duration_text(t_s: float) -> str:
+    """``t_s`` in the unit of :func:`time_unit`: "10 s", "2.5 min", "1.25 h"."""
+    unit, scale = time_unit(t_s)
+    decimals = {"s": 0, "min": 1, "h": 2}[unit]
+    return f"{t_s / scale:.{decimals}f} {unit}"
+
+
 def format_value(x: float | None, spec: str = ".4g", scale: float = 1.0) -> str:
     """``x · scale`` formatted with ``spec``; "—" for a value that is missing, NaN or infinite."""
     return "—" if x is None or not math.isfinite(x) else format(x * scale, spec)
