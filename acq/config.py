@@ -68,6 +68,11 @@ def _message(error: dict[str, Any]) -> str:
         return "missing key 'driver'"
     if kind == "value_error" and "error" in error.get("ctx", {}):  # a validator's own words, without pydantic's prefix
         return str(error["ctx"]["error"])
+    ctx = error.get("ctx", {})
+    if kind == "too_short":
+        return f"must list at least {ctx.get('min_length')}"
+    if kind == "too_long":
+        return f"must list at most {ctx.get('max_length')}"
     return error["msg"].lower().replace("input should be", "must be")
 
 
@@ -111,6 +116,9 @@ def validate(model: type[M], data: dict[str, Any], source: Path | str) -> M:
         # A misspelt key shows up as "unknown" and "missing"; the unknown one names the cause.
         first = next((err for err in errors if err["type"] == "extra_forbidden"), errors[0])
         message = _format(Path(source), first, data)
+        section_models = _section_models(model, tuple(first["loc"])) if first["type"] == "missing" else []
+        if section_models:  # a whole section
+            message = _missing_section(source, tuple(first["loc"]), section_models)
         if first["type"] == "extra_forbidden":
             section = tuple(first["loc"][:-1])
             missing = [str(err["loc"][-1]) for err in errors
@@ -122,6 +130,28 @@ def validate(model: type[M], data: dict[str, Any], source: Path | str) -> M:
                                                   cutoff=0.6))
             message += f" (did you mean {close[0]}?)" if close else ""
         raise ConfigError(message) from None
+
+
+def _section_models(model: type[BaseModel], loc: tuple[Any, ...]) -> list[type[BaseModel]]:
+    """The config models of the section at pydantic location ``loc`` of ``model`` (several for a discriminated
+    union of drivers); none when ``loc`` names a key, not a section."""
+    models: list[type[BaseModel]] = [model]
+    for element in loc:
+        fields = [m.model_fields[element] for m in models if element in m.model_fields]
+        if not fields:
+            return []
+        models = [m for f in fields for m in _models_in(f.annotation)]
+    return models
+
+
+def _missing_section(source: Path | str, loc: tuple[Any, ...], models: list[type[BaseModel]]) -> str:
+    """One line for a section the file lacks, naming what it must hold."""
+    section = ".".join(map(str, loc))
+    tags = [t for t in map(_tag_of, models) if t is not None]
+    if len(models) > 1 and tags:
+        return f"{source}: [{section}] missing (driver = one of {', '.join(map(repr, tags))}, and that driver's keys)"
+    required = [n for n, f in models[0].model_fields.items() if f.is_required()]
+    return f"{source}: [{section}] missing (it needs {', '.join(required)})"
 
 
 def _unset_keys(model: type[BaseModel], section: tuple[Any, ...], data: dict[str, Any]) -> list[str]:

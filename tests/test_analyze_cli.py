@@ -266,6 +266,31 @@ def test_a_profile_too_slow_or_too_short_to_find_the_currents_phase_is_refused_a
                                       "follow them\n")
 
 
+def test_several_sessions_as_the_shell_expands_a_glob_are_one_batch(session_10s: Path, tmp_path: Path,
+                                                                     capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: `acq analyze par/*.h5` unquoted was 'Got unexpected extra argument (par/b.h5)', exit 2."""
+    par, other = tmp_path / "par", tmp_path / "other"
+    for folder, name in ((par, "a.h5"), (par, "b.h5"), (other, "c.h5")):
+        folder.mkdir(exist_ok=True)
+        (folder / name).write_bytes(session_10s.read_bytes())
+    batch = run_cli(capsys, "analyze", str(par / "a.h5"), str(par / "b.h5"), "--no-report", "--jobs", "1", "--json")
+    assert batch.code == 0, batch.err
+    assert [(Path(d["path"]).name, d["outcome"]) for d in json.loads(batch.out)] == [("a.h5", "analysed"),
+                                                                                   ("b.h5", "analysed")]
+    assert (par / "catalogue.sqlite").is_file()  # in the sessions' folder, as for `acq analyze par`
+    # a folder, a glob and a session named twice: each session once; the catalogue in the folder common to them
+    batch = run_cli(capsys, "analyze", str(par), str(other / "*.h5"), str(par / "a.h5"), "--no-report", "--jobs",
+                    "1", "--json")
+    assert batch.code == 0, batch.err
+    assert sorted((Path(d["path"]).name, d["outcome"]) for d in json.loads(batch.out)) == [
+        ("a.h5", "analysed"), ("b.h5", "analysed"), ("c.h5", "analysed")]
+    assert (tmp_path / "catalogue.sqlite").is_file()
+    missing = run_cli(capsys, "analyze", str(par / "a.h5"), str(par / "nope.h5"), "--no-report")
+    assert (missing.code, missing.err) == (2, f"acq: error: {par / 'nope.h5'}: no such session file\n")
+    none = run_cli(capsys, "analyze", "--no-report")
+    assert (none.code, none.err) == (2, "acq: error: Missing argument 'SESSION...'.\n")
+
+
 def test_missing_session_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = run_cli(capsys, "analyze", str(tmp_path / "nope.h5"))
     assert run.code == 2
@@ -413,3 +438,11 @@ def test_a_read_only_session_folder_shows_the_result_fails_the_write_and_result_
         assert [d["outcome"] for d in json.loads(batch.out)] == ["analysed", "analysed"]
         assert sorted(p.name for p in (tmp_path / "batch_results").iterdir()) == ["a.result.json", "b.result.json"]
         assert sorted(p.name for p in ro.iterdir()) == ["a.h5", "b.h5"]
+
+
+def test_a_result_dir_that_cannot_be_made_is_bad_input(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The trial: `--result-dir /proc/x` said "folder vanished" (exit 1) of a folder that never was."""
+    run = run_cli(capsys, "analyze", str(session_10s), "--no-report", "--result-dir", "/proc/acq-none/x")
+    assert run.code == 2
+    assert run.err == ("acq: error: --result-dir /proc/acq-none/x: cannot make a folder there (no such file or "
+                       "directory)\n")

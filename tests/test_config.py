@@ -39,6 +39,12 @@ def test_shipped_configs_validate() -> None:
         ("rate_hz = 25600", "rate_hz = \"fast\"", "[daq] rate_hz = \"fast\": must be a valid number"),
         ("pole_pairs = 4", "pole_pair = 4", "[motor] pole_pair = 4: unknown key (did you mean pole_pairs?)"),
         ("pole_pairs = 4", "", "[motor] pole_pairs: missing"),
+        # a whole section: before, "motor: missing"; pydantic's "list should have at least 1 item after validation"
+        ("[motor]\ntorque_constant_Nm_per_A = 3.0\npole_pairs = 4\n", "",
+         "[motor] missing (it needs torque_constant_Nm_per_A, pole_pairs)"),
+        ('[daq]\ndriver = "sim"\nrate_hz = 25600\nchannels = ["i_a"]\n', "",
+         "[daq] missing (driver = one of 'sim', 'nidaqmx', and that driver's keys)"),
+        ('channels = ["i_a"]', "channels = []", "[daq] channels = []: must list at least 1"),
         # a key with a default misspelt: before, "unknown key" alone (only missing keys were offered)
         ("host_jitter_s", "host_jiter_s", "[sim] host_jiter_s = 0.0002: unknown key (did you mean host_jitter_s?)"),
         ("inertia_known", "inertia_knwn", "[nominal] inertia_knwn = true: unknown key (did you mean inertia_known?)"),

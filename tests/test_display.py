@@ -104,7 +104,7 @@ def test_trend_without_a_baseline_says_what_it_needs_and_shows_a_missing_interva
     wide = render(trend_table(trend), width=200)
     assert "—–—" not in wide and re.search(r"│ +— +│", wide)
     assert ("no baseline yet (it needs 1 session of verdict ok, 0 so far); ALARM below −10 % (threshold) or EWMA "
-            "(λ = 0.2) below its −3σ limit (EWMA) #1 skipped") in " ".join(wide.split())
+            "(λ = 0.2) below its −3σ limit (EWMA); rules: acq's defaults #1 skipped") in " ".join(wide.split())
     assert "σ =" not in wide and "baseline —" not in wide
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import re
 import shutil
 import subprocess
@@ -122,19 +123,26 @@ def test_intact_session_checks_clean(recorded: Path, tmp_path: Path, capsys: pyt
             "nothing to repair") in run.out.replace("\n", "")
 
 
-def test_flipped_byte_in_a_chunk_is_reported_with_its_span(recorded: Path, tmp_path: Path,
-                                                           capsys: pytest.CaptureFixture[str]) -> None:
-    path = _copy(recorded, tmp_path / "flip.h5")
+def _flip_a_byte_in_chunk(path: Path, chunk_number: int) -> tuple[int, int]:
+    """Flip one bit of a byte inside chunk ``chunk_number`` of ``/current/i_a_A``; its first sample and the chunk
+    length (samples)."""
     with h5py.File(path, "r") as f:
         ds = f["current/i_a_A"]
         chunk = ds.chunks[0]
-        info = ds.id.get_chunk_info(40)
+        info = ds.id.get_chunk_info(chunk_number)
         first_bad = int(info.chunk_offset[0])
     with path.open("r+b") as fh:
         fh.seek(info.byte_offset + 100)
         byte = fh.read(1)
         fh.seek(info.byte_offset + 100)
         fh.write(bytes([byte[0] ^ 0x40]))
+    return first_bad, chunk
+
+
+def test_flipped_byte_in_a_chunk_is_reported_with_its_span(recorded: Path, tmp_path: Path,
+                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    path = _copy(recorded, tmp_path / "flip.h5")
+    first_bad, chunk = _flip_a_byte_in_chunk(path, 40)
     assert first_bad == 40 * chunk
     s = load(path)
     span = f"current: samples {first_bad:,}–{10 * RATE_HZ - 1:,} unreadable".replace(",", " ")
@@ -149,6 +157,94 @@ def test_flipped_byte_in_a_chunk_is_reported_with_its_span(recorded: Path, tmp_p
                                    "analyse the intact part")
     info_run = run_cli(capsys, "info", str(path))
     assert info_run.err.strip() == f"acq: warning: {path}: damaged ({span}) — run acq check {path}"
+
+
+def test_a_damaged_session_is_exported_only_with_partial_and_its_import_says_what_is_missing(
+        recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: acq export wrote the intact part silently (exit 0), its metadata named no damage, and the import of
+    the pair was 'complete, checksums and counts verified … nothing to repair'."""
+    path = _copy(recorded, tmp_path / "flip.h5")
+    first_bad, _ = _flip_a_byte_in_chunk(path, 56)
+    assert first_bad == 143360  # the new user's case: samples 143 360–255 999 unreadable
+    span = f"current: samples 143 360–{10 * RATE_HZ - 1:,} unreadable".replace(",", " ")
+    out = tmp_path / "exf"
+    refused = run_cli(capsys, "export", str(path), "--csv", str(out))
+    assert (refused.code, refused.err) == (2, f"acq: error: {path}: damaged ({span}) — run acq check, or use "
+                                              "--partial to export the intact part\n")
+    assert not out.exists()
+    exported = run_cli(capsys, "export", str(path), "--csv", str(out), "--partial")
+    assert exported.code == 0
+    assert exported.err == (f"acq: warning: {path}: damaged — exported the intact part only (143360 current and "
+                            f"10000 encoder samples); left out: {span} (recorded in flip.session.json)\n")
+    assert len((out / "flip.current.csv").read_text().splitlines()) == 1 + 143360
+    meta = json.loads((out / "flip.session.json").read_text())
+    assert (meta["status"], meta["stop_reason"], meta["damage"]) == ("complete", "recorded 10 s", [span])
+    imported = run_cli(capsys, "import", "--current", str(out / "flip.current.csv"), "--encoder",
+                       str(out / "flip.encoder.csv"), "-o", str(tmp_path / "imp.h5"))
+    assert imported.code == 0, imported.err
+    why = f"the exported session was damaged, the files hold its intact part only: {span}"
+    assert " ".join(imported.err.split()) == f"warning: {why}"
+    s = load(tmp_path / "imp.h5")
+    assert (s.status, s.meta.stop_reason) == ("interrupted", f"imported from flip.current.csv and flip.encoder.csv; "
+                                                             f"{why}")
+    assert [(e.stream, e.kind, e.detail) for e in s.events] == [("current", "warning",
+                                                                 f"not in the exported files: {span}")]
+    assert s.current.sample_count == 143360 and s.damage == ()
+    checked = run_cli(capsys, "check", str(tmp_path / "imp.h5"))
+    assert checked.code == 0
+    assert f"status interrupted (imported from flip.current.csv and flip.encoder.csv; {why})" in " ".join(
+        checked.out.split())
+    assert f"{tmp_path / 'imp.h5'}: interrupted, checksums and counts verified" in checked.out.replace("\n", "")
+    info = run_cli(capsys, "info", str(tmp_path / "imp.h5"), "--json")
+    assert json.loads(info.out)["status"] == "interrupted"
+
+
+def test_a_partial_analysis_says_so_on_screen_and_in_its_reasons_naming_the_spans_left_out(
+        recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: 'identification — verdict ok', the only hint 'note: using 0.064–5.610 s, where both streams have
+    data'; the result's reasons did not mention the damage."""
+    from dataclasses import replace
+
+    path = _copy(recorded, tmp_path / "flip.h5")
+    _flip_a_byte_in_chunk(path, 56)
+    span = f"current: samples 143 360–{10 * RATE_HZ - 1:,} unreadable".replace(",", " ")
+    note = f"note: partial: only the readable part of a damaged session was analysed; left out: {span}"
+    run = run_cli(capsys, "analyze", str(path), "--partial", "--no-report")
+    assert run.code == 0, run.err
+    screen = " ".join(run.out.split())
+    assert re.search(r"identification — verdict \w+ — partial: readable part of a damaged session quantity", screen)
+    assert note in screen
+    doc = json.loads((tmp_path / "flip.result.json").read_text())
+    assert doc["partial"] is True and doc["quality"]["reasons"][0] == note
+    assert [r for r in doc["quality"]["reasons"] if "partial" in r] == [note]  # the analysis's own reasons follow
+    from acq.offline.analyze import partial_notes
+
+    session = load(path)
+    recording = replace(session, attrs={**session.attrs, "status": "recording"}, damage=())
+    assert partial_notes(recording) == ["note: partial: the session is still being recorded (status recording); "
+                                        "only what was stored was analysed"]
+    assert partial_notes(replace(session, damage=())) == []
+
+
+@pytest.mark.parametrize(("status", "stop_reason", "damage", "imported"), [
+    ("complete", "recorded 10 s", (), ("complete", None)),
+    ("recording", "", (), ("interrupted", "the exported session was still recording (status recording): the files "
+                                          "hold what was stored")),
+    ("failed", "disk full: s.h5 — 3.5 s kept", (),
+     ("failed", "the exported session's status: failed (disk full: s.h5 — 3.5 s kept)")),
+    ("interrupted", "interrupted by user (Ctrl-C)", ("encoder: samples 10–19 unreadable",),
+     ("interrupted", "the exported session's status: interrupted (interrupted by user (Ctrl-C)); the exported "
+                     "session was damaged, the files hold its intact part only: encoder: samples 10–19 unreadable")),
+])
+def test_an_imported_session_keeps_the_exported_sessions_status(status: str, stop_reason: str,
+                                                               damage: tuple[str, ...],
+                                                               imported: tuple[str, str | None]) -> None:
+    from acq.offline.export_metadata import ExportMetadata
+
+    meta = ExportMetadata(session_id="s", joint="j", created_utc="", operator="", origin={}, tags={},
+                          host_clock_shared=True, path=Path("s.session.json"), bench_json="{}", profile_json="{}",
+                          status=status, stop_reason=stop_reason, damage=damage)
+    assert meta.incomplete() == imported
 
 
 @pytest.mark.parametrize("percent", [10, 30, 50, 90])

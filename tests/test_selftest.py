@@ -241,7 +241,7 @@ def test_a_bench_that_cannot_be_opened_fails_the_devices_stage_in_one_line(
     run = run_cli(capsys, "selftest", "--fast", "--json", "--bench", str(DEFAULT_BENCH.parent / "sim_canopen.toml"))
     assert run.code == 2
     assert failed_check(json.loads(run.out))["figure"] == ("--fast: the simulated CANopen drive runs on the bus in "
-                                                           "real time; record without --fast")
+                                                           "real time; run without --fast")
 
 
 def test_pole_pairs_3_stated_on_a_4_pole_pair_motor_is_named_on_the_slow_move(

@@ -31,9 +31,10 @@ from typing import Any
 import numpy as np
 
 from acq.environment import pin_blas_threads
+from acq.install import install_hint
 from acq.monitoring.catalogue import Catalogue, Outcome
 from acq.offline.analyze import SessionResult, analyze_session, output_paths, sha256_of
-from acq.recording.paths import GLOB_CHARS
+from acq.recording.paths import GLOB_CHARS, is_batch, require_session_file
 from acq.recording.reader import load, read_status
 from acq.recording.session import Session
 from acq.recording.storage import remove_temp_files
@@ -82,6 +83,26 @@ def find_sessions(spec: Path | str) -> tuple[list[Path], Path]:
     if not sessions:
         raise ConfigError(f"{spec}: no session files (*.h5) found")
     return sessions, base
+
+
+def find_all_sessions(specs: Sequence[Path | str]) -> tuple[list[Path], Path]:
+    """The session files of several command-line arguments — session files, folders, globs (also as the shell
+    expanded ``par/*.h5``) — each once, sorted; and the folder the catalogue goes in by default: the one all were
+    sought in, else the folder common to them (as a glob's deepest folder without wildcards)."""
+    found: dict[Path, Path] = {}
+    bases: list[Path] = []
+    for spec in map(Path, specs):
+        if is_batch(spec):
+            paths, base = find_sessions(spec)
+        else:
+            require_session_file(spec)
+            paths, base = [spec], spec.parent
+        bases.append(base)
+        for p in paths:
+            found.setdefault(p.resolve(), p)
+    if any(b != bases[0] for b in bases):
+        return sorted(found.values()), Path(os.path.commonpath([b.resolve() for b in bases]))
+    return sorted(found.values()), bases[0]
 
 
 def _prefix(parts: Sequence[str]) -> Iterator[str]:
@@ -237,7 +258,7 @@ def analysis_executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
     try:
         from distributed import Client
     except ImportError:
-        raise ConfigError("--scheduler needs Dask distributed: pip install 'acq[cluster]'") from None
+        raise ConfigError(f"--scheduler needs Dask distributed: {install_hint('cluster')}") from None
     try:
         client = Client(scheduler, timeout="10s")
     except OSError as e:

@@ -22,6 +22,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
+from acq.install import install_hint
 from acqcore.errors import ConfigError, StorageError
 
 #: Seconds a writer waits for another process's lock (SQLite's busy timeout, PostgreSQL's lock_timeout).
@@ -121,7 +122,7 @@ class PostgreSQLDialect:
         try:
             import psycopg
         except ImportError:
-            raise ConfigError("--catalogue postgresql://…: needs psycopg 3 — pip install 'acq[fleet]'") from None
+            raise ConfigError(f"--catalogue postgresql://…: needs psycopg 3 — {install_hint('fleet')}") from None
         self._psycopg = psycopg
         self.errors: tuple[type[Exception], ...] = (psycopg.Error,)
 

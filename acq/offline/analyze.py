@@ -156,6 +156,7 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     except ValueError as e:
         raise ConfigError(f"{session.path}: {e}") from None
     doc = result_json(session, result)
+    doc["quality"]["reasons"][:0] = partial_notes(session)
     doc["partial"] = bool(session.damage) or session.status == "recording"
     doc["session"]["damage"] = list(session.damage)
     json_path, png_path = output_paths(session.path, request, result_dir)
@@ -173,6 +174,18 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
         if report_path is None:  # no picture of this result: one of an earlier result would be taken for it
             png_path.unlink(missing_ok=True)
     return SessionResult(session, result, doc, json_path, report_path)
+
+
+def partial_notes(session: Session) -> list[str]:
+    """The note that says a result rests on part of the session only (damaged: the spans left out; still
+    ``recording``: what was stored), first among the result's reasons; none for a whole session."""
+    if session.damage:
+        return [f"note: partial: only the readable part of a damaged session was analysed; left out: "
+                f"{'; '.join(session.damage)}"]
+    if session.status == "recording":
+        return ["note: partial: the session is still being recorded (status recording); only what was stored was "
+                "analysed"]
+    return []
 
 
 def output_paths(session_path: Path, request: AnalysisRequest, result_dir: Path | None = None) -> tuple[Path, Path]:

@@ -1,10 +1,11 @@
 """The metadata ``acq export`` writes beside its CSV pair, so ``acq import`` restores the session's history.
 
 ``<stem>.session.json`` holds what the CSV columns cannot: the session's id, joint, start time,
-operator, tags, the bench and profile as used, where the data came from, and whether both files'
-time columns are arrival stamps on one host clock. It names each CSV with its SHA-256, so an import
-recognises the pair it describes: a file changed since export is not that pair, and its metadata is
-not used (the import says so).
+operator, tags, the bench and profile as used, where the data came from, whether both files'
+time columns are arrival stamps on one host clock, and the session's status, stop reason and the
+spans it could not read (``damage``: an export of a damaged session's intact part). It names each
+CSV with its SHA-256, so an import recognises the pair it describes: a file changed since export is
+not that pair, and its metadata is not used (the import says so).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from pathlib import Path
 
 from acq import __version__
 from acq.offline.analyze import sha256_of
-from acq.recording.layout import utc_now_iso
+from acq.recording.layout import Status, utc_now_iso
 from acq.recording.session import Session, SessionHistory
 from acqcore.errors import ConfigError
 
@@ -36,11 +37,38 @@ class ExportMetadata(SessionHistory):
         The metadata file read.
     bench_json, profile_json : str
         The bench and profile as used, JSON.
+    status, stop_reason : str
+        The exported session's (``"complete"``, ``""`` in metadata written before they were recorded).
+    damage : tuple of str
+        The spans the exported session could not read, so the files do not hold ("current: samples 102 400–255 999
+        unreadable").
     """
 
     path: Path
     bench_json: str
     profile_json: str
+    status: str = "complete"
+    stop_reason: str = ""
+    damage: tuple[str, ...] = ()
+
+    def incomplete(self) -> tuple[Status, str | None]:
+        """The status a session imported from the files gets, and why it is not ``complete`` (None when it is).
+
+        The exported session's ``interrupted`` or ``failed`` is kept; its intact part only (damaged, or exported
+        while ``recording``) is ``interrupted``, as :func:`acq.recording.repair.repair` marks such a session.
+        """
+        why = []
+        if self.status == "recording":
+            why.append("the exported session was still recording (status recording): the files hold what was stored")
+        elif self.status not in ("", "complete"):
+            why.append(f"the exported session's status: {self.status}"
+                       + (f" ({self.stop_reason})" if self.stop_reason else ""))
+        if self.damage:
+            why.append("the exported session was damaged, the files hold its intact part only: "
+                       + "; ".join(self.damage))
+        if not why:
+            return "complete", None
+        return ("failed" if self.status == "failed" else "interrupted"), "; ".join(why)
 
 
 def metadata_path(current_path: Path) -> Path | None:
@@ -60,6 +88,7 @@ def metadata_text(session: Session, current: tuple[str, str], encoder: tuple[str
         **{f.name: getattr(meta, f.name) for f in fields(SessionHistory)},
         "bench": session.bench.model_dump(mode="json"),
         "profile": session.profile.model_dump(mode="json") if session.profile is not None else None,
+        "status": session.status, "stop_reason": session.meta.stop_reason, "damage": list(session.damage),
         "files": {"current": {"name": current[0], "sha256": current[1]},
                   "encoder": {"name": encoder[0], "sha256": encoder[1]}},
     }
@@ -102,7 +131,9 @@ def read_metadata(current_path: Path, encoder_path: Path, digest: Callable[[Path
                               created_utc=str(doc["created_utc"]), operator=str(doc.get("operator", "")),
                               origin=dict(doc["origin"]), tags=dict(doc["tags"]),
                               host_clock_shared=bool(doc["host_clock_shared"]), path=path,
-                              bench_json=json.dumps(doc["bench"]), profile_json=json.dumps(doc["profile"]))
+                              bench_json=json.dumps(doc["bench"]), profile_json=json.dumps(doc["profile"]),
+                              status=str(doc.get("status", "complete")), stop_reason=str(doc.get("stop_reason", "")),
+                              damage=tuple(str(line) for line in doc.get("damage", [])))
     except (KeyError, TypeError) as e:
         raise ConfigError(f"{path}: key {e}: missing or malformed") from None
     return meta, None

@@ -11,8 +11,12 @@ the session has it. Floats are written in their shortest exact form, so a round 
 except for host stamps rounded to the ns.
 
 ``<stem>.session.json`` (:mod:`acq.offline.export_metadata`): the session's id, joint, start time, tags,
-bench and profile as used, and whether the two ``t_s`` columns are stamps on one host clock, so
-``acq import`` restores the session's history.
+bench and profile as used, whether the two ``t_s`` columns are stamps on one host clock, its status and the
+spans it could not read, so ``acq import`` restores the session's history.
+
+A damaged session (or one still ``recording``) is refused unless asked (``partial``, ``acq export
+--partial`` as ``acq analyze --partial``): then its intact part is exported, and the metadata says what is
+missing, so the imported session is not taken for the whole recording.
 
 An existing file is not replaced unless asked (``force``); the three are written under temp names in
 the output folder and renamed only when all three are complete, so a failed write leaves the folder as
@@ -81,19 +85,22 @@ def current_t0_s(session: Session) -> float:
 NOT_EXPORTED = ("velocity_counts_per_s", "velocity_demand_counts_per_s")
 
 
-def export_csv(session_path: Path, out_dir: Path, *, force: bool = False,
-               ) -> tuple[tuple[Path, Path, Path], tuple[str, ...]]:
-    """Write the session's current and encoder CSV files and its metadata into ``out_dir``; return their paths and
-    the names of the session's encoder datasets left out (:data:`NOT_EXPORTED` that it holds).
+def export_csv(session_path: Path, out_dir: Path, *, force: bool = False, partial: bool = False,
+               ) -> tuple[tuple[Path, Path, Path], tuple[str, ...], str | None]:
+    """Write the session's current and encoder CSV files and its metadata into ``out_dir``; return their paths,
+    the names of the session's encoder datasets left out (:data:`NOT_EXPORTED` that it holds), and, for a session
+    exported with ``partial``, what the files lack (one line naming the spans; None for a whole session).
 
     Raises
     ------
     ConfigError
-        One of the three files exists and ``force`` is false (nothing is written).
+        The session is damaged or still ``recording`` and ``partial`` is false, or one of the three files exists
+        and ``force`` is false (nothing is written).
     StorageError
         A write failed (the folder is left as it was) or a rename did (the metadata, renamed last, is kept).
     """
     session = load(session_path)
+    session.require_usable(partial=partial, action="export")
     session.require_samples()
     stem = Path(session_path).stem
     current_path, encoder_path = out_dir / f"{stem}.current.csv", out_dir / f"{stem}.encoder.csv"
@@ -129,4 +136,16 @@ def export_csv(session_path: Path, out_dir: Path, *, force: bool = False,
             write_text_synced(tmp_meta, metadata_text(session, (current_path.name, sha256_of(tmp_current)),
                                                       (encoder_path.name, sha256_of(tmp_encoder))))
     left_out = tuple(name for name in NOT_EXPORTED if getattr(enc, name, None) is not None)
-    return targets, left_out
+    return targets, left_out, _missing_text(session, meta_path)
+
+
+def _missing_text(session: Session, meta_path: Path) -> str | None:
+    """What an export of ``session``'s intact part lacks, one line (None when the session is whole)."""
+    kept = f"{session.current.sample_count} current and {session.encoder.index.size} encoder samples"
+    if session.damage:
+        return (f"{session.path}: damaged — exported the intact part only ({kept}); left out: "
+                f"{'; '.join(session.damage)} (recorded in {meta_path.name})")
+    if session.status == "recording":
+        return (f"{session.path}: status recording — exported what is stored ({kept}); the rest of the recording "
+                f"is not in the files (recorded in {meta_path.name})")
+    return None

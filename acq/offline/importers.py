@@ -244,6 +244,11 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
     notes = [*cur.notes, *enc.notes]
     events = sorted((StreamEvent(int(host_ns(n.t_s + (shift if n.stream == "current" else 0.0))), n.stream, n.kind,
                                  n.detail) for n in notes), key=lambda e: e.host_ns)  # file times onto the host timeline
+    status, incomplete = meta.incomplete() if meta is not None else ("complete", None)
+    if meta is not None and meta.damage:  # where the files end: what the exported session could not read follows
+        end_ns = int(host_ns(max(float(cur.time_s(cur.sample_index[-1])) + shift, float(enc.t_s[-1]))))
+        events += [StreamEvent(end_ns, _stream_of(span), "warning", f"not in the exported files: {span}")
+                   for span in meta.damage]
     cpr = getattr(bench.drive, "counts_per_rev", None) or bench.encoder.counts_per_rev
     _make_folder(out)
     tmp = out.with_name(f".{out.name}.importing")
@@ -261,7 +266,8 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
         writer.append_encoder(EncoderBlock(enc.index, enc.position_counts, host_ns(enc.t_s), enc.drive_time_s))
         for event in events:
             writer.add_event(event)
-        writer.finish("complete", f"imported from {current_path.name} and {encoder_path.name}")
+        writer.finish(status, f"imported from {current_path.name} and {encoder_path.name}"
+                      + (f"; {incomplete}" if incomplete else ""))
         if writer.failure is not None:
             raise writer.failure
         os.replace(tmp, out)
@@ -272,5 +278,11 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
     finally:
         with contextlib.suppress(OSError):  # nothing to remove where nothing could be written
             tmp.unlink(missing_ok=True)
-    return ImportResult(out, [*([meta_warning] if meta_warning else []), *(n.detail for n in notes
-                                                                           if n.kind == "warning")])
+    return ImportResult(out, [*([meta_warning] if meta_warning else []), *([incomplete] if incomplete else []),
+                              *(n.detail for n in notes if n.kind == "warning")])
+
+
+def _stream_of(span: str) -> str:
+    """The stream a damaged span names ("current: samples …"); "session" for a whole-file note ("file cut: …")."""
+    stream = span.split(":", 1)[0]
+    return stream if stream in ("current", "encoder", "events") else "session"

@@ -135,19 +135,20 @@ class Session:
     def status(self) -> str:
         return self.meta.status
 
-    def require_usable(self, *, partial: bool = False) -> None:
+    def require_usable(self, *, partial: bool = False, action: str = "analyse") -> None:
         """Raise :class:`ConfigError` for a session still ``recording`` or damaged, unless ``partial``.
 
-        ``partial`` accepts them: the intact part is used (the caller marks its result partial).
+        ``partial`` accepts them: the intact part is used (the caller marks its result partial). ``action`` is what
+        ``--partial`` would do with it, in the message ("analyse", "export").
         """
         if partial:
             return
         if self.damage:
             raise ConfigError(f"{self.path}: damaged ({'; '.join(self.damage)}) — run acq check, or use --partial "
-                              "to analyse the intact part")
+                              f"to {action} the intact part")
         if self.status == "recording":
             raise ConfigError(f"{self.path}: status recording (still being recorded, or the recorder was killed) — "
-                              "run acq check, or use --partial to analyse what is stored")
+                              f"run acq check, or use --partial to {action} what is stored")
 
     @property
     def tags(self) -> dict[str, Any]:

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
@@ -12,7 +12,7 @@ from rich.console import Console
 from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn,
                            TimeRemainingColumn)
 
-from acq.monitoring.batch import CATALOGUE_NAME, BatchReport, OnProgress, find_sessions, report_json, run_batch
+from acq.monitoring.batch import CATALOGUE_NAME, BatchReport, OnProgress, find_all_sessions, report_json, run_batch
 from acq.monitoring.catalogue import Catalogue
 from acq.ui.display import batch_table
 from acq.ui.report_png import draw_report
@@ -48,12 +48,13 @@ def batch_progress(console: Console | None = None) -> Iterator[OnProgress]:
             progress.stop()
 
 
-def analyze_many(spec: Path, request: AnalysisRequest, *, jobs: int | None, catalogue_path: Path | str | None,
-                 scheduler: str | None, report: bool, as_json: bool, out: Console, result_dir: Path | None = None) -> int:
-    """``acq analyze FOLDER|GLOB``: the batch, its table (or JSON) on ``out``; 1 when a session failed, else 0; 130
-    when Ctrl-C stopped it (one line on stderr says how far it got). With ``result_dir`` the results, reports and the
-    default catalogue go there (the sessions' folders may be read-only)."""
-    paths, base = find_sessions(spec)
+def analyze_many(specs: Sequence[Path], request: AnalysisRequest, *, jobs: int | None,
+                 catalogue_path: Path | str | None, scheduler: str | None, report: bool, as_json: bool, out: Console,
+                 result_dir: Path | None = None) -> int:
+    """``acq analyze FOLDER|GLOB|SESSION…``: the batch, its table (or JSON) on ``out``; 1 when a session failed, else
+    0; 130 when Ctrl-C stopped it (one line on stderr says how far it got). With ``result_dir`` the results, reports
+    and the default catalogue go there (the sessions' folders may be read-only)."""
+    paths, base = find_all_sessions(specs)
     if result_dir is not None:
         _one_result_name_each(paths, result_dir)
     done: BatchReport | None = None

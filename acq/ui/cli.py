@@ -320,7 +320,7 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
 
 
 @cli.command(name="analyze")
-@click.argument("session_path", type=click.Path(path_type=Path))
+@click.argument("session_paths", metavar="SESSION...", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--torque", type=click.Choice(["encoder", "hilbert", "park"]), default=None,
               help="Torque from current: encoder-angle demodulation (default, one phase), Park (≥ 2 phases), "
                    "or the paper's Hilbert envelope.")
@@ -351,7 +351,7 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
 @click.option("--result-dir", type=click.Path(path_type=Path), default=None, metavar="DIR",
               help="Write the .result.json and .report.png (and the default catalogue) into DIR instead of beside "
                    "the session, e.g. for a read-only archive.")
-def analyze_command(session_path: Path, torque: str | None, params: str, fit_kind: str, band: str | None,
+def analyze_command(session_paths: tuple[Path, ...], torque: str | None, params: str, fit_kind: str, band: str | None,
                     paper: bool, as_json: bool, no_report: bool, wait_report: bool, jobs: int | None,
                     catalogue_path: Path | str | None, partial: bool, scheduler: str | None,
                     result_dir: Path | None) -> int:
@@ -362,10 +362,12 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
     paper, torque-<method>, params-K, fit-complex, band-<lo>-<hi>, e.g. --band 10,150 --params K writes
     <session>.params-K.band-10-150.result.json.
 
-    SESSION may be a folder or a glob ('sessions/*.h5'): every session not yet current in the catalogue
-    (same file hash and options) is analysed in parallel and recorded there; exit code 1 if any failed.
+    SESSION may be a folder or a glob ('sessions/*.h5'), or several sessions, folders or globs (sessions/*.h5 as
+    the shell expands it): every session not yet current in the catalogue (same file hash and options) is analysed
+    in parallel and recorded there; exit code 1 if any failed.
     """
-    batch = is_batch(session_path)
+    session_path = session_paths[0]
+    batch = len(session_paths) > 1 or is_batch(session_path)
     if not batch:
         require_session_file(session_path)  # a mistyped path is one line before the analysis's libraries load
     from analysis import AnalysisRequest
@@ -377,7 +379,7 @@ def analyze_command(session_path: Path, torque: str | None, params: str, fit_kin
     if batch:
         from acq.ui.batch_cli import analyze_many
 
-        return analyze_many(session_path, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
+        return analyze_many(session_paths, request, jobs=jobs, catalogue_path=catalogue_path, scheduler=scheduler,
                             report=not no_report, as_json=as_json, out=out, result_dir=result_dir)
     from acq.offline.analyze import ResultNotWritten
 
@@ -403,6 +405,9 @@ def _result_folder(result_dir: Path) -> Path:
     except OSError as e:
         from acq.recording.storage import storage_error
 
+        if isinstance(e, FileNotFoundError):  # a folder that cannot be made there (e.g. under /proc): bad input
+            raise ConfigError(f"--result-dir {result_dir}: cannot make a folder there "
+                              f"({(e.strerror or 'no such file or directory').lower()})") from None
         raise storage_error(e, f"--result-dir {result_dir}") from None
     return result_dir.resolve()
 

@@ -196,7 +196,11 @@ def result_table(doc: dict[str, Any]) -> FittedTable:
         columns += [Column("sim truth", true_values, drop=2), Column("error", errors, drop=1)]
     quality = doc["quality"]
     caption = [f"options: {options_text(doc)}", *quality["reasons"]]
-    return FittedTable(f"identification — verdict [bold]{escape(quality['verdict'])}[/bold]", columns, caption)
+    title = f"identification — verdict [bold]{escape(quality['verdict'])}[/bold]"
+    if doc.get("partial"):  # why (the spans left out) is the first note of the caption
+        title += (" — [bold]partial[/bold]: readable part of a damaged session" if doc["session"].get("damage")
+                  else " — [bold]partial[/bold]: what was stored of a session still recording")
+    return FittedTable(title, columns, caption)
 
 
 def _lookup(doc: dict[str, Any], path: tuple[str, ...]) -> tuple[bool, Any]:
@@ -300,7 +304,7 @@ def trend_table(trend: Trend) -> FittedTable:
             f"baseline {trend.baseline_K_Nm_per_rad:.1f} N·m/rad ({trend.baseline_note})")
     sigma = "" if trend.sigma_K_Nm_per_rad is None else f", σ = {f1(trend.sigma_K_Nm_per_rad)} N·m/rad"
     caption += [f"{base}; ALARM below −{trend.threshold_pct:g} % (threshold) or "
-                f"EWMA (λ = {trend.ewma_lambda:g}) below its −{trend.ewma_L:g}σ limit (EWMA){sigma}; rules "
+                f"EWMA (λ = {trend.ewma_lambda:g}) below its −{trend.ewma_L:g}σ limit (EWMA){sigma}; rules: "
                 f"{trend.rules_source}",
                 *(f"#{i} skipped: {p.reason}" for i, p in enumerate(pts, 1) if p.state == "skipped")]
     title = f"stiffness trend — {escape(trend.joint)}" + ("  [bold red]ALARM[/]" if trend.alarm else "")

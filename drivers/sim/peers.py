@@ -157,7 +157,7 @@ def open_canopen_with_sim_node(bench: Bench, sim_bench: SimBench | None, fast: b
     s = bench.drive
     assert isinstance(s, DriveCanopen) and sim_bench is not None
     if fast:
-        raise ConfigError("--fast: the simulated CANopen drive runs on the bus in real time; record without --fast")
+        raise ConfigError("--fast: the simulated CANopen drive runs on the bus in real time; run without --fast")
     adapter = canopen_drive.open_drive(bench, None, fast)
     if s.motion == "external":  # the robot's own master owns the drive; acq listens
         return CanopenWithRobot(adapter, _robot_cell(bench, sim_bench))
