@@ -36,6 +36,9 @@ from drivers.config import Bench, DaqNidaqmx
 from acqcore.errors import ConfigError, DeviceError
 
 DRIVER_MISSING = "NI-DAQmx driver not installed — install it or use configs/benches/sim.toml"
+#: How to install the driver: the nidaqmx package's own installer (Windows, Linux) or NI's runtime.
+INSTALL_DRIVER = ("install the NI-DAQmx driver: python -m nidaqmx installdriver (Windows, Linux), or the NI-DAQmx "
+                  "runtime from ni.com")
 SAMPLES_NOT_YET_AVAILABLE = -200284
 #: DAQmx overflow codes → (what happened, what to change). ``{buffer_s}``/``{block_s}`` are filled in.
 OVERFLOW_ADVICE: dict[int, tuple[str, str]] = {

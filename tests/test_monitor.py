@@ -90,6 +90,36 @@ def test_passive_capture_never_commands_motion_and_the_robot_moves_the_joint(tmp
     assert abs(counts.max() - counts.min()) > bench.encoder.counts_per_rev  # the robot program moved it > 1 rev
 
 
+def test_acq_record_on_a_listening_bench_records_passively_without_a_profile(capsys: pytest.CaptureFixture[str],
+                                                                           tmp_path: Path) -> None:
+    """`acq record` asked for --profile, then refused it with "record without a profile", which the CLI had no way
+    to do. Now: no --profile, the machine's own motion recorded and identified on the segments that excite."""
+    bench = _bench_file(tmp_path, seed=EXCITING_SEED)
+    run = run_cli(capsys, "record", "--bench", str(bench), "--duration", "10", "--fast", "--out", str(tmp_path / "s"))
+    assert run.code == 0, run.err
+    (path,) = (tmp_path / "s").glob("*.h5")
+    session = load(path)
+    assert session.profile is None and session.status == "complete"
+    assert (session.current.sample_count, session.encoder.position_counts.size) == (256000, 10000)
+    (result,) = (tmp_path / "s").glob("*.result.json")
+    doc = json.loads(result.read_text())
+    assert doc["excitation"]["selection_applied"] is True and doc["quality"]["verdict"] == "ok"
+    assert doc["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
+    refused = run_cli(capsys, "record", "--bench", str(bench), "--duration", "10", "--profile", "triangle_0.2s",
+                      "--out", str(tmp_path / "t"))
+    assert (refused.code, refused.err.strip()) == (2, f"acq: error: --profile triangle_0.2s: {bench} has [drive] motion "
+                                                      "= \"external\": the machine's own controller moves the joint and acq "
+                                                      "never commands motion — leave out --profile to record passively "
+                                                      "what the machine does")
+    no_length = run_cli(capsys, "record", "--bench", str(bench), "--out", str(tmp_path / "t"))
+    assert (no_length.code, no_length.err.strip()) == (2, f"acq: error: {bench} has [drive] motion = \"external\": a "
+                                                          "passive recording has no profile to take its length from — "
+                                                          "give --duration (seconds)")
+    commanded = run_cli(capsys, "record", "--out", str(tmp_path / "t"))
+    assert commanded.code == 2 and "Missing option '--profile'" in commanded.err
+    assert not (tmp_path / "t").exists()
+
+
 def test_passive_bench_refuses_a_profile_and_a_commanded_bench_needs_one(tmp_path: Path) -> None:
     from acq.config import load_profile
 
@@ -209,7 +239,7 @@ def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: p
     users = dict(os.environ)
     run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "4m", "--baseline-windows", "2",
                   "--keep", "0", "--out", str(tmp_path / "m"),
-                  "--on-alarm", f"sh -c 'env -0 > {env_file}'")
+                  "--on-alarm", f"env -0 > {env_file}")  # a shell's redirection: the command runs through sh -c
     assert run.code == 3
     seen = dict(item.split("=", 1) for item in env_file.read_text().split("\0") if item)
     env = {name: value for name, value in seen.items() if name.startswith("ACQ_")}
@@ -224,6 +254,29 @@ def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: p
     assert float(env["ACQ_BASELINE_K"]) == pytest.approx(baseline, rel=1e-5)
     assert Path(env["ACQ_SESSION"]).exists()  # an alarming window's raw file is kept even with --keep 0
     assert "ALARM" in run.err
+
+
+def test_on_alarm_runs_through_the_shell_and_its_failure_is_reported(capsys: pytest.CaptureFixture[str],
+                                                                      tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """README's own example: the shell expands $ACQ_K (it printed "K $ACQ_K" literally, run without a shell), and a
+    command that fails (here: not found, exit 127) is said in the status line and the final summary (it said nothing)."""
+    bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0, seed=EXCITING_SEED)
+    monkeypatch.setenv("COLUMNS", "200")  # the final table unwrapped
+    said = tmp_path / "said.txt"
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "4m", "--baseline-windows", "2",
+                  "--keep", "0", "--out", str(tmp_path / "m"), "--on-alarm",
+                  f'echo "joint $ACQ_JOINT: K $ACQ_K (baseline $ACQ_BASELINE_K)" | tee {said} && acq-no-such-notifier')
+    assert run.code == 3
+    rows = _rows(tmp_path / "m")
+    baseline = (rows[0]["K_Nm_per_rad"] + rows[1]["K_Nm_per_rad"]) / 2
+    assert said.read_text() == f"joint joint1: K {rows[3]['K_Nm_per_rad']:.6g} (baseline {baseline:.6g})\n"
+    failure = ("alarm command failed: exit 127 (command not found): echo \"joint $ACQ_JOINT: K $ACQ_K (baseline "
+               f"$ACQ_BASELINE_K)\" | tee {said} && acq-no-such-notifier")
+    status_lines = [line for line in run.err.splitlines() if " captured, " in line]
+    assert any(line.endswith(f" — {failure}") for line in status_lines)  # the status line when it failed
+    summary = " ".join(run.err.split())  # the final table: the failure beside "alarms raised"
+    assert "alarms raised │ 1 · alarm command failed: exit 127 (command not found) │" in summary
 
 
 def test_retention_rules() -> None:
@@ -331,6 +384,40 @@ def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None
     assert not not_excited({"quality": {**weak, "verdict": "ok"}, "clock": {"residual_s": 20e-6}})
     strong = {"verdict": "poor", "mean_coherence": 0.9, "excitation_coherence": 0.95}
     assert not not_excited({"quality": strong, "clock": {"residual_s": 20e-6}})  # poor for another reason
+
+
+def test_a_window_whose_segments_do_not_excite_is_not_excited_whatever_its_clock_residual() -> None:
+    """The analysis' segment selection decides first: fewer than two segments that excite (selection not applied)."""
+    from acq.monitoring.window_judge import excites, not_excited
+
+    strong = {"verdict": "failed", "mean_coherence": 0.9, "excitation_coherence": 0.95}
+    still = {"excited_fraction": 0.0, "selection_applied": False}
+    moving = {"excited_fraction": 0.8, "selection_applied": True}
+    assert not_excited({"quality": strong, "clock": {"residual_s": 1.75e-3}, "excitation": still})
+    assert not not_excited({"quality": strong, "clock": {"residual_s": 1.75e-3}, "excitation": moving})
+    assert not not_excited({"quality": strong, "clock": {"failure": "clock: no alignment found"}, "excitation": still})
+    assert not not_excited({"quality": {**strong, "verdict": "ok"}, "clock": {}, "excitation": still})
+    assert [excites({"quality": strong, "excitation": e}) for e in (still, moving)] == [False, True]
+    assert not excites({"quality": {"verdict": "not excited"}}) and not excites(None)
+
+
+def test_a_window_the_joint_barely_moved_in_is_not_excited_and_not_counted_as_excited(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The shipped seed 0 at 0 and 12 min: no segment excites in either. The window at 12 min came out `failed`
+    with K 31 084 N·m/rad (truth 891) and the advice "remove interference at its source (PWM ripple…)", and was
+    counted excited: its clock residual (1753 µs, little motion to align on) kept it from `not excited`."""
+    monkeypatch.setenv("COLUMNS", "120")
+    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--fast", "--every", "12m", "--for", "13m",
+                  "--out", str(tmp_path / "m"))
+    assert run.code == 0
+    rows = _rows(tmp_path / "m")
+    assert [(r["verdict"], r["K_Nm_per_rad"]) for r in rows] == [("not excited", None)] * 2
+    assert json.loads(rows[1]["reasons_json"]) == [
+        "0 of 12 moves put torque into 10…400 Hz beyond chance (0 % of the window)",
+        "clock alignment residual 1753 µs exceeds 1000 µs for a amplitude fit"]
+    assert "windows captured / excited / analysed │ 2 / 0 / 2 │" in " ".join(run.err.split())
+    trend = run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1")
+    assert "31084" not in trend.out and "PWM" not in trend.out
 
 
 @pytest.fixture(scope="module")

@@ -13,10 +13,13 @@ from pathlib import Path
 
 import pytest
 
+import acq.commissioning.devices
 from acq.commissioning.selftest_checks import Check
 from acq.config import DEFAULT_BENCH
 from acq.ui.selftest_cli import next_step, selftest_json
+from acqcore.errors import DeviceError
 from analysis.speed_ratio import SpeedRatio, likely_counts_per_rev, ratio_doubt, ratio_fault
+from drivers.nidaq import DRIVER_MISSING
 from tests.helpers import run_cli
 from tests.nidaqmx_standin import StandinHardware
 from tests.test_nidaq import hardware, write_bench  # noqa: F401 - the stand-in NI 9234 fixture
@@ -71,6 +74,45 @@ def test_correct_bench_passes_every_check_in_order_with_figures(capsys: pytest.C
     # the shipped bench states its inertias known (they are its [sim] truth): k_t is checked, and holds
     assert [c["name"] for c in doc["checks"] if c["status"] != "pass"] == []
     assert by["torque constant"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
+
+
+ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
+
+
+@pytest.mark.parametrize("seed", [5, 0])
+def test_a_listening_bench_is_checked_on_the_machines_own_motion_without_commanding_any(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, seed: int) -> None:
+    """sim_robot.toml ([drive] motion = "external") failed `✗ devices · open` with "record without a profile", exit 2.
+    Now the checks that need no commanded motion run; seed 5's first 10 s excite the joint, seed 0's do not (⚠)."""
+    bench = tmp_path / "robot.toml"
+    bench.write_text(ROBOT.read_text().replace("seed = 0 ", f"seed = {seed} "))
+    code, doc = selftest(capsys, bench)
+    assert code == 0 and doc["passed"]
+    by = {c["name"]: c for c in doc["checks"]}
+    assert [(c["stage"], c["name"], c["status"]) for c in doc["checks"]][:8] == [
+        ("devices", "acq devices", "pass"), ("devices", "DAQ", "pass"), ("devices", "drive", "pass"),
+        ("streams", "recording", "pass"), ("streams", "DAQ blocks", "pass"), ("streams", "drive period", "pass"),
+        ("motion", "machine's motion", "pass"), ("motion", "electrical speed", "warn")]
+    assert by["recording"]["figure"] == "3.0 s: 76800 current + 3000 encoder samples, 0 + 0 lost"
+    assert by["machine's motion"]["figure"].endswith(" motor revolutions in 10 s (the machine's own motion; acq "
+                                                    "commanded none)")
+    assert by["electrical speed"]["fix"] == ("pole_pairs, counts_per_rev and the phase order stay unchecked on a "
+                                             "listening bench: take them from the motor's and the encoder's data sheets")
+    ident = by["identification (10 s)"]
+    if seed == 5:
+        assert ident["status"] == "pass" and ident["values"]["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
+        assert by["torque constant"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
+    else:
+        assert (ident["status"], ident["figure"]) == ("warn", "not excited: 0 of 12 moves put torque into 10…400 Hz "
+                                                              "beyond chance (3 % of the window)")
+        assert ident["fix"] == ("run acq selftest again while the machine runs a program with fast moves of this joint "
+                                "(acq commands no motion on a bench with [drive] motion = \"external\")")
+    refused = run_cli(capsys, "selftest", "--fast", "--bench", str(bench), "--profile", "triangle_0.2s")
+    assert (refused.code, refused.err.strip()) == (2, f"acq: error: --profile triangle_0.2s: {bench} has [drive] motion "
+                                                      "= \"external\": acq commands no motion there and checks the bench "
+                                                      "on the machine's own motion — leave out --profile")
+    assert next_step([], Path("robot.toml"), None) == ("the bench is ready: acq monitor --bench robot.toml, or acq record "
+                                                       "--bench robot.toml --duration 10")
 
 
 def test_a_new_users_first_selftest_on_the_shipped_bench_shows_no_warning(capsys: pytest.CaptureFixture[str]) -> None:
@@ -312,6 +354,31 @@ def test_ni_daq_missing_device_and_coerced_rate_are_named(capsys: pytest.Capture
     daq = next(c for c in json.loads(run.out)["checks"] if c["name"] == "DAQ")
     assert daq["status"] == "warn" and daq["values"]["rate_hz"] == 25600.0
     assert daq["fix"] == "[daq] rate_hz = 25000: the card runs 25600 Hz — state that rate"
+
+
+@pytest.mark.parametrize("missing", ["driver", "package"])
+def test_a_missing_ni_driver_or_package_gets_the_fix_that_installs_it(capsys: pytest.CaptureFixture[str],
+                                                                      tmp_path: Path, hardware: StandinHardware,
+                                                                      monkeypatch: pytest.MonkeyPatch,
+                                                                      missing: str) -> None:
+    """The fix said "no device Dev1 — check the cable and NI MAX": no device can be seen without the driver."""
+    if missing == "driver":
+        hardware.driver_installed = False
+    else:
+        def no_package() -> None:
+            raise DeviceError("the nidaqmx Python package is missing (No module named 'nidaqmx') — pip install "
+                              "nidaqmx, or use configs/benches/sim.toml")
+        monkeypatch.setattr(acq.commissioning.devices, "import_nidaqmx", no_package)
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench",
+                  str(write_bench(tmp_path, physical_channels=["Dev1/ai0"])))
+    fail = failed_check(json.loads(run.out))
+    assert run.code == 1 and fail["name"] == "acq devices"
+    install = ("install the NI-DAQmx driver: python -m nidaqmx installdriver (Windows, Linux), or the NI-DAQmx runtime "
+               "from ni.com; then acq devices lists the card — or use configs/benches/sim.toml")
+    if missing == "driver":
+        assert (fail["figure"], fail["fix"]) == (DRIVER_MISSING, install)
+    else:
+        assert fail["fix"] == f"pip install nidaqmx, then {install}"
 
 
 FAST_RAMPS = """kind = "triangle"

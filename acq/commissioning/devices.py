@@ -16,7 +16,7 @@ from typing import Any
 
 from acq.config import DEFAULT_BENCH
 from acqcore.errors import DeviceError
-from drivers.nidaq import DRIVER_MISSING, first_line, import_nidaqmx
+from drivers.nidaq import DRIVER_MISSING, INSTALL_DRIVER, first_line, import_nidaqmx
 
 #: python-can interfaces that are software buses, not something a drive can be wired to.
 SOFTWARE_CAN = frozenset({"virtual", "udp_multicast"})
@@ -26,11 +26,13 @@ CAN_NOTES = {"serial": "python-can's serial-line CAN protocol; only if such an a
 
 @dataclass(frozen=True)
 class Section:
-    """One kind of device: rows of (name, kind, detail), and why there are none if there are none."""
+    """One kind of device: rows of (name, kind, detail), why there are none if there are none, and what to install
+    when a library or driver is what is missing (``install``, "" otherwise)."""
 
     title: str
     rows: list[tuple[str, str, str]] = field(default_factory=list)
     empty_because: str = ""
+    install: str = ""
 
     def to_json_dict(self) -> dict[str, Any]:
         """``{"title", "devices": [{"device", "kind", "detail"}], "empty_because"}``."""
@@ -43,15 +45,15 @@ def ni_section() -> Section:
     title = "NI-DAQmx devices"
     try:
         nidaqmx = import_nidaqmx()
-    except DeviceError as e:
-        return Section(title, empty_because=str(e))
+    except DeviceError as e:  # the Python package is missing
+        return Section(title, empty_because=str(e), install=f"pip install nidaqmx, then {INSTALL_DRIVER}")
     try:
         system = nidaqmx.system.System.local()
         v = system.driver_version
         rows = [(d.name, d.product_type, ", ".join(ch.name for ch in d.ai_physical_chans) or "no AI channels")
                 for d in system.devices]
     except nidaqmx.errors.DaqNotFoundError:
-        return Section(title, empty_because=DRIVER_MISSING)
+        return Section(title, empty_because=DRIVER_MISSING, install=INSTALL_DRIVER)
     except nidaqmx.errors.DaqError as e:
         return Section(title, empty_because=f"NI-DAQmx: {first_line(e)} (DAQmx error {e.error_code})")
     version = f"{v.major_version}.{v.minor_version}.{v.update_version}"

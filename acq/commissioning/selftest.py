@@ -10,6 +10,13 @@
    against pole_pairs·ω, direction, phase order (2–3 phases);
 4. identification: a 10 s session of the profile, its verdict, and the torque constant against a known inertia.
 
+On a bench that listens (``[drive] motion = "external"``: the machine's own controller moves the joint) acq
+commands no motion and runs what needs none (:func:`_passive_motion_and_identification`): devices and streams
+as above, recorded passively (without the current at standstill: the machine may be moving), then 10 s of
+the machine's own motion — the electrical speed and phase order on it, and the identification on the
+segments that excite (as ``acq monitor``): a window the machine did not excite is a ⚠ that says so, not a
+verdict on the bench. The slow move's commanded speed and direction cannot be checked there.
+
 The checks run in this order and stop at the first ✗ (a later check would only repeat its consequence).
 The simulated bench runs through the same registry; this module never imports ``drivers.sim``.
 """
@@ -22,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.commissioning.devices import can_section, ni_section, serial_section
+from acq.monitoring.window_judge import joint_travel, not_excited, not_excited_reasons
 from acq.commissioning.selftest_checks import (Check, blf_check, daq_blocks_check, direction_check, drive_period_check,
                                                encoder_speed_check, phase_order_check, samples_check, speed_ratio_check,
                                                standstill_current_check, torque_constant_check)
@@ -56,16 +64,22 @@ class _HoldStill:
         return getattr(self._drive, name)
 
 
-def run_selftest(bench: Bench, profile: Profile, work_dir: Path, *, fast: bool = False) -> Iterator[Check]:
+def listens(bench: Bench) -> bool:
+    """True on a bench whose machine moves the joint itself (``[drive] motion = "external"``): acq commands none."""
+    return getattr(bench.drive, "motion", "commanded") == "external"
+
+
+def run_selftest(bench: Bench, profile: Profile | None, work_dir: Path, *, fast: bool = False) -> Iterator[Check]:
     """Run the checks in order, yielding each as it completes; stop after the first that fails.
 
     Parameters
     ----------
-    bench, profile : the bench config and the identification's motion.
+    bench, profile : the bench config and the identification's motion (None on a bench that :func:`listens`).
     work_dir : folder for the short sessions (and their raw logs).
     fast : simulated parts run as fast as possible (as ``acq record --fast``).
     """
-    for stage in (_devices_and_streams, _motion, _identification):
+    passive = (_passive_motion_and_identification,)
+    for stage in (_devices_and_streams, *(passive if listens(bench) else (_motion, _identification))):
         for check in stage(bench, profile, work_dir, fast):
             yield check
             if check.status == "fail":
@@ -84,6 +98,10 @@ def _listed(bench: Bench) -> Iterator[Check]:
         ni = ni_section()
         seen = {name for name, _, _ in ni.rows}
         wanted = {c.split("/")[0] for c in daq.physical_channels}
+        if ni.install:  # no device can be seen before the package and the driver are there
+            yield Check("devices", "acq devices", "fail", ni.empty_because,
+                        f"{ni.install}; then acq devices lists the card — or use configs/benches/sim.toml")
+            return
         if ni.empty_because or not wanted <= seen:
             yield Check("devices", "acq devices", "fail", ni.empty_because or f"NI-DAQmx sees {sorted(seen)}",
                         f"[daq] physical_channels = {_toml(daq.physical_channels)}: no device "
@@ -105,15 +123,17 @@ def _listed(bench: Bench) -> Iterator[Check]:
     yield Check("devices", "acq devices", "pass", "the configured devices are listed")
 
 
-def _devices_and_streams(bench: Bench, profile: Profile, work_dir: Path, fast: bool) -> Iterator[Check]:
+def _devices_and_streams(bench: Bench, profile: Profile | None, work_dir: Path, fast: bool) -> Iterator[Check]:
     listed = list(_listed(bench))
     yield from listed
     if any(c.status == "fail" for c in listed):
         return
     try:
         current, drive = open_bench(bench, fast=fast)
-        recorder = Recorder(bench, STANDSTILL, current, _HoldStill(drive), work_dir, STANDSTILL_S,
-                            tags={"selftest": "standstill"})
+        recorder = (Recorder(bench, None, current, drive, work_dir, STANDSTILL_S, tags={"selftest": "streams"})
+                    if listens(bench) else  # the machine's motion, whatever it does: no command
+                    Recorder(bench, STANDSTILL, current, _HoldStill(drive), work_dir, STANDSTILL_S,
+                             tags={"selftest": "standstill"}))
         recorder.start_devices()
     except AcqError as e:
         yield Check("devices", "open", "fail", str(e), "the message names the key or the device; "
@@ -141,7 +161,8 @@ def _devices_and_streams(bench: Bench, profile: Profile, work_dir: Path, fast: b
     stats = getattr(drive, "stats", None)  # a serial link's frame and CRC counters
     if callable(stats):
         yield _serial_check(stats(), bench)
-    yield standstill_current_check(session)
+    if not listens(bench):  # a listening bench's joint may be moving: no standstill to measure offset and noise on
+        yield standstill_current_check(session)
 
 
 def _daq_check(bench: Bench, recorder: Recorder) -> Check:
@@ -217,8 +238,9 @@ def _serial_check(stats: Any, bench: Bench) -> Check:
     return Check("streams", "serial link", "pass", figure, values=values)
 
 
-def _record(bench: Bench, profile: Profile, work_dir: Path, fast: bool, duration_s: float, tag: str) -> Path:
-    """Record ``duration_s`` of ``profile`` through the registry and the recorder; the session's path."""
+def _record(bench: Bench, profile: Profile | None, work_dir: Path, fast: bool, duration_s: float, tag: str) -> Path:
+    """Record ``duration_s`` of ``profile`` (None: passively) through the registry and the recorder; the session's
+    path."""
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, work_dir, duration_s, tags={"selftest": tag})
     return recorder.run().path
@@ -245,8 +267,58 @@ def _identification(bench: Bench, profile: Profile, work_dir: Path, fast: bool) 
     if recorded.status == "fail":  # frames lost while moving: the identification would only echo it
         yield recorded
         return
+    yield from _identified(bench, path)
+
+
+def _passive_motion_and_identification(bench: Bench, profile: Profile | None, work_dir: Path,
+                                       fast: bool) -> Iterator[Check]:
+    """On a listening bench: 10 s of the machine's own motion, the motion checks that need no command, and the
+    identification on the segments that excite."""
+    path = _record(bench, None, work_dir, fast, IDENTIFICATION_S, "machine's motion")
+    session = load(path)
+    recorded = samples_check(session, "motion")
+    if recorded.status == "fail":
+        yield recorded
+        return
+    travel, need = joint_travel(session)
+    if travel < need:
+        yield Check("motion", "machine's motion", "warn", f"the joint travelled {travel:.0f} counts in "
+                    f"{IDENTIFICATION_S:g} s, less than half an electrical revolution ({need:.0f} counts)",
+                    _WHILE_IT_RUNS, {"travel_counts": travel})
+        return
+    revolutions = travel / bench.encoder.counts_per_rev
+    yield Check("motion", "machine's motion", "pass", f"the joint travelled {revolutions:.1f} motor revolutions in "
+                f"{IDENTIFICATION_S:g} s (the machine's own motion; acq commanded none)",
+                values={"travel_counts": travel})
+    rec = recording_from_session(session)
+    ratio = electrical_speed_ratio(rec.current_a["i_a"], rec.rate_hz, rec.encoder_index, rec.position_counts,
+                                   rec.period_s, rec.counts_per_rev, rec.pole_pairs)
+    if ratio is None:  # a program's moves need not give one: the commanded slow move's "no current" does not follow
+        yield Check("motion", "electrical speed", "warn", "the machine's motion gives no steady ratio of the current's "
+                    "electrical frequency to pole_pairs·ω (its half-periods scatter, or its moves are too short)",
+                    "pole_pairs, counts_per_rev and the phase order stay unchecked on a listening bench: take them "
+                    "from the motor's and the encoder's data sheets")
+    else:
+        yield speed_ratio_check(ratio, bench)
+        yield phase_order_check(session, ratio.lag_s)
+    yield from _identified(bench, path)
+
+
+#: What a listening bench's selftest asks for when the machine's motion does not serve (it cannot command any).
+_WHILE_IT_RUNS = ("run acq selftest again while the machine runs a program with fast moves of this joint (acq "
+                  "commands no motion on a bench with [drive] motion = \"external\")")
+
+
+def _identified(bench: Bench, path: Path) -> Iterator[Check]:
+    """The identification of a recorded session: its verdict (a passive recording, analysed on the segments that
+    excite, that does not excite: a ⚠ saying so) and the torque constant against a known inertia."""
     done = analyze_session(path, report=False)
     doc = done.json_dict
+    if "excitation" in doc and not_excited(doc):  # the machine's motion, not the bench, fell short
+        yield Check("identification", f"identification ({IDENTIFICATION_S:g} s)", "warn",
+                    "not excited: " + "; ".join(not_excited_reasons(doc)), _WHILE_IT_RUNS,
+                    {"verdict": "not excited"})
+        return
     quality = doc["quality"]
     reasons = [r for r in quality["reasons"] if not r.startswith("note: ")]
     values = {k: doc[k] for k in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")}

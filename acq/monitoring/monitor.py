@@ -6,7 +6,9 @@ command); a worker process analyses it while capture goes on (at most ``jobs`` r
 a window beyond that is not analysed and says so — back-pressure, never an unbounded queue); the
 outcome goes into the catalogue (:mod:`acq.monitoring.catalogue`, the batch's record of an outcome); the trend
 (:mod:`acq.monitoring.trend`: baseline, threshold and EWMA rules) judges it; on entering alarm ``on_alarm`` runs
-with ``ACQ_JOINT``, ``ACQ_K``, ``ACQ_BASELINE_K``, ``ACQ_CHANGE_PCT``, ``ACQ_SESSION`` in its environment.
+through the shell (``sh -c``, in the background) with ``ACQ_JOINT``, ``ACQ_K``, ``ACQ_BASELINE_K``,
+``ACQ_CHANGE_PCT``, ``ACQ_SESSION`` in its environment; a command that fails is reported
+(:attr:`MonitorStatus.alarm_command_failure`).
 
 Each window is judged for excitation (:mod:`acq.monitoring.window_judge`): a window that does not excite is catalogued
 with verdict ``not excited`` and the reason, without K. Windows are numbered (session tag ``monitor_window``) and
@@ -19,7 +21,6 @@ does not sleep, and waits for the analysis instead of skipping (no real time pas
 from __future__ import annotations
 
 import math
-import shlex
 import subprocess
 import time
 from collections.abc import Callable
@@ -35,7 +36,7 @@ from acq.monitoring.catalogue import Catalogue, Entry, Outcome
 from acq.monitoring.folder_lock import folder_lock
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, Trend, compute_trend
-from acq.monitoring.window_judge import analyse_window, marked
+from acq.monitoring.window_judge import analyse_window, excites, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
 from acq.recording.reader import load
@@ -46,6 +47,10 @@ from drivers.config import Bench
 from drivers.registry import open_bench
 
 WINDOW_TAG = "monitor_window"
+#: How long the ending monitor waits for an alarm command still running (a mail or a webhook takes seconds).
+_ALARM_WAIT_S = 30.0
+#: The exit codes POSIX shells give themselves (XCU 2.8.2): the command was not found / could not be executed.
+_SHELL_EXITS = {127: "command not found", 126: "not executable"}
 #: Expected window size = this × the data's raw size (HDF5 chunks, block tables, events): measured 1.1…1.2.
 _SIZE_MARGIN = 1.5
 
@@ -84,6 +89,7 @@ class MonitorStatus:
     skipped: int = 0
     interrupted: int = 0
     alarms: int = 0
+    alarm_command_failure: str | None = None  # how the last --on-alarm command that failed did: "exit 127 (…)"
     machine_time_s: float = 0.0  # the start of the window being captured; its end once it is captured
     disk_bytes: int = 0
     last_K: float | None = None
@@ -250,13 +256,14 @@ class Monitor:
         self.catalogue.record(outcome)
         verdict = (outcome.doc or {}).get("quality", {}).get("verdict")
         self.status.analysed += verdict not in ("not analysed", "interrupted")
-        self.status.excited += verdict in ("ok", "poor", "failed")
+        self.status.excited += excites(outcome.doc)
         self.status.not_excited += verdict == "not excited"
         self.status.interrupted += verdict == "interrupted"
         self._excitation(outcome, verdict)
         self._windows[key] = replace(self._windows[key], done=True)
         trend = self._trend()
         self._judge(trend, key)
+        self._reap_alarms(wait=False)  # an alarm command of an earlier window that ended meanwhile (--fast: no waits)
         self._retain(trend)
         self._show()
 
@@ -297,7 +304,9 @@ class Monitor:
         self._in_alarm = point.state == "alarm"
 
     def _run_on_alarm(self, entry: Entry, trend: Trend) -> None:
-        """Start ``on_alarm`` (not waited for: a slow mail or webhook must not stop the capture)."""
+        """Start ``on_alarm`` through ``sh -c`` (as cron, systemd and git hooks do: pipes, redirections and ``$ACQ_K``
+        work; the values reach it only as environment variables, never in the command's text) and do not wait for it:
+        a slow mail or webhook must not stop the capture; :meth:`_reap_alarms` reports how it ended."""
         self.status.message = f"ALARM: K {entry.K_Nm_per_rad:.1f} N·m/rad ({entry.path})"
         if not self.s.on_alarm:
             return
@@ -305,21 +314,38 @@ class Monitor:
                "ACQ_BASELINE_K": f"{trend.baseline_K_Nm_per_rad:.6g}", "ACQ_SESSION": entry.path,
                "ACQ_CHANGE_PCT": f"{100 * (entry.K_Nm_per_rad / trend.baseline_K_Nm_per_rad - 1):.3g}"}  # type: ignore
         try:
-            self._alarm_procs.append(subprocess.Popen(shlex.split(self.s.on_alarm), env=env,
+            self._alarm_procs.append(subprocess.Popen(["/bin/sh", "-c", self.s.on_alarm], env=env,
                                                       stdin=subprocess.DEVNULL))
         except OSError as e:
-            self.status.message += f" — --on-alarm failed to start: {e}"
+            self._alarm_failed(f"cannot start /bin/sh: {e.strerror or e}")
         self._reap_alarms(wait=False)
 
     def _reap_alarms(self, wait: bool) -> None:
+        """Collect the alarm commands that ended and report those that failed; with ``wait`` (the monitor ends) give
+        each up to :data:`_ALARM_WAIT_S` and report one still running (it is left running: it may be mid-send)."""
         for proc in list(self._alarm_procs):
             if wait:
                 try:
-                    proc.wait(timeout=30)
+                    proc.wait(timeout=_ALARM_WAIT_S)
                 except subprocess.TimeoutExpired:
+                    self._alarm_failed(f"still running after {_ALARM_WAIT_S:g} s when the monitor ended "
+                                       f"(pid {proc.pid}, left running)")
+                    self._alarm_procs.remove(proc)
                     continue
-            if proc.poll() is not None:
-                self._alarm_procs.remove(proc)
+            code = proc.poll()
+            if code is None:
+                continue
+            self._alarm_procs.remove(proc)
+            if code > 0:
+                self._alarm_failed(f"exit {code}" + (f" ({_SHELL_EXITS[code]})" if code in _SHELL_EXITS else ""))
+            elif code < 0:
+                self._alarm_failed(f"killed by signal {-code}")
+
+    def _alarm_failed(self, why: str) -> None:
+        """Report a failed --on-alarm command in the status line and the final summary."""
+        self.status.alarm_command_failure = why
+        self.status.message = f"alarm command failed: {why}: {self.s.on_alarm}"
+        self._show()
 
     # ---- retention and disk ----------------------------------------------------------------------------
     def _retain(self, trend: Trend) -> None:

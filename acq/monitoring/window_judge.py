@@ -1,9 +1,11 @@
 """One monitor window judged and analysed (runs in a worker process): excited or not, and why.
 
 Before the analysis the joint's travel decides (less than half an electrical revolution cannot be analysed
-at all); after it the verdict's own excitation checks (coherence between f_a and f_r, and in the band,
-against :class:`analysis.quality.Thresholds`). A window that does not excite gets a catalogue record with
-verdict ``not excited`` and the reasons, without K, J or C: never a number.
+at all); after it the analysis' segment selection (fewer than two Welch segments whose torque explains their
+speed beyond chance: :mod:`analysis.segments`) and the verdict's own excitation checks (coherence between f_a
+and f_r, and in the band, against :class:`analysis.quality.Thresholds`). A window that does not excite gets a
+catalogue record with verdict ``not excited`` and why, without K, J or C: never a number, and without the
+analysis' advice on the hardware (interference, play: it judged a fit of data that carries no excitation).
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from acq.monitoring.batch import analyze_one, session_meta
 from acq.monitoring.catalogue import Outcome
 from acq.offline.analyze import output_paths, write_json
 from acq.recording.reader import load
+from acq.recording.session import Session
 from acqcore.errors import StorageError
 from analysis import AnalysisRequest, Thresholds
 
@@ -37,14 +40,33 @@ def _weak_coherence(quality: dict[str, Any]) -> str | None:
     return None
 
 
+def _unselected(doc: dict[str, Any]) -> bool:
+    """True when the analysis' segment selection found fewer than two segments that excite (it then used them all)."""
+    excitation = doc.get("excitation")
+    return excitation is not None and not excitation["selection_applied"]
+
+
 def not_excited(doc: dict[str, Any]) -> bool:
-    """True when a verdict that is not ok comes from the excitation checks (:func:`_weak_coherence`), with the clocks
-    aligned (a failed alignment, or a residual above the amplitude fit's limit, makes the coherence low too, but
-    says nothing about the motion: such a window keeps the analysis' own verdict and reasons, the clock's first)."""
+    """True when a verdict that is not ok comes from a lack of excitation, with clocks that were aligned at all.
+
+    Either the segment selection found fewer than two segments that excite (:func:`_unselected`: the motion itself
+    says so, whatever the clock residual — a residual above the limit is then what little motion there was to align
+    on), or the excitation checks fail (:func:`_weak_coherence`) with the residual within the amplitude fit's limit.
+    A failed alignment keeps the analysis' own verdict and reasons, the clock's first: it makes the coherence low
+    too, but says nothing about the motion; so does a high residual on a window whose segments do excite."""
     quality, clock = doc["quality"], doc.get("clock", {})
+    if quality.get("verdict") == "ok" or clock.get("failure"):
+        return False
     residual = clock.get("residual_s")
-    aligned = not clock.get("failure") and (residual is None or residual <= Thresholds().clock_residual_amplitude_s)
-    return quality.get("verdict") != "ok" and aligned and _weak_coherence(quality) is not None
+    aligned = residual is None or residual <= Thresholds().clock_residual_amplitude_s
+    return _unselected(doc) or (aligned and _weak_coherence(quality) is not None)
+
+
+def excites(doc: dict[str, Any] | None) -> bool:
+    """True when an outcome's window excites the joint: analysed to a verdict with numbers, and not with a segment
+    selection that found fewer than two segments that excite (the monitor's "excited" count)."""
+    analysed = doc is not None and doc.get("quality", {}).get("verdict") in ("ok", "poor", "failed")
+    return analysed and not _unselected(doc)  # type: ignore[arg-type]
 
 
 def _but(doc: dict[str, Any], excited_moves: int) -> str:
@@ -63,15 +85,21 @@ def marked(path: str, sha256: str, request: AnalysisRequest, meta: dict[str, Any
     return Outcome(path, sha256, request.key(), meta, out, None, 0.0)
 
 
+def joint_travel(session: Session) -> tuple[float, float]:
+    """Encoder counts the joint travelled in ``session`` (back and forth added up), and the least an analysis needs:
+    half an electrical revolution, in counts."""
+    counts = session.encoder.position_counts
+    travel = float(abs(counts[1:] - counts[:-1]).sum()) if counts.size > 1 else 0.0
+    return travel, session.bench.encoder.counts_per_rev / (2 * session.bench.motor.pole_pairs)
+
+
 def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
     """Judge and analyse one window (runs in a worker process); never raises."""
     if multiprocessing.parent_process() is not None:  # a worker: Ctrl-C in the terminal is the monitor's to handle
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         session = load(path)
-        counts = session.encoder.position_counts
-        travel = float(abs(counts[1:] - counts[:-1]).sum()) if counts.size > 1 else 0.0
-        need = session.bench.encoder.counts_per_rev / (2 * session.bench.motor.pole_pairs)
+        travel, need = joint_travel(session)
         if travel < need:
             return marked(path, sha256, request, session_meta(session), "not excited",
                           [f"the joint travelled {travel:.0f} counts, less than half an electrical revolution "
@@ -80,18 +108,25 @@ def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
         pass
     outcome = analyze_one(path, sha256, request, write=False)  # no report PNG; the result is written once, below
     if outcome.doc is not None and not_excited(outcome.doc):
-        reasons = [r for r in outcome.doc["quality"]["reasons"] if not r.startswith("note: ")]
-        reasons.sort(key=lambda r: "coherence" not in r)  # the excitation's own reasons first
-        excitation = outcome.doc.get("excitation")
-        if excitation is not None:
-            moves = excitation["moves"]
-            lo, hi = outcome.doc["options"]["band_hz"]
-            excited = sum(m["excited"] for m in moves)
-            reasons.insert(0, f"{excited} of {len(moves)} moves put torque into {lo:g}…{hi:g} Hz beyond chance "
-                              f"({100 * excitation['excited_fraction']:.0f} % of the window){_but(outcome.doc, excited)}")
-        outcome = replace(marked(path, sha256, request, outcome.session, "not excited", reasons, outcome.doc),
-                          seconds=outcome.seconds)
+        outcome = replace(marked(path, sha256, request, outcome.session, "not excited",
+                                 not_excited_reasons(outcome.doc), outcome.doc), seconds=outcome.seconds)
     return _write_result(Path(path), request, outcome)
+
+
+def not_excited_reasons(doc: dict[str, Any]) -> list[str]:
+    """Why a window does not excite: the moves that excite and the coherence that fell short, then the clock's
+    finding (a fact, not advice). The analysis' other reasons are left out: their advice (interference on the
+    phase current, play in the gear, the intervals of a K not shown) judges a fit of data without excitation."""
+    clock = [r for r in doc["quality"]["reasons"] if r.startswith("clock")]
+    excitation = doc.get("excitation")
+    if excitation is None:  # no segment selection asked for: the coherence checks' own words
+        return [f"the torque does not excite the speed: {_weak_coherence(doc['quality']) or 'no coherence measured'}",
+                *clock]
+    moves = excitation["moves"]
+    lo, hi = doc["options"]["band_hz"]
+    excited = sum(m["excited"] for m in moves)
+    return [f"{excited} of {len(moves)} moves put torque into {lo:g}…{hi:g} Hz beyond chance "
+            f"({100 * excitation['excited_fraction']:.0f} % of the window){_but(doc, excited)}", *clock]
 
 
 def _write_result(path: Path, request: AnalysisRequest, outcome: Outcome) -> Outcome:

@@ -33,6 +33,7 @@ if TYPE_CHECKING:
     from acq.offline.analyze import SessionResult
     from acq.recording.recorder import Recorder, RecordingResult
     from acq.recording.session import Session
+    from drivers.config import Bench
     from drivers.profile import Profile
 
 # numpy, scipy, h5py, pydantic and Qt are imported inside the commands that use them: `acq --help`, a command's
@@ -125,11 +126,13 @@ def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> 
 
 
 @cli.command()
-@click.option("--profile", "profile_name", required=True, help="Profile name in configs/profiles/ or a TOML path.")
+@click.option("--profile", "profile_name", default=None,
+              help="Profile name in configs/profiles/ or a TOML path; none on a bench with [drive] motion = "
+                   "\"external\" (acq then records passively what the machine's own controller does).")
 @click.option("--bench", "bench_path", type=click.Path(path_type=Path), default=None,
               help="Bench TOML (default: the simulated bench configs/benches/sim.toml).")
 @click.option("--duration", "duration_s", type=float, default=None,
-              help="Seconds to record (default: the profile's duration_s).")
+              help="Seconds to record (default: the profile's duration_s; needed without a profile).")
 @click.option("--joint", default=None, help="Joint name (default: the bench config's).")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("sessions"), show_default=True,
               help="Folder for the session file.")
@@ -138,12 +141,14 @@ def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> 
 @click.option("--no-analyze", is_flag=True, help="Only record; do not identify the joint afterwards.")
 @click.option("--live", is_flag=True, help="Watch it in a live window: phase current, speed, position, counters, gaps.")
 @tag_option
-def record(profile_name: str, bench_path: Path | None, duration_s: float | None, joint: str | None,
+def record(profile_name: str | None, bench_path: Path | None, duration_s: float | None, joint: str | None,
            out_dir: Path, operator: str, fast: bool, no_analyze: bool, tags: tuple[str, ...],
            live: bool) -> int:
-    """Swing the joint on PROFILE, record current and encoder, write one session file."""
-    from acq.config import (bench_label, check_duration, check_memory, load_bench, load_profile,
-                            resolve_profile_path, with_joint)
+    """Swing the joint on PROFILE, record current and encoder, write one session file.
+
+    On a bench whose machine moves the joint itself ([drive] motion = "external") acq commands no motion: it records
+    passively, without --profile, and the identification uses the segments that excite (as acq monitor)."""
+    from acq.config import bench_label, check_duration, check_memory, load_bench, resolve_profile_path, with_joint
     from acq.ui.display import summary_table
     from acq.recording.recorder import Recorder
     from acq.recording.reader import load
@@ -152,10 +157,10 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
     from drivers.registry import open_bench
 
     bench = with_joint(load_bench(bench_path), joint)
-    profile = load_profile(profile_name)
+    profile = _profile_for(bench, bench_path, profile_name, duration_s)
     if out_dir.exists() and not out_dir.is_dir():  # before any device starts
         raise ConfigError(f"--out {out_dir}: is a file, not a folder")
-    duration = check_duration(duration_s) if duration_s is not None else profile.duration_s
+    duration = check_duration(duration_s) if duration_s is not None else profile.duration_s  # type: ignore[union-attr]
     if not no_analyze:
         from acq.config import min_record_duration_s
         from analysis import AnalysisRequest
@@ -165,8 +170,10 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
             given = f"--duration {duration:g}" if duration_s is not None else f"the profile's duration_s = {duration:g}"
             raise ConfigError(f"{given}: the identification needs --duration {need_s:g} s or more ({parts}); record "
                               "longer, or add --no-analyze")
-        _require_enough_motion(profile, profile_name, bench.motor.pole_pairs)
-    refuse_beyond_limits(profile, bench, str(resolve_profile_path(profile_name)), bench_label(bench_path))
+        if profile is not None:  # a passive recording's motion is the machine's: judged by the analysis
+            _require_enough_motion(profile, str(profile_name), bench.motor.pole_pairs)
+    if profile is not None:
+        refuse_beyond_limits(profile, bench, str(resolve_profile_path(profile_name)), bench_label(bench_path))
     check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))
@@ -201,6 +208,27 @@ def record(profile_name: str, bench_path: Path | None, duration_s: float | None,
                f"{result.path} ({result.current_samples} current samples, {result.encoder_samples} encoder samples)",
                err=True)  # one plain line (rich would wrap it)
     return EXIT_INTERRUPTED if result.status == "interrupted" else 1
+
+
+def _profile_for(bench: Bench, bench_path: Path | None, profile_name: str | None,
+                 duration_s: float | None) -> Profile | None:
+    """The profile ``acq record`` executes; None on a bench that listens (``[drive] motion = "external"``), where a
+    profile is refused in one line (acq must not command motion there) and ``--duration`` is needed instead."""
+    from acq.config import load_profile
+
+    if getattr(bench.drive, "motion", "commanded") != "external":
+        if profile_name is None:
+            raise click.UsageError("Missing option '--profile' (only a bench with [drive] motion = \"external\" "
+                                   "records without one).")
+        return load_profile(profile_name)
+    if profile_name is not None:
+        raise ConfigError(f"--profile {profile_name}: {bench_path} has [drive] motion = \"external\": the machine's "
+                          "own controller moves the joint and acq never commands motion — leave out --profile to "
+                          "record passively what the machine does")
+    if duration_s is None:
+        raise ConfigError(f"{bench_path} has [drive] motion = \"external\": a passive recording has no profile to take "
+                          "its length from — give --duration (seconds)")
+    return None
 
 
 def _require_enough_motion(profile: Profile, name: str, pole_pairs: int) -> None:

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 from rich.live import Live
+from rich.markup import escape
 from rich.table import Table
 
 from acq.config import load_bench
@@ -50,7 +51,8 @@ def status_table(st: MonitorStatus) -> Table:
         ("excited share: last window · all windows", f"{_pct(st.last_excited_fraction)} · "
                                                      f"{_pct(st.program_excited_fraction)}"),
         ("trend state", f"[bold red]{st.state}[/]" if st.state == "alarm" else st.state),
-        ("alarms raised", str(st.alarms)),
+        ("alarms raised", str(st.alarms) + (f" · [bold red]alarm command failed: {escape(st.alarm_command_failure)}[/]"
+                                            if st.alarm_command_failure else "")),
         ("disk used", f"{st.disk_bytes / 1e6:.1f} MB"),
     ]
     for what, value in rows:
@@ -89,7 +91,8 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
 @click.option("--every", "every", default="60", show_default=True, help="One window per this (600, 10m, 1h).")
 @click.option("--for", "for_text", default=None, help="Stop after this (8h); default: until Ctrl-C.")
 @click.option("--on-alarm", default=None, metavar="CMD",
-              help="Run CMD on entering alarm, with ACQ_JOINT, ACQ_K, ACQ_BASELINE_K, ACQ_CHANGE_PCT, ACQ_SESSION.")
+              help="Run CMD through sh -c on entering alarm (in the background; a failure is reported), with "
+                   "ACQ_JOINT, ACQ_K, ACQ_BASELINE_K, ACQ_CHANGE_PCT, ACQ_SESSION in its environment.")
 @click.option("--keep", type=click.IntRange(min=0), default=10, show_default=True,
               help="Keep the raw files of the last N windows (baseline and alarming windows are always kept).")
 @click.option("--max-disk", default=None, help="Disk budget of the folder (2GB, 500MB); never exceeded.")

@@ -12,13 +12,16 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from acq.commissioning.selftest import SLOW_MOVE, run_selftest
+from acq.commissioning.selftest import SLOW_MOVE, listens, run_selftest
 from acq.commissioning.selftest_checks import Check
 from acq.config import bench_label, load_bench, load_profile, resolve_profile_path
+from acqcore.errors import ConfigError
 from drivers.limits import refuse_beyond_limits
 
 MARK = {"pass": "[green]✓[/]", "warn": "[yellow]⚠[/]", "fail": "[bold red]✗[/]"}
 STAGES = ("devices", "streams", "motion", "identification")
+#: The identification check's profile on a bench acq moves.
+DEFAULT_PROFILE = "triangle_0.2s"
 
 
 def check_line(check: Check) -> str:
@@ -41,13 +44,16 @@ def summary_table(checks: list[Check]) -> Table:
     return table
 
 
-def next_step(checks: list[Check], bench_path: Path | None, profile_name: str) -> str:
+def next_step(checks: list[Check], bench_path: Path | None, profile_name: str | None) -> str:
     """What to do next, plain text: the first failed check's fix, or the command that records on this bench (printed
-    under the summary at the terminal's width: as the table's caption it wrapped to the table's)."""
+    under the summary at the terminal's width: as the table's caption it wrapped to the table's); ``profile_name``
+    None: a bench that listens, recorded passively."""
     failed = next((c for c in checks if c.status == "fail"), None)
     if failed is not None:
         return f"stopped at {failed.stage} · {failed.name}: {failed.fix}"
     bench = "" if bench_path is None else f" --bench {bench_path}"
+    if profile_name is None:
+        return f"the bench is ready: acq monitor{bench}, or acq record{bench} --duration 10"
     return f"the bench is ready: acq record --profile {profile_name}{bench}"
 
 
@@ -62,24 +68,33 @@ def selftest_json(checks: list[Check], bench_path: str) -> dict[str, object]:
 @click.command("selftest")
 @click.option("--bench", "bench_path", type=click.Path(path_type=Path), default=None,
               help="Bench TOML (default: the simulated bench configs/benches/sim.toml).")
-@click.option("--profile", "profile_name", default="triangle_0.2s", show_default=True,
-              help="Profile of the identification check (name in configs/profiles/ or a TOML path).")
+@click.option("--profile", "profile_name", default=None,
+              help="Profile of the identification check (name in configs/profiles/ or a TOML path; default "
+                   f"{DEFAULT_PROFILE}); none on a bench with [drive] motion = \"external\", which is checked on the "
+                   "machine's own motion.")
 @click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
 @click.option("--keep", "keep_dir", type=click.Path(path_type=Path), default=None,
               help="Keep the selftest's sessions in this folder (default: a temporary folder, removed).")
 @click.option("--json", "as_json", is_flag=True, help="Print the checks as JSON.")
-def selftest_command(bench_path: Path | None, profile_name: str, fast: bool, keep_dir: Path | None,
+def selftest_command(bench_path: Path | None, profile_name: str | None, fast: bool, keep_dir: Path | None,
                      as_json: bool) -> int:
     """Check the bench and its config against the data: devices, streams, a slow move, an identification.
 
     Each check prints ✓ / ⚠ / ✗ with its figure; a ✗ says what to change in which config key and stops the
-    run. Exit code 0 when nothing failed, 2 when the devices refused the config at opening, 1 otherwise.
+    run. Exit code 0 when nothing failed, 2 when the devices refused the config at opening, 1 otherwise. A bench with
+    [drive] motion = "external" is checked on the machine's own motion: acq commands none there.
     """
     bench = load_bench(bench_path)
-    profile = load_profile(profile_name)
-    for motion, name in ((SLOW_MOVE, "acq selftest's slow move (acq/commissioning/selftest.py SLOW_MOVE)"),
-                         (profile, str(resolve_profile_path(profile_name)))):
-        refuse_beyond_limits(motion, bench, name, bench_label(bench_path))  # before any device is opened
+    if listens(bench) and profile_name is not None:
+        raise ConfigError(f"--profile {profile_name}: {bench_path} has [drive] motion = \"external\": acq commands no "
+                          "motion there and checks the bench on the machine's own motion — leave out --profile")
+    if not listens(bench):
+        profile_name = profile_name or DEFAULT_PROFILE
+    profile = None if profile_name is None else load_profile(profile_name)
+    if profile is not None:  # acq moves the joint: its slow move and the profile within [limits], before any device
+        for motion, name in ((SLOW_MOVE, "acq selftest's slow move (acq/commissioning/selftest.py SLOW_MOVE)"),
+                             (profile, str(resolve_profile_path(profile_name)))):
+            refuse_beyond_limits(motion, bench, name, bench_label(bench_path))
     work_dir = keep_dir if keep_dir is not None else Path(tempfile.mkdtemp(prefix="acq-selftest-"))
     out = Console()
     checks: list[Check] = []
