@@ -113,6 +113,23 @@ def test_a_comparison_never_takes_the_sessions_own_results_place_in_the_trend() 
     assert [p.entry.K_Nm_per_rad for p in compute_trend("j", mixed).points] == [889.0, 888.0]
 
 
+def test_a_monitor_running_on_across_an_upgrade_judges_its_new_windows_against_the_old_baseline() -> None:
+    """The review: old windows filed under the old code's key (select_segments true, another code fingerprint), new
+    ones under today's — compared by the full key the new were "other options" and skipped, the 21 % drop unseen."""
+    import json as json_
+
+    from analysis import AnalysisRequest
+
+    old = json_.dumps({**json_.loads(AnalysisRequest(select_segments=True).key()), "analysis": "0123456789abcdef"},
+                      sort_keys=True)
+    new = AnalysisRequest().key()
+    entries = [_entry(i, 890.0 + (i % 2), request=old) for i in range(8)]
+    entries += [replace(_entry(i, 700.0, request=new), analyzed_utc="2026-01-03T00:00:00+00:00") for i in range(8, 13)]
+    trend = compute_trend("j", entries, baseline_sessions=5)
+    assert trend.alarm and [p.state for p in trend.points[8:]] == ["alarm"] * 5
+    assert trend.baseline_K_Nm_per_rad == pytest.approx(890.4)
+
+
 def test_trend_skips_sessions_not_ok_and_a_stable_joint_raises_no_alarm() -> None:
     ks = [891.0, 893.0, 889.0, 500.0, 890.0, 892.0, 888.0, 891.0, 890.5, 889.5]
     entries = [_entry(i, k, verdict="poor" if k == 500 else "ok") for i, k in enumerate(ks)]

@@ -155,36 +155,43 @@ class Trend:
 
 
 def like_for_like(entries: Sequence[Entry]) -> tuple[list[Entry], dict[str, str]]:
-    """One analysis per session, all with the same request: of the sessions' own results (the default request, or
-    the monitor's — :meth:`analysis.AnalysisRequest.variant_label` empty), the request most sessions have (the latest
-    on a tie); a comparison (``--paper``, ``--band``, …) only where no session has its own result.
+    """One analysis per session, all of the same kind: the sessions' own results (the default request, or the
+    monitor's — :meth:`analysis.AnalysisRequest.variant_label` empty), each session's latest; a comparison
+    (``--paper``, ``--band``, …) only where no session has its own result, then the kind most sessions have (the
+    latest on a tie).
 
-    Returns the entries (oldest session first) and, by session key, why a session has none with that
-    request (its latest analysis stands in, to be listed as skipped).
+    The kind is what the request asks (its label), not the code that answered it nor how a recording resolved the
+    segment selection: a monitor that runs on across an upgrade of acq keeps judging its new windows against the
+    baseline of its old ones (compared by the full catalogue key, the new windows were "other options" and skipped
+    until they outnumbered the old — an alarm lost meanwhile).
+
+    Returns the entries (oldest session first) and, by session key, why a session has none of that kind (its
+    latest analysis stands in, to be listed as skipped).
     """
     sessions: dict[str, list[Entry]] = {}
     for e in entries:
         sessions.setdefault(e.session_key, []).append(e)
-    own = [e for e in entries if _is_own_result(e.request_key)]
+    kinds = {id(e): _kind(e.request_key) for e in entries}
+    own = [e for e in entries if kinds[id(e)] == ""]
     pool = own or list(entries)
-    counts = Counter(e.request_key for e in pool)
-    request = max(counts, key=lambda r: (counts[r], max(e.analyzed_utc for e in pool if e.request_key == r)))
+    counts = Counter(kinds[id(e)] for e in pool)
+    kind = max(counts, key=lambda k: (counts[k], max(e.analyzed_utc for e in pool if kinds[id(e)] == k)))
     chosen, missing = [], {}
     for key, analyses in sessions.items():
-        same = [e for e in analyses if e.request_key == request]
+        same = [e for e in analyses if kinds[id(e)] == kind]
         chosen.append(same[-1] if same else analyses[-1])
         if not same:
             missing[key] = "analysed only with other options than the trend's — run acq analyze on it again"
     return chosen, missing
 
 
-def _is_own_result(request_key: str) -> bool:
-    """Whether a catalogue row's request (:meth:`analysis.AnalysisRequest.key`) gives a session's own result rather
-    than a comparison; a key that is no request (a catalogue of other software) counts as its own result."""
+def _kind(request_key: str) -> str:
+    """What a catalogue row's request (:meth:`analysis.AnalysisRequest.key`) asks, as its variant label ('' for a
+    session's own result); a key that is no request (a catalogue of other software) is its own kind."""
     try:
-        return AnalysisRequest.from_json_dict(json.loads(request_key)).variant_label() == ""
+        return AnalysisRequest.from_json_dict(json.loads(request_key)).variant_label()
     except (ValueError, TypeError, AttributeError):
-        return True
+        return f"other:{request_key}"
 
 
 def _skip_reason(e: Entry) -> str | None:
