@@ -50,7 +50,8 @@ def test_record_upserts_and_reads_back_the_same_on_both_back_ends(catalogue_loca
 
 def test_a_damaged_copy_does_not_hide_the_analysis_of_an_intact_copy(catalogue_location: Path | str) -> None:
     """Copies of a session share its id: the failure of a damaged copy (another file) leaves the intact copy's
-    analysis in place; a failure of the very file analysed (same hash) replaces it."""
+    analysis — and the session's path — in place, in one statement (a separate check before the upsert let two
+    PostgreSQL writers both pass it: the review); a failure of the very file (the same path) replaces it."""
     intact = _outcome("s-01", 889.6)
     damaged = Outcome("/bench/copy/s-01.h5", "sha-damaged", "r", intact.session, None,
                       "s-01.h5: damaged: current samples 143 360-255 999 unreadable", 0.1)
@@ -58,8 +59,12 @@ def test_a_damaged_copy_does_not_hide_the_analysis_of_an_intact_copy(catalogue_l
         c.record(intact)
         c.record(damaged)
         assert [(e.path, e.K_Nm_per_rad, e.error) for e in c.entries("j1")] == [("/bench/s-01.h5", 889.6, None)]
-        c.record(Outcome(intact.path, intact.sha256, "r", intact.session, None, "s-01.h5: unreadable", 0.1))
-        assert [(e.K_Nm_per_rad, e.error) for e in c.entries("j1")] == [(None, "s-01.h5: unreadable")]
+        # the very file, damaged in place (another hash, the same path): its failure replaces its analysis
+        c.record(Outcome(intact.path, "sha-rotten", "r", intact.session, None, "s-01.h5: unreadable", 0.1))
+        assert [(e.path, e.K_Nm_per_rad, e.error) for e in c.entries("j1")] == [
+            ("/bench/s-01.h5", None, "s-01.h5: unreadable")]
+        c.record(damaged)  # a failure replacing a failure: the session row names the file that failed last
+        assert [(e.path, e.error) for e in c.entries("j1")] == [("/bench/copy/s-01.h5", damaged.error)]
 
 
 def test_an_older_catalogue_is_migrated_with_its_rows(catalogue_location: Path | str,

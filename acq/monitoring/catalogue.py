@@ -62,6 +62,11 @@ MIGRATIONS: tuple[str, ...] = (
     """
     ALTER TABLE analyses ADD COLUMN excitation_json TEXT;
     """,
+    # 4 → 5: the file each analysis was made of (copies of a session share its key: a damaged copy's failure must
+    # not replace an intact copy's analysis)
+    """
+    ALTER TABLE analyses ADD COLUMN file_path TEXT;
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
 
@@ -203,13 +208,15 @@ class Catalogue:
     def record(self, outcome: Outcome) -> None:
         """Store one analysis (replacing that session's earlier one with the same request) — but a failure of
         another file of the same session (a copy, damaged) does not replace the analysis of a file that succeeded:
-        copies share the session id, and the last one written had hidden an intact copy's result (the trial)."""
+        copies share the session id, and the last one written had hidden an intact copy's result (the trial). A
+        failure of the same file (damaged in place) does replace it."""
         from acq.recording.layout import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
 
         meta, doc = outcome.session, outcome.doc or {}
         key = meta.get("session_id") or f"path:{Path(outcome.path).resolve()}"
         values: dict[str, Any] = {
             "session_key": key, "sha256": outcome.sha256, "request_key": outcome.request_key,
+            "file_path": str(Path(outcome.path).resolve()),
             "options_json": json.dumps(doc["options"]) if doc else None,
             "analyzed_utc": doc.get("analyzed_utc") or utc_now_iso(), "acq_version": doc.get("acq_version"),
             "seconds": outcome.seconds, "verdict": doc.get("quality", {}).get("verdict"),
@@ -234,21 +241,23 @@ class Catalogue:
     def _write_outcome(self, key: str, meta: dict[str, Any], outcome: Outcome, values: dict[str, Any]) -> None:
         columns = ", ".join(values)
         updates = ", ".join(f"{c} = excluded.{c}" for c in values if c not in ("session_key", "request_key"))
+        path = values["file_path"]
         with self._transaction():
-            if outcome.error is not None:
-                analysed = self._execute("SELECT sha256 FROM analyses WHERE session_key = ? AND request_key = ? AND"
-                                         " error IS NULL", (key, outcome.request_key)).fetchone()
-                if analysed is not None and analysed[0] != outcome.sha256:
-                    return  # another file of this session was analysed: the failure of this one does not hide it
             self._execute(
                 "INSERT INTO sessions (session_key, session_id, path, joint, created_utc, start_monotonic_ns, status,"
-                " tags_json) VALUES (?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (session_key) DO UPDATE SET"
-                " path = excluded.path, status = excluded.status, tags_json = excluded.tags_json",
-                (key, meta.get("session_id"), str(Path(outcome.path).resolve()), meta.get("joint"),
-                 meta.get("created_utc"), meta.get("start_monotonic_ns"), meta.get("status"),
-                 json.dumps(meta.get("tags", {}))))
-            self._execute(f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"
-                       f" ON CONFLICT (session_key, request_key) DO UPDATE SET {updates}", tuple(values.values()))
+                " tags_json) VALUES (?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (session_key) DO NOTHING",
+                (key, meta.get("session_id"), path, meta.get("joint"), meta.get("created_utc"),
+                 meta.get("start_monotonic_ns"), meta.get("status"), json.dumps(meta.get("tags", {}))))
+            # one statement, so two writers cannot both pass a separate check (PostgreSQL's READ COMMITTED): the update
+            # is skipped when a failure of another file would replace a success
+            stored = self._execute(
+                f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"
+                f" ON CONFLICT (session_key, request_key) DO UPDATE SET {updates}"
+                " WHERE excluded.error IS NULL OR analyses.error IS NOT NULL OR analyses.file_path IS NULL"
+                " OR analyses.file_path = excluded.file_path RETURNING id", tuple(values.values())).fetchone()
+            if stored is not None:  # the session row follows the analysis that stands
+                self._execute("UPDATE sessions SET path = ?, status = ?, tags_json = ? WHERE session_key = ?",
+                              (path, meta.get("status"), json.dumps(meta.get("tags", {})), key))
 
     def entries(self, joint: str | None = None) -> list[Entry]:
         """Every session's analyses (one per request), oldest session first (all joints when ``joint`` is None)."""
