@@ -174,3 +174,36 @@ def test_the_simulated_drive_holds_a_faster_and_longer_motion_to_its_limits() ->
         drive.stop()
     assert 2900 < max(abs(v) for v in speeds) <= 3000  # 0.1 rpm units: it ran at the limit, not above
     assert 100_000 < max(positions) <= 109_226 + 200 and min(positions) > -200  # ±200 counts: the speed loop's lag
+
+
+def test_a_motion_cut_short_cannot_walk_the_joint_beyond_its_travel_on_the_next_run() -> None:
+    """The review: 0x607D centred on each start let three runs cut at 0.12 s reach 89.7° of the arm against ±30°.
+    The window acq left in the drive stays the reference: a start away from its centre is refused; a narrower window
+    the integrator set is kept (acq's goes inside it, never wider)."""
+    _, drive = _canopen(Limits(max_speed_rpm=1200.0, max_travel_deg=30.0, max_torque_Nm=20.0))
+    drive.start()
+    try:
+        node = drive.sim_node.node
+        limits = node.sdo[SOFTWARE_POSITION_LIMIT]
+        p0 = node.sdo[POSITION_ACTUAL].raw
+        travel = 109_226  # 30° of the arm: 30/360 · 10 · 131072
+        drive.start_motion(load_profile("triangle_0.2s"))
+        time.sleep(0.12)
+        drive.stop_motion()  # cut short on the way out
+        time.sleep(0.2)  # at rest after the quick stop
+        stopped = node.sdo[POSITION_ACTUAL].raw
+        assert stopped - p0 > 0.2 * travel
+        with pytest.raises(DeviceError) as err:
+            drive.start_motion(load_profile("triangle_0.2s"))
+        share = 100 * (stopped - p0) / travel
+        assert str(err.value) == (
+            f"{drive.name}: the joint stands {share:+.0f} % of [limits] max_travel_deg from where acq's earlier motion "
+            f"started (position {stopped}, the centre of the 0x607D window {p0 - travel} … {p0 + travel} acq left in "
+            "the drive): bring it back there before acq moves it again, or clear 0x607D (or power-cycle the drive) if "
+            "it was moved there on purpose")
+        assert (limits[1].raw, limits[2].raw) == (p0 - travel, p0 + travel)  # unchanged
+        limits[1].raw, limits[2].raw = stopped - 1000, stopped + 50_000  # the integrator's stops, narrower
+        drive.start_motion(load_profile("triangle_0.2s"))
+        assert (limits[1].raw, limits[2].raw) == (stopped - 1000, stopped + 50_000)  # never widened
+    finally:
+        drive.stop()
