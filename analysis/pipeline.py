@@ -24,7 +24,7 @@ from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.recording import Recording
 from analysis.report import FigureData, figure_data
 from analysis.request import AnalysisRequest
-from analysis.segments import Move, SegmentSelection, describe_moves
+from analysis.segments import Move, SegmentSelection, describe_moves, excitation_summary
 from analysis.signals import prepare_signals
 
 # blocks of the delete-one-block jackknife behind the intervals: 10 gives 9 degrees of freedom
@@ -102,6 +102,19 @@ def _excitation(sel: SegmentSelection, moves: tuple[Move, ...]) -> dict[str, Any
                        "peak_rad_s": round(m.peak_rad_s, 3), "excited": m.excited} for m in moves]}
 
 
+def _not_excited(quality: Quality, moves: tuple[Move, ...], excited_fraction: float,
+                 band_hz: tuple[float, float]) -> Quality:
+    """The verdict of a record whose segment selection found fewer than two segments that excite: failed, because
+    the joint was not excited — with the clock's findings (facts), without the other reasons, whose advice
+    (interference on the phase current, play in the gear, a wrong constant) judges a fit of data that carry no
+    excitation (a passive 10 s record of a robot at rest read K +468 % and "PWM ripple": the trial)."""
+    summary = excitation_summary(sum(m.excited for m in moves), len(moves), band_hz, excited_fraction)
+    clock = tuple(r for r in quality.reasons if r.startswith("clock"))
+    notes = tuple(r for r in quality.reasons if r.startswith("note: "))
+    return replace(quality, verdict="failed", reasons=(
+        f"not excited: {summary} — record while the machine runs fast moves of this joint", *clock, *notes))
+
+
 def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Result:
     """Identify K, J_m, J_l, C of a joint from a raw recording.
 
@@ -155,6 +168,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     scale_fault = nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95)  # a unit or scale mistake
     quality = with_nominal_fault(quality, scale_fault)
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
+    if frf.selection is not None and not frf.selection.applied and not sig.clock.failure:  # a failed clock: its own
+        quality = _not_excited(quality, moves, frf.selection.excited_fraction, select)  # type: ignore[arg-type]
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual), misfit_band_hz=quality.misfit_band_hz,

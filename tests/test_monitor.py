@@ -634,3 +634,19 @@ def test_a_window_judged_not_excited_after_its_analysis_keeps_no_K_beside_it(tmp
     assert outcome.doc["quality"]["verdict"] == beside["quality"]["verdict"] == "not excited"
     assert "K_Nm_per_rad" not in beside and beside == outcome.doc
     assert written == [path.with_name(path.stem + ".result.json")]  # once, as judged: never the refused K first
+
+
+def test_a_passive_record_of_a_joint_at_rest_is_not_excited_in_acq_analyze_too(tmp_path: Path) -> None:
+    """The second trial: acq record / acq analyze of a robot's first 10 s (seed 0: the joint barely moves) read K
+    +468 % with "interference on the phase current … PWM ripple" where the monitor said "not excited". The analysis
+    itself now fails it for the lack of excitation, with no hardware advice."""
+    from acq.offline.analyze import analyze_session
+
+    bench = _bench()
+    current, drive = open_bench(bench, fast=True)
+    path = Recorder(bench, None, current, drive, tmp_path, 10.0).run().path
+    quality = analyze_session(path, write=False, report=False).json_dict["quality"]
+    assert quality["verdict"] == "failed"
+    assert quality["reasons"][0].startswith("not excited: 0 of 12 moves put torque into 10…400 Hz beyond chance (")
+    assert quality["reasons"][0].endswith("of the record) — record while the machine runs fast moves of this joint")
+    assert not any("interference" in r or "ripple" in r or "play" in r for r in quality["reasons"])

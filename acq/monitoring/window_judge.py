@@ -23,6 +23,7 @@ from acq.recording.reader import load
 from acq.recording.session import Session
 from acqcore.errors import StorageError
 from analysis import AnalysisRequest, Thresholds
+from analysis.segments import excitation_summary
 
 
 def _weak_coherence(quality: dict[str, Any]) -> str | None:
@@ -125,8 +126,8 @@ def not_excited_reasons(doc: dict[str, Any]) -> list[str]:
     moves = excitation["moves"]
     lo, hi = doc["options"]["band_hz"]
     excited = sum(m["excited"] for m in moves)
-    return [f"{excited} of {len(moves)} moves put torque into {lo:g}…{hi:g} Hz beyond chance "
-            f"({100 * excitation['excited_fraction']:.0f} % of the window){_but(doc, excited)}", *clock]
+    return [excitation_summary(excited, len(moves), (lo, hi), excitation["excited_fraction"], "window")
+            + _but(doc, excited), *clock]
 
 
 def _write_result(path: Path, request: AnalysisRequest, outcome: Outcome) -> Outcome:
