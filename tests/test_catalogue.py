@@ -59,6 +59,9 @@ def test_a_damaged_copy_does_not_hide_the_analysis_of_an_intact_copy(catalogue_l
         c.record(intact)
         c.record(damaged)
         assert [(e.path, e.K_Nm_per_rad, e.error) for e in c.entries("j1")] == [("/bench/s-01.h5", 889.6, None)]
+        part = {**intact.doc, "K_Nm_per_rad": 880.0, "partial": True}  # acq analyze copy/s-01.h5 --partial
+        c.record(Outcome(damaged.path, damaged.sha256, "r", intact.session, part, None, 0.1))
+        assert [(e.path, e.K_Nm_per_rad) for e in c.entries("j1")] == [("/bench/s-01.h5", 889.6)]  # the second trial
         # the very file, damaged in place (another hash, the same path): its failure replaces its analysis
         c.record(Outcome(intact.path, "sha-rotten", "r", intact.session, None, "s-01.h5: unreadable", 0.1))
         assert [(e.path, e.K_Nm_per_rad, e.error) for e in c.entries("j1")] == [

@@ -206,8 +206,9 @@ class Catalogue:
         return {r[0] for r in rows}
 
     def record(self, outcome: Outcome) -> None:
-        """Store one analysis (replacing that session's earlier one with the same request) — but a failure of
-        another file of the same session (a copy, damaged) does not replace the analysis of a file that succeeded:
+        """Store one analysis (replacing that session's earlier one with the same request) — but a failure, or a
+        ``--partial`` analysis, of another file of the same session (a copy, damaged) does not replace the analysis of
+        a file that succeeded whole:
         copies share the session id, and the last one written had hidden an intact copy's result (the trial). A
         failure of the same file (damaged in place) does replace it."""
         from acq.recording.layout import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
@@ -249,12 +250,14 @@ class Catalogue:
                 (key, meta.get("session_id"), path, meta.get("joint"), meta.get("created_utc"),
                  meta.get("start_monotonic_ns"), meta.get("status"), json.dumps(meta.get("tags", {}))))
             # one statement, so two writers cannot both pass a separate check (PostgreSQL's READ COMMITTED): the update
-            # is skipped when a failure of another file would replace a success
+            # is skipped when a failure, or an analysis of only the readable part (--partial), of another file would
+            # replace an analysis of a whole file
             stored = self._execute(
                 f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"
                 f" ON CONFLICT (session_key, request_key) DO UPDATE SET {updates}"
-                " WHERE excluded.error IS NULL OR analyses.error IS NOT NULL OR analyses.file_path IS NULL"
-                " OR analyses.file_path = excluded.file_path RETURNING id", tuple(values.values())).fetchone()
+                " WHERE analyses.error IS NOT NULL OR analyses.file_path IS NULL OR analyses.file_path = excluded.file_path"
+                " OR (excluded.error IS NULL AND (excluded.partial = 0 OR analyses.partial = 1))"
+                " RETURNING id", tuple(values.values())).fetchone()
             if stored is not None:  # the session row follows the analysis that stands
                 self._execute("UPDATE sessions SET path = ?, status = ?, tags_json = ? WHERE session_key = ?",
                               (path, meta.get("status"), json.dumps(meta.get("tags", {})), key))
