@@ -190,6 +190,10 @@ def test_a_damaged_session_is_exported_only_with_partial_and_its_import_says_wha
     assert [(e.stream, e.kind, e.detail) for e in s.events] == [("current", "warning",
                                                                  f"not in the exported files: {span}")]
     assert s.current.sample_count == 143360 and s.damage == ()
+    # other data than the whole session: its own id, the exported one kept in its origin (the review: under the same
+    # id its analysis of 5.6 s replaced the whole session's in a shared catalogue)
+    original = load(path).meta.session_id
+    assert s.meta.session_id != original and s.meta.origin["restored"]["session_id"] == original
     checked = run_cli(capsys, "check", str(tmp_path / "imp.h5"))
     assert checked.code == 0
     assert f"status interrupted (imported from flip.current.csv and flip.encoder.csv; {why})" in " ".join(

@@ -238,7 +238,8 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
         "started_from": started_from,
     }
     if meta is not None:
-        origin["restored"] = {"metadata": _file_entry("metadata", meta.path, {}), "origin": meta.origin}
+        origin["restored"] = {"metadata": _file_entry("metadata", meta.path, {}), "origin": meta.origin,
+                              "session_id": meta.session_id}
     if meta_warning:
         origin["metadata_not_used"] = meta_warning
     notes = [*cur.notes, *enc.notes]
@@ -260,7 +261,7 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
             drive_info=DriveInfo(period_s, cpr, "imported", enc.timestamp_kind, f"imported: {encoder_path.name}"),
             host_ns_at_start=int(host_ns(min(float(cur.time_s(0)) + shift, float(enc.t_s[0])))), origin=origin,
             tags={**(meta.tags if meta else {}), **(tags or {})}, operator=meta.operator if meta else "",
-            host_clock_shared=shared_by is not None, session_id=meta.session_id if meta else None,
+            host_clock_shared=shared_by is not None, session_id=_restored_id(meta),
             created_utc=created_utc, bulk=True)
         writer.append_current_blocks(list(cur.phases_a.values()), *_current_blocks(cur, shift))
         writer.append_encoder(EncoderBlock(enc.index, enc.position_counts, host_ns(enc.t_s), enc.drive_time_s))
@@ -280,6 +281,15 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
             tmp.unlink(missing_ok=True)
     return ImportResult(out, [*([meta_warning] if meta_warning else []), *([incomplete] if incomplete else []),
                               *(n.detail for n in notes if n.kind == "warning")])
+
+
+def _restored_id(meta: ExportMetadata | None) -> str | None:
+    """The session id an import keeps: the exported session's, unless the files hold only part of it (a damaged
+    session exported with --partial) — that is other data, and under the same id its analysis would replace the whole
+    session's in a shared catalogue (the review); its origin keeps the exported id."""
+    if meta is None or meta.damage:
+        return None
+    return meta.session_id
 
 
 def _stream_of(span: str) -> str:
