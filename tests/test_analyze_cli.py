@@ -278,13 +278,17 @@ def test_several_sessions_as_the_shell_expands_a_glob_are_one_batch(session_10s:
     assert [(Path(d["path"]).name, d["outcome"]) for d in json.loads(batch.out)] == [("a.h5", "analysed"),
                                                                                    ("b.h5", "analysed")]
     assert (par / "catalogue.sqlite").is_file()  # in the sessions' folder, as for `acq analyze par`
-    # a folder, a glob and a session named twice: each session once; the catalogue in the folder common to them
+    # sessions in different folders: no folder is theirs (the common one could be /: the review) — one line asking
+    # for the catalogue; with it, a folder, a glob and a session named twice: each session once
+    spread = run_cli(capsys, "analyze", str(par), str(other / "*.h5"), "--no-report")
+    assert (spread.code, spread.err) == (2, f"acq: error: the sessions lie in 2 folders ({other}, {par}): give "
+                                            "--catalogue FILE for the catalogue they go in\n")
     batch = run_cli(capsys, "analyze", str(par), str(other / "*.h5"), str(par / "a.h5"), "--no-report", "--jobs",
-                    "1", "--json")
+                    "1", "--json", "--catalogue", str(tmp_path / "both.sqlite"))
     assert batch.code == 0, batch.err
     assert sorted((Path(d["path"]).name, d["outcome"]) for d in json.loads(batch.out)) == [
         ("a.h5", "analysed"), ("b.h5", "analysed"), ("c.h5", "analysed")]
-    assert (tmp_path / "catalogue.sqlite").is_file()
+    assert (tmp_path / "both.sqlite").is_file() and not (tmp_path / "catalogue.sqlite").exists()
     missing = run_cli(capsys, "analyze", str(par / "a.h5"), str(par / "nope.h5"), "--no-report")
     assert (missing.code, missing.err) == (2, f"acq: error: {par / 'nope.h5'}: no such session file\n")
     none = run_cli(capsys, "analyze", "--no-report")

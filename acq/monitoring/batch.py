@@ -85,10 +85,11 @@ def find_sessions(spec: Path | str) -> tuple[list[Path], Path]:
     return sessions, base
 
 
-def find_all_sessions(specs: Sequence[Path | str]) -> tuple[list[Path], Path]:
+def find_all_sessions(specs: Sequence[Path | str]) -> tuple[list[Path], Path | None]:
     """The session files of several command-line arguments — session files, folders, globs (also as the shell
     expanded ``par/*.h5``) — each once, sorted; and the folder the catalogue goes in by default: the one all were
-    sought in, else the folder common to them (as a glob's deepest folder without wildcards)."""
+    sought in (as a glob's deepest folder without wildcards), None when they lie in different folders (their common
+    folder could be /: the review)."""
     found: dict[Path, Path] = {}
     bases: list[Path] = []
     for spec in map(Path, specs):
@@ -100,8 +101,8 @@ def find_all_sessions(specs: Sequence[Path | str]) -> tuple[list[Path], Path]:
         bases.append(base)
         for p in paths:
             found.setdefault(p.resolve(), p)
-    if any(b != bases[0] for b in bases):
-        return sorted(found.values()), Path(os.path.commonpath([b.resolve() for b in bases]))
+    if any(b.resolve() != bases[0].resolve() for b in bases):
+        return sorted(found.values()), None
     return sorted(found.values()), bases[0]
 
 

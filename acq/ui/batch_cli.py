@@ -55,10 +55,15 @@ def analyze_many(specs: Sequence[Path], request: AnalysisRequest, *, jobs: int |
     0; 130 when Ctrl-C stopped it (one line on stderr says how far it got). With ``result_dir`` the results, reports
     and the default catalogue go there (the sessions' folders may be read-only)."""
     paths, base = find_all_sessions(specs)
+    if base is None and catalogue_path is None and result_dir is None:
+        folders = sorted({str(p.parent) for p in paths})
+        raise ConfigError(f"the sessions lie in {len(folders)} folders ({', '.join(folders[:3])}"
+                          f"{', …' if len(folders) > 3 else ''}): give --catalogue FILE for the catalogue they go in")
     if result_dir is not None:
         _one_result_name_each(paths, result_dir)
     done: BatchReport | None = None
-    with Catalogue(catalogue_path or (result_dir or base) / CATALOGUE_NAME) as catalogue:
+    folder = result_dir or base
+    with Catalogue(catalogue_path or (folder or Path(".")) / CATALOGUE_NAME) as catalogue:
         try:
             with batch_progress() as on_progress:
                 done = run_batch(paths, catalogue, request, jobs=jobs, scheduler=scheduler,
