@@ -314,19 +314,22 @@ class Monitor:
                "ACQ_BASELINE_K": f"{trend.baseline_K_Nm_per_rad:.6g}", "ACQ_SESSION": entry.path,
                "ACQ_CHANGE_PCT": f"{100 * (entry.K_Nm_per_rad / trend.baseline_K_Nm_per_rad - 1):.3g}"}  # type: ignore
         try:
+            # a session of its own: the Ctrl-C that stops the monitor must not kill a mail or webhook mid-send
             self._alarm_procs.append(subprocess.Popen(["/bin/sh", "-c", self.s.on_alarm], env=env,
-                                                      stdin=subprocess.DEVNULL))
+                                                      stdin=subprocess.DEVNULL, start_new_session=True))
         except OSError as e:
             self._alarm_failed(f"cannot start /bin/sh: {e.strerror or e}")
         self._reap_alarms(wait=False)
 
     def _reap_alarms(self, wait: bool) -> None:
         """Collect the alarm commands that ended and report those that failed; with ``wait`` (the monitor ends) give
-        each up to :data:`_ALARM_WAIT_S` and report one still running (it is left running: it may be mid-send)."""
+        them together up to :data:`_ALARM_WAIT_S` and report one still running (it is left running: it may be
+        mid-send)."""
+        deadline = time.monotonic() + _ALARM_WAIT_S  # one for all: N slow commands must not hold the exit N × 30 s
         for proc in list(self._alarm_procs):
             if wait:
                 try:
-                    proc.wait(timeout=_ALARM_WAIT_S)
+                    proc.wait(timeout=max(0.0, deadline - time.monotonic()))
                 except subprocess.TimeoutExpired:
                     self._alarm_failed(f"still running after {_ALARM_WAIT_S:g} s when the monitor ended "
                                        f"(pid {proc.pid}, left running)")
