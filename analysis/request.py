@@ -93,10 +93,11 @@ class AnalysisRequest:
 
         The parts, in this order and joined by ``.``: ``paper`` (the paper's chain), ``torque-<method>`` (a torque
         method named, even the one the default would pick), ``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (the
-        band as given, Hz, ``%g``), ``no-align``, ``segment-<s>s`` — letters, digits, ``-`` and ``.`` only. The paper's
-        chain ignores the torque method and the alignment, so they are not in its label. Not in the label: ``partial``
-        (the intact part of a session is its result so far), ``select_segments`` (by default decided by the
-        recording: see above) and ``nominal`` (the bench's, filled in by the application).
+        band as given, Hz, ``%g``), ``no-align``, ``segment-<s>s``, ``segments-on``/``segments-off`` (a segment
+        selection asked for, not left to the recording: the monitor's own results are the default's) — letters,
+        digits, ``-`` and ``.`` only. The paper's chain ignores the torque method and the alignment, so they are not in
+        its label. Not in the label: ``partial`` (the intact part of a session is its result so far) and ``nominal``
+        (the bench's, filled in by the application).
         """
         default = AnalysisRequest()
         paper = self.pipeline == "paper"
@@ -113,6 +114,8 @@ class AnalysisRequest:
             parts.append("no-align")
         if self.segment_s != default.segment_s:
             parts.append(f"segment-{self.segment_s:g}s")
+        if self.select_segments is not None:  # asked for: a result the recording's default would not give
+            parts.append("segments-on" if self.select_segments else "segments-off")
         return ".".join(parts)
 
     def to_json_dict(self, chain: SignalChain | None = None) -> dict[str, Any]:

@@ -112,7 +112,8 @@ def test_variant_labels_name_what_differs_from_the_default_request() -> None:
     from analysis import AnalysisRequest
 
     assert AnalysisRequest().variant_label() == ""
-    assert AnalysisRequest(select_segments=True, partial=True).variant_label() == ""  # the monitor's; a live session's
+    assert AnalysisRequest(partial=True).variant_label() == ""  # a live session's result so far is its result
+    assert AnalysisRequest(select_segments=False).variant_label() == "segments-off"  # the review: it overwrote
     assert AnalysisRequest(torque_method="park", params="K", fit="complex", band_hz=(12.5, 300.0),
                            align=False, segment_s=0.25).variant_label() == \
         "torque-park.params-K.fit-complex.band-12.5-300.no-align.segment-0.25s"

@@ -20,11 +20,15 @@ import numpy as np
 import pytest
 
 from acq.ui.report_png import drawers_lock_path
-from analysis import AnalysisRequest
+from analysis import AnalysisRequest, TwoMassParams
 from tests.helpers import record_session_in_subprocess
 
 #: How long a test waits for a background drawer (≈ 1 s alone) before it fails; only a bound, not a measurement.
 DRAWER_BOUND_S = 120.0
+#: Another analysis of the same file that writes its result (the default file name: a fit start other than the bench's
+#: [nominal] is no variant), with other content than the first.
+OTHER_START = AnalysisRequest(nominal=TwoMassParams(K_Nm_per_rad=900.0, Jm_kgm2=0.003027, Jl_kgm2=0.00748,
+                                                    C_Nms_per_rad=0.0))
 
 
 @pytest.fixture(scope="module")
@@ -166,7 +170,7 @@ def test_a_drawer_draws_nothing_over_a_newer_result(session: Path, env: dict[str
     png, result, log = _paths(session)
     job = _write_job(done, png)
     older = _read_job(job.read_bytes())
-    analyze_session(session, AnalysisRequest(select_segments=True))  # a newer result (the monitor's, same file)
+    analyze_session(session, OTHER_START)  # a newer result of the same file
     newer = result.read_text()
     log.write_text("")  # as the drawer's process has it
     _draw_job(older)
@@ -191,12 +195,12 @@ def test_a_picture_finished_after_a_newer_result_is_not_put_in_place(session: Pa
 
     def draw_while_a_newer_analysis_comes(*args: object, **kwargs: object) -> None:
         draw(*args, **kwargs)
-        analyze_session(session, AnalysisRequest(select_segments=True), report=False)
+        analyze_session(session, OTHER_START, report=False)
 
     monkeypatch.setattr(plots, "render_report_png", draw_while_a_newer_analysis_comes)
     _draw_job(job)
     assert not png.exists()
-    assert json.loads(result.read_text())["options"]["select_segments"] is True
+    assert json.loads(result.read_text())["options"]["nominal"]["K_Nm_per_rad"] == 900.0
     assert not [p.name for p in session.parent.iterdir() if p.name.startswith(".")]  # no temp picture left
 
 

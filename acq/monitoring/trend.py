@@ -26,7 +26,7 @@ import math
 import statistics
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, fields
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -160,8 +160,8 @@ def like_for_like(entries: Sequence[Entry]) -> tuple[list[Entry], dict[str, str]
     (``--paper``, ``--band``, …) only where no session has its own result, then the kind most sessions have (the
     latest on a tie).
 
-    The kind is what the request asks (its label), not the code that answered it nor how a recording resolved the
-    segment selection: a monitor that runs on across an upgrade of acq keeps judging its new windows against the
+    The kind is what the request asks (its label), not the code that answered it nor whether the segment selection
+    was asked for or left to the recording: a monitor that runs on across an upgrade of acq keeps judging its new windows against the
     baseline of its old ones (compared by the full catalogue key, the new windows were "other options" and skipped
     until they outnumbered the old — an alarm lost meanwhile).
 
@@ -189,9 +189,12 @@ def _kind(request_key: str) -> str:
     """What a catalogue row's request (:meth:`analysis.AnalysisRequest.key`) asks, as its variant label ('' for a
     session's own result); a key that is no request (a catalogue of other software) is its own kind."""
     try:
-        return AnalysisRequest.from_json_dict(json.loads(request_key)).variant_label()
+        request = AnalysisRequest.from_json_dict(json.loads(request_key))
     except (ValueError, TypeError, AttributeError):
         return f"other:{request_key}"
+    # a selection asked for explicitly (the monitor's windows before it was the default where acq does not command
+    # the motion) is the same kind as the default's
+    return replace(request, select_segments=None).variant_label()
 
 
 def _skip_reason(e: Entry) -> str | None:
