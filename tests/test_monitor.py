@@ -299,21 +299,24 @@ def test_disk_budget_frees_the_oldest_unprotected_windows_or_refuses(tmp_path: P
 
 def test_a_disk_budget_that_cannot_hold_one_window_is_refused_before_anything_is_captured(
         capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
-    """It ran on, capturing nothing ("not captured: the disk budget would be exceeded" every window), exit 0."""
+    """It ran on, capturing nothing ("not captured: the disk budget would be exceeded" every window), exit 0; and a
+    budget below the baseline's windows and one more skipped every window after the first (the second trial)."""
     from acq.monitoring.monitor import Monitor, MonitorSettings
 
     out = tmp_path / "monitor"
-    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--fast", "--for", "1m", "--max-disk", "1MB",
+    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--fast", "--for", "1m", "--max-disk", "6MB",
                   "--out", str(out))
-    assert (run.code, run.err) == (2, "acq: error: --max-disk 1 MB: one --window of 10 s needs 3.9 MB (current "
-                                      "25600 Hz × 1 channel(s), encoder 1000 Hz, with the files' overhead) — raise "
-                                      "--max-disk or shorten --window\n")
+    assert (run.code, run.err) == (2, "acq: error: --max-disk 6 MB: the 5 baseline windows acq keeps and the next "
+                                      "one, 10 s each, need 23.3 MB (3.9 MB a window: current 25600 Hz × 1 "
+                                      "channel(s), encoder 1000 Hz, with the files' overhead) — raise --max-disk, "
+                                      "shorten --window or lower --baseline-windows\n")
     assert not out.exists() or not list(out.glob("*.h5"))
-    # the size named is the one the capture loop asks room for: 3.9 MB is enough, a byte less of 3.872 MB is not
-    settings = MonitorSettings(bench=_bench(), out_dir=out, window_s=10.0, every_s=60.0, max_disk_bytes=3_900_000)
-    with pytest.raises(ConfigError, match="needs 3.9 MB"):
-        Monitor(replace(settings, max_disk_bytes=3_871_999))
-    Monitor(replace(settings, max_disk_bytes=3_872_000))
+    # the size named is the one the capture loop asks room for: 6 × 3.872 MB is enough, a byte less is not
+    settings = MonitorSettings(bench=_bench(), out_dir=out, window_s=10.0, every_s=60.0, max_disk_bytes=23_300_000)
+    with pytest.raises(ConfigError, match="need 23.3 MB"):
+        Monitor(replace(settings, max_disk_bytes=6 * 3_872_000 - 1))
+    Monitor(replace(settings, max_disk_bytes=6 * 3_872_000))
+    Monitor(replace(settings, baseline_windows=1, max_disk_bytes=2 * 3_872_000))
 
 
 def test_sizes_parse_and_a_bad_one_is_named() -> None:

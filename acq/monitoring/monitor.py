@@ -134,12 +134,17 @@ class Monitor:
         self._size = expected_window_bytes(settings.bench, settings.window_s)
         # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
         self._rules = AlarmRules(settings.baseline_windows, settings.threshold_pct, settings.ewma_lambda)
-        if settings.max_disk_bytes is not None and settings.max_disk_bytes < self._size:  # no window would be captured
+        # the baseline's windows are kept whatever the budget (retention protects them), and the next window must fit
+        # beside them: a budget of fewer skipped every window after the first ones, the alarm unseen (the second trial)
+        need = (settings.baseline_windows + 1) * self._size
+        if settings.max_disk_bytes is not None and settings.max_disk_bytes < need:
             daq, drive = settings.bench.daq, settings.bench.drive
-            raise ConfigError(f"--max-disk {settings.max_disk_bytes / 1e6:g} MB: one --window of {settings.window_s:g} s "
-                              f"needs {math.ceil(self._size / 1e5) / 10:g} MB (current {daq.rate_hz:g} Hz × "
-                              f"{len(daq.channels)} channel(s), encoder {1 / drive.period_s:g} Hz, with the files' "
-                              "overhead) — raise --max-disk or shorten --window")
+            raise ConfigError(f"--max-disk {settings.max_disk_bytes / 1e6:g} MB: the {settings.baseline_windows} "
+                              f"baseline windows acq keeps and the next one, {settings.window_s:g} s each, need "
+                              f"{math.ceil(need / 1e5) / 10:g} MB ({math.ceil(self._size / 1e5) / 10:g} MB a window: "
+                              f"current {daq.rate_hz:g} Hz × {len(daq.channels)} channel(s), encoder "
+                              f"{1 / drive.period_s:g} Hz, with the files' overhead) — raise --max-disk, shorten "
+                              "--window or lower --baseline-windows")
 
     @property
     def stopped_by(self) -> str | None:
