@@ -215,6 +215,20 @@ def test_restart_resumes_numbering_and_marks_an_interrupted_window(four_windows:
     assert not (out / "cut.h5").exists()  # marked, then its raw file went (not baseline, not the last)
 
 
+def test_a_restart_with_other_alarm_rules_is_refused(four_windows: Path, tmp_path: Path,
+                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """The second trial: a restart with --baseline-windows 5 --threshold-pct 20 re-baselined on the windows already
+    judged (the alarming ones in it) and cleared the alarm, saying nothing."""
+    out = tmp_path / "other_rules"
+    shutil.copytree(four_windows, out)
+    run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for",
+                  "1m", "--baseline-windows", "5", "--threshold-pct", "20", "--out", str(out))
+    assert (run.code, run.err) == (2, f"acq: error: {out}: its windows were judged with --baseline-windows 2 "
+                                      "--threshold-pct 10 --ewma-lambda 0.2: resume with the same, or start a new "
+                                      "--out\n")
+    assert sorted(r["window"] for r in _rows(out)) == [0, 1, 2, 3] and not (out / "monitor.lock").exists()
+
+
 def test_a_window_of_a_paused_robot_is_not_excited_and_has_no_K(capsys: pytest.CaptureFixture[str],
                                                                   tmp_path: Path) -> None:
     bench = _bench_file(tmp_path, robot_idle_fraction=1.0)

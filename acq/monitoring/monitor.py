@@ -35,7 +35,7 @@ from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
 from acq.monitoring.folder_lock import folder_lock
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
-from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, Trend, compute_trend
+from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, Trend, compute_trend, filed_rules
 from acq.monitoring.window_judge import analyse_window, excites, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
@@ -382,6 +382,13 @@ class Monitor:
     def _resume(self, pool: Any) -> int:
         """Mark or analyse the windows a previous run left; return the next window's number."""
         known = {e.session_id: e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags}
+        filed = filed_rules(list(known.values()))
+        rules = (self._rules.baseline_sessions, self._rules.threshold_pct, self._rules.ewma_lambda)
+        if filed is not None and (filed.baseline_sessions, filed.threshold_pct, filed.ewma_lambda) != rules:
+            # other rules midway re-baselined on windows judged before, the alarm cleared silently (the second trial)
+            raise ConfigError(f"{self.s.out_dir}: its windows were judged with --baseline-windows "
+                              f"{filed.baseline_sessions} --threshold-pct {filed.threshold_pct:g} --ewma-lambda "
+                              f"{filed.ewma_lambda:g}: resume with the same, or start a new --out")
         numbers = [int(e.tags[WINDOW_TAG]) for e in known.values()]
         for path in sorted(self.s.out_dir.glob("*.h5")):
             try:

@@ -80,11 +80,16 @@ def _tagged_rules(entry: Entry) -> AlarmRules | None:
     return rules if valid else None
 
 
+def filed_rules(entries: Sequence[Entry]) -> AlarmRules | None:
+    """The rules the newest of ``entries`` (oldest first) was filed with (:data:`RULE_TAGS`), or None."""
+    return next((r for r in map(_tagged_rules, reversed(entries)) if r is not None), None)
+
+
 def rules_for(entries: Sequence[Entry], *, baseline_sessions: int | None = None, threshold_pct: float | None = None,
               ewma_lambda: float | None = None) -> AlarmRules:
     """The rules to judge ``entries`` (oldest first) by: each one given here, else the newest session's filed ones
     (:data:`RULE_TAGS`), else acq's defaults."""
-    filed = next((r for r in map(_tagged_rules, reversed(entries)) if r is not None), None)
+    filed = filed_rules(entries)
     rules = filed or AlarmRules()
     given = {name: value for name, value in (("baseline_sessions", baseline_sessions), ("threshold_pct", threshold_pct),
                                              ("ewma_lambda", ewma_lambda)) if value is not None}
