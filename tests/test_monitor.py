@@ -646,7 +646,7 @@ def test_a_window_judged_not_excited_after_its_analysis_keeps_no_K_beside_it(tmp
         write(target, text)
 
     monkeypatch.setattr(acq.offline.analyze, "write_text_atomically", counted)
-    outcome = analyse_window(str(path), sha256_of(path), AnalysisRequest(select_segments=True))
+    outcome = analyse_window(str(path), sha256_of(path), AnalysisRequest())
     beside = json.loads(path.with_name(path.stem + ".result.json").read_text())
     assert outcome.doc["quality"]["verdict"] == beside["quality"]["verdict"] == "not excited"
     assert "K_Nm_per_rad" not in beside and beside == outcome.doc
