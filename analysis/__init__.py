@@ -32,6 +32,7 @@ from analysis.quality import Thresholds
 from analysis.recording import CommandedProfile, Recording
 from analysis.report import FigureData
 from analysis.request import AnalysisRequest, code_fingerprint
+from analysis.segments import excitation_summary
 from analysis.signals import PreparedSignals, prepare_signals
 from analysis.speed_ratio import SpeedRatio, electrical_speed_ratio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from analysis.torque import PHASE_WINDOW_S, min_speed_rpm
@@ -39,7 +40,8 @@ from analysis.torque import PHASE_WINDOW_S, min_speed_rpm
 __all__ = [
     "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",
     "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TorqueMethod", "TwoMassParams", "Z95",
-    "analyze", "code_fingerprint", "electrical_speed_ratio", "encoder_period_problem", "min_current_rate_hz",
+    "analyze", "code_fingerprint", "electrical_speed_ratio", "encoder_period_problem", "excitation_summary",
+    "min_current_rate_hz",
     "min_duration_s", "min_record_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",
     "likely_counts_per_rev", "longest_gap_free_span", "our_chain", "phase_sequence_agreement", "prepare_signals",
     "ratio_doubt", "ratio_fault", "sequence_fault", "speed_from_counts",

@@ -22,8 +22,7 @@ from acq.offline.analyze import output_paths, write_json
 from acq.recording.reader import load
 from acq.recording.session import Session
 from acqcore.errors import StorageError
-from analysis import AnalysisRequest, Thresholds
-from analysis.segments import excitation_summary
+from analysis import AnalysisRequest, Thresholds, excitation_summary
 
 
 def _weak_coherence(quality: dict[str, Any]) -> str | None:
