@@ -82,11 +82,11 @@ def _int32(value: int) -> int:
     return (value + 2**31) % 2**32 - 2**31
 
 
-
 #: How far from the start of acq's earlier motion (the centre of the 0x607D window it left in the drive) a new start
 #: may be, as a share of [limits] max_travel_deg: a motion that ran to its end stands at its start within its position
 #: loop's error (counts); one cut short stands up to a whole swing away. 1 % of the travel (1.35° of a 135° joint).
 RETURN_SHARE = 0.01
+
 
 class ProfilePositionMotion:
     """Motion of ``node`` (a started :func:`node402`) for a drive named ``device`` in messages.
@@ -153,20 +153,22 @@ class ProfilePositionMotion:
                                   f"(the drive limits it?)")
 
     def _set_position_limits(self, p0: int, travel: int) -> None:
-        """0x607D software position limits p0 ∓ ``travel`` (position units) around the start ``p0``, written while the
-        drive is disabled and read back: the drive itself then refuses to go further than [limits] max_travel_deg.
+        """0x607D software position limits p0 − ``travel`` … p0 + ``travel`` + 1 (position units) around the start
+        ``p0``, written while the drive is disabled and read back: the drive itself then refuses to go further than
+        [limits] max_travel_deg. The one count more above marks the window as acq's (a width of 2·travel + 1).
 
         The window stays in the drive when acq stops, and it is what keeps the joint from walking: a motion cut short
         stops up to a swing from its start, and a window centred on each new start would let the next run go a swing
-        further (the review: three runs cut at 0.12 s reached 89.7° against ±30°). So a window of acq's own width
-        found in the drive is kept, and a start away from its centre is refused; a narrower window someone else set
-        (the joint's stops, from the integrator) is never widened: acq's goes inside it.
+        further (the review: three runs cut at 0.12 s reached 89.7° against ±30°). So acq's own window found in the
+        drive is kept, and a start away from its centre is refused. A window someone else set (the joint's stops,
+        from the integrator) is left as it is — the drive keeps to it, acq's host check keeps to max_travel_deg — and
+        a start outside it is refused.
         """
         limits = self._node.sdo[od.SOFTWARE_POSITION_LIMIT]
         held = (int(limits[1].raw), int(limits[2].raw))
         if held[0] < held[1] and held != (-2**31, 2**31 - 1):  # a window is set in the drive
-            if held[1] - held[0] == 2 * travel:  # acq's own, left by an earlier start: that start stays the reference
-                centre = (held[0] + held[1]) // 2
+            if held[1] - held[0] == 2 * travel + 1:  # acq's own, left by an earlier start: that start stays the reference
+                centre = held[0] + travel
                 if abs(p0 - centre) > RETURN_SHARE * travel:
                     raise DeviceError(
                         f"{self._name}: the joint stands {100 * (p0 - centre) / travel:+.0f} % of [limits] "
@@ -177,9 +179,8 @@ class ProfilePositionMotion:
             if not held[0] <= p0 <= held[1]:
                 raise DeviceError(f"{self._name}: the joint stands at {p0}, outside the drive's own software position "
                                   f"limits 0x607D {held[0]} … {held[1]}: bring it inside before acq moves it")
-        low, high = p0 - travel, p0 + travel
-        if held[0] < held[1] and held != (-2**31, 2**31 - 1):
-            low, high = max(low, held[0]), min(high, held[1])
+            return  # the integrator's stops: kept as they are
+        low, high = p0 - travel, p0 + travel + 1
         if low < -2**31 or high > 2**31 - 1:
             raise DeviceError(f"{self._name}: 0x607D software position limits {low} … {high} (start {p0} ± {travel} "
                               "counts, [limits] max_travel_deg) leave the drive's 32-bit position range — home the "

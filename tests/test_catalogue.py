@@ -68,6 +68,18 @@ def test_a_damaged_copy_does_not_hide_the_analysis_of_an_intact_copy(catalogue_l
             ("/bench/s-01.h5", None, "s-01.h5: unreadable")]
         c.record(damaged)  # a failure replacing a failure: the session row names the file that failed last
         assert [(e.path, e.error) for e in c.entries("j1")] == [("/bench/copy/s-01.h5", damaged.error)]
+        # a row filed before schema 5 (no file path): the file hash tells a copy (the second read)
+        c.record(intact)
+        with c._transaction():
+            c._execute("UPDATE analyses SET file_path = NULL")
+        c.record(damaged)
+        assert [(e.K_Nm_per_rad, e.error) for e in c.entries("j1")] == [(889.6, None)]
+        # each analysis is listed with the file it was made of, not the session row's last file (the second read)
+        c.record(intact)
+        c.record(Outcome(damaged.path, damaged.sha256, "paper", intact.session, {**intact.doc, "K_Nm_per_rad": 1536.0},
+                         None, 0.1))
+        assert sorted((e.request_key, e.path) for e in c.entries("j1")) == [("paper", "/bench/copy/s-01.h5"),
+                                                                            ("r", "/bench/s-01.h5")]
 
 
 def test_an_older_catalogue_is_migrated_with_its_rows(catalogue_location: Path | str,

@@ -194,6 +194,9 @@ def test_a_damaged_session_is_exported_only_with_partial_and_its_import_says_wha
     # id its analysis of 5.6 s replaced the whole session's in a shared catalogue)
     original = load(path).meta.session_id
     assert s.meta.session_id != original and s.meta.origin["restored"]["session_id"] == original
+    again = run_cli(capsys, "import", "--current", str(out / "flip.current.csv"), "--encoder",
+                    str(out / "flip.encoder.csv"), "-o", str(tmp_path / "imp2.h5"))
+    assert again.code == 0 and load(tmp_path / "imp2.h5").meta.session_id == s.meta.session_id  # the same session
     checked = run_cli(capsys, "check", str(tmp_path / "imp.h5"))
     assert checked.code == 0
     assert f"status interrupted (imported from flip.current.csv and flip.encoder.csv; {why})" in " ".join(

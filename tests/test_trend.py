@@ -107,6 +107,9 @@ def test_a_comparison_never_takes_the_sessions_own_results_place_in_the_trend() 
     assert [p.entry.K_Nm_per_rad for p in compute_trend("j", three).points] == [890.0, 891.0, 892.0]
     only_compared = [_entry(0, 880.0, request=band), _entry(1, 881.0, request=band)]
     assert [p.entry.K_Nm_per_rad for p in compute_trend("j", only_compared).points] == [880.0, 881.0]
+    refused = AnalysisRequest(select_segments=False).key()  # a selection refused: a comparison (the second read)
+    assert [p.entry.K_Nm_per_rad for p in compute_trend("j", [_entry(0, 890.0, request=own), replace(
+        _entry(0, 1500.0, request=refused), analyzed_utc=later)]).points] == [890.0]
     monitor = AnalysisRequest(select_segments=True).key()  # a monitor's windows: their own results
     mixed = [_entry(0, 889.0, request=monitor), replace(_entry(0, 700.0, request=paper), analyzed_utc=later),
              _entry(1, 888.0, request=monitor)]

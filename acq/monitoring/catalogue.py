@@ -252,20 +252,24 @@ class Catalogue:
             # one statement, so two writers cannot both pass a separate check (PostgreSQL's READ COMMITTED): the update
             # is skipped when a failure, or an analysis of only the readable part (--partial), of another file would
             # replace an analysis of a whole file
+            # (a row filed before schema 5 has no file path: its file hash tells the same file; rowcount, not RETURNING:
+            # SQLite before 3.35 has none — both back ends count 0 rows when the WHERE skips the update)
             stored = self._execute(
                 f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"
                 f" ON CONFLICT (session_key, request_key) DO UPDATE SET {updates}"
-                " WHERE analyses.error IS NOT NULL OR analyses.file_path IS NULL OR analyses.file_path = excluded.file_path"
-                " OR (excluded.error IS NULL AND (excluded.partial = 0 OR analyses.partial = 1))"
-                " RETURNING id", tuple(values.values())).fetchone()
-            if stored is not None:  # the session row follows the analysis that stands
+                " WHERE analyses.error IS NOT NULL OR analyses.file_path = excluded.file_path"
+                " OR (analyses.file_path IS NULL AND analyses.sha256 = excluded.sha256)"
+                " OR (excluded.error IS NULL AND (excluded.partial = 0 OR analyses.partial = 1))",
+                tuple(values.values())).rowcount
+            if stored:  # the session row follows the analysis that stands
                 self._execute("UPDATE sessions SET path = ?, status = ?, tags_json = ? WHERE session_key = ?",
                               (path, meta.get("status"), json.dumps(meta.get("tags", {})), key))
 
     def entries(self, joint: str | None = None) -> list[Entry]:
         """Every session's analyses (one per request), oldest session first (all joints when ``joint`` is None)."""
         rows = self._execute(
-            "SELECT s.*, a.* FROM sessions s JOIN analyses a ON a.session_key = s.session_key"
+            "SELECT s.*, a.*, COALESCE(a.file_path, s.path) AS analysed_path FROM sessions s JOIN analyses a"
+            " ON a.session_key = s.session_key"
             " WHERE (CAST(? AS TEXT) IS NULL OR s.joint = ?)"
             " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path, a.analyzed_utc, a.id",
             (joint, joint))
@@ -278,7 +282,7 @@ class Catalogue:
 
 def _entry(r: Any) -> Entry:
     truth = json.loads(r["truth_json"]) if r["truth_json"] else {}
-    return Entry(session_key=r["session_key"], session_id=r["session_id"], path=r["path"], joint=r["joint"],
+    return Entry(session_key=r["session_key"], session_id=r["session_id"], path=r["analysed_path"], joint=r["joint"],
                  created_utc=r["created_utc"], tags=json.loads(r["tags_json"]), verdict=r["verdict"],
                  reasons=json.loads(r["reasons_json"] or "[]"), error=r["error"], K_Nm_per_rad=r["K_Nm_per_rad"],
                  K_ci95=(r["K_lo"], r["K_hi"]), f_a_hz=r["f_a_hz"], f_r_hz=r["f_r_hz"], request_key=r["request_key"],

@@ -197,9 +197,9 @@ def _kind(request_key: str) -> str:
         request = AnalysisRequest.from_json_dict(json.loads(request_key))
     except (ValueError, TypeError, AttributeError):
         return f"other:{request_key}"
-    # a selection asked for explicitly (the monitor's windows before it was the default where acq does not command
-    # the motion) is the same kind as the default's
-    return replace(request, select_segments=None).variant_label()
+    # a selection asked for (the monitor's windows before it became the default where acq does not command the
+    # motion) is the default's kind; one refused (select_segments False) is a comparison
+    return (replace(request, select_segments=None) if request.select_segments else request).variant_label()
 
 
 def _skip_reason(e: Entry) -> str | None:

@@ -18,6 +18,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import os
+import uuid
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -286,9 +287,13 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
 def _restored_id(meta: ExportMetadata | None) -> str | None:
     """The session id an import keeps: the exported session's, unless the files hold only part of it (a damaged
     session exported with --partial) — that is other data, and under the same id its analysis would replace the whole
-    session's in a shared catalogue (the review); its origin keeps the exported id."""
-    if meta is None or meta.damage:
+    session's in a shared catalogue (the review). Its id is then derived from the exported id and what is missing, so
+    importing the same partial export twice gives the same session, not two (the second read); its origin keeps the
+    exported id."""
+    if meta is None:
         return None
+    if meta.damage:
+        return str(uuid.uuid5(uuid.NAMESPACE_URL, f"acq-partial:{meta.session_id}:{'|'.join(meta.damage)}"))
     return meta.session_id
 
 

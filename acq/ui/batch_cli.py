@@ -62,8 +62,8 @@ def analyze_many(specs: Sequence[Path], request: AnalysisRequest, *, jobs: int |
     if result_dir is not None:
         _one_result_name_each(paths, result_dir)
     done: BatchReport | None = None
-    folder = result_dir or base
-    with Catalogue(catalogue_path or (folder or Path(".")) / CATALOGUE_NAME) as catalogue:
+    location = catalogue_path if catalogue_path is not None else (result_dir or base or Path()) / CATALOGUE_NAME
+    with Catalogue(location) as catalogue:
         try:
             with batch_progress() as on_progress:
                 done = run_batch(paths, catalogue, request, jobs=jobs, scheduler=scheduler,
