@@ -667,3 +667,37 @@ def test_a_passive_record_of_a_joint_at_rest_is_not_excited_in_acq_analyze_too(t
     assert quality["reasons"][0].startswith("not excited: 0 of 12 moves put torque into 10…400 Hz beyond chance (")
     assert quality["reasons"][0].endswith("of the record) — record while the machine runs fast moves of this joint")
     assert not any("interference" in r or "ripple" in r or "play" in r for r in quality["reasons"])
+
+
+def test_alarm_commands_run_in_a_session_of_their_own_and_share_one_wait_at_the_end(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The review: the Ctrl-C that stops the monitor reached its alarm commands (same process group), and N slow
+    commands held the exit N × 30 s. Two commands still running: one shared wait, both said, both left running."""
+    import acq.monitoring.monitor as monitor_module
+    from acq.monitoring.catalogue import Entry
+    from acq.monitoring.monitor import Monitor, MonitorSettings
+    from acq.monitoring.trend import Trend
+
+    monkeypatch.setattr(monitor_module, "_ALARM_WAIT_S", 0.6)
+    sid_file = tmp_path / "sid"
+    command = f"{sys.executable} -c 'import os; open(\"{sid_file}\", \"w\").write(str(os.getsid(0)))'; sleep 5"
+    m = Monitor(MonitorSettings(bench=_bench(), out_dir=tmp_path, window_s=10.0, every_s=60.0, on_alarm=command))
+    entry = Entry("k", "k", str(tmp_path / "w.h5"), "joint1", None, {}, "ok", [], None, 700.0, (690.0, 710.0), None,
+                  None, "{}", "2026-11-30T00:00:00+00:00", None)
+    trend = Trend("joint1", [], 890.0, "first good session", 2.0, 10.0, 0.2)
+    for _ in range(2):
+        m._run_on_alarm(entry, trend)
+    started = list(m._alarm_procs)
+    try:
+        deadline = time.monotonic() + 3.0
+        while not sid_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.02)
+        assert int(sid_file.read_text()) != os.getsid(0)  # not the monitor's session: a Ctrl-C does not reach it
+        start = time.monotonic()
+        m._reap_alarms(wait=True)
+        assert time.monotonic() - start < 1.0  # one 0.6 s wait for both, not 0.6 s each
+        assert m.status.alarm_command_failure.startswith("still running after 0.6 s when the monitor ended")
+    finally:
+        for proc in started:  # left running by the monitor, as a mail mid-send would be; not by the test
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
