@@ -451,11 +451,13 @@ def _demodulated(piece: dict[str, np.ndarray], rec: Recording, theta_m_rad: np.n
     theta_e = rec.pole_pairs * theta_m_rad
     if method == "encoder":
         if np.isnan(theta0):
-            theta0 = torque.phase_offset(piece["i_a"], theta_e, rec.rate_hz, pole_pairs=rec.pole_pairs).theta0_rad
+            theta0 = torque.phase_offset(piece["i_a"], theta_e, rec.rate_hz, pole_pairs=rec.pole_pairs,
+                                         commanded=rec.profile is not None).theta0_rad
         # the sensor DC is estimated jointly by the spline fit, θ_0 refined there
         return torque.torque_encoder(piece["i_a"], theta_e, rec.rate_hz, rec.k_t_Nm_per_A,
                                      torque.PhaseOffset(theta0, 0.0, 0), noise_seed=noise_seed, found=found), theta0
-    offsets = {name: torque.phase_offset(c, theta_e, rec.rate_hz, pole_pairs=rec.pole_pairs)
+    offsets = {name: torque.phase_offset(c, theta_e, rec.rate_hz, pole_pairs=rec.pole_pairs,
+                                         commanded=rec.profile is not None)
                for name, c in piece.items()}
     theta0 = offsets["i_a"].theta0_rad if np.isnan(theta0) else theta0
     gains = torque.phase_gains(piece)

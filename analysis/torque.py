@@ -122,7 +122,8 @@ def min_speed_rpm(pole_pairs: int, window_s: float = PHASE_WINDOW_S) -> float:
 
 
 def phase_offset(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float,
-                 window_s: float = PHASE_WINDOW_S, pole_pairs: int | None = None) -> PhaseOffset:
+                 window_s: float = PHASE_WINDOW_S, pole_pairs: int | None = None,
+                 commanded: bool = True) -> PhaseOffset:
     """Estimate θ_0 (mod π) and the sensor DC of one phase by windowed least squares.
 
     θ_0 is the argument of Σ phasor² / 2 (each window weighted by i_q²); dc the median of the windows'
@@ -138,13 +139,17 @@ def phase_offset(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float,
         Window length, s.
     pole_pairs : int, optional
         The motor's pole pairs: the error then says how fast the motor must run.
+    commanded : bool
+        acq commanded the motion (the error's advice is the profile's); False: a machine's own program moved the
+        joint (the advice is to record while it runs fast moves — there is no profile to change).
     """
     w = window_phasors(current_a, theta_e_rad, max(8, int(round(window_s * rate_hz))))
     if not w.valid.any():
         need = "" if pole_pairs is None else (
             f": the motor must run faster than {min_speed_rpm(pole_pairs, window_s):.0f} rpm for {1e3 * window_s:.0f} ms "
-            f"at a time ({pole_pairs} pole pairs) — raise the profile's top_speed_rpm, and lengthen accel_time_s and "
-            "decel_time_s if the drive cannot follow them")
+            f"at a time ({pole_pairs} pole pairs) — " + (
+                "raise the profile's top_speed_rpm, and lengthen accel_time_s and decel_time_s if the drive cannot "
+                "follow them" if commanded else "record while the machine runs fast moves of this joint"))
         raise ValueError(f"the motor never turns half an electrical revolution within {1e3 * window_s:.0f} ms, so the "
                          f"current's phase (θ_0) and DC cannot be estimated{need}")
     z = np.sum(w.phasor_a[w.valid] ** 2)

@@ -54,3 +54,16 @@ def test_spline_fit_equals_the_dense_penalised_least_squares() -> None:
     sol = np.linalg.solve(N, full.T @ y)
     np.testing.assert_allclose(beta, sol[nk + 3:], rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(s, B @ sol[:nk + 3], rtol=1e-8, atol=1e-10)
+
+
+@pytest.mark.parametrize("commanded, advice", [
+    (True, "raise the profile's top_speed_rpm, and lengthen accel_time_s and decel_time_s if the drive cannot follow "
+           "them"),
+    (False, "record while the machine runs fast moves of this joint")])  # no profile to change (the second trial)
+def test_a_motor_that_never_turns_half_an_electrical_revolution_gets_advice_for_who_moved_it(
+        commanded: bool, advice: str) -> None:
+    from analysis.torque import phase_offset
+
+    with pytest.raises(ValueError) as err:
+        phase_offset(np.zeros(25600), np.zeros(25600), 25600.0, pole_pairs=4, commanded=commanded)
+    assert str(err.value).endswith(f"(4 pole pairs) — {advice}")
