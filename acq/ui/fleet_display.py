@@ -19,7 +19,7 @@ from rich.console import Console
 
 from acq.monitoring.catalogue import Entry
 from acq.ui.display import Column, FittedTable, start_times
-from acq.ui.options import CatalogueLocation
+from acq.ui.options import CatalogueLocation, alarm_rule_options
 from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet
 from acq.monitoring.trend import EXIT_ALARM
 from acq.ui.values import format_value
@@ -140,15 +140,7 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
               help="Only sessions with this tag (repeatable), e.g. --tag site=plant2.")
 @click.option("--stale-days", type=click.FloatRange(0, min_open=True), default=7.0, show_default=True,
               help="A joint with no session for this many days is stale.")
-@click.option("--baseline-sessions", type=click.IntRange(min=1), default=None,
-              help="Baseline = mean K of each joint's first N good sessions (default: as acq monitor judged the "
-                   "joint's windows, else 1).")
-@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=None,
-              help="Alarm when K is this many % below the baseline (default: as acq monitor judged the joint's "
-                   "windows, else 10).")
-@click.option("--ewma-lambda", type=click.FloatRange(0, 1, min_open=True), default=None,
-              help="EWMA weight of the newest session, alarm at the 3σ control limit (default: as acq monitor judged "
-                   "the joint's windows, else 0.2).")
+@alarm_rule_options("each joint's")
 @click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
               help="Also draw the fleet (ΔK over time, one row per joint) into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the fleet as JSON.")

@@ -8,7 +8,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from acq.ui.options import CatalogueLocation
+from acq.ui.options import CatalogueLocation, alarm_rule_options
 from acq.monitoring.trend import EXIT_ALARM, load_trend, trend_json
 from acq.ui.display import trend_table
 from acq.ui.trend_plot import render_trend_png
@@ -21,16 +21,8 @@ from acqcore.errors import ConfigError
               help="The catalogue, a file or postgresql:// URL (default: FOLDER/catalogue.sqlite, FOLDER defaulting "
                    "to sessions/).")
 @click.option("--joint", required=True, help="The joint to trend.")
-@click.option("--baseline-sessions", type=click.IntRange(min=1), default=None,
-              help="Baseline = mean K of the first N good sessions (default: as acq monitor judged the windows, else "
-                   "1).")
+@alarm_rule_options("the joint's")
 @click.option("--baseline", "baseline_id", default=None, help="Baseline = this session id (or a unique prefix).")
-@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=None,
-              help="Alarm when K is this many % below the baseline (default: as acq monitor judged the windows, else "
-                   "10).")
-@click.option("--ewma-lambda", type=click.FloatRange(0, 1, min_open=True), default=None,
-              help="EWMA weight of the newest session, alarm at the 3σ control limit (default: as acq monitor judged "
-                   "the windows, else 0.2).")
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE", help="Only sessions with this tag (repeatable).")
 @click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
               help="Also draw the trend into this PNG.")
