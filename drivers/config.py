@@ -431,6 +431,11 @@ class Bench(Strict):
     def _safe_joint(cls, name: str) -> str:
         return check_joint_name(name)
 
+    def listens(self) -> bool:
+        """True when the machine's own controller moves the joint (``[drive] motion = "external"``): acq commands no
+        motion, it only records (``acq monitor``, a passive ``acq record`` or ``acq selftest``)."""
+        return self.drive.motion == "external"
+
     def motion_limits(self) -> Limits | None:
         """``[limits]``; where the bench states none, :data:`SIM_LIMITS` for a simulated drive, None for a real one."""
         if self.limits is not None:

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 from acqcore.errors import ConfigError
 from drivers.config import Bench, Profile
-from drivers.motion import RPM_TO_RAD_S, half_swing_rad
+from drivers.motion import RPM_TO_RAD_S, half_swing_rad, peak_ramp_rate
 
 
 @dataclass(frozen=True)
@@ -38,18 +38,13 @@ class Demand:
     torque_Nm: float
 
 
-def _peak_ramp_rate(ramp_s: float, jerk_s: float) -> float:
-    """Peak acceleration of a ramp per rad/s of speed step, 1/s: 1/(t_r − t_j), t_j capped at t_r/2 (drivers.motion)."""
-    return 1.0 / (ramp_s - min(jerk_s, ramp_s / 2.0))
-
-
 def demand(profile: Profile, gear_ratio: float, inertia_kgm2: float) -> Demand:
     """The :class:`Demand` of ``profile`` on a joint of ``gear_ratio`` (motor turns per arm turn) and motor-side
     total inertia ``inertia_kgm2`` (kg·m²)."""
     factor = profile.max_speed_factor
     top_rad_s = profile.top_speed_rpm * RPM_TO_RAD_S * factor
-    rate = max(_peak_ramp_rate(profile.accel_time_s, profile.jerk_time_s),
-               _peak_ramp_rate(profile.decel_time_s, profile.jerk_time_s))
+    rate = max(peak_ramp_rate(profile.accel_time_s, profile.jerk_time_s),
+               peak_ramp_rate(profile.decel_time_s, profile.jerk_time_s))
     accel = top_rad_s * rate
     return Demand(speed_rpm=profile.top_speed_rpm * factor,
                   travel_deg=math.degrees(half_swing_rad(profile) * factor / gear_ratio),
@@ -69,7 +64,8 @@ def limit_problem(profile: Profile, bench: Bench) -> str | None:
     ``bench`` must have limits (:func:`missing_limits`)."""
     lim, d = bench.motion_limits(), profile.speed_dither
     assert lim is not None, "a real drive without [limits] (drivers.limits.missing_limits)"
-    need = demand(profile, bench.gear.ratio, bench.nominal.Jm_kgm2 + bench.nominal.Jl_kgm2)
+    inertia = bench.nominal.Jm_kgm2 + bench.nominal.Jl_kgm2
+    need = demand(profile, bench.gear.ratio, inertia)
     dither = f" with speed_dither = {d:g}" if d else ""
     cycle = "the fastest cycle" if d else "the motion"
     if need.speed_rpm > lim.max_speed_rpm:
@@ -84,7 +80,6 @@ def limit_problem(profile: Profile, bench: Bench) -> str | None:
         steep = "accel_time_s" if profile.accel_time_s <= profile.decel_time_s else "decel_time_s"
         keys = f"{steep} = {getattr(profile, steep):g}" + (f", jerk_time_s = {profile.jerk_time_s:g}"
                                                             if profile.jerk_time_s else "")
-        inertia = bench.nominal.Jm_kgm2 + bench.nominal.Jl_kgm2
         return (f"{keys} (top_speed_rpm = {profile.top_speed_rpm:g}{dither}): {cycle}'s steepest ramp needs "
                 f"{need.torque_Nm:.3g} N·m to accelerate [nominal] Jm_kgm2 + Jl_kgm2 = {inertia:.4g} kg·m² at "
                 f"{need.accel_rad_s2:.4g} rad/s², above [limits] max_torque_Nm = {lim.max_torque_Nm:g}")

@@ -81,13 +81,19 @@ def _phase(t_s: np.ndarray | float, profile: Profile) -> tuple[np.ndarray, np.nd
     return t, sign, np.mod(tau_ns, half_ns) / 1e9
 
 
+def peak_ramp_rate(ramp_s: float, jerk_s: float) -> float:
+    """The steepest part of a ramp of ``ramp_s`` (s) with jerk time ``jerk_s`` (s), per unit of its speed step, 1/s:
+    A = 1/(t_r − t_j), t_j at most t_r/2 (the module's S-curve; 1/t_r for a plain ramp)."""
+    return 1.0 / (ramp_s - min(jerk_s, ramp_s / 2.0))
+
+
 def _ramp(u_s: np.ndarray, ramp_s: float, jerk_s: float) -> tuple[np.ndarray, np.ndarray]:
     """Fraction of the speed step (0…1) and its time derivative (1/s) at ``u_s`` into a ramp of ``ramp_s``."""
     u = np.clip(u_s, 0.0, ramp_s)
     tj = min(jerk_s, ramp_s / 2.0)
     if tj <= 0.0:
         return u / ramp_s, np.full_like(u, 1.0 / ramp_s)
-    a = 1.0 / (ramp_s - tj)
+    a = peak_ramp_rate(ramp_s, jerk_s)
     rest = ramp_s - u
     frac = np.where(u < tj, a * u**2 / (2 * tj), np.where(rest < tj, 1.0 - a * rest**2 / (2 * tj), a * (u - tj / 2)))
     rate = np.where(u < tj, a * u / tj, np.where(rest < tj, a * rest / tj, a))

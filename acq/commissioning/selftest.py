@@ -64,22 +64,17 @@ class _HoldStill:
         return getattr(self._drive, name)
 
 
-def listens(bench: Bench) -> bool:
-    """True on a bench whose machine moves the joint itself (``[drive] motion = "external"``): acq commands none."""
-    return getattr(bench.drive, "motion", "commanded") == "external"
-
-
 def run_selftest(bench: Bench, profile: Profile | None, work_dir: Path, *, fast: bool = False) -> Iterator[Check]:
     """Run the checks in order, yielding each as it completes; stop after the first that fails.
 
     Parameters
     ----------
-    bench, profile : the bench config and the identification's motion (None on a bench that :func:`listens`).
+    bench, profile : the bench config and the identification's motion (None on a bench that :meth:`drivers.config.Bench.listens`).
     work_dir : folder for the short sessions (and their raw logs).
     fast : simulated parts run as fast as possible (as ``acq record --fast``).
     """
     passive = (_passive_motion_and_identification,)
-    for stage in (_devices_and_streams, *(passive if listens(bench) else (_motion, _identification))):
+    for stage in (_devices_and_streams, *(passive if bench.listens() else (_motion, _identification))):
         for check in stage(bench, profile, work_dir, fast):
             yield check
             if check.status == "fail":
@@ -131,7 +126,7 @@ def _devices_and_streams(bench: Bench, profile: Profile | None, work_dir: Path, 
     try:
         current, drive = open_bench(bench, fast=fast)
         recorder = (Recorder(bench, None, current, drive, work_dir, STANDSTILL_S, tags={"selftest": "streams"})
-                    if listens(bench) else  # the machine's motion, whatever it does: no command
+                    if bench.listens() else  # the machine's motion, whatever it does: no command
                     Recorder(bench, STANDSTILL, current, _HoldStill(drive), work_dir, STANDSTILL_S,
                              tags={"selftest": "standstill"}))
         recorder.start_devices()
@@ -161,7 +156,7 @@ def _devices_and_streams(bench: Bench, profile: Profile | None, work_dir: Path, 
     stats = getattr(drive, "stats", None)  # a serial link's frame and CRC counters
     if callable(stats):
         yield _serial_check(stats(), bench)
-    if not listens(bench):  # a listening bench's joint may be moving: no standstill to measure offset and noise on
+    if not bench.listens():  # a listening bench's joint may be moving: no standstill to measure offset and noise on
         yield standstill_current_check(session)
 
 

@@ -383,8 +383,7 @@ class Monitor:
         """Mark or analyse the windows a previous run left; return the next window's number."""
         known = {e.session_id: e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags}
         filed = filed_rules(list(known.values()))
-        rules = (self._rules.baseline_sessions, self._rules.threshold_pct, self._rules.ewma_lambda)
-        if filed is not None and (filed.baseline_sessions, filed.threshold_pct, filed.ewma_lambda) != rules:
+        if filed is not None and filed.as_tags() != self._rules.as_tags():
             # other rules midway re-baselined on windows judged before, the alarm cleared silently (the second trial)
             raise ConfigError(f"{self.s.out_dir}: its windows were judged with --baseline-windows "
                               f"{filed.baseline_sessions} --threshold-pct {filed.threshold_pct:g} --ewma-lambda "

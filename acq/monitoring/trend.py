@@ -26,7 +26,7 @@ import math
 import statistics
 from collections import Counter
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -99,7 +99,7 @@ def rules_for(entries: Sequence[Entry], *, baseline_sessions: int | None = None,
         source = "as given" if len(given) == len(RULE_TAGS) else f"{', '.join(given)} as given, the rest acq's defaults"
     else:
         source = f"{', '.join(given)} as given, the rest as acq monitor judged its windows"
-    return AlarmRules(**{**{f.name: getattr(rules, f.name) for f in fields(rules)}, **given, "source": source})
+    return replace(rules, **given, source=source)
 
 @dataclass(frozen=True)
 class TrendPoint:
@@ -166,9 +166,9 @@ def like_for_like(entries: Sequence[Entry]) -> tuple[list[Entry], dict[str, str]
     latest on a tie).
 
     The kind is what the request asks (its label), not the code that answered it nor whether the segment selection
-    was asked for or left to the recording: a monitor that runs on across an upgrade of acq keeps judging its new windows against the
-    baseline of its old ones (compared by the full catalogue key, the new windows were "other options" and skipped
-    until they outnumbered the old — an alarm lost meanwhile).
+    was asked for or left to the recording: a monitor that runs on across an upgrade of acq keeps judging its new
+    windows against the baseline of its old ones (compared by the full catalogue key, the new windows were "other
+    options" and skipped until they outnumbered the old — an alarm lost meanwhile).
 
     Returns the entries (oldest session first) and, by session key, why a session has none of that kind (its
     latest analysis stands in, to be listed as skipped).

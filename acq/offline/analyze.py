@@ -8,11 +8,9 @@ never touched). On the simulated bench the result also holds the simulated truth
 Where the results go (:func:`output_paths`): the default analysis writes the session's result,
 ``<session>.result.json`` and ``<session>.report.png`` — what ``acq view``, the catalogue's default rows and the
 trend take as the session's result. Any other request writes beside it, never over it, under a name that says
-what differs (:meth:`analysis.AnalysisRequest.variant_label`): ``<session>.<label>.result.json`` and
-``<session>.<label>.report.png``, the label's parts in a fixed order, joined by ``.``: ``paper`` (the paper's
-chain), ``torque-<method>``, ``params-K``, ``fit-complex``, ``band-<lo>-<hi>`` (Hz, as given), ``no-align``,
-``segment-<s>s``; e.g.
-``S.band-10-150.result.json`` or ``S.params-K.fit-complex.result.json``.
+what differs (:meth:`analysis.AnalysisRequest.variant_label`, which lists the label's parts):
+``<session>.<label>.result.json`` and ``<session>.<label>.report.png``, e.g. ``S.band-10-150.result.json`` or
+``S.params-K.fit-complex.result.json``.
 """
 
 from __future__ import annotations
@@ -156,8 +154,9 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     except ValueError as e:
         raise ConfigError(f"{session.path}: {e}") from None
     doc = result_json(session, result)
-    doc["quality"]["reasons"][:0] = partial_notes(session)
-    doc["partial"] = bool(session.damage) or session.status == "recording"
+    notes = partial_notes(session)
+    doc["quality"]["reasons"][:0] = notes
+    doc["partial"] = bool(notes)  # the note says why
     doc["session"]["damage"] = list(session.damage)
     json_path, png_path = output_paths(session.path, request, result_dir)
     report_path = png_path if report and write else None

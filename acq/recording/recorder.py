@@ -126,7 +126,7 @@ class Recorder:
         listeners: list[Listener] | None = None,
         progress: Callable[[float], None] | None = None,
     ) -> None:
-        external = getattr(bench.drive, "motion", "commanded") == "external"
+        external = bench.listens()
         if external != (profile is None):
             raise ConfigError("[drive] motion = \"external\": acq must not command motion, record without a profile"
                               if external else "a recording without a profile needs [drive] motion = \"external\"")

@@ -216,7 +216,7 @@ def _profile_for(bench: Bench, bench_path: Path | None, profile_name: str | None
     profile is refused in one line (acq must not command motion there) and ``--duration`` is needed instead."""
     from acq.config import load_profile
 
-    if getattr(bench.drive, "motion", "commanded") != "external":
+    if not bench.listens():
         if profile_name is None:
             raise click.UsageError("Missing option '--profile' (only a bench with [drive] motion = \"external\" "
                                    "records without one).")

@@ -109,7 +109,7 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
                     jobs: int, fast: bool) -> int:
     """Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in alarm."""
     bench = load_bench(bench_path)
-    if getattr(bench.drive, "motion", "commanded") != "external":
+    if not bench.listens():
         raise ConfigError(f"{bench_path}: acq monitor listens only — set [drive] motion = \"external\" "
                           "(the machine's controller moves the joint)")
     try:

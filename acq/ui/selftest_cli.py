@@ -12,7 +12,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from acq.commissioning.selftest import SLOW_MOVE, listens, run_selftest
+from acq.commissioning.selftest import SLOW_MOVE, run_selftest
 from acq.commissioning.selftest_checks import Check
 from acq.config import bench_label, load_bench, load_profile, resolve_profile_path
 from acqcore.errors import ConfigError
@@ -85,10 +85,10 @@ def selftest_command(bench_path: Path | None, profile_name: str | None, fast: bo
     [drive] motion = "external" is checked on the machine's own motion: acq commands none there.
     """
     bench = load_bench(bench_path)
-    if listens(bench) and profile_name is not None:
+    if bench.listens() and profile_name is not None:
         raise ConfigError(f"--profile {profile_name}: {bench_path} has [drive] motion = \"external\": acq commands no "
                           "motion there and checks the bench on the machine's own motion — leave out --profile")
-    if not listens(bench):
+    if not bench.listens():
         profile_name = profile_name or DEFAULT_PROFILE
     profile = None if profile_name is None else load_profile(profile_name)
     if profile is not None:  # acq moves the joint: its slow move and the profile within [limits], before any device
