@@ -293,6 +293,30 @@ def test_on_alarm_runs_through_the_shell_and_its_failure_is_reported(capsys: pyt
     assert "alarms raised │ 1 · alarm command failed: exit 127 (command not found) │" in summary
 
 
+def test_a_joint_that_stays_in_alarm_keeps_the_raw_window_that_raised_it_not_every_one(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """Every alarming window used to be kept: a joint in alarm for a weekend grew the folder by each window (under
+    --max-disk its capture stopped once the budget was full). Kept now: the baseline and the window that raised the
+    alarm; the catalogue keeps every window's K."""
+    # K falls 5 % per simulated minute: windows at 0 … 5 min have K −0 … −25 %
+    bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0, seed=EXCITING_SEED)
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "6m", "--baseline-windows", "2",
+                  "--keep", "0", "--out", str(tmp_path / "m"))
+    assert run.code == 3
+    rows = _rows(tmp_path / "m")
+    assert [r["window"] for r in rows] == [0, 1, 2, 3, 4, 5]
+    trend = json.loads(run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1", "--json").out)
+    states = [p["state"] for p in trend["points"]]
+    first_alarm = states.index("alarm")
+    # a window the robot's program leaves unexcited is skipped (no K): it neither ends nor restarts the alarm
+    assert states[:2] == ["baseline", "baseline"] and set(states[first_alarm:]) <= {"alarm", "skipped"}
+    assert states.count("alarm") >= 2
+    kept = [Path(r["path"]).exists() for r in rows]
+    assert kept == [w in (0, 1, first_alarm) for w in range(6)]
+    assert sorted(p.name for p in (tmp_path / "m").glob("*.h5")) == sorted(
+        Path(rows[w]["path"]).name for w in (0, 1, first_alarm))
+
+
 def test_retention_rules() -> None:
     windows = [WindowFiles(i, Path(f"w{i}.h5"), done=i < 5, protected=i in (0, 3)) for i in range(6)]
     assert [w.index for w in to_delete(windows, keep=2)] == [1, 2]  # 0, 3 protected; 4, 5 the last two

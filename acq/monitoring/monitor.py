@@ -35,7 +35,7 @@ from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
 from acq.monitoring.folder_lock import folder_lock
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
-from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, Trend, compute_trend, filed_rules
+from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, Trend, alarm_onsets, compute_trend, filed_rules
 from acq.monitoring.window_judge import analyse_window, excites, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
@@ -357,8 +357,12 @@ class Monitor:
 
     # ---- retention and disk ----------------------------------------------------------------------------
     def _retain(self, trend: Trend) -> None:
-        # "before baseline": good windows that will make the baseline once there are enough of them
-        protected = {p.entry.session_id for p in trend.points if p.state in ("baseline", "alarm", "before baseline")}
+        # "before baseline": good windows that will make the baseline once there are enough of them. Of an alarm only
+        # the window that raised it is kept: a joint that stays in alarm for a weekend grew the folder by every window
+        # (or, under --max-disk, stopped its capture once the budget was full); the catalogue keeps every K, and --keep
+        # the latest raw windows
+        protected = alarm_onsets(trend) | {p.entry.session_id for p in trend.points
+                                           if p.state in ("baseline", "before baseline")}
         for key, w in self._windows.items():
             if (key in protected) != w.protected:
                 self._windows[key] = replace(w, protected=key in protected)

@@ -2,7 +2,7 @@
 
 Catalogue rows are always kept; a window's raw files (``<stem>.h5``, ``.result.json``, ``.report.png``,
 a transport's raw log) are deleted once the window is done (analysed or marked), except the baseline
-windows, every alarming window and the last ``keep`` windows. A disk budget is never exceeded: before
+windows, the window that raised each alarm and the last ``keep`` windows. A disk budget is never exceeded: before
 a window is captured the folder's size plus the window's expected size must fit, else the oldest
 unprotected raw files go first, then the oldest of the last ``keep``; when even that is not enough
 the window is not captured (and the monitor says so).
@@ -24,7 +24,7 @@ class WindowFiles:
     index : the window's number in the monitor (time order).
     path : its session file.
     done : analysed or marked (its catalogue row is written).
-    protected : a baseline or alarming window (never deleted).
+    protected : a baseline window or the window that raised an alarm (never deleted).
     key : what the caller knows the window by (e.g. its session id).
     """
 

@@ -159,6 +159,18 @@ class Trend:
         return bool(self.judged) and self.judged[-1].state == "alarm"
 
 
+def alarm_onsets(trend: Trend) -> set[str]:
+    """Session ids of the judged sessions that raised an alarm when the one judged before them had not: the first
+    session of each alarm episode (skipped sessions neither start nor end one, as in the monitor's own count)."""
+    onsets: set[str] = set()
+    in_alarm = False
+    for point in trend.judged:
+        if point.state == "alarm" and not in_alarm:
+            onsets.add(point.entry.session_id)
+        in_alarm = point.state == "alarm"
+    return onsets
+
+
 def like_for_like(entries: Sequence[Entry]) -> tuple[list[Entry], dict[str, str]]:
     """One analysis per session, all of the same kind: the sessions' own results (the default request, or the
     monitor's — :meth:`analysis.AnalysisRequest.variant_label` empty), each session's latest; a comparison
