@@ -234,7 +234,8 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
                           "transport, timestamp_kind or device attribute") from None
     return EncoderData(
         period_s=period_s, counts_per_rev=counts_per_rev, transport=transport, timestamp_kind=kind, device=device,
-        position_counts=kept["position_counts"], index=kept["index"], host_ns=kept["host_ns"], **{name: optional(name) for name in OPTIONAL_ENCODER},
+        position_counts=kept["position_counts"], index=kept["index"], host_ns=kept["host_ns"],
+        **{name: optional(name) for name in OPTIONAL_ENCODER},
     )
 
 
