@@ -123,11 +123,11 @@ def test_intact_session_checks_clean(recorded: Path, tmp_path: Path, capsys: pyt
             "nothing to repair") in run.out.replace("\n", "")
 
 
-def _flip_a_byte_in_chunk(path: Path, chunk_number: int) -> tuple[int, int]:
-    """Flip one bit of a byte inside chunk ``chunk_number`` of ``/current/i_a_A``; its first sample and the chunk
+def _flip_a_byte_in_chunk(path: Path, chunk_number: int, name: str = "current/i_a_A") -> tuple[int, int]:
+    """Flip one bit of a byte inside chunk ``chunk_number`` of dataset ``name``; its first sample and the chunk
     length (samples)."""
     with h5py.File(path, "r") as f:
-        ds = f["current/i_a_A"]
+        ds = f[name]
         chunk = ds.chunks[0]
         info = ds.id.get_chunk_info(chunk_number)
         first_bad = int(info.chunk_offset[0])
@@ -250,6 +250,21 @@ def test_a_partial_analysis_says_so_on_screen_and_in_its_reasons_naming_the_span
     assert partial_notes(recording) == ["note: partial: the session is still being recorded (status recording); "
                                         "only what was stored was analysed"]
     assert partial_notes(replace(session, damage=())) == []
+
+
+def test_holes_that_leave_too_little_of_both_streams_together_fail_naming_the_damage(
+        recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The longest gap-free runs, current 4.9–10 s and encoder 0–5.0 s, barely overlap: no number, and the error
+    (here the analysis's own: too little motion in what is left) says what was left out."""
+    path = _copy(recorded, tmp_path / "holes.h5")
+    _flip_a_byte_in_chunk(path, 48)
+    _flip_a_byte_in_chunk(path, 10, "encoder/index")
+    spans = "current: samples 122 880–125 439 unreadable; encoder: samples 5 000–5 499 unreadable"
+    run = run_cli(capsys, "analyze", str(path), "--partial", "--no-report")
+    assert run.code == 2 and not (tmp_path / "holes.result.json").exists()
+    assert run.err.startswith(f"acq: error: {path}: ") and run.err.count("\n") == 1
+    assert run.err.endswith(f" (partial: only the readable part of a damaged session was analysed; left out: {spans})"
+                            "\n")
 
 
 @pytest.mark.parametrize(("status", "stop_reason", "damage", "imported"), [
