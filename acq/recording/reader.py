@@ -63,6 +63,7 @@ def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
 def _span(stream: str, first: int, end: int, what: str = "unreadable") -> str:
     return f"{stream}: samples {first:,}–{end - 1:,} {what}".replace(",", " ")
 
+
 #: A damaged span found while reading: (stream, first row, end row, what), the words of :func:`_span`.
 Damage = tuple[str, int, int, str]
 
