@@ -123,11 +123,11 @@ def test_intact_session_checks_clean(recorded: Path, tmp_path: Path, capsys: pyt
             "nothing to repair") in run.out.replace("\n", "")
 
 
-def _flip_a_byte_in_chunk(path: Path, chunk_number: int) -> tuple[int, int]:
-    """Flip one bit of a byte inside chunk ``chunk_number`` of ``/current/i_a_A``; its first sample and the chunk
+def _flip_a_byte_in_chunk(path: Path, chunk_number: int, name: str = "current/i_a_A") -> tuple[int, int]:
+    """Flip one bit of a byte inside chunk ``chunk_number`` of dataset ``name``; its first sample and the chunk
     length (samples)."""
     with h5py.File(path, "r") as f:
-        ds = f["current/i_a_A"]
+        ds = f[name]
         chunk = ds.chunks[0]
         info = ds.id.get_chunk_info(chunk_number)
         first_bad = int(info.chunk_offset[0])
@@ -141,16 +141,21 @@ def _flip_a_byte_in_chunk(path: Path, chunk_number: int) -> tuple[int, int]:
 
 def test_flipped_byte_in_a_chunk_is_reported_with_its_span(recorded: Path, tmp_path: Path,
                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    """A chunk in the middle costs that chunk only (before: every sample after it, 153 600 of 256 000 lost)."""
     path = _copy(recorded, tmp_path / "flip.h5")
     first_bad, chunk = _flip_a_byte_in_chunk(path, 40)
-    assert first_bad == 40 * chunk
+    assert (first_bad, chunk) == (102400, 2560)
     s = load(path)
-    span = f"current: samples {first_bad:,}–{10 * RATE_HZ - 1:,} unreadable".replace(",", " ")
+    span = "current: samples 102 400–104 959 unreadable"
     assert s.damage == (span,)
-    assert s.current.sample_count == first_bad
+    assert s.current.sample_count == 10 * RATE_HZ - chunk  # 102 400 before the hole + 151 040 after it
+    assert s.encoder.index.size == 10000
     run = run_cli(capsys, "check", str(path))
     assert run.code == 1
     assert f"{path}: {span}" in run.out.replace("\n", "")
+    assert run.err == (f"acq: damaged: {path} ({span}) — the intact part holds 253440 current and 10000 encoder "
+                       "samples, 151040 and 10000 of them after the first damaged span (acq analyze --partial uses "
+                       "it)\n")
     analyze = run_cli(capsys, "analyze", str(path), "--no-report")
     assert analyze.code == 2
     assert analyze.err.strip() == (f"acq: error: {path}: damaged ({span}) — run acq check, or use --partial to "
@@ -165,8 +170,8 @@ def test_a_damaged_session_is_exported_only_with_partial_and_its_import_says_wha
     the pair was 'complete, checksums and counts verified … nothing to repair'."""
     path = _copy(recorded, tmp_path / "flip.h5")
     first_bad, _ = _flip_a_byte_in_chunk(path, 56)
-    assert first_bad == 143360  # the new user's case: samples 143 360–255 999 unreadable
-    span = f"current: samples 143 360–{10 * RATE_HZ - 1:,} unreadable".replace(",", " ")
+    assert first_bad == 143360  # the new user's case (then: samples 143 360–255 999 unreadable, all after it lost)
+    span = "current: samples 143 360–145 919 unreadable"
     out = tmp_path / "exf"
     refused = run_cli(capsys, "export", str(path), "--csv", str(out))
     assert (refused.code, refused.err) == (2, f"acq: error: {path}: damaged ({span}) — run acq check, or use "
@@ -174,9 +179,12 @@ def test_a_damaged_session_is_exported_only_with_partial_and_its_import_says_wha
     assert not out.exists()
     exported = run_cli(capsys, "export", str(path), "--csv", str(out), "--partial")
     assert exported.code == 0
-    assert exported.err == (f"acq: warning: {path}: damaged — exported the intact part only (143360 current and "
+    assert exported.err == (f"acq: warning: {path}: damaged — exported the intact part only (253440 current and "
                             f"10000 encoder samples); left out: {span} (recorded in flip.session.json)\n")
-    assert len((out / "flip.current.csv").read_text().splitlines()) == 1 + 143360
+    rows = (out / "flip.current.csv").read_text().splitlines()
+    assert len(rows) == 1 + 253440  # the samples after the hole are exported, the hole a jump in t_s (as a gap)
+    t_s = np.array([float(r.split(",")[0]) for r in rows[1 + 143359:1 + 143362]])  # samples 143 359–143 361
+    assert np.round(np.diff(t_s) * RATE_HZ).tolist() == [2561.0, 1.0]
     meta = json.loads((out / "flip.session.json").read_text())
     assert (meta["status"], meta["stop_reason"], meta["damage"]) == ("complete", "recorded 10 s", [span])
     imported = run_cli(capsys, "import", "--current", str(out / "flip.current.csv"), "--encoder",
@@ -187,9 +195,14 @@ def test_a_damaged_session_is_exported_only_with_partial_and_its_import_says_wha
     s = load(tmp_path / "imp.h5")
     assert (s.status, s.meta.stop_reason) == ("interrupted", f"imported from flip.current.csv and flip.encoder.csv; "
                                                              f"{why}")
-    assert [(e.stream, e.kind, e.detail) for e in s.events] == [("current", "warning",
-                                                                 f"not in the exported files: {span}")]
-    assert s.current.sample_count == 143360 and s.damage == ()
+    assert sorted((e.stream, e.kind, e.detail) for e in s.events) == [  # the hole is imported as the gap it is
+        ("current", "gap", "2560 samples missing before index 145920"),
+        ("current", "warning", f"not in the exported files: {span}")]
+    assert s.current.sample_count == 253440 and s.damage == ()
+    damaged = load(path)  # the data after the hole came through: the same DAQ indices and values
+    assert np.array_equal(s.current.sample_index(), damaged.current.sample_index())
+    assert np.array_equal(s.current.phases_a["i_a"], damaged.current.phases_a["i_a"])
+    assert s.current.sample_index()[143360] == 145920
     # other data than the whole session: its own id, the exported one kept in its origin (the review: under the same
     # id its analysis of 5.6 s replaced the whole session's in a shared catalogue)
     original = load(path).meta.session_id
@@ -214,7 +227,7 @@ def test_a_partial_analysis_says_so_on_screen_and_in_its_reasons_naming_the_span
 
     path = _copy(recorded, tmp_path / "flip.h5")
     _flip_a_byte_in_chunk(path, 56)
-    span = f"current: samples 143 360–{10 * RATE_HZ - 1:,} unreadable".replace(",", " ")
+    span = "current: samples 143 360–145 919 unreadable"
     note = f"note: partial: only the readable part of a damaged session was analysed; left out: {span}"
     run = run_cli(capsys, "analyze", str(path), "--partial", "--no-report")
     assert run.code == 0, run.err
@@ -224,6 +237,12 @@ def test_a_partial_analysis_says_so_on_screen_and_in_its_reasons_naming_the_span
     doc = json.loads((tmp_path / "flip.result.json").read_text())
     assert doc["partial"] is True and doc["quality"]["reasons"][0] == note
     assert [r for r in doc["quality"]["reasons"] if "partial" in r] == [note]  # the analysis's own reasons follow
+    # the hole is a gap to the analysis: it uses the longest gap-free run (here before the hole) and gets K right
+    assert "note: current: 1 gap(s) in the DAQ sample count; using the longest gap-free run, samples 0–143359" in (
+        doc["quality"]["reasons"])
+    truth = doc["simulated_truth"]["K_Nm_per_rad"]
+    low, high = doc["ci95"]["K_Nm_per_rad"]
+    assert doc["quality"]["verdict"] == "ok" and low < truth < high and abs(doc["K_Nm_per_rad"] / truth - 1) < 0.01
     from acq.offline.analyze import partial_notes
 
     session = load(path)
@@ -231,6 +250,21 @@ def test_a_partial_analysis_says_so_on_screen_and_in_its_reasons_naming_the_span
     assert partial_notes(recording) == ["note: partial: the session is still being recorded (status recording); "
                                         "only what was stored was analysed"]
     assert partial_notes(replace(session, damage=())) == []
+
+
+def test_holes_that_leave_too_little_of_both_streams_together_fail_naming_the_damage(
+        recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The longest gap-free runs, current 4.9–10 s and encoder 0–5.0 s, barely overlap: no number, and the error
+    (here the analysis's own: too little motion in what is left) says what was left out."""
+    path = _copy(recorded, tmp_path / "holes.h5")
+    _flip_a_byte_in_chunk(path, 48)
+    _flip_a_byte_in_chunk(path, 10, "encoder/index")
+    spans = "current: samples 122 880–125 439 unreadable; encoder: samples 5 000–5 499 unreadable"
+    run = run_cli(capsys, "analyze", str(path), "--partial", "--no-report")
+    assert run.code == 2 and not (tmp_path / "holes.result.json").exists()
+    assert run.err.startswith(f"acq: error: {path}: ") and run.err.count("\n") == 1
+    assert run.err.endswith(f" (partial: only the readable part of a damaged session was analysed; left out: {spans})"
+                            "\n")
 
 
 @pytest.mark.parametrize(("status", "stop_reason", "damage", "imported"), [

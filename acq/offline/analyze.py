@@ -149,12 +149,13 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     session = load(path)
     session.require_usable(partial=request.partial)
     request = request_for(session, request)
+    notes = partial_notes(session)
     try:
         result = analyze(recording_from_session(session), request)
-    except ValueError as e:
-        raise ConfigError(f"{session.path}: {e}") from None
+    except ValueError as e:  # on part of a session, the error may come of what is missing: the note says what
+        why = f" ({notes[0].removeprefix('note: ')})" if notes else ""
+        raise ConfigError(f"{session.path}: {e}{why}") from None
     doc = result_json(session, result)
-    notes = partial_notes(session)
     doc["quality"]["reasons"][:0] = notes
     doc["partial"] = bool(notes)  # the note says why
     doc["session"]["damage"] = list(session.damage)

@@ -3,8 +3,9 @@
 Integrity: every dataset carries HDF5 Fletcher32 checksums per chunk. A reader trusts only what
 was committed (the footer's counts, or the last ``/flushes`` row of a session still ``recording``),
 reads chunk by chunk with bounded metadata reads (:mod:`acq.recording.h5safe`) and reports what it could not
-read as :attr:`Session.damage` ("current: samples 62 550–102 399 unreadable"), keeping the intact
-part before the first damaged sample of each stream.
+read as :attr:`Session.damage` ("current: samples 62 550–102 399 unreadable", one line per span). A chunk whose
+checksum fails costs its own rows only (a hole, :mod:`acq.recording.holes`: the rows after it are kept, the loss
+seen as a gap); a chunk never written or beyond the file's end ends the intact part (the tail).
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from acq.recording.h5safe import open_read, superblock_eof
+from acq.recording.holes import Column, Span, current_rows, lost_spans, readable
 from acq.recording.layout import FLUSH_DTYPE, FORMAT, FORMAT_VERSION, OPTIONAL_ENCODER
 from acq.recording.paths import require_session_file
 from acq.recording.session import CurrentData, EncoderData, Session
@@ -62,6 +64,10 @@ def _span(stream: str, first: int, end: int, what: str = "unreadable") -> str:
     return f"{stream}: samples {first:,}–{end - 1:,} {what}".replace(",", " ")
 
 
+#: A damaged span found while reading: (stream, first row, end row, what), the words of :func:`_span`.
+Damage = tuple[str, int, int, str]
+
+
 class _Reader:
     """Reads datasets of one open file chunk by chunk, up to the committed length; never past the file's end."""
 
@@ -77,11 +83,12 @@ class _Reader:
             why = f" ({self.notes[0]})" if self.notes else ""
             raise ConfigError(f"{self.path}: {what}: /{name} is missing or unreadable{why}") from None
 
-    def column(self, name: str, n: int | None) -> tuple[np.ndarray, int | None]:
-        """The first ``n`` rows (all stored if None) of dataset ``name`` and the first row not readable (or None).
+    def column(self, name: str, n: int | None) -> Column:
+        """The first ``n`` rows (all stored if None) of dataset ``name``, its holes and the first row not readable.
 
-        Rows are read one chunk at a time; a chunk whose checksum fails, that lies beyond the end of the file,
-        or that was never written (its rows would read as zeros) ends the intact part.
+        Rows are read one chunk at a time when a single read fails: a chunk whose checksum fails is a hole (its rows
+        are marked, the next chunks read on); a chunk beyond the end of the file, never written (its rows would read
+        as zeros) or whose place HDF5 cannot tell ends the readable rows.
         """
         ds = self.node(name)
         if not isinstance(ds, h5py.Dataset) or ds.ndim != 1:
@@ -91,21 +98,31 @@ class _Reader:
         have = min(want, stored)
         out = np.empty(have, dtype=ds.dtype)
         step = ds.chunks[0] if ds.chunks else max(have, 1)
+        short = have if have < want else None
         if have and ds.chunks and self._all_on_disk(ds, have, step):
             try:  # the usual case, an intact file: one read (checksums verified), 4× faster than chunk by chunk
                 ds.read_direct(out, np.s_[0:have], np.s_[0:have])
-                return out, (have if have < want else None)
+                return Column(out, short)
             except (OSError, RuntimeError, ValueError):
                 pass  # a checksum fails somewhere: find where, chunk by chunk
+        holes: list[Span] = []
         for start in range(0, have, step):
             stop = min(start + step, have)
             try:
                 if ds.chunks and not self._on_disk(ds.id.get_chunk_info_by_coord((start,))):
-                    return out[:start], start
+                    return Column(out[:start], start, tuple(holes))
+            except (OSError, RuntimeError, ValueError):
+                return Column(out[:start], start, tuple(holes))
+            try:
                 out[start:stop] = ds[start:stop]
             except (OSError, RuntimeError, ValueError):
-                return out[:start], start
-        return out, (have if have < want else None)
+                if not ds.chunks:  # no checksums to fail: the data cannot be read at all
+                    return Column(out[:start], start, tuple(holes))
+                if holes and holes[-1][1] == start:
+                    holes[-1] = (holes[-1][0], stop)
+                else:
+                    holes.append((start, stop))
+        return Column(out, short, tuple(holes))
 
     def _on_disk(self, info: Any) -> bool:
         """A chunk (HDF5's chunk info) was written and lies inside the file (a never-written one reads as zeros)."""
@@ -136,18 +153,17 @@ def _committed(f: h5py.File, reader: _Reader) -> dict[str, int] | None:
         return {"current_samples": int(f.attrs["current_samples"]), "encoder_samples": int(f.attrs["encoder_samples"])}
     if "flushes" not in f:
         return None
-    rows, _ = reader.column("flushes", None)
+    flushes = reader.column("flushes", None)
+    rows = flushes.values[readable((flushes,), len(flushes.values))]
     if rows.size == 0:
         return {"current_samples": 0, "current_blocks": 0, "encoder_samples": 0, "events": 0}
     return {name: int(rows[-1][name]) for name in FLUSH_DTYPE.names if name != "host_ns"}
 
 
-def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: list[str]) -> CurrentData:
+def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage]) -> CurrentData:
     g = reader.node("current")
     n_blocks = None if committed is None else committed.get("current_blocks")
-    counts, bad_c = reader.column("current/blocks/count", n_blocks)
-    first, bad_f = reader.column("current/blocks/first_index", n_blocks)
-    host, bad_h = reader.column("current/blocks/host_ns", n_blocks)
+    table = [reader.column(f"current/blocks/{name}", n_blocks) for name in ("count", "first_index", "host_ns")]
     try:
         rate_hz, device = float(g.attrs["rate_hz"]), str(_attr(g.attrs["device"]))
         channels = [c for c in str(_attr(g.attrs["channels"])).split(",") if c]
@@ -157,12 +173,11 @@ def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: lis
     if not channels:
         raise ConfigError(f"{reader.path}: malformed session: /current names no channels")
     want = None if committed is None else committed["current_samples"]
-    phases: dict[str, np.ndarray] = {}
-    bad_samples: int | None = None
-    for ch in channels:
-        phases[ch], bad = reader.column(f"current/{ch}_A", want)
-        if bad is not None:
-            bad_samples = bad if bad_samples is None else min(bad_samples, bad)
+    columns = {ch: reader.column(f"current/{ch}_A", want) for ch in channels}
+    if any(c.holes for c in [*table, *columns.values()]):
+        return _current_with_holes(rate_hz, device, table, columns, want, damage)
+    counts, first, host = (c.values for c in table)
+    phases = {ch: c.values for ch, c in columns.items()}
     stored = min(len(first), len(counts), len(host))
     counts, first, host = counts[:stored], first[:stored], host[:stored]
     n = min([int(counts.sum())] + [len(v) for v in phases.values()])
@@ -171,29 +186,44 @@ def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: lis
         counts, first, host = counts[:stored], first[:stored], host[:stored]
     n = int(counts.sum())
     total = want if want is not None else max([n] + [len(v) for v in phases.values()])
-    if (bad_samples is not None or any(b is not None for b in (bad_c, bad_f, bad_h))) and n < total:
-        damage.append(_span("current", n, total))
+    if any(c.damaged for c in [*table, *columns.values()]) and n < total:
+        damage.append(("current", n, total, "unreadable"))
     return CurrentData(rate_hz=rate_hz, device=device, phases_a={ch: v[:n] for ch, v in phases.items()},
                        block_first_index=first, block_count=counts, block_host_ns=host)
 
 
-def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: list[str]) -> EncoderData:
+def _current_with_holes(rate_hz: float, device: str, table: list[Column], columns: dict[str, Column],
+                        want: int | None, damage: list[Damage]) -> CurrentData:
+    """The current of a file with a hole in a phase or the block table (:func:`acq.recording.holes.current_rows`):
+    the samples after it kept, the loss a jump in the DAQ sample index, one damage line per span lost."""
+    rows = current_rows(*table, list(columns.values()), want)
+    keep = rows.sample_keep
+    total = want if want is not None else max(len(c.values) for c in columns.values())
+    damage.extend(("current", a, b, "unreadable") for a, b in lost_spans(keep, total))
+    return CurrentData(rate_hz=rate_hz, device=device,
+                       phases_a={ch: c.values[:keep.size][keep] for ch, c in columns.items()},
+                       block_first_index=rows.first_index, block_count=rows.count, block_host_ns=rows.host_ns)
+
+
+def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage]) -> EncoderData:
     g = reader.node("encoder")
     want = None if committed is None else committed["encoder_samples"]
     columns = {name: reader.column(f"encoder/{name}", want) for name in ("position_counts", "index", "host_ns")}
     for name in OPTIONAL_ENCODER:
         if name in g:
             columns[name] = reader.column(f"encoder/{name}", want)
-    n = min(len(v) for v, _ in columns.values())
-    total = want if want is not None else max(len(v) for v, _ in columns.values())
-    if any(bad is not None for _, bad in columns.values()) and n < total:
-        damage.append(_span("encoder", n, total))
+    n = min(len(c.values) for c in columns.values())
+    total = want if want is not None else max(len(c.values) for c in columns.values())
+    keep = readable(list(columns.values()), n)  # a row lost in one column is lost in all: a jump in the cycle index
+    if any(c.damaged for c in columns.values()):
+        damage.extend(("encoder", a, b, "unreadable") for a, b in lost_spans(keep, total))
+    kept = {name: c.values[:n] if keep.all() else c.values[:n][keep] for name, c in columns.items()}
 
     def optional(name: str) -> np.ndarray | None:
         """The column, None when absent or all NaN: the writer creates every optional column and fills what a drive
         does not give with NaN until :func:`acq.recording.layout.write_footer` deletes it, so while a session records
         (or after its recorder was killed) a column of NaN only is one the drive has not given."""
-        values = columns[name][0][:n] if name in columns else None
+        values = kept.get(name)
         return None if values is None or np.isnan(values).all() else values
 
     try:
@@ -205,15 +235,18 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
                           "transport, timestamp_kind or device attribute") from None
     return EncoderData(
         period_s=period_s, counts_per_rev=counts_per_rev, transport=transport, timestamp_kind=kind, device=device,
-        position_counts=columns["position_counts"][0][:n], index=columns["index"][0][:n],
-        host_ns=columns["host_ns"][0][:n], **{name: optional(name) for name in OPTIONAL_ENCODER},
+        position_counts=kept["position_counts"], index=kept["index"], host_ns=kept["host_ns"],
+        **{name: optional(name) for name in OPTIONAL_ENCODER},
     )
 
 
-def _read_events(reader: _Reader, committed: dict[str, int] | None, damage: list[str]) -> list[StreamEvent]:
-    rows, bad = reader.column("events", None if committed is None else committed.get("events"))
+def _read_events(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage]) -> list[StreamEvent]:
+    events = reader.column("events", None if committed is None else committed.get("events"))
+    rows, bad = events.values[readable((events,), len(events.values))], events.lost_from
+    damage.extend(("events", a, b, "lost") for a, b in events.holes)
     if bad is not None:
-        damage.append(_span("events", len(rows), bad + 1 if bad >= len(rows) else len(rows) + 1, "lost"))
+        n = len(events.values)
+        damage.append(("events", n, bad + 1 if bad >= n else n + 1, "lost"))
     return [
         StreamEvent(int(r["host_ns"]), r["stream"].decode("utf-8", "replace"), r["kind"].decode("utf-8", "replace"),  # type: ignore[arg-type]
                     r["detail"].decode("utf-8", "replace"))
@@ -287,11 +320,10 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
     profile = None if attrs.get("profile_json") == "null" else _config_attr(p, attrs, "profile_json", Profile)
     reader = _Reader(f, p, notes)
     committed = _committed(f, reader)
-    damage: list[str] = []
+    damage: list[Damage] = []
     current = _read_current(reader, committed, damage)
     encoder = _read_encoder(reader, committed, damage)
     events = _read_events(reader, committed, damage)
-    if notes and not damage:
-        damage.extend(notes)
+    lines = tuple(_span(*span) for span in damage) if damage else tuple(notes)
     return Session(path=p, attrs=attrs, bench=bench, profile=profile, current=current, encoder=encoder,
-                   events=events, damage=tuple(damage))
+                   events=events, damage=lines, damage_spans=tuple(span[:3] for span in damage))

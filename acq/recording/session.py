@@ -122,9 +122,12 @@ class Session:
     current: CurrentData
     encoder: EncoderData
     events: list[StreamEvent] = field(default_factory=list)
-    #: What could not be read, one line per stream ("current: samples 62 550–102 399 unreadable"); the streams
-    #: above hold the intact part before the first damaged sample.
+    #: What could not be read, one line per span ("current: samples 62 550–65 109 unreadable"); the streams above
+    #: hold every readable sample: a span inside a stream is left out as a gap (a jump in the DAQ sample index or the
+    #: drive cycle index), a damaged or missing tail is cut.
     damage: tuple[str, ...] = ()
+    #: The span of each line of :attr:`damage` that names one: (stream, first row lost, end row), in its order.
+    damage_spans: tuple[tuple[str, int, int], ...] = ()
 
     @functools.cached_property
     def meta(self) -> SessionMeta:
@@ -149,6 +152,13 @@ class Session:
         if self.status == "recording":
             raise ConfigError(f"{self.path}: status recording (still being recorded, or the recorder was killed) — "
                               f"run acq check, or use --partial to {action} what is stored")
+
+    def kept_after_first_damage(self, stream: str) -> int:
+        """Samples of ``stream`` (``"current"``, ``"encoder"``) kept after its first damaged span (every sample before
+        it is kept); all it holds when it has none."""
+        held = self.current.sample_count if stream == "current" else self.encoder.index.size
+        first = [start for name, start, _ in self.damage_spans if name == stream]
+        return held - first[0] if first else held
 
     @property
     def tags(self) -> dict[str, Any]:

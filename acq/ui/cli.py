@@ -500,8 +500,9 @@ def check(session_path: Path) -> int:
         for line in session.damage:
             click.echo(f"{session_path}: {line}")  # plain lines (no wrapping): scripts grep them
         click.echo(f"acq: damaged: {session_path} ({'; '.join(session.damage)}) — the intact part holds "
-                   f"{session.current.sample_count} current and {session.encoder.index.size} encoder samples "
-                   "(acq analyze --partial uses it)", err=True)
+                   f"{session.current.sample_count} current and {session.encoder.index.size} encoder samples, "
+                   f"{session.kept_after_first_damage('current')} and {session.kept_after_first_damage('encoder')} "
+                   "of them after the first damaged span (acq analyze --partial uses it)", err=True)
         return 1
     click.echo(f"{session_path}: {session.status}, checksums and counts verified ({session.current.sample_count} "
                f"current, {session.encoder.index.size} encoder samples), nothing to repair")
