@@ -16,6 +16,7 @@ indices, never from timing. Adapters raise :class:`acqcore.errors.DeviceError` o
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Literal, Protocol, runtime_checkable
 
@@ -93,6 +94,29 @@ class StreamEvent:
     stream: StreamName
     kind: EventKind
     detail: str
+
+
+#: The event a drive writes for a span in which it reported "internal limit active" (CiA 402 statusword 0x6041 bit 11:
+#: a torque, speed or position limit held the motor), read back by :func:`limit_span_ns`.
+LIMIT_EVENT = "internal limit active (0x6041 bit 11) from {start_s:.3f} s to {end_s:.3f} s after the motion started"
+_LIMIT_EVENT = re.compile(r"^internal limit active \(0x6041 bit 11\) from (\S+) s to (\S+) s")
+
+
+def limit_event(start_ns: int, end_ns: int, motion_start_ns: int) -> StreamEvent:
+    """The drive's event for a span of "internal limit active" seen from ``start_ns`` to ``end_ns`` (host monotonic
+    ns) in a motion started at ``motion_start_ns``; stamped at its start."""
+    detail = LIMIT_EVENT.format(start_s=(start_ns - motion_start_ns) * 1e-9, end_s=(end_ns - motion_start_ns) * 1e-9)
+    return StreamEvent(start_ns, "drive", "warning", detail + ": the drive held the motor at a torque, speed or "
+                       "position limit (0x6072, 0x607F, 0x607D)")
+
+
+def limit_span_ns(event: StreamEvent) -> tuple[int, int] | None:
+    """The host span (start, end; monotonic ns) of a :func:`limit_event`, None for any other event."""
+    match = _LIMIT_EVENT.match(event.detail) if event.stream == "drive" else None
+    if match is None:
+        return None
+    length_ns = round((float(match[2]) - float(match[1])) * 1e9)
+    return event.host_ns, event.host_ns + length_ns
 
 
 @dataclass(frozen=True)

@@ -127,7 +127,8 @@ class CanopenDrive:
             self._node = node
             travel = (None if self._limits is None else
                       travel_counts(self._limits.max_travel_deg, self._gear_ratio, self._cpr))
-            self._motion = ProfilePositionMotion(node, self.name, s, self._cpr, self._fail, self._info, travel)
+            self._motion = ProfilePositionMotion(node, self.name, s, self._cpr, self._fail, self._info, travel,
+                                                 self._add_event)
             node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
             node.TIMEOUT_SWITCH_STATE_FINAL = s.state_timeout_s
             node.TIMEOUT_SWITCH_STATE_SINGLE = s.state_timeout_s
@@ -436,8 +437,11 @@ class CanopenDrive:
         self._event("info", detail)
 
     def _event(self, kind: EventKind, detail: str, stream: StreamName = "drive") -> None:
+        self._add_event(StreamEvent(time.monotonic_ns(), stream, kind, detail))
+
+    def _add_event(self, event: StreamEvent) -> None:
         with self._events_lock:
-            self._events.append(StreamEvent(time.monotonic_ns(), stream, kind, detail))
+            self._events.append(event)
 
 
 def _entries(entries: list[int]) -> str:

@@ -22,6 +22,12 @@ Travel limit: before the drive is enabled, 0x607D software position limits are s
 bench's ``[limits] max_travel_deg`` (in position units, as 0x6064/0x607A count them) and read back, so the drive itself
 refuses a target beyond them; a range that would leave int32 is refused (home the drive nearer 0).
 
+Internal limit: every statusword the motion polls (by SDO, every ``STATUS_POLL_S`` while it waits on a set-point or a
+target) is watched for bit 11 "internal limit active" (CiA 402: the drive holds a torque, speed or position limit —
+0x6072, 0x607F, 0x607D); each span it stays set is one :func:`drivers.base.limit_event` in the session, from the
+first poll that saw it set to the first that saw it clear (or the last poll of the motion). The polls see a span to
+within a poll and its SDO round trip; a span shorter than that may pass unseen.
+
 All SDO traffic of the motion goes through one lock (the motion thread and a stop from any other
 thread share canopen's SDO client). Every stop is a quick stop on the 0x6085 ramp, a wait for rest
 (SWITCH ON DISABLED, or QUICK STOP ACTIVE with target reached), then disable voltage, verified.
@@ -37,12 +43,14 @@ from contextlib import contextmanager
 from typing import Any
 
 from drivers import canopen_od as od
+from drivers.base import StreamEvent, limit_event
 from drivers.config import DriveCanopen, Profile
 from acqcore.errors import AcqError, ConfigError, DeviceError
 from drivers.motion import half_swing_rad, speed_factors, with_dither_seed
 
 STATUS_POLL_S = 0.01
 SW_TARGET_REACHED = 1 << 10
+SW_INTERNAL_LIMIT = 1 << 11
 SW_SETPOINT_ACK = 1 << 12
 CW_ENABLE = 0x000F
 CW_NEW_SETPOINT = 0x0010
@@ -92,15 +100,19 @@ class ProfilePositionMotion:
     """Motion of ``node`` (a started :func:`node402`) for a drive named ``device`` in messages.
 
     ``on_failure`` is called (from the motion thread) with the error that ended the motion after
-    the drive was stopped; ``on_info`` with one-line notes for the session's events.
+    the drive was stopped; ``on_info`` with one-line notes for the session's events; ``on_event`` with the
+    "internal limit active" spans (:func:`drivers.base.limit_event`).
     """
 
     def __init__(self, node: Any, device: str, settings: DriveCanopen, counts_per_rev: int,
                  on_failure: Callable[[DeviceError], None], on_info: Callable[[str], None],
-                 travel_counts: int | None = None) -> None:
+                 travel_counts: int | None = None, on_event: Callable[[StreamEvent], None] | None = None) -> None:
         self._node, self._name, self._s, self._cpr = node, device, settings, counts_per_rev
         self._travel_counts = travel_counts  # [limits] max_travel_deg in position units (0x607D around the start)
-        self._on_failure, self._on_info = on_failure, on_info
+        self._on_failure, self._on_info, self._on_event = on_failure, on_info, on_event
+        self._motion_start_ns = 0
+        self._limit_since_ns: int | None = None  # host ns of the first poll that saw bit 11 set, None while clear
+        self._limit_seen_ns = 0  # the last poll that saw it set
         self.sdo_lock = threading.RLock()
         self._halt_lock = threading.Lock()
         self._stop = threading.Event()
@@ -133,6 +145,7 @@ class ProfilePositionMotion:
             self.quick_stop_and_disable()
             raise
         self._stop.clear()
+        self._motion_start_ns, self._limit_since_ns = time.monotonic_ns(), None
         self._thread = threading.Thread(target=self._run_triangle, args=(p0, profile),
                                         name="acq-canopen-motion", daemon=True)
         self._thread.start()
@@ -224,6 +237,7 @@ class ProfilePositionMotion:
         while not self._stop.is_set():
             with self.sdo_lock:
                 sw = int(self._node.statusword)
+            self._watch_limit(sw, time.monotonic_ns())
             if sw & 0x6F != 0x27:
                 raise DeviceError(f"{self._name}: drive left OPERATION ENABLED during the motion (statusword 0x{sw:04X})")
             if sw & mask == value:
@@ -232,6 +246,20 @@ class ProfilePositionMotion:
                 raise DeviceError(f"{self._name}: {what} within {timeout_s:g} s (statusword 0x{sw:04X})")
             self._stop.wait(STATUS_POLL_S)
         return False
+
+    def _watch_limit(self, sw: int, host_ns: int) -> None:
+        """Follow bit 11 of statusword ``sw`` polled at ``host_ns``; a span that ends becomes an event."""
+        if sw & SW_INTERNAL_LIMIT:
+            if self._limit_since_ns is None:
+                self._limit_since_ns = host_ns
+            self._limit_seen_ns = host_ns
+        else:
+            self._end_limit_span(host_ns)
+
+    def _end_limit_span(self, host_ns: int) -> None:
+        if self._limit_since_ns is not None and self._on_event is not None:
+            self._on_event(limit_event(self._limit_since_ns, host_ns, self._motion_start_ns))
+        self._limit_since_ns = None
 
     def _run_triangle(self, p0: int, profile: Profile) -> None:
         """Alternate absolute targets p0 + round(s_c·swing) and p0 with the new-set-point handshake until stopped;
@@ -268,3 +296,5 @@ class ProfilePositionMotion:
             except AcqError as stop_error:
                 self._on_info(str(stop_error))
             self._on_failure(error)
+        finally:  # a limit still active when the motion ends: its span as far as the polls saw it
+            self._end_limit_span(self._limit_seen_ns)
