@@ -4,7 +4,8 @@
    (as ``acq record`` does): the DAQ's channels and coerced rate, the drive reachable (a CANopen drive is
    configured, its heartbeat awaited and its TPDO mapping read back by the adapter; identity 0x1018 read);
 2. streams: 3 s at standstill through the real recorder into a temporary session — samples lost, DAQ block
-   timing, drive period and jitter (and, for CANopen, SYNC-to-TPDO spacing from the raw ``.blf``; for a
+   timing, drive period and jitter, the SYNC jitter against half a cycle (what the analysis takes for a jitter
+   around the drive's cycle grid; :func:`~acq.commissioning.selftest_checks.sync_jitter_check`) (and, for CANopen, SYNC-to-TPDO spacing from the raw ``.blf``; for a
    serial link, frames and CRC errors), current offset and noise;
 3. motion: a short slow triangle — encoder speed against the command, the current's electrical frequency
    against pole_pairs·ω, direction, phase order (2–3 phases);
@@ -32,10 +33,12 @@ from acq.commissioning.devices import can_section, ni_section, serial_section
 from acq.monitoring.window_judge import joint_travel, not_excited, not_excited_reasons
 from acq.commissioning.selftest_checks import (Check, blf_check, daq_blocks_check, direction_check, drive_period_check,
                                                encoder_speed_check, phase_order_check, samples_check, speed_ratio_check,
-                                               standstill_current_check, torque_constant_check)
+                                               standstill_current_check, sync_jitter_check, sync_times,
+                                               torque_constant_check)
 from acq.offline.analyze import analyze_session, recording_from_session
 from acq.recording.recorder import Recorder
 from acq.recording.reader import load
+from acq.recording.session import Session
 from analysis import AnalysisRequest, electrical_speed_ratio, prepare_signals
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen, DriveSerial, Profile
 from acqcore.errors import AcqError
@@ -149,15 +152,31 @@ def _devices_and_streams(bench: Bench, profile: Profile | None, work_dir: Path, 
         return
     yield daq_blocks_check(session)
     yield drive_period_check(session)
-    if isinstance(bench.drive, DriveCanopen):
-        blf = result.path.with_suffix(".can.blf")
-        if blf.exists():
-            yield blf_check(blf, bench.drive)
+    blf = result.path.with_suffix(".can.blf")
+    yield _sync_jitter(session, blf if isinstance(bench.drive, DriveCanopen) and blf.exists() else None)
+    if isinstance(bench.drive, DriveCanopen) and blf.exists():
+        yield blf_check(blf, bench.drive)
     stats = getattr(drive, "stats", None)  # a serial link's frame and CRC counters
     if callable(stats):
         yield _serial_check(stats(), bench)
     if not bench.listens():  # a listening bench's joint may be moving: no standstill to measure offset and noise on
         yield standstill_current_check(session)
+
+
+def _sync_jitter(session: Session, blf: Path | None) -> Check:
+    """The drive cycle's irregularity, from the best timing the session has: the drive's own time stamps (0x1013 /
+    the serial frame's drive time: when it really sampled), else the SYNC frames' host stamps in the raw ``.blf``
+    (SocketCAN stamps them in the kernel), else the host arrival stamps of the samples (the host's latency in them)."""
+    enc, period_s = session.encoder, session.encoder.period_s
+    if enc.drive_time_s is not None:
+        return sync_jitter_check(enc.index, enc.drive_time_s, period_s, "the drive's own time stamps",
+                                 IDENTIFICATION_S, from_drive=True)
+    if blf is not None:
+        index, stamps_s = sync_times(blf, session.bench.drive)
+        return sync_jitter_check(index, stamps_s, period_s, f"host stamps of the SYNC frames in {blf.name}",
+                                 IDENTIFICATION_S, from_drive=False)
+    return sync_jitter_check(enc.index, enc.host_ns * 1e-9, period_s, "host arrival stamps of the samples, an upper "
+                             "bound", IDENTIFICATION_S, from_drive=False)
 
 
 def _daq_check(bench: Bench, recorder: Recorder) -> Check:
