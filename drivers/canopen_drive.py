@@ -146,6 +146,7 @@ class CanopenDrive:
             self._set_profile_position()
             if self._limits is not None:
                 self._write_limits(self._limits)
+                self._check_position_frame()
             self._capture = FrameCapture(with_counter=overflow > 0, max_frames=QUEUE_FRAMES)
             self._network.subscribe(SYNC_COB_ID, self._capture.on_sync)
             self._network.subscribe(cob_id, self._capture.on_tpdo)
@@ -374,6 +375,35 @@ class CanopenDrive:
             shown = ", ".join(f"0x{i:04X} = {v}" for i, v in wanted.items())
             read = ", ".join(f"0x{i:04X} = {v}" for i, v in got.items())
             raise DeviceError(f"{self.name}: [limits] read back differ from what was written — wrote {shown}, read {read}")
+
+    def _check_position_frame(self) -> None:
+        """Read 0x607C home offset and the 0x607D window the drive holds, say both in an info event, and refuse a home
+        offset other than 0.
+
+        acq takes its travel window in 0x6064's frame: the start position p0 it reads there ± [limits] max_travel_deg
+        (:mod:`drivers.canopen_motion`). 0x6064 (and 0x607A) already include the home offset — they count from the
+        application's zero — and so does acq's own check of the swing, which is relative to p0: for those the offset
+        changes nothing, and it is only reported. But CiA 402 takes 0x607D relative to the machine's home position:
+        the drive corrects the limits by the home offset before comparing a target with them (corrected limit = limit
+        − 0x607C, as drive manuals quote the profile), so with an offset the window the drive enforces is not the one
+        acq wrote, and no read-back shows it. acq does not write limits it would have to shift by a convention it
+        cannot check on the drive: it refuses to move such a drive, in one line, before anything is enabled."""
+        node = self._node
+        with device_step(self.name, "reading 0x607D software position limits failed"):
+            limits = node.sdo[od.SOFTWARE_POSITION_LIMIT]
+            window = f"0x607D software position limits {int(limits[1].raw)} … {int(limits[2].raw)}"
+        with device_step(self.name, "reading 0x607C home offset failed"):
+            try:
+                offset = int(node.sdo[od.HOME_OFFSET].raw)
+            except SdoAbortedError:  # an optional object: a drive without homing has none
+                self._event("info", f"{window}; the drive has no 0x607C home offset")
+                return
+        self._event("info", f"{window}; 0x607C home offset {offset} (position units)")
+        if offset != 0:
+            raise DeviceError(
+                f"{self.name}: 0x607C home offset = {offset}: the drive takes 0x607D software position limits relative "
+                "to its home position, shifted by the offset from 0x6064 position actual, in which acq sets the window of "
+                "[limits] max_travel_deg — set 0x607C to 0 in the drive before acq moves the joint")
 
     # ---- streaming health --------------------------------------------------------------------------
     def _on_heartbeat(self, nmt_state: int) -> None:

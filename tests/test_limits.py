@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from acq.commissioning.selftest import read_position_frame
 from acq.config import CONFIG_DIR, DEFAULT_BENCH, load_bench, load_profile
 from acq.offline.analyze import analyze_session
 from acq.recording.reader import load
@@ -265,3 +266,28 @@ def test_a_drive_held_at_its_torque_limit_is_an_event_and_a_poor_verdict_naming_
     assert doc["quality"]["verdict"] == "poor"
     assert doc["quality"]["reasons"][0].startswith(
         f"drive: internal limit active (CiA 402 0x6041 bit 11) in {len(spans)} span(s), ")
+
+
+def test_a_home_offset_is_refused_before_the_drive_is_enabled_and_reported_where_it_is_0() -> None:
+    """0x6064 and 0x607A count from the application's zero (home offset included), but CiA 402 takes 0x607D relative
+    to the machine's home, corrected by 0x607C: acq's window around the start would not be the drive's."""
+    _, drive = _canopen()
+    drive.sim_node.home_offset = 5000
+    with pytest.raises(DeviceError) as err:
+        drive.start()
+    assert str(err.value) == (
+        f"{drive.name}: 0x607C home offset = 5000: the drive takes 0x607D software position limits relative to its "
+        "home position, shifted by the offset from 0x6064 position actual, in which acq sets the window of [limits] "
+        "max_travel_deg — set 0x607C to 0 in the drive before acq moves the joint")
+    assert drive.sim_node.state_402 == 0x40  # never enabled
+    for offset, said in ((0, "; 0x607C home offset 0 (position units)"), (None, "; the drive has no 0x607C home offset")):
+        bench, drive = _canopen()
+        drive.sim_node.home_offset = offset
+        drive.start()
+        try:
+            infos = [e.detail for e in drive.events() if e.kind == "info"]
+            assert f"0x607D software position limits {-2**31} … {2**31 - 1}{said}" in infos
+            expected = "0x607C home offset 0" if offset == 0 else "no 0x607C home offset"
+            assert read_position_frame(bench.drive) == f"0x607D window none set, {expected}"
+        finally:
+            drive.stop()

@@ -38,7 +38,8 @@ follows, :data:`SETPOINT_DELAY_CYCLES` after that SYNC.
 
 Fault switches, for tests: :meth:`~SimCanNode.drop_tpdos`, :meth:`~SimCanNode.stop_heartbeat`,
 ``refuse_mode_change`` (0x6060 writes are ignored), ``has_timestamp`` (set False before :meth:`~SimCanNode.start`:
-a drive without 0x1013), ``reject_mapping`` (0x1A0x keeps its
+a drive without 0x1013), ``home_offset`` (0x607C at power-on, None: a drive without it; stored only — acq refuses to
+move a drive with a home offset, :meth:`drivers.canopen_drive.CanopenDrive.start`), ``reject_mapping`` (0x1A0x keeps its
 power-on mapping while the SDO writes succeed — a mismatch only a read-back finds) and ``reject_limits`` (the same
 for the limits 0x607F, 0x6072, 0x607D).
 
@@ -62,9 +63,10 @@ import canopen
 import numpy as np
 from can.interfaces.virtual import VirtualBus, channels, channels_lock
 
-from drivers.canopen_od import (HIGH_RES_TIMESTAMP, MAX_PROFILE_VELOCITY, MAX_TORQUE, MODE_CYCLIC_SYNC_VELOCITY,
-                                 MODE_PROFILE_POSITION, MOTOR_RATED_TORQUE, N_TPDO, PDO_INVALID, RPDO_COMM, RPDO_MAP,
-                                 SOFTWARE_POSITION_LIMIT, TARGET_VELOCITY, TPDO_COMM, TPDO_MAP, drive_object_dictionary)
+from drivers.canopen_od import (HIGH_RES_TIMESTAMP, HOME_OFFSET, MAX_PROFILE_VELOCITY, MAX_TORQUE,
+                                 MODE_CYCLIC_SYNC_VELOCITY, MODE_PROFILE_POSITION, MOTOR_RATED_TORQUE, N_TPDO, PDO_INVALID,
+                                 RPDO_COMM, RPDO_MAP, SOFTWARE_POSITION_LIMIT, TARGET_VELOCITY, TPDO_COMM, TPDO_MAP,
+                                 drive_object_dictionary)
 from drivers.config import Bench, DriveCanopen
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
@@ -159,6 +161,7 @@ class SimCanNode:
         self._cache_stamp_us = np.zeros(0, dtype=np.int64)
         self.refuse_mode_change = False
         self.has_timestamp = True
+        self.home_offset: int | None = 0  # power-on 0x607C (None: no such object); nothing is shifted by it
         self.reject_mapping = False
         self.reject_limits = False
         self.first_cycle: int | None = None  # drive cycle of the first SYNC (SYNC index 0)
@@ -182,8 +185,12 @@ class SimCanNode:
         dictionary = drive_object_dictionary(self._s.node_id)
         if not self.has_timestamp:
             del dictionary[HIGH_RES_TIMESTAMP]
+        if self.home_offset is None:
+            del dictionary[HOME_OFFSET]
         self.node = canopen.LocalNode(self._s.node_id, dictionary)
         self.network.add_node(self.node)
+        if self.home_offset:
+            self.node.sdo[HOME_OFFSET].raw = self.home_offset
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
         self.node.nmt.state = "INITIALISING"
