@@ -98,14 +98,15 @@ class StreamEvent:
 
 #: The event a drive writes for a span in which it reported "internal limit active" (CiA 402 statusword 0x6041 bit 11:
 #: a torque, speed or position limit held the motor), read back by :func:`limit_span_ns`.
-LIMIT_EVENT = "internal limit active (0x6041 bit 11) from {start_s:.3f} s to {end_s:.3f} s after the motion started"
+LIMIT_EVENT = "internal limit active (0x6041 bit 11) from {start_s:.3f} s to {end_s:.3f} s after {origin}"
 _LIMIT_EVENT = re.compile(r"^internal limit active \(0x6041 bit 11\) from (\S+) s to (\S+) s")
 
 
-def limit_event(start_ns: int, end_ns: int, motion_start_ns: int) -> StreamEvent:
+def limit_event(start_ns: int, end_ns: int, origin_ns: int, origin: str = "the motion started") -> StreamEvent:
     """The drive's event for a span of "internal limit active" seen from ``start_ns`` to ``end_ns`` (host monotonic
-    ns) in a motion started at ``motion_start_ns``; stamped at its start."""
-    detail = LIMIT_EVENT.format(start_s=(start_ns - motion_start_ns) * 1e-9, end_s=(end_ns - motion_start_ns) * 1e-9)
+    ns), its times counted from ``origin_ns`` (what ``origin`` says happened then); stamped at its start."""
+    detail = LIMIT_EVENT.format(start_s=(start_ns - origin_ns) * 1e-9, end_s=(end_ns - origin_ns) * 1e-9,
+                                origin=origin)
     return StreamEvent(start_ns, "drive", "warning", detail + ": the drive held the motor at a torque, speed or "
                        "position limit (0x6072, 0x607F, 0x607D)")
 

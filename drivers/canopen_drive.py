@@ -23,7 +23,8 @@ frames received before are delivered (the recorder then ends the session ``faile
 Listen-only (``[drive] motion = "external"``, :meth:`CanopenDrive.start` → ``_start_listening``): the machine's
 own master runs NMT, SYNC and the motion, so acq sends no NMT, no SYNC, no SDO write and no RPDO; it records the
 TPDO the master set up (COB-ID and mapping from the bench config or the drive's EDS/DCF,
-:mod:`drivers.canopen_eds`), pairing each with the master's SYNC before it, stamped on arrival. With
+:mod:`drivers.canopen_eds`), pairing each with the master's SYNC before it, stamped on arrival; a statusword mapped in
+it is watched for bit 11 "internal limit active" (each span an event, :func:`drivers.base.limit_event`). With
 ``configure = true`` it first maps its own TPDO ``tpdo`` by SDO (still no NMT, SYNC or motion). No heartbeat is
 required (the master owns the drive's heartbeat), and the bus-load check of acq's own traffic does not apply.
 
@@ -43,7 +44,7 @@ from canopen.sdo import SdoAbortedError
 
 from drivers import canopen_od as od
 from drivers.canopen_eds import PassiveTpdo, passive_tpdo
-from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent, StreamName
+from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent, StreamName, limit_event
 from drivers.canopen_motion import STATUS_POLL_S, ProfilePositionMotion, device_step, node402
 from drivers.canopen_stream import (SYNC_COB_ID, SYNC_COUNTER_OVERFLOW, FrameCapture, RawFrameLog, SyncProducer,
                                     SyncUnwrapper, TpdoDecoder, TpdoLayout)
@@ -236,6 +237,7 @@ class CanopenDrive:
         self._raw.drain()
         self._check_health()
         block = self._decoder.decode(frames) if frames and self._decoder is not None else None
+        self._report_limits()
         self._report_counters()
         if self._failure is not None and block is None:
             raise self._failure
@@ -265,6 +267,7 @@ class CanopenDrive:
             self._network.disconnect()
             self._network = None
         self._raw.stop()
+        self._report_limits(final=True)
         for e in errors:
             self._event("error", e)
 
@@ -449,6 +452,15 @@ class CanopenDrive:
             self._event("error", str(e))
         if self._sync is not None:
             self._sync.stop()
+
+    def _report_limits(self, final: bool = False) -> None:
+        """The "internal limit active" spans of a statusword mapped in the recorded TPDO (a master's, listening) as
+        events; ``final``: also one still open. acq's own TPDO maps none: the motion polls the statusword
+        (:mod:`drivers.canopen_motion`)."""
+        if self._decoder is None or self._capture is None:
+            return
+        for start_ns, end_ns in self._decoder.take_limit_spans(final):
+            self._add_event(limit_event(start_ns, end_ns, self._capture.first_sync_ns, "the first SYNC"))
 
     def _report_counters(self) -> None:
         if self._capture is None or self._decoder is None:
