@@ -111,6 +111,39 @@ def limit_event(start_ns: int, end_ns: int, origin_ns: int, origin: str = "the m
                        "position limit (0x6072, 0x607F, 0x607D)")
 
 
+#: CiA 402 statusword bit 11: internal limit active
+SW_INTERNAL_LIMIT = 1 << 11
+
+
+class LimitSpans:
+    """The spans in which a drive's statusword had bit 11 "internal limit active" set, from statuswords seen one by one
+    (polled by SDO, or in each TPDO): each from the first seen with it set to the first seen clear (host ns)."""
+
+    def __init__(self) -> None:
+        self._since_ns: int | None = None  # the first statusword with bit 11 set, None while clear
+        self._seen_ns = 0  # the last with it set
+        self._ended: list[tuple[int, int]] = []
+
+    def see(self, active: bool, host_ns: int) -> None:
+        """Bit 11 is ``active`` in the statusword seen at ``host_ns``."""
+        if active:
+            if self._since_ns is None:
+                self._since_ns = host_ns
+            self._seen_ns = host_ns
+        elif self._since_ns is not None:
+            self._ended.append((self._since_ns, host_ns))
+            self._since_ns = None
+
+    def take(self, final: bool = False) -> list[tuple[int, int]]:
+        """The spans (start, end; host ns) that ended since the last call; with ``final`` also one still open, ended at
+        the last statusword that had bit 11 set."""
+        if final and self._since_ns is not None:
+            self._ended.append((self._since_ns, self._seen_ns))
+            self._since_ns = None
+        out, self._ended = self._ended, []
+        return out
+
+
 def limit_span_ns(event: StreamEvent) -> tuple[int, int] | None:
     """The host span (start, end; monotonic ns) of a :func:`limit_event`, None for any other event."""
     match = _LIMIT_EVENT.match(event.detail) if event.stream == "drive" else None

@@ -43,14 +43,13 @@ from contextlib import contextmanager
 from typing import Any
 
 from drivers import canopen_od as od
-from drivers.base import StreamEvent, limit_event
+from drivers.base import SW_INTERNAL_LIMIT, LimitSpans, StreamEvent, limit_event
 from drivers.config import DriveCanopen, Profile
 from acqcore.errors import AcqError, ConfigError, DeviceError
 from drivers.motion import half_swing_rad, speed_factors, with_dither_seed
 
 STATUS_POLL_S = 0.01
 SW_TARGET_REACHED = 1 << 10
-SW_INTERNAL_LIMIT = 1 << 11
 SW_SETPOINT_ACK = 1 << 12
 CW_ENABLE = 0x000F
 CW_NEW_SETPOINT = 0x0010
@@ -111,8 +110,7 @@ class ProfilePositionMotion:
         self._travel_counts = travel_counts  # [limits] max_travel_deg in position units (0x607D around the start)
         self._on_failure, self._on_info, self._on_event = on_failure, on_info, on_event
         self._motion_start_ns = 0
-        self._limit_since_ns: int | None = None  # host ns of the first poll that saw bit 11 set, None while clear
-        self._limit_seen_ns = 0  # the last poll that saw it set
+        self._limit_spans = LimitSpans()
         self.sdo_lock = threading.RLock()
         self._halt_lock = threading.Lock()
         self._stop = threading.Event()
@@ -145,7 +143,7 @@ class ProfilePositionMotion:
             self.quick_stop_and_disable()
             raise
         self._stop.clear()
-        self._motion_start_ns, self._limit_since_ns = time.monotonic_ns(), None
+        self._motion_start_ns, self._limit_spans = time.monotonic_ns(), LimitSpans()
         self._thread = threading.Thread(target=self._run_triangle, args=(p0, profile),
                                         name="acq-canopen-motion", daemon=True)
         self._thread.start()
@@ -237,7 +235,8 @@ class ProfilePositionMotion:
         while not self._stop.is_set():
             with self.sdo_lock:
                 sw = int(self._node.statusword)
-            self._watch_limit(sw, time.monotonic_ns())
+            self._limit_spans.see(bool(sw & SW_INTERNAL_LIMIT), time.monotonic_ns())
+            self._report_limit_spans()
             if sw & 0x6F != 0x27:
                 raise DeviceError(f"{self._name}: drive left OPERATION ENABLED during the motion (statusword 0x{sw:04X})")
             if sw & mask == value:
@@ -247,19 +246,11 @@ class ProfilePositionMotion:
             self._stop.wait(STATUS_POLL_S)
         return False
 
-    def _watch_limit(self, sw: int, host_ns: int) -> None:
-        """Follow bit 11 of statusword ``sw`` polled at ``host_ns``; a span that ends becomes an event."""
-        if sw & SW_INTERNAL_LIMIT:
-            if self._limit_since_ns is None:
-                self._limit_since_ns = host_ns
-            self._limit_seen_ns = host_ns
-        else:
-            self._end_limit_span(host_ns)
-
-    def _end_limit_span(self, host_ns: int) -> None:
-        if self._limit_since_ns is not None and self._on_event is not None:
-            self._on_event(limit_event(self._limit_since_ns, host_ns, self._motion_start_ns))
-        self._limit_since_ns = None
+    def _report_limit_spans(self, final: bool = False) -> None:
+        """Each "internal limit active" span that ended (``final``: also one still open) as an event."""
+        for start_ns, end_ns in self._limit_spans.take(final):
+            if self._on_event is not None:
+                self._on_event(limit_event(start_ns, end_ns, self._motion_start_ns))
 
     def _run_triangle(self, p0: int, profile: Profile) -> None:
         """Alternate absolute targets p0 + round(s_c·swing) and p0 with the new-set-point handshake until stopped;
@@ -297,4 +288,4 @@ class ProfilePositionMotion:
                 self._on_info(str(stop_error))
             self._on_failure(error)
         finally:  # a limit still active when the motion ends: its span as far as the polls saw it
-            self._end_limit_span(self._limit_seen_ns)
+            self._report_limit_spans(final=True)

@@ -28,7 +28,7 @@ from pathlib import Path
 import can
 import numpy as np
 
-from drivers.base import EncoderBlock
+from drivers.base import SW_INTERNAL_LIMIT, EncoderBlock, LimitSpans
 
 log = logging.getLogger(__name__)
 
@@ -37,7 +37,6 @@ SYNC_COUNTER_OVERFLOW = 240
 RAW_PRE_LOG_MAX = 100_000  # frames kept while no raw log file is open yet
 POSITION_ACTUAL, VELOCITY_ACTUAL, VELOCITY_DEMAND, HIGH_RES_TIMESTAMP = 0x6064, 0x606C, 0x606B, 0x1013
 STATUSWORD = 0x6041
-SW_INTERNAL_LIMIT = 1 << 11  # CiA 402 statusword bit 11: internal limit active
 
 
 @dataclass(frozen=True)
@@ -210,9 +209,7 @@ class TpdoDecoder:
         self._last_stamp_us = 0
         self.bad_length = 0
         self.before_first_sync = 0
-        self._limit_since_ns: int | None = None  # host ns of the first frame with bit 11 set, None while clear
-        self._limit_seen_ns = 0  # the last frame with it set
-        self._limit_spans: list[tuple[int, int]] = []
+        self._limit_spans = LimitSpans()
 
     def decode(self, frames: list[tuple[int, bytes, int]] | list[tuple[int, bytes, int, int]]) -> EncoderBlock | None:
         """Decode frames (counter, payload, host_ns[, SYNC frames seen]) in arrival order; None if none is usable."""
@@ -240,25 +237,16 @@ class TpdoDecoder:
                             velocity_counts_per_s=velocity, velocity_demand_counts_per_s=demand)
 
     def _watch_limit(self, active: np.ndarray, host_ns: np.ndarray) -> None:
-        """Follow bit 11 over frames stamped ``host_ns``; each span that ends is kept."""
-        was = self._limit_since_ns is not None
-        for i in np.flatnonzero(np.diff(np.r_[was, active].astype(np.int8))):  # frames where bit 11 changes
-            if active[i]:
-                self._limit_since_ns = int(host_ns[i])
-            else:
-                self._limit_spans.append((self._limit_since_ns, int(host_ns[i])))  # type: ignore[arg-type]
-                self._limit_since_ns = None
-        if active.size and active[-1]:
-            self._limit_seen_ns = int(host_ns[-1])
+        """Follow bit 11 over frames stamped ``host_ns``: the first frame, those where it changes, and the last are
+        enough (:meth:`drivers.base.LimitSpans.see` keeps a span's start and its last frame)."""
+        changes = np.flatnonzero(np.diff(active.astype(np.int8))) + 1
+        for i in np.r_[0, changes, active.size - 1].tolist():
+            self._limit_spans.see(bool(active[i]), int(host_ns[i]))
 
     def take_limit_spans(self, final: bool = False) -> list[tuple[int, int]]:
         """The "internal limit active" spans (host ns: start, end) that ended since the last call; with ``final`` also
-        one still open, ended at the last frame that had bit 11 set."""
-        if final and self._limit_since_ns is not None:
-            self._limit_spans.append((self._limit_since_ns, self._limit_seen_ns))
-            self._limit_since_ns = None
-        out, self._limit_spans = self._limit_spans, []
-        return out
+        one still open, ended at the last frame that had bit 11 set (:class:`drivers.base.LimitSpans`)."""
+        return self._limit_spans.take(final)
 
     def _unwrap_stamps(self, raw_us: np.ndarray) -> np.ndarray:
         """uint32 µs stamps → cumulative drive time, s (a step is taken modulo 2³²: frames come in order)."""

@@ -2,11 +2,12 @@
 
 1. devices: what ``acq devices`` sees for the configured hardware; the devices opened through the registry
    (as ``acq record`` does): the DAQ's channels and coerced rate, the drive reachable (a CANopen drive is
-   configured, its heartbeat awaited and its TPDO mapping read back by the adapter; identity 0x1018 read);
+   configured, its heartbeat awaited and its TPDO mapping read back by the adapter; identity 0x1018 read, and the
+   0x607D window with the 0x607C home offset);
 2. streams: 3 s at standstill through the real recorder into a temporary session — samples lost, DAQ block
    timing, drive period and jitter, the SYNC jitter against half a cycle (what the analysis takes for a jitter
-   around the drive's cycle grid; :func:`~acq.commissioning.selftest_checks.sync_jitter_check`) (and, for CANopen, SYNC-to-TPDO spacing from the raw ``.blf``; for a
-   serial link, frames and CRC errors), current offset and noise;
+   around the drive's cycle grid: :func:`~acq.commissioning.selftest_checks.sync_jitter_check`), for CANopen the
+   SYNC-to-TPDO spacing from the raw ``.blf``, for a serial link frames and CRC errors, current offset and noise;
 3. motion: a short slow triangle — encoder speed against the command, the current's electrical frequency
    against pole_pairs·ω, direction, phase order (2–3 phases);
 4. identification: a 10 s session of the profile, its verdict, and the torque constant against a known inertia.
