@@ -193,20 +193,24 @@ def sync_times(blf_path: Path, settings: DriveCanopen) -> tuple[np.ndarray, np.n
     return np.arange(stamps.size), stamps
 
 
-#: A share of the cycle no instant of an identification may be off its grid (:data:`analysis.MAX_STAMP_DEVIATION`,
-#: half a cycle): beyond it the analysis refuses all of the drive's time stamps of the record (the spline that moves
-#: the samples to k·T needs a deviation much smaller than T, and a stamp half a cycle off could belong to the next
-#: cycle), and on CANopen a SYNC that late or early breaks the synchronous window (CiA 301: TPDO k before SYNC k+1)
-#: by which each sample is paired with its SYNC.
+#: The bound: no cycle of an identification may be half a cycle or more off its grid
+#: (:data:`analysis.MAX_STAMP_DEVIATION`). The clock fit (analysis.clocks) takes drive cycle k at exactly k·T: a
+#: zero-mean scatter only adds noise to its windowed phase fits, and analysis.sample_instants moves each sample to k·T
+#: with the drive's stamps — which it refuses for the whole record once one deviates half a cycle (the spline move needs
+#: a deviation much smaller than T, and a stamp half a cycle off could belong to the neighbouring cycle). On CANopen a
+#: SYNC that far off also breaks the synchronous window (CiA 301: TPDO k before SYNC k+1) by which each sample is paired
+#: with its SYNC. What a smaller jitter costs (speed noise at speed, without stamps) the identification's verdict judges
+#: from its own spectra.
 def sync_jitter_check(index: np.ndarray, times_s: np.ndarray, period_s: float, source: str, identification_s: float,
                       from_drive: bool) -> Check:
     """The drive cycle's irregularity (``times_s`` of cycles ``index``, s, measured by ``source``) against half a cycle.
 
-    The scatter σ is robust (1.4826 × the median absolute deviation from the cycle grid): a host that stalls once
-    delays a stamp, not the SYNC producer. The largest deviation a Gaussian jitter reaches in the identification's
-    N = ``identification_s``/T cycles is ≈ σ·√(2 ln N); at half a cycle or more (:data:`analysis.MAX_STAMP_DEVIATION`)
-    it is a ⚠. A deviation already seen that large in the drive's own stamps (``from_drive``) is a ✗ — host stamps
-    carry the host's own latency, so from them it stays a ⚠ (an upper bound of the drive's irregularity).
+    The scatter σ is robust (1.4826 × the median absolute deviation from the cycle grid: one stall does not stand
+    for the jitter; the largest deviation is judged on its own). The largest deviation a Gaussian jitter reaches in
+    the identification's N = ``identification_s``/T cycles is ≈ σ·√(2 ln N); at half a cycle or more
+    (:data:`analysis.MAX_STAMP_DEVIATION`) it is a ⚠. A deviation already seen that large in the drive's own stamps
+    (``from_drive``) is a ✗; in host stamps, which carry the host's own latency (an upper bound of the drive's
+    irregularity), a ⚠.
     """
     bound_s = MAX_STAMP_DEVIATION * period_s
     dev = cycle_deviation_s(index, times_s, period_s)
