@@ -15,7 +15,8 @@ Everything outside ``analysis/`` (the application ``acq``) imports from here onl
   :func:`min_speed_rpm` (within :data:`PHASE_WINDOW_S`) — what a bench, a record and a profile must offer
   before it records.
 - The bench checks of ``acq selftest`` (:mod:`analysis.speed_ratio`, :mod:`analysis.bench_checks`,
-  :mod:`analysis.encoder`).
+  :mod:`analysis.encoder`; the cycle grid of :mod:`analysis.sample_instants`: :func:`cycle_deviation_s`,
+  :data:`MAX_STAMP_DEVIATION`).
 """
 
 from __future__ import annotations
@@ -32,15 +33,16 @@ from analysis.quality import Thresholds
 from analysis.recording import CommandedProfile, Recording
 from analysis.report import FigureData
 from analysis.request import AnalysisRequest, code_fingerprint
+from analysis.sample_instants import MAX_STAMP_DEVIATION, cycle_deviation_s
 from analysis.segments import excitation_summary
 from analysis.signals import PreparedSignals, prepare_signals
 from analysis.speed_ratio import SpeedRatio, electrical_speed_ratio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from analysis.torque import PHASE_WINDOW_S, min_speed_rpm
 
 __all__ = [
-    "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",
+    "MAX_STAMP_DEVIATION", "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",
     "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TorqueMethod", "TwoMassParams", "Z95",
-    "analyze", "code_fingerprint", "electrical_speed_ratio", "encoder_period_problem", "excitation_summary",
+    "analyze", "code_fingerprint", "cycle_deviation_s", "electrical_speed_ratio", "encoder_period_problem", "excitation_summary",
     "min_current_rate_hz",
     "min_duration_s", "min_record_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",
     "likely_counts_per_rev", "longest_gap_free_span", "our_chain", "phase_sequence_agreement", "prepare_signals",

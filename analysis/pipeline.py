@@ -14,6 +14,7 @@ from typing import Any
 
 from analysis.chain import SignalChain, chain_caveat
 from analysis.clocks import ClockFit
+from analysis.drive_limits import drive_limit_reason
 from analysis.diagnose import nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
 from analysis.fit import FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit
 from analysis.encoder import longest_gap_free_span
@@ -170,6 +171,10 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
     if frf.selection is not None and not frf.selection.applied and not sig.clock.failure:  # a failed clock: its own
         quality = _not_excited(quality, moves, frf.selection.excited_fraction, select)  # type: ignore[arg-type]
+    limited = drive_limit_reason(rec)  # the drive held a limit: at best poor, whatever else was found
+    if limited is not None:
+        quality = replace(quality, verdict="failed" if quality.verdict == "failed" else "poor",
+                          reasons=(limited, *quality.reasons))
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual), misfit_band_hz=quality.misfit_band_hz,

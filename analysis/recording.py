@@ -63,6 +63,9 @@ class Recording:
         the instant it really sampled; its origin and 1 µs quantisation do not matter. None: not recorded.
     profile : CommandedProfile or None
         The profile acq commanded; None when the machine's own controller moved the joint (or not recorded).
+    drive_limited_host_ns : ndarray of int64, shape (n, 2), or None
+        Host spans (start, end; monotonic ns, the clock of ``encoder_host_ns``) in which the drive reported
+        "internal limit active" (CiA 402 0x6041 bit 11, :mod:`analysis.drive_limits`); None or empty: none reported.
     """
 
     current_a: dict[str, np.ndarray]
@@ -80,3 +83,4 @@ class Recording:
     host_clock_shared: bool = True
     drive_time_s: np.ndarray | None = None
     profile: CommandedProfile | None = None
+    drive_limited_host_ns: np.ndarray | None = None

@@ -86,12 +86,44 @@ class EncoderJitter:
         return quantisation_speed_psd(f_hz, period_s, self.lsb_rad)
 
 
-def stamp_deviation_s(index: np.ndarray, drive_time_s: np.ndarray, period_s: float) -> np.ndarray | None:
-    """Deviation of each sample's drive time stamp from the regular grid, s, in units of k·T.
+#: The largest deviation of a sample instant from its cycle grid, as a share of the cycle T, that the analysis takes
+#: for a jitter around the grid: the spline move (:func:`angle_at_nominal_instants`) reads θ(t_k) − ω·δ_k − ½α·δ_k²
+#: + O(δ³), which needs δ a small fraction of T, and a stamp half a cycle off could as well belong to the neighbouring
+#: cycle. One deviation this large makes :func:`stamp_deviation_s` refuse all of a record's stamps.
+MAX_STAMP_DEVIATION = 0.5
 
-    A straight line a + b·k fitted to the stamps is the grid (its offset and rate are the drive clock's,
-    not the samples'); δ_k = (stamp_k − a − b·k)·T/b. None when the stamps cannot be used: not all
-    finite, or a deviation of half a period or more (not a jitter around the grid).
+
+def cycle_deviation_s(index: np.ndarray, times_s: np.ndarray, period_s: float) -> np.ndarray | None:
+    """Deviation of each cycle's time from the regular grid, s, in units of k·T.
+
+    A straight line a + b·k fitted to the times is the grid (its offset and rate are the clock's, not the cycles'):
+    δ_k = (t_k − a − b·k)·T/b. None when there is no grid to fit: fewer than 4 times, one not finite, or a rate
+    that is not positive.
+
+    Parameters
+    ----------
+    index : ndarray of int
+        Cumulative cycle k of each time (gap-free or not).
+    times_s : ndarray
+        The time of each cycle, s (a drive's time stamps, or host stamps).
+    period_s : float
+        Cycle T, s.
+    """
+    t = np.asarray(times_s, dtype=np.float64)
+    k = np.asarray(index, dtype=np.float64)
+    if t.size < 4 or not np.all(np.isfinite(t)):
+        return None
+    kc, tc = k - k.mean(), t - t.mean()
+    rate = float(np.dot(kc, tc) / np.dot(kc, kc))
+    if not rate > 0:
+        return None
+    return (tc - rate * kc) * (period_s / rate)
+
+
+def stamp_deviation_s(index: np.ndarray, drive_time_s: np.ndarray, period_s: float) -> np.ndarray | None:
+    """Deviation of each sample's drive time stamp from the regular grid, s (:func:`cycle_deviation_s`). None when
+    the stamps cannot be used: no grid to fit, or a deviation of :data:`MAX_STAMP_DEVIATION` of a period or more (not a
+    jitter around the grid).
 
     Parameters
     ----------
@@ -102,16 +134,10 @@ def stamp_deviation_s(index: np.ndarray, drive_time_s: np.ndarray, period_s: flo
     period_s : float
         Drive cycle T, s.
     """
-    t = np.asarray(drive_time_s, dtype=np.float64)
-    k = np.asarray(index, dtype=np.float64)
-    if t.size < 4 or not np.all(np.isfinite(t)):
+    dev = cycle_deviation_s(index, drive_time_s, period_s)
+    if dev is None:
         return None
-    kc, tc = k - k.mean(), t - t.mean()
-    rate = float(np.dot(kc, tc) / np.dot(kc, kc))
-    if not rate > 0:
-        return None
-    dev = (tc - rate * kc) * (period_s / rate)
-    return dev if np.max(np.abs(dev)) < 0.5 * period_s else None
+    return dev if np.max(np.abs(dev)) < MAX_STAMP_DEVIATION * period_s else None
 
 
 def angle_at_nominal_instants(theta_rad: np.ndarray, index: np.ndarray, period_s: float,

@@ -16,6 +16,7 @@ indices, never from timing. Adapters raise :class:`acqcore.errors.DeviceError` o
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from typing import Literal, Protocol, runtime_checkable
 
@@ -93,6 +94,63 @@ class StreamEvent:
     stream: StreamName
     kind: EventKind
     detail: str
+
+
+#: The event a drive writes for a span in which it reported "internal limit active" (CiA 402 statusword 0x6041 bit 11:
+#: a torque, speed or position limit held the motor), read back by :func:`limit_span_ns`.
+LIMIT_EVENT = "internal limit active (0x6041 bit 11) from {start_s:.3f} s to {end_s:.3f} s after {origin}"
+_LIMIT_EVENT = re.compile(r"^internal limit active \(0x6041 bit 11\) from (\S+) s to (\S+) s")
+
+
+def limit_event(start_ns: int, end_ns: int, origin_ns: int, origin: str = "the motion started") -> StreamEvent:
+    """The drive's event for a span of "internal limit active" seen from ``start_ns`` to ``end_ns`` (host monotonic
+    ns), its times counted from ``origin_ns`` (what ``origin`` says happened then); stamped at its start."""
+    detail = LIMIT_EVENT.format(start_s=(start_ns - origin_ns) * 1e-9, end_s=(end_ns - origin_ns) * 1e-9,
+                                origin=origin)
+    return StreamEvent(start_ns, "drive", "warning", detail + ": the drive held the motor at a torque, speed or "
+                       "position limit (0x6072, 0x607F, 0x607D)")
+
+
+#: CiA 402 statusword bit 11: internal limit active
+SW_INTERNAL_LIMIT = 1 << 11
+
+
+class LimitSpans:
+    """The spans in which a drive's statusword had bit 11 "internal limit active" set, from statuswords seen one by one
+    (polled by SDO, or in each TPDO): each from the first seen with it set to the first seen clear (host ns)."""
+
+    def __init__(self) -> None:
+        self._since_ns: int | None = None  # the first statusword with bit 11 set, None while clear
+        self._seen_ns = 0  # the last with it set
+        self._ended: list[tuple[int, int]] = []
+
+    def see(self, active: bool, host_ns: int) -> None:
+        """Bit 11 is ``active`` in the statusword seen at ``host_ns``."""
+        if active:
+            if self._since_ns is None:
+                self._since_ns = host_ns
+            self._seen_ns = host_ns
+        elif self._since_ns is not None:
+            self._ended.append((self._since_ns, host_ns))
+            self._since_ns = None
+
+    def take(self, final: bool = False) -> list[tuple[int, int]]:
+        """The spans (start, end; host ns) that ended since the last call; with ``final`` also one still open, ended at
+        the last statusword that had bit 11 set."""
+        if final and self._since_ns is not None:
+            self._ended.append((self._since_ns, self._seen_ns))
+            self._since_ns = None
+        out, self._ended = self._ended, []
+        return out
+
+
+def limit_span_ns(event: StreamEvent) -> tuple[int, int] | None:
+    """The host span (start, end; monotonic ns) of a :func:`limit_event`, None for any other event."""
+    match = _LIMIT_EVENT.match(event.detail) if event.stream == "drive" else None
+    if match is None:
+        return None
+    length_ns = round((float(match[2]) - float(match[1])) * 1e9)
+    return event.host_ns, event.host_ns + length_ns
 
 
 @dataclass(frozen=True)

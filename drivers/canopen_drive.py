@@ -23,7 +23,8 @@ frames received before are delivered (the recorder then ends the session ``faile
 Listen-only (``[drive] motion = "external"``, :meth:`CanopenDrive.start` → ``_start_listening``): the machine's
 own master runs NMT, SYNC and the motion, so acq sends no NMT, no SYNC, no SDO write and no RPDO; it records the
 TPDO the master set up (COB-ID and mapping from the bench config or the drive's EDS/DCF,
-:mod:`drivers.canopen_eds`), pairing each with the master's SYNC before it, stamped on arrival. With
+:mod:`drivers.canopen_eds`), pairing each with the master's SYNC before it, stamped on arrival; a statusword mapped in
+it is watched for bit 11 "internal limit active" (each span an event, :func:`drivers.base.limit_event`). With
 ``configure = true`` it first maps its own TPDO ``tpdo`` by SDO (still no NMT, SYNC or motion). No heartbeat is
 required (the master owns the drive's heartbeat), and the bus-load check of acq's own traffic does not apply.
 
@@ -43,7 +44,7 @@ from canopen.sdo import SdoAbortedError
 
 from drivers import canopen_od as od
 from drivers.canopen_eds import PassiveTpdo, passive_tpdo
-from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent, StreamName
+from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent, StreamName, limit_event
 from drivers.canopen_motion import STATUS_POLL_S, ProfilePositionMotion, device_step, node402
 from drivers.canopen_stream import (SYNC_COB_ID, SYNC_COUNTER_OVERFLOW, FrameCapture, RawFrameLog, SyncProducer,
                                     SyncUnwrapper, TpdoDecoder, TpdoLayout)
@@ -127,7 +128,8 @@ class CanopenDrive:
             self._node = node
             travel = (None if self._limits is None else
                       travel_counts(self._limits.max_travel_deg, self._gear_ratio, self._cpr))
-            self._motion = ProfilePositionMotion(node, self.name, s, self._cpr, self._fail, self._info, travel)
+            self._motion = ProfilePositionMotion(node, self.name, s, self._cpr, self._fail, self._info, travel,
+                                                 self._add_event)
             node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
             node.TIMEOUT_SWITCH_STATE_FINAL = s.state_timeout_s
             node.TIMEOUT_SWITCH_STATE_SINGLE = s.state_timeout_s
@@ -145,6 +147,7 @@ class CanopenDrive:
             self._set_profile_position()
             if self._limits is not None:
                 self._write_limits(self._limits)
+                self._check_position_frame()
             self._capture = FrameCapture(with_counter=overflow > 0, max_frames=QUEUE_FRAMES)
             self._network.subscribe(SYNC_COB_ID, self._capture.on_sync)
             self._network.subscribe(cob_id, self._capture.on_tpdo)
@@ -234,6 +237,7 @@ class CanopenDrive:
         self._raw.drain()
         self._check_health()
         block = self._decoder.decode(frames) if frames and self._decoder is not None else None
+        self._report_limits()
         self._report_counters()
         if self._failure is not None and block is None:
             raise self._failure
@@ -263,6 +267,7 @@ class CanopenDrive:
             self._network.disconnect()
             self._network = None
         self._raw.stop()
+        self._report_limits(final=True)
         for e in errors:
             self._event("error", e)
 
@@ -374,6 +379,35 @@ class CanopenDrive:
             read = ", ".join(f"0x{i:04X} = {v}" for i, v in got.items())
             raise DeviceError(f"{self.name}: [limits] read back differ from what was written — wrote {shown}, read {read}")
 
+    def _check_position_frame(self) -> None:
+        """Read 0x607C home offset and the 0x607D window the drive holds, say both in an info event, and refuse a home
+        offset other than 0.
+
+        acq takes its travel window in 0x6064's frame: the start position p0 it reads there ± [limits] max_travel_deg
+        (:mod:`drivers.canopen_motion`). 0x6064 (and 0x607A) already include the home offset — they count from the
+        application's zero — and so does acq's own check of the swing, which is relative to p0: for those the offset
+        changes nothing, and it is only reported. But CiA 402 takes 0x607D relative to the machine's home position:
+        the drive corrects the limits by the home offset before comparing a target with them (corrected limit = limit
+        − 0x607C, as drive manuals quote the profile), so with an offset the window the drive enforces is not the one
+        acq wrote, and no read-back shows it. acq does not write limits it would have to shift by a convention it
+        cannot check on the drive: it refuses to move such a drive, in one line, before anything is enabled."""
+        node = self._node
+        with device_step(self.name, "reading 0x607D software position limits failed"):
+            limits = node.sdo[od.SOFTWARE_POSITION_LIMIT]
+            window = f"0x607D software position limits {int(limits[1].raw)} … {int(limits[2].raw)}"
+        with device_step(self.name, "reading 0x607C home offset failed"):
+            try:
+                offset = int(node.sdo[od.HOME_OFFSET].raw)
+            except SdoAbortedError:  # an optional object: a drive without homing has none
+                self._event("info", f"{window}; the drive has no 0x607C home offset")
+                return
+        self._event("info", f"{window}; 0x607C home offset {offset} (position units)")
+        if offset != 0:
+            raise DeviceError(
+                f"{self.name}: 0x607C home offset = {offset}: the drive takes 0x607D software position limits relative "
+                "to its home position, shifted by the offset from 0x6064 position actual, in which acq sets the window of "
+                "[limits] max_travel_deg — set 0x607C to 0 in the drive before acq moves the joint")
+
     # ---- streaming health --------------------------------------------------------------------------
     def _on_heartbeat(self, nmt_state: int) -> None:
         self._hb_ns, self._hb_state = time.monotonic_ns(), nmt_state
@@ -419,6 +453,15 @@ class CanopenDrive:
         if self._sync is not None:
             self._sync.stop()
 
+    def _report_limits(self, final: bool = False) -> None:
+        """The "internal limit active" spans of a statusword mapped in the recorded TPDO (a master's, listening) as
+        events; ``final``: also one still open. acq's own TPDO maps none: the motion polls the statusword
+        (:mod:`drivers.canopen_motion`)."""
+        if self._decoder is None or self._capture is None:
+            return
+        for start_ns, end_ns in self._decoder.take_limit_spans(final):
+            self._add_event(limit_event(start_ns, end_ns, self._capture.first_sync_ns, "the first SYNC"))
+
     def _report_counters(self) -> None:
         if self._capture is None or self._decoder is None:
             return
@@ -436,8 +479,11 @@ class CanopenDrive:
         self._event("info", detail)
 
     def _event(self, kind: EventKind, detail: str, stream: StreamName = "drive") -> None:
+        self._add_event(StreamEvent(time.monotonic_ns(), stream, kind, detail))
+
+    def _add_event(self, event: StreamEvent) -> None:
         with self._events_lock:
-            self._events.append(StreamEvent(time.monotonic_ns(), stream, kind, detail))
+            self._events.append(event)
 
 
 def _entries(entries: list[int]) -> str:

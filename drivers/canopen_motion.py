@@ -22,6 +22,12 @@ Travel limit: before the drive is enabled, 0x607D software position limits are s
 bench's ``[limits] max_travel_deg`` (in position units, as 0x6064/0x607A count them) and read back, so the drive itself
 refuses a target beyond them; a range that would leave int32 is refused (home the drive nearer 0).
 
+Internal limit: every statusword the motion polls (by SDO, every ``STATUS_POLL_S`` while it waits on a set-point or a
+target) is watched for bit 11 "internal limit active" (CiA 402: the drive holds a torque, speed or position limit —
+0x6072, 0x607F, 0x607D); each span it stays set is one :func:`drivers.base.limit_event` in the session, from the
+first poll that saw it set to the first that saw it clear (or the last poll of the motion). The polls see a span to
+within a poll and its SDO round trip; a span shorter than that may pass unseen.
+
 All SDO traffic of the motion goes through one lock (the motion thread and a stop from any other
 thread share canopen's SDO client). Every stop is a quick stop on the 0x6085 ramp, a wait for rest
 (SWITCH ON DISABLED, or QUICK STOP ACTIVE with target reached), then disable voltage, verified.
@@ -37,6 +43,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from drivers import canopen_od as od
+from drivers.base import SW_INTERNAL_LIMIT, LimitSpans, StreamEvent, limit_event
 from drivers.config import DriveCanopen, Profile
 from acqcore.errors import AcqError, ConfigError, DeviceError
 from drivers.motion import half_swing_rad, speed_factors, with_dither_seed
@@ -92,15 +99,18 @@ class ProfilePositionMotion:
     """Motion of ``node`` (a started :func:`node402`) for a drive named ``device`` in messages.
 
     ``on_failure`` is called (from the motion thread) with the error that ended the motion after
-    the drive was stopped; ``on_info`` with one-line notes for the session's events.
+    the drive was stopped; ``on_info`` with one-line notes for the session's events; ``on_event`` with the
+    "internal limit active" spans (:func:`drivers.base.limit_event`).
     """
 
     def __init__(self, node: Any, device: str, settings: DriveCanopen, counts_per_rev: int,
                  on_failure: Callable[[DeviceError], None], on_info: Callable[[str], None],
-                 travel_counts: int | None = None) -> None:
+                 travel_counts: int | None = None, on_event: Callable[[StreamEvent], None] | None = None) -> None:
         self._node, self._name, self._s, self._cpr = node, device, settings, counts_per_rev
         self._travel_counts = travel_counts  # [limits] max_travel_deg in position units (0x607D around the start)
-        self._on_failure, self._on_info = on_failure, on_info
+        self._on_failure, self._on_info, self._on_event = on_failure, on_info, on_event
+        self._motion_start_ns = 0
+        self._limit_spans = LimitSpans()
         self.sdo_lock = threading.RLock()
         self._halt_lock = threading.Lock()
         self._stop = threading.Event()
@@ -133,6 +143,7 @@ class ProfilePositionMotion:
             self.quick_stop_and_disable()
             raise
         self._stop.clear()
+        self._motion_start_ns, self._limit_spans = time.monotonic_ns(), LimitSpans()
         self._thread = threading.Thread(target=self._run_triangle, args=(p0, profile),
                                         name="acq-canopen-motion", daemon=True)
         self._thread.start()
@@ -224,6 +235,8 @@ class ProfilePositionMotion:
         while not self._stop.is_set():
             with self.sdo_lock:
                 sw = int(self._node.statusword)
+            self._limit_spans.see(bool(sw & SW_INTERNAL_LIMIT), time.monotonic_ns())
+            self._report_limit_spans()
             if sw & 0x6F != 0x27:
                 raise DeviceError(f"{self._name}: drive left OPERATION ENABLED during the motion (statusword 0x{sw:04X})")
             if sw & mask == value:
@@ -232,6 +245,12 @@ class ProfilePositionMotion:
                 raise DeviceError(f"{self._name}: {what} within {timeout_s:g} s (statusword 0x{sw:04X})")
             self._stop.wait(STATUS_POLL_S)
         return False
+
+    def _report_limit_spans(self, final: bool = False) -> None:
+        """Each "internal limit active" span that ended (``final``: also one still open) as an event."""
+        for start_ns, end_ns in self._limit_spans.take(final):
+            if self._on_event is not None:
+                self._on_event(limit_event(start_ns, end_ns, self._motion_start_ns))
 
     def _run_triangle(self, p0: int, profile: Profile) -> None:
         """Alternate absolute targets p0 + round(s_c·swing) and p0 with the new-set-point handshake until stopped;
@@ -268,3 +287,5 @@ class ProfilePositionMotion:
             except AcqError as stop_error:
                 self._on_info(str(stop_error))
             self._on_failure(error)
+        finally:  # a limit still active when the motion ends: its span as far as the polls saw it
+            self._report_limit_spans(final=True)

@@ -37,6 +37,7 @@ QUICK_STOP_DECELERATION = 0x6085
 MAX_TORQUE = 0x6072  # per mille of 0x6076
 MOTOR_RATED_TORQUE = 0x6076  # mN·m
 SOFTWARE_POSITION_LIMIT = 0x607D  # sub 1 min, sub 2 max, position units
+HOME_OFFSET = 0x607C  # position units
 MAX_PROFILE_VELOCITY = 0x607F  # velocity units
 SUPPORTED_MODES = 0x6502
 
@@ -105,6 +106,7 @@ def drive_object_dictionary(node_id: int) -> ObjectDictionary:
         _var("Velocity demand value", VELOCITY_DEMAND, INTEGER32, "ro", 0, mappable=True),  # velocity units
         _var("Velocity actual value", VELOCITY_ACTUAL, INTEGER32, "ro", 0, mappable=True),
         _var("Target position", TARGET_POSITION, INTEGER32, "rw", 0, mappable=True),
+        _var("Home offset", HOME_OFFSET, INTEGER32, "rw", 0),
         _var("Target velocity", TARGET_VELOCITY, INTEGER32, "rw", 0, mappable=True),  # velocity units
         _var("Profile velocity", PROFILE_VELOCITY, UNSIGNED32, "rw", 0),
         _var("Profile acceleration", PROFILE_ACCELERATION, UNSIGNED32, "rw", 0),

@@ -28,7 +28,7 @@ from pathlib import Path
 import can
 import numpy as np
 
-from drivers.base import EncoderBlock
+from drivers.base import SW_INTERNAL_LIMIT, EncoderBlock, LimitSpans
 
 log = logging.getLogger(__name__)
 
@@ -36,6 +36,7 @@ SYNC_COB_ID = 0x80
 SYNC_COUNTER_OVERFLOW = 240
 RAW_PRE_LOG_MAX = 100_000  # frames kept while no raw log file is open yet
 POSITION_ACTUAL, VELOCITY_ACTUAL, VELOCITY_DEMAND, HIGH_RES_TIMESTAMP = 0x6064, 0x606C, 0x606B, 0x1013
+STATUSWORD = 0x6041
 
 
 @dataclass(frozen=True)
@@ -43,8 +44,9 @@ class TpdoLayout:
     """Where the recorded objects sit in a TPDO's payload (byte offsets; None: not mapped).
 
     ``position`` is 0x6064 (int32), ``velocity`` 0x606C (int32), ``timestamp`` 0x1013 (uint32 µs),
-    ``velocity_demand`` 0x606B (int32, the speed loop's reference, in the velocity's units); any other mapped object
-    (a statusword, say) is skipped. ``size`` is the payload's length, bytes.
+    ``velocity_demand`` 0x606B (int32, the speed loop's reference, in the velocity's units), ``statusword`` 0x6041
+    (uint16, watched for bit 11 "internal limit active"); any other mapped object is skipped. ``size`` is the
+    payload's length, bytes.
     """
 
     size: int
@@ -52,6 +54,7 @@ class TpdoLayout:
     velocity: int | None = None
     timestamp: int | None = None
     velocity_demand: int | None = None
+    statusword: int | None = None
 
     @classmethod
     def from_entries(cls, entries: Sequence[int]) -> TpdoLayout:
@@ -59,18 +62,19 @@ class TpdoLayout:
         offsets: dict[int, int] = {}
         at = 0
         for e in entries:
-            if e & 0xFF == 32 and (e >> 8) & 0xFF == 0:
+            if (e & 0xFF == 32 or e >> 16 == STATUSWORD and e & 0xFF == 16) and (e >> 8) & 0xFF == 0:
                 offsets.setdefault(e >> 16, at // 8)
             at += e & 0xFF
         if POSITION_ACTUAL not in offsets:
             raise ValueError("the TPDO does not map 0x6064 position actual value (32 bit)")
         return cls(at // 8, offsets[POSITION_ACTUAL], offsets.get(VELOCITY_ACTUAL), offsets.get(HIGH_RES_TIMESTAMP),
-                   offsets.get(VELOCITY_DEMAND))
+                   offsets.get(VELOCITY_DEMAND), offsets.get(STATUSWORD))
 
     def dtype(self) -> np.dtype:
         """A numpy structured dtype reading the mapped fields of one payload (little endian, CiA 301)."""
         fields = {"position": (self.position, "<i4"), "velocity": (self.velocity, "<i4"),
-                  "timestamp": (self.timestamp, "<u4"), "velocity_demand": (self.velocity_demand, "<i4")}
+                  "timestamp": (self.timestamp, "<u4"), "velocity_demand": (self.velocity_demand, "<i4"),
+                  "statusword": (self.statusword, "<u2")}
         used = {k: v for k, v in fields.items() if v[0] is not None}
         return np.dtype({"names": list(used), "formats": [f for _, f in used.values()],
                          "offsets": [o for o, _ in used.values()], "itemsize": self.size})
@@ -185,7 +189,9 @@ class TpdoDecoder:
     The int32 position register is unwrapped to int64; velocity and velocity demand (drive units) are scaled to
     counts/s by ``counts_per_s_per_unit``; the time stamp (wrapping every 2³² µs ≈ 71.6 min) is unwrapped into
     ``drive_time_s`` (s of the drive's clock, its origin the drive's). Frames of the wrong length are
-    counted and skipped.
+    counted and skipped. A mapped statusword is watched for bit 11 "internal limit active": each span it stays set,
+    from the host stamp of the first frame with it set to that of the first with it clear, is kept for
+    :meth:`take_limit_spans` (a span still open at the end: :meth:`take_limit_spans` with ``final``).
     """
 
     def __init__(self, unwrapper: SyncUnwrapper, with_velocity: bool, counts_per_s_per_unit: float,
@@ -203,6 +209,7 @@ class TpdoDecoder:
         self._last_stamp_us = 0
         self.bad_length = 0
         self.before_first_sync = 0
+        self._limit_spans = LimitSpans()
 
     def decode(self, frames: list[tuple[int, bytes, int]] | list[tuple[int, bytes, int, int]]) -> EncoderBlock | None:
         """Decode frames (counter, payload, host_ns[, SYNC frames seen]) in arrival order; None if none is usable."""
@@ -224,8 +231,22 @@ class TpdoDecoder:
         velocity = values["velocity"] * self._scale if self._with_velocity else None
         demand = values["velocity_demand"] * self._scale if self._layout.velocity_demand is not None else None
         drive_time_s = self._unwrap_stamps(values["timestamp"]) if self._with_timestamp else None
+        if self._layout.statusword is not None:
+            self._watch_limit((values["statusword"] & SW_INTERNAL_LIMIT) != 0, host_ns)
         return EncoderBlock(index=index, position_counts=counts, host_ns=host_ns, drive_time_s=drive_time_s,
                             velocity_counts_per_s=velocity, velocity_demand_counts_per_s=demand)
+
+    def _watch_limit(self, active: np.ndarray, host_ns: np.ndarray) -> None:
+        """Follow bit 11 over frames stamped ``host_ns``: the first frame, those where it changes, and the last are
+        enough (:meth:`drivers.base.LimitSpans.see` keeps a span's start and its last frame)."""
+        changes = np.flatnonzero(np.diff(active.astype(np.int8))) + 1
+        for i in np.r_[0, changes, active.size - 1].tolist():
+            self._limit_spans.see(bool(active[i]), int(host_ns[i]))
+
+    def take_limit_spans(self, final: bool = False) -> list[tuple[int, int]]:
+        """The "internal limit active" spans (host ns: start, end) that ended since the last call; with ``final`` also
+        one still open, ended at the last frame that had bit 11 set (:class:`drivers.base.LimitSpans`)."""
+        return self._limit_spans.take(final)
 
     def _unwrap_stamps(self, raw_us: np.ndarray) -> np.ndarray:
         """uint32 µs stamps → cumulative drive time, s (a step is taken modulo 2³²: frames come in order)."""

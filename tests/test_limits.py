@@ -8,15 +8,22 @@ import re
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from acq.commissioning.selftest import read_position_frame
 from acq.config import CONFIG_DIR, DEFAULT_BENCH, load_bench, load_profile
+from acq.offline.analyze import analyze_session
+from acq.recording.reader import load
+from acq.recording.recorder import Recorder
+from drivers.base import limit_span_ns
 from acqcore.errors import ConfigError, DeviceError
 from drivers.canopen_od import (MAX_PROFILE_VELOCITY, MAX_TORQUE, POSITION_ACTUAL, SOFTWARE_POSITION_LIMIT,
                                 VELOCITY_DEMAND)
 from drivers.config import Bench, Limits
 from drivers.limits import limit_problem
 from drivers.sim.bench import SimBench
+from drivers.sim.daq import open_current_source
 from drivers.sim.peers import open_canopen_with_sim_node
 from tests.helpers import run_cli
 
@@ -120,11 +127,16 @@ def test_the_shipped_profiles_fit_the_shipped_benches(bench_file: Path, profile:
 
 # ---- CANopen: the drive is told the limits and enforces them -------------------------------------------------
 def _canopen(limits: Limits | None = None) -> tuple[Bench, object]:
+    bench, _, drive = _canopen_parts(limits)
+    return bench, drive
+
+
+def _canopen_parts(limits: Limits | None = None) -> tuple[Bench, SimBench, object]:
     bench = load_bench(SIM_CANOPEN)
     drive = bench.drive.model_copy(update={"channel": f"acq-limits-{next(_channels)}", "state_timeout_s": 0.3})
     bench = bench.model_copy(update={"drive": drive, "limits": limits})
     sim = SimBench(bench, realtime=True, keep_history=True)
-    return bench, open_canopen_with_sim_node(bench, sim, False)
+    return bench, sim, open_canopen_with_sim_node(bench, sim, False)
 
 
 def test_the_limits_are_in_the_drives_object_dictionary_after_start_and_motion_start() -> None:
@@ -213,3 +225,69 @@ def test_a_motion_cut_short_cannot_walk_the_joint_beyond_its_travel_on_the_next_
             assert (limits[1].raw, limits[2].raw) == stops  # kept as they are
     finally:
         drive.stop()
+
+
+def test_a_limit_never_reached_changes_no_simulated_sample_and_one_reached_clamps_the_torque() -> None:
+    """The simulated speed loop's torque clamp: the shipped 22 N·m (SIM_LIMITS, 0x6072 = 3013 ‰ of 7.3 N·m) is never
+    reached by triangle_0.2s (peak ≈ 9 N·m), so every state is bit for bit the unlimited one — the default bench's
+    numbers, and K, are unchanged; at 7 N·m the motor's torque stops at 7 N·m."""
+    bench = load_bench(SIM_CANOPEN)
+    t_s = np.arange(0.0, 1.5, 1e-4)
+    states = {}
+    for limit_Nm in (None, 22.0, 7.0):
+        sim = SimBench(bench, realtime=False, keep_history=True)
+        if limit_Nm is not None:
+            sim.set_torque_limit(limit_Nm)
+        sim.start_motion(load_profile("triangle_0.2s").model_copy(update={"dither_seed": 1}), 0.0)
+        states[limit_Nm] = sim.true_state_at(t_s)
+    for key in ("torque_Nm", "theta_m_rad", "theta_l_rad"):
+        np.testing.assert_array_equal(states[22.0][key], states[None][key])
+    assert 8.0 < np.max(np.abs(states[None]["torque_Nm"])) < 22.0
+    assert 6.99 < np.max(np.abs(states[7.0]["torque_Nm"])) <= 7.0 + 1e-9
+
+
+def test_a_drive_held_at_its_torque_limit_is_an_event_and_a_poor_verdict_naming_it(tmp_path: Path) -> None:
+    """[limits] max_torque_Nm = 7 passes the host's check (the fastest cycle's inertial torque is 5.6 N·m) but the
+    resonance and gravity ask ~9 N·m: the simulated drive clamps at 0x6072, sets statusword bit 11 while it does, the
+    motion's polls make one event per span, and the identification's verdict says so first (poor, not ok)."""
+    bench, sim, drive = _canopen_parts(Limits(max_speed_rpm=3000.0, max_travel_deg=360.0, max_torque_Nm=7.0))
+    current = open_current_source(bench, sim, False)
+    result = Recorder(bench, load_profile("triangle_0.2s"), current, drive, tmp_path, 3.5).run()
+    assert result.status == "complete", result.stop_reason
+    session = load(result.path)
+    spans = [span for e in session.events if (span := limit_span_ns(e)) is not None]
+    assert len(spans) >= 4  # the ramps of 3 s of a 0.8 s cycle: each out- and return move's acceleration
+    assert all(e.detail.startswith("internal limit active (0x6041 bit 11) from ") and e.kind == "warning"
+               for e in session.events if limit_span_ns(e) is not None)
+    assert all(0 < end - start < 0.3e9 for start, end in spans)  # within a ramp (0.2 s) and a poll
+    t_s = np.arange(0.5, 3.0, 1e-4)
+    assert 6.99 < np.max(np.abs(sim.true_state_at(t_s)["torque_Nm"])) <= 7.0 + 1e-9
+    doc = analyze_session(result.path, report=False).json_dict
+    assert doc["quality"]["verdict"] == "poor"
+    assert doc["quality"]["reasons"][0].startswith(
+        f"drive: internal limit active (CiA 402 0x6041 bit 11) in {len(spans)} span(s), ")
+
+
+def test_a_home_offset_is_refused_before_the_drive_is_enabled_and_reported_where_it_is_0() -> None:
+    """0x6064 and 0x607A count from the application's zero (home offset included), but CiA 402 takes 0x607D relative
+    to the machine's home, corrected by 0x607C: acq's window around the start would not be the drive's."""
+    _, drive = _canopen()
+    drive.sim_node.home_offset = 5000
+    with pytest.raises(DeviceError) as err:
+        drive.start()
+    assert str(err.value) == (
+        f"{drive.name}: 0x607C home offset = 5000: the drive takes 0x607D software position limits relative to its "
+        "home position, shifted by the offset from 0x6064 position actual, in which acq sets the window of [limits] "
+        "max_travel_deg — set 0x607C to 0 in the drive before acq moves the joint")
+    assert drive.sim_node.state_402 == 0x40  # never enabled
+    for offset, said in ((0, "; 0x607C home offset 0 (position units)"), (None, "; the drive has no 0x607C home offset")):
+        bench, drive = _canopen()
+        drive.sim_node.home_offset = offset
+        drive.start()
+        try:
+            infos = [e.detail for e in drive.events() if e.kind == "info"]
+            assert f"0x607D software position limits {-2**31} … {2**31 - 1}{said}" in infos
+            expected = "0x607C home offset 0" if offset == 0 else "no 0x607C home offset"
+            assert read_position_frame(bench.drive) == f"0x607D window none set, {expected}"
+        finally:
+            drive.stop()

@@ -20,6 +20,7 @@ from acq.recording.recorder import Recorder
 from acq.recording.reader import load
 from acqcore.errors import ConfigError, DeviceError
 from drivers import canopen_od as od
+from drivers.base import limit_span_ns
 from drivers.canopen_eds import tpdo_from_eds
 from drivers.canopen_stream import SyncUnwrapper, TpdoDecoder, TpdoLayout
 from drivers.config import Bench
@@ -112,6 +113,7 @@ def test_listening_acq_sends_no_nmt_sync_sdo_write_or_rpdo_and_records_every_tpd
     assert any(np.array_equal(produced[c:c + n], recorded) for c in np.flatnonzero(produced == recorded[0]))
     assert np.ptp(recorded) > bench.encoder.counts_per_rev  # the robot's master moved the joint > 1 rev
     assert any("listen-only" in e.detail for e in session.events)
+    assert [e.detail for e in session.events if limit_span_ns(e)] == []  # 0x6072 at power-on 300 %: never reached
 
 
 def test_a_master_tpdo_with_other_objects_is_decoded_by_its_mapping() -> None:
@@ -124,6 +126,40 @@ def test_a_master_tpdo_with_other_objects_is_decoded_by_its_mapping() -> None:
     np.testing.assert_allclose(block.drive_time_s, [0.001, 0.002, 0.003])
     with pytest.raises(ValueError, match="does not map 0x6064"):
         TpdoLayout.from_entries([0x60410010, 0x606C0020])
+
+
+def test_a_mapped_statusword_is_watched_for_internal_limit_spans() -> None:
+    """Bit 11 set in the frames of cycles 3–4 and from 7 on: one span from frame 3's stamp to frame 5's (the first
+    clear), and one still open at the end, closed at the last frame that had it."""
+    layout = TpdoLayout.from_entries([0x60410010, 0x60640020])
+    assert layout.statusword == 0
+    decoder = TpdoDecoder(SyncUnwrapper(240, 0.001, 0), False, 1.0, layout=layout)
+    limited = {3, 4, 7, 8}
+    frames = [(c, struct.pack("<Hi", 0x0627 | (1 << 11 if c in limited else 0), c), c * 1_000_000) for c in range(1, 9)]
+    decoder.decode(frames[:4])  # the span crosses a read
+    decoder.decode(frames[4:])
+    assert decoder.take_limit_spans() == [(3_000_000, 5_000_000)]
+    assert decoder.take_limit_spans(final=True) == [(7_000_000, 8_000_000)]
+    assert decoder.take_limit_spans(final=True) == []
+
+
+def test_a_listening_drive_held_at_its_torque_limit_gives_events_from_the_masters_tpdo(tmp_path: Path) -> None:
+    """The robot's drive told 0x6072 = 300 ‰ of 7.3 N·m (2.19 N·m) once recording runs: its statusword in the master's
+    TPDO sets bit 11 while the moves ask more, and acq (sending nothing) records each span as an event."""
+    bench = _drive(ROBOT_CANOPEN)
+    current, drive = open_bench(bench)
+
+    def limit_torque(kind: str, block: object, done: list[bool] = []) -> None:  # noqa: B006 - once per test
+        if kind == "encoder" and not done:
+            drive.sim_node.node.sdo[od.MAX_TORQUE].raw = 300
+            done.append(True)
+
+    result = Recorder(bench, None, current, drive, tmp_path, 2.5, listeners=[limit_torque]).run()
+    assert result.status == "complete", result.stop_reason
+    events = [e for e in load(result.path).events if limit_span_ns(e) is not None]
+    assert events and all(e.detail.startswith("internal limit active (0x6041 bit 11) from ") and
+                          " s after the first SYNC: " in e.detail for e in events)
+    assert all(0 < end - start < 2.5e9 for start, end in map(limit_span_ns, events))
 
 
 def test_a_stalled_host_reading_bunched_frames_invents_no_lost_wrap() -> None:

@@ -11,10 +11,11 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import acq.commissioning.devices
-from acq.commissioning.selftest_checks import Check
+from acq.commissioning.selftest_checks import Check, sync_jitter_check
 from acq.config import DEFAULT_BENCH
 from acq.ui.selftest_cli import next_step, selftest_json
 from acqcore.errors import DeviceError
@@ -57,7 +58,8 @@ def test_correct_bench_passes_every_check_in_order_with_figures(capsys: pytest.C
     assert code == 0 and doc["passed"] and doc["stopped_at"] is None
     names = [(c["stage"], c["name"]) for c in doc["checks"]]
     assert names == [("devices", "acq devices"), ("devices", "DAQ"), ("devices", "drive"), ("streams", "recording"),
-                     ("streams", "DAQ blocks"), ("streams", "drive period"), ("streams", "current at standstill"),
+                     ("streams", "DAQ blocks"), ("streams", "drive period"), ("streams", "SYNC jitter"),
+                     ("streams", "current at standstill"),
                      ("motion", "encoder speed"), ("motion", "electrical speed"), ("motion", "direction"),
                      ("motion", "phase order"), ("identification", "identification (10 s)"),
                      ("identification", "torque constant")]
@@ -65,6 +67,9 @@ def test_correct_bench_passes_every_check_in_order_with_figures(capsys: pytest.C
     assert by["recording"]["values"]["current_lost"] == 0 and by["recording"]["values"]["encoder_lost"] == 0
     assert by["DAQ"]["values"]["rate_hz"] == 25600.0
     assert by["drive period"]["values"]["period_host_s"] == pytest.approx(1e-3, rel=1e-3)
+    # the simulated drive latches on its cycle grid ([sim] sync_jitter_s = 0) and stamps it: no jitter
+    assert by["SYNC jitter"]["figure"] == ("0.0 µs RMS, largest 0 µs off the 1 ms cycle grid (the drive's own time "
+                                           "stamps); bound 500 µs")
     noise = by["current at standstill"]["values"]["i_a"]["white_noise_A"]
     assert noise == pytest.approx(0.01, rel=0.1)  # [sim] current_noise_A
     assert by["electrical speed"]["values"]["ratio"] == pytest.approx(1.0, abs=0.02)
@@ -89,10 +94,10 @@ def test_a_listening_bench_is_checked_on_the_machines_own_motion_without_command
     code, doc = selftest(capsys, bench)
     assert code == 0 and doc["passed"]
     by = {c["name"]: c for c in doc["checks"]}
-    assert [(c["stage"], c["name"], c["status"]) for c in doc["checks"]][:8] == [
+    assert [(c["stage"], c["name"], c["status"]) for c in doc["checks"]][:9] == [
         ("devices", "acq devices", "pass"), ("devices", "DAQ", "pass"), ("devices", "drive", "pass"),
         ("streams", "recording", "pass"), ("streams", "DAQ blocks", "pass"), ("streams", "drive period", "pass"),
-        ("motion", "machine's motion", "pass"), ("motion", "electrical speed", "warn")]
+        ("streams", "SYNC jitter", "pass"), ("motion", "machine's motion", "pass"), ("motion", "electrical speed", "warn")]
     assert by["recording"]["figure"] == "3.0 s: 76800 current + 3000 encoder samples, 0 + 0 lost"
     assert by["machine's motion"]["figure"].endswith(" motor revolutions in 10 s (the machine's own motion; acq "
                                                     "commanded none)")
@@ -128,6 +133,34 @@ def test_a_new_users_first_selftest_on_the_shipped_bench_shows_no_warning(capsys
     assert {stage: (warned, failed, result) for stage, (_, warned, failed, result) in rows.items()} == {
         stage: ("0", "0", "✓") for stage in ("devices", "streams", "motion", "identification")}  # the summary table
     assert lines[-1] == "the bench is ready: acq record --profile triangle_0.2s"
+
+
+def test_a_jittering_sync_is_a_warning_with_its_figure_against_half_a_cycle(capsys: pytest.CaptureFixture[str],
+                                                                             tmp_path: Path) -> None:
+    """[sim] sync_jitter_s = 200 µs at a 1 ms cycle: the drive's stamps scatter ≈ 200 µs RMS (clipped at 0.45 of a
+    cycle by the simulator, so none reaches half a cycle off the fitted grid), which over the 10 s identification's 10 000
+    cycles reaches ≈ 200 · √(2 ln 10⁴) ≈ 860 µs: beyond half a cycle, where the analysis refuses the stamps."""
+    code, doc = selftest(capsys, bench_file(tmp_path, "sync_jitter_s = 0.0002"))
+    assert code == 0
+    check = {c["name"]: c for c in doc["checks"]}["SYNC jitter"]
+    assert check["status"] == "warn"
+    values = check["values"]
+    assert values["sigma_s"] == pytest.approx(200e-6, rel=0.1) and values["bound_s"] == 500e-6
+    assert values["largest_s"] < values["bound_s"] <= values["expected_largest_s"]  # only the projection warns
+    assert check["figure"] == (f"{1e6 * values['sigma_s']:.1f} µs RMS, largest {1e6 * values['largest_s']:.0f} µs off "
+                               "the 1 ms cycle grid (the drive's own time stamps); bound 500 µs")
+    assert check["fix"].startswith(f"{1e6 * values['sigma_s']:.0f} µs RMS reaches ≈ "
+                                   f"{1e6 * values['expected_largest_s']:.0f} µs in the 10 s identification, half a "
+                                   "cycle or more, where the analysis refuses the drive's time stamps")
+
+
+def test_sync_jitter_check_fails_on_a_stamp_half_a_cycle_off_and_only_warns_from_host_stamps() -> None:
+    k = np.arange(3000)
+    times = k * 1e-3 + 1e-6 * np.sin(k)  # ± 1 µs: a good drive
+    assert sync_jitter_check(k, times, 1e-3, "stamps", 10.0, from_drive=True).status == "pass"
+    times[1500] += 0.6e-3  # one cycle 0.6 ms late
+    assert sync_jitter_check(k, times, 1e-3, "stamps", 10.0, from_drive=True).status == "fail"
+    assert sync_jitter_check(k, times, 1e-3, "host", 10.0, from_drive=False).status == "warn"
 
 
 def test_a_bench_without_known_inertias_is_told_what_to_set_to_check_k_t(capsys: pytest.CaptureFixture[str],

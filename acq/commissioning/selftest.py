@@ -2,10 +2,12 @@
 
 1. devices: what ``acq devices`` sees for the configured hardware; the devices opened through the registry
    (as ``acq record`` does): the DAQ's channels and coerced rate, the drive reachable (a CANopen drive is
-   configured, its heartbeat awaited and its TPDO mapping read back by the adapter; identity 0x1018 read);
+   configured, its heartbeat awaited and its TPDO mapping read back by the adapter; identity 0x1018 read, and the
+   0x607D window with the 0x607C home offset);
 2. streams: 3 s at standstill through the real recorder into a temporary session — samples lost, DAQ block
-   timing, drive period and jitter (and, for CANopen, SYNC-to-TPDO spacing from the raw ``.blf``; for a
-   serial link, frames and CRC errors), current offset and noise;
+   timing, drive period and jitter, the SYNC jitter against half a cycle (what the analysis takes for a jitter
+   around the drive's cycle grid: :func:`~acq.commissioning.selftest_checks.sync_jitter_check`), for CANopen the
+   SYNC-to-TPDO spacing from the raw ``.blf``, for a serial link frames and CRC errors, current offset and noise;
 3. motion: a short slow triangle — encoder speed against the command, the current's electrical frequency
    against pole_pairs·ω, direction, phase order (2–3 phases);
 4. identification: a 10 s session of the profile, its verdict, and the torque constant against a known inertia.
@@ -24,18 +26,20 @@ The simulated bench runs through the same registry; this module never imports ``
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from acq.commissioning.devices import can_section, ni_section, serial_section
 from acq.monitoring.window_judge import joint_travel, not_excited, not_excited_reasons
 from acq.commissioning.selftest_checks import (Check, blf_check, daq_blocks_check, direction_check, drive_period_check,
                                                encoder_speed_check, phase_order_check, samples_check, speed_ratio_check,
-                                               standstill_current_check, torque_constant_check)
+                                               standstill_current_check, sync_jitter_check, sync_times,
+                                               torque_constant_check)
 from acq.offline.analyze import analyze_session, recording_from_session
 from acq.recording.recorder import Recorder
 from acq.recording.reader import load
+from acq.recording.session import Session
 from analysis import AnalysisRequest, electrical_speed_ratio, prepare_signals
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen, DriveSerial, Profile
 from acqcore.errors import AcqError
@@ -149,15 +153,31 @@ def _devices_and_streams(bench: Bench, profile: Profile | None, work_dir: Path, 
         return
     yield daq_blocks_check(session)
     yield drive_period_check(session)
-    if isinstance(bench.drive, DriveCanopen):
-        blf = result.path.with_suffix(".can.blf")
-        if blf.exists():
-            yield blf_check(blf, bench.drive)
+    blf = result.path.with_suffix(".can.blf")
+    yield _sync_jitter(session, blf if isinstance(bench.drive, DriveCanopen) and blf.exists() else None)
+    if isinstance(bench.drive, DriveCanopen) and blf.exists():
+        yield blf_check(blf, bench.drive)
     stats = getattr(drive, "stats", None)  # a serial link's frame and CRC counters
     if callable(stats):
         yield _serial_check(stats(), bench)
     if not bench.listens():  # a listening bench's joint may be moving: no standstill to measure offset and noise on
         yield standstill_current_check(session)
+
+
+def _sync_jitter(session: Session, blf: Path | None) -> Check:
+    """The drive cycle's irregularity, from the best timing the session has: the drive's own time stamps (0x1013 /
+    the serial frame's drive time: when it really sampled), else the SYNC frames' host stamps in the raw ``.blf``
+    (SocketCAN stamps them in the kernel), else the host arrival stamps of the samples (the host's latency in them)."""
+    enc, period_s = session.encoder, session.encoder.period_s
+    if enc.drive_time_s is not None:
+        return sync_jitter_check(enc.index, enc.drive_time_s, period_s, "the drive's own time stamps",
+                                 IDENTIFICATION_S, from_drive=True)
+    if blf is not None:
+        index, stamps_s = sync_times(blf, session.bench.drive)
+        return sync_jitter_check(index, stamps_s, period_s, f"host stamps of the SYNC frames in {blf.name}",
+                                 IDENTIFICATION_S, from_drive=False)
+    return sync_jitter_check(enc.index, enc.host_ns * 1e-9, period_s, "host arrival stamps of the samples, an upper "
+                             "bound", IDENTIFICATION_S, from_drive=False)
 
 
 def _daq_check(bench: Bench, recorder: Recorder) -> Check:
@@ -189,15 +209,54 @@ def _drive_check(bench: Bench, recorder: Recorder) -> Check:
                          "the drive you mean", values)
         values["identity"] = identity
         figure += "; identity 0x1018 " + ", ".join(f"{k} 0x{v:08X}" for k, v in identity.items())
+        if not bench.listens():  # acq sets its travel window in 0x6064's frame (a home offset was refused at start)
+            figure += "; " + read_position_frame(drive)
     return Check("devices", "drive", "pass", figure, values=values)
 
 
 IDENTITY = {"vendor": 1, "product": 2, "revision": 3, "serial": 4}
+T = TypeVar("T")
 
 
 def read_identity(settings: DriveCanopen) -> dict[str, int] | str:
     """The drive's identity object 0x1018 by SDO from a second connection to the bus (the adapter's own
     client is idle before motion); the reason as a string when it cannot be read."""
+    import canopen
+
+    def identity(node: Any) -> dict[str, int]:
+        found: dict[str, int] = {}
+        for name, sub in IDENTITY.items():
+            try:
+                found[name] = int.from_bytes(node.sdo.upload(0x1018, sub), "little")
+            except canopen.SdoAbortedError:
+                if sub == 1:
+                    raise
+        return found
+
+    return _by_sdo(settings, identity)
+
+
+def read_position_frame(settings: DriveCanopen) -> str:
+    """The 0x607D software position limits the drive holds and its 0x607C home offset, in words, by SDO from a
+    second connection (as :func:`read_identity`). The adapter has refused a home offset other than 0 before motion
+    (:meth:`drivers.canopen_drive.CanopenDrive.start`), so on a bench that got this far it reads 0 or is absent."""
+    import canopen
+
+    def frame(node: Any) -> str:
+        low, high = (int.from_bytes(node.sdo.upload(0x607D, sub), "little", signed=True) for sub in (1, 2))
+        window = "none set" if (low, high) == (-2**31, 2**31 - 1) else f"{low} … {high}"
+        try:
+            offset = f"0x607C home offset {int.from_bytes(node.sdo.upload(0x607C, 0), 'little', signed=True)}"
+        except canopen.SdoAbortedError:
+            offset = "no 0x607C home offset"
+        return f"0x607D window {window}, {offset}"
+
+    return _by_sdo(settings, frame)
+
+
+def _by_sdo(settings: DriveCanopen, read: Callable[[Any], T]) -> T | str:
+    """``read(node)`` on the drive as a RemoteNode of a second connection to the bus; the reason as a string when
+    the bus or an SDO fails."""
     import can
     import canopen
     from canopen.objectdictionary import ObjectDictionary
@@ -208,14 +267,7 @@ def read_identity(settings: DriveCanopen) -> dict[str, int] | str:
         network.connect(interface=settings.interface, channel=settings.channel, bitrate=settings.bitrate)
         node = network.add_node(canopen.RemoteNode(settings.node_id, ObjectDictionary()))
         node.sdo.RESPONSE_TIMEOUT = settings.sdo_timeout_s
-        identity: dict[str, int] = {}
-        for name, sub in IDENTITY.items():
-            try:
-                identity[name] = int.from_bytes(node.sdo.upload(0x1018, sub), "little")
-            except canopen.SdoAbortedError:
-                if sub == 1:
-                    raise
-        return identity
+        return read(node)
     except (SdoError, OSError, can.CanError) as e:
         return f"not readable ({e})"
     finally:

@@ -14,8 +14,9 @@ import numpy as np
 
 from acq.recording.session import Session
 from acq.recording.summary import summarize
-from analysis import (SpeedRatio, first_move_sign, inertia_from_torque, likely_counts_per_rev, longest_gap_free_span,
-                      phase_sequence_agreement, ratio_doubt, ratio_fault, sequence_fault, speed_from_counts)
+from analysis import (MAX_STAMP_DEVIATION, SpeedRatio, cycle_deviation_s, first_move_sign, inertia_from_torque,
+                      likely_counts_per_rev, longest_gap_free_span, phase_sequence_agreement, ratio_doubt, ratio_fault,
+                      sequence_fault, speed_from_counts)
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen
 
 CheckStatus = Literal["pass", "warn", "fail"]
@@ -141,20 +142,27 @@ def standstill_current_check(session: Session) -> Check:
     return Check("streams", "current at standstill", "pass", figure, values=values)
 
 
-def blf_check(blf_path: Path, settings: DriveCanopen) -> Check:
-    """From the raw ``.blf``: SYNC period and jitter, SYNC-to-TPDO spacing, heartbeat period."""
+def _blf_frames(blf_path: Path, settings: DriveCanopen) -> dict[str, tuple[np.ndarray, list[bytes]]]:
+    """The host stamps (s) and payloads of the SYNC, TPDO and heartbeat frames in the raw ``.blf``, in log order."""
     import can
 
     from drivers.canopen_od import tpdo_cob_id
 
-    times: dict[str, list[float]] = {"sync": [], "tpdo": [], "hb": []}
+    frames: dict[str, tuple[list[float], list[bytes]]] = {"sync": ([], []), "tpdo": ([], []), "hb": ([], [])}
     ids = {0x80: "sync", tpdo_cob_id(settings.tpdo, settings.node_id): "tpdo", 0x700 + settings.node_id: "hb"}
     with can.BLFReader(str(blf_path)) as reader:
         for msg in reader:
             kind = ids.get(msg.arbitration_id)
             if kind is not None and not msg.is_error_frame:
-                times[kind].append(msg.timestamp)
-    sync, tpdo, hb = (np.asarray(times[k]) for k in ("sync", "tpdo", "hb"))
+                frames[kind][0].append(msg.timestamp)
+                frames[kind][1].append(bytes(msg.data))
+    return {k: (np.asarray(t), data) for k, (t, data) in frames.items()}
+
+
+def blf_check(blf_path: Path, settings: DriveCanopen) -> Check:
+    """From the raw ``.blf``: SYNC period and jitter, SYNC-to-TPDO spacing, heartbeat period."""
+    frames = _blf_frames(blf_path, settings)
+    sync, tpdo, hb = (frames[k][0] for k in ("sync", "tpdo", "hb"))
     if sync.size < 3 or tpdo.size < 3:
         return Check("streams", "CAN frames", "fail", f"{blf_path.name}: {sync.size} SYNC, {tpdo.size} TPDO frames",
                      f"no SYNC/TPDO traffic logged: check [drive] tpdo = {settings.tpdo}, node_id = {settings.node_id}")
@@ -171,6 +179,65 @@ def blf_check(blf_path: Path, settings: DriveCanopen) -> Check:
         return Check("streams", "CAN frames", "warn", figure,
                      f"TPDOs arrive later than one SYNC period: raise [drive] period_s = {settings.period_s:g}", values)
     return Check("streams", "CAN frames", "pass", figure, values=values)
+
+
+def sync_times(blf_path: Path, settings: DriveCanopen) -> tuple[np.ndarray, np.ndarray]:
+    """The SYNC frames of the raw ``.blf``: their cycle index (from the SYNC counter, 0x1019, where they carry one;
+    else their order) and host stamps, s."""
+    stamps, payloads = _blf_frames(blf_path, settings)["sync"]
+    counters = np.array([p[0] if p else 0 for p in payloads], dtype=np.int64)
+    if counters.size and np.all(counters > 0):  # 1…overflow: a step of 0 or less wrapped
+        wrap = max(int(counters.max()), 1)
+        steps = (np.diff(counters) - 1) % wrap + 1
+        return np.r_[0, np.cumsum(steps)], stamps
+    return np.arange(stamps.size), stamps
+
+
+#: The bound: no cycle of an identification may be half a cycle or more off its grid
+#: (:data:`analysis.MAX_STAMP_DEVIATION`). The clock fit (analysis.clocks) takes drive cycle k at exactly k·T: a
+#: zero-mean scatter only adds noise to its windowed phase fits, and analysis.sample_instants moves each sample to k·T
+#: with the drive's stamps — which it refuses for the whole record once one deviates half a cycle (the spline move needs
+#: a deviation much smaller than T, and a stamp half a cycle off could belong to the neighbouring cycle). On CANopen a
+#: SYNC that far off also breaks the synchronous window (CiA 301: TPDO k before SYNC k+1) by which each sample is paired
+#: with its SYNC. What a smaller jitter costs (speed noise at speed, without stamps) the identification's verdict judges
+#: from its own spectra.
+def sync_jitter_check(index: np.ndarray, times_s: np.ndarray, period_s: float, source: str, identification_s: float,
+                      from_drive: bool) -> Check:
+    """The drive cycle's irregularity (``times_s`` of cycles ``index``, s, measured by ``source``) against half a cycle.
+
+    The scatter σ is robust (1.4826 × the median absolute deviation from the cycle grid: one stall does not stand
+    for the jitter; the largest deviation is judged on its own). The largest deviation a Gaussian jitter reaches in
+    the identification's N = ``identification_s``/T cycles is ≈ σ·√(2 ln N); at half a cycle or more
+    (:data:`analysis.MAX_STAMP_DEVIATION`) it is a ⚠. A deviation already seen that large in the drive's own stamps
+    (``from_drive``) is a ✗; in host stamps, which carry the host's own latency (an upper bound of the drive's
+    irregularity), a ⚠.
+    """
+    bound_s = MAX_STAMP_DEVIATION * period_s
+    dev = cycle_deviation_s(index, times_s, period_s)
+    if dev is None:
+        return Check("streams", "SYNC jitter", "warn", f"{source}: too few cycles to measure",
+                     "record the standstill again (acq selftest) and check that the drive streams")
+    sigma = 1.4826 * float(np.median(np.abs(dev - np.median(dev))))
+    largest = float(np.max(np.abs(dev)))
+    cycles = max(identification_s / period_s, 2.0)
+    expected = sigma * math.sqrt(2.0 * math.log(cycles))
+    values = {"sigma_s": sigma, "largest_s": largest, "expected_largest_s": expected, "bound_s": bound_s,
+              "period_s": period_s, "source": source}
+    figure = (f"{1e6 * sigma:.1f} µs RMS, largest {1e6 * largest:.0f} µs off the {1e3 * period_s:g} ms cycle grid "
+              f"({source}); bound {1e6 * bound_s:.0f} µs")
+    why = ("half a cycle or more, where the analysis refuses the drive's time stamps (a drive that samples at SYNC "
+           "arrival then has samples it cannot place) and a TPDO can miss its SYNC's window — use a hardware-timed "
+           "SYNC (SocketCAN's broadcast manager, the interface's own timer, or the drive as SYNC producer) or unload "
+           "the host that produces it")
+    if largest >= bound_s and from_drive:
+        return Check("streams", "SYNC jitter", "fail", figure, f"a cycle {1e6 * largest:.0f} µs off its grid, {why}",
+                     values)
+    if largest >= bound_s or expected >= bound_s:
+        seen = (f"a cycle {1e6 * largest:.0f} µs off its grid" if largest >= bound_s else
+                f"{1e6 * sigma:.0f} µs RMS reaches ≈ {1e6 * expected:.0f} µs in the {identification_s:g} s "
+                "identification")
+        return Check("streams", "SYNC jitter", "warn", figure, f"{seen}, {why}", values)
+    return Check("streams", "SYNC jitter", "pass", figure, values=values)
 
 
 # ---- motion ---------------------------------------------------------------------------------------------

@@ -21,6 +21,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from acq import __version__
 from acq.recording.layout import utc_now_iso
 from acq.recording.reader import load
@@ -28,6 +30,7 @@ from acq.recording.session import Session
 from acq.recording.storage import free_bytes, storage_error, write_text_atomically
 from analysis import AnalysisRequest, CommandedProfile, Recording, Result, TwoMassParams, analyze, code_fingerprint
 from acqcore.errors import ConfigError, StorageError
+from drivers.base import limit_span_ns
 
 #: Free bytes needed before drawing a report PNG: the reports are 0.2–0.6 MB (1600×1000 px); ×4 margin.
 REPORT_ROOM_BYTES = 4 << 20
@@ -75,7 +78,15 @@ def recording_from_session(session: Session) -> Recording:
         profile=None if session.profile is None else CommandedProfile(
             session.profile.accel_time_s, session.profile.decel_time_s, session.profile.jerk_time_s,
             session.profile.speed_dither),
+        drive_limited_host_ns=drive_limited_spans(session),
     )
+
+
+def drive_limited_spans(session: Session) -> np.ndarray | None:
+    """The host spans (n, 2; monotonic ns) in which the drive reported "internal limit active", from the session's
+    events (:func:`drivers.base.limit_event`); None when it reported none."""
+    spans = [span for event in session.events if (span := limit_span_ns(event)) is not None]
+    return np.array(spans, dtype=np.int64) if spans else None
 
 
 def request_for(session: Session, request: AnalysisRequest = AnalysisRequest()) -> AnalysisRequest:

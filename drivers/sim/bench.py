@@ -202,6 +202,18 @@ class SimBench:
         on indices only). Never held while pacing to the host clock."""
         return self._lock
 
+    def set_torque_limit(self, torque_Nm: float) -> None:
+        """Clamp the speed loop's torque reference to ±``torque_Nm`` (N·m, motor side) from the simulated frontier
+        on (a simulated drive told 0x6072 max torque; the past already computed stays as it was)."""
+        with self._lock:
+            self._physics.torque_limit_Nm = torque_Nm
+
+    def torque_limited_at(self, t_drive_s: float) -> bool:
+        """Whether the torque limit clamps the speed loop at drive time ``t_drive_s`` (s)."""
+        with self._lock:
+            self._physics.advance_to(t_drive_s)
+            return bool(self._physics.limited_at(np.array([t_drive_s]))[0])
+
     # ---- history -----------------------------------------------------------------------------------
     def hold_history(self, consumer: str, from_t_s: float) -> None:
         """Declare that ``consumer`` will still read states at drive times ≥ ``from_t_s`` (s)."""

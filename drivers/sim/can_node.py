@@ -38,13 +38,15 @@ follows, :data:`SETPOINT_DELAY_CYCLES` after that SYNC.
 
 Fault switches, for tests: :meth:`~SimCanNode.drop_tpdos`, :meth:`~SimCanNode.stop_heartbeat`,
 ``refuse_mode_change`` (0x6060 writes are ignored), ``has_timestamp`` (set False before :meth:`~SimCanNode.start`:
-a drive without 0x1013), ``reject_mapping`` (0x1A0x keeps its
+a drive without 0x1013), ``home_offset`` (0x607C at power-on, None: a drive without it; stored only — acq refuses to
+move a drive with a home offset, :meth:`drivers.canopen_drive.CanopenDrive.start`), ``reject_mapping`` (0x1A0x keeps its
 power-on mapping while the SDO writes succeed — a mismatch only a read-back finds) and ``reject_limits`` (the same
 for the limits 0x607F, 0x6072, 0x607D).
 
 Limits: a set-point's target is clamped to the 0x607D software position limits and its speed to the 0x607F max
-profile velocity, as a CiA 402 drive does. 0x6072 max torque is stored and read back but not enforced: the simulated
-speed loop has no current saturation.
+profile velocity, as a CiA 402 drive does. 0x6072 max torque (per mille of 0x6076 motor rated torque; power-on 300 %)
+clamps the simulated speed loop's torque (:meth:`~drivers.sim.bench.SimBench.set_torque_limit`), and while it does
+the statusword's bit 11 "internal limit active" is set (CiA 402), as read by SDO.
 """
 
 from __future__ import annotations
@@ -61,9 +63,10 @@ import canopen
 import numpy as np
 from can.interfaces.virtual import VirtualBus, channels, channels_lock
 
-from drivers.canopen_od import (HIGH_RES_TIMESTAMP, MAX_PROFILE_VELOCITY, MAX_TORQUE, MODE_CYCLIC_SYNC_VELOCITY,
-                                 MODE_PROFILE_POSITION, N_TPDO, PDO_INVALID, RPDO_COMM, RPDO_MAP,
-                                 SOFTWARE_POSITION_LIMIT, TARGET_VELOCITY, TPDO_COMM, TPDO_MAP, drive_object_dictionary)
+from drivers.canopen_od import (HIGH_RES_TIMESTAMP, HOME_OFFSET, MAX_PROFILE_VELOCITY, MAX_TORQUE,
+                                 MODE_CYCLIC_SYNC_VELOCITY, MODE_PROFILE_POSITION, MOTOR_RATED_TORQUE, N_TPDO, PDO_INVALID,
+                                 RPDO_COMM, RPDO_MAP, SOFTWARE_POSITION_LIMIT, TARGET_VELOCITY, TPDO_COMM, TPDO_MAP,
+                                 drive_object_dictionary)
 from drivers.config import Bench, DriveCanopen
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
@@ -72,7 +75,7 @@ from drivers.sim.csv_reference import SetpointReference
 from drivers.sim.pp_generator import ProfileGenerator
 
 SOD, RTSO, SO, OE, QSA = 0x40, 0x21, 0x23, 0x27, 0x07  # CiA 402 statusword state bits
-REMOTE, TARGET_REACHED, SETPOINT_ACK = 1 << 9, 1 << 10, 1 << 12
+REMOTE, TARGET_REACHED, INTERNAL_LIMIT, SETPOINT_ACK = 1 << 9, 1 << 10, 1 << 11, 1 << 12
 HISTORY_EVERY = 64
 CACHE_CYCLES = 50
 #: A cyclic set-point acts this many cycles after the SYNC that applies it, a set-point buffer (a real drive
@@ -158,6 +161,7 @@ class SimCanNode:
         self._cache_stamp_us = np.zeros(0, dtype=np.int64)
         self.refuse_mode_change = False
         self.has_timestamp = True
+        self.home_offset: int | None = 0  # power-on 0x607C (None: no such object); nothing is shifted by it
         self.reject_mapping = False
         self.reject_limits = False
         self.first_cycle: int | None = None  # drive cycle of the first SYNC (SYNC index 0)
@@ -181,12 +185,17 @@ class SimCanNode:
         dictionary = drive_object_dictionary(self._s.node_id)
         if not self.has_timestamp:
             del dictionary[HIGH_RES_TIMESTAMP]
+        if self.home_offset is None:
+            del dictionary[HOME_OFFSET]
         self.node = canopen.LocalNode(self._s.node_id, dictionary)
         self.network.add_node(self.node)
+        if self.home_offset:
+            self.node.sdo[HOME_OFFSET].raw = self.home_offset
         self.node.add_read_callback(self._on_read)
         self.node.add_write_callback(self._on_write)
         self.node.nmt.state = "INITIALISING"
         self.node.nmt.state = "PRE-OPERATIONAL"
+        self._limit_torque(self._param(MAX_TORQUE), self._param(MOTOR_RATED_TORQUE))
 
     def stop(self) -> None:
         """Leave the bus. Idempotent."""
@@ -271,6 +280,10 @@ class SimCanNode:
             self._tpdos = None
         elif index in (RPDO_COMM, RPDO_MAP):
             self._rpdo_layout = None
+        elif index == MAX_TORQUE and not self.reject_limits:
+            self._limit_torque(od.decode_raw(data), self._param(MOTOR_RATED_TORQUE))
+        elif index == MOTOR_RATED_TORQUE:
+            self._limit_torque(self._param(MAX_TORQUE), od.decode_raw(data))
         elif index == 0x6060 and not self.refuse_mode_change:
             self._mode = od.decode_raw(data)
         elif index == 0x6040:
@@ -281,6 +294,11 @@ class SimCanNode:
 
     def _param(self, index: int) -> int:
         return int(self.node.sdo[index].raw)
+
+    def _limit_torque(self, per_mille: int, rated_mNm: int) -> None:
+        """0x6072 max torque (‰ of 0x6076 rated torque, mN·m) into the simulated speed loop (the written value: the
+        write callback runs before canopen stores it)."""
+        self._bench.set_torque_limit(per_mille * 1e-3 * rated_mNm * 1e-3)
 
     # ---- CiA 402 -----------------------------------------------------------------------------------
     def _settle(self) -> None:
@@ -297,6 +315,8 @@ class SimCanNode:
                 sw |= TARGET_REACHED
             if self._setpoint_latched or self.generator.pending(now):
                 sw |= SETPOINT_ACK
+            if self._bench.torque_limited_at(now):
+                sw |= INTERNAL_LIMIT
         return sw
 
     def _ramp_to_rest(self) -> None:

@@ -9,6 +9,11 @@ instant comes from the fine sub-grid (n_sub points per step, exact
 through precomputed stacked matrices) and cubic Hermite interpolation between two fine points with the
 exact derivative A·x + B·u (error ~1e-6 of a current step).
 
+Torque limit (CiA 402 0x6072, :attr:`JointSimulation.torque_limit_Nm`, infinite unless a simulated drive is told
+one): the PI's torque reference is clamped to ±the limit, as a drive's current limit does, and its integrator holds
+while the clamp acts against the error (anti-windup by conditional integration); :meth:`JointSimulation.limited_at`
+says at which instants the clamp acted (what the drive reports as "internal limit active", 0x6041 bit 11).
+
 Time is the drive's clock in seconds, t = 0 at the first control step. Before t = 0 the joint rests at
 its gravity equilibrium. Not thread-safe: :class:`drivers.sim.bench.SimBench` serialises access.
 """
@@ -109,8 +114,12 @@ class JointSimulation:
         self._counts_prev = math.floor(self._x[0] / self._rad_per_count)
         self._integral_Nm = self.gravity.torque_Nm(self._x[2])
         self._iq_ref_A = 0.0
+        self._clamped = False
         self._k = 0                      # control steps done
         self._steps = _Rows(self.n_states + self.n_inputs)   # [x[k], u[k]] of steps k0 … k−1
+        self._limited = _Rows(1)                              # 1.0 where step k's torque reference was clamped
+        #: motor torque limit, N·m (k_t·i_q,ref clamped to ±it); a change acts from the next simulated step on
+        self.torque_limit_Nm = math.inf
         self._k0 = 0
         # fine point j of a step (j = 0 … n_sub, n_sub being the next control instant) = Psi[j]·[x[k], u[k]]
         psi = np.concatenate([self.disc.Phi_sub, self.disc.Gam_sub], axis=2)
@@ -153,6 +162,9 @@ class JointSimulation:
         speed_ref, accel_ref = self.schedule.reference((self._k + np.arange(n)) * self.step_s)
         n_inner, k0 = self.n_inner, self._k
         iq_ref = self._iq_ref_A
+        iq_max = self.torque_limit_Nm / kt
+        clamped = self._clamped
+        limited = [False] * n
         ff = (Jff * accel_ref).tolist()
         wref = speed_ref.tolist()
         ns = self.n_states
@@ -169,8 +181,13 @@ class JointSimulation:
                 counts = math.floor(x[0] / rad_per_count)
                 err = wref[j] - (counts - counts_prev) * q_per_T
                 iq_ref = (ff[j] + kp * err + integral) / kt         # i_q reference, A
-                integral += ki_T * err
+                clamped = abs(iq_ref) > iq_max
+                if clamped:
+                    iq_ref = math.copysign(iq_max, iq_ref)
+                if not clamped or (err > 0) != (iq_ref > 0):        # anti-windup: no integration into the clamp
+                    integral += ki_T * err
                 counts_prev = counts
+            limited[j] = clamped
             z[:ns] = x
             z[ns] = iq_ref
             z[ns + 1] = g_scale * math.cos(g_start + x[2] / g_ratio)  # T_g, N·m (= Gravity.torque_Nm)
@@ -181,7 +198,9 @@ class JointSimulation:
             xs[j] = z
             x = AB @ z
         self._x, self._counts_prev, self._integral_Nm, self._iq_ref_A = x, counts_prev, integral, iq_ref
+        self._clamped = clamped
         self._steps.append(xs)
+        self._limited.append(np.array(limited, dtype=float)[:, None])
         self._k += n
 
     def states_at(self, t_s: np.ndarray) -> np.ndarray:
@@ -211,11 +230,22 @@ class JointSimulation:
                       + (3 * tau2 - 2 * tau3) * x1 + (tau3 - tau2) * d1)
         return out
 
+    def limited_at(self, t_s: np.ndarray) -> np.ndarray:
+        """Whether the torque limit clamped the reference held at drive times ``t_s`` (s), bool; False before 0.
+        Call :meth:`advance_to` first."""
+        t = np.asarray(t_s, dtype=float).ravel()
+        out = np.zeros(t.size, dtype=bool)
+        held = t >= 0.0
+        k = np.clip(np.floor(t[held] / self.step_s).astype(np.int64), self._k0, self._k - 1)
+        out[held] = self._limited.view[k - self._k0, 0] > 0
+        return out
+
     def forget_before(self, t_s: float) -> None:
         """Drop history older than ``t_s`` (s); later reads before it raise ValueError."""
         k_cut = min(math.floor(t_s / self.step_s), self._k - 1)
         if k_cut > self._k0:
             self._steps.drop_front(k_cut - self._k0)
+            self._limited.drop_front(k_cut - self._k0)
             self._k0 = k_cut
 
     @property

@@ -48,6 +48,7 @@ def test_standstill_streams_lose_nothing(selftest_checks: dict[str, Check]) -> N
     _ok(rec, allow_warn=False)
     assert rec.values["current_lost"] == 0 and rec.values["encoder_lost"] == 0
     _ok(selftest_checks.get("drive period"), allow_warn=False)
+    _ok(selftest_checks.get("SYNC jitter"))  # ⚠: a software SYNC producer; ✗: the drive's own stamps half a cycle off
     _ok(selftest_checks.get("current at standstill"))
 
 
