@@ -11,7 +11,7 @@ import pytest
 
 from acq.recording.reader import load
 from acq.ui.values import format_value
-from tests.helpers import read_only_view, run_cli
+from tests.helpers import read_only_view, run_cli, seeded_profile
 
 KEYS = {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "ci95", "antiresonance_hz", "resonance_hz",
         "clock", "quality", "options"}
@@ -24,7 +24,7 @@ def session_10s(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from acq.ui.cli import main
 
     with pytest.raises(SystemExit) as exc:
-        main(["record", "--profile", "triangle_0.2s", "--fast", "--no-analyze", "--out", str(out)])
+        main(["record", "--profile", str(seeded_profile(out.parent)), "--fast", "--no-analyze", "--out", str(out)])
     assert exc.value.code == 0
     (path,) = out.glob("*.h5")
     return path
@@ -172,8 +172,8 @@ def session_500hz(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from acq.ui.cli import main
 
     with pytest.raises(SystemExit) as exc:
-        main(["record", "--profile", "triangle_0.2s", "--bench", str(bench), "--duration", "3", "--fast",
-              "--no-analyze", "--out", str(out)])
+        main(["record", "--profile", str(seeded_profile(bench.parent)), "--bench", str(bench), "--duration", "3",
+              "--fast", "--no-analyze", "--out", str(out)])
     assert exc.value.code == 0
     (path,) = out.glob("*.h5")
     return path

@@ -20,7 +20,7 @@ from acq.ui.selftest_cli import next_step, selftest_json
 from acqcore.errors import DeviceError
 from analysis.speed_ratio import SpeedRatio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from drivers.nidaq import DRIVER_MISSING
-from tests.helpers import run_cli
+from tests.helpers import run_cli, seeded_profile
 from tests.nidaqmx_standin import StandinHardware
 from tests.test_nidaq import hardware, write_bench  # noqa: F401 - the stand-in NI 9234 fixture
 
@@ -41,8 +41,8 @@ def bench_file(tmp_path: Path, sim_lines: str = "", *, channels: str = '["i_a"]'
     return path
 
 
-def selftest(capsys: pytest.CaptureFixture[str], bench: Path) -> tuple[int, dict]:
-    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench", str(bench))
+def selftest(capsys: pytest.CaptureFixture[str], bench: Path, *profile: str) -> tuple[int, dict]:
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench", str(bench), *profile)
     return run.code, json.loads(run.out)
 
 
@@ -52,8 +52,9 @@ def failed_check(doc: dict) -> dict:
     return fail
 
 
-def test_correct_bench_passes_every_check_in_order_with_figures(capsys: pytest.CaptureFixture[str]) -> None:
-    code, doc = selftest(capsys, DEFAULT_BENCH)
+def test_correct_bench_passes_every_check_in_order_with_figures(capsys: pytest.CaptureFixture[str],
+                                                                tmp_path: Path) -> None:
+    code, doc = selftest(capsys, DEFAULT_BENCH, "--profile", str(seeded_profile(tmp_path)))
     assert code == 0 and doc["passed"] and doc["stopped_at"] is None
     names = [(c["stage"], c["name"]) for c in doc["checks"]]
     assert names == [("devices", "acq devices"), ("devices", "DAQ"), ("devices", "drive"), ("streams", "recording"),
