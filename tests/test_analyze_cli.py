@@ -107,6 +107,28 @@ def test_a_request_other_than_the_default_writes_beside_the_sessions_result(
         "s.params-K.band-10-150.result.json", "s.report.png", "s.result.json"]
 
 
+def test_an_option_that_names_the_default_writes_the_sessions_own_result(
+        session_10s: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--torque encoder` on a one-phase session and `--band 10,400` at a 1 kHz encoder are what the default does, but
+    they wrote `s.torque-encoder.result.json` / `s.band-10-400.result.json` beside the session's result, filed in the
+    catalogue as comparisons: a user who spells out the default gets the default's result."""
+    from acq.monitoring.catalogue import Catalogue
+    from analysis import AnalysisRequest
+
+    monkeypatch.chdir(tmp_path)
+    shutil.copy(session_10s, "s.h5")
+    for options in (["--torque", "encoder"], ["--band", "10,400"], ["--torque", "encoder", "--band", "10,400.0"]):
+        run = run_cli(capsys, "analyze", "s.h5", "--no-report", *options)
+        assert run.code == 0, run.err
+        assert "result: s.result.json" in run.out and "beside" not in run.out, options
+        assert sorted(p.name for p in tmp_path.glob("s.*")) == ["s.h5", "s.result.json"], options
+        assert json.loads(Path("s.result.json").read_text())["options"]["band_hz"] == [10.0, 400.0]
+    with Catalogue(tmp_path / "catalogue.sqlite") as catalogue:
+        assert {e.request_key for e in catalogue.entries("joint1")} == {AnalysisRequest().key()}
+    assert run_cli(capsys, "analyze", "s.h5", "--no-report", "--band", "10,300").code == 0  # not the default band
+    assert sorted(p.name for p in tmp_path.glob("s.*")) == ["s.band-10-300.result.json", "s.h5", "s.result.json"]
+
+
 def test_variant_labels_name_what_differs_from_the_default_request() -> None:
     from acq.offline.analyze import output_paths
     from analysis import AnalysisRequest
@@ -357,6 +379,7 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     from acq.monitoring.batch import analyze_one
     from analysis import AnalysisRequest
     from acq.monitoring.catalogue import Catalogue
+    from analysis import AnalysisRequest
     from acq.ui.report_png import draw_report
 
     copy = Path(shutil.copy2(session_10s, tmp_path / "s.h5"))
