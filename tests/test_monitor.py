@@ -180,7 +180,7 @@ def test_trend_and_fleet_judge_a_monitors_windows_by_the_monitors_rules(four_win
     mine = json.loads(run_cli(capsys, "trend", str(four_windows), "--joint", "joint1", "--json",
                               "--baseline-sessions", "1").out)
     assert mine["baseline_K_Nm_per_rad"] == pytest.approx(rows[0]["K_Nm_per_rad"], rel=1e-9)
-    assert mine["rules"] == "baseline_sessions as given, the rest as acq monitor judged its windows"
+    assert mine["rules"] == "--baseline-sessions from the command line, the rest as acq monitor judged its windows"
 
 
 def test_retention_keeps_the_baseline_and_the_last_windows_and_every_catalogue_row(four_windows: Path) -> None:

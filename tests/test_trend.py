@@ -259,6 +259,11 @@ def test_view_shows_the_trend_window(wear: Path, tmp_path: Path, capsys: pytest.
     widget = trend_widget(load_trend(wear, None, "joint1"))
     plots = [item for item in widget.findChildren(object) if type(item).__name__ == "GraphicsLayoutWidget"]
     assert len(plots) == 1
+    assert plots[0].ci.getItem(4, 0).text == "alarm rules: acq's defaults"  # where the rules drawn came from
+    given = [item for item in trend_widget(load_trend(wear, None, "joint1", threshold_pct=20.0)).findChildren(object)
+             if type(item).__name__ == "GraphicsLayoutWidget"]
+    assert given[0].ci.getItem(4, 0).text == ("alarm rules: --threshold-pct from the command line, the rest acq's "
+                                              "defaults")
     png = tmp_path / "trend_view.png"
     run = run_cli(capsys, "view", "--trend", "joint1", str(wear), "--screenshot", str(png), "--size", "900x600")
     assert run.code == 0, run.err
