@@ -241,12 +241,12 @@ def test_record_refuses_a_duration_the_identification_cannot_use_and_the_one_it_
                       str(tmp_path))
         assert (run.code, run.err) == (2, f"acq: error: --duration {duration}: {need}\n")
     assert not list(tmp_path.glob("*.h5"))
-    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.85", "--fast", "--out",
-                  str(tmp_path / "named"))
+    run = run_cli(capsys, "record", "--profile", str(seeded_profile(tmp_path)), "--duration", "0.85", "--fast",
+                  "--out", str(tmp_path / "named"))
     assert run.code == 0 and "acq:" not in run.err, run.err  # the duration named is enough: identified
     (result,) = (tmp_path / "named").glob("*.result.json")
-    doc = json.loads(result.read_text())  # 0.85 s of a randomly dithered motion: K 10.5 % off in one run, so
-    lo, hi = doc["ci95"]["K_Nm_per_rad"]  # never as a confident wrong number
+    doc = json.loads(result.read_text())  # 0.85 s of a dithered motion (seed 0 here; K 10.5 % off in one run of a
+    lo, hi = doc["ci95"]["K_Nm_per_rad"]  # random seed), so never as a confident wrong number
     assert abs(doc["K_Nm_per_rad"] / 891.0 - 1) < 0.2 and (lo <= 891.0 <= hi or doc["quality"]["verdict"] != "ok")
     # recorded without the identification, a session too short for it is refused by acq analyze in one line
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.76", "--fast", "--no-analyze",
