@@ -138,14 +138,15 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
         (:func:`analysis.limits.band_problem`: one the recording's encoder or the Welch segments cannot support, or
         one with too few bins) or ``params="K"`` without nominal values. Messages are one line.
     """
-    band_refused = band_problem(request.band_hz or default_band_hz(rec.period_s), rec.period_s, request.segment_s)
+    band = request.band_hz or default_band_hz(rec.period_s)  # the prepared signals keep rec's encoder period
+    band_refused = band_problem(band, rec.period_s, request.segment_s)
     if band_refused is not None:  # the default band too: its 10 Hz bin reaches 0 Hz with segments under 0.5 s
         raise FitInputError(band_refused)
     require_two_segments(longest_gap_free_span(rec.encoder_index).count, rec.period_s, request.segment_s)
     chain = request.chain(rec)
     sig = prepare_signals(rec, chain)
     request = replace(request, select_segments=request.selects_segments(rec))  # the result says what was done
-    select = (request.band_hz or default_band_hz(sig.period_s)) if request.select_segments else None
+    select = band if request.select_segments else None
     frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=request.segment_s,
                        torque_noise_Nm=sig.torque_noise_Nm, torque_alias_Nm=sig.torque_alias_Nm,
                        jackknife_blocks=JACKKNIFE_BLOCKS, select_band_hz=select)

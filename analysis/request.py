@@ -10,7 +10,8 @@ from __future__ import annotations
 import functools
 import hashlib
 import json
-from dataclasses import asdict, dataclass, fields
+import math
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -18,7 +19,7 @@ import numpy
 import scipy
 
 from analysis.chain import PAPER_CHAIN, Pipeline, SignalChain, TorqueMethod, our_chain
-from analysis.fit import PARAM_NAMES, FitKind, FitParams
+from analysis.fit import PARAM_NAMES, FitKind, FitParams, default_band_hz
 from analysis.model import TwoMassParams
 from analysis.recording import Recording
 
@@ -81,6 +82,20 @@ class AnalysisRequest:
             return PAPER_CHAIN
         method = self.torque_method or ("park" if len(rec.current_a) >= 2 else "encoder")
         return our_chain(method, self.align)
+
+    def as_default_where_it_is(self, rec: Recording) -> AnalysisRequest:
+        """This request with each option that names what the default does on ``rec`` anyway left to the default: the
+        torque method ``rec``'s phases pick, the default band of its encoder period, the segment selection its
+        motion gets. The same analysis as the default request's, so the same result file and catalogue key
+        (``acq analyze S --torque encoder`` on one phase is the session's result, not a comparison beside it)."""
+        default = AnalysisRequest(pipeline=self.pipeline)
+        same = {"torque_method": self.torque_method is not None and (
+                    self.pipeline == "paper" or self.torque_method == default.chain(rec).torque_method),
+                "band_hz": self.band_hz is not None and all(  # 0.4/period carries float noise: 1e-9, far below a bin
+                    math.isclose(a, b, rel_tol=1e-9) for a, b in zip(self.band_hz, default_band_hz(rec.period_s))),
+                "select_segments": self.select_segments is not None
+                and self.select_segments == default.selects_segments(rec)}
+        return replace(self, **{name: None for name, equal in same.items() if equal})
 
     def key(self) -> str:
         """The catalogue's key of this request: its fields as asked and the analysis code that answers them

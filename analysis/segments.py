@@ -89,10 +89,12 @@ class SegmentSelection:
 
 def excitation_summary(excited_moves: int, moves: int, band_hz: tuple[float, float], excited_fraction: float,
                        span: str = "record") -> str:
-    """How much of a record excites the joint, in words: "2 of 12 moves put torque into 10…400 Hz beyond chance (8 %
-    of the record)" (``span``: what the record is called — a monitor's "window")."""
-    return (f"{excited_moves} of {moves} moves put torque into {band_hz[0]:g}…{band_hz[1]:g} Hz beyond chance "
-            f"({100 * excited_fraction:.0f} % of the {span})")
+    """How much of a record excites the joint, in words: "2 of the record's 12 moves put torque into 10…400 Hz beyond
+    chance; time that does: 8 % of the record" (``span``: what the record is called — a monitor's "window"). The two
+    counts are apart: moves (rest to rest) that a kept segment covers, and the share of the record's time in kept
+    segments (:attr:`SegmentSelection.excited_fraction`), which can excite outside every move."""
+    return (f"{excited_moves} of the {span}'s {moves} moves put torque into {band_hz[0]:g}…{band_hz[1]:g} Hz beyond "
+            f"chance; time that does: {100 * excited_fraction:.0f} % of the {span}")
 
 
 def select_segments(X: np.ndarray, Y: np.ndarray, in_band: np.ndarray, nperseg: int, step: int) -> SegmentSelection:

@@ -30,10 +30,25 @@ def run_cli(capsys: pytest.CaptureFixture[str], *args: str) -> CliRun:
     return CliRun(int(exc.value.code or 0), captured.out, captured.err)
 
 
+PROFILES = Path(__file__).resolve().parents[1] / "configs" / "profiles"
+
+
+def seeded_profile(folder: Path, dither_seed: int = 0, name: str = "triangle_0.2s") -> Path:
+    """The shipped profile ``name`` with a fixed ``dither_seed``, written to ``folder`` (``--profile`` takes the path).
+
+    The shipped profiles dither the speed per cycle with a seed acq draws per recording, so a test that records them
+    and asserts on identified numbers would run another motion every time; from this one it repeats exactly."""
+    path = folder / f"{name}_seed{dither_seed}.toml"
+    path.write_text((PROFILES / f"{name}.toml").read_text() + f"dither_seed = {dither_seed}\n")
+    return path
+
+
 def record_session_in_subprocess(out: Path, duration_s: float) -> Path:
-    """``acq record --profile triangle_0.2s --fast`` of ``duration_s`` into ``out`` in a child process (nothing of
-    the recording stays in the test process); the one session file it wrote."""
-    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.2s", "--fast", "--duration",
+    """``acq record --profile triangle_0.2s --fast`` (dither seed 0) of ``duration_s`` into ``out`` in a child process
+    (nothing of the recording stays in the test process); the one session file it wrote."""
+    out.mkdir(parents=True, exist_ok=True)
+    profile = seeded_profile(out.parent)
+    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", str(profile), "--fast", "--duration",
                            f"{duration_s:g}", "--no-analyze", "--out", str(out)], capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0, proc.stderr

@@ -11,7 +11,7 @@ import pytest
 
 from acq.recording.reader import load
 from acq.ui.values import format_value
-from tests.helpers import read_only_view, run_cli
+from tests.helpers import read_only_view, run_cli, seeded_profile
 
 KEYS = {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "ci95", "antiresonance_hz", "resonance_hz",
         "clock", "quality", "options"}
@@ -24,7 +24,7 @@ def session_10s(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from acq.ui.cli import main
 
     with pytest.raises(SystemExit) as exc:
-        main(["record", "--profile", "triangle_0.2s", "--fast", "--no-analyze", "--out", str(out)])
+        main(["record", "--profile", str(seeded_profile(out.parent)), "--fast", "--no-analyze", "--out", str(out)])
     assert exc.value.code == 0
     (path,) = out.glob("*.h5")
     return path
@@ -107,6 +107,28 @@ def test_a_request_other_than_the_default_writes_beside_the_sessions_result(
         "s.params-K.band-10-150.result.json", "s.report.png", "s.result.json"]
 
 
+def test_an_option_that_names_the_default_writes_the_sessions_own_result(
+        session_10s: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]) -> None:
+    """`--torque encoder` on a one-phase session and `--band 10,400` at a 1 kHz encoder are what the default does, but
+    they wrote `s.torque-encoder.result.json` / `s.band-10-400.result.json` beside the session's result, filed in the
+    catalogue as comparisons: a user who spells out the default gets the default's result."""
+    from acq.monitoring.catalogue import Catalogue
+    from analysis import AnalysisRequest
+
+    monkeypatch.chdir(tmp_path)
+    shutil.copy(session_10s, "s.h5")
+    for options in (["--torque", "encoder"], ["--band", "10,400"], ["--torque", "encoder", "--band", "10,400.0"]):
+        run = run_cli(capsys, "analyze", "s.h5", "--no-report", *options)
+        assert run.code == 0, run.err
+        assert "result: s.result.json" in run.out and "beside" not in run.out, options
+        assert sorted(p.name for p in tmp_path.glob("s.*")) == ["s.h5", "s.result.json"], options
+        assert json.loads(Path("s.result.json").read_text())["options"]["band_hz"] == [10.0, 400.0]
+    with Catalogue(tmp_path / "catalogue.sqlite") as catalogue:
+        assert {e.request_key for e in catalogue.entries("joint1")} == {AnalysisRequest().key()}
+    assert run_cli(capsys, "analyze", "s.h5", "--no-report", "--band", "10,300").code == 0  # not the default band
+    assert sorted(p.name for p in tmp_path.glob("s.*")) == ["s.band-10-300.result.json", "s.h5", "s.result.json"]
+
+
 def test_variant_labels_name_what_differs_from_the_default_request() -> None:
     from acq.offline.analyze import output_paths
     from analysis import AnalysisRequest
@@ -172,8 +194,8 @@ def session_500hz(tmp_path_factory: pytest.TempPathFactory) -> Path:
     from acq.ui.cli import main
 
     with pytest.raises(SystemExit) as exc:
-        main(["record", "--profile", "triangle_0.2s", "--bench", str(bench), "--duration", "3", "--fast",
-              "--no-analyze", "--out", str(out)])
+        main(["record", "--profile", str(seeded_profile(bench.parent)), "--bench", str(bench), "--duration", "3",
+              "--fast", "--no-analyze", "--out", str(out)])
     assert exc.value.code == 0
     (path,) = out.glob("*.h5")
     return path
@@ -219,12 +241,12 @@ def test_record_refuses_a_duration_the_identification_cannot_use_and_the_one_it_
                       str(tmp_path))
         assert (run.code, run.err) == (2, f"acq: error: --duration {duration}: {need}\n")
     assert not list(tmp_path.glob("*.h5"))
-    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.85", "--fast", "--out",
-                  str(tmp_path / "named"))
+    run = run_cli(capsys, "record", "--profile", str(seeded_profile(tmp_path)), "--duration", "0.85", "--fast",
+                  "--out", str(tmp_path / "named"))
     assert run.code == 0 and "acq:" not in run.err, run.err  # the duration named is enough: identified
     (result,) = (tmp_path / "named").glob("*.result.json")
-    doc = json.loads(result.read_text())  # 0.85 s of a randomly dithered motion: K 10.5 % off in one run, so
-    lo, hi = doc["ci95"]["K_Nm_per_rad"]  # never as a confident wrong number
+    doc = json.loads(result.read_text())  # 0.85 s of a dithered motion (seed 0 here; K 10.5 % off in one run of a
+    lo, hi = doc["ci95"]["K_Nm_per_rad"]  # random seed), so never as a confident wrong number
     assert abs(doc["K_Nm_per_rad"] / 891.0 - 1) < 0.2 and (lo <= 891.0 <= hi or doc["quality"]["verdict"] != "ok")
     # recorded without the identification, a session too short for it is refused by acq analyze in one line
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--duration", "0.76", "--fast", "--no-analyze",
@@ -357,6 +379,7 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     from acq.monitoring.batch import analyze_one
     from analysis import AnalysisRequest
     from acq.monitoring.catalogue import Catalogue
+    from analysis import AnalysisRequest
     from acq.ui.report_png import draw_report
 
     copy = Path(shutil.copy2(session_10s, tmp_path / "s.h5"))

@@ -18,14 +18,14 @@ from pathlib import Path
 import h5py
 import pytest
 
-from tests.helpers import run_cli
+from tests.helpers import run_cli, seeded_profile
 
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
     out = tmp_path_factory.mktemp("rec")
-    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.2s", "--fast",
-                           "--duration", "10", "--no-analyze", "--out", str(out)],
+    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", str(seeded_profile(out.parent)),
+                           "--fast", "--duration", "10", "--no-analyze", "--out", str(out)],
                           capture_output=True, text=True, timeout=180)
     assert proc.returncode == 0, proc.stderr
     (path,) = out.glob("*.h5")

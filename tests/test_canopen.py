@@ -61,7 +61,8 @@ def _record(tmp_path: Path, bench: Bench, duration_s: float, on_encoder_block=No
         if kind == "encoder" and on_encoder_block is not None:
             on_encoder_block(next(blocks), drive)
 
-    result = Recorder(bench, load_profile("triangle_0.2s"), current, drive, tmp_path, duration_s,
+    profile = load_profile("triangle_0.2s").model_copy(update={"dither_seed": 0})  # the same motion in every run
+    result = Recorder(bench, profile, current, drive, tmp_path, duration_s,
                       listeners=[listener]).run()
     return result, load(result.path), sim, drive
 

@@ -93,3 +93,29 @@ def test_real_nidaqmx_without_driver_says_so(machine: dict[str, Any], capsys: py
     assert (sections["NI-DAQmx devices"]["devices"], sections["NI-DAQmx devices"]["empty_because"]) == (
         [], DRIVER_MISSING)
     assert sections["Simulated bench"]["devices"][0]["device"] == "sim"
+
+
+def test_a_serial_port_is_a_serial_port_and_no_probe_waits_for_a_network_beacon(
+        monkeypatch: pytest.MonkeyPatch, machine: dict[str, Any], capsys: pytest.CaptureFixture[str]) -> None:
+    """`acq devices` took 4.5 s and listed /dev/ttyS0 as a CAN interface of kind serial: python-can's ``serial``
+    detection names every serial port, and its ``socketcand`` detection listens 3.1 s for a server's beacon."""
+    use_standin(monkeypatch, StandinHardware(currents=synthetic_currents(25600.0, 1), devices=[]))
+    by_interface = {"serial": [{"interface": "serial", "channel": "/dev/ttyS0"}],
+                    "socketcand": [{"interface": "socketcand", "host": "10.0.0.9", "port": 29536, "channel": "can0"}],
+                    "virtual": [{"interface": "virtual", "channel": "v"}]}
+    asked: list[str] = []
+
+    def detect(interfaces: list[str] | None = None) -> list[dict[str, Any]]:
+        asked.extend(interfaces if interfaces is not None else sorted(can.interfaces.VALID_INTERFACES))
+        return [c for name in asked for c in by_interface.get(name, [])]
+
+    monkeypatch.setattr(can, "detect_available_configs", detect)
+    machine["serial"] = [SimpleNamespace(device="/dev/ttyS0", description="n/a", hwid="n/a")]
+    sections = devices_json(capsys)
+    assert "serial" not in asked and "socketcand" not in asked and "socketcan" in asked
+    assert sections["CAN interfaces (python-can)"] == {
+        "title": "CAN interfaces (python-can)", "devices": [], "empty_because": f"{NO_CAN}; only software buses: virtual",
+        "note": "not looked for: socketcand servers on the network (finding one waits 3 s for its beacon) and "
+                "serial-line CAN adapters (their ports are under Serial ports)"}
+    assert sections["Serial ports (pyserial)"]["devices"] == [
+        {"device": "/dev/ttyS0", "kind": "serial port", "detail": ""}]

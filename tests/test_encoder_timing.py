@@ -24,7 +24,7 @@ from analysis import AnalysisRequest, analyze
 from analysis.sample_instants import angle_at_nominal_instants, estimate_jitter, stamp_deviation_s
 from drivers.config import Bench, Profile
 from drivers.sim.bench import LATCH_CLIP, SimBench
-from tests.helpers import run_cli
+from tests.helpers import run_cli, seeded_profile
 from tests.test_analysis_pipeline import SIM_TOML, sim_recording
 
 CONFIGS = Path(__file__).parents[1] / "configs" / "benches"
@@ -156,8 +156,8 @@ def _bench_file(tmp_path: Path, source: str, **sim: object) -> Path:
 def test_recorded_sessions_carry_the_drive_time_and_analyse_on_it(capsys: pytest.CaptureFixture[str], tmp_path: Path,
                                                                    source: str) -> None:
     bench = _bench_file(tmp_path, source, sync_jitter_s=100e-6)
-    run = run_cli(capsys, "record", "--bench", str(bench), "--profile", "triangle_0.2s", "--duration", "4",
-                  "--fast", "--no-analyze", "--out", str(tmp_path))
+    run = run_cli(capsys, "record", "--bench", str(bench), "--profile", str(seeded_profile(bench.parent)),
+                  "--duration", "4", "--fast", "--no-analyze", "--out", str(tmp_path))
     assert run.code == 0, run.err
     (path,) = tmp_path.glob("*.h5")
     session = load(path)

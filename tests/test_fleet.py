@@ -107,3 +107,34 @@ def test_fleet_at_80_columns_splits_long_names_at_the_slash_never_inside_a_word(
     assert [c for c in first_cells if c] == ["r3/", "joint1", "r1/", "joint1", "r1/", "joint2", "r2/", "joint1"]
     states = [line.split("│")[-1].strip() for line in out.splitlines() if "│" in line]
     assert states[:3] == ["ALARM", "threshold", "+ EWMA"]
+
+
+def test_the_fleet_says_where_its_alarm_rules_came_from(catalogue_location: Path | str,
+                                                        capsys: pytest.CaptureFixture[str],
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """The table judged each joint by the rules its windows were filed with, or by the command line's, or by acq's
+    defaults, and said not which."""
+    from acq.monitoring.trend import AlarmRules
+
+    monkeypatch.setenv("COLUMNS", "250")
+    _fill(catalogue_location)
+
+    def rules(*options: str) -> list[str]:
+        run = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--tag", "site=A", *options)
+        return [line.strip() for line in run.out.splitlines() if "alarm rules:" in line]
+
+    assert rules() == ["alarm rules: acq's defaults"]
+    assert rules("--threshold-pct", "20") == [
+        "alarm rules: --threshold-pct from the command line, the rest acq's defaults"]
+    now = datetime.now(UTC)
+    with Catalogue(catalogue_location) as c:  # a monitor's windows: filed with the rules it judged them by
+        for n, (hours, k) in enumerate(((4, 900.0), (2, 890.0))):
+            doc = {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [k - 5, k + 5]},
+                   "quality": {"verdict": "ok", "reasons": []}}
+            meta = {"session_id": f"m{n}", "joint": "j1",
+                    "tags": {"robot": "r4", "site": "A", **AlarmRules(1, 15.0, 0.3).as_tags()},
+                    "created_utc": (now - timedelta(hours=hours)).isoformat(timespec="seconds")}
+            c.record(Outcome(f"/x/m{n}.h5", f"m{n}", "r", meta, doc, None, 1.0))
+    assert rules() == ["alarm rules: acq's defaults (r1/j1, r1/j2, r2/j1); as acq monitor judged its windows (r4/j1)"]
+    assert rules("--threshold-pct", "20", "--baseline-sessions", "1", "--ewma-lambda", "0.2") == [
+        "alarm rules: from the command line"]

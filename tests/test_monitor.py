@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import signal
 import sqlite3
@@ -179,7 +180,7 @@ def test_trend_and_fleet_judge_a_monitors_windows_by_the_monitors_rules(four_win
     mine = json.loads(run_cli(capsys, "trend", str(four_windows), "--joint", "joint1", "--json",
                               "--baseline-sessions", "1").out)
     assert mine["baseline_K_Nm_per_rad"] == pytest.approx(rows[0]["K_Nm_per_rad"], rel=1e-9)
-    assert mine["rules"] == "baseline_sessions as given, the rest as acq monitor judged its windows"
+    assert mine["rules"] == "--baseline-sessions from the command line, the rest as acq monitor judged its windows"
 
 
 def test_retention_keeps_the_baseline_and_the_last_windows_and_every_catalogue_row(four_windows: Path) -> None:
@@ -454,7 +455,7 @@ def test_a_window_the_joint_barely_moved_in_is_not_excited_and_not_counted_as_ex
     rows = _rows(tmp_path / "m")
     assert [(r["verdict"], r["K_Nm_per_rad"]) for r in rows] == [("not excited", None)] * 2
     assert json.loads(rows[1]["reasons_json"]) == [
-        "0 of 12 moves put torque into 10…400 Hz beyond chance (0 % of the window)",
+        "0 of the window's 12 moves put torque into 10…400 Hz beyond chance; time that does: 0 % of the window",
         "clock alignment residual 1753 µs exceeds 1000 µs for a amplitude fit"]
     assert "windows captured / excited / analysed │ 2 / 0 / 2 │" in " ".join(run.err.split())
     trend = run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1")
@@ -492,7 +493,7 @@ def test_a_clock_fit_of_implausible_drift_is_rejected_and_the_host_stamps_align_
     assert abs(drift) > 1000.0
     # aligned, the window is honestly not excited: its moves put no torque into the band
     assert row["verdict"] == "not excited" and row["K_Nm_per_rad"] is None
-    assert "moves put torque into 10…400 Hz beyond chance" in json.loads(row["reasons_json"])[0]
+    assert "moves put torque into 10…400 Hz beyond chance; time that does: " in json.loads(row["reasons_json"])[0]
 
 
 def test_without_shared_host_stamps_the_window_fails_on_its_clock_and_is_not_called_not_excited(
@@ -688,8 +689,9 @@ def test_a_passive_record_of_a_joint_at_rest_is_not_excited_in_acq_analyze_too(t
     path = Recorder(bench, None, current, drive, tmp_path, 10.0).run().path
     quality = analyze_session(path, write=False, report=False).json_dict["quality"]
     assert quality["verdict"] == "failed"
-    assert quality["reasons"][0].startswith("not excited: 0 of 12 moves put torque into 10…400 Hz beyond chance (")
-    assert quality["reasons"][0].endswith("of the record) — record while the machine runs fast moves of this joint")
+    assert re.fullmatch(r"not excited: 0 of the record's 12 moves put torque into 10…400 Hz beyond chance; time that "
+                        r"does: \d+ % of the record — record while the machine runs fast moves of this joint",
+                        quality["reasons"][0])
     assert not any("interference" in r or "ripple" in r or "play" in r for r in quality["reasons"])
 
 

@@ -14,6 +14,7 @@ from acq.recording.recorder import Recorder
 from analysis import AnalysisRequest
 from analysis.encoder import difference_response
 from analysis.frf import estimate_frf
+from analysis.segments import excitation_summary
 from drivers.motion import RPM_TO_RAD_S
 from drivers.registry import open_bench
 from drivers.sim.bench import SimBench
@@ -155,3 +156,12 @@ def test_an_idle_robot_window_names_no_bench_constant(tmp_path: Path) -> None:
     current, drive = open_bench(bench, fast=True, sim_bench=SimBench(bench, realtime=False))
     rec = recording_from_session(load(Recorder(bench, None, current, drive, tmp_path, 4.0).run().path))
     assert recording_fault(rec) is None
+
+
+def test_the_excitation_summary_says_what_each_count_counts() -> None:
+    """It read "0 of 12 moves put torque into 10…400 Hz beyond chance (3 % of the window)": 3 % of what, if no move
+    excites? The moves and the excited time are counted apart (a kept segment can lie outside every move)."""
+    assert excitation_summary(0, 12, (10.0, 400.0), 0.03, "window") == (
+        "0 of the window's 12 moves put torque into 10…400 Hz beyond chance; time that does: 3 % of the window")
+    assert excitation_summary(2, 5, (10.0, 150.0), 0.084) == (
+        "2 of the record's 5 moves put torque into 10…150 Hz beyond chance; time that does: 8 % of the record")

@@ -21,7 +21,7 @@ from acq.ui.selftest_cli import next_step, selftest_json
 from acqcore.errors import DeviceError
 from analysis.speed_ratio import SpeedRatio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from drivers.nidaq import DRIVER_MISSING
-from tests.helpers import run_cli
+from tests.helpers import run_cli, seeded_profile
 from tests.nidaqmx_standin import StandinHardware
 from tests.test_nidaq import hardware, write_bench  # noqa: F401 - the stand-in NI 9234 fixture
 
@@ -42,8 +42,8 @@ def bench_file(tmp_path: Path, sim_lines: str = "", *, channels: str = '["i_a"]'
     return path
 
 
-def selftest(capsys: pytest.CaptureFixture[str], bench: Path) -> tuple[int, dict]:
-    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench", str(bench))
+def selftest(capsys: pytest.CaptureFixture[str], bench: Path, *profile: str) -> tuple[int, dict]:
+    run = run_cli(capsys, "selftest", "--fast", "--json", "--bench", str(bench), *profile)
     return run.code, json.loads(run.out)
 
 
@@ -53,8 +53,9 @@ def failed_check(doc: dict) -> dict:
     return fail
 
 
-def test_correct_bench_passes_every_check_in_order_with_figures(capsys: pytest.CaptureFixture[str]) -> None:
-    code, doc = selftest(capsys, DEFAULT_BENCH)
+def test_correct_bench_passes_every_check_in_order_with_figures(capsys: pytest.CaptureFixture[str],
+                                                                tmp_path: Path) -> None:
+    code, doc = selftest(capsys, DEFAULT_BENCH, "--profile", str(seeded_profile(tmp_path)))
     assert code == 0 and doc["passed"] and doc["stopped_at"] is None
     names = [(c["stage"], c["name"]) for c in doc["checks"]]
     assert names == [("devices", "acq devices"), ("devices", "DAQ"), ("devices", "drive"), ("streams", "recording"),
@@ -108,8 +109,8 @@ def test_a_listening_bench_is_checked_on_the_machines_own_motion_without_command
         assert ident["status"] == "pass" and ident["values"]["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
         assert by["torque constant"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
     else:
-        assert (ident["status"], ident["figure"]) == ("warn", "not excited: 0 of 12 moves put torque into 10…400 Hz "
-                                                              "beyond chance (3 % of the window)")
+        assert (ident["status"], ident["figure"]) == ("warn", "not excited: 0 of the window's 12 moves put torque into "
+                                                              "10…400 Hz beyond chance; time that does: 3 % of the window")
         assert ident["fix"] == ("run acq selftest again while the machine runs a program with fast moves of this joint "
                                 "(acq commands no motion on a bench with [drive] motion = \"external\")")
     refused = run_cli(capsys, "selftest", "--fast", "--bench", str(bench), "--profile", "triangle_0.2s")

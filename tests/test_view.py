@@ -39,7 +39,8 @@ def offscreen() -> Iterator[None]:
 def _recorder(out_dir: Path, duration_s: float) -> Recorder:
     bench = load_bench(None)
     current, drive = open_bench(bench, fast=True)
-    return Recorder(bench, load_profile("triangle_0.2s"), current, drive, out_dir, duration_s)
+    profile = load_profile("triangle_0.2s").model_copy(update={"dither_seed": 0})  # the same motion in every run
+    return Recorder(bench, profile, current, drive, out_dir, duration_s)
 
 
 @pytest.fixture(scope="module")

@@ -1,8 +1,8 @@
 """``acq devices``: what this machine can record from, and why a section is empty when it is.
 
 Four sections: NI-DAQmx devices with their AI channels (needs the NI-DAQmx driver), CAN interfaces
-python-can detects (software buses such as ``virtual`` are not hardware and are left out), serial ports
-pyserial sees, and the simulated bench, which is always there. Each probe is a small function that
+python-can detects (software buses such as ``virtual`` are not hardware and are left out; two probes are not run,
+:data:`NOT_PROBED`), serial ports pyserial sees, and the simulated bench, which is always there. Each probe is a small function that
 returns a :class:`Section`; a library or driver that is missing empties its section with the reason.
 """
 
@@ -20,8 +20,13 @@ from drivers.nidaq import DRIVER_MISSING, INSTALL_DRIVER, first_line, import_nid
 
 #: python-can interfaces that are software buses, not something a drive can be wired to.
 SOFTWARE_CAN = frozenset({"virtual", "udp_multicast"})
-#: What a detected configuration means when python-can only guesses it from the port.
-CAN_NOTES = {"serial": "python-can's serial-line CAN protocol; only if such an adapter is on this port"}
+#: python-can interfaces whose detection is not run: ``serial`` "detects" every serial port pyserial sees, whatever
+#: is wired to it (it listed /dev/ttyS0 as a CAN interface; the serial section lists the ports), and ``socketcand``
+#: listens 3.1 s for a server's UDP beacon (sent every 3 s; a shorter wait would miss servers at random) — 4 s of
+#: the command's 4.5 s on a machine without one.
+NOT_PROBED = frozenset({"serial", "socketcand"})
+CAN_NOT_PROBED = ("not looked for: socketcand servers on the network (finding one waits 3 s for its beacon) and "
+                  "serial-line CAN adapters (their ports are under Serial ports)")
 
 
 @dataclass(frozen=True)
@@ -33,11 +38,13 @@ class Section:
     rows: list[tuple[str, str, str]] = field(default_factory=list)
     empty_because: str = ""
     install: str = ""
+    note: str = ""  # what the section did not look for
 
     def to_json_dict(self) -> dict[str, Any]:
-        """``{"title", "devices": [{"device", "kind", "detail"}], "empty_because"}``."""
+        """``{"title", "devices": [{"device", "kind", "detail"}], "empty_because"}``, and ``"note"`` if there is one."""
         devices = [dict(zip(("device", "kind", "detail"), row)) for row in self.rows]
-        return {"title": self.title, "devices": devices, "empty_because": self.empty_because}
+        return {"title": self.title, "devices": devices, "empty_because": self.empty_because,
+                **({"note": self.note} if self.note else {})}
 
 
 def ni_section() -> Section:
@@ -74,27 +81,31 @@ def _quiet(logger_name: str) -> Iterator[None]:
 
 
 def can_section() -> Section:
-    """CAN interfaces python-can detects (``can.detect_available_configs``), software buses left out."""
+    """CAN interfaces python-can detects (``can.detect_available_configs``), software buses left out, the
+    :data:`NOT_PROBED` interfaces not asked."""
     import can
 
     with _quiet("can"):
-        configs: list[dict[str, Any]] = can.detect_available_configs()
+        configs: list[dict[str, Any]] = can.detect_available_configs(
+            interfaces=sorted(can.interfaces.VALID_INTERFACES - NOT_PROBED))
     rows = [(str(c.get("channel", "")), str(c["interface"]),
-             CAN_NOTES.get(c["interface"], ", ".join(f"{k}={v}" for k, v in c.items()
-                                                     if k not in ("interface", "channel"))))
+             ", ".join(f"{k}={v}" for k, v in c.items() if k not in ("interface", "channel")))
             for c in configs if c.get("interface") not in SOFTWARE_CAN]
     software = sorted({str(c["interface"]) for c in configs if c.get("interface") in SOFTWARE_CAN})
     because = "python-can detects no CAN interface (no adapter plugged in, or its driver is missing)"
     if software:
         because += f"; only software buses: {', '.join(software)}"
-    return Section("CAN interfaces (python-can)", rows, "" if rows else because)
+    return Section("CAN interfaces (python-can)", rows, "" if rows else because, note=CAN_NOT_PROBED)
 
 
 def serial_section() -> Section:
-    """Serial ports pyserial sees (``serial.tools.list_ports.comports``)."""
+    """Serial ports pyserial sees (``serial.tools.list_ports.comports``); a port it knows nothing more of (its "n/a",
+    e.g. a mainboard's /dev/ttyS0) is a "serial port"."""
     from serial.tools import list_ports
 
-    rows = [(p.device, p.description or "", p.hwid or "") for p in list_ports.comports()]
+    known = {"", "n/a"}
+    rows = [(p.device, "serial port" if p.description in known else p.description, "" if p.hwid in known else p.hwid)
+            for p in list_ports.comports()]
     return Section("Serial ports (pyserial)", rows, "" if rows else "pyserial sees no serial port")
 
 

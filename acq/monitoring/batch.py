@@ -117,8 +117,7 @@ def _prefix(parts: Sequence[str]) -> Iterator[str]:
         yield part
 
 
-def record_outcome(done: SessionResult, request: AnalysisRequest, catalogue_path: Path | str | None,
-                   seconds: float) -> Path | str:
+def record_outcome(done: SessionResult, catalogue_path: Path | str | None, seconds: float) -> Path | str:
     """Put one session's analysis (done outside a batch) into its catalogue; return the catalogue's path.
 
     The catalogue is ``catalogue_path`` or ``catalogue.sqlite`` in the folder of the result (the session's, or
@@ -126,13 +125,14 @@ def record_outcome(done: SessionResult, request: AnalysisRequest, catalogue_path
     """
     path = catalogue_path or done.json_path.parent / CATALOGUE_NAME
     with Catalogue(path) as catalogue:
-        catalogue.record(succeeded(str(done.session.path), done, request, seconds))
+        catalogue.record(succeeded(str(done.session.path), done, seconds))
     return path
 
 
-def succeeded(path: str, done: SessionResult, request: AnalysisRequest, seconds: float) -> Outcome:
-    """The catalogue's record of a successful analysis of the session at ``path``."""
-    return Outcome(path, done.json_dict["session"]["sha256"], request.key(), session_meta(done.session),
+def succeeded(path: str, done: SessionResult, seconds: float) -> Outcome:
+    """The catalogue's record of a successful analysis of the session at ``path``, filed under the request it
+    answered (an option that named the default left to it: :meth:`analysis.AnalysisRequest.as_default_where_it_is`)."""
+    return Outcome(path, done.json_dict["session"]["sha256"], done.request.key(), session_meta(done.session),
                    done.json_dict, None, seconds)
 
 
@@ -181,7 +181,7 @@ def analyze_one(path: str, sha256: str, request: AnalysisRequest, draw_report: D
                        time.perf_counter() - start)
     if draw_report is not None:
         done = draw_report(done)  # the result is written; a picture that fails is a note on it, not a failure
-    return succeeded(path, done, request, time.perf_counter() - start)
+    return succeeded(path, done, time.perf_counter() - start)
 
 
 def _meta_if_readable(path: str) -> dict[str, Any]:

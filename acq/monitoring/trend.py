@@ -95,10 +95,12 @@ def rules_for(entries: Sequence[Entry], *, baseline_sessions: int | None = None,
                                              ("ewma_lambda", ewma_lambda)) if value is not None}
     if not given:
         return rules
-    if len(given) == len(RULE_TAGS) or filed is None:
-        source = "as given" if len(given) == len(RULE_TAGS) else f"{', '.join(given)} as given, the rest acq's defaults"
+    options = ", ".join(f"--{name.replace('_', '-')}" for name in given)  # the options of acq trend, fleet, view
+    if len(given) == len(RULE_TAGS):
+        source = "from the command line"
     else:
-        source = f"{', '.join(given)} as given, the rest as acq monitor judged its windows"
+        rest = "acq's defaults" if filed is None else filed.source
+        source = f"{options} from the command line, the rest {rest}"
     return replace(rules, **given, source=source)
 
 @dataclass(frozen=True)

@@ -45,6 +45,7 @@ class SessionResult:
     json_dict: dict[str, Any]
     json_path: Path
     report_path: Path | None
+    request: AnalysisRequest = AnalysisRequest()  # as asked, an option naming the default left to it (no nominal)
 
 
 class ResultNotWritten(StorageError):
@@ -159,10 +160,12 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     """
     session = load(path)
     session.require_usable(partial=request.partial)
-    request = request_for(session, request)
     notes = partial_notes(session)
     try:
-        result = analyze(recording_from_session(session), request)
+        rec = recording_from_session(session)
+        asked = request.as_default_where_it_is(rec)  # spelled-out defaults: the session's own result, not a variant
+        request = request_for(session, asked)
+        result = analyze(rec, request)
     except ValueError as e:  # on part of a session, the error may come of what is missing: the note says what
         why = f" ({notes[0].removeprefix('note: ')})" if notes else ""
         raise ConfigError(f"{session.path}: {e}{why}") from None
@@ -181,10 +184,10 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
             write_json(doc, json_path)
         except (StorageError, OSError) as e:
             message = str(e) if isinstance(e, StorageError) else str(storage_error(e, json_path))
-            raise ResultNotWritten(message, SessionResult(session, result, doc, json_path, None)) from None
+            raise ResultNotWritten(message, SessionResult(session, result, doc, json_path, None, asked)) from None
         if report_path is None:  # no picture of this result: one of an earlier result would be taken for it
             png_path.unlink(missing_ok=True)
-    return SessionResult(session, result, doc, json_path, report_path)
+    return SessionResult(session, result, doc, json_path, report_path, asked)
 
 
 def partial_notes(session: Session) -> list[str]:

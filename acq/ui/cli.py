@@ -266,7 +266,7 @@ def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_p
     with quiet_numerics():
         done = analyze_session(path, request, report=report, result_dir=result_dir)
     try:
-        record_outcome(done, request, catalogue_path, time.perf_counter() - start)
+        record_outcome(done, catalogue_path, time.perf_counter() - start)
     except BaseException:  # no result without its catalogue row (a later batch analyses the session again)
         done.json_path.unlink(missing_ok=True)
         raise
@@ -435,7 +435,9 @@ def _analyze_one_session(session_path: Path, request: AnalysisRequest, *, as_jso
     from acq.offline.analyze import output_paths
     from analysis import AnalysisRequest
 
-    default_result = output_paths(session_path, AnalysisRequest(), result_dir)[0] if request.variant_label() else None
+    # a variant as answered: an option that named the default is the session's result (as_default_where_it_is)
+    variant = done.request.variant_label()
+    default_result = output_paths(session_path, AnalysisRequest(), result_dir)[0] if variant else None
     _print_result_and_draw(done, default_result)
     return 0
 

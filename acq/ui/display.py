@@ -346,6 +346,8 @@ def sections_table(sections: Sequence[Section]) -> FittedTable:
         rows += s.rows
         if s.empty_because:
             rows.append(("none", "", s.empty_because))
+        if s.note:
+            rows.append(("note", "", s.note))
         ends.add(len(rows) - 1)
     columns = [Column(name, [r[i] for r in rows], "left", wrap=True) for i, name in enumerate(("device", "kind",
                                                                                                "detail"))]

@@ -22,7 +22,7 @@ from acq.ui.display import Column, FittedTable, start_times
 from acq.ui.options import CatalogueLocation, alarm_rule_options
 from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet
 from acq.monitoring.trend import EXIT_ALARM
-from acq.ui.values import format_value
+from acq.ui.values import alarm_rules_line, format_value
 
 _STYLES = {"alarm": "bold red", "stale": "yellow", "no baseline": "dim", "ok": ""}
 #: Time bins of the PNG's heat strips (the width of a strip is the time since the oldest session).
@@ -60,6 +60,8 @@ def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> FittedTab
                       "left", wrap=True)]
     caption = [f"stale: no session for {stale_days:g} days; 24 h ok/all: sessions of the last day with a K of "
                "verdict ok / all analysed; alarm rules as acq trend (per joint: acq trend --joint J --tag robot=R)"]
+    if statuses:
+        caption.append(alarm_rules_line([(s.trend.joint, s.trend.rules_source) for s in statuses]))
     return FittedTable(title, columns, caption, row_styles=[_STYLES[s.state] for s in statuses])
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.trend import ELAPSED_TAG, Trend, TrendPoint
-from acq.ui.values import time_unit
+from acq.ui.values import alarm_rules_line, time_unit
 
 
 def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (1400, 900)) -> Path:
@@ -120,6 +120,7 @@ def trend_widget(trend: Trend) -> Any:
         plot.getAxis("bottom").setTicks([ticks])
         plot.showGrid(x=True, y=True, alpha=0.25)
     f_plot.setLabel("bottom", x_label)
+    widget.ci.addLabel(alarm_rules_line([(trend.joint, trend.rules_source)]), row=4, col=0, size="9pt")
     widget.ci.layout.setRowFixedHeight(1, 20 * -(-len(legend.items) // 3) + 5)  # every legend row, none clipped
     return frame
 

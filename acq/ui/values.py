@@ -7,6 +7,7 @@ nothing of ``acq``, so both can use it without importing each other.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any
 
 from analysis import PARAM_LABELS, PARAM_NAMES
@@ -59,3 +60,15 @@ def options_text(doc: dict[str, Any]) -> str:
     if opts.get("pipeline") != "paper" and opts.get("align") is False:
         parts.append("clocks not aligned")
     return " · ".join(parts)
+
+
+def alarm_rules_line(sources: Sequence[tuple[str, str]]) -> str:
+    """Where the alarm rules shown came from, in one line, from (joint, its trend's ``rules_source``) pairs:
+    "alarm rules: as acq monitor judged its windows"; joints judged by rules from different places are named after
+    their source ("alarm rules: acq's defaults (r1/joint1); as acq monitor judged its windows (r2/joint1)")."""
+    joints: dict[str, list[str]] = {}
+    for joint, source in sources:
+        joints.setdefault(source, []).append(joint)
+    if len(joints) == 1:
+        return f"alarm rules: {next(iter(joints))}"
+    return "alarm rules: " + "; ".join(f"{source} ({', '.join(names)})" for source, names in joints.items())
