@@ -89,7 +89,7 @@ class MonitorStatus:
     skipped: int = 0
     interrupted: int = 0
     alarms: int = 0
-    alarm_command_failure: str | None = None  # how the last --on-alarm command that failed did: "exit 127 (…)"
+    alarm_command_failure: str | None = None  # the last --on-alarm command's problem: "alarm command failed: exit 1"
     machine_time_s: float = 0.0  # the start of the window being captured; its end once it is captured
     disk_bytes: int = 0
     last_K: float | None = None
@@ -336,8 +336,8 @@ class Monitor:
                 try:
                     proc.wait(timeout=max(0.0, deadline - time.monotonic()))
                 except subprocess.TimeoutExpired:
-                    self._alarm_failed(f"still running after {_ALARM_WAIT_S:g} s when the monitor ended "
-                                       f"(pid {proc.pid}, left running)")
+                    self._alarm_problem(f"alarm command still running after {_ALARM_WAIT_S:g} s when the monitor "
+                                        f"ended (pid {proc.pid}, left running)")
                     self._alarm_procs.remove(proc)
                     continue
             code = proc.poll()
@@ -350,9 +350,13 @@ class Monitor:
                 self._alarm_failed(f"killed by signal {-code}")
 
     def _alarm_failed(self, why: str) -> None:
-        """Report a failed --on-alarm command in the status line and the final summary."""
-        self.status.alarm_command_failure = why
-        self.status.message = f"alarm command failed: {why}: {self.s.on_alarm}"
+        """Report a failed --on-alarm command (exit ≠ 0, a signal, cannot start) in the status line and summary."""
+        self._alarm_problem(f"alarm command failed: {why}")
+
+    def _alarm_problem(self, what: str) -> None:
+        """Report what went wrong with an --on-alarm command in the status line and the final summary."""
+        self.status.alarm_command_failure = what
+        self.status.message = f"{what}: {self.s.on_alarm}"
         self._show()
 
     # ---- retention and disk ----------------------------------------------------------------------------

@@ -51,7 +51,7 @@ def status_table(st: MonitorStatus) -> Table:
         ("excited share: last window · all windows", f"{_pct(st.last_excited_fraction)} · "
                                                      f"{_pct(st.program_excited_fraction)}"),
         ("trend state", f"[bold red]{st.state}[/]" if st.state == "alarm" else st.state),
-        ("alarms raised", str(st.alarms) + (f" · [bold red]alarm command failed: {escape(st.alarm_command_failure)}[/]"
+        ("alarms raised", str(st.alarms) + (f" · [bold red]{escape(st.alarm_command_failure)}[/]"
                                             if st.alarm_command_failure else "")),
         ("disk used", f"{st.disk_bytes / 1e6:.1f} MB"),
     ]

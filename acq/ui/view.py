@@ -5,7 +5,8 @@ when ``<session>.result.json`` exists, its options are used, so the window shows
 found (the JSON holds the values, not the curves, hence the re-run: ≲ 3 s for a 60 s session).
 Several sessions overlay their FRFs with a legend (e.g. the same joint months apart).
 
-Qt is imported only when a window or a screenshot is drawn, so the rest of the CLI starts fast.
+Qt is imported only when a window or a screenshot is drawn, so the rest of the CLI starts fast. Closing the window
+exits 0; Ctrl-C or SIGTERM close it too, with exit 130 and one line (:mod:`acq.ui.qt_signals`).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import click
 
 from acq.ui.options import CatalogueLocation
 from acq.offline.analyze import analyze_session
-from acqcore.errors import AcqError, ConfigError
+from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 from analysis import AnalysisRequest
 
 if TYPE_CHECKING:
@@ -91,6 +92,7 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         click.echo(NO_DISPLAY_MESSAGE, err=True)
         return 1
     from acq.ui.plots import ReportView, ensure_app, grab_png
+    from acq.ui.qt_signals import loop_ended_by_signals
 
     if trend_joint is not None:
         from acq.monitoring.trend import load_trend
@@ -98,22 +100,29 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         folder = sessions[0] if sessions else None
         load = functools.partial(load_trend, folder, catalogue_path, trend_joint)
         first = load()  # a catalogue without the joint is one line before any window opens
-        app = ensure_app(offscreen=screenshot is not None)
-        live = LiveTrend(load, first, refresh_s)  # kept alive with the window: its timer redraws it
-        window = live.frame
     else:
         figures = [session_figure(p) for p in sessions]
-        app = ensure_app(offscreen=screenshot is not None)
-        title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}"
-                 if len(figures) == 1 else f"{len(figures)} sessions")
-        window = ReportView(figures, title=title)
-    if screenshot is not None:
-        grab_png(window, screenshot, size)
-        click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")
-        return 0
-    window.resize(*size)
-    window.show()
-    app.exec()
+    app = ensure_app(offscreen=screenshot is not None)
+    # from here Ctrl-C / SIGTERM end the event loop (a KeyboardInterrupt raised in Qt's frames was a traceback)
+    with loop_ended_by_signals(app) as caught:
+        if trend_joint is not None:
+            live = LiveTrend(load, first, refresh_s)  # kept alive with the window: its timer redraws it
+            window = live.frame
+        else:
+            title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}"
+                     if len(figures) == 1 else f"{len(figures)} sessions")
+            window = ReportView(figures, title=title)
+        if screenshot is not None:
+            grab_png(window, screenshot, size)
+            click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")
+            return 0
+        window.resize(*size)
+        window.show()
+        click.echo(f"{window.windowTitle()}: close the window or press Ctrl-C to end")
+        app.exec()
+    if caught:
+        click.echo("acq: interrupted", err=True)
+        return EXIT_INTERRUPTED
     return 0
 
 
