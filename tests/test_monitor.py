@@ -859,3 +859,20 @@ def test_a_monitor_whose_devices_fail_to_open_leaves_no_catalogue(capsys: pytest
                   "--out", str(out))
     assert run.code != 0 and "acq-no-such-bus" in run.err, run.err
     assert not (out / "catalogue.sqlite").exists()
+
+
+def test_readmes_two_monitor_benches_differ_in_their_drive_and_not_in_their_simulated_machine() -> None:
+    """README's CANopen example, then its serial one, in the default folder: one series from two measurement chains.
+    What the refusal names, from the benches shipped (the [sim] sections, which differ in nothing that counts, are not
+    compared)."""
+    from acq.monitoring.catalogue import Entry
+    from acq.monitoring.window_bench import differences, window_facts
+
+    benches = ROBOT.parent
+    canopen, serial = (load_bench(benches / f"sim_robot_{t}.toml") for t in ("canopen", "serial"))
+    filed = [Entry("k", "k", "w.h5", "joint1", None, {"monitor_window": 0, **window_facts(canopen, 4.0)}, "ok", [],
+                   None, 890.0, (880.0, 900.0), None, None, "{}", "2026-11-30T00:00:00+00:00", None)]
+    assert differences(filed, serial, 4.0) == ["[drive] driver canopen, now serial"]
+    assert differences(filed, serial, 5.0) == ["--window 4, now 5", "[drive] driver canopen, now serial"]
+    worn = canopen.model_copy(update={"sim": canopen.sim.model_copy(update={"K_Nm_per_rad": 700.0, "seed": 9})})
+    assert differences(filed, worn, 4.0) == []

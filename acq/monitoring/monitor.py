@@ -14,8 +14,10 @@ Each window is judged for excitation (:mod:`acq.monitoring.window_judge`): a win
 with verdict ``not excited`` and the reason, without K. Windows are numbered (session tag ``monitor_window``) and
 placed in machine time (``monitor_elapsed_s`` = number × ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
-``interrupted`` (not counted). In ``fast`` mode (simulated benches) machine time is simulated: the loop
-does not sleep, and waits for the analysis instead of skipping (no real time passes meanwhile).
+``interrupted`` (not counted); it refuses a folder whose windows were captured with another bench or ``--window``
+(:mod:`acq.monitoring.window_bench`) or judged by other alarm rules. In ``fast`` mode (simulated benches) machine
+time is simulated: the loop does not sleep, and waits for the analysis instead of skipping (no real time passes
+meanwhile).
 """
 
 from __future__ import annotations

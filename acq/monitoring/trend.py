@@ -10,6 +10,9 @@ session (sessions before a pinned baseline are shown, not judged). Two alarm rul
   a small but persistent drop, relative to the session-to-session scatter σ of K. σ is the larger of
   the baseline's own 95 % interval (as 1.96 σ) and the standard deviation of the baseline sessions.
 
+A baseline of several sessions that disagree far beyond their own intervals (the joint changed while it was
+learned) is called unstable (:func:`baseline_warning`): its limits are too wide to trust.
+
 The alarm state is the latest judged session's: exit code 3 while it is in alarm, so a cron job or a
 PLC script can act; re-pin the baseline (``--baseline``) after a repair.
 
@@ -244,8 +247,8 @@ def baseline_warning(baseline: Sequence[Entry]) -> str | None:
 
     A joint that changed while its baseline was learned (a monitor started on a joint already softening) gives a
     mean between old and new and a scatter σ that widens the EWMA's limit: the alarm comes late or never. Test:
-    χ² = Σ (K_i − K̄)² / σ_i² about the inverse-variance weighted mean K̄, σ_i the session's 95 % half-width / 1.96,
-    against χ² with n − 1 degrees of freedom at :data:`BASELINE_SIGNIFICANCE` — no tuned constant: each session's
+    χ² = Σ (K_i − K̄)² / σ_i² about the inverse-variance weighted mean K̄, σ_i the session's 95 % half-width
+    / 1.96, against χ² with n − 1 degrees of freedom at :data:`BASELINE_SIGNIFICANCE` — no tuned constant: each session's
     own interval says how much it may scatter. It assumes those intervals are honest (Gaussian about the truth);
     sessions without an interval are left out, and with fewer than two the test is not made."""
     known = [(e.K_Nm_per_rad, (hi - lo) / 2) for e in baseline if e.K_Nm_per_rad is not None
@@ -260,7 +263,7 @@ def baseline_warning(baseline: Sequence[Entry]) -> str | None:
     ks = [k for k, _ in known]
     scatter_pct = 100 * statistics.stdev(ks) / statistics.fmean(ks)
     known_pct = 100 * max(half / k for k, half in known)
-    return (f"baseline unstable: its {len(known)} sessions scatter {scatter_pct:.1f} % while each is known to "
+    return (f"baseline unstable: its {len(known)} sessions scatter {scatter_pct:.1f} % while each is known to within "
             f"±{known_pct:.1f} % — the joint changed while the baseline was learned, and its alarm limits are too "
             "wide; re-baseline with --baseline on a session of the joint in a known state")
 

@@ -279,7 +279,8 @@ def trend_table(trend: Trend) -> FittedTable:
     tags = [" ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.entry.tags.items())
             for p in pts]
     # "learning baseline" as acq monitor and acq fleet say it; "before baseline" only before a pinned one (--baseline)
-    words = {**TREND_STATES, "before baseline": "before baseline" if trend.baseline_K_Nm_per_rad else "learning baseline"}
+    words = {**TREND_STATES,
+             "before baseline": "before baseline" if trend.baseline_K_Nm_per_rad else "learning baseline"}
     states = [words[p.state] + (f": {p.reason.replace('+', ' + ')}" if p.state == "alarm" else "")
               + (f" (#{i} below)" if p.state == "skipped" else "") for i, p in enumerate(pts, 1)]
     rel = [f"± {50.0 * (p.entry.K_ci95[1] - p.entry.K_ci95[0]) / p.entry.K_Nm_per_rad:.1f}"
