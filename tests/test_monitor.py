@@ -876,3 +876,21 @@ def test_readmes_two_monitor_benches_differ_in_their_drive_and_not_in_their_simu
     assert differences(filed, serial, 5.0) == ["--window 4, now 5", "[drive] driver canopen, now serial"]
     worn = canopen.model_copy(update={"sim": canopen.sim.model_copy(update={"K_Nm_per_rad": 700.0, "seed": 9})})
     assert differences(filed, worn, 4.0) == []
+
+
+def test_the_status_table_says_an_unstable_baseline_and_which_window_the_last_K_is_from() -> None:
+    """The monitor showed state "ok" under a baseline learned on a softening joint, and a K of an earlier window beside
+    the last window's share without saying so."""
+    from rich.console import Console
+
+    from acq.monitoring.monitor import MonitorStatus
+    from acq.ui.monitor_cli import status_table
+
+    warning = "baseline unstable: its 5 sessions scatter 12.6 % while each is known to within ±0.6 %"
+    st = MonitorStatus("joint1", last_K=889.8, last_K_ci=(880.0, 899.6), last_K_window=3, baseline_warning=warning,
+                       message="done")
+    console = Console(width=140, record=True)
+    console.print(status_table(st))
+    text = " ".join(console.export_text().split())
+    assert "last K N·m/rad (95 %) · its window │ 889.8 (880.0 … 899.6) · window 3 │" in text
+    assert f"{warning} done" in text  # the caption: the warning, then the message
