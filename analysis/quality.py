@@ -17,7 +17,7 @@ import numpy as np
 from analysis.adequacy import (CHAIN_WINDOW_STD, BandMisfit, band_misfits, critical_t, loop_feedback_bound,
                                missed_spans, quantisation_through_fit, spread_beyond_fit)
 from analysis.encoder import difference_response
-from analysis.excitation import RESOLUTION_NAMED, weak_coherence_cause
+from analysis.excitation import RESOLUTION_NAMED, against_limit, weak_coherence_cause
 from analysis.fit import (COHERENCE_CLIP, FitResult, band_mask, judged_fit, log_ratio_jacobian, model_log_ratios,
                           model_misfits, quantisation_terms)
 from analysis.frf import FrequencyResponse
@@ -215,13 +215,13 @@ def assess(
             exc_db = float(10.0 * np.log10(np.mean(frf.torque_psd[sel])))
             level = _grade(exc_coh, th.excitation_poor, th.excitation_failed)
             if level != "ok":
-                findings.append((level, f"coherence {exc_coh:.2f} between f_a {fit.f_a:.0f} Hz and f_r "
+                findings.append((level, f"coherence {against_limit(exc_coh, th.excitation_poor)} between f_a {fit.f_a:.0f} Hz and f_r "
                                         f"{fit.f_r:.0f} Hz (torque {exc_db:.0f} dB re 1 N²m²/Hz there), "
                                         f"{cause(sel, th.excitation_poor)}"))
 
     level = _grade(mean_coh, th.coherence_poor, th.coherence_failed)
     if level != "ok":
-        findings.append((level, f"mean coherence {mean_coh:.2f} in {lo:g}…{hi:g} Hz (in closed loop that biases |H|, "
+        findings.append((level, f"mean coherence {against_limit(mean_coh, th.coherence_poor)} in {lo:g}…{hi:g} Hz (in closed loop that biases |H|, "
                                 f"not only scatters it), {cause(in_band, th.coherence_poor)}"))
 
     ratio = fit.residual_rms / _noise_rms(frf, in_band)

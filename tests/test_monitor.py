@@ -646,6 +646,8 @@ def test_a_window_whose_moves_excite_the_band_says_which_coherence_was_too_low()
     assert _but(between, 14) == ", but too little between f_a and f_r (coherence 0.61, below 0.7)"
     assert _but(band, 3) == ", but too little over the band (mean coherence 0.50, below 0.72)"
     assert _but(between, 0) == ""  # no move excites: the count says it all
+    at_the_limit = {"quality": {"excitation_coherence": 0.95, "mean_coherence": 0.7184}}  # not "0.72, below 0.72"
+    assert _but(at_the_limit, 3) == ", but too little over the band (mean coherence 0.718, below 0.72)"
 
 
 def test_a_window_judged_not_excited_after_its_analysis_keeps_no_K_beside_it(tmp_path: Path,

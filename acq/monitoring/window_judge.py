@@ -22,7 +22,7 @@ from acq.offline.analyze import output_paths, write_json
 from acq.recording.reader import load
 from acq.recording.session import Session
 from acqcore.errors import StorageError
-from analysis import AnalysisRequest, Thresholds, excitation_summary
+from analysis import AnalysisRequest, Thresholds, against_limit, excitation_summary
 
 
 def _weak_coherence(quality: dict[str, Any]) -> str | None:
@@ -32,11 +32,13 @@ def _weak_coherence(quality: dict[str, Any]) -> str | None:
     th = Thresholds()
     exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
     if exc is not None and not exc >= th.excitation_poor:
-        return f"too little between f_a and f_r (coherence {exc:.2f}, below {th.excitation_poor:g})"
+        return (f"too little between f_a and f_r (coherence {against_limit(exc, th.excitation_poor)}, "
+                f"below {th.excitation_poor:g})")
     if mean is None:
         return ""
     if not mean >= th.coherence_poor:
-        return f"too little over the band (mean coherence {mean:.2f}, below {th.coherence_poor:g})"
+        return (f"too little over the band (mean coherence {against_limit(mean, th.coherence_poor)}, "
+                f"below {th.coherence_poor:g})")
     return None
 
 
