@@ -268,7 +268,8 @@ def assess(
         limit = th.clock_residual_complex_s if fit.options.kind == "complex" else th.clock_residual_amplitude_s
         if not clock_residual_s <= limit:
             findings.append(("poor", f"clock alignment residual {1e6 * clock_residual_s:.0f} µs exceeds "
-                                     f"{1e6 * limit:.0f} µs for a {fit.options.kind} fit"))
+                                     f"{1e6 * limit:.0f} µs for {'an' if fit.options.kind == 'amplitude' else 'a'} "
+                                     f"{fit.options.kind} fit"))
 
     if encoder_jitter is not None and np.any(in_band):
         found, timing_defect = _jitter_findings(frf, fit, in_band, encoder_jitter, th)
