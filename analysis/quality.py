@@ -152,6 +152,7 @@ def assess(
     profile: CommandedProfile | None = None,
     interference: tuple[Interference, ...] = (),
     kernel_error: np.ndarray | None = None,
+    torque_from_angle: bool = False,
 ) -> Quality:
     """Judge an identification from its FRF, its fit and the clock alignment.
 
@@ -183,6 +184,10 @@ def assess(
     interference : tuple of Interference, optional
         What the torque estimate removed from the current, named when the torque carries power the speed does not
         follow.
+    torque_from_angle : bool, optional
+        The torque was read from one phase current through the electrical angle (the encoder method): a misfit
+        band's reason then names that estimate first when the clock alignment's residual says the phase follows the
+        angle only loosely (:func:`_one_phase_doubt`).
 
     Returns
     -------
@@ -243,8 +248,10 @@ def assess(
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
                                  f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
                                  f"{worst.t:.0f} σ beyond what noise, the chain and the encoder's quantisation explain"
-                                 f"{_beyond_band(worst.low_hz, fit, False)} — {_misfit_cause(worst, fit)}; until then K, J_m, "
-                                 f"J_l are the two-mass model's compromise, not the joint's"))
+                                 f"{_beyond_band(worst.low_hz, fit, False)} — "
+                                 f"{_one_phase_doubt(clock_residual_s, th) if torque_from_angle else ''}"
+                                 f"{_misfit_cause(worst, fit)}; until then K, J_m, J_l are the two-mass model's "
+                                 f"compromise, not the joint's"))
     elif np.isfinite(fit.residual_rms):
         # the RMS misfit against the coherence's noise alone: where the window test ran (it allows for the
         # quantisation that repeats with the motion, which this ratio does not — 8 % RMS on a healthy 2^17 counts/rev
@@ -317,6 +324,26 @@ def _beyond_band(f_hz: float, fit: FitResult, mode: bool) -> str:
     if mode:
         return f", beyond the band fitted (up to {fit.band[1]:g} Hz): narrowing --band does not remove its effect on K"
     return f", beyond the band fitted (up to {fit.band[1]:g} Hz), which the model fitted below it does not describe"
+
+
+def _one_phase_doubt(clock_residual_s: float | None, th: Thresholds) -> str:
+    """The one-phase torque estimate named as a cause of a misfit band before the joint, when the clock alignment's
+    residual exceeds the limit below which a phase is shown (:func:`phase_is_meaningful`); "" otherwise.
+
+    One phase current i_a gives the torque only through the electrical angle, i_q ∝ i_a / sin(θ_e + θ_0), so an error
+    δ in that angle moves the estimate by δ·cot(θ_e + θ_0) — without bound where the motor holds torque at an angle
+    at which i_a carries little of it, as a robot's pauses do. The angle stage's residual is how loosely the current's
+    phase follows the encoder's angle. Measured on the simulated robot (configs/benches/sim_robot.toml, seeds 0 and 5,
+    the trial's poor windows, residuals 107–315 µs): fed the true clock the estimate still read |H| at f_r 47 % low
+    (the true torque: 0.6 %), the fit doubled C and missed f_a by +15…24 %; the same windows recorded with two
+    phases (Park, no angle) were ok with the same clock errors. A second phase tells the estimate from the joint."""
+    if clock_residual_s is None or phase_is_meaningful(clock_residual_s, th):
+        return ""
+    return (f"the torque estimate from one phase current may bend |H| alike: the clock alignment's residual of "
+            f"{1e6 * clock_residual_s:.0f} µs (above {1e6 * th.clock_residual_complex_s:.0f} µs) says that phase "
+            "follows the encoder's electrical angle only loosely, and where the motor holds torque at an angle at "
+            "which the phase carries little of it the estimate errs — record a second phase current ([daq] channels; "
+            "Park needs no angle); if the misfit stays with two phases: ")
 
 
 def _misfit_cause(worst: BandMisfit, fit: FitResult) -> str:
