@@ -238,7 +238,22 @@ def test_a_window_of_a_paused_robot_is_not_excited_and_has_no_K(capsys: pytest.C
     assert run.code == 0
     (row,) = _rows(tmp_path / "m")
     assert row["verdict"] == "not excited" and row["K_Nm_per_rad"] is None
-    assert "the joint travelled 0 counts, less than half an electrical revolution" in row["reasons_json"]
+    idle = ("the joint travelled 0 counts, less than half an electrical revolution (16384 counts): the machine did "
+            "not move it in this window")
+    assert json.loads(row["reasons_json"]) == [idle]
+    # acq analyze of the window gives the monitor's own result (the trial: exit 2, "the motor never turns half an
+    # electrical revolution within 20 ms"), and a batch over the folder counts it analysed, not failed
+    (window,) = (tmp_path / "m").glob("*.h5")
+    run = run_cli(capsys, "analyze", str(window), "--json", "--no-report")
+    assert run.code == 0, run.err
+    assert json.loads(run.out)["quality"] == {"verdict": "not excited", "reasons": [idle]}
+    assert not window.with_suffix(".report.png").exists()
+    window.with_suffix(".result.json").unlink()
+    run = run_cli(capsys, "analyze", str(tmp_path / "m"), "--json", "--no-report", "--catalogue",
+                  str(tmp_path / "batch.sqlite"))
+    assert run.code == 0, run.err
+    assert json.loads(run.out) == [{"path": str(window), "outcome": "analysed", "K_Nm_per_rad": None,
+                                    "verdict": "not excited", "error": None}]
 
 
 def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: pytest.CaptureFixture[str],
@@ -500,7 +515,7 @@ def test_a_window_the_joint_barely_moved_in_is_not_excited_and_not_counted_as_ex
     assert [(r["verdict"], r["K_Nm_per_rad"]) for r in rows] == [("not excited", None)] * 2
     assert json.loads(rows[1]["reasons_json"]) == [
         "0 of the window's 12 moves put torque into 10…400 Hz beyond chance; time that does: 0 % of the window",
-        "clock alignment residual 1753 µs exceeds 1000 µs for a amplitude fit"]
+        "clock alignment residual 1753 µs exceeds 1000 µs for an amplitude fit"]
     assert "windows captured / excited / analysed │ 2 / 0 / 2 │" in " ".join(run.err.split())
     trend = run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1")
     assert "31084" not in trend.out and "PWM" not in trend.out
@@ -690,6 +705,8 @@ def test_a_window_whose_moves_excite_the_band_says_which_coherence_was_too_low()
     assert _but(between, 14) == ", but too little between f_a and f_r (coherence 0.61, below 0.7)"
     assert _but(band, 3) == ", but too little over the band (mean coherence 0.50, below 0.72)"
     assert _but(between, 0) == ""  # no move excites: the count says it all
+    at_the_limit = {"quality": {"excitation_coherence": 0.95, "mean_coherence": 0.7184}}  # not "0.72, below 0.72"
+    assert _but(at_the_limit, 3) == ", but too little over the band (mean coherence 0.718, below 0.72)"
 
 
 def test_a_window_judged_not_excited_after_its_analysis_keeps_no_K_beside_it(tmp_path: Path,

@@ -474,7 +474,7 @@ def _outcome(future: Future[Outcome], path: Path, hashes: dict[Path, str], reque
 def report_json(report: BatchReport) -> list[dict[str, Any]]:
     """The ``--json`` list: per session its path, what happened, K, verdict and error."""
     done = [{"path": o.path, "outcome": "failed" if o.error else "analysed",
-             "K_Nm_per_rad": None if o.doc is None else o.doc["K_Nm_per_rad"],
+             "K_Nm_per_rad": None if o.doc is None else o.doc.get("K_Nm_per_rad"),  # none when not excited
              "verdict": None if o.doc is None else o.doc["quality"]["verdict"], "error": o.error}
             for o in report.outcomes]
     return (done + [{"path": str(p.resolve()), "outcome": "skipped"} for p in report.skipped]

@@ -321,7 +321,7 @@ def batch_table(report: BatchReport) -> FittedTable:
     """
     outcomes = sorted(report.outcomes, key=lambda o: o.path)
     joints = [str(o.session.get("joint") or "?") for o in outcomes]
-    ks = [None if o.doc is None else o.doc["K_Nm_per_rad"] for o in outcomes]
+    ks = [None if o.doc is None else o.doc.get("K_Nm_per_rad") for o in outcomes]  # none when not excited
     columns = [Column("session", [Path(o.path).name for o in outcomes], "left")]
     one_joint = len(set(joints)) == 1
     if not one_joint:

@@ -55,6 +55,8 @@ def session_figure(path: Path) -> SessionFigure:
     from acq.ui.plots import SessionFigure
 
     done = analyze_session(path, stored_request(Path(path)), write=False)
+    if done.result is None:  # the joint never moved: nothing to draw, the verdict says why
+        raise ConfigError(f"{path}: not excited: {done.json_dict['quality']['reasons'][-1]}")
     return SessionFigure(Path(path).stem, done.result.figures, done.json_dict)
 
 
