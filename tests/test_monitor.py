@@ -334,6 +334,27 @@ def test_a_joint_that_stays_in_alarm_keeps_the_raw_window_that_raised_it_not_eve
         Path(rows[w]["path"]).name for w in (0, 1, first_alarm))
 
 
+def test_a_restart_in_alarm_does_not_announce_the_same_alarm_again(capsys: pytest.CaptureFixture[str],
+                                                                   tmp_path: Path) -> None:
+    """The third trial: after a restart the monitor forgot it was in alarm, ran --on-alarm again for the same episode
+    and counted it as a new alarm."""
+    # K falls 5 % per simulated minute: windows at 0 … 5 min have K −0 … −25 %
+    bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0, seed=EXCITING_SEED)
+    said = tmp_path / "said.txt"
+    args = ["monitor", "--bench", str(bench), "--fast", "--baseline-windows", "2", "--keep", "0",
+            "--out", str(tmp_path / "m"), "--on-alarm", f"echo $ACQ_SESSION >> {said}"]
+    first = run_cli(capsys, *args, "--for", "4m")
+    assert first.code == 3 and len(said.read_text().splitlines()) == 1
+    again = run_cli(capsys, *args, "--for", "2m")
+    assert again.code == 3  # still in alarm
+    rows = _rows(tmp_path / "m")
+    assert [r["window"] for r in rows] == [0, 1, 2, 3, 4, 5]
+    trend = json.loads(run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1", "--json").out)
+    assert [p["state"] for p in trend["points"]][-1] == "alarm"
+    assert len(said.read_text().splitlines()) == 1  # announced once, when it was raised
+    assert "alarms raised │ 0" in " ".join(again.err.split())
+
+
 def test_retention_rules() -> None:
     windows = [WindowFiles(i, Path(f"w{i}.h5"), done=i < 5, protected=i in (0, 3)) for i in range(6)]
     assert [w.index for w in to_delete(windows, keep=2)] == [1, 2]  # 0, 3 protected; 4, 5 the last two

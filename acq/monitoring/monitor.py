@@ -433,6 +433,9 @@ class Monitor:
                               f"{filed.ewma_lambda:g}: resume with the same, or start a new --out")
         numbers = [int(e.tags[WINDOW_TAG]) for e in known.values()]
         self._resumed(numbers)
+        # an alarm raised before the restart goes on: its command is not run again for the same episode (a power cut
+        # in alarm announced it once more and counted it twice — the third trial)
+        self._in_alarm = bool(known) and self._trend().alarm
         for path in sorted(self.s.out_dir.glob("*.h5")):
             try:
                 session = load(path)
