@@ -344,6 +344,9 @@ def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> Non
     assert "1 skipped session(s) outside the range shown" in [label.text for _, label in legend.items]
 
 
+_WINDOWS: list[Any] = []
+
+
 def _monitor_trend(tmp_path: Path, windows: list[tuple[float | None, str]], every_s: float) -> tuple[Any, Any, Any]:
     """A monitor's catalogue of ``windows`` (K, verdict) ``every_s`` of machine time apart, drawn as the trend
     widget offscreen: its K plot, frequency plot and legend."""
@@ -366,6 +369,7 @@ def _monitor_trend(tmp_path: Path, windows: list[tuple[float | None, str]], ever
             c.record(Outcome(f"/m/w{n}.h5", f"h{n}", "r", meta, doc, None, 1.0))
     ensure_app(offscreen=True)
     widget = trend_widget(load_trend(None, path, "joint1", baseline_sessions=3))
+    _WINDOWS.append(widget)  # alive while its items are looked at (Qt deletes a dropped window's items)
     (layout,) = [item for item in widget.findChildren(object) if type(item).__name__ == "GraphicsLayoutWidget"]
     k_plot, f_plot = [item for item in layout.ci.items if isinstance(item, pg.PlotItem)]
     return k_plot, f_plot, next(item for item in layout.ci.items if isinstance(item, pg.LegendItem))
@@ -379,18 +383,38 @@ def test_a_monitor_trend_is_drawn_over_machine_time_and_shows_the_windows_withou
                                                        (889.0, "ok"), (13_000.0, "poor"), (None, "not excited"),
                                                        (850.0, "ok")], 1800.0)
     ticks = [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]]
-    assert ticks == ["0.0 h", "0.5 h", "1.0 h", "1.5 h", "2.0 h", "2.5 h", "3.0 h"]
-    assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (h)"
+    assert ticks == ["0:00", "0:30", "1:00", "1:30", "2:00", "2:30", "3:00"]
+    assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (h:min)"
     assert "no K: 2 not excited / failed" in [label.text for _, label in legend.items]
     (bars,) = [item for item in k_plot.items if isinstance(item, pg.ErrorBarItem)]
     assert sorted(bars.opts["x"]) == [0.0, 2.0, 3.0, 6.0]  # no bar for the skipped window 4
 
 
+
 def test_a_short_monitor_run_is_labelled_in_seconds_not_in_hours(tmp_path: Path) -> None:
-    """Windows 5 s apart read 0.0 s, 5.0 s, 10.0 s (in hours they all read 0.0 h)."""
+    """Windows 5 s apart read 0.0, 5.0, 10.0 s (in hours they all read 0.0 h)."""
     _, f_plot, _ = _monitor_trend(tmp_path, [(890.0, "ok")] * 3, 5.0)
-    assert [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]] == ["0.0 s", "5.0 s", "10.0 s"]
+    assert [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]] == ["0.0", "5.0", "10.0"]
     assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (s)"
+
+
+def test_a_ten_minute_grid_reads_as_a_clock_not_as_rounded_decimal_hours(tmp_path: Path) -> None:
+    """The third trial: windows every 10 min over 1 h read 0.2 h, 0.3 h, 0.5 h; every 15 s over 2.5 min read
+    0.2 min, 0.5 min, 0.8 min."""
+    import pyqtgraph as pg
+
+    k_plot, f_plot, _ = _monitor_trend(tmp_path, [(890.0, "ok")] * 7, 600.0)
+    assert [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]] == [
+        "0:00", "0:10", "0:20", "0:30", "0:40", "0:50", "1:00"]
+    # the legend's "shaded: no alarm" is drawn between the baseline and the EWMA limit of the 4 judged windows (it
+    # had no path to fill: one of its curves was drawn without a pen)
+    (shade,) = [item for item in k_plot.items if isinstance(item, pg.FillBetweenItem)]
+    assert shade.path().boundingRect().height() > 0
+    (tmp_path / "b").mkdir()
+    _, f_plot, _ = _monitor_trend(tmp_path / "b", [(890.0, "ok")] * 9, 15.0)
+    assert [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]] == [
+        "0:00", "0:15", "0:30", "0:45", "1:00", "1:15", "1:30", "1:45", "2:00"]
+    assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (min:s)"
 
 
 def _known_to(i: int, k: float, half_width_pct: float) -> Entry:

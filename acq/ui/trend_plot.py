@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.trend import ELAPSED_TAG, Trend, TrendPoint
-from acq.ui.values import alarm_rules_line, time_unit
+from acq.ui.values import alarm_rules_line, clock_text
 
 
 def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (1400, 900)) -> Path:
@@ -77,8 +77,11 @@ def trend_widget(trend: Trend) -> Any:
             legend.addItem(k_plot.plot(jx, ewma, pen=pg.mkPen("#ff7f0e", width=2.5), symbol="d", symbolSize=7,
                                        symbolBrush="#ff7f0e", symbolPen=None), f"EWMA (λ = {trend.ewma_lambda:g})")
             limit_curve = k_plot.plot(jx, limit, pen=pg.mkPen("#ff7f0e", width=2, style=QtCore.Qt.PenStyle.DashLine))
-            k_plot.addItem(pg.FillBetweenItem(limit_curve, k_plot.plot(jx, [base] * len(jx), pen=None),
-                                              brush=pg.mkBrush(255, 127, 14, 35)))
+            # between two curve items with pens: a PlotDataItem drawn with pen=None has no path to fill, so the
+            # shading the legend promised was never drawn (the third trial)
+            base_curve = pg.PlotCurveItem(jx, [base] * len(jx), pen=pg.mkPen(0, 0, 0, 0))
+            k_plot.addItem(base_curve)
+            k_plot.addItem(pg.FillBetweenItem(limit_curve.curve, base_curve, brush=pg.mkBrush(255, 127, 14, 45)))
             legend.addItem(limit_curve, f"EWMA limit −{trend.ewma_L:g}σ (latest {limit[-1]:.1f}; shaded: no alarm)")
             levels += [*ewma, *limit]
         # the range of what is judged (and its limits): a skipped session's K — often wild, that is why it was
@@ -107,9 +110,8 @@ def trend_widget(trend: Trend) -> Any:
     elapsed = [p.entry.tags.get(ELAPSED_TAG) for p in trend.points]
     if trend.points and all(isinstance(e, int | float) for e in elapsed):  # a monitor's windows: its machine time
         span_s = max(elapsed) - min(elapsed)  # type: ignore[type-var,operator]
-        unit, scale = time_unit(span_s)
-        ticks = [(float(i), f"{e / scale:.1f} {unit}") for i, e in enumerate(elapsed)][::step]  # type: ignore[operator]
-        x_label = f"machine time at the window's start ({unit})"
+        ticks = [(float(i), clock_text(e, span_s)[0]) for i, e in enumerate(elapsed)][::step]  # type: ignore[arg-type]
+        x_label = f"machine time at the window's start ({clock_text(0.0, span_s)[1]})"
     else:
         ticks = [(float(i), (p.entry.created_utc or "?")[:19].replace("T", "\n"))
                  for i, p in enumerate(trend.points)][::step]

@@ -21,6 +21,19 @@ def time_unit(span_s: float) -> tuple[str, float]:
     return ("h", 3600.0) if span_s >= 3600.0 else ("min", 60.0) if span_s >= 120.0 else ("s", 1.0)
 
 
+def clock_text(t_s: float, span_s: float) -> tuple[str, str]:
+    """Machine time ``t_s`` as a clock reads it within a run of ``span_s`` seconds, and the clock's unit: "1:20"
+    ("h:min") from 1 h, "2:30" ("min:s") from 2 min, else "12.5" ("s"). Decimal hours mislabel a 10 min grid
+    (0.17 h read "0.2 h", the third trial); a clock reads every whole minute or second as it is."""
+    if span_s >= 3600.0:
+        minutes = round(t_s / 60.0)
+        return f"{minutes // 60}:{minutes % 60:02d}", "h:min"
+    if span_s >= 120.0:
+        seconds = round(t_s)
+        return f"{seconds // 60}:{seconds % 60:02d}", "min:s"
+    return f"{t_s:.1f}", "s"
+
+
 def duration_text(t_s: float) -> str:
     """``t_s`` in the unit of :func:`time_unit`: "10 s", "2.5 min", "1.25 h"."""
     unit, scale = time_unit(t_s)
