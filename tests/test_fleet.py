@@ -75,7 +75,7 @@ def test_fleet_table_shows_every_value_at_80_columns(catalogue_location: Path | 
                                                      capsys: pytest.CaptureFixture[str],
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     _fill(catalogue_location)
-    statuses = load_fleet(None, catalogue_location, now=datetime.now(UTC), stale_days=7.0)
+    statuses = load_fleet((), [catalogue_location], now=datetime.now(UTC), stale_days=7.0)
     console = Console(width=80, file=io.StringIO(), color_system=None)
     console.print(fleet_table(statuses, stale_days=7.0))
     monkeypatch.setenv("COLUMNS", "80")
@@ -98,7 +98,7 @@ def test_fleet_at_80_columns_splits_long_names_at_the_slash_never_inside_a_word(
         catalogue_location: Path | str, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(f"{__name__}.SESSIONS", [(r, j.replace("j", "joint"), *rest) for r, j, *rest in SESSIONS])
     _fill(catalogue_location)
-    statuses = load_fleet(None, catalogue_location, now=datetime.now(UTC), stale_days=7.0)
+    statuses = load_fleet((), [catalogue_location], now=datetime.now(UTC), stale_days=7.0)
     console = Console(width=80, file=io.StringIO(), color_system=None)
     console.print(fleet_table(statuses, stale_days=7.0))
     out = console.file.getvalue()  # type: ignore[attr-defined]
