@@ -64,6 +64,12 @@ def test_two_monitors_of_one_joint_name_share_a_catalogue_and_stay_apart(catalog
     mixed = run_cli(capsys, "trend", "--catalogue", str(catalogue_location), "--joint", "joint1")
     assert mixed.code == 2 and (f"joint joint1 has the windows of 2 monitors ({ids['r1']}, {ids['r2']}) — trend one: "
                                 "--tag monitor_id=ID or --tag robot=R (r1, r2)") in mixed.err
+    png = tmp_path / "r2.png"
+    view = run_cli(capsys, "view", "--trend", "joint1", "--catalogue", str(catalogue_location), "--tag", "robot=r2",
+                   "--screenshot", str(png))
+    assert view.code == 0 and png.read_bytes()[:4] == b"\x89PNG", view.err
+    assert run_cli(capsys, "view", "--trend", "joint1", "--catalogue", str(catalogue_location), "--screenshot",
+                   str(png)).code == 2  # the two monitors' windows are never drawn as one trend
     fleet = json.loads(run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--json").out)
     rows = sorted((j["robot"], j["joint"], j["monitor_id"], j["baseline_K_Nm_per_rad"]) for j in fleet)
     assert rows == [(r, "joint1", ids[r], pytest.approx(trends[r]["baseline_K_Nm_per_rad"], rel=1e-12))

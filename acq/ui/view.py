@@ -79,8 +79,12 @@ def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[
               help="With --trend: the catalogue, a file or postgresql:// URL (default: FOLDER/catalogue.sqlite).")
 @click.option("--refresh", "refresh_s", type=click.FloatRange(0.5, 3600), default=5.0, show_default=True,
               help="With --trend: re-read the catalogue every this many s (a monitor may be writing to it).")
+@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+              help="With --trend: only sessions with this tag (repeatable), e.g. --tag robot=r1 in a catalogue that "
+                   "several monitors share.")
 def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tuple[int, int],
-                 trend_joint: str | None, catalogue_path: Path | str | None, refresh_s: float) -> int:
+                 trend_joint: str | None, catalogue_path: Path | str | None, refresh_s: float,
+                 tags: tuple[str, ...]) -> int:
     """Show traces, FRF with the fitted model, coherence and identified values of SESSION(s);
     or, with --trend JOINT [FOLDER], the joint's stiffness over time."""
     if trend_joint is None and not sessions:
@@ -96,13 +100,14 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         from acq.monitoring.trend import NoSessions, load_trend
 
         folder = sessions[0] if sessions else None
-        load = functools.partial(load_trend, folder, catalogue_path, trend_joint)
+        load = functools.partial(load_trend, folder, catalogue_path, trend_joint, tags)
         try:
             first: Trend | NoSessions = load()  # any other error (a bad URL, mixed monitors) is one line, no window
         except NoSessions as e:  # started before the monitor has filed a window of the joint: the window waits for it
             first = e
         app = ensure_app(offscreen=screenshot is not None)
-        live = LiveTrend(load, first, refresh_s, joint=trend_joint)  # kept alive with the window: its timer redraws it
+        shown = " ".join([trend_joint, "tagged", *tags]) if tags else trend_joint
+        live = LiveTrend(load, first, refresh_s, joint=shown)  # kept alive with the window: its timer redraws it
         if live.waiting:
             click.echo(live.waiting, err=True)
         window = live.frame
