@@ -158,7 +158,8 @@ def test_fleet_of_several_folders_keeps_a_joint_of_each_apart(tmp_path: Path, ca
     of one robot, latest K of another: fleet said ok where the robot's own trend said ALARM −31.5 %). Each folder's
     catalogue is now read as it is and judged apart."""
     monkeypatch.setenv("COLUMNS", "250")
-    plant = tmp_path / "plant"
+    monkeypatch.chdir(tmp_path)
+    plant = Path("plant")
     _joint(plant / "r1" / "catalogue.sqlite", "a", (900.0, 902.0, 616.0))  # −31.6 %: alarm
     _joint(plant / "r2" / "catalogue.sqlite", "b", (600.0, 601.0, 599.0))
     run = run_cli(capsys, "fleet", str(plant / "r1"), str(plant / "r2"), "--json")
@@ -170,6 +171,17 @@ def test_fleet_of_several_folders_keeps_a_joint_of_each_apart(tmp_path: Path, ca
     table = run_cli(capsys, "fleet", str(plant / "r1"), str(plant / "r2"))
     lines = [[cell.strip() for cell in line.split("│")] for line in table.out.splitlines() if "│" in line]
     assert [line[:2] for line in lines] == [["—/j1", str(plant / "r1")], ["—/j1", str(plant / "r2")]]
+    trends = run_cli(capsys, "trend", str(plant / "r1"), str(plant / "r2"), "--joint", "j1", "--json")
+    assert trends.code == 3, trends.err
+    assert [(t["joint"], t["baseline_K_Nm_per_rad"], [p["K_Nm_per_rad"] for p in t["points"]], t["alarm"])
+            for t in json.loads(trends.out)] == [(f"j1 ({plant / 'r1'})", 900.0, [900.0, 902.0, 616.0], True),
+                                                 (f"j1 ({plant / 'r2'})", 600.0, [600.0, 601.0, 599.0], False)]
+    tables = run_cli(capsys, "trend", str(plant / "r1"), str(plant / "r2"), "--joint", "j1")
+    assert [line.strip() for line in tables.out.splitlines() if "stiffness trend" in line] == [
+        f"stiffness trend — j1 ({plant / 'r1'})  ALARM", f"stiffness trend — j1 ({plant / 'r2'})"]
+    one_png = run_cli(capsys, "trend", str(plant / "r1"), str(plant / "r2"), "--joint", "j1", "--png",
+                      str(tmp_path / "t.png"))
+    assert (one_png.code, one_png.err) == (2, "acq: error: --png is for one trend: give one FOLDER or --catalogue\n")
     twice = run_cli(capsys, "fleet", str(plant / "r1"), "--catalogue", str(plant / "r1" / "catalogue.sqlite"))
     assert (twice.code, twice.err) == (2, f"acq: error: {plant / 'r1'} {plant / 'r1' / 'catalogue.sqlite'}: a "
                                           "catalogue is given twice\n")

@@ -28,9 +28,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 from acq.monitoring.catalogue import Catalogue, Entry
-from acq.monitoring.catalogue_backends import is_url, redacted
 from acq.monitoring.monitor_scope import split_by_monitor
-from acq.monitoring.trend import Trend, TrendPoint, catalogue_location, compute_trend
+from acq.monitoring.trend import Trend, TrendPoint, catalogue_sources, compute_trend
 from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
 
@@ -180,12 +179,7 @@ def load_fleet(folders: Sequence[Path], catalogues: Sequence[Path | str], tags: 
     ``FOLDER/catalogue.sqlite`` and every catalogue given (none: ``sessions/catalogue.sqlite``) — judged apart, worst
     first over all of them."""
     wanted = parse_tags(tags)
-    sources = [(str(f), catalogue_location(f, None)) for f in folders] + \
-        [(redacted(str(c)) if is_url(c) else str(c), catalogue_location(None, c)) for c in catalogues] \
-        or [("", catalogue_location(None, None))]
-    same = {str(loc) if is_url(loc) else str(Path(loc).resolve()) for _, loc in sources}
-    if len(same) < len(sources):
-        raise ConfigError(f"{' '.join(label for label, _ in sources)}: a catalogue is given twice")
+    sources = catalogue_sources(folders, catalogues)
     statuses: list[JointStatus] = []
     names = []
     for label, location in sources:

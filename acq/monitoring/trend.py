@@ -32,7 +32,7 @@ from typing import Any, Literal
 
 from acq.monitoring.batch import CATALOGUE_NAME
 from acq.monitoring.catalogue import Catalogue, Entry
-from acq.monitoring.catalogue_backends import is_url
+from acq.monitoring.catalogue_backends import is_url, redacted
 from acq.monitoring.monitor_scope import MONITOR_TAG, monitors_of
 from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
@@ -336,6 +336,19 @@ def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Pat
     if not is_url(path) and not Path(path).is_file():
         raise NoSessions(f"{path}: no catalogue — fill one with acq analyze {folder or 'sessions'}/ first", path)
     return path
+
+
+def catalogue_sources(folders: Sequence[Path], catalogues: Sequence[Path | str]) -> list[tuple[str, Path | str]]:
+    """The catalogues of ``acq fleet`` / ``acq trend`` FOLDER… [--catalogue C]…, each with its label (the folder or
+    catalogue as given, a URL without its password): FOLDER/catalogue.sqlite of each folder, then each catalogue;
+    none given: ``sessions/catalogue.sqlite`` (label ''). A catalogue named twice is refused (it would be read twice).
+    """
+    sources = [(str(f), catalogue_location(f, None)) for f in folders] + \
+        [(redacted(str(c)) if is_url(c) else str(c), catalogue_location(None, c)) for c in catalogues] \
+        or [("", catalogue_location(None, None))]
+    if len({str(loc) if is_url(loc) else str(Path(loc).resolve()) for _, loc in sources}) < len(sources):
+        raise ConfigError(f"{' '.join(label for label, _ in sources)}: a catalogue is given twice")
+    return sources
 
 
 def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: str, tags: Sequence[str] = (),
