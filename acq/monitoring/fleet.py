@@ -1,8 +1,8 @@
 """``acq fleet``: every joint of every robot in one catalogue, worst first.
 
 Each joint — the sessions of one ``joint`` on one robot (the session tag ``robot``; sessions without
-it are grouped under ``—``) in one catalogue — is judged by :func:`acq.monitoring.trend.compute_trend`, the same baseline and
-alarm rules as ``acq trend``. Its state is, worst first:
+it are grouped under ``—``) in one catalogue — is judged by :func:`acq.monitoring.trend.compute_trend`, the same
+baseline and alarm rules as ``acq trend``. Its state is, worst first:
 
 * **alarm** — the latest judged session is in alarm (exit code 3, as ``acq trend``);
 * **stale** — no session started in the last ``--stale-days`` days (a monitor or bench has stopped);

@@ -60,7 +60,8 @@ def check_user_tags(tags: Mapping[str, Any], reserved: Sequence[str]) -> None:
     """Refuse a ``--tag`` of ``acq monitor`` that would overwrite a tag the monitor files itself."""
     for key in tags:
         if key in reserved or key == MONITOR_TAG:
-            raise ConfigError(f"--tag {key}=…: acq monitor files {key} itself with every window — choose another key")
+            raise ConfigError(f"--tag {key}=…: acq monitor files {key} itself with every window — "
+                              "choose another key")
 
 
 def monitors_of(entries: Iterable[Entry]) -> list[str]:

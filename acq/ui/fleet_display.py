@@ -148,9 +148,9 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
 @click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
               help="Also draw the fleet (ΔK over time, one row per joint) into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the fleet as JSON.")
-def fleet_command(folders: tuple[Path, ...], catalogues: tuple[Path | str, ...], tags: tuple[str, ...], stale_days: float,
-                  baseline_sessions: int | None, threshold_pct: float | None, ewma_lambda: float | None,
-                  png_path: Path | None, as_json: bool) -> int:
+def fleet_command(folders: tuple[Path, ...], catalogues: tuple[Path | str, ...], tags: tuple[str, ...],
+                  stale_days: float, baseline_sessions: int | None, threshold_pct: float | None,
+                  ewma_lambda: float | None, png_path: Path | None, as_json: bool) -> int:
     """Every joint (by robot tag): latest K ± 95 %, ΔK to its baseline, sessions of the last day, state
     (alarm / stale / no baseline / ok), worst first; exit code 3 if any joint is in alarm."""
     now = datetime.now(UTC)

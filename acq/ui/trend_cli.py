@@ -28,9 +28,9 @@ from acqcore.errors import ConfigError
 @click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
               help="Also draw the trend into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the trend as JSON.")
-def trend_command(folders: tuple[Path, ...], catalogues: tuple[Path | str, ...], joint: str, baseline_sessions: int | None,
-                  baseline_id: str | None, threshold_pct: float | None, ewma_lambda: float | None, tags: tuple[str, ...],
-                  png_path: Path | None, as_json: bool) -> int:
+def trend_command(folders: tuple[Path, ...], catalogues: tuple[Path | str, ...], joint: str,
+                  baseline_sessions: int | None, baseline_id: str | None, threshold_pct: float | None,
+                  ewma_lambda: float | None, tags: tuple[str, ...], png_path: Path | None, as_json: bool) -> int:
     """K of a joint over time (± 95 %), f_a, f_r, baseline and alarms; exit code 3 while in alarm.
 
     Several FOLDERs / catalogues: the joint's trend in each, judged apart (a table each, --json a list); exit code 3
