@@ -24,6 +24,7 @@ from __future__ import annotations
 from analysis.chain import PAPER_CHAIN, Pipeline, SignalChain, TorqueMethod, our_chain
 from analysis.bench_checks import first_move_sign, inertia_from_torque, phase_sequence_agreement, sequence_fault
 from analysis.encoder import longest_gap_free_span, speed_from_counts
+from analysis.excitation import against_limit
 from analysis.fit import PARAM_NAMES, Z95
 from analysis.frf import min_duration_s
 from analysis.limits import encoder_period_problem, min_current_rate_hz, min_record_s
@@ -42,7 +43,7 @@ from analysis.torque import PHASE_WINDOW_S, min_speed_rpm
 __all__ = [
     "MAX_STAMP_DEVIATION", "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",
     "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TorqueMethod", "TwoMassParams", "Z95",
-    "analyze", "code_fingerprint", "cycle_deviation_s", "electrical_speed_ratio", "encoder_period_problem", "excitation_summary",
+    "against_limit", "analyze", "code_fingerprint", "cycle_deviation_s", "electrical_speed_ratio", "encoder_period_problem", "excitation_summary",
     "min_current_rate_hz",
     "min_duration_s", "min_record_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",
     "likely_counts_per_rev", "longest_gap_free_span", "our_chain", "phase_sequence_agreement", "prepare_signals",

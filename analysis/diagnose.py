@@ -37,8 +37,11 @@ def recording_diagnosis(rec: Recording) -> tuple[str | None, str | None]:
     if r is None:
         return None, None
     doubt = ratio_doubt(r, rec.pole_pairs)
-    if doubt is not None:  # its slow move turns the motor through many electrical turns
-        doubt += "; check the constants with acq selftest"
+    if doubt is not None:  # acq selftest's slow move turns the motor through many electrical turns ...
+        doubt += ("; check the constants with acq selftest" if rec.profile is not None
+                  # ... on a bench acq commands; on a listening bench it commands none and leaves them unchecked too
+                  else "; acq selftest cannot check them on a listening bench either: take them from the motor's and "
+                       "the encoder's data sheets")
     fault = ratio_fault(r, rec.pole_pairs, rec.counts_per_rev)
     if fault is None and doubt is None and len(rec.current_a) >= 2:
         agreement = phase_sequence_agreement(rec.current_a, rec.rate_hz, rec.encoder_index, rec.position_counts,

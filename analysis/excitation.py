@@ -46,6 +46,16 @@ SMOOTH_BINS = 5
 RESOLUTION_NAMED = "where the encoder's resolution"
 
 
+def against_limit(value: float, limit: float, decimals: int = 2) -> str:
+    """``value`` with at least ``decimals`` decimals and as many more (up to 6) as it takes to read apart from
+    ``limit`` (0.718 against 0.72, not 0.72), for a sentence that compares the two."""
+    for d in range(decimals, 7):
+        text = f"{value:.{d}f}"
+        if float(text) != limit:
+            return text
+    return f"{value:.6f}"
+
+
 def weak_coherence_cause(frf: FrequencyResponse, check: np.ndarray, limit: float, *, lsb_rad: float = 0.0,
                          profile: CommandedProfile | None = None, f_a_hz: float = float("nan"),
                          band_mask_all: np.ndarray | None = None,

@@ -163,7 +163,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     kernel_error = None if fit.status == "failed" else kernel_model_error(frf, judged_fit(frf, fit), sig.torque_Nm)
     quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
                      encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None, profile=rec.profile,
-                     interference=sig.interference, kernel_error=kernel_error)
+                     interference=sig.interference, kernel_error=kernel_error,
+                     torque_from_angle=chain.torque_method == "encoder")
     caveat = chain_caveat(chain, AnalysisRequest().chain(rec))
     if caveat is not None and quality.verdict != "ok":
         quality = replace(quality, reasons=(caveat, *quality.reasons))

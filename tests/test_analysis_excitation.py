@@ -80,3 +80,12 @@ def test_interference_in_the_torque_estimate_is_named_not_the_motion(tmp_path: P
         "current that the torque model leaves in it (it removed an offset moving by 102 mA), or a drive that does not "
         "respond linearly: remove interference at its source (PWM ripple: the DAQ's anti-alias filter)")
     assert not any("accel_time_s" in r for r in reasons)
+
+
+def test_a_value_against_its_limit_shows_the_digits_that_tell_them_apart() -> None:
+    from analysis import against_limit
+
+    assert against_limit(0.718, 0.72) == "0.718"  # not "0.72, below 0.72" (the trial's mean coherence)
+    assert against_limit(0.71996, 0.72) == "0.71996"
+    assert against_limit(0.65, 0.72) == "0.65"
+    assert against_limit(0.3, 0.4) == "0.30"

@@ -81,7 +81,8 @@ def test_batch_skips_a_session_still_recording(recorded: Path, tmp_path: Path,
 def test_ctrl_c_stops_a_batch_and_every_result_written_is_catalogued(recorded: Path, tmp_path: Path) -> None:
     folder = tmp_path / "many"
     folder.mkdir()
-    for i in range(8):
+    n = 16  # 8 finished before the signal once, on a loaded machine (the test process descheduled): the batch must
+    for i in range(n):  # still be running when the first result is seen
         copy_session(recorded, folder / f"s{i}.h5")
     proc = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(folder), "--jobs", "2", "--no-report"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -97,11 +98,11 @@ def test_ctrl_c_stops_a_batch_and_every_result_written_is_catalogued(recorded: P
     assert stopped_s < 10.0  # a bound (it took 11 s for 80); bench/faults.py measures the real figure
     rows = catalogue_rows(folder / "catalogue.sqlite")
     results = sorted(p.name.replace(".result.json", ".h5") for p in folder.glob("*.result.json"))
-    assert err.splitlines() == [f"acq: interrupted: {len(results)} of 8 sessions analysed ({len(results)} by this "
+    assert err.splitlines() == [f"acq: interrupted: {len(results)} of {n} sessions analysed ({len(results)} by this "
                                 f"run), in {folder / 'catalogue.sqlite'}; run the same command again to analyse the "
-                                f"other {8 - len(results)}"]
+                                f"other {n - len(results)}"]
     assert sorted(Path(r["path"]).name for r in rows if r["error"] is None) == results
-    assert 1 <= len(results) < 8  # the result seen was catalogued; stopped part-way: queued work was cancelled
+    assert 1 <= len(results) < n  # the result seen was catalogued; stopped part-way: queued work was cancelled
     assert [p.name for p in folder.iterdir() if p.name.startswith(".")] == []  # no temp file left
     os.sync()
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -237,7 +238,22 @@ def test_a_window_of_a_paused_robot_is_not_excited_and_has_no_K(capsys: pytest.C
     assert run.code == 0
     (row,) = _rows(tmp_path / "m")
     assert row["verdict"] == "not excited" and row["K_Nm_per_rad"] is None
-    assert "the joint travelled 0 counts, less than half an electrical revolution" in row["reasons_json"]
+    idle = ("the joint travelled 0 counts, less than half an electrical revolution (16384 counts): the machine did "
+            "not move it in this window")
+    assert json.loads(row["reasons_json"]) == [idle]
+    # acq analyze of the window gives the monitor's own result (the trial: exit 2, "the motor never turns half an
+    # electrical revolution within 20 ms"), and a batch over the folder counts it analysed, not failed
+    (window,) = (tmp_path / "m").glob("*.h5")
+    run = run_cli(capsys, "analyze", str(window), "--json", "--no-report")
+    assert run.code == 0, run.err
+    assert json.loads(run.out)["quality"] == {"verdict": "not excited", "reasons": [idle]}
+    assert not window.with_suffix(".report.png").exists()
+    window.with_suffix(".result.json").unlink()
+    run = run_cli(capsys, "analyze", str(tmp_path / "m"), "--json", "--no-report", "--catalogue",
+                  str(tmp_path / "batch.sqlite"))
+    assert run.code == 0, run.err
+    assert json.loads(run.out) == [{"path": str(window), "outcome": "analysed", "K_Nm_per_rad": None,
+                                    "verdict": "not excited", "error": None}]
 
 
 def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: pytest.CaptureFixture[str],
@@ -316,6 +332,27 @@ def test_a_joint_that_stays_in_alarm_keeps_the_raw_window_that_raised_it_not_eve
     assert kept == [w in (0, 1, first_alarm) for w in range(6)]
     assert sorted(p.name for p in (tmp_path / "m").glob("*.h5")) == sorted(
         Path(rows[w]["path"]).name for w in (0, 1, first_alarm))
+
+
+def test_a_restart_in_alarm_does_not_announce_the_same_alarm_again(capsys: pytest.CaptureFixture[str],
+                                                                   tmp_path: Path) -> None:
+    """The third trial: after a restart the monitor forgot it was in alarm, ran --on-alarm again for the same episode
+    and counted it as a new alarm."""
+    # K falls 5 % per simulated minute: windows at 0 … 5 min have K −0 … −25 %
+    bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0, seed=EXCITING_SEED)
+    said = tmp_path / "said.txt"
+    args = ["monitor", "--bench", str(bench), "--fast", "--baseline-windows", "2", "--keep", "0",
+            "--out", str(tmp_path / "m"), "--on-alarm", f"echo $ACQ_SESSION >> {said}"]
+    first = run_cli(capsys, *args, "--for", "4m")
+    assert first.code == 3 and len(said.read_text().splitlines()) == 1
+    again = run_cli(capsys, *args, "--for", "2m")
+    assert again.code == 3  # still in alarm
+    rows = _rows(tmp_path / "m")
+    assert [r["window"] for r in rows] == [0, 1, 2, 3, 4, 5]
+    trend = json.loads(run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1", "--json").out)
+    assert [p["state"] for p in trend["points"]][-1] == "alarm"
+    assert len(said.read_text().splitlines()) == 1  # announced once, when it was raised
+    assert "alarms raised │ 0" in " ".join(again.err.split())
 
 
 def test_retention_rules() -> None:
@@ -403,10 +440,53 @@ def test_ctrl_c_ends_the_monitor_with_exit_130_and_one_line_of_what_it_kept(tmp_
     captured = sum(v != "interrupted" for v in verdicts)
     analysed = sum(v not in ("interrupted", "not analysed") for v in verdicts)
     assert captured >= 1
-    assert err.splitlines()[-1] == (f"acq: interrupted by user (Ctrl-C): {captured} windows captured, {analysed} "
+    windows = "window" if captured == 1 else "windows"  # "1 windows captured" (the new-user trial)
+    assert err.splitlines()[-1] == (f"acq: interrupted by user (Ctrl-C): {captured} {windows} captured, {analysed} "
                                     f"analysed, all kept in {out / 'catalogue.sqlite'} (trend state: learning "
                                     "baseline); the same command resumes")
     assert not (out / "monitor.lock").exists()  # released and removed on Ctrl-C too
+
+
+def _processes_of_session(sid: int) -> dict[int, int]:
+    """The live processes (not zombies) of session ``sid``: pid → parent pid, from /proc."""
+    found = {}
+    for stat in Path("/proc").glob("[0-9]*/stat"):
+        try:
+            fields = stat.read_text().rsplit(")", 1)[1].split()  # after "pid (comm)": state ppid pgrp session …
+        except (OSError, IndexError):
+            continue  # ended meanwhile
+        if int(fields[3]) == sid and fields[0] != "Z":
+            found[int(stat.parent.name)] = int(fields[1])
+    return found
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_kill_9_of_the_monitor_ends_its_workers_forkserver_and_resource_tracker(tmp_path: Path) -> None:
+    """The trial: after kill -9 of acq monitor its analysis worker, the forkserver and the resource tracker lived on
+    (re-parented to PID 1, ≈ 270 MB per killed monitor). Now the worker ends with the monitor, and the rest after."""
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "monitor", "--bench", str(ROBOT), "--fast", "--window", "2",
+                             "--every", "5", "--out", str(tmp_path / "monitor")], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while proc.poll() is None and time.monotonic() < deadline:
+            processes = _processes_of_session(proc.pid)
+            workers = [pid for pid, ppid in processes.items() if ppid != proc.pid and pid != proc.pid]
+            if workers:  # a child of the forkserver: an analysis worker
+                break
+            time.sleep(0.1)
+        assert proc.poll() is None, proc.communicate()
+        assert workers and len(processes) >= 4, processes  # monitor, resource tracker, forkserver, worker(s)
+        proc.kill()
+        proc.wait()
+        deadline = time.monotonic() + 5.0
+        while _processes_of_session(proc.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert _processes_of_session(proc.pid) == {}
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
 
 
 def _rows_or_none(folder: Path) -> list[dict[str, object]] | None:
@@ -456,7 +536,7 @@ def test_a_window_the_joint_barely_moved_in_is_not_excited_and_not_counted_as_ex
     assert [(r["verdict"], r["K_Nm_per_rad"]) for r in rows] == [("not excited", None)] * 2
     assert json.loads(rows[1]["reasons_json"]) == [
         "0 of the window's 12 moves put torque into 10…400 Hz beyond chance; time that does: 0 % of the window",
-        "clock alignment residual 1753 µs exceeds 1000 µs for a amplitude fit"]
+        "clock alignment residual 1753 µs exceeds 1000 µs for an amplitude fit"]
     assert "windows captured / excited / analysed │ 2 / 0 / 2 │" in " ".join(run.err.split())
     trend = run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1")
     assert "31084" not in trend.out and "PWM" not in trend.out
@@ -647,6 +727,8 @@ def test_a_window_whose_moves_excite_the_band_says_which_coherence_was_too_low()
     assert _but(between, 14) == ", but too little between f_a and f_r (coherence 0.61, below 0.7)"
     assert _but(band, 3) == ", but too little over the band (mean coherence 0.50, below 0.72)"
     assert _but(between, 0) == ""  # no move excites: the count says it all
+    at_the_limit = {"quality": {"excitation_coherence": 0.95, "mean_coherence": 0.7184}}  # not "0.72, below 0.72"
+    assert _but(at_the_limit, 3) == ", but too little over the band (mean coherence 0.718, below 0.72)"
 
 
 def test_a_window_judged_not_excited_after_its_analysis_keeps_no_K_beside_it(tmp_path: Path,
@@ -723,8 +805,176 @@ def test_alarm_commands_run_in_a_session_of_their_own_and_share_one_wait_at_the_
         start = time.monotonic()
         m._reap_alarms(wait=True)
         assert time.monotonic() - start < 1.0  # one 0.6 s wait for both, not 0.6 s each
-        assert m.status.alarm_command_failure.startswith("still running after 0.6 s when the monitor ended")
+        assert m.status.alarm_command_failure.startswith(
+            "alarm command still running after 0.6 s when the monitor ended (pid ")
+        assert "failed" not in m.status.alarm_command_failure and "failed" not in m.status.message
     finally:
         for proc in started:  # left running by the monitor, as a mail mid-send would be; not by the test
             os.killpg(proc.pid, signal.SIGKILL)
             proc.wait()
+
+
+def test_a_restart_with_another_bench_or_window_is_refused_but_not_another_simulated_machine(
+        four_windows: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The new-user trial: README's CANopen monitor, then its serial one, in the same default folder — one series of
+    windows from two measurement chains, no notice; a changed --window was accepted too. Another [sim] truth or seed
+    (a simulated wear series: the machine, not the measurement) resumes."""
+    out = tmp_path / "other_bench"
+    shutil.copytree(four_windows, out)
+    same = _bench_file(tmp_path, seed=EXCITING_SEED)
+    geared = tmp_path / "geared.toml"
+    geared.write_text(same.read_text().replace("ratio = 10.0", "ratio = 12.5"))
+    other_joint = tmp_path / "joint2.toml"
+    other_joint.write_text(same.read_text().replace('joint = "joint1"', 'joint = "joint2"'))
+    cases = [(["--bench", str(same), "--window", "5"], "--window 10, now 5"),
+             (["--bench", str(geared)], "[gear] ratio 10, now 12.5"),
+             (["--bench", str(other_joint)], "joint joint1, now joint2")]
+    for options, why in cases:
+        run = run_cli(capsys, "monitor", *options, "--fast", "--for", "1m", "--baseline-windows", "2", "--out", str(out))
+        assert (run.code, run.err) == (2, f"acq: error: {out}: its windows were captured with another bench or window "
+                                          f"({why}): their K is not comparable — start a new --out (or resume with the "
+                                          "same bench and --window)\n")
+    assert sorted(r["window"] for r in _rows(out)) == [0, 1, 2, 3]
+    worn = tmp_path / "worn"
+    worn.mkdir()
+    run = run_cli(capsys, "monitor", "--bench", str(_bench_file(worn, seed=7, K_Nm_per_rad=850.0)), "--fast", "--for",
+                  "1m", "--baseline-windows", "2", "--keep", "1", "--out", str(out))
+    assert run.code == 0, run.err
+    assert [r["window"] for r in _rows(out)] == [0, 1, 2, 3, 4]
+
+
+def test_a_folder_filed_before_the_bench_tags_resumes(four_windows: Path, tmp_path: Path,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """A missing bench tag is unknown, not a refusal: the folders of earlier monitors resume (with --window 5 here,
+    which the tags would have refused)."""
+    from acq.monitoring.window_bench import FACT_TAGS
+
+    out = tmp_path / "old"
+    shutil.copytree(four_windows, out)
+    db = sqlite3.connect(out / "catalogue.sqlite")
+    for key, tags in db.execute("SELECT session_key, tags_json FROM sessions").fetchall():
+        old = {k: v for k, v in json.loads(tags).items() if k not in FACT_TAGS}
+        db.execute("UPDATE sessions SET tags_json = ? WHERE session_key = ?", (json.dumps(old), key))
+    db.commit()
+    db.close()
+    run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--window", "5",
+                  "--fast", "--for", "1m", "--baseline-windows", "2", "--keep", "1", "--out", str(out))
+    assert run.code == 0, run.err
+    assert [r["window"] for r in _rows(out)] == [0, 1, 2, 3, 4]
+
+
+def test_a_restart_says_both_counts_and_goes_on_from_the_resumed_machine_time(
+        four_windows: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """After a restart the summary counted only this run's windows while the trend had all, and the first status line
+    said "0 s" of machine time, then jumped to 5 min."""
+    out = tmp_path / "resumed"
+    shutil.copytree(four_windows, out)
+    run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for",
+                  "2m", "--baseline-windows", "2", "--keep", "1", "--out", str(out))
+    assert run.code == 0, run.err
+    lines = [line for line in run.err.splitlines() if " captured" in line and line[0].isdigit()]
+    assert lines[0].startswith("3.2 min: 0 captured in this run (4 in the folder), "), lines
+    assert lines[-1].startswith("5.2 min: 2 captured in this run (6 in the folder), "), lines
+    table = " ".join(run.err.split())
+    assert "windows captured / excited / analysed │ 2 / 2 / 2 │" in table
+    assert "windows in the folder (earlier runs too) │ 6 │" in table
+
+
+def test_windows_not_captured_for_the_disk_budget_are_in_the_summary(tmp_path: Path) -> None:
+    """They were counted nowhere: "not excited · skipped · interrupted" 0 · 0 · 0 while 4 windows were missing. The
+    baseline window and the one that raised the alarm are kept (protected) and fill a budget of two windows."""
+    from rich.console import Console
+
+    from acq.monitoring.monitor import Monitor, MonitorSettings
+    from acq.ui.monitor_cli import status_table
+
+    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED, K_decay_pct_per_hour=300.0), out_dir=tmp_path,
+                               window_s=10.0, every_s=60.0, for_s=360.0, fast=True, baseline_windows=1,
+                               max_disk_bytes=2 * 3_872_000)
+    monitor = Monitor(settings)
+    assert monitor.run() == 3
+    st = monitor.status
+    assert (st.captured, st.not_captured, st.skipped, st.in_folder) == (2, 4, 0, 2)
+    console = Console(width=120, record=True)
+    console.print(status_table(st))
+    assert [" ".join(line.split()) for line in console.export_text().splitlines() if "not captured" in line] == [
+        "│ not captured: the disk budget (--max-disk) was full │ 4 │"]
+
+
+def test_status_shows_the_latest_K_in_alarm_and_which_window_it_is_from(capsys: pytest.CaptureFixture[str],
+                                                                        tmp_path: Path) -> None:
+    """Every line after the alarm repeated "ALARM: K <the K that raised it>" while K fell on; and "K 889.8" beside
+    "excited 0 % of the last window" was an earlier window's K without saying so."""
+    bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0, seed=EXCITING_SEED)
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "6m", "--baseline-windows", "2",
+                  "--keep", "0", "--out", str(tmp_path / "m"))
+    assert run.code == 3
+    rows = {r["window"]: r["K_Nm_per_rad"] for r in _rows(tmp_path / "m")}
+    alarms = [line for line in run.err.splitlines() if "— ALARM: K" in line]
+    assert len(alarms) >= 2
+    for line in alarms:
+        k, n = re.search(r"ALARM: K ([0-9.]+) N·m/rad in window (\d+) ", line).groups()  # type: ignore[union-attr]
+        assert float(k) == pytest.approx(rows[int(n)], abs=0.05)
+        assert f", last K {k} (window {n}), " in line
+    assert len({re.search(r"ALARM: K ([0-9.]+)", line).group(1) for line in alarms}) >= 2  # type: ignore[union-attr]
+
+
+def test_max_disk_needs_a_unit(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """--max-disk 2 was 2 bytes."""
+    with pytest.raises(ValueError, match="'2' has no unit"):
+        parse_size("2")
+    assert parse_size("123B") == 123
+    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--fast", "--for", "1m", "--max-disk", "2", "--out",
+                  str(tmp_path / "m"))
+    assert (run.code, run.err) == (2, "acq: error: --max-disk 2: '2' has no unit — give one of B, kB, MB, GB, TB, "
+                                      "KiB, MiB, GiB, TiB (e.g. 2GB)\n")
+
+
+def test_a_monitor_whose_devices_fail_to_open_leaves_no_catalogue(capsys: pytest.CaptureFixture[str],
+                                                                  tmp_path: Path) -> None:
+    """An empty catalogue.sqlite was left in --out when the bench's devices could not be opened."""
+    canopen = ROBOT.parent / "sim_robot_canopen.toml"
+    bench = tmp_path / "no_bus.toml"
+    bench.write_text(canopen.read_text().replace('interface = "virtual"', 'interface = "socketcan"')
+                     .replace('channel = "acq-sim-robot"', 'channel = "acq-no-such-bus"')
+                     .replace("simulated_node = true", "simulated_node = false"))
+    out = tmp_path / "m"
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--for", "10s", "--window", "4", "--every", "5",
+                  "--out", str(out))
+    assert run.code != 0 and "acq-no-such-bus" in run.err, run.err
+    assert not (out / "catalogue.sqlite").exists()
+
+
+def test_readmes_two_monitor_benches_differ_in_their_drive_and_not_in_their_simulated_machine() -> None:
+    """README's CANopen example, then its serial one, in the default folder: one series from two measurement chains.
+    What the refusal names, from the benches shipped (the [sim] sections, which differ in nothing that counts, are not
+    compared)."""
+    from acq.monitoring.catalogue import Entry
+    from acq.monitoring.window_bench import differences, window_facts
+
+    benches = ROBOT.parent
+    canopen, serial = (load_bench(benches / f"sim_robot_{t}.toml") for t in ("canopen", "serial"))
+    filed = [Entry("k", "k", "w.h5", "joint1", None, {"monitor_window": 0, **window_facts(canopen, 4.0)}, "ok", [],
+                   None, 890.0, (880.0, 900.0), None, None, "{}", "2026-11-30T00:00:00+00:00", None)]
+    assert differences(filed, serial, 4.0) == ["[drive] driver canopen, now serial"]
+    assert differences(filed, serial, 5.0) == ["--window 4, now 5", "[drive] driver canopen, now serial"]
+    worn = canopen.model_copy(update={"sim": canopen.sim.model_copy(update={"K_Nm_per_rad": 700.0, "seed": 9})})
+    assert differences(filed, worn, 4.0) == []
+
+
+def test_the_status_table_says_an_unstable_baseline_and_which_window_the_last_K_is_from() -> None:
+    """The monitor showed state "ok" under a baseline learned on a softening joint, and a K of an earlier window beside
+    the last window's share without saying so."""
+    from rich.console import Console
+
+    from acq.monitoring.monitor import MonitorStatus
+    from acq.ui.monitor_cli import status_table
+
+    warning = "baseline unstable: its 5 sessions scatter 12.6 % while each is known to within ±0.6 %"
+    st = MonitorStatus("joint1", last_K=889.8, last_K_ci=(880.0, 899.6), last_K_window=3, baseline_warning=warning,
+                       message="done")
+    console = Console(width=140, record=True)
+    console.print(status_table(st))
+    text = " ".join(console.export_text().split())
+    assert "last K N·m/rad (95 %) · its window │ 889.8 (880.0 … 899.6) · window 3 │" in text
+    assert f"{warning} done" in text  # the caption: the warning, then the message

@@ -14,6 +14,7 @@ import sqlite3
 import subprocess
 import sys
 from dataclasses import replace
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -435,3 +436,65 @@ def test_a_short_monitor_run_is_labelled_in_seconds_not_in_hours(tmp_path: Path)
     _, f_plot, _ = _monitor_trend(tmp_path, [(890.0, "ok")] * 3, 5.0)
     assert [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]] == ["0.0 s", "5.0 s", "10.0 s"]
     assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (s)"
+
+
+def _known_to(i: int, k: float, half_width_pct: float) -> Entry:
+    return replace(_entry(i, k), K_ci95=(k * (1 - half_width_pct / 100), k * (1 + half_width_pct / 100)))
+
+
+#: The trial: a monitor started on a joint losing 20 % of K an hour, windows 10 min apart, each K known to ±0.6 %.
+_SOFTENING = [834.5, 772.7, 678.0, 643.7, 624.7]
+
+
+def test_a_baseline_learned_on_a_changing_joint_is_called_unstable() -> None:
+    """Baseline 710.7 with σ 89.6 N·m/rad: the EWMA's limit far too wide, fleet "ok" beside ΔK −12.1 %, no word. The
+    sessions' scatter against their own intervals (χ² at 0.1 %) says the joint changed while the baseline was learned;
+    the alarm numbers of the trend stay as they were."""
+    from acq.monitoring.fleet import fleet_json, fleet_status
+    from acq.monitoring.trend import trend_json
+    from acq.ui.display import trend_table
+    from acq.ui.fleet_display import fleet_table
+
+    entries = [_known_to(i, k, 0.6) for i, k in enumerate(_SOFTENING)]
+    trend = compute_trend("j", entries, baseline_sessions=5)
+    warning = ("baseline unstable: its 5 sessions scatter 12.6 % while each is known to within ±0.6 % — the joint "
+               "changed while the baseline was learned, and its alarm limits are too wide; re-baseline with --baseline on a "
+               "session of the joint in a known state")
+    assert trend.baseline_warning == warning and trend_json(trend)["baseline_warning"] == warning
+    assert (round(trend.baseline_K_Nm_per_rad, 1), round(trend.sigma_K_Nm_per_rad, 1)) == (710.7, 89.6)
+    assert warning in trend_table(trend).caption
+    now = datetime(2026, 1, 1, 1, tzinfo=UTC)
+    (joint,) = fleet_status(entries, now=now, baseline_sessions=5)
+    assert (joint.state, round(joint.change_pct, 1)) == ("baseline", -12.1)  # its latest K is a baseline session's
+    assert fleet_json([joint])[0]["baseline_warning"] == warning
+    table = fleet_table([joint], 7.0)
+    assert f"j: {warning}" in table.caption
+    assert table.columns[-1].cells == ["baseline · baseline unstable"]
+
+
+def test_a_baseline_that_scatters_as_its_intervals_say_is_not_called_unstable() -> None:
+    """Five windows of a stable simulated joint (sim_robot.toml, seed 5, windows 0…4 min; measured): K 890.9 ± 0.5 %,
+    882.0 ± 3.3 %, 888.5 ± 0.9 %, 891.9 ± 1.1 %, 882.9 ± 3.2 % — χ² 3.3 on 4 degrees of freedom (chance 0.5); and a
+    baseline of one session, or without intervals, is never judged."""
+    stable = [(890.9, 0.54), (882.0, 3.25), (888.5, 0.87), (891.9, 1.14), (882.9, 3.24)]
+    trend = compute_trend("j", [_known_to(i, k, w) for i, (k, w) in enumerate(stable)], baseline_sessions=5)
+    assert trend.baseline_warning is None and trend.baseline_K_Nm_per_rad == pytest.approx(887.24)
+    assert compute_trend("j", [_known_to(0, 834.5, 0.6), _known_to(1, 600.0, 0.6)]).baseline_warning is None
+    no_intervals = [replace(_entry(i, k), K_ci95=(None, None)) for i, k in enumerate(_SOFTENING)]
+    assert compute_trend("j", no_intervals, baseline_sessions=5).baseline_warning is None
+
+
+def test_the_state_before_the_baseline_is_learning_baseline_in_trend_and_fleet() -> None:
+    """Monitor "learning baseline", trend "before baseline", fleet "no baseline": one name now (the JSON's values stay)."""
+    from acq.monitoring.fleet import fleet_status
+    from acq.ui.display import trend_table
+    from acq.ui.fleet_display import fleet_table
+
+    entries = [_entry(0, 890.0), _entry(1, 891.0)]
+    trend = compute_trend("j", entries, baseline_sessions=5)
+    assert [p.state for p in trend.points] == ["before baseline"] * 2
+    assert trend_table(trend).columns[-1].cells == ["learning baseline"] * 2
+    (joint,) = fleet_status(entries, now=datetime(2026, 1, 1, 1, tzinfo=UTC), baseline_sessions=5)
+    assert joint.state == "no baseline" and fleet_table([joint], 7.0).columns[-1].cells == ["learning baseline"]
+    pinned = compute_trend("j", [_entry(0, 880.0), _entry(1, 890.0)], baseline_id="id1")
+    assert trend_table(pinned).columns[-1].cells[0] == "before baseline"  # before a pinned baseline: not learning

@@ -8,6 +8,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
@@ -263,6 +264,67 @@ def test_ctrl_c_under_the_live_view_ends_the_recording_as_interrupted(tmp_path: 
     assert (result.status, result.stop_reason) == ("interrupted", "interrupted by user (Ctrl-C)")
     assert 0 < result.current_samples < 30 * RATE_HZ
     assert load(result.path).status == "interrupted"
+
+
+def _stop_and_wait(proc: subprocess.Popen[str], signum: int) -> str:
+    """Send ``signum`` to the process group (as the terminal does on Ctrl-C); its stderr once it exited."""
+    os.killpg(proc.pid, signum)
+    try:
+        _, err = proc.communicate(timeout=20)  # before the fix: never (the loop ran on until kill -9)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail(f"still running 20 s after signal {signum}")
+    return err
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+@pytest.mark.parametrize("what", ["session", "trend"])
+def test_ctrl_c_or_sigterm_closes_the_view_window_with_exit_130_and_one_line(session: Path, what: str,
+                                                                            signum: int) -> None:
+    """The trial: acq view (a session, or --trend) could not be stopped from the terminal — SIGTERM printed a
+    traceback (KeyboardInterrupt raised in Qt's frames) and both ran on until kill -9."""
+    if what == "trend":
+        from acq.monitoring.batch import record_outcome
+
+        record_outcome(analyze_session(session, write=False, report=False), None, 1.0)
+        args = ["--trend", "joint1", str(session.parent), "--refresh", "1"]
+        title = "acq trend — joint1"
+    else:
+        args, title = [str(session)], f"acq view — joint1 · {session.name}"
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "view", *args], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
+    assert proc.stdout is not None
+    line = proc.stdout.readline()  # said once the window is shown
+    assert line == f"{title}: close the window or press Ctrl-C to end\n", (line, proc.communicate())
+    time.sleep(0.5)  # in Qt's event loop (a signal before it was a KeyboardInterrupt in Python's frames)
+    err = _stop_and_wait(proc, signum)
+    assert proc.returncode == 130 and err == "acq: interrupted\n", err
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])
+def test_ctrl_c_or_sigterm_under_record_live_ends_the_recording_as_interrupted(tmp_path: Path, signum: int) -> None:
+    """The live window's Ctrl-C / SIGTERM stop the recording: the file finished as interrupted, exit 130."""
+    from acq.recording.reader import load
+
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.2s", "--duration", "600",
+                             "--fast", "--live", "--no-analyze", "--out", str(tmp_path)], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob("*.h5")) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.05)  # the window is shown before the recording (and its file) starts
+    assert proc.poll() is None, proc.communicate()
+    time.sleep(0.5)  # some samples recorded
+    err = _stop_and_wait(proc, signum)
+    reason = "interrupted by user (Ctrl-C)" if signum == signal.SIGINT else "stopped by SIGTERM"
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and err.splitlines()[-1].startswith(f"acq: interrupted: {reason} — "), err
+    (path,) = tmp_path.glob("*.h5")
+    recorded = load(path)
+    assert (recorded.status, recorded.meta.stop_reason) == ("interrupted", reason)
+    assert 0 < recorded.current.sample_count < 600 * RATE_HZ
 
 
 def test_the_side_panel_says_the_values_are_motor_side() -> None:

@@ -31,12 +31,12 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from acq.commissioning.devices import can_section, ni_section, serial_section
-from acq.monitoring.window_judge import joint_travel, not_excited, not_excited_reasons
+from acq.monitoring.window_judge import not_excited, not_excited_reasons
 from acq.commissioning.selftest_checks import (Check, blf_check, daq_blocks_check, direction_check, drive_period_check,
                                                encoder_speed_check, phase_order_check, samples_check, speed_ratio_check,
                                                standstill_current_check, sync_jitter_check, sync_times,
                                                torque_constant_check)
-from acq.offline.analyze import analyze_session, recording_from_session
+from acq.offline.analyze import analyze_session, joint_travel, recording_from_session
 from acq.recording.recorder import Recorder
 from acq.recording.reader import load
 from acq.recording.session import Session

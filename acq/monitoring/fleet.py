@@ -6,7 +6,8 @@ baseline and alarm rules as ``acq trend``. Its state is, worst first:
 
 * **alarm** — the latest judged session is in alarm (exit code 3, as ``acq trend``);
 * **stale** — no session started in the last ``--stale-days`` days (a monitor or bench has stopped);
-* **no baseline** — not enough good sessions for a baseline yet;
+* **no baseline** — not enough good sessions for a baseline yet (shown as "learning baseline", as acq monitor says);
+* **baseline** — a baseline, but no session judged against it yet;
 * **ok**.
 
 Within a state the joints with the largest drop of K come first. Several catalogues (``acq fleet plant/r1
@@ -33,8 +34,8 @@ from acq.monitoring.trend import Trend, TrendPoint, catalogue_sources, compute_t
 from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
 
-FleetState = Literal["alarm", "stale", "no baseline", "ok"]
-STATE_ORDER: dict[FleetState, int] = {"alarm": 0, "stale": 1, "no baseline": 2, "ok": 3}
+FleetState = Literal["alarm", "stale", "no baseline", "baseline", "ok"]
+STATE_ORDER: dict[FleetState, int] = {"alarm": 0, "stale": 1, "no baseline": 2, "baseline": 3, "ok": 4}
 UNTAGGED_ROBOT = "—"
 _JUDGED_OR_GOOD = ("baseline", "ok", "alarm", "before baseline")
 
@@ -47,7 +48,7 @@ class JointStatus:
     ----------
     robot, joint : str
         The ``robot`` tag of its sessions (:data:`UNTAGGED_ROBOT` when absent) and the joint's name.
-    state : {"alarm", "stale", "no baseline", "ok"}
+    state : {"alarm", "stale", "no baseline", "baseline", "ok"}
         See the module's docstring.
     source : str
         Where the row comes from when that tells it apart: the catalogue (several given), the monitor (several
@@ -149,6 +150,8 @@ def _joint_status(robot: str, joint: str, entries: list[Entry], now: datetime, s
         state = "stale"
     elif trend.baseline_K_Nm_per_rad is None:
         state = "no baseline"
+    elif not trend.judged:  # its latest K is a baseline session's: nothing judged yet (its ΔK is against their mean)
+        state = "baseline"
     else:
         state = "ok"
     return JointStatus(robot, joint, state, trend, latest, last, len(day),
@@ -166,7 +169,7 @@ def fleet_json(statuses: Sequence[JointStatus]) -> list[dict[str, Any]]:
                      "K_Nm_per_rad": None if entry is None else entry.K_Nm_per_rad,
                      "K_ci95": None if entry is None else list(entry.K_ci95), "change_pct": s.change_pct,
                      "baseline_K_Nm_per_rad": s.trend.baseline_K_Nm_per_rad,
-                     "rules": s.trend.rules_source,
+                     "rules": s.trend.rules_source, "baseline_warning": s.trend.baseline_warning,
                      "latest_session_id": None if entry is None else entry.session_id,
                      "last_session_utc": None if s.last_session_utc is None else s.last_session_utc.isoformat(),
                      "analysed_last_day": s.analysed_last_day, "excited_last_day": s.excited_last_day})

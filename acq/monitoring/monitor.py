@@ -14,8 +14,10 @@ Each window is judged for excitation (:mod:`acq.monitoring.window_judge`): a win
 with verdict ``not excited`` and the reason, without K. Windows are numbered (session tag ``monitor_window``) and
 placed in machine time (``monitor_elapsed_s`` = number × ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
-``interrupted`` (not counted). In ``fast`` mode (simulated benches) machine time is simulated: the loop
-does not sleep, and waits for the analysis instead of skipping (no real time passes meanwhile).
+``interrupted`` (not counted); it refuses a folder whose windows were captured with another bench or ``--window``
+(:mod:`acq.monitoring.window_bench`) or judged by other alarm rules. In ``fast`` mode (simulated benches) machine
+time is simulated: the loop does not sleep, and waits for the analysis instead of skipping (no real time passes
+meanwhile).
 """
 
 from __future__ import annotations
@@ -35,9 +37,10 @@ from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
 from acq.monitoring.catalogue_backends import is_url
 from acq.monitoring.folder_lock import folder_lock
-from acq.monitoring.monitor_scope import MONITOR_TAG, check_user_tags, monitor_identity, own_windows
+from acq.monitoring.monitor_scope import IDENTITY_FILE, MONITOR_TAG, check_user_tags, monitor_identity, own_windows
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.monitoring.trend import ELAPSED_TAG, RULE_TAGS, AlarmRules, Trend, alarm_onsets, compute_trend, filed_rules
+from acq.monitoring.window_bench import FACT_TAGS, differences, window_facts
 from acq.monitoring.window_judge import analyse_window, excites, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
@@ -88,21 +91,26 @@ class MonitorStatus:
     """The live figures of a monitor (shown by :func:`acq.ui.monitor_cli.status_table`)."""
 
     joint: str
-    captured: int = 0
+    captured: int = 0  # in this run
+    in_folder: int = 0  # windows the folder holds: those of earlier runs (a restart resumes them) and this run's
+    resumed: int = 0  # of them, those of earlier runs
     excited: int = 0
     not_excited: int = 0
     analysed: int = 0
-    skipped: int = 0
+    skipped: int = 0  # captured, not analysed: the analysis fell behind
+    not_captured: int = 0  # not captured: the disk budget would have been exceeded
     interrupted: int = 0
     alarms: int = 0
-    alarm_command_failure: str | None = None  # how the last --on-alarm command that failed did: "exit 127 (…)"
+    alarm_command_failure: str | None = None  # the last --on-alarm command's problem: "alarm command failed: exit 1"
     machine_time_s: float = 0.0  # the start of the window being captured; its end once it is captured
     disk_bytes: int = 0
     last_K: float | None = None
+    last_K_window: int | None = None  # the window last_K is of (not the last window when that had no K)
     last_K_ci: tuple[float | None, float | None] = (None, None)
     change_pct: float | None = None
     baseline_K: float | None = None
     state: str = "starting"
+    baseline_warning: str | None = None  # the baseline's windows disagree beyond their intervals (Trend's)
     message: str = ""
     last_excited_fraction: float | None = None  # share of the last analysed window that excites the joint
     last_moves: tuple[dict[str, Any], ...] = ()  # its moves: index, start_s, duration_s, peak_rad_s, excited
@@ -137,10 +145,11 @@ class Monitor:
         self._pending: dict[Future[Outcome], str] = {}
         self._alarm_procs: list[subprocess.Popen[bytes]] = []
         self._in_alarm = False
+        self._filed = 0  # catalogue rows written by this run
         self._size = expected_window_bytes(settings.bench, settings.window_s)
         # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
         self._rules = AlarmRules(settings.baseline_windows, settings.threshold_pct, settings.ewma_lambda)
-        check_user_tags(settings.tags, (WINDOW_TAG, ELAPSED_TAG, *RULE_TAGS.values()))
+        check_user_tags(settings.tags, (WINDOW_TAG, ELAPSED_TAG, *RULE_TAGS.values(), *FACT_TAGS))
         self._catalogue_location = settings.catalogue or settings.out_dir / CATALOGUE_NAME
         # windows filed before monitors had an identity are this monitor's only in its own folder's catalogue
         self._legacy = not is_url(self._catalogue_location) and \
@@ -175,6 +184,21 @@ class Monitor:
 
         Returns 130 when stopped (:attr:`stopped_by`: Ctrl-C, SIGTERM, a stop request), else 3 when the last
         state is alarm, else 0."""
+        # a catalogue file or identity this run made (a database of a URL is not ours to remove)
+        made = [p for p in (None if is_url(self._catalogue_location) else Path(self._catalogue_location),
+                            self.s.out_dir / IDENTITY_FILE) if p is not None and not p.exists()]
+        try:
+            self._run()
+        finally:
+            if made and not self._filed:  # devices that failed to open: no empty catalogue left behind
+                for path in made:
+                    for left in (path, *(path.with_name(path.name + end) for end in ("-wal", "-shm", "-journal"))):
+                        left.unlink(missing_ok=True)
+        if self._stop is not None:
+            return EXIT_INTERRUPTED
+        return 3 if self._in_alarm else 0
+
+    def _run(self) -> None:
         with folder_lock(self.s.out_dir), Catalogue(self._catalogue_location) as catalogue, \
                 analysis_executor(self.s.jobs, None) as pool, self._signals():
             self.catalogue = catalogue
@@ -194,15 +218,12 @@ class Monitor:
             self.status.state = "alarm" if self._in_alarm else self.status.state
             self.status.message = f"stopped: {self._stop}" if self._stop else "done"
             self._show()
-        if self._stop is not None:
-            return EXIT_INTERRUPTED
-        return 3 if self._in_alarm else 0
 
     def _window(self, n: int, pool: Any) -> None:
         """Capture window ``n`` (if the disk budget allows) and hand it to the pool (if it keeps up)."""
         self.status.machine_time_s = n * self.s.every_s
         if not self._room_for_window():
-            self.status.skipped += 1
+            self.status.not_captured += 1
             self.status.message = f"window {n} not captured: the disk budget would be exceeded"
             self._show()
             return
@@ -213,7 +234,8 @@ class Monitor:
         machine = getattr(drive, "machine_tags", dict)()  # what the machine says of the window (a robot's payload)
         recorder = Recorder(bench, None, current, drive, self.s.out_dir, self.s.window_s,
                             tags={**self.s.tags, **machine, WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s,
-                                  MONITOR_TAG: self._id, **self._rules.as_tags()})
+                                  MONITOR_TAG: self._id, **self._rules.as_tags(),
+                                  **window_facts(self.s.bench, self.s.window_s)})
         self._recorder = recorder
         if self._stop is not None:
             recorder.request_stop(self._stop)
@@ -223,6 +245,7 @@ class Monitor:
             self._recorder = None
         key = str(load(result.path).meta.session_id)
         self._windows[key] = WindowFiles(n, result.path, False, False, key)
+        self.status.in_folder += 1
         self._size = max(self._size, int(_SIZE_MARGIN * result.path.stat().st_size))
         if result.status != "complete":
             self._mark(key, "interrupted", f"window capture {result.status}: {result.stop_reason}")
@@ -273,6 +296,7 @@ class Monitor:
     def _record(self, key: str, outcome: Outcome) -> None:
         """Catalogue one window, update the trend, the alarm and the figures, apply retention."""
         self.catalogue.record(outcome)
+        self._filed += 1
         verdict = (outcome.doc or {}).get("quality", {}).get("verdict")
         self.status.analysed += verdict not in ("not analysed", "interrupted")
         self.status.excited += excites(outcome.doc)
@@ -318,6 +342,8 @@ class Monitor:
         if with_k:  # while the baseline is learned too: a person watching wants to see K from the first good window
             last = with_k[-1]
             st.last_K, st.last_K_ci, st.change_pct = last.entry.K_Nm_per_rad, last.entry.K_ci95, last.change_pct
+            st.last_K_window = last.entry.tags.get(WINDOW_TAG)
+        st.baseline_warning = trend.baseline_warning
         st.state = "alarm" if trend.alarm else ("ok" if trend.judged else
                                                 "baseline" if trend.baseline_K_Nm_per_rad else "learning baseline")
         point = next((p for p in trend.points if p.entry.session_id == key), None)
@@ -326,13 +352,15 @@ class Monitor:
         if point.state == "alarm" and not self._in_alarm:
             st.alarms += 1
             self._run_on_alarm(point.entry, trend)
+        elif point.state == "alarm":  # still in alarm: the latest K (the one that raised it stays in the catalogue)
+            st.message = _alarm_message(point.entry)
         self._in_alarm = point.state == "alarm"
 
     def _run_on_alarm(self, entry: Entry, trend: Trend) -> None:
         """Start ``on_alarm`` through ``sh -c`` (as cron, systemd and git hooks do: pipes, redirections and ``$ACQ_K``
         work; the values reach it only as environment variables, never in the command's text) and do not wait for it:
         a slow mail or webhook must not stop the capture; :meth:`_reap_alarms` reports how it ended."""
-        self.status.message = f"ALARM: K {entry.K_Nm_per_rad:.1f} N·m/rad ({entry.path})"
+        self.status.message = _alarm_message(entry)
         if not self.s.on_alarm:
             return
         env = {**user_environment(), "ACQ_JOINT": trend.joint, "ACQ_K": f"{entry.K_Nm_per_rad:.6g}",
@@ -356,8 +384,8 @@ class Monitor:
                 try:
                     proc.wait(timeout=max(0.0, deadline - time.monotonic()))
                 except subprocess.TimeoutExpired:
-                    self._alarm_failed(f"still running after {_ALARM_WAIT_S:g} s when the monitor ended "
-                                       f"(pid {proc.pid}, left running)")
+                    self._alarm_problem(f"alarm command still running after {_ALARM_WAIT_S:g} s when the monitor "
+                                        f"ended (pid {proc.pid}, left running)")
                     self._alarm_procs.remove(proc)
                     continue
             code = proc.poll()
@@ -370,9 +398,13 @@ class Monitor:
                 self._alarm_failed(f"killed by signal {-code}")
 
     def _alarm_failed(self, why: str) -> None:
-        """Report a failed --on-alarm command in the status line and the final summary."""
-        self.status.alarm_command_failure = why
-        self.status.message = f"alarm command failed: {why}: {self.s.on_alarm}"
+        """Report a failed --on-alarm command (exit ≠ 0, a signal, cannot start) in the status line and summary."""
+        self._alarm_problem(f"alarm command failed: {why}")
+
+    def _alarm_problem(self, what: str) -> None:
+        """Report what went wrong with an --on-alarm command in the status line and the final summary."""
+        self.status.alarm_command_failure = what
+        self.status.message = f"{what}: {self.s.on_alarm}"
         self._show()
 
     # ---- retention and disk ----------------------------------------------------------------------------
@@ -406,6 +438,14 @@ class Monitor:
     def _resume(self, pool: Any) -> int:
         """Mark or analyse the windows a previous run left; return the next window's number."""
         known = {e.session_id: e for e in self._own_windows()}
+        windows = sorted(own_windows((e for e in self.catalogue.entries() if WINDOW_TAG in e.tags), self._id,
+                                     legacy=self._legacy), key=lambda e: int(e.tags[WINDOW_TAG]))
+        changed = differences(windows, self.s.bench, self.s.window_s)
+        if changed:
+            # K of another measurement chain, scale or window length would join the trend as if the joint had changed
+            raise ConfigError(f"{self.s.out_dir}: its windows were captured with another bench or window "
+                              f"({'; '.join(changed)}): their K is not comparable — start a new --out (or resume "
+                              "with the same bench and --window)")
         filed = filed_rules(list(known.values()))
         if filed is not None and filed.as_tags() != self._rules.as_tags():
             # other rules midway re-baselined on windows judged before, the alarm cleared silently (the second trial)
@@ -413,6 +453,10 @@ class Monitor:
                               f"{filed.baseline_sessions} --threshold-pct {filed.threshold_pct:g} --ewma-lambda "
                               f"{filed.ewma_lambda:g}: resume with the same, or start a new --out")
         numbers = [int(e.tags[WINDOW_TAG]) for e in known.values()]
+        self._resumed(numbers)
+        # an alarm raised before the restart goes on: its command is not run again for the same episode (a power cut
+        # in alarm announced it once more and counted it twice — the third trial)
+        self._in_alarm = bool(known) and self._trend().alarm
         for path in sorted(self.s.out_dir.glob("*.h5")):
             try:
                 session = load(path)
@@ -432,9 +476,21 @@ class Monitor:
                 self._mark(key, "interrupted", f"window capture {session.status}: {session.meta.stop_reason}")
             else:
                 self._submit(pool, key)
-        self._retain(self._trend())
+        trend = self._trend()
+        self._retain(trend)
         self._collect(at_most=0)
+        self._resumed(numbers)
+        if numbers:  # the resumed trend's figures (last K, baseline, state) from the first status line on
+            self._judge(self._trend(), "")
+            self._show()
         return max(numbers, default=-1) + 1
+
+    def _resumed(self, numbers: list[int]) -> None:
+        """The folder's windows (``numbers``) in the status: their count, and machine time from the end of the last
+        (the first status line of a restart said "0 s", then jumped)."""
+        self.status.in_folder = self.status.resumed = len(set(numbers))
+        if numbers:
+            self.status.machine_time_s = max(numbers) * self.s.every_s + self.s.window_s
 
     # ---- time, signals, display ----------------------------------------------------------------------
     def _wait_until(self, deadline: float) -> None:
@@ -450,4 +506,10 @@ class Monitor:
     def _show(self) -> None:
         if self.on_status is not None:
             self.on_status(self.status)
+
+
+def _alarm_message(entry: Entry) -> str:
+    """The status line of a window in alarm: its K, its number and its file."""
+    window = f" in window {entry.tags[WINDOW_TAG]}" if WINDOW_TAG in entry.tags else ""
+    return f"ALARM: K {entry.K_Nm_per_rad:.1f} N·m/rad{window} ({entry.path})"
 

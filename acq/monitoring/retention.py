@@ -95,8 +95,10 @@ def delete(window: WindowFiles) -> int:
 
 
 def parse_size(text: str) -> int:
-    """``2GB``, ``500MB``, ``1.5GiB``, ``123`` (bytes) → bytes; ValueError naming the text otherwise."""
-    units = {"": 1, "B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "TB": 10**12,
+    """``2GB``, ``500MB``, ``1.5GiB``, ``123B`` → bytes; ValueError naming the text otherwise.
+
+    The unit is required: ``--max-disk 2`` was taken as 2 bytes (the new-user trial), where 2 GB was meant."""
+    units = {"B": 1, "KB": 10**3, "MB": 10**6, "GB": 10**9, "TB": 10**12,
              "KIB": 2**10, "MIB": 2**20, "GIB": 2**30, "TIB": 2**40}
     s = text.strip().upper().replace(" ", "")
     number = s.rstrip("KMGTIB")
@@ -105,6 +107,8 @@ def parse_size(text: str) -> int:
         value = float(number)
     except ValueError:
         raise ValueError(f"{text!r} is not a size (e.g. 2GB, 500MB)") from None
+    if not unit:
+        raise ValueError(f"{text!r} has no unit — give one of B, kB, MB, GB, TB, KiB, MiB, GiB, TiB (e.g. {text}GB)")
     if unit not in units or value <= 0:
         raise ValueError(f"{text!r} is not a size (e.g. 2GB, 500MB)")
     return int(value * units[unit])

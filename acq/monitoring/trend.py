@@ -10,6 +10,9 @@ session (sessions before a pinned baseline are shown, not judged). Two alarm rul
   a small but persistent drop, relative to the session-to-session scatter σ of K. σ is the larger of
   the baseline's own 95 % interval (as 1.96 σ) and the standard deviation of the baseline sessions.
 
+A baseline of several sessions that disagree far beyond their own intervals (the joint changed while it was
+learned) is called unstable (:func:`baseline_warning`): its limits are too wide to trust.
+
 The alarm state is the latest judged session's: exit code 3 while it is in alarm, so a cron job or a
 PLC script can act; re-pin the baseline (``--baseline``) after a repair.
 
@@ -30,6 +33,8 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any, Literal
 
+from scipy.stats import chi2
+
 from acq.monitoring.batch import CATALOGUE_NAME
 from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.catalogue_backends import is_url, redacted
@@ -40,6 +45,9 @@ from analysis import AnalysisRequest, Z95
 
 EXIT_ALARM = 3
 EWMA_L = 3.0
+#: A baseline whose sessions scatter about their mean this unlikely by their own intervals is called unstable
+#: (χ² test, :func:`baseline_warning`): a stable joint's baseline is called so once in a thousand.
+BASELINE_SIGNIFICANCE = 0.001
 
 State = Literal["baseline", "ok", "alarm", "skipped", "before baseline"]
 
@@ -150,6 +158,7 @@ class Trend:
     ewma_lambda: float
     ewma_L: float = EWMA_L
     rules_source: str = AlarmRules.source
+    baseline_warning: str | None = None  # the baseline's sessions disagree beyond their intervals (baseline_warning)
 
     @property
     def judged(self) -> list[TrendPoint]:
@@ -234,6 +243,32 @@ def _sigma(baseline: Sequence[Entry]) -> float:
     return max(from_ci, scatter)
 
 
+def baseline_warning(baseline: Sequence[Entry]) -> str | None:
+    """Why a baseline of several sessions cannot be trusted, or None: their K disagree far beyond their own intervals.
+
+    A joint that changed while its baseline was learned (a monitor started on a joint already softening) gives a
+    mean between old and new and a scatter σ that widens the EWMA's limit: the alarm comes late or never. Test:
+    χ² = Σ (K_i − K̄)² / σ_i² about the inverse-variance weighted mean K̄, σ_i the session's 95 % half-width
+    / 1.96, against χ² with n − 1 degrees of freedom at :data:`BASELINE_SIGNIFICANCE` — no tuned constant: each session's
+    own interval says how much it may scatter. It assumes those intervals are honest (Gaussian about the truth);
+    sessions without an interval are left out, and with fewer than two the test is not made."""
+    known = [(e.K_Nm_per_rad, (hi - lo) / 2) for e in baseline if e.K_Nm_per_rad is not None
+             for lo, hi in [e.K_ci95] if lo is not None and hi is not None and hi > lo]
+    if len(known) < 2:
+        return None
+    weights = [(Z95 / half) ** 2 for _, half in known]
+    mean = sum(w * k for w, (k, _) in zip(weights, known)) / sum(weights)
+    statistic = sum(w * (k - mean) ** 2 for w, (k, _) in zip(weights, known))
+    if chi2.sf(statistic, len(known) - 1) >= BASELINE_SIGNIFICANCE:
+        return None
+    ks = [k for k, _ in known]
+    scatter_pct = 100 * statistics.stdev(ks) / statistics.fmean(ks)
+    known_pct = 100 * max(half / k for k, half in known)
+    return (f"baseline unstable: its {len(known)} sessions scatter {scatter_pct:.1f} % while each is known to within "
+            f"±{known_pct:.1f} % — the joint changed while the baseline was learned, and its alarm limits are too "
+            "wide; re-baseline with --baseline on a session of the joint in a known state")
+
+
 def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: int | None = None,
                   baseline_id: str | None = None, threshold_pct: float | None = None,
                   ewma_lambda: float | None = None) -> Trend:
@@ -285,6 +320,7 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
                      threshold_pct, ewma_lambda, rules_source=judged_by.source)
     base = statistics.fmean(e.K_Nm_per_rad for e in baseline)  # type: ignore[misc]
     sigma = _sigma(baseline)
+    warning = baseline_warning(baseline)
     z, t, points = base, 0, []
     for i, e in enumerate(entries):
         if skip[id(e)] is not None:
@@ -306,7 +342,8 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
         rules += ["EWMA"] if z < base - limit else []
         points.append(TrendPoint(e, "alarm" if rules else "ok", "+".join(rules), change,
                                  100.0 * (z / base - 1.0), -100.0 * limit / base))
-    return Trend(joint, points, base, note, sigma, threshold_pct, ewma_lambda, rules_source=judged_by.source)
+    return Trend(joint, points, base, note, sigma, threshold_pct, ewma_lambda, rules_source=judged_by.source,
+                 baseline_warning=warning)
 
 
 def trend_json(trend: Trend) -> dict[str, Any]:
@@ -314,7 +351,7 @@ def trend_json(trend: Trend) -> dict[str, Any]:
     return {"joint": trend.joint, "alarm": trend.alarm, "baseline_K_Nm_per_rad": trend.baseline_K_Nm_per_rad,
             "baseline": trend.baseline_note, "sigma_K_Nm_per_rad": trend.sigma_K_Nm_per_rad,
             "threshold_pct": trend.threshold_pct, "ewma_lambda": trend.ewma_lambda, "ewma_L": EWMA_L,
-            "rules": trend.rules_source,
+            "rules": trend.rules_source, "baseline_warning": trend.baseline_warning,
             "points": [{**asdict(p.entry), "state": p.state, "reason": p.reason, "change_pct": p.change_pct,
                         "ewma_change_pct": p.ewma_change_pct, "ewma_limit_pct": p.ewma_limit_pct}
                        for p in trend.points]}

@@ -18,11 +18,10 @@ from typing import Any
 
 from acq.monitoring.batch import analyze_one, session_meta
 from acq.monitoring.catalogue import Outcome
-from acq.offline.analyze import output_paths, write_json
+from acq.offline.analyze import idle_reason, output_paths, write_json
 from acq.recording.reader import load
-from acq.recording.session import Session
 from acqcore.errors import StorageError
-from analysis import AnalysisRequest, Thresholds, excitation_summary
+from analysis import AnalysisRequest, Thresholds, against_limit, excitation_summary
 
 
 def _weak_coherence(quality: dict[str, Any]) -> str | None:
@@ -32,11 +31,13 @@ def _weak_coherence(quality: dict[str, Any]) -> str | None:
     th = Thresholds()
     exc, mean = quality.get("excitation_coherence"), quality.get("mean_coherence")
     if exc is not None and not exc >= th.excitation_poor:
-        return f"too little between f_a and f_r (coherence {exc:.2f}, below {th.excitation_poor:g})"
+        return (f"too little between f_a and f_r (coherence {against_limit(exc, th.excitation_poor)}, "
+                f"below {th.excitation_poor:g})")
     if mean is None:
         return ""
     if not mean >= th.coherence_poor:
-        return f"too little over the band (mean coherence {mean:.2f}, below {th.coherence_poor:g})"
+        return (f"too little over the band (mean coherence {against_limit(mean, th.coherence_poor)}, "
+                f"below {th.coherence_poor:g})")
     return None
 
 
@@ -85,25 +86,15 @@ def marked(path: str, sha256: str, request: AnalysisRequest, meta: dict[str, Any
     return Outcome(path, sha256, request.key(), meta, out, None, 0.0)
 
 
-def joint_travel(session: Session) -> tuple[float, float]:
-    """Encoder counts the joint travelled in ``session`` (back and forth added up), and the least an analysis needs:
-    half an electrical revolution, in counts."""
-    counts = session.encoder.position_counts
-    travel = float(abs(counts[1:] - counts[:-1]).sum()) if counts.size > 1 else 0.0
-    return travel, session.bench.encoder.counts_per_rev / (2 * session.bench.motor.pole_pairs)
-
-
 def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
     """Judge and analyse one window (runs in a worker process); never raises."""
     if multiprocessing.parent_process() is not None:  # a worker: Ctrl-C in the terminal is the monitor's to handle
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         session = load(path)
-        travel, need = joint_travel(session)
-        if travel < need:
-            return marked(path, sha256, request, session_meta(session), "not excited",
-                          [f"the joint travelled {travel:.0f} counts, less than half an electrical revolution "
-                           f"({need:.0f} counts): the machine did not move it in this window"])
+        idle = idle_reason(session)
+        if idle is not None:
+            return marked(path, sha256, request, session_meta(session), "not excited", [idle])
     except Exception:  # noqa: BLE001 - analyze_one below records why the file cannot be read
         pass
     outcome = analyze_one(path, sha256, request, write=False)  # no report PNG; the result is written once, below

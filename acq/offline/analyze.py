@@ -41,7 +41,7 @@ class SessionResult:
     """A session's identification with where its outputs went."""
 
     session: Session
-    result: Result
+    result: Result | None  # None: a record acq did not command in which the joint never moved (:func:`idle_reason`)
     json_dict: dict[str, Any]
     json_path: Path
     report_path: Path | None
@@ -125,9 +125,44 @@ def simulated_truth(session: Session) -> dict[str, float] | None:
             "C_Nms_per_rad": sim.C_Nms_per_rad, "offset_s": offset, "drift_ppm": sim.daq_drift_ppm}
 
 
+def joint_travel(session: Session) -> tuple[float, float]:
+    """Encoder counts the joint travelled in ``session`` (back and forth added up), and the least an analysis needs:
+    half an electrical revolution, in counts."""
+    counts = session.encoder.position_counts
+    travel = float(abs(counts[1:] - counts[:-1]).sum()) if counts.size > 1 else 0.0
+    return travel, session.bench.encoder.counts_per_rev / (2 * session.bench.motor.pole_pairs)
+
+
+def idle_reason(session: Session) -> str | None:
+    """Why a record acq did not command (no profile: a passive or listening record, a monitor's window, an import)
+    holds nothing to analyse: the joint travelled less than half an electrical revolution — the reason of the
+    monitor's verdict ``not excited``. None when it travelled more, or when acq commanded the motion (a commanded
+    record that never moves is a bench fault: the analysis' error names it)."""
+    if session.profile is not None:
+        return None
+    travel, need = joint_travel(session)
+    if travel >= need:
+        return None
+    where = "window" if "monitor_window" in session.tags else "record"
+    return (f"the joint travelled {travel:.0f} counts, less than half an electrical revolution ({need:.0f} counts): "
+            f"the machine did not move it in this {where}")
+
+
+def not_excited_json(session: Session, request: AnalysisRequest, reason: str) -> dict[str, Any]:
+    """The ``.result.json`` document of a record whose joint never moved (:func:`idle_reason`): verdict
+    ``not excited`` with the reason, no numbers — as the monitor catalogues such a window."""
+    doc: dict[str, Any] = {"options": request.to_json_dict(),
+                           "quality": {"verdict": "not excited", "reasons": [reason]}}
+    return _identified(doc, session)
+
+
 def result_json(session: Session, result: Result) -> dict[str, Any]:
     """The ``--json`` / ``.result.json`` document: the result's keys plus what identifies the session."""
-    doc = result.to_json_dict()
+    return _identified(result.to_json_dict(), session)
+
+
+def _identified(doc: dict[str, Any], session: Session) -> dict[str, Any]:
+    """``doc`` with what identifies the session, the analysis' time and version, and the simulated truth."""
     doc["session"] = {
         "path": str(session.path),
         "session_id": session.meta.session_id,
@@ -165,16 +200,17 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
         rec = recording_from_session(session)
         asked = request.as_default_where_it_is(rec)  # spelled-out defaults: the session's own result, not a variant
         request = request_for(session, asked)
-        result = analyze(rec, request)
+        idle = idle_reason(session)
+        result = analyze(rec, request) if idle is None else None
     except ValueError as e:  # on part of a session, the error may come of what is missing: the note says what
         why = f" ({notes[0].removeprefix('note: ')})" if notes else ""
         raise ConfigError(f"{session.path}: {e}{why}") from None
-    doc = result_json(session, result)
+    doc = result_json(session, result) if result is not None else not_excited_json(session, request, str(idle))
     doc["quality"]["reasons"][:0] = notes
     doc["partial"] = bool(notes)  # the note says why
     doc["session"]["damage"] = list(session.damage)
     json_path, png_path = output_paths(session.path, request, result_dir)
-    report_path = png_path if report and write else None
+    report_path = png_path if report and write and result is not None else None  # nothing to draw when not excited
     if write:
         try:
             if report_path is not None and free_bytes(report_path.parent) < REPORT_ROOM_BYTES:

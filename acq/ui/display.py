@@ -278,7 +278,10 @@ def trend_table(trend: Trend) -> FittedTable:
     wide_time, short_time = start_times([p.entry.created_utc for p in pts])
     tags = [" ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.entry.tags.items())
             for p in pts]
-    states = [TREND_STATES[p.state] + (f": {p.reason.replace('+', ' + ')}" if p.state == "alarm" else "")
+    # "learning baseline" as acq monitor and acq fleet say it; "before baseline" only before a pinned one (--baseline)
+    words = {**TREND_STATES,
+             "before baseline": "before baseline" if trend.baseline_K_Nm_per_rad else "learning baseline"}
+    states = [words[p.state] + (f": {p.reason.replace('+', ' + ')}" if p.state == "alarm" else "")
               + (f" (#{i} below)" if p.state == "skipped" else "") for i, p in enumerate(pts, 1)]
     rel = [f"± {50.0 * (p.entry.K_ci95[1] - p.entry.K_ci95[0]) / p.entry.K_Nm_per_rad:.1f}"
            if None not in (*p.entry.K_ci95, p.entry.K_Nm_per_rad) else "—" for p in pts]
@@ -305,7 +308,7 @@ def trend_table(trend: Trend) -> FittedTable:
     sigma = "" if trend.sigma_K_Nm_per_rad is None else f", σ = {f1(trend.sigma_K_Nm_per_rad)} N·m/rad"
     caption += [f"{base}; ALARM below −{trend.threshold_pct:g} % (threshold) or "
                 f"EWMA (λ = {trend.ewma_lambda:g}) below its −{trend.ewma_L:g}σ limit (EWMA){sigma}; rules: "
-                f"{trend.rules_source}",
+                f"{trend.rules_source}", *([trend.baseline_warning] if trend.baseline_warning else []),
                 *(f"#{i} skipped: {p.reason}" for i, p in enumerate(pts, 1) if p.state == "skipped")]
     title = f"stiffness trend — {escape(trend.joint)}" + ("  [bold red]ALARM[/]" if trend.alarm else "")
     return FittedTable(title, columns, caption, row_styles=[_TREND_STYLES[p.state] for p in pts])
@@ -318,7 +321,7 @@ def batch_table(report: BatchReport) -> FittedTable:
     """
     outcomes = sorted(report.outcomes, key=lambda o: o.path)
     joints = [str(o.session.get("joint") or "?") for o in outcomes]
-    ks = [None if o.doc is None else o.doc["K_Nm_per_rad"] for o in outcomes]
+    ks = [None if o.doc is None else o.doc.get("K_Nm_per_rad") for o in outcomes]  # none when not excited
     columns = [Column("session", [Path(o.path).name for o in outcomes], "left")]
     one_joint = len(set(joints)) == 1
     if not one_joint:

@@ -24,7 +24,9 @@ from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet
 from acq.monitoring.trend import EXIT_ALARM
 from acq.ui.values import alarm_rules_line, format_value
 
-_STYLES = {"alarm": "bold red", "stale": "yellow", "no baseline": "dim", "ok": ""}
+_STYLES = {"alarm": "bold red", "stale": "yellow", "no baseline": "dim", "baseline": "cyan", "ok": ""}
+#: The state column's words: "no baseline" (the JSON's) as acq monitor and acq trend say it.
+_STATE_WORDS = {"no baseline": "learning baseline"}
 #: Time bins of the PNG's heat strips (the width of a strip is the time since the oldest session).
 HEAT_BINS = 400
 
@@ -55,8 +57,9 @@ def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> FittedTab
                replace(wide_time, header="last session\n(UTC)",
                        narrow=replace(short_time, header=short_time.header.replace("started", "last"))),
                Column("24 h\nok/all", [f"{s.excited_last_day}/{s.analysed_last_day}" for s in statuses]),
-               Column("state", [f"ALARM {s.latest.reason.replace('+', ' + ')}"
-                                if s.state == "alarm" and s.latest is not None else s.state for s in statuses],
+               Column("state", [(f"ALARM {s.latest.reason.replace('+', ' + ')}" if s.state == "alarm" and
+                                 s.latest is not None else _STATE_WORDS.get(s.state, s.state))
+                                + (" · baseline unstable" if s.trend.baseline_warning else "") for s in statuses],
                       "left", wrap=True)]
     if any(s.source for s in statuses):  # several catalogues, or several monitors of one robot and joint name
         columns.insert(1, Column("source", [s.source or "—" for s in statuses], "left", wrap=True))
@@ -64,6 +67,7 @@ def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> FittedTab
                "verdict ok / all analysed; alarm rules as acq trend (per joint: acq trend --joint J --tag robot=R)"]
     if statuses:
         caption.append(alarm_rules_line([(s.trend.joint, s.trend.rules_source) for s in statuses]))
+    caption += [f"{s.trend.joint}: {s.trend.baseline_warning}" for s in statuses if s.trend.baseline_warning]
     return FittedTable(title, columns, caption, row_styles=[_STYLES[s.state] for s in statuses])
 
 

@@ -7,7 +7,7 @@ block is written and for each event stored) only counts samples and events and p
 to the block into a bounded queue; when the queue is full the block is dropped *for display only*
 (it is already on disk). A timer in the main thread drains the queue and redraws ~30 times a second.
 
-Stopping: Ctrl-C or SIGTERM (handled in the main thread, which Python services at each redraw) or
+Stopping: Ctrl-C or SIGTERM (handled in the main thread: :func:`acq.ui.qt_signals.signals_in_qt_loop`) or
 closing the window calls :meth:`acq.recording.recorder.Recorder.request_stop`; the recorder ends at its next
 safe point with status ``interrupted`` — unless it already has all its samples.
 """
@@ -31,6 +31,7 @@ from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
 from acq.recording.recorder import Recorder, RecordingResult
 from acq.ui.plots import ensure_app
+from acq.ui.qt_signals import signals_in_qt_loop
 from acq.ui.view import has_display
 from drivers.base import CurrentBlock, EncoderBlock, StreamEvent
 from acqcore.errors import ConfigError
@@ -247,21 +248,17 @@ class LiveView:
                 self.window.close()
                 self.app.quit()
 
-        def on_signal(signum: int, frame: object) -> None:
+        def on_signal(signum: int) -> None:
             self.feed.request_stop("interrupted by user (Ctrl-C)" if signum == signal.SIGINT else "stopped by SIGTERM")
 
-        previous = {s: signal.signal(s, on_signal) for s in (signal.SIGINT, signal.SIGTERM)}
         timer.timeout.connect(tick)
-        self.window.show()
-        t0 = time.monotonic()
-        worker.start()
-        timer.start(FRAME_INTERVAL_MS)
-        try:
+        with signals_in_qt_loop(on_signal):
+            self.window.show()
+            t0 = time.monotonic()
+            worker.start()
+            timer.start(FRAME_INTERVAL_MS)
             self.app.exec()
             worker.join()
-        finally:
-            for s, handler in previous.items():
-                signal.signal(s, handler)
         stats = LiveStats(self.window.frames, time.monotonic() - t0, self.feed.dropped, self.feed.max_listener_s)
         if "error" in outcome:
             raise outcome["error"]

@@ -43,18 +43,21 @@ def status_table(st: MonitorStatus) -> Table:
     table.add_column("what")
     table.add_column("value", justify="right")
     lo, hi = st.last_K_ci
-    k_text = "—" if st.last_K is None else (f"{st.last_K:.1f} ({format_value(lo, '.1f')} … {format_value(hi, '.1f')})")
+    k_text = "—" if st.last_K is None else (f"{st.last_K:.1f} ({format_value(lo, '.1f')} … {format_value(hi, '.1f')})"
+                                            f" · window {st.last_K_window}")
     rows = [
         ("machine time", duration_text(st.machine_time_s)),
         ("windows captured / excited / analysed", f"{st.captured} / {st.excited} / {st.analysed}"),
+        *([("windows in the folder (earlier runs too)", str(st.in_folder))] if st.resumed else []),
         ("not excited · skipped · interrupted", f"{st.not_excited} · {st.skipped} · {st.interrupted}"),
-        ("last K N·m/rad (95 %)", k_text),
+        *([("not captured: the disk budget (--max-disk) was full", str(st.not_captured))] if st.not_captured else []),
+        ("last K N·m/rad (95 %) · its window", k_text),
         ("ΔK against the baseline", format_value(st.change_pct, "+.1f") + " %"),
         ("baseline K N·m/rad", format_value(st.baseline_K, ".1f")),
         ("excited share: last window · all windows", f"{_pct(st.last_excited_fraction)} · "
                                                      f"{_pct(st.program_excited_fraction)}"),
         ("trend state", f"[bold red]{st.state}[/]" if st.state == "alarm" else st.state),
-        ("alarms raised", str(st.alarms) + (f" · [bold red]alarm command failed: {escape(st.alarm_command_failure)}[/]"
+        ("alarms raised", str(st.alarms) + (f" · [bold red]{escape(st.alarm_command_failure)}[/]"
                                             if st.alarm_command_failure else "")),
         ("disk used", f"{st.disk_bytes / 1e6:.1f} MB"),
     ]
@@ -63,9 +66,14 @@ def status_table(st: MonitorStatus) -> Table:
     if st.last_moves:
         excited = sum(m["excited"] for m in st.last_moves)
         table.add_row(f"moves of the last window: {excited} of {len(st.last_moves)} excite", moves_table(st.last_moves))
-    if st.message:
-        table.caption = st.message
+    table.caption = "\n".join(filter(None, (st.baseline_warning, st.message))) or None
     return table
+
+
+def _captured(st: MonitorStatus) -> str:
+    """'1 window captured', '12 captured in this run, 15 in the folder' (after a restart)."""
+    text = f"{st.captured} window{'s' if st.captured != 1 else ''} captured"
+    return text + (f" in this run, {st.in_folder} in the folder" if st.resumed else "")
 
 
 def _pct(fraction: float | None) -> str:
@@ -140,9 +148,15 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
     last = [""]
 
     def log(st: MonitorStatus) -> None:  # one line per change when not on a terminal (a service, a log file)
-        line = (f"{duration_text(st.machine_time_s)}: {st.captured} captured, {st.excited} excited, {st.analysed} "
-                f"analysed, excited {_pct(st.last_excited_fraction)} of the last window, K {format_value(st.last_K, '.1f')}, ΔK {format_value(st.change_pct, '+.1f')} %, "
-                f"{st.state}, {st.disk_bytes / 1e6:.1f} MB" + (f" — {st.message}" if st.message else ""))
+        last_k = "—" if st.last_K is None else f"{st.last_K:.1f} (window {st.last_K_window})"
+        line = (f"{duration_text(st.machine_time_s)}: {st.captured} captured"
+                + (f" in this run ({st.in_folder} in the folder)" if st.resumed else "")
+                + f", {st.excited} excited, {st.analysed} "
+                f"analysed" + (f", {st.not_captured} not captured (disk budget)" if st.not_captured else "")
+                + f", excited {_pct(st.last_excited_fraction)} of the last window, last K {last_k}, "
+                f"ΔK {format_value(st.change_pct, '+.1f')} %, {st.state}"
+                + (" (baseline unstable)" if st.baseline_warning else "") + f", {st.disk_bytes / 1e6:.1f} MB"
+                + (f" — {st.message}" if st.message else ""))
         if line != last[0]:
             console.print(line, highlight=False, markup=False, soft_wrap=True)
             last[0] = line
@@ -160,5 +174,5 @@ def _say_if_stopped(monitor: Monitor, catalogue: Path | str) -> None:
         return
     st = monitor.status
     catalogue = redacted(catalogue) if is_url(catalogue) else catalogue  # type: ignore[arg-type]
-    click.echo(f"acq: {monitor.stopped_by}: {st.captured} windows captured, {st.analysed} analysed, all kept in "
+    click.echo(f"acq: {monitor.stopped_by}: {_captured(st)}, {st.analysed} analysed, all kept in "
                f"{catalogue} (trend state: {st.state}); the same command resumes", err=True)

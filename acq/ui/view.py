@@ -5,7 +5,8 @@ when ``<session>.result.json`` exists, its options are used, so the window shows
 found (the JSON holds the values, not the curves, hence the re-run: ≲ 3 s for a 60 s session).
 Several sessions overlay their FRFs with a legend (e.g. the same joint months apart).
 
-Qt is imported only when a window or a screenshot is drawn, so the rest of the CLI starts fast.
+Qt is imported only when a window or a screenshot is drawn, so the rest of the CLI starts fast. Closing the window
+exits 0; Ctrl-C or SIGTERM close it too, with exit 130 and one line (:mod:`acq.ui.qt_signals`).
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import click
 
 from acq.ui.options import CatalogueLocation
 from acq.offline.analyze import analyze_session
-from acqcore.errors import AcqError, ConfigError
+from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 from analysis import AnalysisRequest
 
 if TYPE_CHECKING:
@@ -54,6 +55,8 @@ def session_figure(path: Path) -> SessionFigure:
     from acq.ui.plots import SessionFigure
 
     done = analyze_session(path, stored_request(Path(path)), write=False)
+    if done.result is None:  # the joint never moved: nothing to draw, the verdict says why
+        raise ConfigError(f"{path}: not excited: {done.json_dict['quality']['reasons'][-1]}")
     return SessionFigure(Path(path).stem, done.result.figures, done.json_dict)
 
 
@@ -95,6 +98,7 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         click.echo(NO_DISPLAY_MESSAGE, err=True)
         return 1
     from acq.ui.plots import ReportView, ensure_app, grab_png
+    from acq.ui.qt_signals import loop_ended_by_signals
 
     if trend_joint is not None:
         from acq.monitoring.trend import NoSessions, load_trend
@@ -105,25 +109,32 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
             first: Trend | NoSessions = load()  # any other error (a bad URL, mixed monitors) is one line, no window
         except NoSessions as e:  # started before the monitor has filed a window of the joint: the window waits for it
             first = e
-        app = ensure_app(offscreen=screenshot is not None)
-        shown = " ".join([trend_joint, "tagged", *tags]) if tags else trend_joint
-        live = LiveTrend(load, first, refresh_s, joint=shown)  # kept alive with the window: its timer redraws it
-        if live.waiting:
-            click.echo(live.waiting, err=True)
-        window = live.frame
     else:
         figures = [session_figure(p) for p in sessions]
-        app = ensure_app(offscreen=screenshot is not None)
-        title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}"
-                 if len(figures) == 1 else f"{len(figures)} sessions")
-        window = ReportView(figures, title=title)
-    if screenshot is not None:
-        grab_png(window, screenshot, size)
-        click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")
-        return 0
-    window.resize(*size)
-    window.show()
-    app.exec()
+    app = ensure_app(offscreen=screenshot is not None)
+    # from here Ctrl-C / SIGTERM end the event loop (a KeyboardInterrupt raised in Qt's frames was a traceback)
+    with loop_ended_by_signals(app) as caught:
+        if trend_joint is not None:
+            shown = " ".join([trend_joint, "tagged", *tags]) if tags else trend_joint
+            live = LiveTrend(load, first, refresh_s, joint=shown)  # kept alive with the window: its timer redraws it
+            if live.waiting:
+                click.echo(live.waiting, err=True)
+            window = live.frame
+        else:
+            title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}"
+                     if len(figures) == 1 else f"{len(figures)} sessions")
+            window = ReportView(figures, title=title)
+        if screenshot is not None:
+            grab_png(window, screenshot, size)
+            click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")
+            return 0
+        window.resize(*size)
+        window.show()
+        click.echo(f"{window.windowTitle()}: close the window or press Ctrl-C to end")
+        app.exec()
+    if caught:
+        click.echo("acq: interrupted", err=True)
+        return EXIT_INTERRUPTED
     return 0
 
 
