@@ -75,7 +75,7 @@ def test_fleet_table_shows_every_value_at_80_columns(catalogue_location: Path | 
                                                      capsys: pytest.CaptureFixture[str],
                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     _fill(catalogue_location)
-    statuses = load_fleet(None, catalogue_location, now=datetime.now(UTC), stale_days=7.0)
+    statuses = load_fleet((), [catalogue_location], now=datetime.now(UTC), stale_days=7.0)
     console = Console(width=80, file=io.StringIO(), color_system=None)
     console.print(fleet_table(statuses, stale_days=7.0))
     monkeypatch.setenv("COLUMNS", "80")
@@ -98,7 +98,7 @@ def test_fleet_at_80_columns_splits_long_names_at_the_slash_never_inside_a_word(
         catalogue_location: Path | str, monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(f"{__name__}.SESSIONS", [(r, j.replace("j", "joint"), *rest) for r, j, *rest in SESSIONS])
     _fill(catalogue_location)
-    statuses = load_fleet(None, catalogue_location, now=datetime.now(UTC), stale_days=7.0)
+    statuses = load_fleet((), [catalogue_location], now=datetime.now(UTC), stale_days=7.0)
     console = Console(width=80, file=io.StringIO(), color_system=None)
     console.print(fleet_table(statuses, stale_days=7.0))
     out = console.file.getvalue()  # type: ignore[attr-defined]
@@ -138,3 +138,63 @@ def test_the_fleet_says_where_its_alarm_rules_came_from(catalogue_location: Path
     assert rules() == ["alarm rules: acq's defaults (r1/j1, r1/j2, r2/j1); as acq monitor judged its windows (r4/j1)"]
     assert rules("--threshold-pct", "20", "--baseline-sessions", "1", "--ewma-lambda", "0.2") == [
         "alarm rules: from the command line"]
+
+
+def _joint(location: Path | str, prefix: str, ks: tuple[float, ...], **tags: str) -> None:
+    """Sessions of joint j1, one an hour up to an hour ago, with these K and tags."""
+    now = datetime.now(UTC)
+    with Catalogue(location) as c:
+        for n, k in enumerate(ks):
+            doc = {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [k - 5, k + 5]},
+                   "quality": {"verdict": "ok", "reasons": []}}
+            meta = {"session_id": f"{prefix}{n}", "joint": "j1", "tags": dict(tags),
+                    "created_utc": (now - timedelta(hours=len(ks) - n)).isoformat(timespec="seconds")}
+            c.record(Outcome(f"/x/{prefix}{n}.h5", f"{prefix}{n}", "r", meta, doc, None, 1.0))
+
+
+def test_fleet_of_several_folders_keeps_a_joint_of_each_apart(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                              monkeypatch: pytest.MonkeyPatch) -> None:
+    """The trial: three robots' sessions, all of joint "joint1", analysed into one catalogue made one joint (baseline
+    of one robot, latest K of another: fleet said ok where the robot's own trend said ALARM −31.5 %). Each folder's
+    catalogue is now read as it is and judged apart."""
+    monkeypatch.setenv("COLUMNS", "250")
+    monkeypatch.chdir(tmp_path)
+    plant = Path("plant")
+    _joint(plant / "r1" / "catalogue.sqlite", "a", (900.0, 902.0, 616.0))  # −31.6 %: alarm
+    _joint(plant / "r2" / "catalogue.sqlite", "b", (600.0, 601.0, 599.0))
+    run = run_cli(capsys, "fleet", str(plant / "r1"), str(plant / "r2"), "--json")
+    assert run.code == 3, run.err
+    rows = [(j["source"], j["robot"], j["joint"], j["state"], j["baseline_K_Nm_per_rad"], round(j["change_pct"], 1))
+            for j in json.loads(run.out)]
+    assert rows == [(str(plant / "r1"), "—", "j1", "alarm", 900.0, -31.6),
+                    (str(plant / "r2"), "—", "j1", "ok", 600.0, -0.2)]
+    table = run_cli(capsys, "fleet", str(plant / "r1"), str(plant / "r2"))
+    lines = [[cell.strip() for cell in line.split("│")] for line in table.out.splitlines() if "│" in line]
+    assert [line[:2] for line in lines] == [["—/j1", str(plant / "r1")], ["—/j1", str(plant / "r2")]]
+    trends = run_cli(capsys, "trend", str(plant / "r1"), str(plant / "r2"), "--joint", "j1", "--json")
+    assert trends.code == 3, trends.err
+    assert [(t["joint"], t["baseline_K_Nm_per_rad"], [p["K_Nm_per_rad"] for p in t["points"]], t["alarm"])
+            for t in json.loads(trends.out)] == [(f"j1 ({plant / 'r1'})", 900.0, [900.0, 902.0, 616.0], True),
+                                                 (f"j1 ({plant / 'r2'})", 600.0, [600.0, 601.0, 599.0], False)]
+    tables = run_cli(capsys, "trend", str(plant / "r1"), str(plant / "r2"), "--joint", "j1")
+    assert [line.strip() for line in tables.out.splitlines() if "stiffness trend" in line] == [
+        f"stiffness trend — j1 ({plant / 'r1'})  ALARM", f"stiffness trend — j1 ({plant / 'r2'})"]
+    one_png = run_cli(capsys, "trend", str(plant / "r1"), str(plant / "r2"), "--joint", "j1", "--png",
+                      str(tmp_path / "t.png"))
+    assert (one_png.code, one_png.err) == (2, "acq: error: --png is for one trend: give one FOLDER or --catalogue\n")
+    twice = run_cli(capsys, "fleet", str(plant / "r1"), "--catalogue", str(plant / "r1" / "catalogue.sqlite"))
+    assert (twice.code, twice.err) == (2, f"acq: error: {plant / 'r1'} {plant / 'r1' / 'catalogue.sqlite'}: a "
+                                          "catalogue is given twice\n")
+
+
+def test_fleet_judges_the_windows_of_two_monitors_of_one_joint_name_apart(tmp_path: Path,
+                                                                         capsys: pytest.CaptureFixture[str]) -> None:
+    """Two monitors without a robot tag filing into one catalogue: one row each, named by the monitor."""
+    shared = tmp_path / "plant.sqlite"
+    _joint(shared, "a", (900.0, 902.0, 616.0), monitor_window="0", monitor_id="host:/m/r1:0a")
+    _joint(shared, "b", (600.0, 601.0, 599.0), monitor_window="0", monitor_id="host:/m/r2:0b")
+    run = run_cli(capsys, "fleet", "--catalogue", str(shared), "--json")
+    assert run.code == 3, run.err
+    assert [(j["source"], j["monitor_id"], j["state"], j["baseline_K_Nm_per_rad"]) for j in json.loads(run.out)] == [
+        ("monitor host:/m/r1:0a", "host:/m/r1:0a", "alarm", 900.0), ("monitor host:/m/r2:0b", "host:/m/r2:0b", "ok",
+                                                                     600.0)]

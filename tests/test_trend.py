@@ -317,6 +317,51 @@ def test_the_trend_window_redraws_when_a_writer_adds_sessions(tmp_path: Path) ->
     assert "not refreshed" in live.frame.windowTitle()
 
 
+def test_the_trend_window_started_before_the_first_window_waits_for_it(tmp_path: Path,
+                                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    """acq view --trend of a monitor's folder before the monitor had filed a window failed with "no sessions of joint
+    joint1 (joints: none)"; README promised a window that redraws when the monitor has added windows."""
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    import functools
+
+    from acq.monitoring.catalogue import Catalogue, Outcome
+    from acq.monitoring.trend import NoSessions, load_trend
+    from acq.ui.plots import ensure_app
+    from acq.ui.view import LiveTrend
+
+    folder = tmp_path / "monitor"
+    png = tmp_path / "waiting.png"
+    run = run_cli(capsys, "view", "--trend", "joint1", str(folder), "--screenshot", str(png))
+    assert run.code == 0 and png.read_bytes()[:4] == b"\x89PNG"
+    assert run.err == f"waiting for the first window of joint1 in {folder / 'catalogue.sqlite'} …\n"
+
+    def write(joint: str, n: int, k: float) -> None:
+        doc = {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [k - 4, k + 4]},
+               "quality": {"verdict": "ok", "reasons": []}}
+        meta = {"session_id": f"{joint}w{n}", "joint": joint, "tags": {"monitor_window": n},
+                "created_utc": f"2026-11-29T10:0{n}:00+00:00"}
+        with Catalogue(folder / "catalogue.sqlite") as c:
+            c.record(Outcome(f"/m/w{n}.h5", f"h{joint}{n}", "r", meta, doc, None, 1.0))
+
+    ensure_app(offscreen=True)
+    load = functools.partial(load_trend, folder, None, "joint1")
+    with pytest.raises(NoSessions) as missing:
+        load()
+    live = LiveTrend(load, missing.value, refresh_s=3600, joint="joint1")
+    assert live.shown is None and live.frame.windowTitle() == "acq trend — joint1"
+    assert live.refresh() is False
+    assert live.waiting == f"waiting for the first window of joint1 in {folder / 'catalogue.sqlite'} …"
+    write("joint2", 0, 500.0)  # the catalogue made, a window of another joint: still waiting, saying what there is
+    assert live.refresh() is False
+    assert live.waiting == (f"waiting for the first window of joint1 in {folder / 'catalogue.sqlite'} … "
+                            "(joints so far: joint2)")
+    write("joint1", 0, 890.0)
+    assert live.refresh() is True and live.waiting is None
+    assert [p.entry.K_Nm_per_rad for p in live.shown.points] == [890.0]  # type: ignore[union-attr]
+    write("joint1", 1, 700.0)
+    assert live.refresh() is True and len(live.shown.points) == 2 and live.shown.alarm  # type: ignore[union-attr]
+
+
 def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> None:
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     import pyqtgraph as pg

@@ -1,8 +1,8 @@
 """``acq fleet``: every joint of every robot in one catalogue, worst first.
 
 Each joint — the sessions of one ``joint`` on one robot (the session tag ``robot``; sessions without
-it are grouped under ``—``) — is judged by :func:`acq.monitoring.trend.compute_trend`, the same baseline and
-alarm rules as ``acq trend``. Its state is, worst first:
+it are grouped under ``—``) in one catalogue — is judged by :func:`acq.monitoring.trend.compute_trend`, the same
+baseline and alarm rules as ``acq trend``. Its state is, worst first:
 
 * **alarm** — the latest judged session is in alarm (exit code 3, as ``acq trend``);
 * **stale** — no session started in the last ``--stale-days`` days (a monitor or bench has stopped);
@@ -10,7 +10,11 @@ alarm rules as ``acq trend``. Its state is, worst first:
 * **baseline** — a baseline, but no session judged against it yet;
 * **ok**.
 
-Within a state the joints with the largest drop of K come first. "Excited" sessions are those whose
+Within a state the joints with the largest drop of K come first. Several catalogues (``acq fleet plant/r1
+plant/r2``) are read as they are and never mixed: a joint of the same robot and name in two of them is two rows,
+told apart by their source. Within one catalogue the windows of several monitors of the same robot and joint name
+(monitors sharing a catalogue without a ``robot`` tag) are judged apart too, each monitor a row
+(:func:`acq.monitoring.monitor_scope.split_by_monitor`). "Excited" sessions are those whose
 analysis gave a K with verdict ``ok``; the others (failed, ``poor``: too little excitation, low
 coherence …) count as analysed only. The command, table and PNG are :mod:`acq.ui.fleet_display`.
 """
@@ -25,7 +29,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 from acq.monitoring.catalogue import Catalogue, Entry
-from acq.monitoring.trend import Trend, TrendPoint, catalogue_location, compute_trend
+from acq.monitoring.monitor_scope import split_by_monitor
+from acq.monitoring.trend import Trend, TrendPoint, catalogue_sources, compute_trend
 from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
 
@@ -45,6 +50,11 @@ class JointStatus:
         The ``robot`` tag of its sessions (:data:`UNTAGGED_ROBOT` when absent) and the joint's name.
     state : {"alarm", "stale", "no baseline", "baseline", "ok"}
         See the module's docstring.
+    source : str
+        Where the row comes from when that tells it apart: the catalogue (several given), the monitor (several
+        monitors of one robot and joint name in a catalogue); empty otherwise.
+    monitor : str or None
+        The identity of the monitor whose windows these are (:data:`acq.monitoring.monitor_scope.MONITOR_TAG`).
     trend : Trend
         The joint's trend (baseline, points, rules).
     latest : TrendPoint or None
@@ -63,6 +73,8 @@ class JointStatus:
     last_session_utc: datetime | None
     analysed_last_day: int
     excited_last_day: int
+    source: str = ""
+    monitor: str | None = None
 
     @property
     def change_pct(self) -> float | None:
@@ -84,7 +96,7 @@ def session_start(entry: Entry) -> datetime | None:
     return start if start.tzinfo else start.replace(tzinfo=UTC)
 
 
-def fleet_status(entries: Sequence[Entry], *, now: datetime, stale_days: float = 7.0,
+def fleet_status(entries: Sequence[Entry], *, now: datetime, stale_days: float = 7.0, source: str = "",
                  **trend_options: Any) -> list[JointStatus]:
     """Judge every (robot, joint) of ``entries`` (oldest session first); worst first.
 
@@ -96,6 +108,8 @@ def fleet_status(entries: Sequence[Entry], *, now: datetime, stale_days: float =
         The present, UTC (the last day and staleness are counted back from it).
     stale_days : float
         A joint with no session started within this many days is stale.
+    source : str
+        The catalogue's label, when several are judged together ('' for one).
     **trend_options
         ``baseline_sessions``, ``threshold_pct``, ``ewma_lambda`` of :func:`acq.monitoring.trend.compute_trend`.
     """
@@ -103,15 +117,26 @@ def fleet_status(entries: Sequence[Entry], *, now: datetime, stale_days: float =
     for e in entries:
         if e.joint is not None:
             groups.setdefault((str(e.tags.get("robot", UNTAGGED_ROBOT)), e.joint), []).append(e)
-    statuses = [_joint_status(robot, joint, group, now, stale_days, trend_options)
-                for (robot, joint), group in groups.items()]
+    statuses = []
+    for (robot, joint), group in groups.items():
+        by_monitor = split_by_monitor(group)
+        for monitor, history in by_monitor.items():
+            apart = ([source] if source else []) + ([f"monitor {monitor or '—'}"] if len(by_monitor) > 1 else [])
+            statuses.append(_joint_status(robot, joint, history, now, stale_days, trend_options, " · ".join(apart),
+                                          monitor))
+    return worst_first(statuses)
+
+
+def worst_first(statuses: Sequence[JointStatus]) -> list[JointStatus]:
+    """``statuses`` by state (alarm first), then by the drop of K (largest first)."""
     return sorted(statuses, key=lambda s: (STATE_ORDER[s.state], s.change_pct if s.change_pct is not None
-                                           else math.inf, s.robot, s.joint))
+                                           else math.inf, s.robot, s.joint, s.source))
 
 
 def _joint_status(robot: str, joint: str, entries: list[Entry], now: datetime, stale_days: float,
-                  trend_options: dict[str, Any]) -> JointStatus:
-    trend = compute_trend(joint if robot == UNTAGGED_ROBOT else f"{robot}/{joint}", entries, **trend_options)
+                  trend_options: dict[str, Any], source: str, monitor: str | None) -> JointStatus:
+    name = joint if robot == UNTAGGED_ROBOT else f"{robot}/{joint}"
+    trend = compute_trend(f"{name} ({source})" if source else name, entries, **trend_options)
     starts = [(session_start(p.entry), p) for p in trend.points]
     known = [start for start, _ in starts if start is not None]
     last = max(known, default=None)
@@ -130,7 +155,7 @@ def _joint_status(robot: str, joint: str, entries: list[Entry], now: datetime, s
     else:
         state = "ok"
     return JointStatus(robot, joint, state, trend, latest, last, len(day),
-                       sum(p.state in _JUDGED_OR_GOOD for p in day))
+                       sum(p.state in _JUDGED_OR_GOOD for p in day), source, monitor)
 
 
 def fleet_json(statuses: Sequence[JointStatus]) -> list[dict[str, Any]]:
@@ -138,7 +163,8 @@ def fleet_json(statuses: Sequence[JointStatus]) -> list[dict[str, Any]]:
     docs = []
     for s in statuses:
         entry = None if s.latest is None else s.latest.entry
-        docs.append({"robot": s.robot, "joint": s.joint, "state": s.state,
+        docs.append({"robot": s.robot, "joint": s.joint, "source": s.source, "monitor_id": s.monitor,
+                     "state": s.state,
                      "reason": "" if s.latest is None or s.state != "alarm" else s.latest.reason,
                      "K_Nm_per_rad": None if entry is None else entry.K_Nm_per_rad,
                      "K_ci95": None if entry is None else list(entry.K_ci95), "change_pct": s.change_pct,
@@ -150,13 +176,21 @@ def fleet_json(statuses: Sequence[JointStatus]) -> list[dict[str, Any]]:
     return docs
 
 
-def load_fleet(folder: Path | None, catalogue_path: Path | str | None, tags: Sequence[str] = (), *,
+def load_fleet(folders: Sequence[Path], catalogues: Sequence[Path | str], tags: Sequence[str] = (), *,
                now: datetime, **options: Any) -> list[JointStatus]:
-    """:func:`fleet_status` of a catalogue's sessions tagged ``tags`` (``KEY=VALUE``)."""
+    """:func:`fleet_status` of the sessions tagged ``tags`` (``KEY=VALUE``) of each catalogue — every folder's
+    ``FOLDER/catalogue.sqlite`` and every catalogue given (none: ``sessions/catalogue.sqlite``) — judged apart, worst
+    first over all of them."""
     wanted = parse_tags(tags)
-    with Catalogue(catalogue_location(folder, catalogue_path)) as catalogue:
-        entries = [e for e in catalogue.entries() if tags_match(e.tags, wanted)]
-        if not any(e.joint is not None for e in entries):
-            tagged = f" tagged {' '.join(tags)}" if tags else ""
-            raise ConfigError(f"{catalogue.path}: no sessions of any joint{tagged}")
-    return fleet_status(entries, now=now, **options)
+    sources = catalogue_sources(folders, catalogues)
+    statuses: list[JointStatus] = []
+    names = []
+    for label, location in sources:
+        with Catalogue(location) as catalogue:
+            entries = [e for e in catalogue.entries() if tags_match(e.tags, wanted)]
+            names.append(str(catalogue.path))
+        statuses += fleet_status(entries, now=now, source=label if len(sources) > 1 else "", **options)
+    if not statuses:
+        tagged = f" tagged {' '.join(tags)}" if tags else ""
+        raise ConfigError(f"{', '.join(names)}: no sessions of any joint{tagged}")
+    return worst_first(statuses)

@@ -28,17 +28,19 @@ import time
 from collections.abc import Callable
 from concurrent.futures import Future
 from contextlib import AbstractContextManager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 from acq.environment import user_environment
 from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
+from acq.monitoring.catalogue_backends import is_url
 from acq.monitoring.folder_lock import folder_lock
+from acq.monitoring.monitor_scope import IDENTITY_FILE, MONITOR_TAG, check_user_tags, monitor_identity, own_windows
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
-from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, Trend, alarm_onsets, compute_trend, filed_rules
-from acq.monitoring.window_bench import differences, window_facts
+from acq.monitoring.trend import ELAPSED_TAG, RULE_TAGS, AlarmRules, Trend, alarm_onsets, compute_trend, filed_rules
+from acq.monitoring.window_bench import FACT_TAGS, differences, window_facts
 from acq.monitoring.window_judge import analyse_window, excites, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
@@ -78,6 +80,10 @@ class MonitorSettings:
     # a robot program excites the joint only in parts: the default request averages only the segments that excite
     # (analysis.segments) where acq did not command the motion — as acq analyze of a window does, under the same key
     request: AnalysisRequest = AnalysisRequest()
+    # the catalogue every window is filed into (a SQLite file or a postgresql:// URL, shared with other monitors and
+    # benches); None: out_dir/catalogue.sqlite
+    catalogue: Path | str | None = None
+    tags: dict[str, str | float] = field(default_factory=dict)  # --tag K=V, filed with every window (robot=r1)
 
 
 @dataclass
@@ -143,6 +149,12 @@ class Monitor:
         self._size = expected_window_bytes(settings.bench, settings.window_s)
         # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
         self._rules = AlarmRules(settings.baseline_windows, settings.threshold_pct, settings.ewma_lambda)
+        check_user_tags(settings.tags, (WINDOW_TAG, ELAPSED_TAG, *RULE_TAGS.values(), *FACT_TAGS))
+        self._catalogue_location = settings.catalogue or settings.out_dir / CATALOGUE_NAME
+        # windows filed before monitors had an identity are this monitor's only in its own folder's catalogue
+        self._legacy = not is_url(self._catalogue_location) and \
+            Path(self._catalogue_location).resolve() == (settings.out_dir / CATALOGUE_NAME).resolve()
+        self._id = ""  # the monitor's identity (monitor_scope), read or made in its folder when it runs
         # the baseline's windows are kept whatever the budget (retention protects them), and the next window must fit
         # beside them: a budget of fewer skipped every window after the first ones, the alarm unseen (the second trial)
         need = (settings.baseline_windows + 1) * self._size
@@ -172,23 +184,25 @@ class Monitor:
 
         Returns 130 when stopped (:attr:`stopped_by`: Ctrl-C, SIGTERM, a stop request), else 3 when the last
         state is alarm, else 0."""
-        catalogue_path = self.s.out_dir / CATALOGUE_NAME
-        fresh = not catalogue_path.exists()
+        # a catalogue file or identity this run made (a database of a URL is not ours to remove)
+        made = [p for p in (None if is_url(self._catalogue_location) else Path(self._catalogue_location),
+                            self.s.out_dir / IDENTITY_FILE) if p is not None and not p.exists()]
         try:
             self._run()
         finally:
-            if fresh and not self._filed:  # devices that failed to open: no empty catalogue left behind
-                for path in (catalogue_path, *(catalogue_path.with_name(catalogue_path.name + end)
-                                               for end in ("-wal", "-shm", "-journal"))):
-                    path.unlink(missing_ok=True)
+            if made and not self._filed:  # devices that failed to open: no empty catalogue left behind
+                for path in made:
+                    for left in (path, *(path.with_name(path.name + end) for end in ("-wal", "-shm", "-journal"))):
+                        left.unlink(missing_ok=True)
         if self._stop is not None:
             return EXIT_INTERRUPTED
         return 3 if self._in_alarm else 0
 
     def _run(self) -> None:
-        with folder_lock(self.s.out_dir), Catalogue(self.s.out_dir / CATALOGUE_NAME) as catalogue, \
+        with folder_lock(self.s.out_dir), Catalogue(self._catalogue_location) as catalogue, \
                 analysis_executor(self.s.jobs, None) as pool, self._signals():
             self.catalogue = catalogue
+            self._id = monitor_identity(self.s.out_dir)
             first = self._resume(pool)
             wall0 = time.monotonic()
             n = first
@@ -219,7 +233,8 @@ class Monitor:
         current, drive = open_bench(bench, fast=self.s.fast)
         machine = getattr(drive, "machine_tags", dict)()  # what the machine says of the window (a robot's payload)
         recorder = Recorder(bench, None, current, drive, self.s.out_dir, self.s.window_s,
-                            tags={**machine, WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s, **self._rules.as_tags(),
+                            tags={**self.s.tags, **machine, WINDOW_TAG: n, ELAPSED_TAG: n * self.s.every_s,
+                                  MONITOR_TAG: self._id, **self._rules.as_tags(),
                                   **window_facts(self.s.bench, self.s.window_s)})
         self._recorder = recorder
         if self._stop is not None:
@@ -307,8 +322,14 @@ class Monitor:
         st.excited_fraction_sum += st.last_excited_fraction
         st.excitation_judged += 1
 
+    def _own_windows(self) -> list[Entry]:
+        """This monitor's windows in the catalogue, oldest first — never another monitor's of a joint of the same name
+        in a shared catalogue (its windows without an identity only in the catalogue of its own folder)."""
+        windows = [e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags]
+        return own_windows(windows, self._id, legacy=self._legacy)
+
     def _trend(self) -> Trend:
-        entries = [e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags]
+        entries = self._own_windows()
         if not entries:
             return Trend(self.s.bench.joint, [], None, "no windows yet", None, self.s.threshold_pct, self.s.ewma_lambda)
         return compute_trend(self.s.bench.joint, entries, baseline_sessions=self.s.baseline_windows,
@@ -416,9 +437,9 @@ class Monitor:
     # ---- resume after a crash --------------------------------------------------------------------------
     def _resume(self, pool: Any) -> int:
         """Mark or analyse the windows a previous run left; return the next window's number."""
-        known = {e.session_id: e for e in self.catalogue.entries(self.s.bench.joint) if WINDOW_TAG in e.tags}
-        windows = sorted((e for e in self.catalogue.entries() if WINDOW_TAG in e.tags),
-                         key=lambda e: int(e.tags[WINDOW_TAG]))
+        known = {e.session_id: e for e in self._own_windows()}
+        windows = sorted(own_windows((e for e in self.catalogue.entries() if WINDOW_TAG in e.tags), self._id,
+                                     legacy=self._legacy), key=lambda e: int(e.tags[WINDOW_TAG]))
         changed = differences(windows, self.s.bench, self.s.window_s)
         if changed:
             # K of another measurement chain, scale or window length would join the trend as if the joint had changed

@@ -37,7 +37,8 @@ from scipy.stats import chi2
 
 from acq.monitoring.batch import CATALOGUE_NAME
 from acq.monitoring.catalogue import Catalogue, Entry
-from acq.monitoring.catalogue_backends import is_url
+from acq.monitoring.catalogue_backends import is_url, redacted
+from acq.monitoring.monitor_scope import MONITOR_TAG, monitors_of
 from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
 from analysis import AnalysisRequest, Z95
@@ -356,12 +357,35 @@ def trend_json(trend: Trend) -> dict[str, Any]:
                        for p in trend.points]}
 
 
+class NoSessions(ConfigError):
+    """The catalogue has no session of the joint asked for, or there is no catalogue file yet (``acq view --trend``
+    waits for a monitor's first window). ``location``: the catalogue (a URL without its password); ``joints``: the
+    joints it has."""
+
+    def __init__(self, message: str, location: Path | str, joints: Sequence[str] = ()) -> None:
+        super().__init__(message)
+        self.location, self.joints = location, list(joints)
+
+
 def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Path | str:
     """The catalogue to read: ``catalogue`` (a file or URL) or FOLDER/catalogue.sqlite; an error when no file."""
     path = catalogue or (folder or Path("sessions")) / CATALOGUE_NAME
     if not is_url(path) and not Path(path).is_file():
-        raise ConfigError(f"{path}: no catalogue — fill one with acq analyze {folder or 'sessions'}/ first")
+        raise NoSessions(f"{path}: no catalogue — fill one with acq analyze {folder or 'sessions'}/ first", path)
     return path
+
+
+def catalogue_sources(folders: Sequence[Path], catalogues: Sequence[Path | str]) -> list[tuple[str, Path | str]]:
+    """The catalogues of ``acq fleet`` / ``acq trend`` FOLDER… [--catalogue C]…, each with its label (the folder or
+    catalogue as given, a URL without its password): FOLDER/catalogue.sqlite of each folder, then each catalogue;
+    none given: ``sessions/catalogue.sqlite`` (label ''). A catalogue named twice is refused (it would be read twice).
+    """
+    sources = [(str(f), catalogue_location(f, None)) for f in folders] + \
+        [(redacted(str(c)) if is_url(c) else str(c), catalogue_location(None, c)) for c in catalogues] \
+        or [("", catalogue_location(None, None))]
+    if len({str(loc) if is_url(loc) else str(Path(loc).resolve()) for _, loc in sources}) < len(sources):
+        raise ConfigError(f"{' '.join(label for label, _ in sources)}: a catalogue is given twice")
+    return sources
 
 
 def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: str, tags: Sequence[str] = (),
@@ -371,8 +395,15 @@ def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: st
     wanted = parse_tags(tags)
     with Catalogue(catalogue_location(folder, catalogue_path)) as catalogue:
         entries = [e for e in catalogue.entries(joint) if tags_match(e.tags, wanted)]
+        tagged = f" tagged {' '.join(tags)}" if tags else ""
         if not entries:
-            tagged = f" tagged {' '.join(tags)}" if tags else ""
-            raise ConfigError(f"{catalogue.path}: no sessions of joint {joint}{tagged} "
-                              f"(joints: {', '.join(catalogue.joints()) or 'none'})")
+            joints = catalogue.joints()
+            raise NoSessions(f"{catalogue.path}: no sessions of joint {joint}{tagged} "
+                             f"(joints: {', '.join(joints) or 'none'})", catalogue.path, joints)
+        monitors = monitors_of(entries)
+        if len(monitors) > 1:  # several robots' monitors sharing a catalogue, one joint name: one trend would mix them
+            robots = sorted({str(e.tags["robot"]) for e in entries if "robot" in e.tags})
+            raise ConfigError(f"{catalogue.path}: joint {joint}{tagged} has the windows of {len(monitors)} monitors "
+                              f"({', '.join(monitors)}) — trend one: --tag {MONITOR_TAG}=ID"
+                              + (f" or --tag robot=R ({', '.join(robots)})" if robots else ""))
     return compute_trend(joint, entries, **options)

@@ -61,6 +61,8 @@ def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> FittedTab
                                  s.latest is not None else _STATE_WORDS.get(s.state, s.state))
                                 + (" · baseline unstable" if s.trend.baseline_warning else "") for s in statuses],
                       "left", wrap=True)]
+    if any(s.source for s in statuses):  # several catalogues, or several monitors of one robot and joint name
+        columns.insert(1, Column("source", [s.source or "—" for s in statuses], "left", wrap=True))
     caption = [f"stale: no session for {stale_days:g} days; 24 h ok/all: sessions of the last day with a K of "
                "verdict ok / all analysed; alarm rules as acq trend (per joint: acq trend --joint J --tag robot=R)"]
     if statuses:
@@ -126,7 +128,7 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
     bar = pg.ColorBarItem(values=(-limit, limit), colorMap=colormap, label="ΔK %", interactive=False)
     bar.setImageItem(image)
     widget.addItem(bar, row=1, col=1)
-    labels = [(len(statuses) - 1 - i + 0.5, f"{s.robot}/{s.joint} · {s.state}"
+    labels = [(len(statuses) - 1 - i + 0.5, f"{s.robot}/{s.joint}{f' ({s.source})' if s.source else ''} · {s.state}"
                + ("" if s.change_pct is None else f" {s.change_pct:+.1f} %")) for i, s in enumerate(statuses)]
     plot.getAxis("left").setTicks([labels])
     plot.getAxis("left").setWidth(12 + 8 * max((len(text) for _, text in labels), default=10))
@@ -138,10 +140,10 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
 
 
 @click.command(name="fleet")
-@click.argument("folder", required=False, type=click.Path(path_type=Path, file_okay=False))
-@click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
-              help="The catalogue, a file or postgresql:// URL (default: FOLDER/catalogue.sqlite, FOLDER defaulting "
-                   "to sessions/).")
+@click.argument("folders", nargs=-1, type=click.Path(path_type=Path, file_okay=False))
+@click.option("--catalogue", "catalogues", type=CatalogueLocation(), multiple=True,
+              help="A catalogue, a file or postgresql:// URL (repeatable; default: FOLDER/catalogue.sqlite of each "
+                   "FOLDER, FOLDER defaulting to sessions/). Several are judged apart, each row saying its source.")
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
               help="Only sessions with this tag (repeatable), e.g. --tag site=plant2.")
 @click.option("--stale-days", type=click.FloatRange(0, min_open=True), default=7.0, show_default=True,
@@ -150,13 +152,13 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
 @click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
               help="Also draw the fleet (ΔK over time, one row per joint) into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the fleet as JSON.")
-def fleet_command(folder: Path | None, catalogue_path: Path | str | None, tags: tuple[str, ...], stale_days: float,
-                  baseline_sessions: int | None, threshold_pct: float | None, ewma_lambda: float | None,
-                  png_path: Path | None, as_json: bool) -> int:
+def fleet_command(folders: tuple[Path, ...], catalogues: tuple[Path | str, ...], tags: tuple[str, ...],
+                  stale_days: float, baseline_sessions: int | None, threshold_pct: float | None,
+                  ewma_lambda: float | None, png_path: Path | None, as_json: bool) -> int:
     """Every joint (by robot tag): latest K ± 95 %, ΔK to its baseline, sessions of the last day, state
     (alarm / stale / no baseline / ok), worst first; exit code 3 if any joint is in alarm."""
     now = datetime.now(UTC)
-    statuses = load_fleet(folder, catalogue_path, tags, now=now, stale_days=stale_days,
+    statuses = load_fleet(folders, catalogues, tags, now=now, stale_days=stale_days,
                           baseline_sessions=baseline_sessions, threshold_pct=threshold_pct, ewma_lambda=ewma_lambda)
     out = Console()
     if as_json:

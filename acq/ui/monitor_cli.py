@@ -14,8 +14,11 @@ from rich.table import Table
 
 from acq.config import load_bench
 from acq.monitoring.batch import CATALOGUE_NAME
+from acq.monitoring.catalogue_backends import is_url, redacted
 from acq.monitoring.monitor import Monitor, MonitorSettings, MonitorStatus
 from acq.monitoring.retention import parse_size
+from acq.recording.tags import parse_tags
+from acq.ui.options import CatalogueLocation
 from acq.ui.values import duration_text, format_value
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
@@ -106,6 +109,12 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
 @click.option("--max-disk", default=None, help="Disk budget of the folder (2GB, 500MB); never exceeded.")
 @click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("monitor"), show_default=True,
               help="Folder for the windows and catalogue.sqlite (a restart there resumes).")
+@click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
+              help="File every window into this catalogue, a file or postgresql:// URL, which other monitors and "
+                   "benches may share (default: OUT/catalogue.sqlite).")
+@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+              help="Tag every window (repeatable), e.g. --tag robot=r1: acq fleet and acq trend --tag tell the "
+                   "robots apart by it.")
 @click.option("--baseline-windows", type=click.IntRange(min=1), default=5, show_default=True,
               help="Baseline = mean K of the first N good windows.")
 @click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=10.0, show_default=True,
@@ -114,7 +123,7 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
 @click.option("--fast", is_flag=True, help="Simulated bench: machine time runs as fast as the analysis allows.")
 def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str | None, on_alarm: str | None,
                     keep: int, max_disk: str | None, out_dir: Path, baseline_windows: int, threshold_pct: float,
-                    jobs: int, fast: bool) -> int:
+                    jobs: int, fast: bool, catalogue_path: Path | str | None, tags: tuple[str, ...]) -> int:
     """Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in alarm."""
     bench = load_bench(bench_path)
     if not bench.listens():
@@ -127,13 +136,14 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
     settings = MonitorSettings(bench=bench, out_dir=out_dir, window_s=window_s, every_s=parse_duration("--every", every),
                                for_s=None if for_text is None else parse_duration("--for", for_text), on_alarm=on_alarm,
                                keep=keep, max_disk_bytes=budget, fast=fast, jobs=jobs,
-                               baseline_windows=baseline_windows, threshold_pct=threshold_pct)
+                               baseline_windows=baseline_windows, threshold_pct=threshold_pct,
+                               catalogue=catalogue_path, tags=parse_tags(tags))
     console = Console(stderr=True)
     if console.is_terminal:
         with Live(status_table(MonitorStatus(bench.joint)), console=console, refresh_per_second=2) as live:
             monitor = Monitor(settings, on_status=lambda st: live.update(status_table(st)))
             code = monitor.run()
-        _say_if_stopped(monitor, out_dir)
+        _say_if_stopped(monitor, catalogue_path or out_dir / CATALOGUE_NAME)
         return code
     last = [""]
 
@@ -154,14 +164,15 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
     monitor = Monitor(settings, on_status=log)
     code = monitor.run()
     console.print(status_table(monitor.status))
-    _say_if_stopped(monitor, out_dir)
+    _say_if_stopped(monitor, catalogue_path or out_dir / CATALOGUE_NAME)
     return code
 
 
-def _say_if_stopped(monitor: Monitor, out_dir: Path) -> None:
+def _say_if_stopped(monitor: Monitor, catalogue: Path | str) -> None:
     """The one line of a monitor stopped by Ctrl-C / SIGTERM (exit 130): what it kept and that a restart resumes."""
     if monitor.stopped_by is None:
         return
     st = monitor.status
+    catalogue = redacted(catalogue) if is_url(catalogue) else catalogue  # type: ignore[arg-type]
     click.echo(f"acq: {monitor.stopped_by}: {_captured(st)}, {st.analysed} analysed, all kept in "
-               f"{out_dir / CATALOGUE_NAME} (trend state: {st.state}); the same command resumes", err=True)
+               f"{catalogue} (trend state: {st.state}); the same command resumes", err=True)

@@ -27,7 +27,7 @@ from analysis import AnalysisRequest
 
 if TYPE_CHECKING:
     from acq.ui.plots import SessionFigure
-    from acq.monitoring.trend import Trend
+    from acq.monitoring.trend import NoSessions, Trend
 
 NO_DISPLAY_MESSAGE = ("acq view: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window as an image "
                       "instead: acq view SESSION --screenshot out.png")
@@ -82,8 +82,12 @@ def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[
               help="With --trend: the catalogue, a file or postgresql:// URL (default: FOLDER/catalogue.sqlite).")
 @click.option("--refresh", "refresh_s", type=click.FloatRange(0.5, 3600), default=5.0, show_default=True,
               help="With --trend: re-read the catalogue every this many s (a monitor may be writing to it).")
+@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+              help="With --trend: only sessions with this tag (repeatable), e.g. --tag robot=r1 in a catalogue that "
+                   "several monitors share.")
 def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tuple[int, int],
-                 trend_joint: str | None, catalogue_path: Path | str | None, refresh_s: float) -> int:
+                 trend_joint: str | None, catalogue_path: Path | str | None, refresh_s: float,
+                 tags: tuple[str, ...]) -> int:
     """Show traces, FRF with the fitted model, coherence and identified values of SESSION(s);
     or, with --trend JOINT [FOLDER], the joint's stiffness over time."""
     if trend_joint is None and not sessions:
@@ -97,18 +101,24 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
     from acq.ui.qt_signals import loop_ended_by_signals
 
     if trend_joint is not None:
-        from acq.monitoring.trend import load_trend
+        from acq.monitoring.trend import NoSessions, load_trend
 
         folder = sessions[0] if sessions else None
-        load = functools.partial(load_trend, folder, catalogue_path, trend_joint)
-        first = load()  # a catalogue without the joint is one line before any window opens
+        load = functools.partial(load_trend, folder, catalogue_path, trend_joint, tags)
+        try:
+            first: Trend | NoSessions = load()  # any other error (a bad URL, mixed monitors) is one line, no window
+        except NoSessions as e:  # started before the monitor has filed a window of the joint: the window waits for it
+            first = e
     else:
         figures = [session_figure(p) for p in sessions]
     app = ensure_app(offscreen=screenshot is not None)
     # from here Ctrl-C / SIGTERM end the event loop (a KeyboardInterrupt raised in Qt's frames was a traceback)
     with loop_ended_by_signals(app) as caught:
         if trend_joint is not None:
-            live = LiveTrend(load, first, refresh_s)  # kept alive with the window: its timer redraws it
+            shown = " ".join([trend_joint, "tagged", *tags]) if tags else trend_joint
+            live = LiveTrend(load, first, refresh_s, joint=shown)  # kept alive with the window: its timer redraws it
+            if live.waiting:
+                click.echo(live.waiting, err=True)
             window = live.frame
         else:
             title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}"
@@ -133,33 +143,48 @@ class LiveTrend:
 
     ``load`` re-reads the catalogue (SQLite in WAL mode or PostgreSQL: reading does not block a monitor that
     writes); a failed re-read (the catalogue busy, a server away) keeps the figure shown and says why in the
-    title. The figure itself is :func:`acq.ui.trend_plot.trend_widget`.
+    title. The figure itself is :func:`acq.ui.trend_plot.trend_widget`. Started before the catalogue has a
+    session of the joint (``first`` is that :class:`acq.monitoring.trend.NoSessions`: a monitor that has not filed
+    its first window, or not yet made its catalogue), it says what it waits for until the first one arrives.
+    ``shown`` is the trend drawn (None while waiting).
     """
 
-    def __init__(self, load: Callable[[], Trend], first: Trend, refresh_s: float) -> None:
+    def __init__(self, load: Callable[[], Trend], first: Trend | NoSessions, refresh_s: float, *,
+                 joint: str | None = None) -> None:
         from pyqtgraph.Qt import QtCore, QtWidgets
 
+        from acq.monitoring.trend import NoSessions
         from acq.ui.trend_plot import trend_widget
 
         self._load, self._draw = load, trend_widget
         self.frame = QtWidgets.QWidget()
         self._layout = QtWidgets.QVBoxLayout(self.frame)
-        self._figure = trend_widget(first)
+        self.shown: Trend | None = None if isinstance(first, NoSessions) else first
+        self.joint = joint or (first.joint if self.shown is not None else "")  # type: ignore[union-attr]
+        if isinstance(first, NoSessions):
+            self._figure = QtWidgets.QLabel(self._waiting_text(first))
+            self._figure.setAlignment(QtCore.Qt.AlignmentFlag.AlignCenter)
+        else:
+            self._figure = trend_widget(first)
         self._layout.addWidget(self._figure)
-        self.shown = first
-        self.frame.setWindowTitle(f"acq trend — {first.joint}")
+        self.frame.setWindowTitle(f"acq trend — {self.joint}")
         self._timer = QtCore.QTimer(self.frame)
         self._timer.timeout.connect(self.refresh)
         self._timer.start(int(refresh_s * 1000))
 
     def refresh(self) -> bool:
         """Re-read the catalogue; redraw when the joint's sessions changed. True when redrawn."""
+        from acq.monitoring.trend import NoSessions
+
         try:
             trend = self._load()
         except AcqError as e:
-            self.frame.setWindowTitle(f"acq trend — {self.shown.joint} (not refreshed: {e})")
+            if self.shown is None and isinstance(e, NoSessions):  # still waiting (the joints so far may have changed)
+                self._figure.setText(self._waiting_text(e))
+                return False
+            self.frame.setWindowTitle(f"acq trend — {self.joint} (not refreshed: {e})")
             return False
-        if [p.entry for p in trend.points] == [p.entry for p in self.shown.points]:
+        if self.shown is not None and [p.entry for p in trend.points] == [p.entry for p in self.shown.points]:
             return False
         figure = self._draw(trend)
         self._layout.replaceWidget(self._figure, figure)
@@ -167,4 +192,13 @@ class LiveTrend:
         self._figure, self.shown = figure, trend
         self.frame.setWindowTitle(f"acq trend — {trend.joint}")
         return True
+
+    @property
+    def waiting(self) -> str | None:
+        """The text shown while no session of the joint has arrived, else None."""
+        return None if self.shown is not None else self._figure.text()
+
+    def _waiting_text(self, missing: NoSessions) -> str:
+        others = f" (joints so far: {', '.join(missing.joints)})" if missing.joints else ""
+        return f"waiting for the first window of {self.joint} in {missing.location} …{others}"
 

@@ -1,0 +1,108 @@
+"""Several acq monitors filing into one catalogue (SQLite and PostgreSQL): two robots whose joints share the name
+``joint1`` stay two histories — each monitor's trend, baseline, rules and resume see only its own windows."""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+from pathlib import Path
+
+import pytest
+
+from tests.helpers import run_cli
+
+ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
+#: The robot program of this seed excites the joint in the windows at 0, 1, 2 min (test_monitor's EXCITING_SEED).
+SEED = 5
+
+
+def _robot(folder: Path, name: str, k_nm_per_rad: float) -> Path:
+    """sim_robot.toml with the exciting seed and the simulated joint's true K (the [sim] section's, not [nominal])."""
+    text = ROBOT.read_text().replace("seed = 0 ", f"seed = {SEED} ")
+    head, sim = text.split("[sim]")
+    path = folder / f"{name}.toml"
+    path.write_text(head + "[sim]" + sim.replace("K_Nm_per_rad = 891.0", f"K_Nm_per_rad = {k_nm_per_rad}", 1))
+    return path
+
+
+def _monitor(capsys: pytest.CaptureFixture[str], bench: Path, out: Path, catalogue: Path | str, robot: str,
+             minutes: int, baseline: int) -> None:
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--window", "10", "--every", "60", "--for",
+                  f"{minutes}m", "--baseline-windows", str(baseline), "--out", str(out), "--catalogue",
+                  str(catalogue), "--tag", f"robot={robot}")
+    assert run.code == 0, run.err
+
+
+def _windows(doc: dict[str, object]) -> list[tuple[int, str, str]]:
+    return [(int(p["tags"]["monitor_window"]), p["tags"]["robot"], p["tags"]["monitor_id"])  # type: ignore[index]
+            for p in doc["points"]]  # type: ignore[union-attr]
+
+
+def test_two_monitors_of_one_joint_name_share_a_catalogue_and_stay_apart(catalogue_location: Path | str,
+                                                                           tmp_path: Path,
+                                                                           capsys: pytest.CaptureFixture[str]) -> None:
+    """Robot r1 (true K 891) and r2 (true K 700) both call their joint joint1. Before, one catalogue held one joint
+    joint1: baseline of one robot, latest K of the other (the trial: fleet said ok, the folder's trend ALARM)."""
+    r1, r2 = _robot(tmp_path, "r1", 891.0), _robot(tmp_path, "r2", 700.0)
+    # baselines of all their windows: nothing judged, no alarm to muddle the exit code (the rules are not tested here)
+    _monitor(capsys, r1, tmp_path / "r1", catalogue_location, "r1", 2, baseline=3)
+    _monitor(capsys, r2, tmp_path / "r2", catalogue_location, "r2", 2, baseline=2)  # other rules: not r1's to refuse
+    _monitor(capsys, r1, tmp_path / "r1", catalogue_location, "r1", 1, baseline=3)  # restart: resumes r1's numbering
+    ids = {r: (tmp_path / r / "monitor.id").read_text().strip() for r in ("r1", "r2")}
+    assert ids["r1"] != ids["r2"] and not (tmp_path / "r1" / "catalogue.sqlite").exists()
+    trends = {}
+    for robot, truth, windows in (("r1", 891.0, 3), ("r2", 700.0, 2)):
+        run = run_cli(capsys, "trend", "--catalogue", str(catalogue_location), "--joint", "joint1", "--tag",
+                      f"robot={robot}", "--json")
+        doc = trends[robot] = json.loads(run.out)
+        assert _windows(doc) == [(n, robot, ids[robot]) for n in range(windows)]
+        assert [p["state"] for p in doc["points"]] == ["baseline"] * windows
+        assert doc["baseline"] == f"mean of the first {windows} good sessions"  # each monitor's own rules
+        ks = [p["K_Nm_per_rad"] for p in doc["points"]]
+        assert ks == [pytest.approx(truth, rel=0.03)] * windows
+        assert doc["baseline_K_Nm_per_rad"] == pytest.approx(sum(ks) / windows, rel=1e-12)
+    mixed = run_cli(capsys, "trend", "--catalogue", str(catalogue_location), "--joint", "joint1")
+    assert mixed.code == 2 and (f"joint joint1 has the windows of 2 monitors ({ids['r1']}, {ids['r2']}) — trend one: "
+                                "--tag monitor_id=ID or --tag robot=R (r1, r2)") in mixed.err
+    png = tmp_path / "r2.png"
+    view = run_cli(capsys, "view", "--trend", "joint1", "--catalogue", str(catalogue_location), "--tag", "robot=r2",
+                   "--screenshot", str(png))
+    assert view.code == 0 and png.read_bytes()[:4] == b"\x89PNG", view.err
+    assert run_cli(capsys, "view", "--trend", "joint1", "--catalogue", str(catalogue_location), "--screenshot",
+                   str(png)).code == 2  # the two monitors' windows are never drawn as one trend
+    fleet = json.loads(run_cli(capsys, "fleet", "--catalogue", str(catalogue_location), "--json").out)
+    rows = sorted((j["robot"], j["joint"], j["monitor_id"], j["baseline_K_Nm_per_rad"]) for j in fleet)
+    assert rows == [(r, "joint1", ids[r], pytest.approx(trends[r]["baseline_K_Nm_per_rad"], rel=1e-12))
+                    for r in ("r1", "r2")]
+
+
+def test_a_monitor_without_tags_keeps_its_windows_from_before_it_had_an_identity(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder of a monitor of an earlier acq: no monitor.id, windows without monitor_id in its own catalogue. A
+    restart there adopts them (numbering, rules); the same windows in a catalogue given with --catalogue are not its."""
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "old"
+    assert run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--window", "10", "--every", "60", "--for",
+                   "2m", "--baseline-windows", "2", "--out", str(out)).code == 0
+    (out / "monitor.id").unlink()
+    with sqlite3.connect(out / "catalogue.sqlite") as db:  # as an earlier acq filed them
+        for key, tags in db.execute("SELECT session_key, tags_json FROM sessions").fetchall():
+            tags = json.loads(tags)
+            del tags["monitor_id"]
+            db.execute("UPDATE sessions SET tags_json = ? WHERE session_key = ?", (json.dumps(tags), key))
+    refused = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--window", "10", "--every", "60", "--for",
+                      "1m", "--baseline-windows", "3", "--out", str(out))
+    assert refused.code == 2 and "its windows were judged with --baseline-windows 2" in refused.err
+    assert run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--window", "10", "--every", "60", "--for",
+                   "1m", "--baseline-windows", "2", "--out", str(out)).code == 0
+    doc = json.loads(run_cli(capsys, "trend", str(out), "--joint", "joint1", "--json").out)
+    assert [p["tags"]["monitor_window"] for p in doc["points"]] == [0, 1, 2]
+    assert [("monitor_id" in p["tags"]) for p in doc["points"]] == [False, False, True]
+
+
+def test_a_monitor_tag_that_the_monitor_files_itself_is_refused(tmp_path: Path,
+                                                                capsys: pytest.CaptureFixture[str]) -> None:
+    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--fast", "--for", "1m", "--out", str(tmp_path / "m"),
+                  "--tag", "monitor_window=7")
+    assert (run.code, run.err) == (2, "acq: error: --tag monitor_window=…: acq monitor files monitor_window itself "
+                                      "with every window — choose another key\n")
+    assert not (tmp_path / "m").exists()
