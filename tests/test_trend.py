@@ -7,6 +7,7 @@ is analysed by the batch into a catalogue and trended.
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 import shutil
@@ -22,7 +23,7 @@ import pytest
 
 from acq.monitoring.batch import find_sessions, run_batch
 from acq.monitoring.catalogue import SCHEMA_VERSION, Catalogue, Entry
-from acq.monitoring.trend import compute_trend
+from acq.monitoring.trend import EWMA_L, compute_trend
 from analysis import AnalysisRequest
 from tests.helpers import run_cli, seeded_profile
 
@@ -464,6 +465,22 @@ def test_a_ten_minute_grid_reads_as_a_clock_not_as_rounded_decimal_hours(tmp_pat
 
 def _known_to(i: int, k: float, half_width_pct: float) -> Entry:
     return replace(_entry(i, k), K_ci95=(k * (1 - half_width_pct / 100), k * (1 + half_width_pct / 100)))
+
+
+def test_the_ewma_limit_widens_for_a_session_known_less_well_than_the_baseline() -> None:
+    """The third trial's fleet: with a one-window baseline (±0.6 %), a second window at −1.0 % known only to ±3.3 %
+    raised an EWMA alarm — its limit came from the baseline's interval alone. Each session's own σ now enters the
+    EWMA's variance (never below the baseline's); a window as well known as the baseline keeps the textbook limit."""
+    base = _known_to(0, 891.0, 0.6)
+    vague = compute_trend("j", [base, _known_to(1, 891.0 * 0.99, 3.3)], baseline_sessions=1).points[-1]
+    assert (vague.state, vague.reason) == ("ok", "")
+    sigma = 891.0 * 0.006 / 1.959964
+    textbook = -100.0 * EWMA_L * sigma * math.sqrt(0.2 / 1.8 * (1 - 0.8 ** 2)) / 891.0
+    sharp = compute_trend("j", [base, _known_to(1, 891.0 * 0.99, 0.6)], baseline_sessions=1).points[-1]
+    assert sharp.ewma_limit_pct == pytest.approx(textbook, rel=1e-6)
+    assert (sharp.state, sharp.reason) == ("alarm", "EWMA")  # the same −1.0 %, known to ±0.6 %: a real change
+    own = 891.0 * 0.99 * 0.033 / 1.959964  # its own σ: its interval's half width / z
+    assert vague.ewma_limit_pct == pytest.approx(-100.0 * EWMA_L * 0.2 * own / 891.0, rel=1e-6)
 
 
 #: The trial: a monitor started on a joint losing 20 % of K an hour, windows 10 min apart, each K known to ±0.6 %.

@@ -235,9 +235,15 @@ def _skip_reason(e: Entry) -> str | None:
     return None
 
 
+def _own_sigma(entry: Entry) -> float:
+    """The session's own standard deviation of K, from its 95 % interval (0 without one)."""
+    lo, hi = entry.K_ci95
+    return (hi - lo) / (2 * Z95) if lo is not None and hi is not None else 0.0
+
+
 def _sigma(baseline: Sequence[Entry]) -> float:
     """Session-to-session standard deviation of K: the larger of the intervals' and the baseline's scatter."""
-    widths = [(hi - lo) / (2 * Z95) for lo, hi in (e.K_ci95 for e in baseline) if lo is not None and hi is not None]
+    widths = [_own_sigma(e) for e in baseline if e.K_ci95[0] is not None and e.K_ci95[1] is not None]
     from_ci = math.sqrt(statistics.fmean(w * w for w in widths)) if widths else 0.0
     scatter = statistics.stdev(e.K_Nm_per_rad for e in baseline) if len(baseline) > 1 else 0.0  # type: ignore[misc]
     return max(from_ci, scatter)
@@ -321,7 +327,7 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
     base = statistics.fmean(e.K_Nm_per_rad for e in baseline)  # type: ignore[misc]
     sigma = _sigma(baseline)
     warning = baseline_warning(baseline)
-    z, t, points = base, 0, []
+    z, var_z, points = base, 0.0, []
     for i, e in enumerate(entries):
         if skip[id(e)] is not None:
             points.append(TrendPoint(e, "skipped", skip[id(e)] or ""))
@@ -335,9 +341,12 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
         if any(e is b for b in baseline):
             points.append(TrendPoint(e, "baseline", change_pct=change))
             continue
-        t += 1
         z = ewma_lambda * k + (1.0 - ewma_lambda) * z
-        limit = EWMA_L * sigma * math.sqrt(ewma_lambda / (2.0 - ewma_lambda) * (1.0 - (1.0 - ewma_lambda) ** (2 * t)))
+        # the EWMA's variance from each session's own σ, never below the baseline's: with every σ_i = σ this is the
+        # textbook σ²·λ/(2 − λ)·(1 − (1 − λ)^2t); a session known only to ±3.3 % judged with the ±0.6 % of a
+        # one-window baseline raised an EWMA alarm at −1.0 % (the third trial's fleet)
+        var_z = (1.0 - ewma_lambda) ** 2 * var_z + (ewma_lambda * max(sigma, _own_sigma(e))) ** 2
+        limit = EWMA_L * math.sqrt(var_z)
         rules = ["threshold"] if change < -threshold_pct else []
         rules += ["EWMA"] if z < base - limit else []
         points.append(TrendPoint(e, "alarm" if rules else "ok", "+".join(rules), change,
