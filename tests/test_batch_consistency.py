@@ -81,8 +81,10 @@ def test_batch_skips_a_session_still_recording(recorded: Path, tmp_path: Path,
 def test_ctrl_c_stops_a_batch_and_every_result_written_is_catalogued(recorded: Path, tmp_path: Path) -> None:
     folder = tmp_path / "many"
     folder.mkdir()
-    n = 16  # 8 finished before the signal once, on a loaded machine (the test process descheduled): the batch must
-    for i in range(n):  # still be running when the first result is seen
+    # a 10 s session is analysed in 0.14 s by a warm worker: 8, then 16 finished before the signal on a loaded machine
+    # (the test process descheduled for a second or two); the batch must still be running when the first result is seen
+    n = 48
+    for i in range(n):
         copy_session(recorded, folder / f"s{i}.h5")
     proc = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(folder), "--jobs", "2", "--no-report"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -143,7 +145,8 @@ def test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line(recorded: Path, tmp_pa
     thread, leaked semaphores — 16…136 lines in 3 of 4 runs)."""
     folder = tmp_path / "many"
     folder.mkdir()
-    for i in range(4):
+    n = 24  # with 4 the batch (0.14 s an analysis) ended before the signal on a loaded machine
+    for i in range(n):
         copy_session(recorded, folder / f"s{i}.h5")
     catalogue = folder / "catalogue.sqlite"
     proc = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(folder), "--jobs", "2"],
@@ -168,10 +171,10 @@ def test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line(recorded: Path, tmp_pa
     except sqlite3.OperationalError:  # stopped while the catalogue's tables were made: the re-run makes them
         ok = 0
     assert line in ("acq: interrupted",  # during the parent's own imports (a loaded machine)
-                    "acq: interrupted before any analysis started (4 sessions found); run the same command again "
+                    f"acq: interrupted before any analysis started ({n} sessions found); run the same command again "
                     "to analyse them",
-                    f"acq: interrupted: {ok} of 4 sessions analysed ({ok} by this run), in {catalogue}; run the same "
-                    f"command again to analyse the other {4 - ok}")
+                    f"acq: interrupted: {ok} of {n} sessions analysed ({ok} by this run), in {catalogue}; run the same "
+                    f"command again to analyse the other {n - ok}")
     results = {p.name.replace(".result.json", ".h5") for p in folder.glob("*.result.json")}
     assert results == (_ok_names(catalogue) if ok else set())  # a result whose worker was stopped is removed
     if moment == "first result written":  # its worker draws the report (Qt) meanwhile
@@ -189,4 +192,4 @@ def test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line(recorded: Path, tmp_pa
                             "--json"], capture_output=True, text=True, timeout=300)
     assert again.returncode == 0, again.stderr
     outcomes = [d["outcome"] for d in json.loads(again.stdout)]
-    assert sorted(outcomes) == sorted(["skipped"] * ok + ["analysed"] * (4 - ok))  # the re-run goes on
+    assert sorted(outcomes) == sorted(["skipped"] * ok + ["analysed"] * (n - ok))  # the re-run goes on
