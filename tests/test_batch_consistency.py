@@ -18,7 +18,7 @@ from pathlib import Path
 import h5py
 import pytest
 
-from tests.helpers import run_cli, seeded_profile
+from tests.helpers import ctrl_c_as_at_a_terminal, run_cli, seeded_profile
 
 
 @pytest.fixture(scope="module")
@@ -81,13 +81,12 @@ def test_batch_skips_a_session_still_recording(recorded: Path, tmp_path: Path,
 def test_ctrl_c_stops_a_batch_and_every_result_written_is_catalogued(recorded: Path, tmp_path: Path) -> None:
     folder = tmp_path / "many"
     folder.mkdir()
-    # a 10 s session is analysed in 0.14 s by a warm worker: 8, then 16 finished before the signal on a loaded machine
-    # (the test process descheduled for a second or two); the batch must still be running when the first result is seen
-    n = 48
+    n = 24  # a warm worker analyses a 10 s session in 0.14 s: 8 left a margin of a fraction of a second
     for i in range(n):
         copy_session(recorded, folder / f"s{i}.h5")
     proc = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(folder), "--jobs", "2", "--no-report"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=ctrl_c_as_at_a_terminal)
     deadline = time.monotonic() + 120
     while not list(folder.glob("*.result.json")) and time.monotonic() < deadline:  # at least one result done
         time.sleep(0.05)
@@ -145,12 +144,13 @@ def test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line(recorded: Path, tmp_pa
     thread, leaked semaphores — 16…136 lines in 3 of 4 runs)."""
     folder = tmp_path / "many"
     folder.mkdir()
-    n = 24  # with 4 the batch (0.14 s an analysis) ended before the signal on a loaded machine
+    n = 12  # a warm worker analyses a 10 s session in 0.14 s: 4 left a margin of a fraction of a second
     for i in range(n):
         copy_session(recorded, folder / f"s{i}.h5")
     catalogue = folder / "catalogue.sqlite"
     proc = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(folder), "--jobs", "2"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=ctrl_c_as_at_a_terminal)
 
     def forkserver_running() -> bool:
         children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
