@@ -198,3 +198,24 @@ def test_fleet_judges_the_windows_of_two_monitors_of_one_joint_name_apart(tmp_pa
     assert [(j["source"], j["monitor_id"], j["state"], j["baseline_K_Nm_per_rad"]) for j in json.loads(run.out)] == [
         ("monitor host:/m/r1:0a", "host:/m/r1:0a", "alarm", 900.0), ("monitor host:/m/r2:0b", "host:/m/r2:0b", "ok",
                                                                      600.0)]
+
+
+def test_a_monitors_windows_are_not_judged_with_a_benchs_sessions_of_the_same_joint_name(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The second read: with one monitor among them, a bench's sessions of the same joint name (no monitor_id) were
+    one history with its windows — the bench's first sessions became the monitor's baseline, a confident alarm (or ok)
+    that the monitor itself never gave. They are apart now in acq fleet, and acq trend refuses to mix them."""
+    catalogue = tmp_path / "catalogue.sqlite"
+    _joint(catalogue, "bench", (600.0, 601.0, 599.0))  # a lab bench's joint1: another joint altogether
+    _joint(catalogue, "w", (900.0, 902.0, 899.0), monitor_id="host:/m:1", monitor_window="0")
+    run = run_cli(capsys, "fleet", "--catalogue", str(catalogue), "--json")
+    assert run.code == 0, run.err
+    rows = {j["monitor_id"]: (j["state"], j["baseline_K_Nm_per_rad"], j["K_Nm_per_rad"]) for j in json.loads(run.out)}
+    assert rows == {"host:/m:1": ("ok", 900.0, 899.0), None: ("ok", 600.0, 599.0)}  # mixed: baseline 600, K −50 %
+    trend = run_cli(capsys, "trend", "--catalogue", str(catalogue), "--joint", "j1")
+    assert trend.code == 2
+    assert "has the windows of 1 monitor (host:/m:1) and 3 session(s) of no monitor — trend one: --tag " \
+           "monitor_id=ID" in trend.err
+    own = run_cli(capsys, "trend", "--catalogue", str(catalogue), "--joint", "j1", "--tag", "monitor_id=host:/m:1",
+                  "--json")
+    assert own.code == 0 and [p["K_Nm_per_rad"] for p in json.loads(own.out)["points"]] == [900.0, 902.0, 899.0]

@@ -943,6 +943,11 @@ def test_a_monitor_whose_devices_fail_to_open_leaves_no_catalogue(capsys: pytest
                   "--out", str(out))
     assert run.code != 0 and "acq-no-such-bus" in run.err, run.err
     assert not (out / "catalogue.sqlite").exists()
+    # a --catalogue other monitors share (they may start together and write to it meanwhile) is never removed
+    shared = tmp_path / "plant.sqlite"
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--for", "10s", "--window", "4", "--every", "5",
+                  "--out", str(tmp_path / "m2"), "--catalogue", str(shared))
+    assert run.code != 0 and shared.exists()
 
 
 def test_readmes_two_monitor_benches_differ_in_their_drive_and_not_in_their_simulated_machine() -> None:

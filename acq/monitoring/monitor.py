@@ -37,7 +37,8 @@ from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
 from acq.monitoring.catalogue import Catalogue, Entry, Outcome
 from acq.monitoring.catalogue_backends import is_url
 from acq.monitoring.folder_lock import folder_lock
-from acq.monitoring.monitor_scope import IDENTITY_FILE, MONITOR_TAG, check_user_tags, monitor_identity, own_windows
+from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, check_user_tags, monitor_identity,
+                                          own_windows)
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.monitoring.trend import ELAPSED_TAG, RULE_TAGS, AlarmRules, Trend, alarm_onsets, compute_trend, filed_rules
 from acq.monitoring.window_bench import FACT_TAGS, differences, window_facts
@@ -51,7 +52,6 @@ from analysis import AnalysisRequest
 from drivers.config import Bench
 from drivers.registry import open_bench
 
-WINDOW_TAG = "monitor_window"
 #: How long the ending monitor waits for an alarm command still running (a mail or a webhook takes seconds).
 _ALARM_WAIT_S = 30.0
 #: The exit codes POSIX shells give themselves (XCU 2.8.2): the command was not found / could not be executed.
@@ -184,9 +184,10 @@ class Monitor:
 
         Returns 130 when stopped (:attr:`stopped_by`: Ctrl-C, SIGTERM, a stop request), else 3 when the last
         state is alarm, else 0."""
-        # a catalogue file or identity this run made (a database of a URL is not ours to remove)
-        made = [p for p in (None if is_url(self._catalogue_location) else Path(self._catalogue_location),
-                            self.s.out_dir / IDENTITY_FILE) if p is not None and not p.exists()]
+        # a catalogue file or identity this run made: only the folder's own catalogue (a --catalogue file other monitors
+        # may be writing to — they start together — or a database of a URL is not ours to remove: the second read)
+        own = None if self.s.catalogue is not None else self.s.out_dir / CATALOGUE_NAME
+        made = [p for p in (own, self.s.out_dir / IDENTITY_FILE) if p is not None and not p.exists()]
         try:
             self._run()
         finally:

@@ -23,6 +23,8 @@ from acqcore.errors import ConfigError
 
 #: Session tag of a monitor's window: the identity of the monitor that captured it.
 MONITOR_TAG = "monitor_id"
+#: Session tag of a monitor's window: its number in the monitor (every window has it, from before identities too).
+WINDOW_TAG = "monitor_window"
 #: The file in a monitor's ``--out`` folder holding its identity (one line).
 IDENTITY_FILE = "monitor.id"
 
@@ -70,13 +72,18 @@ def monitors_of(entries: Iterable[Entry]) -> list[str]:
 
 
 def split_by_monitor(entries: Sequence[Entry]) -> dict[str | None, list[Entry]]:
-    """One joint's sessions (oldest first) as the histories to judge apart: all together while at most one monitor
-    filed among them (with the benches' sessions and windows from before monitors had an identity, as before); with
-    several, each monitor's windows apart and the sessions of no monitor under None (when there are any)."""
+    """One joint's sessions (oldest first) as the histories to judge apart: each monitor's windows apart, and the
+    sessions of no monitor (a bench's recordings, imports) under None; with a single monitor, windows from before
+    monitors had an identity are its own. Without any monitor: all together, as before identities. A bench's sessions
+    judged with a monitor's windows made the bench's first sessions the monitor's baseline (the second read)."""
     monitors = monitors_of(entries)
-    if len(monitors) <= 1:
-        return {monitors[0] if monitors else None: list(entries)}
+    if not monitors:
+        return {None: list(entries)}
     groups: dict[str | None, list[Entry]] = {m: [] for m in monitors}
     for e in entries:
-        groups.setdefault(None if MONITOR_TAG not in e.tags else str(e.tags[MONITOR_TAG]), []).append(e)
+        if MONITOR_TAG in e.tags:
+            key: str | None = str(e.tags[MONITOR_TAG])
+        else:
+            key = monitors[0] if len(monitors) == 1 and WINDOW_TAG in e.tags else None
+        groups.setdefault(key, []).append(e)
     return groups

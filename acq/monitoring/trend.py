@@ -38,7 +38,7 @@ from scipy.stats import chi2
 from acq.monitoring.batch import CATALOGUE_NAME
 from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.catalogue_backends import is_url, redacted
-from acq.monitoring.monitor_scope import MONITOR_TAG, monitors_of
+from acq.monitoring.monitor_scope import MONITOR_TAG, monitors_of, split_by_monitor
 from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
 from analysis import AnalysisRequest, Z95
@@ -409,10 +409,13 @@ def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: st
             joints = catalogue.joints()
             raise NoSessions(f"{catalogue.path}: no sessions of joint {joint}{tagged} "
                              f"(joints: {', '.join(joints) or 'none'})", catalogue.path, joints)
-        monitors = monitors_of(entries)
-        if len(monitors) > 1:  # several robots' monitors sharing a catalogue, one joint name: one trend would mix them
+        histories = split_by_monitor(entries)
+        if len(histories) > 1:  # several monitors (or one and a bench's sessions), one joint name: one trend mixes them
+            monitors = monitors_of(entries)
             robots = sorted({str(e.tags["robot"]) for e in entries if "robot" in e.tags})
-            raise ConfigError(f"{catalogue.path}: joint {joint}{tagged} has the windows of {len(monitors)} monitors "
-                              f"({', '.join(monitors)}) — trend one: --tag {MONITOR_TAG}=ID"
+            others = len(histories.get(None, []))
+            what = (f"the windows of {len(monitors)} monitor{'s' if len(monitors) > 1 else ''} "
+                    f"({', '.join(monitors)})" + (f" and {others} session(s) of no monitor" if others else ""))
+            raise ConfigError(f"{catalogue.path}: joint {joint}{tagged} has {what} — trend one: --tag {MONITOR_TAG}=ID"
                               + (f" or --tag robot=R ({', '.join(robots)})" if robots else ""))
     return compute_trend(joint, entries, **options)
