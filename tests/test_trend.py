@@ -333,8 +333,10 @@ def test_the_trend_window_started_before_the_first_window_waits_for_it(tmp_path:
     folder = tmp_path / "monitor"
     png = tmp_path / "waiting.png"
     run = run_cli(capsys, "view", "--trend", "joint1", str(folder), "--screenshot", str(png))
-    assert run.code == 0 and png.read_bytes()[:4] == b"\x89PNG"
-    assert run.err == f"waiting for the first window of joint1 in {folder / 'catalogue.sqlite'} …\n"
+    # a screenshot (a script) of a trend with no window yet is an error, not a picture of "waiting" (the second read)
+    assert run.code == 1 and not png.exists()
+    assert run.err == (f"acq: error: {folder / 'catalogue.sqlite'}: no catalogue — fill one with acq analyze "
+                       f"{folder}/ first\n")
 
     def write(joint: str, n: int, k: float) -> None:
         doc = {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [k - 4, k + 4]},

@@ -108,6 +108,9 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         try:
             first: Trend | NoSessions = load()  # any other error (a bad URL, mixed monitors) is one line, no window
         except NoSessions as e:  # started before the monitor has filed a window of the joint: the window waits for it
+            if screenshot is not None:  # a script's picture of "waiting" with exit 0 would hide a wrong joint or folder
+                click.echo(f"acq: error: {e}", err=True)
+                return 1
             first = e
     else:
         figures = [session_figure(p) for p in sessions]
