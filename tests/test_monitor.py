@@ -254,6 +254,18 @@ def test_a_window_of_a_paused_robot_is_not_excited_and_has_no_K(capsys: pytest.C
     assert run.code == 0, run.err
     assert json.loads(run.out) == [{"path": str(window), "outcome": "analysed", "K_Nm_per_rad": None,
                                     "verdict": "not excited", "error": None}]
+    # damaged: the travel of the readable part says nothing of the rows lost, and the reason says so (the second read)
+    from tests.test_integrity import _flip_a_byte_in_chunk
+
+    damaged = tmp_path / "damaged.h5"
+    shutil.copyfile(window, damaged)
+    first, rows = _flip_a_byte_in_chunk(damaged, 1, "encoder/position_counts")
+    run = run_cli(capsys, "analyze", str(damaged), "--json", "--no-report", "--partial")
+    assert run.code == 0, run.err
+    reasons = json.loads(run.out)["quality"]["reasons"]
+    assert reasons[-1] == (f"the joint travelled 0 counts, less than half an electrical revolution (16384 counts): the "
+                           f"machine did not move it in this window's readable part ({(10000 - rows) * 0.001:.1f} s; "
+                           f"encoder: samples {first:_}–{first + rows - 1:_} unreadable)".replace("_", " "))
 
 
 def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: pytest.CaptureFixture[str],

@@ -144,6 +144,9 @@ def idle_reason(session: Session) -> str | None:
     if travel >= need:
         return None
     where = "window" if "monitor_window" in session.tags else "record"
+    if session.damage:  # on a damaged file's readable part the travel says nothing of the rest (the second read)
+        n = session.encoder.position_counts.size
+        where = f"{where}'s readable part ({n * session.encoder.period_s:.1f} s; {session.damage[0]})"
     return (f"the joint travelled {travel:.0f} counts, less than half an electrical revolution ({need:.0f} counts): "
             f"the machine did not move it in this {where}")
 
