@@ -481,6 +481,10 @@ def test_the_ewma_limit_widens_for_a_session_known_less_well_than_the_baseline()
     sharp = compute_trend("j", [base, _known_to(1, 891.0 * 0.99, 0.6)], baseline_sessions=1).points[-1]
     assert sharp.ewma_limit_pct == pytest.approx(textbook, rel=1e-6)
     assert (sharp.state, sharp.reason) == ("alarm", "EWMA")  # the same −1.0 %, known to ±0.6 %: a real change
+    # t ≥ 3 with every σ alike: the recursion is the textbook formula (at t = 1 any factor on the old variance passes)
+    alike = compute_trend("j", [base] + [_known_to(i, 891.0, 0.6) for i in (1, 2, 3)], baseline_sessions=1).points
+    assert alike[-1].ewma_limit_pct == pytest.approx(
+        -100.0 * EWMA_L * sigma * math.sqrt(0.2 / 1.8 * (1 - 0.8 ** 6)) / 891.0, rel=1e-6)  # z rounded
     own = 891.0 * 0.99 * 0.033 / 1.959964  # its own σ: its interval's half width / z
     assert vague.ewma_limit_pct == pytest.approx(-100.0 * EWMA_L * 0.2 * own / 891.0, rel=1e-6)
 
