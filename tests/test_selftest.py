@@ -455,3 +455,22 @@ def test_ramps_too_fast_to_turn_the_motor_blame_no_bench_constant(
                             r"half-periods read 3\.\d\d× pole_pairs·ω, but its \d+ zero crossings in the moves allow "
                             r"0\.\d\d–[23]\.\d\d× — each of the 240 moves turns the motor only 0\.16 rev .*", doubt)
     assert others  # the identification's own findings stay beside it
+
+
+def test_sync_cycles_count_across_a_wrap_with_the_frame_at_the_top_of_the_count_lost(tmp_path: Path) -> None:
+    """The second read: the SYNC counter's wrap was taken from the largest counter seen, so with the frames of counter
+    240 lost, 239 → 1 counted one cycle instead of two. The counter's own overflow is used (acq sets 240)."""
+    import can
+
+    from acq.commissioning.selftest_checks import sync_times
+    from acq.config import load_bench
+
+    drive = load_bench(Path(__file__).resolve().parent.parent / "configs/benches/sim_canopen.toml").drive
+    counters = [237, 238, 239, 1, 2]  # 240 lost
+    path = tmp_path / "s.blf"
+    with can.BLFWriter(str(path)) as writer:
+        for n, counter in enumerate(counters):
+            writer.on_message_received(can.Message(timestamp=1.0 + 0.001 * n, arbitration_id=0x80, data=[counter],
+                                                   is_extended_id=False))
+    index, _ = sync_times(path, drive)
+    assert index.tolist() == [0, 1, 2, 4, 5]

@@ -184,10 +184,14 @@ def blf_check(blf_path: Path, settings: DriveCanopen) -> Check:
 def sync_times(blf_path: Path, settings: DriveCanopen) -> tuple[np.ndarray, np.ndarray]:
     """The SYNC frames of the raw ``.blf``: their cycle index (from the SYNC counter, 0x1019, where they carry one;
     else their order) and host stamps, s."""
+    from drivers.canopen_stream import SYNC_COUNTER_OVERFLOW  # python-can: only where a .blf is read
+
     stamps, payloads = _blf_frames(blf_path, settings)["sync"]
     counters = np.array([p[0] if p else 0 for p in payloads], dtype=np.int64)
     if counters.size and np.all(counters > 0):  # 1…overflow: a step of 0 or less wrapped
-        wrap = max(int(counters.max()), 1)
+        # the counter's own overflow — the master's 0x1019 when acq listens, else the one acq sets — not the largest
+        # counter seen, which SYNC frames lost at the top of the count would lower (the second read)
+        wrap = max(settings.sync_counter_overflow or SYNC_COUNTER_OVERFLOW, int(counters.max()))
         steps = (np.diff(counters) - 1) % wrap + 1
         return np.r_[0, np.cumsum(steps)], stamps
     return np.arange(stamps.size), stamps
