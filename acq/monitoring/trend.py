@@ -235,15 +235,15 @@ def _skip_reason(e: Entry) -> str | None:
     return None
 
 
-def _own_sigma(entry: Entry) -> float:
-    """The session's own standard deviation of K, from its 95 % interval (0 without one)."""
+def _own_sigma(entry: Entry) -> float | None:
+    """The session's own standard deviation of K, from its 95 % interval (None without one)."""
     lo, hi = entry.K_ci95
-    return (hi - lo) / (2 * Z95) if lo is not None and hi is not None else 0.0
+    return (hi - lo) / (2 * Z95) if lo is not None and hi is not None else None
 
 
 def _sigma(baseline: Sequence[Entry]) -> float:
     """Session-to-session standard deviation of K: the larger of the intervals' and the baseline's scatter."""
-    widths = [_own_sigma(e) for e in baseline if e.K_ci95[0] is not None and e.K_ci95[1] is not None]
+    widths = [w for e in baseline if (w := _own_sigma(e)) is not None]
     from_ci = math.sqrt(statistics.fmean(w * w for w in widths)) if widths else 0.0
     scatter = statistics.stdev(e.K_Nm_per_rad for e in baseline) if len(baseline) > 1 else 0.0  # type: ignore[misc]
     return max(from_ci, scatter)
@@ -258,18 +258,18 @@ def baseline_warning(baseline: Sequence[Entry]) -> str | None:
     / 1.96, against χ² with n − 1 degrees of freedom at :data:`BASELINE_SIGNIFICANCE` — no tuned constant: each session's
     own interval says how much it may scatter. It assumes those intervals are honest (Gaussian about the truth);
     sessions without an interval are left out, and with fewer than two the test is not made."""
-    known = [(e.K_Nm_per_rad, (hi - lo) / 2) for e in baseline if e.K_Nm_per_rad is not None
-             for lo, hi in [e.K_ci95] if lo is not None and hi is not None and hi > lo]
+    known = [(e.K_Nm_per_rad, own) for e in baseline
+             if e.K_Nm_per_rad is not None and (own := _own_sigma(e)) is not None and own > 0]
     if len(known) < 2:
         return None
-    weights = [(Z95 / half) ** 2 for _, half in known]
+    weights = [1.0 / own ** 2 for _, own in known]
     mean = sum(w * k for w, (k, _) in zip(weights, known)) / sum(weights)
     statistic = sum(w * (k - mean) ** 2 for w, (k, _) in zip(weights, known))
     if chi2.sf(statistic, len(known) - 1) >= BASELINE_SIGNIFICANCE:
         return None
     ks = [k for k, _ in known]
     scatter_pct = 100 * statistics.stdev(ks) / statistics.fmean(ks)
-    known_pct = 100 * max(half / k for k, half in known)
+    known_pct = 100 * max(Z95 * own / k for k, own in known)  # the 95 % half width
     return (f"baseline unstable: its {len(known)} sessions scatter {scatter_pct:.1f} % while each is known to within "
             f"±{known_pct:.1f} % — the joint changed while the baseline was learned, and its alarm limits are too "
             "wide; re-baseline with --baseline on a session of the joint in a known state")
@@ -345,7 +345,7 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
         # the EWMA's variance from each session's own σ, never below the baseline's: with every σ_i = σ this is the
         # textbook σ²·λ/(2 − λ)·(1 − (1 − λ)^2t); a session known only to ±3.3 % judged with the ±0.6 % of a
         # one-window baseline raised an EWMA alarm at −1.0 % (the third trial's fleet)
-        var_z = (1.0 - ewma_lambda) ** 2 * var_z + (ewma_lambda * max(sigma, _own_sigma(e))) ** 2
+        var_z = (1.0 - ewma_lambda) ** 2 * var_z + (ewma_lambda * max(sigma, _own_sigma(e) or 0.0)) ** 2
         limit = EWMA_L * math.sqrt(var_z)
         rules = ["threshold"] if change < -threshold_pct else []
         rules += ["EWMA"] if z < base - limit else []

@@ -24,14 +24,13 @@ def time_unit(span_s: float) -> tuple[str, float]:
 def clock_text(t_s: float, span_s: float) -> tuple[str, str]:
     """Machine time ``t_s`` as a clock reads it within a run of ``span_s`` seconds, and the clock's unit: "1:20"
     ("h:min") from 1 h, "2:30" ("min:s") from 2 min, else "12.5" ("s"). Decimal hours mislabel a 10 min grid
-    (0.17 h read "0.2 h", the third trial); a clock reads every whole minute or second as it is."""
-    if span_s >= 3600.0:
-        minutes = round(t_s / 60.0)
-        return f"{minutes // 60}:{minutes % 60:02d}", "h:min"
-    if span_s >= 120.0:
-        seconds = round(t_s)
-        return f"{seconds // 60}:{seconds % 60:02d}", "min:s"
-    return f"{t_s:.1f}", "s"
+    (0.17 h read "0.2 h", the third trial); a clock reads every whole minute or second as it is. The unit is
+    :func:`time_unit`'s, as in the status line."""
+    unit, scale = time_unit(span_s)
+    if unit == "s":
+        return f"{t_s:.1f}", "s"
+    ticks = round(t_s * 60.0 / scale)  # whole minutes of an h:min clock, whole seconds of a min:s one
+    return f"{ticks // 60}:{ticks % 60:02d}", {"h": "h:min", "min": "min:s"}[unit]
 
 
 def duration_text(t_s: float) -> str:
