@@ -438,9 +438,9 @@ class Monitor:
     # ---- resume after a crash --------------------------------------------------------------------------
     def _resume(self, pool: Any) -> int:
         """Mark or analyse the windows a previous run left; return the next window's number."""
-        known = {e.session_id: e for e in self._own_windows()}
         windows = sorted(own_windows((e for e in self.catalogue.entries() if WINDOW_TAG in e.tags), self._id,
                                      legacy=self._legacy), key=lambda e: int(e.tags[WINDOW_TAG]))
+        known = {e.session_id: e for e in windows if e.joint == self.s.bench.joint}  # the same read, this joint's
         changed = differences(windows, self.s.bench, self.s.window_s)
         if changed:
             # K of another measurement chain, scale or window length would join the trend as if the joint had changed
