@@ -1,5 +1,6 @@
 """Batch and catalogue stay consistent: Ctrl-C stops a batch with every result written catalogued; a session still
-being recorded is skipped by a batch and refused by acq analyze unless --partial."""
+being recorded is skipped by a batch and refused by acq analyze unless --partial; a request that spells out the
+defaults is looked up, filed (success and failure) and cleaned up as the default request."""
 
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from pathlib import Path
 import h5py
 import pytest
 
+from analysis import AnalysisRequest
 from tests.helpers import ctrl_c_as_at_a_terminal, run_cli, seeded_profile
 
 
@@ -45,7 +47,7 @@ def copy_session(src: Path, dst: Path, *, status: str | None = None) -> Path:
 def catalogue_rows(path: Path) -> list[sqlite3.Row]:
     with sqlite3.connect(path) as db:
         db.row_factory = sqlite3.Row
-        return db.execute("SELECT s.path, a.verdict, a.error, a.partial FROM sessions s "
+        return db.execute("SELECT s.path, a.verdict, a.error, a.partial, a.request_key FROM sessions s "
                           "JOIN analyses a ON a.session_key = s.session_key ORDER BY s.path").fetchall()
 
 
@@ -193,3 +195,96 @@ def test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line(recorded: Path, tmp_pa
     assert again.returncode == 0, again.stderr
     outcomes = [d["outcome"] for d in json.loads(again.stdout)]
     assert sorted(outcomes) == sorted(["skipped"] * ok + ["analysed"] * (n - ok))  # the re-run goes on
+
+
+def _flip_a_bit_in_the_current(path: Path) -> None:
+    """Damage ``path`` in place: one bit flipped in the second chunk of the phase current (its checksum fails; the
+    reader keeps the rest, the batch refuses the session without --partial)."""
+    with h5py.File(path, "r") as f:
+        dataset = f["current/i_a_A"]
+        offset = dataset.id.get_chunk_info_by_coord((dataset.chunks[0],)).byte_offset + 100
+    with path.open("r+b") as fh:
+        fh.seek(offset)
+        byte = fh.read(1)
+        fh.seek(offset)
+        fh.write(bytes([byte[0] ^ 0x40]))
+
+
+def _batch(capsys: pytest.CaptureFixture[str], folder: Path, *options: str) -> dict[str, str]:
+    """``acq analyze FOLDER OPTIONS --no-report --jobs 1 --json``: each session's outcome by file name."""
+    run = run_cli(capsys, "analyze", str(folder), *options, "--no-report", "--jobs", "1", "--json")
+    assert run.code in (0, 1), run.err
+    return {Path(d["path"]).name: d["outcome"] for d in json.loads(run.out)}
+
+
+@pytest.mark.parametrize(("band", "label"), [("10,400", ""),  # the default band of the 1 kHz simulated encoder
+                                             ("20,300", ".band-20-300")])
+def test_a_second_batch_analyses_nothing_also_when_the_request_spells_out_the_default(
+        recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str], band: str, label: str) -> None:
+    """--band 10,400 is the default band here: filed as the default request (the session's own result), it must be
+    looked up there too (it was looked up under its own key, found nothing, and every run analysed every session
+    again). --band 20,300 is a variant: its own result file and key, skipped the second time as well."""
+    names = ["s0", "s1"]
+    for name in names:
+        copy_session(recorded, tmp_path / f"{name}.h5")
+    assert _batch(capsys, tmp_path, "--band", band) == {f"{n}.h5": "analysed" for n in names}
+    results = sorted(tmp_path.glob("*.result.json"))
+    assert [p.name for p in results] == [f"{n}{label}.result.json" for n in names]
+    written = [p.stat().st_mtime_ns for p in results]
+    filed = AnalysisRequest(band_hz=None if label == "" else (20.0, 300.0)).key()
+    rows = catalogue_rows(tmp_path / "catalogue.sqlite")
+    assert [(Path(r["path"]).name, r["verdict"], r["request_key"]) for r in rows] == [(f"{n}.h5", "ok", filed)
+                                                                                      for n in names]
+    assert _batch(capsys, tmp_path, "--band", band) == {f"{n}.h5": "skipped" for n in names}  # 0 analysed
+    assert [p.stat().st_mtime_ns for p in results] == written
+    assert len(catalogue_rows(tmp_path / "catalogue.sqlite")) == len(names)
+    if label == "":  # the same analysis as the default request's: current for it too
+        assert _batch(capsys, tmp_path) == {f"{n}.h5": "skipped" for n in names}
+
+
+def test_a_failure_of_a_request_spelling_out_the_default_is_filed_as_the_default(
+        recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A session damaged in place after its default analysis: --band 10,400 (the default band) fails on it, and the
+    failure replaces the session's default row (it was filed under the asked key beside it, so the catalogue and the
+    trend went on showing the analysis of the intact file as the session's current one). The run after it tries the
+    session again, and files the failure in the same row."""
+    copy_session(recorded, tmp_path / "a.h5")
+    copy_session(recorded, tmp_path / "b.h5")
+    assert _batch(capsys, tmp_path) == {"a.h5": "analysed", "b.h5": "analysed"}
+    _flip_a_bit_in_the_current(tmp_path / "b.h5")
+    default = AnalysisRequest().key()
+    damaged = (f"{tmp_path / 'b.h5'}: damaged (current: samples 2 560–5 119 unreadable) — run acq check, or use "
+               "--partial to analyse the intact part")
+    for _ in range(2):
+        outcomes = _batch(capsys, tmp_path, "--band", "10,400")
+        rows = [(Path(r["path"]).name, r["verdict"], r["error"], r["request_key"])
+                for r in catalogue_rows(tmp_path / "catalogue.sqlite")]
+        assert rows == [("a.h5", "ok", None, default), ("b.h5", None, damaged, default)]
+        assert outcomes == {"a.h5": "skipped", "b.h5": "failed"}
+
+
+def test_ctrl_c_leaves_no_result_of_a_request_spelling_out_the_default_without_its_row(recorded: Path,
+                                                                                        tmp_path: Path) -> None:
+    """Ctrl-C while a worker draws the report of a result it wrote: --band 10,400 (the default band) writes the
+    session's own s<i>.result.json, and a worker stopped after writing it must not leave it without its catalogue row
+    (the cleanup removed s<i>.band-10-400.result.json, which no worker writes)."""
+    folder = tmp_path / "many"
+    folder.mkdir()
+    n = 12
+    for i in range(n):
+        copy_session(recorded, folder / f"s{i}.h5")
+    catalogue = folder / "catalogue.sqlite"
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(folder), "--band", "10,400", "--jobs", "2"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=ctrl_c_as_at_a_terminal)
+    _wait_for(lambda: bool(list(folder.glob("*.result.json"))), proc)  # its worker now draws the report (Qt)
+    assert proc.poll() is None, proc.communicate()
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.startswith("acq: interrupted: "), err
+    ok = _ok_names(catalogue)
+    assert {p.name.replace(".result.json", ".h5") for p in folder.glob("*.result.json")} == ok
+    assert {p.name.replace(".report.png", ".h5") for p in folder.glob("*.report.png")} <= ok
+    assert [p.name for p in folder.iterdir() if ".band-" in p.name or p.name.startswith(".")] == []
+    assert {r["request_key"] for r in catalogue_rows(catalogue)} <= {AnalysisRequest().key()}

@@ -200,8 +200,8 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     session.require_usable(partial=request.partial)
     notes = partial_notes(session)
     try:
+        asked = filed_request(session, request)  # spelled-out defaults: the session's own result, not a variant
         rec = recording_from_session(session)
-        asked = request.as_default_where_it_is(rec)  # spelled-out defaults: the session's own result, not a variant
         request = request_for(session, asked)
         idle = idle_reason(session)
         result = analyze(rec, request) if idle is None else None
@@ -227,6 +227,15 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
         if report_path is None:  # no picture of this result: one of an earlier result would be taken for it
             png_path.unlink(missing_ok=True)
     return SessionResult(session, result, doc, json_path, report_path, asked)
+
+
+def filed_request(session: Session, request: AnalysisRequest) -> AnalysisRequest:
+    """``request`` as its result on ``session`` is filed: the result's file name (:func:`output_paths`) and its
+    catalogue key, of a success and of a failure alike. Each option that names what the default does on this session
+    anyway is left to the default (:meth:`analysis.AnalysisRequest.as_default_where_it_is`), so ``--band 10,400`` on
+    a 1 kHz encoder is the session's own result. A stream with too few samples raises :class:`ConfigError`
+    (:meth:`~acq.recording.session.Session.require_samples`)."""
+    return request.as_default_where_it_is(recording_from_session(session))
 
 
 def partial_notes(session: Session) -> list[str]:
