@@ -76,6 +76,10 @@ class PreparedSignals:
     interference : tuple of Interference
         What the encoder method removed from the current besides the torque, one per chunk of the
         record (:func:`analysis.torque.torque_encoder`); empty for the other methods.
+    torque_std_Nm : ndarray or None
+        Standard error of the one-phase torque at ``t_s`` from the information the phase carries about it near each
+        instant, N·m (:func:`analysis.torque.angle_information_std` at the anti-alias filter's time resolution;
+        encoder method only): large where the motor holds torque at an angle at which the phase shows little of it.
     """
 
     t_s: np.ndarray
@@ -91,6 +95,7 @@ class PreparedSignals:
     torque_alias_Nm: np.ndarray | None = None
     encoder_jitter: EncoderJitter | None = None
     interference: tuple[torque.Interference, ...] = ()
+    torque_std_Nm: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -220,6 +225,7 @@ def torque_on_instants(rec: Recording, spans: Spans, chain: SignalChain = Signal
     out = np.empty(t_s.size)
     noise = np.empty(t_s.size) if chain.torque_method == "encoder" and antialias else None
     alias = np.empty((ALIAS_ORDERS, t_s.size), complex) if sign is None and antialias else None
+    std = np.empty(t_s.size) if noise is not None else None
     theta0 = np.nan if sign is not None else clock.theta0_rad  # NaN: the first chunk estimates it
     found: list[torque.Interference] = []
     gains: list[torque.PhaseGains] = []
@@ -232,8 +238,13 @@ def torque_on_instants(rec: Recording, spans: Spans, chain: SignalChain = Signal
         t_piece = t0 + np.arange(b + m1 - a + m0) / rec.rate_hz
         if sign is None:
             t_drive = clock.drive_time_s(t_piece)
-            tq, theta0 = _demodulated(piece, rec, spans.angle(t_drive), chain.torque_method, theta0,
+            theta_m = spans.angle(t_drive)
+            tq, theta0 = _demodulated(piece, rec, theta_m, chain.torque_method, theta0,
                                       noise_seed=a if noise is not None else None, found=found, gains_found=gains)
+            if std is not None:  # the estimate's own standard error where the angle leaves the phase little of it
+                std[sel] = np.interp(t_daq[sel], t_piece, torque.angle_information_std(
+                    rec.pole_pairs * theta_m, theta0, rec.rate_hz, rec.k_t_Nm_per_A, found[-1].noise_rms_a,
+                    0.5 / f_pass))
             if alias is not None:  # anti-alias resampling: the torque and its noise realisation moved in one filter
                 tq = np.atleast_2d(tq)  # call and one spline; the alias terms from the torque alone (_alias_terms)
                 moved = resample.to_instants(tq, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
@@ -250,7 +261,7 @@ def torque_on_instants(rec: Recording, spans: Spans, chain: SignalChain = Signal
         out[sel] = chain.to_instants(tq, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
     notes = [*spans.notes, *_interference_notes(found), *_gain_notes(gains)]
     prepared = PreparedSignals(t_s, out, speed, rec.period_s, clock, chain.torque_method, chain.align, theta0, notes,
-                               noise, alias, spans.encoder_jitter, tuple(found))
+                               noise, alias, spans.encoder_jitter, tuple(found), std)
     return _signed(prepared) if sign is None else prepared
 
 
