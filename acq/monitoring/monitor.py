@@ -12,7 +12,8 @@ through the shell (``sh -c``, in the background) with ``ACQ_JOINT``, ``ACQ_K``, 
 
 Each window is judged for excitation (:mod:`acq.monitoring.window_judge`): a window that does not excite is catalogued
 with verdict ``not excited`` and the reason, without K. Windows are numbered (session tag ``monitor_window``) and
-placed in machine time (``monitor_elapsed_s`` = number × ``every_s``); a restart after a crash resumes
+placed in machine time (``monitor_elapsed_s``: number × ``every_s``, after a restart going on from the last window at
+the new ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
 ``interrupted`` (not counted); what a restart must agree with (bench, ``--window``, alarm rules, catalogue) is in
 :mod:`acq.monitoring.monitor_restart`, the monitor's identity (a copied folder is refused) in
