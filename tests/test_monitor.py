@@ -50,6 +50,15 @@ def _bench_file(tmp_path: Path, **sim: float) -> Path:
     return path
 
 
+def _restarted_elsewhere(folder: Path, out: Path) -> None:
+    """A copy of the monitor ``folder`` at ``out`` that stands for the same monitor restarted (the fixture's folder is
+    shared by the tests): its identity bound to ``out``, as a folder moved there is (a copy left bound to ``folder``,
+    which still holds it, is refused as a copy)."""
+    shutil.copytree(folder, out)
+    identity = json.loads((out / "monitor.id").read_text())
+    (out / "monitor.id").write_text(json.dumps({**identity, "folder": str(out.resolve())}))
+
+
 def _rows(folder: Path) -> list[dict[str, object]]:
     db = sqlite3.connect(folder / "catalogue.sqlite")
     db.row_factory = sqlite3.Row
@@ -194,7 +203,7 @@ def test_retention_keeps_the_baseline_and_the_last_windows_and_every_catalogue_r
 
 def test_restart_resumes_numbering_and_marks_an_interrupted_window(four_windows: Path, tmp_path: Path) -> None:
     out = tmp_path / "resumed"
-    shutil.copytree(four_windows, out)
+    _restarted_elsewhere(four_windows, out)
     bench = _bench(seed=EXCITING_SEED)
     # a window whose capture was cut (the monitor killed): status stays "recording"
     writer = SessionWriter(out / "cut.h5", bench=bench, profile=None,
@@ -222,7 +231,7 @@ def test_a_restart_with_other_alarm_rules_is_refused(four_windows: Path, tmp_pat
     """The second trial: a restart with --baseline-windows 5 --threshold-pct 20 re-baselined on the windows already
     judged (the alarming ones in it) and cleared the alarm, saying nothing."""
     out = tmp_path / "other_rules"
-    shutil.copytree(four_windows, out)
+    _restarted_elsewhere(four_windows, out)
     run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for",
                   "1m", "--baseline-windows", "5", "--threshold-pct", "20", "--out", str(out))
     assert (run.code, run.err) == (2, f"acq: error: {out}: its windows were judged with --baseline-windows 2 "
@@ -794,12 +803,12 @@ def test_alarm_commands_run_in_a_session_of_their_own_and_share_one_wait_at_the_
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The review: the Ctrl-C that stops the monitor reached its alarm commands (same process group), and N slow
     commands held the exit N × 30 s. Two commands still running: one shared wait, both said, both left running."""
-    import acq.monitoring.monitor as monitor_module
+    import acq.monitoring.alarm_command as alarm_module
     from acq.monitoring.catalogue import Entry
     from acq.monitoring.monitor import Monitor, MonitorSettings
     from acq.monitoring.trend import Trend
 
-    monkeypatch.setattr(monitor_module, "_ALARM_WAIT_S", 0.6)
+    monkeypatch.setattr(alarm_module, "ALARM_WAIT_S", 0.6)
     sid_file = tmp_path / "sid"
     command = f"{sys.executable} -c 'import os; open(\"{sid_file}\", \"w\").write(str(os.getsid(0)))'; sleep 5"
     m = Monitor(MonitorSettings(bench=_bench(), out_dir=tmp_path, window_s=10.0, every_s=60.0, on_alarm=command))
@@ -808,14 +817,14 @@ def test_alarm_commands_run_in_a_session_of_their_own_and_share_one_wait_at_the_
     trend = Trend("joint1", [], 890.0, "first good session", 2.0, 10.0, 0.2)
     for _ in range(2):
         m._run_on_alarm(entry, trend)
-    started = list(m._alarm_procs)
+    started = list(m._alarms._running)
     try:
         deadline = time.monotonic() + 3.0
         while not sid_file.exists() and time.monotonic() < deadline:
             time.sleep(0.02)
         assert int(sid_file.read_text()) != os.getsid(0)  # not the monitor's session: a Ctrl-C does not reach it
         start = time.monotonic()
-        m._reap_alarms(wait=True)
+        m._alarms.reap(wait=True)
         assert time.monotonic() - start < 1.0  # one 0.6 s wait for both, not 0.6 s each
         assert m.status.alarm_command_failure.startswith(
             "alarm command still running after 0.6 s when the monitor ended (pid ")
@@ -832,7 +841,7 @@ def test_a_restart_with_another_bench_or_window_is_refused_but_not_another_simul
     windows from two measurement chains, no notice; a changed --window was accepted too. Another [sim] truth or seed
     (a simulated wear series: the machine, not the measurement) resumes."""
     out = tmp_path / "other_bench"
-    shutil.copytree(four_windows, out)
+    _restarted_elsewhere(four_windows, out)
     same = _bench_file(tmp_path, seed=EXCITING_SEED)
     geared = tmp_path / "geared.toml"
     geared.write_text(same.read_text().replace("ratio = 10.0", "ratio = 12.5"))
@@ -862,7 +871,7 @@ def test_a_folder_filed_before_the_bench_tags_resumes(four_windows: Path, tmp_pa
     from acq.monitoring.window_bench import FACT_TAGS
 
     out = tmp_path / "old"
-    shutil.copytree(four_windows, out)
+    _restarted_elsewhere(four_windows, out)
     db = sqlite3.connect(out / "catalogue.sqlite")
     for key, tags in db.execute("SELECT session_key, tags_json FROM sessions").fetchall():
         old = {k: v for k, v in json.loads(tags).items() if k not in FACT_TAGS}
@@ -880,7 +889,7 @@ def test_a_restart_says_both_counts_and_goes_on_from_the_resumed_machine_time(
     """After a restart the summary counted only this run's windows while the trend had all, and the first status line
     said "0 s" of machine time, then jumped to 5 min."""
     out = tmp_path / "resumed"
-    shutil.copytree(four_windows, out)
+    _restarted_elsewhere(four_windows, out)
     run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for",
                   "2m", "--baseline-windows", "2", "--keep", "1", "--out", str(out))
     assert run.code == 0, run.err
