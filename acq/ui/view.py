@@ -97,8 +97,11 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
     if screenshot is None and not has_display():
         click.echo(NO_DISPLAY_MESSAGE, err=True)
         return 1
-    from acq.ui.plots import ReportView, ensure_app, grab_png
-    from acq.ui.qt_signals import loop_ended_by_signals
+    from acq.monitoring.batch import signals_deferred
+
+    with signals_deferred():  # a Ctrl-C inside Qt's import was a fatal error in shiboken's start-up (exit 134) or lost
+        from acq.ui.plots import ReportView, ensure_app, grab_png
+        from acq.ui.qt_signals import loop_ended_by_signals
 
     if trend_joint is not None:
         from acq.monitoring.trend import NoSessions, load_trend
@@ -129,15 +132,16 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
             window = ReportView(figures, title=title)
         if screenshot is not None:
             grab_png(window, screenshot, size)
-            click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")
-            return 0
-        window.resize(*size)
-        window.show()
-        click.echo(f"{window.windowTitle()}: close the window or press Ctrl-C to end")
-        app.exec()
-    if caught:
+        else:
+            window.resize(*size)
+            window.show()
+            click.echo(f"{window.windowTitle()}: close the window or press Ctrl-C to end")
+            app.exec()
+    if caught:  # also a Ctrl-C while the window was built or drawn: its handler here raises nothing (was exit 0)
         click.echo("acq: interrupted", err=True)
         return EXIT_INTERRUPTED
+    if screenshot is not None:
+        click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")
     return 0
 
 
