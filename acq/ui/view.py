@@ -110,8 +110,11 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         load = functools.partial(load_trend, folder, catalogue_path, trend_joint, tags)
         try:
             first: Trend | NoSessions = load()  # any other error (a bad URL, mixed monitors) is one line, no window
-        except NoSessions as e:  # started before the monitor has filed a window of the joint: the window waits for it
-            if screenshot is not None:  # a script's picture of "waiting" with exit 0 would hide a wrong joint or folder
+        except NoSessions as e:  # started before the monitor has filed its first window: the window waits for it
+            # — only when the catalogue has no session yet: one with sessions, none of this joint (and tags), holds a
+            # misspelt joint or tag, which was waited for for ever. A script's picture of "waiting" with exit 0 would
+            # hide a wrong joint or folder
+            if screenshot is not None or e.joints:
                 click.echo(f"acq: error: {e}", err=True)
                 return 1
             first = e
