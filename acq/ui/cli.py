@@ -572,6 +572,7 @@ def _interrupted_outside_the_command() -> Iterator[None]:
     finally:
         for s, h in _command_handlers.items():
             signal.signal(s, h)  # type: ignore[arg-type]
+        _command_handlers.clear()  # a group invoked otherwise (click's test runner) leaves the handlers alone
 
 
 def _run(argv: list[str] | None) -> None:
