@@ -442,6 +442,29 @@ def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Pa
     assert monitor.status.last_K == rows[0]["K_Nm_per_rad"] and monitor.status.change_pct is None
 
 
+def test_a_ctrl_c_while_a_complete_window_is_shut_down_still_ends_the_monitor(tmp_path: Path,
+                                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """The flaky hang: a Ctrl-C the recorder's handler took once both streams were complete (while it shut the window
+    down) left the window complete and the monitor capturing on (1 run of 30, SIGINT 0.1…10 s in). Here a real SIGINT
+    arrives at that moment of every window."""
+    from acq.monitoring.monitor import Monitor, MonitorSettings
+
+    shut_down = Recorder._shut_down
+
+    def ctrl_c_then_shut_down(recorder: Recorder, *args: object) -> object:
+        os.kill(os.getpid(), signal.SIGINT)  # handled in this (the main) thread before the next line
+        return shut_down(recorder, *args)
+
+    monkeypatch.setattr(Recorder, "_shut_down", ctrl_c_then_shut_down)
+    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=tmp_path, window_s=10.0, every_s=60.0,
+                               for_s=180.0, fast=True, baseline_windows=2)
+    monitor = Monitor(settings)
+    assert monitor.run() == 130 and monitor.stopped_by == "interrupted by user (Ctrl-C)"
+    rows = _rows(tmp_path)  # the window was complete: captured and analysed, and no other captured
+    assert [(r["window"], r["verdict"]) for r in rows] == [(0, "ok")]
+    assert monitor.status.captured == monitor.status.analysed == 1
+
+
 def test_ctrl_c_ends_the_monitor_with_exit_130_and_one_line_of_what_it_kept(tmp_path: Path) -> None:
     """README's exit codes: 130 interrupted (the monitor exited 0); the windows catalogued stay, a restart resumes."""
     out = tmp_path / "monitor"
