@@ -62,7 +62,7 @@ def main() -> None:
         keep_freed_memory()
     try:
         from acq.ui.cli import main as run_cli
+        run_cli()  # its own Ctrl-C handling begins a few steps in: a Ctrl-C before it is caught here too
     except KeyboardInterrupt:
         sys.stderr.write("acq: interrupted\n")
         sys.exit(130)
-    run_cli()

@@ -143,3 +143,47 @@ def test_an_unreachable_server_is_one_line(capsys: pytest.CaptureFixture[str]) -
     assert run.code == 2 and run.out == ""
     assert run.err.startswith("acq: error: postgresql://acq:***@127.0.0.1:1/fleet: cannot open the catalogue (")
     assert "secret" not in run.err and len(run.err.strip().splitlines()) == 1
+
+
+def test_a_monitors_windows_are_read_by_its_column_and_an_older_catalogue_gets_it_from_the_tags(
+        catalogue_location: Path | str, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Scoping to one monitor filtered every row of a joint's name in Python (the review): now a query on the
+    ``monitor_id`` column (indexed), which a catalogue of schema 5 gets from its rows' tags when it is opened."""
+    monkeypatch.setattr(acq.monitoring.catalogue, "SCHEMA_VERSION", 5)
+    with Catalogue(catalogue_location) as old, old._transaction():
+        for key, tags in (("s1", '{"monitor_id": "h:/m1:0000000a"}'), ("s2", '{"monitor_id": "h:/m2:0000000b"}'),
+                          ("s3", '{"robot": "r1"}')):
+            old._execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc, tags_json) "
+                         f"VALUES (?, ?, '/{key}.h5', 'joint1', '2026-01-01T00:00:0{key[1]}+00:00', ?)",
+                         (key, key, tags))
+            old._execute("INSERT INTO analyses (session_key, sha256, request_key, analyzed_utc, verdict) "
+                         "VALUES (?, 'h', '{}', '2026-01-01T00:01:00+00:00', 'ok')", (key,))
+    monkeypatch.undo()
+    with Catalogue(catalogue_location) as c:
+        c.record(Outcome("/s4.h5", "h4", "{}", {"session_id": "s4", "joint": "joint1",
+                                                "created_utc": "2026-01-01T00:00:04+00:00",
+                                                "tags": {"monitor_id": "h:/m1:0000000a"}}, None, "failed", 0.1))
+        m1 = [e.session_id for e in c.entries("joint1", monitor="h:/m1:0000000a")]
+        m1_and_unowned = [e.session_id for e in c.entries("joint1", monitor="h:/m1:0000000a", unowned=True)]
+        m2_other_joint = [e.session_id for e in c.entries("joint2", monitor="h:/m2:0000000b")]
+        everyone = [e.session_id for e in c.entries("joint1")]
+    assert (m1, m1_and_unowned, m2_other_joint, everyone) == (["s1", "s4"], ["s1", "s3", "s4"], [],
+                                                              ["s1", "s2", "s3", "s4"])
+
+
+def test_a_monitors_windows_are_copied_into_another_catalogue_with_their_analyses(
+        catalogue_location: Path | str, tmp_path: Path) -> None:
+    """``acq monitor --move-catalogue`` (SQLite to PostgreSQL): a monitor's sessions and analyses, nobody else's; its
+    windows from before identities filed as its own."""
+    source = tmp_path / "old.sqlite"
+    with Catalogue(source) as old:
+        for sid, tags in (("s-01", {"monitor_id": "m1"}), ("s-02", {"monitor_id": "m2"}), ("s-03", {})):
+            outcome = _outcome(sid, 890.0 + int(sid[-1]))
+            old.record(Outcome(outcome.path, outcome.sha256, "r", {**outcome.session, "tags": tags}, outcome.doc,
+                               None, 1.0))
+        with Catalogue(catalogue_location) as new:
+            assert new.copy_windows(old, "m1", unowned=True) == 2
+            assert new.copy_windows(old, "m1", unowned=True) == 2  # again: the rows it has are kept, none doubled
+            rows = [(e.session_id, e.tags, e.K_Nm_per_rad, e.K_ci95, e.path) for e in new.entries(monitor="m1")]
+    assert rows == [("s-01", {"monitor_id": "m1"}, 891.0, (886.0, 896.0), "/bench/s-01.h5"),
+                    ("s-03", {"monitor_id": "m1"}, 893.0, (888.0, 898.0), "/bench/s-03.h5")]

@@ -50,6 +50,15 @@ def _bench_file(tmp_path: Path, **sim: float) -> Path:
     return path
 
 
+def _restarted_elsewhere(folder: Path, out: Path) -> None:
+    """A copy of the monitor ``folder`` at ``out`` that stands for the same monitor restarted (the fixture's folder is
+    shared by the tests): its identity bound to ``out``, as a folder moved there is (a copy left bound to ``folder``,
+    which still holds it, is refused as a copy)."""
+    shutil.copytree(folder, out)
+    identity = json.loads((out / "monitor.id").read_text())
+    (out / "monitor.id").write_text(json.dumps({**identity, "folder": str(out.resolve())}))
+
+
 def _rows(folder: Path) -> list[dict[str, object]]:
     db = sqlite3.connect(folder / "catalogue.sqlite")
     db.row_factory = sqlite3.Row
@@ -194,7 +203,7 @@ def test_retention_keeps_the_baseline_and_the_last_windows_and_every_catalogue_r
 
 def test_restart_resumes_numbering_and_marks_an_interrupted_window(four_windows: Path, tmp_path: Path) -> None:
     out = tmp_path / "resumed"
-    shutil.copytree(four_windows, out)
+    _restarted_elsewhere(four_windows, out)
     bench = _bench(seed=EXCITING_SEED)
     # a window whose capture was cut (the monitor killed): status stays "recording"
     writer = SessionWriter(out / "cut.h5", bench=bench, profile=None,
@@ -222,7 +231,7 @@ def test_a_restart_with_other_alarm_rules_is_refused(four_windows: Path, tmp_pat
     """The second trial: a restart with --baseline-windows 5 --threshold-pct 20 re-baselined on the windows already
     judged (the alarming ones in it) and cleared the alarm, saying nothing."""
     out = tmp_path / "other_rules"
-    shutil.copytree(four_windows, out)
+    _restarted_elsewhere(four_windows, out)
     run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for",
                   "1m", "--baseline-windows", "5", "--threshold-pct", "20", "--out", str(out))
     assert (run.code, run.err) == (2, f"acq: error: {out}: its windows were judged with --baseline-windows 2 "
@@ -431,6 +440,29 @@ def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Pa
     # one good window of the two the baseline needs: its K is shown while the baseline is learned
     assert rows[0]["verdict"] == "ok" and monitor.status.state == "learning baseline"
     assert monitor.status.last_K == rows[0]["K_Nm_per_rad"] and monitor.status.change_pct is None
+
+
+def test_a_ctrl_c_while_a_complete_window_is_shut_down_still_ends_the_monitor(tmp_path: Path,
+                                                                            monkeypatch: pytest.MonkeyPatch) -> None:
+    """The flaky hang: a Ctrl-C the recorder's handler took once both streams were complete (while it shut the window
+    down) left the window complete and the monitor capturing on (1 run of 30, SIGINT 0.1…10 s in). Here a real SIGINT
+    arrives at that moment of every window."""
+    from acq.monitoring.monitor import Monitor, MonitorSettings
+
+    shut_down = Recorder._shut_down
+
+    def ctrl_c_then_shut_down(recorder: Recorder, *args: object) -> object:
+        os.kill(os.getpid(), signal.SIGINT)  # handled in this (the main) thread before the next line
+        return shut_down(recorder, *args)
+
+    monkeypatch.setattr(Recorder, "_shut_down", ctrl_c_then_shut_down)
+    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=tmp_path, window_s=10.0, every_s=60.0,
+                               for_s=180.0, fast=True, baseline_windows=2)
+    monitor = Monitor(settings)
+    assert monitor.run() == 130 and monitor.stopped_by == "interrupted by user (Ctrl-C)"
+    rows = _rows(tmp_path)  # the window was complete: captured and analysed, and no other captured
+    assert [(r["window"], r["verdict"]) for r in rows] == [(0, "ok")]
+    assert monitor.status.captured == monitor.status.analysed == 1
 
 
 def test_ctrl_c_ends_the_monitor_with_exit_130_and_one_line_of_what_it_kept(tmp_path: Path) -> None:
@@ -794,12 +826,12 @@ def test_alarm_commands_run_in_a_session_of_their_own_and_share_one_wait_at_the_
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """The review: the Ctrl-C that stops the monitor reached its alarm commands (same process group), and N slow
     commands held the exit N × 30 s. Two commands still running: one shared wait, both said, both left running."""
-    import acq.monitoring.monitor as monitor_module
+    import acq.monitoring.alarm_command as alarm_module
     from acq.monitoring.catalogue import Entry
     from acq.monitoring.monitor import Monitor, MonitorSettings
     from acq.monitoring.trend import Trend
 
-    monkeypatch.setattr(monitor_module, "_ALARM_WAIT_S", 0.6)
+    monkeypatch.setattr(alarm_module, "ALARM_WAIT_S", 0.6)
     sid_file = tmp_path / "sid"
     command = f"{sys.executable} -c 'import os; open(\"{sid_file}\", \"w\").write(str(os.getsid(0)))'; sleep 5"
     m = Monitor(MonitorSettings(bench=_bench(), out_dir=tmp_path, window_s=10.0, every_s=60.0, on_alarm=command))
@@ -808,14 +840,14 @@ def test_alarm_commands_run_in_a_session_of_their_own_and_share_one_wait_at_the_
     trend = Trend("joint1", [], 890.0, "first good session", 2.0, 10.0, 0.2)
     for _ in range(2):
         m._run_on_alarm(entry, trend)
-    started = list(m._alarm_procs)
+    started = list(m._alarms._running)
     try:
         deadline = time.monotonic() + 3.0
         while not sid_file.exists() and time.monotonic() < deadline:
             time.sleep(0.02)
         assert int(sid_file.read_text()) != os.getsid(0)  # not the monitor's session: a Ctrl-C does not reach it
         start = time.monotonic()
-        m._reap_alarms(wait=True)
+        m._alarms.reap(wait=True)
         assert time.monotonic() - start < 1.0  # one 0.6 s wait for both, not 0.6 s each
         assert m.status.alarm_command_failure.startswith(
             "alarm command still running after 0.6 s when the monitor ended (pid ")
@@ -832,7 +864,7 @@ def test_a_restart_with_another_bench_or_window_is_refused_but_not_another_simul
     windows from two measurement chains, no notice; a changed --window was accepted too. Another [sim] truth or seed
     (a simulated wear series: the machine, not the measurement) resumes."""
     out = tmp_path / "other_bench"
-    shutil.copytree(four_windows, out)
+    _restarted_elsewhere(four_windows, out)
     same = _bench_file(tmp_path, seed=EXCITING_SEED)
     geared = tmp_path / "geared.toml"
     geared.write_text(same.read_text().replace("ratio = 10.0", "ratio = 12.5"))
@@ -862,7 +894,7 @@ def test_a_folder_filed_before_the_bench_tags_resumes(four_windows: Path, tmp_pa
     from acq.monitoring.window_bench import FACT_TAGS
 
     out = tmp_path / "old"
-    shutil.copytree(four_windows, out)
+    _restarted_elsewhere(four_windows, out)
     db = sqlite3.connect(out / "catalogue.sqlite")
     for key, tags in db.execute("SELECT session_key, tags_json FROM sessions").fetchall():
         old = {k: v for k, v in json.loads(tags).items() if k not in FACT_TAGS}
@@ -880,7 +912,7 @@ def test_a_restart_says_both_counts_and_goes_on_from_the_resumed_machine_time(
     """After a restart the summary counted only this run's windows while the trend had all, and the first status line
     said "0 s" of machine time, then jumped to 5 min."""
     out = tmp_path / "resumed"
-    shutil.copytree(four_windows, out)
+    _restarted_elsewhere(four_windows, out)
     run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for",
                   "2m", "--baseline-windows", "2", "--keep", "1", "--out", str(out))
     assert run.code == 0, run.err

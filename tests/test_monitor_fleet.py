@@ -4,12 +4,14 @@
 from __future__ import annotations
 
 import json
+import shutil
+import socket
 import sqlite3
 from pathlib import Path
 
 import pytest
 
-from tests.helpers import run_cli
+from tests.helpers import CliRun, run_cli
 
 ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
 #: The robot program of this seed excites the joint in the windows at 0, 1, 2 min (test_monitor's EXCITING_SEED).
@@ -48,7 +50,7 @@ def test_two_monitors_of_one_joint_name_share_a_catalogue_and_stay_apart(catalog
     _monitor(capsys, r1, tmp_path / "r1", catalogue_location, "r1", 2, baseline=3)
     _monitor(capsys, r2, tmp_path / "r2", catalogue_location, "r2", 2, baseline=2)  # other rules: not r1's to refuse
     _monitor(capsys, r1, tmp_path / "r1", catalogue_location, "r1", 1, baseline=3)  # restart: resumes r1's numbering
-    ids = {r: (tmp_path / r / "monitor.id").read_text().strip() for r in ("r1", "r2")}
+    ids = {r: json.loads((tmp_path / r / "monitor.id").read_text())["monitor_id"] for r in ("r1", "r2")}
     assert ids["r1"] != ids["r2"] and not (tmp_path / "r1" / "catalogue.sqlite").exists()
     trends = {}
     for robot, truth, windows in (("r1", 891.0, 3), ("r2", 700.0, 2)):
@@ -89,6 +91,9 @@ def test_a_monitor_without_tags_keeps_its_windows_from_before_it_had_an_identity
             tags = json.loads(tags)
             del tags["monitor_id"]
             db.execute("UPDATE sessions SET tags_json = ? WHERE session_key = ?", (json.dumps(tags), key))
+        # schema 5, before the monitor_id column: the restart migrates it (the column from the tags: none here)
+        db.executescript("DROP INDEX sessions_monitor; ALTER TABLE sessions DROP COLUMN monitor_id; "
+                         "PRAGMA user_version = 5;")
     refused = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--window", "10", "--every", "60", "--for",
                       "1m", "--baseline-windows", "3", "--out", str(out))
     assert refused.code == 2 and "its windows were judged with --baseline-windows 2" in refused.err
@@ -106,3 +111,94 @@ def test_a_monitor_tag_that_the_monitor_files_itself_is_refused(tmp_path: Path,
     assert (run.code, run.err) == (2, "acq: error: --tag monitor_window=…: acq monitor files monitor_window itself "
                                       "with every window — choose another key\n")
     assert not (tmp_path / "m").exists()
+
+
+def _start(capsys: pytest.CaptureFixture[str], bench: Path, out: Path, *options: str, minutes: int = 1,
+           every: str = "60") -> CliRun:
+    return run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--window", "10", "--every", every, "--for",
+                   f"{minutes}m", "--baseline-windows", "2", "--out", str(out), *options)
+
+
+def _identity(folder: Path) -> dict[str, str]:
+    return json.loads((folder / "monitor.id").read_text())
+
+
+def test_a_copied_monitor_folder_is_refused_and_a_moved_one_is_the_same_monitor(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The review: a copied folder carried monitor.id along and two monitors filed their windows as one. Bound to host
+    and folder: a copy whose original still holds the identity is refused, a moved folder resumes as the same monitor,
+    another host is refused until the engineer says which it is (--moved, --new-identity)."""
+    bench, first = _robot(tmp_path, "r1", 891.0), tmp_path / "first"
+    assert _start(capsys, bench, first).code == 0
+    ident = _identity(first)
+    mid = ident["monitor_id"]
+    assert (ident["host"], ident["folder"], ident["catalogue"]) == (
+        socket.gethostname(), str(first.resolve()), str((first / "catalogue.sqlite").resolve()))
+    copy = tmp_path / "copy"
+    shutil.copytree(first, copy)
+    refused = _start(capsys, bench, copy)
+    assert (refused.code, refused.err) == (2, f"acq: error: {copy}: this folder looks copied from {first.resolve()} "
+                                              f"(its monitor.id is that monitor's, {mid}): two monitors would file "
+                                              "their windows as one — start it with --new-identity if this is another "
+                                              "monitor (the windows copied here stay that one's), or in a new --out\n")
+    (copy / "monitor.id").write_text(mid + "\n")  # as an earlier acq wrote it: the binding is read from the identity
+    assert _start(capsys, bench, copy).err == refused.err
+    assert _start(capsys, bench, copy, "--new-identity").code == 0
+    new = _identity(copy)["monitor_id"]
+    assert new != mid and _identity(copy)["folder"] == str(copy.resolve())
+    with sqlite3.connect(copy / "catalogue.sqlite") as db:  # the copied window stays the first monitor's
+        rows = sorted((json.loads(t)["monitor_window"], m) for t, m in db.execute("SELECT tags_json, monitor_id "
+                                                                                   "FROM sessions"))
+    assert rows == sorted([(0, mid), (0, new)])
+    assert _start(capsys, bench, copy, "--new-identity").code == 0  # bound here now: the flag changes nothing
+    assert _identity(copy)["monitor_id"] == new
+    moved = tmp_path / "moved"
+    first.rename(moved)
+    assert _start(capsys, bench, moved).code == 0  # nothing left where it was: the same monitor, bound anew
+    assert (_identity(moved)["monitor_id"], _identity(moved)["folder"]) == (mid, str(moved.resolve()))
+    doc = json.loads(run_cli(capsys, "trend", str(moved), "--joint", "joint1", "--json").out)
+    assert [(p["tags"]["monitor_window"], p["tags"]["monitor_id"]) for p in doc["points"]] == [(0, mid), (1, mid)]
+    monkeypatch.setattr(socket, "gethostname", lambda: "newpc")
+    other_host = _start(capsys, bench, moved)
+    assert (other_host.code, other_host.err) == (
+        2, f"acq: error: {moved}: its monitor.id was made on host {ident['host']} "
+           f"for {moved.resolve()} ({mid}) — a copy would file its windows as that monitor's: start it with "
+           "--new-identity if this is another monitor (the windows copied here stay that one's), or with --moved if "
+           f"the monitor on {ident['host']} no longer runs (the folder moved here)\n")
+    assert _start(capsys, bench, moved, "--moved").code == 0
+    assert (_identity(moved)["monitor_id"], _identity(moved)["host"]) == (mid, "newpc")
+
+
+def test_a_restart_into_another_catalogue_is_refused_unless_its_windows_move_there(
+        catalogue_location: Path | str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A restart with another --catalogue started over in an empty one (numbering, baseline, alarm) and left the
+    history behind. Refused in one line naming both; --move-catalogue (SQLite to PostgreSQL) copies the windows."""
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "m"
+    assert _start(capsys, bench, out, minutes=2).code == 0
+    old = (out / "catalogue.sqlite").resolve()
+    here = str(catalogue_location) if isinstance(catalogue_location, str) else str(catalogue_location.resolve())
+    refused = _start(capsys, bench, out, "--catalogue", str(catalogue_location))
+    assert (refused.code, refused.err) == (2, f"acq: error: {out}: its windows are filed in {old}, not in {here} "
+                                              f"(--catalogue): resume with --catalogue {old}, or add --move-catalogue "
+                                              f"to copy them into {here} and file there from now on\n")
+    moved = _start(capsys, bench, out, "--catalogue", str(catalogue_location), "--move-catalogue")
+    assert moved.code == 0, moved.err
+    assert _identity(out)["catalogue"] == here
+    doc = json.loads(run_cli(capsys, "trend", "--catalogue", str(catalogue_location), "--joint", "joint1",
+                             "--json").out)
+    assert [p["tags"]["monitor_window"] for p in doc["points"]] == [0, 1, 2]
+    assert [p["state"] for p in doc["points"]] == ["baseline", "baseline", "ok"]  # the baseline came along
+    assert _start(capsys, bench, out, "--catalogue", str(catalogue_location)).code == 0  # bound there now
+
+
+def test_a_restart_with_another_every_goes_on_in_machine_time_from_the_last_window(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--every spaces the windows, it changes no K: watching a joint more closely is allowed. Machine time was the
+    window's number × --every: windows 0, 1 at 0, 60 s, then 2, 3 at 240, 360 s with --every 120 (the simulated wear
+    jumped with it); now it goes on from the last window."""
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "m"
+    assert _start(capsys, bench, out, minutes=2).code == 0
+    assert _start(capsys, bench, out, minutes=4, every="120").code == 0
+    doc = json.loads(run_cli(capsys, "trend", str(out), "--joint", "joint1", "--json").out)
+    assert [(p["tags"]["monitor_window"], p["tags"]["monitor_elapsed_s"], p["tags"]["monitor_every_s"])
+            for p in doc["points"]] == [(0, 0.0, 60.0), (1, 60.0, 60.0), (2, 120.0, 120.0), (3, 240.0, 120.0)]

@@ -365,6 +365,28 @@ def test_the_trend_window_started_before_the_first_window_waits_for_it(tmp_path:
     assert live.refresh() is True and len(live.shown.points) == 2 and live.shown.alarm  # type: ignore[union-attr]
 
 
+def test_the_trend_window_of_a_joint_the_catalogue_does_not_have_is_one_line_not_a_wait(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A misspelt joint (or tag) in a catalogue that has sessions waited for ever: now one line naming the joint and
+    the joints there, exit 1. An empty catalogue (or none yet) is a monitor yet to file its first window: waited for."""
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    from acq.monitoring.catalogue import Outcome
+
+    doc = {"options": {}, "K_Nm_per_rad": 890.0, "ci95": {"K_Nm_per_rad": [886.0, 894.0]},
+           "quality": {"verdict": "ok", "reasons": []}}
+    for joint in ("joint1", "joint2"):
+        meta = {"session_id": joint, "joint": joint, "tags": {"monitor_window": 0},
+                "created_utc": "2026-11-29T10:00:00+00:00"}
+        with Catalogue(tmp_path / "catalogue.sqlite") as c:
+            c.record(Outcome(f"/m/{joint}.h5", f"h{joint}", "r", meta, doc, None, 1.0))
+    run = run_cli(capsys, "view", "--trend", "jiont1", str(tmp_path))
+    assert (run.code, run.out) == (1, "")
+    assert run.err == (f"acq: error: {tmp_path / 'catalogue.sqlite'}: no sessions of joint jiont1 (joints: joint1, "
+                       "joint2)\n")
+    run = run_cli(capsys, "view", "--trend", "joint1", str(tmp_path), "--tag", "robot=r2")  # a tag no session has
+    assert run.code == 1 and "no sessions of joint joint1 tagged robot=r2 (joints: joint1, joint2)" in run.err
+
+
 def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> None:
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     import pyqtgraph as pg

@@ -24,7 +24,7 @@ from acq.ui.report_png import draw_report
 from acq.recording.recorder import Recorder
 from analysis import AnalysisRequest
 from drivers.registry import open_bench
-from tests.helpers import run_cli
+from tests.helpers import ctrl_c_as_at_a_terminal, run_cli
 
 RATE_HZ = 25600
 
@@ -301,6 +301,65 @@ def test_ctrl_c_or_sigterm_closes_the_view_window_with_exit_130_and_one_line(ses
     time.sleep(0.5)  # in Qt's event loop (a signal before it was a KeyboardInterrupt in Python's frames)
     err = _stop_and_wait(proc, signum)
     assert proc.returncode == 130 and err == "acq: interrupted\n", err
+
+
+def test_the_trend_window_waiting_for_a_monitors_first_window_says_so_once_and_ctrl_c_ends_it(tmp_path: Path) -> None:
+    """Started before the monitor made its catalogue: a window that waits, one line on the terminal saying for what and
+    where, and the Ctrl-C of a terminal ends it with exit 130 and one line."""
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "view", "--trend", "joint1", str(tmp_path)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            preexec_fn=ctrl_c_as_at_a_terminal, env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
+    assert proc.stdout is not None
+    line = proc.stdout.readline()  # said once the window is shown
+    assert line == "acq trend — joint1: close the window or press Ctrl-C to end\n", (line, proc.communicate())
+    err = _stop_and_wait(proc, signal.SIGINT)
+    assert proc.returncode == 130
+    assert err == f"waiting for the first window of joint1 in {tmp_path / 'catalogue.sqlite'} …\nacq: interrupted\n"
+
+
+#: ``python -c`` of acq's entry point with a Ctrl-C to itself while Qt's import runs shiboken's start-up (the signature
+#: module imports PySide6.support): the moment a terminal's Ctrl-C made a fatal error (exit 134) or was lost
+_CTRL_C_INSIDE_QT_IMPORT = """
+import os, signal, sys
+
+class CtrlCInsideQtImport:
+    def find_spec(self, name, path=None, target=None):
+        if name == "PySide6.support":
+            sys.meta_path.remove(self)
+            os.kill(os.getpid(), signal.SIGINT)
+        return None
+
+sys.meta_path.insert(0, CtrlCInsideQtImport())
+from acq.entry import main
+main()
+"""
+
+
+def test_a_ctrl_c_inside_qt_s_import_is_exit_130_and_one_line(tmp_path: Path) -> None:
+    """Before: "Fatal Python error: libshiboken/signature: could not initialize part 2", exit 134 (9 of 30 Ctrl-Cs
+    1.3…2.4 s after start), or the Ctrl-C lost and the window open (2 of 30). Now the Ctrl-C waits for the import."""
+    done = subprocess.run([sys.executable, "-c", _CTRL_C_INSIDE_QT_IMPORT, "view", "--trend", "joint1", str(tmp_path)],
+                          capture_output=True, text=True, timeout=60, preexec_fn=ctrl_c_as_at_a_terminal,
+                          env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
+    assert (done.returncode, done.stderr, done.stdout) == (130, "acq: interrupted\n", "")
+
+
+def test_a_ctrl_c_while_click_makes_the_commands_context_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                                                    capsys: pytest.CaptureFixture[str]) -> None:
+    """A Ctrl-C in click's own frames (here as it makes acq's context) was click's KeyboardInterrupt handling: an empty
+    line, then acq's."""
+    import click
+
+    make = click.Context.__init__
+
+    def ctrl_c_then_make(context: click.Context, *args: Any, **kwargs: Any) -> None:
+        monkeypatch.undo()  # the first context only
+        os.kill(os.getpid(), signal.SIGINT)  # handled in this (the main) thread before the next line
+        make(context, *args, **kwargs)
+
+    monkeypatch.setattr(click.Context, "__init__", ctrl_c_then_make)
+    run = run_cli(capsys, "view", "--trend", "joint1", str(tmp_path))
+    assert (run.code, run.err, run.out) == (130, "acq: interrupted\n", "")
 
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGINT])

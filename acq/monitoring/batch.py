@@ -358,7 +358,7 @@ def run_batch(paths: Sequence[Path], catalogue: Catalogue, request: AnalysisRequ
             with analysis_executor(jobs or os.cpu_count() or 1, scheduler) as executor:
                 futures: dict[Future[Outcome], Path] = {}
                 try:
-                    with _sigint_deferred():  # a submit starts a worker: one cut short would outlive the pool
+                    with signals_deferred():  # a submit starts a worker: one cut short would outlive the pool
                         for p in todo:
                             futures[executor.submit(analyze_one, str(p.resolve()), hashes[p], filed[p],
                                                     draw_report, result_dir=result_dir)] = p
@@ -439,19 +439,23 @@ def _signals_ignored() -> Iterator[None]:
 
 
 @contextmanager
-def _sigint_deferred() -> Iterator[None]:
-    """A Ctrl-C inside the block is raised (KeyboardInterrupt) when the block has run to its end."""
+def signals_deferred() -> Iterator[None]:
+    """A Ctrl-C or SIGTERM inside the block reaches this process's own handlers when the block has run to its end
+    (acq's: a KeyboardInterrupt; an ignored signal stays ignored). For code that must not be cut short: a worker being
+    started, Qt's import (shiboken's start-up interrupted is a fatal error, or swallows the Ctrl-C)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     caught: list[int] = []
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: caught.append(signum))
+    previous = {s: signal.signal(s, lambda signum, frame: caught.append(signum))
+                for s in (signal.SIGINT, signal.SIGTERM)}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-    if caught:
-        raise KeyboardInterrupt
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+    for signum in dict.fromkeys(caught):
+        signal.raise_signal(signum)
 
 
 def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outcomes: list[Outcome],

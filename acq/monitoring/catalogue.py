@@ -67,8 +67,17 @@ MIGRATIONS: tuple[str, ...] = (
     """
     ALTER TABLE analyses ADD COLUMN file_path TEXT;
     """,
+    # 5 → 6: the monitor that captured a window (its tag MONITOR_TAG, as a column): a monitor reads back its own
+    # windows of a catalogue every robot's joint1 shares by an index, not by reading every row of the joint's name
+    """
+    ALTER TABLE sessions ADD COLUMN monitor_id TEXT;
+    UPDATE sessions SET monitor_id = json_extract(tags_json, '$.monitor_id');
+    CREATE INDEX sessions_monitor ON sessions (monitor_id, joint);
+    """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
+#: Session tag of a monitor's window: the identity of the monitor that captured it (also the column ``monitor_id``).
+MONITOR_TAG = "monitor_id"
 
 _PARAM_COLUMNS = (("K_Nm_per_rad", "K"), ("Jm_kgm2", "Jm"), ("Jl_kgm2", "Jl"), ("C_Nms_per_rad", "C"))
 
@@ -243,12 +252,14 @@ class Catalogue:
         columns = ", ".join(values)
         updates = ", ".join(f"{c} = excluded.{c}" for c in values if c not in ("session_key", "request_key"))
         path = values["file_path"]
+        tags = meta.get("tags", {})
+        monitor = str(tags[MONITOR_TAG]) if MONITOR_TAG in tags else None
         with self._transaction():
             self._execute(
                 "INSERT INTO sessions (session_key, session_id, path, joint, created_utc, start_monotonic_ns, status,"
-                " tags_json) VALUES (?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (session_key) DO NOTHING",
+                " tags_json, monitor_id) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (session_key) DO NOTHING",
                 (key, meta.get("session_id"), path, meta.get("joint"), meta.get("created_utc"),
-                 meta.get("start_monotonic_ns"), meta.get("status"), json.dumps(meta.get("tags", {}))))
+                 meta.get("start_monotonic_ns"), meta.get("status"), json.dumps(tags), monitor))
             # one statement, so two writers cannot both pass a separate check (PostgreSQL's READ COMMITTED): the update
             # is skipped when a failure, or an analysis of only the readable part (--partial), of another file would
             # replace an analysis of a whole file
@@ -262,18 +273,50 @@ class Catalogue:
                 " OR (excluded.error IS NULL AND (excluded.partial = 0 OR analyses.partial = 1))",
                 tuple(values.values())).rowcount
             if stored:  # the session row follows the analysis that stands
-                self._execute("UPDATE sessions SET path = ?, status = ?, tags_json = ? WHERE session_key = ?",
-                              (path, meta.get("status"), json.dumps(meta.get("tags", {})), key))
+                self._execute("UPDATE sessions SET path = ?, status = ?, tags_json = ?, monitor_id = ?"
+                              " WHERE session_key = ?", (path, meta.get("status"), json.dumps(tags), monitor, key))
 
-    def entries(self, joint: str | None = None) -> list[Entry]:
-        """Every session's analyses (one per request), oldest session first (all joints when ``joint`` is None)."""
+    def entries(self, joint: str | None = None, *, monitor: str | None = None,
+                unowned: bool = False) -> list[Entry]:
+        """Every session's analyses (one per request), oldest session first (all joints when ``joint`` is None).
+
+        ``monitor``: only the windows of this monitor (:data:`MONITOR_TAG`), read by the column's index — and with
+        ``unowned`` also the sessions of no monitor (windows filed before monitors had an identity).
+        """
         rows = self._execute(
             "SELECT s.*, a.*, COALESCE(a.file_path, s.path) AS analysed_path FROM sessions s JOIN analyses a"
             " ON a.session_key = s.session_key"
             " WHERE (CAST(? AS TEXT) IS NULL OR s.joint = ?)"
+            " AND (CAST(? AS TEXT) IS NULL OR s.monitor_id = ? OR (? = 1 AND s.monitor_id IS NULL))"
             " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path, a.analyzed_utc, a.id",
-            (joint, joint))
+            (joint, joint, monitor, monitor, unowned))
         return [_entry(r) for r in rows]
+
+    def copy_windows(self, source: Catalogue, monitor: str, *, unowned: bool = False) -> int:
+        """Copy the sessions of ``monitor`` with their analyses from ``source`` into this catalogue (one transaction;
+        rows this catalogue already has are kept); with ``unowned`` also the sessions of no monitor, filed as
+        ``monitor``'s (windows from before monitors had an identity). Returns the number of the monitor's sessions."""
+        mine = "SELECT * FROM sessions WHERE monitor_id = ? OR (? = 1 AND monitor_id IS NULL)"
+        sessions = list(source._execute(mine, (monitor, unowned)))
+        analyses = list(source._execute(f"SELECT * FROM analyses WHERE session_key IN"
+                                        f" ({mine.replace('*', 'session_key')}) ORDER BY id", (monitor, unowned)))
+        try:
+            with self._transaction():
+                for r in sessions:
+                    row = {name: r[name] for name in r.keys()}
+                    row["tags_json"] = json.dumps({**json.loads(row["tags_json"]), MONITOR_TAG: monitor})
+                    row["monitor_id"] = monitor
+                    self._insert("sessions", row, "session_key")
+                for r in analyses:
+                    self._insert("analyses", {name: r[name] for name in r.keys() if name != "id"},
+                                 "session_key, request_key")
+        except self._dialect.errors as e:
+            raise StorageError(f"{cause_of(e)}: {self.path} ({e})") from None
+        return len(sessions)
+
+    def _insert(self, table: str, row: dict[str, Any], key: str) -> None:
+        self._execute(f"INSERT INTO {table} ({', '.join(row)}) VALUES ({', '.join('?' * len(row))})"
+                      f" ON CONFLICT ({key}) DO NOTHING", tuple(row.values()))
 
     def joints(self) -> list[str]:
         """The joints the catalogue knows."""

@@ -150,6 +150,12 @@ class Recorder:
         if self._stop_request is None:
             self._stop_request = reason
 
+    @property
+    def stop_request(self) -> str | None:
+        """The stop asked for (Ctrl-C, SIGTERM, :meth:`request_stop`), also one that came once both streams were
+        complete, which leaves the recording ``complete``; None if none was."""
+        return self._stop_request
+
     def start_devices(self) -> None:
         """Start both devices (idempotent); a set-up error raises here, before any file exists."""
         if self._started:

@@ -16,6 +16,8 @@ import sys
 import threading
 import time
 import warnings
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -74,14 +76,28 @@ class _Interrupted(BaseException):
     acq says ``acq: interrupted`` in one line."""
 
 
+def _raise_interrupted(signum: int, frame: object) -> None:
+    raise _Interrupted
+
+
+#: The handlers of Ctrl-C and SIGTERM while a command runs (a KeyboardInterrupt, which a batch or a recording catches to
+#: tidy up); around it, in click's own frames, :func:`_raise_interrupted` (:func:`_interrupted_outside_the_command`).
+_command_handlers: dict[int, object] = {}
+
+
 class LazyGroup(click.Group):
     """A group whose :data:`LAZY_COMMANDS` load on first use (click's documented "lazy loading" pattern)."""
 
     def invoke(self, ctx: click.Context) -> object:
+        outside: dict[int, object] = {}
         try:
+            outside.update((s, signal.signal(s, h)) for s, h in _command_handlers.items())  # type: ignore[arg-type]
             return super().invoke(ctx)
         except KeyboardInterrupt:
             raise _Interrupted from None
+        finally:
+            for s, h in outside.items():
+                signal.signal(s, h)  # type: ignore[arg-type]
 
     def list_commands(self, ctx: click.Context) -> list[str]:
         return sorted([*super().list_commands(ctx), *LAZY_COMMANDS])
@@ -538,10 +554,33 @@ def main(argv: list[str] | None = None) -> None:
             signal.signal(signal.SIGTERM, previous)
 
 
+@contextmanager
+def _interrupted_outside_the_command() -> Iterator[None]:
+    """In the block Ctrl-C and SIGTERM raise :class:`_Interrupted`, except while :meth:`LazyGroup.invoke` runs the
+    command (:data:`_command_handlers`: the handlers they had): click writes an empty line before its Abort on a
+    KeyboardInterrupt in its own frames (a Ctrl-C as it made the command's context). A signal ignored stays ignored."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    _command_handlers.clear()
+    _command_handlers.update((s, h) for s, h in handlers.items() if h not in (signal.SIG_IGN, None))
+    try:
+        for s in _command_handlers:
+            signal.signal(s, _raise_interrupted)
+        yield
+    finally:
+        for s, h in _command_handlers.items():
+            signal.signal(s, h)  # type: ignore[arg-type]
+        _command_handlers.clear()  # a group invoked otherwise (click's test runner) leaves the handlers alone
+
+
 def _run(argv: list[str] | None) -> None:
     try:
-        with warnings.catch_warnings():  # numpy's floating-point warnings (the filter of acq.monitoring.batch.quiet_numerics,
-            warnings.simplefilter("ignore", RuntimeWarning)  # which an analysis adds; numpy is not loaded here yet)
+        # numpy's floating-point warnings (the filter of acq.monitoring.batch.quiet_numerics, which an analysis adds;
+        # numpy is not loaded here yet)
+        with _interrupted_outside_the_command(), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
             code = cli.main(args=argv, prog_name="acq", standalone_mode=False)
     except AcqError as e:
         click.echo(f"acq: error: {e}", err=True)

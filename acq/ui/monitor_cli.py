@@ -115,6 +115,14 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
               help="Tag every window (repeatable), e.g. --tag robot=r1: acq fleet and acq trend --tag tell the "
                    "robots apart by it.")
+@click.option("--move-catalogue", is_flag=True,
+              help="Resume with another --catalogue than the monitor filed into (e.g. SQLite to PostgreSQL): copy its "
+                   "windows there first.")
+@click.option("--new-identity", is_flag=True,
+              help="A folder copied from another monitor: make this one a monitor of its own (only acts on a copy).")
+@click.option("--moved", is_flag=True,
+              help="A folder moved here from another host: it is the same monitor, the one there no longer runs "
+                   "(only acts on a folder bound elsewhere).")
 @click.option("--baseline-windows", type=click.IntRange(min=1), default=5, show_default=True,
               help="Baseline = mean K of the first N good windows.")
 @click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=10.0, show_default=True,
@@ -123,7 +131,8 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
 @click.option("--fast", is_flag=True, help="Simulated bench: machine time runs as fast as the analysis allows.")
 def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str | None, on_alarm: str | None,
                     keep: int, max_disk: str | None, out_dir: Path, baseline_windows: int, threshold_pct: float,
-                    jobs: int, fast: bool, catalogue_path: Path | str | None, tags: tuple[str, ...]) -> int:
+                    jobs: int, fast: bool, catalogue_path: Path | str | None, tags: tuple[str, ...],
+                    move_catalogue: bool, new_identity: bool, moved: bool) -> int:
     """Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in alarm."""
     bench = load_bench(bench_path)
     if not bench.listens():
@@ -137,7 +146,8 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
                                for_s=None if for_text is None else parse_duration("--for", for_text), on_alarm=on_alarm,
                                keep=keep, max_disk_bytes=budget, fast=fast, jobs=jobs,
                                baseline_windows=baseline_windows, threshold_pct=threshold_pct,
-                               catalogue=catalogue_path, tags=parse_tags(tags))
+                               catalogue=catalogue_path, tags=parse_tags(tags), new_identity=new_identity,
+                               moved=moved, move_catalogue=move_catalogue)
     console = Console(stderr=True)
     if console.is_terminal:
         with Live(status_table(MonitorStatus(bench.joint)), console=console, refresh_per_second=2) as live:

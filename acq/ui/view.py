@@ -97,8 +97,11 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
     if screenshot is None and not has_display():
         click.echo(NO_DISPLAY_MESSAGE, err=True)
         return 1
-    from acq.ui.plots import ReportView, ensure_app, grab_png
-    from acq.ui.qt_signals import loop_ended_by_signals
+    from acq.monitoring.batch import signals_deferred
+
+    with signals_deferred():  # a Ctrl-C inside Qt's import was a fatal error in shiboken's start-up (exit 134) or lost
+        from acq.ui.plots import ReportView, ensure_app, grab_png
+        from acq.ui.qt_signals import loop_ended_by_signals
 
     if trend_joint is not None:
         from acq.monitoring.trend import NoSessions, load_trend
@@ -107,8 +110,11 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         load = functools.partial(load_trend, folder, catalogue_path, trend_joint, tags)
         try:
             first: Trend | NoSessions = load()  # any other error (a bad URL, mixed monitors) is one line, no window
-        except NoSessions as e:  # started before the monitor has filed a window of the joint: the window waits for it
-            if screenshot is not None:  # a script's picture of "waiting" with exit 0 would hide a wrong joint or folder
+        except NoSessions as e:  # started before the monitor has filed its first window: the window waits for it
+            # — only when the catalogue has no session yet: one with sessions, none of this joint (and tags), holds a
+            # misspelt joint or tag, which was waited for for ever. A script's picture of "waiting" with exit 0 would
+            # hide a wrong joint or folder
+            if screenshot is not None or e.joints:
                 click.echo(f"acq: error: {e}", err=True)
                 return 1
             first = e
@@ -129,15 +135,16 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
             window = ReportView(figures, title=title)
         if screenshot is not None:
             grab_png(window, screenshot, size)
-            click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")
-            return 0
-        window.resize(*size)
-        window.show()
-        click.echo(f"{window.windowTitle()}: close the window or press Ctrl-C to end")
-        app.exec()
-    if caught:
+        else:
+            window.resize(*size)
+            window.show()
+            click.echo(f"{window.windowTitle()}: close the window or press Ctrl-C to end")
+            app.exec()
+    if caught:  # also a Ctrl-C while the window was built or drawn: its handler here raises nothing (was exit 0)
         click.echo("acq: interrupted", err=True)
         return EXIT_INTERRUPTED
+    if screenshot is not None:
+        click.echo(f"screenshot: {screenshot} ({size[0]}×{size[1]} px)")
     return 0
 
 

@@ -1,0 +1,108 @@
+"""What a monitor's restart in its folder must agree with, and where its machine time goes on.
+
+A restart resumes the folder's windows: its numbering, its baseline, its alarm. It is refused in one line naming what
+differs where the new windows would not be comparable with the old ones or would not join them:
+
+* another bench or ``--window`` (:mod:`acq.monitoring.window_bench`), or other alarm rules;
+* another ``--catalogue`` than the one its windows are filed in, when that holds none of them: the monitor started
+  over in an empty catalogue — numbering from the raw windows left, a new baseline, the alarm forgotten — and the old
+  history stayed behind, unseen. The same database under another spelling (another host alias, user or password in the
+  URL; a SQLite file moved with its folder) holds the windows and is no refusal. Moving a monitor from SQLite to a
+  plant's PostgreSQL is the legitimate case: ``--move-catalogue`` copies its windows there first, then files there.
+
+Not refused: another ``--every``. It spaces the windows and changes neither a window's K nor its interval; watching a
+joint more closely after a warning is what an engineer does. Machine time (``monitor_elapsed_s``, the trend's time
+axis and a simulated machine's wear) then goes on from the last window at the new spacing (:class:`MachineClock`)
+instead of being the window's number × ``--every``, which jumped when ``--every`` changed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from acq.monitoring.catalogue import Catalogue, Entry
+from acq.monitoring.catalogue_backends import is_url, redacted
+from acq.monitoring.monitor_scope import WINDOW_TAG, Identity
+from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, filed_rules
+from acq.monitoring.window_bench import differences
+from acqcore.errors import ConfigError
+from drivers.config import Bench
+
+#: Session tag of a monitor's window: the --every it was captured with, s (where machine time goes on after a restart).
+EVERY_TAG = "monitor_every_s"
+
+
+def catalogue_text(location: Path | str) -> str:
+    """A catalogue as a monitor records it: a SQLite file's absolute path, a URL without its password."""
+    return redacted(location) if is_url(location) else str(Path(location).resolve())  # type: ignore[arg-type]
+
+
+def check_comparable(out_dir: Path, windows: Sequence[Entry], bench: Bench, window_s: float,
+                     rules: AlarmRules) -> None:
+    """Refuse a restart whose windows would not be comparable with the folder's ``windows`` (oldest first; rules
+    compared with those of this joint's)."""
+    changed = differences(windows, bench, window_s)
+    if changed:
+        # K of another measurement chain, scale or window length would join the trend as if the joint had changed
+        raise ConfigError(f"{out_dir}: its windows were captured with another bench or window "
+                          f"({'; '.join(changed)}): their K is not comparable — start a new --out (or resume "
+                          "with the same bench and --window)")
+    filed = filed_rules([e for e in windows if e.joint == bench.joint])
+    if filed is not None and filed.as_tags() != rules.as_tags():
+        # other rules midway re-baselined on windows judged before, the alarm cleared silently (the second trial)
+        raise ConfigError(f"{out_dir}: its windows were judged with --baseline-windows "
+                          f"{filed.baseline_sessions} --threshold-pct {filed.threshold_pct:g} --ewma-lambda "
+                          f"{filed.ewma_lambda:g}: resume with the same, or start a new --out")
+
+
+def check_catalogue(out_dir: Path, identity: Identity, catalogue: Catalogue, location: Path | str, holds_own: bool,
+                    *, move: bool, unowned: bool) -> Identity:
+    """The identity bound to ``catalogue`` (at ``location``), or a refusal when its windows are filed elsewhere.
+
+    ``holds_own``: the catalogue already holds windows of this monitor (the same database, or its windows moved
+    there). ``move`` (``--move-catalogue``): copy the monitor's windows from the catalogue it filed into to this one
+    first — with ``unowned`` its windows from before monitors had an identity too (the old catalogue was its folder's
+    own).
+    """
+    here = catalogue_text(location)
+    if identity.catalogue is None or identity.catalogue == here or holds_own:
+        return replace(identity, catalogue=here)
+    if not move:
+        raise ConfigError(f"{out_dir}: its windows are filed in {identity.catalogue}, not in {here} (--catalogue): "
+                          f"resume with --catalogue {identity.catalogue}, or add --move-catalogue to copy them into "
+                          f"{here} and file there from now on")
+    with Catalogue(identity.catalogue) as old:
+        catalogue.copy_windows(old, identity.monitor_id, unowned=unowned)
+    return replace(identity, catalogue=here)
+
+
+@dataclass(frozen=True)
+class MachineClock:
+    """Machine time of a monitor's windows, s: from the last window filed (``last_n`` at ``last_s``, captured every
+    ``then_s``) on at ``every_s``; a first run starts at window 0, time 0."""
+
+    every_s: float
+    last_n: int = -1
+    last_s: float = 0.0
+    then_s: float | None = None
+
+    @classmethod
+    def resumed(cls, windows: Sequence[Entry], every_s: float) -> MachineClock:
+        """The clock going on from the newest of ``windows`` (a window of an earlier acq has no :data:`EVERY_TAG`:
+        captured with this ``every_s``)."""
+        timed = [e for e in windows if WINDOW_TAG in e.tags and ELAPSED_TAG in e.tags]
+        if not timed:
+            return cls(every_s)
+        last = max(timed, key=lambda e: int(e.tags[WINDOW_TAG]))
+        return cls(every_s, int(last.tags[WINDOW_TAG]), float(last.tags[ELAPSED_TAG]),
+                   float(last.tags.get(EVERY_TAG, every_s)))
+
+    def at(self, n: int) -> float:
+        """The start of window ``n`` in machine time, s."""
+        if self.then_s is None:
+            return n * self.every_s
+        if n <= self.last_n:
+            return self.last_s + (n - self.last_n) * self.then_s
+        return self.last_s + self.then_s + (n - self.last_n - 1) * self.every_s

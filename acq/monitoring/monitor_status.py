@@ -1,0 +1,109 @@
+"""What ``acq monitor`` is asked for (:class:`MonitorSettings`) and the figures it shows (:class:`MonitorStatus`).
+
+Apart from the loop (:mod:`acq.monitoring.monitor`) because the command line and the status table
+(:mod:`acq.ui.monitor_cli`) deal in these alone.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from acq.monitoring.catalogue import Outcome
+from acq.monitoring.window_judge import excites
+from analysis import AnalysisRequest
+from drivers.config import Bench
+
+#: Expected window size = this × the data's raw size (HDF5 chunks, block tables, events): measured 1.1…1.2.
+SIZE_MARGIN = 1.5
+
+
+@dataclass(frozen=True)
+class MonitorSettings:
+    """What ``acq monitor`` was asked for (SI units; sizes in bytes)."""
+
+    bench: Bench
+    out_dir: Path
+    window_s: float
+    every_s: float
+    for_s: float | None = None
+    on_alarm: str | None = None
+    keep: int = 10
+    max_disk_bytes: int | None = None
+    fast: bool = False
+    jobs: int = 1
+    baseline_windows: int = 5
+    threshold_pct: float = 10.0
+    ewma_lambda: float = 0.2
+    # a robot program excites the joint only in parts: the default request averages only the segments that excite
+    # (analysis.segments) where acq did not command the motion — as acq analyze of a window does, under the same key
+    request: AnalysisRequest = AnalysisRequest()
+    # the catalogue every window is filed into (a SQLite file or a postgresql:// URL, shared with other monitors and
+    # benches); None: out_dir/catalogue.sqlite
+    catalogue: Path | str | None = None
+    tags: dict[str, str | float] = field(default_factory=dict)  # --tag K=V, filed with every window (robot=r1)
+    # the way on for a folder whose identity is bound to another host or folder (monitor_scope.bound_identity)
+    new_identity: bool = False
+    moved: bool = False
+    move_catalogue: bool = False  # copy the windows from the catalogue they are filed in to `catalogue` first
+
+
+@dataclass
+class MonitorStatus:
+    """The live figures of a monitor (shown by :func:`acq.ui.monitor_cli.status_table`)."""
+
+    joint: str
+    captured: int = 0  # in this run
+    in_folder: int = 0  # windows the folder holds: those of earlier runs (a restart resumes them) and this run's
+    resumed: int = 0  # of them, those of earlier runs
+    excited: int = 0
+    not_excited: int = 0
+    analysed: int = 0
+    skipped: int = 0  # captured, not analysed: the analysis fell behind
+    not_captured: int = 0  # not captured: the disk budget would have been exceeded
+    interrupted: int = 0
+    alarms: int = 0
+    alarm_command_failure: str | None = None  # the last --on-alarm command's problem: "alarm command failed: exit 1"
+    machine_time_s: float = 0.0  # the start of the window being captured; its end once it is captured
+    disk_bytes: int = 0
+    last_K: float | None = None
+    last_K_window: int | None = None  # the window last_K is of (not the last window when that had no K)
+    last_K_ci: tuple[float | None, float | None] = (None, None)
+    change_pct: float | None = None
+    baseline_K: float | None = None
+    state: str = "starting"
+    baseline_warning: str | None = None  # the baseline's windows disagree beyond their intervals (Trend's)
+    message: str = ""
+    last_excited_fraction: float | None = None  # share of the last analysed window that excites the joint
+    last_moves: tuple[dict[str, Any], ...] = ()  # its moves: index, start_s, duration_s, peak_rad_s, excited
+    excited_fraction_sum: float = 0.0  # over the windows judged for excitation (for the share of the program)
+    excitation_judged: int = 0
+
+    def count(self, outcome: Outcome) -> None:
+        """Count a window just catalogued: analysed, excited, not excited, interrupted; and which share of it and
+        which moves excite (segment selection; a window the joint did not travel in excites nowhere)."""
+        verdict = (outcome.doc or {}).get("quality", {}).get("verdict")
+        self.analysed += verdict not in ("not analysed", "interrupted")
+        self.excited += excites(outcome.doc)
+        self.not_excited += verdict == "not excited"
+        self.interrupted += verdict == "interrupted"
+        excitation = (outcome.doc or {}).get("excitation")
+        if excitation is None and verdict != "not excited":
+            return
+        self.last_excited_fraction = excitation["excited_fraction"] if excitation else 0.0
+        self.last_moves = tuple(excitation["moves"]) if excitation else ()
+        self.excited_fraction_sum += self.last_excited_fraction
+        self.excitation_judged += 1
+
+    @property
+    def program_excited_fraction(self) -> float | None:
+        """Share of the program's windows (time) that excites the joint, over the windows judged so far."""
+        return self.excited_fraction_sum / self.excitation_judged if self.excitation_judged else None
+
+
+def expected_window_bytes(bench: Bench, window_s: float) -> int:
+    """Bytes a window's session file needs at most: current (f8 per channel) and encoder (5 columns of 8 bytes)."""
+    current = bench.daq.rate_hz * len(bench.daq.channels) * 8
+    encoder = 5 * 8 / bench.drive.period_s
+    return int(SIZE_MARGIN * window_s * (current + encoder)) + 200_000
