@@ -146,9 +146,9 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
         raise FitInputError(band_refused)
     require_two_segments(longest_gap_free_span(rec.encoder_index).count, rec.period_s, request.segment_s)
     chain = request.chain(rec)
-    sig = prepare_signals(rec, chain)
     request = replace(request, select_segments=request.selects_segments(rec))  # the result says what was done
     select = band if request.select_segments else None
+    sig = prepare_signals(rec, chain, torque_std=select is not None)
     frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=request.segment_s,
                        torque_noise_Nm=sig.torque_noise_Nm, torque_alias_Nm=sig.torque_alias_Nm,
                        jackknife_blocks=JACKKNIFE_BLOCKS, select_band_hz=select,

@@ -318,7 +318,7 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         angle_columns(iq)  # the lines leaked into the first i_q, and so into the angle columns
     # the noise floor of the final residual: with the lines removed (left in, a line's leak raised the
     # floor and the noise model biased K by −2 % with 25 mA tones on a 10 kS/s current)
-    sigma = _broadband_noise_rms(resid, rate_hz, m) if found is not None or noise_iq is not None else float("nan")
+    sigma = _broadband_noise_rms(resid, rate_hz, m) if noise_iq is not None else float("nan")
     if found is not None:
         found.append(replace(_interference_found(lines_hz, beta[nd + 3:], offset_a, w_e), noise_rms_a=sigma))
     if noise_iq is None:
@@ -399,7 +399,8 @@ class Interference:
         Peak-to-peak excursion of the sensor offset over the record, A.
     noise_rms_a : float
         RMS of white noise with the final residual's broadband floor (:func:`_broadband_noise_rms`), A: what the
-        phase carries besides the torque and the removed interference, per sample.
+        phase carries besides the torque and the removed interference, per sample; NaN when the torque's noise
+        realisation was not asked for (:func:`torque_encoder`'s ``noise_seed``).
     """
 
     lines_hz: tuple[float, ...]
