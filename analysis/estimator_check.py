@@ -51,7 +51,8 @@ def kernel_model_error(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.nda
     h = np.zeros(f.size, dtype=complex)
     h[1:] = frequency_response(fit.values, f[1:]) * difference_response(f[1:], frf.period_s)  # no mean speed
     speed = np.fft.irfft(np.fft.rfft(x) * h, x.size)
-    model_frf = estimate_frf(x, speed, frf.period_s, segment_s=frf.segment_s, reuse_selection=frf.selection)
+    model_frf = estimate_frf(x, speed, frf.period_s, segment_s=frf.segment_s, reuse_selection=frf.selection,
+                             leave_out=frf.unknown_torque)
     sel = fitted_bins(frf, fit.band)
     if not np.array_equal(fitted_bins(model_frf, fit.band), sel):
         return np.zeros(int(np.count_nonzero(sel)), dtype=complex)  # a bin empty in one estimate: no correction

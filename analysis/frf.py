@@ -72,6 +72,10 @@ class FrequencyResponse:
         delete-one-block jackknife of :func:`analysis.fit.fit_two_mass`); None when not asked for.
     selection : SegmentSelection or None
         The segments averaged when segment selection was asked for (:mod:`analysis.segments`); None: all.
+    unknown_torque : ndarray of bool or None
+        One per segment of the record's segmentation: True where the segment was left out because the torque
+        estimate there carries far more of its own error than the record's other segments do
+        (:func:`unknown_torque_segments`); None when the estimate's standard error was not given.
     """
 
     f_hz: np.ndarray
@@ -86,6 +90,7 @@ class FrequencyResponse:
     alias: np.ndarray | None = None
     replicates: tuple[FrequencyResponse, ...] | None = None
     selection: SegmentSelection | None = None
+    unknown_torque: np.ndarray | None = None
 
 
 def min_duration_s(segment_s: float, overlap: float = 0.5) -> float:
@@ -148,6 +153,8 @@ def estimate_frf(
     jackknife_blocks: int = 0,
     select_band_hz: tuple[float, float] | None = None,
     reuse_selection: SegmentSelection | None = None,
+    torque_std_Nm: np.ndarray | None = None,
+    leave_out: np.ndarray | None = None,
 ) -> FrequencyResponse:
     """Estimate H1 = G_xy/G_xx and the coherence from torque and backward-difference speed.
 
@@ -177,6 +184,13 @@ def estimate_frf(
     reuse_selection : SegmentSelection or None, optional
         Average the segments another estimate selected (the same stretches of other signals) instead of
         selecting; None: every segment, or those ``select_band_hz`` selects.
+    torque_std_Nm : ndarray or None, optional
+        Standard error of the torque estimate at each sample, N·m: segments where it makes an outlying share of
+        the torque are left out (:func:`unknown_torque_segments`, ``unknown_torque``); None: none left out. Not
+        where a segment selection found fewer than two segments that excite (the record is judged as not excited).
+    leave_out : ndarray of bool or None, optional
+        Leave out these segments as if ``torque_std_Nm`` had flagged them (another estimate's ``unknown_torque``, with
+        its ``selection`` as ``reuse_selection``); None: as ``torque_std_Nm`` says.
 
     Returns
     -------
@@ -207,13 +221,21 @@ def estimate_frf(
     if selection is None and select_band_hz is not None:
         f = np.fft.rfftfreq(nperseg, period_s)
         selection = select_segments(X, Y, (f >= select_band_hz[0]) & (f <= select_band_hz[1]), nperseg, step)
-    if selection is not None:
-        keep = selection.keep
+    unknown = leave_out
+    if unknown is None and torque_std_Nm is not None and (selection is None or selection.applied):
+        unknown = unknown_torque_segments(x, np.asarray(torque_std_Nm, dtype=float), nperseg, step,
+                                          None if selection is None else selection.keep)
+    # left out as the selection leaves out segments that do not excite (the selection itself still says which excite)
+    used = selection if unknown is None or not unknown.any() else SegmentSelection(
+        (np.ones(unknown.size, dtype=bool) if selection is None else selection.keep) & ~unknown,
+        np.full(unknown.size, np.inf), 0.0, nperseg, step, True)
+    if used is not None:
+        keep = used.keep
         X, Y = X[keep], Y[keep]
         N = None if N is None else N[keep]
         U = None if U is None else [u[keep] for u in U]
         n_segments = X.shape[0]
-    gxx_fine = _fine_psd(x, fs, nperseg, step, n_fine, None if selection is None else selection.runs())
+    gxx_fine = _fine_psd(x, fs, nperseg, step, n_fine, None if used is None else used.runs())
     blocks = min(jackknife_blocks, n_segments // 2)
     jackknife = blocks >= MIN_JACKKNIFE_BLOCKS
     # delete-one-block replicates: the segments of one contiguous stretch of the record left out; each is the total's
@@ -223,10 +245,42 @@ def estimate_frf(
     total = parts[0]
     for part in parts[1:]:
         total = total + part
-    full = replace(_response(seg, total, gxx_fine, period_s), selection=selection)
+    full = replace(_response(seg, total, gxx_fine, period_s), selection=selection, unknown_torque=unknown)
     if not jackknife:
         return full
     return replace(full, replicates=tuple(_response(seg, total - part, gxx_fine, period_s) for part in parts))
+
+
+def unknown_torque_segments(torque_Nm: np.ndarray, torque_std_Nm: np.ndarray, nperseg: int, step: int,
+                            keep: np.ndarray | None = None) -> np.ndarray:
+    """The segments in which the torque is not known: its estimate's error makes an outlying share of it.
+
+    Per segment (Hann window, linear detrend, as Welch's), the share R = Σ w²·σ² / Σ w²·(x − trend)² of the torque's
+    energy that is the estimate's own error (σ = ``torque_std_Nm``). Where the motor holds or steps its torque at an
+    electrical angle at which one phase shows little of it, σ there is many times larger, and the estimate's bias
+    (the spline bridging what the phase does not show, any error of the angle, offset or interference divided by a
+    small sin) grows with it, beyond what σ itself says — so the segment is not used, as a gap would not be. A
+    segment is outlying when log R lies beyond Tukey's fence, the upper quartile plus 1.5 interquartile ranges, of
+    the segments considered (``keep``: those a segment selection kept; None: all): a rule on the record's own
+    spread, no level set on a simulator. Segments outside ``keep`` are never flagged. With fewer than 4 segments
+    considered, or if fewer than two would remain (or a quarter of them carry no information), none is flagged.
+    """
+    segs = np.lib.stride_tricks.sliding_window_view(torque_Nm, nperseg)[::step]
+    errs = np.lib.stride_tricks.sliding_window_view(torque_std_Nm, nperseg)[::step]
+    pool = np.ones(segs.shape[0], dtype=bool) if keep is None else np.asarray(keep, dtype=bool).copy()
+    out = np.zeros(segs.shape[0], dtype=bool)
+    if pool.sum() < 4:
+        return out
+    w2 = signal.get_window("hann", nperseg) ** 2
+    t = np.arange(nperseg) - 0.5 * (nperseg - 1)
+    detrended = segs - segs.mean(axis=1, keepdims=True)
+    detrended -= np.outer(detrended @ t / (t @ t), t)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # no information at all: R = ∞, flagged
+        weighted = w2 > 0  # the window's zero ends: an infinite error there does not count
+        log_r = np.nan_to_num(np.log((errs[:, weighted] ** 2 @ w2[weighted]) / (detrended**2 @ w2)), nan=np.inf)
+    q1, q3 = np.percentile(log_r[pool], [25.0, 75.0])
+    out = pool & (log_r > q3 + 1.5 * (q3 - q1))
+    return out if (pool & ~out).sum() >= 2 else np.zeros_like(out)
 
 
 def _fine_psd(x: np.ndarray, fs: float, nperseg: int, step: int, n_fine: int,

@@ -17,10 +17,10 @@ motor's electrical offset. All functions return torque at the DAQ samples they w
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.ndimage import median_filter
+from scipy.ndimage import median_filter, uniform_filter1d
 from scipy.signal import butter, find_peaks, hilbert, sosfiltfilt
 
 from analysis import trig, welch
@@ -316,18 +316,51 @@ def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: floa
         lines_hz += new
         cols = np.concatenate((cols, *(_tone_columns(f, rate_hz, tn) for f in new)))
         angle_columns(iq)  # the lines leaked into the first i_q, and so into the angle columns
-    if found is not None:
-        found.append(_interference_found(lines_hz, beta[nd + 3:], offset_a, w_e))
-    if noise_iq is None:
-        return k_t_Nm_per_A * iq
     # the noise floor of the final residual: with the lines removed (left in, a line's leak raised the
     # floor and the noise model biased K by −2 % with 25 mA tones on a 10 kS/s current)
-    sigma = _broadband_noise_rms(resid, rate_hz, m)
+    sigma = _broadband_noise_rms(resid, rate_hz, m) if noise_iq is not None else float("nan")
+    if found is not None:
+        found.append(replace(_interference_found(lines_hz, beta[nd + 3:], offset_a, w_e), noise_rms_a=sigma))
+    if noise_iq is None:
+        return k_t_Nm_per_A * iq
     out = np.empty((2, y.size))
     np.multiply(iq, k_t_Nm_per_A, out=out[0])
     np.multiply(noise_iq, sigma, out=out[1])
     out[1] *= k_t_Nm_per_A
     return out
+
+
+def angle_information_std(theta_e_rad: np.ndarray, theta0_rad: float, rate_hz: float, k_t_Nm_per_A: float,
+                          noise_rms_a: float, resolution_s: float) -> np.ndarray:
+    """Standard error, N·m, of the one-phase torque (:func:`torque_encoder`) at each sample, from what the phase
+    carries about i_q near it: k_t·σ / √(Σ sin²(θ_e + θ_0)) over the ``resolution_s`` centred on the sample.
+
+    i_a = −i_q·sin(θ_e + θ_0) + noise, so a least-squares i_q over the samples of one resolution cell has the
+    variance σ²/Σ sin²: wherever the motor holds or slowly changes its torque at an electrical angle where
+    sin(θ_e + θ_0) ≈ 0 this grows without bound, and the spline's penalty, not the current, decides the torque
+    there. The noise realisation of :func:`torque_encoder` cannot show it: the penalty that bridges such a hole
+    keeps the noise small there and turns the missing information into a bias instead.
+
+    Parameters
+    ----------
+    theta_e_rad : ndarray
+        Electrical angle at the samples, rad.
+    theta0_rad : float
+        Electrical offset θ_0 (mod π suffices), rad.
+    rate_hz : float
+        Sampling rate, Hz.
+    k_t_Nm_per_A : float
+        Torque constant, N·m/A.
+    noise_rms_a : float
+        The phase's noise per sample besides the torque (:attr:`Interference.noise_rms_a`), A.
+    resolution_s : float
+        The time resolution asked of the torque, s (half the period of the highest frequency used).
+    """
+    cell = max(1, int(round(resolution_s * rate_hz)))
+    information = uniform_filter1d(np.sin(np.asarray(theta_e_rad, dtype=np.float64) + theta0_rad) ** 2, cell,
+                                   mode="nearest") * cell
+    with np.errstate(divide="ignore"):
+        return k_t_Nm_per_A * noise_rms_a / np.sqrt(information)
 
 
 # Knot spacing of the sensor-offset spline, s: a thermal drift of a Hall sensor's offset is slower
@@ -364,12 +397,17 @@ class Interference:
         amplitude, and the torque where they are, cannot be told apart.
     offset_drift_a : float
         Peak-to-peak excursion of the sensor offset over the record, A.
+    noise_rms_a : float
+        RMS of white noise with the final residual's broadband floor (:func:`_broadband_noise_rms`), A: what the
+        phase carries besides the torque and the removed interference, per sample; NaN when the torque's noise
+        realisation was not asked for (:func:`torque_encoder`'s ``noise_seed``).
     """
 
     lines_hz: tuple[float, ...]
     amplitude_a: tuple[float, ...]
     inseparable_hz: tuple[float, ...]
     offset_drift_a: float
+    noise_rms_a: float = float("nan")
 
 
 def _interference_lines(resid_a: np.ndarray, rate_hz: float) -> list[float]:

@@ -1,6 +1,10 @@
-"""A robot window whose misfit comes from the one-phase torque estimate, not the joint (the trial's 11 of 112 poor
-windows of configs/benches/sim_robot.toml, which has no friction, backlash or third mass): the verdict stays poor
-and names the estimate first; the same window recorded with two phases (Park, no angle) is ok."""
+"""A robot window whose misfit came from the one-phase torque estimate, not the joint (the trial's 11 of 112 poor
+windows of configs/benches/sim_robot.toml, which has no friction, backlash or third mass): the motor holds and then
+steps its torque at an electrical angle where i_a shows little of it (7.3–7.8 s of the window: |sin| 0.06, then a
+step at |sin| 0.014, where the estimate missed the 4 N·m step by 5 N·m). Of the segments the selection keeps (the
+robot moves on its own), those where the estimate's own error is an outlying share of the torque are left out, and
+the window is ok with the truth inside its intervals (on the code before: poor, |H| +15.9 % at 42…56 Hz, C ×2);
+the same window recorded with two phases (Park, no angle) is ok as well."""
 
 from __future__ import annotations
 
@@ -26,24 +30,24 @@ def _window(tmp_path: Path, channels: list[str]) -> dict:
     return analyze_session(path, write=False).json_dict
 
 
-def test_a_misfit_the_one_phase_estimate_explains_names_it_before_the_joint(tmp_path: Path) -> None:
+def test_segments_where_one_phase_does_not_show_the_torque_are_left_out_and_the_window_is_ok(tmp_path: Path) -> None:
     doc = _window(tmp_path / "one", ["i_a"])
-    assert doc["quality"]["verdict"] == "poor"
-    assert doc["clock"]["residual_s"] == pytest.approx(162.4e-6, abs=1e-6)
-    assert doc["quality"]["reasons"][0] == (
-        "the two-mass model does not fit |H| between 42 and 56 Hz: it misses by +15.9 % at 42…56 Hz, 5 σ beyond what "
-        "noise, the chain and the encoder's quantisation explain — the torque estimate from one phase current may "
-        "bend |H| alike: the clock alignment's residual of 162 µs (above 100 µs) says that phase follows the "
-        "encoder's electrical angle only loosely, and where the motor holds torque at an angle at which the phase "
-        "carries little of it the estimate errs — record a second phase current ([daq] channels; Park needs no "
-        "angle); if the misfit stays with two phases: at the anti-resonance (f_a = 55 Hz), which friction and "
-        "backlash on the load side damp and bend: check the load side for friction and the gear and the coupling "
-        "for play; until then K, J_m, J_l are the two-mass model's compromise, not the joint's")
-    # what the estimate did: the resonance read low, so the fit doubled the damping (truth C = 0.1 N·m·s/rad)
-    assert doc["C_Nms_per_rad"] > 1.8 * doc["simulated_truth"]["C_Nms_per_rad"]
+    assert doc["clock"]["residual_s"] == pytest.approx(162.4e-6, abs=1e-6)  # the same loosely aligned phase as before
+    notes = [r for r in doc["quality"]["reasons"] if r.startswith("note: torque: ")]
+    assert notes == ["note: torque: 3 of 38 Welch segments left out (4.81–5.31 s, 7.06–7.56 s, 7.31–7.81 s): there the "
+                     "one-phase estimate's own error is an outlying share of the torque — the motor holds or changes "
+                     "its torque at an electrical angle where i_a shows little of it"]
+    assert doc["quality"]["verdict"] == "ok", doc["quality"]["reasons"]
+    truth = doc["simulated_truth"]
+    assert doc["K_Nm_per_rad"] == pytest.approx(truth["K_Nm_per_rad"], rel=0.01)  # 893.8 against 891 (before 896.4)
+    for p in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2"):
+        assert doc["ci95"][p][0] <= truth[p] <= doc["ci95"][p][1], p
+    # the damping is still read high from one phase (0.171 against 0.1; before 0.197): the estimate's error in the
+    # segments kept still lowers the resonance's peak
+    assert 1.5 * truth["C_Nms_per_rad"] < doc["C_Nms_per_rad"] < 1.8 * truth["C_Nms_per_rad"]
     two = _window(tmp_path / "two", ["i_a", "i_b"])
     assert two["clock"]["offset_s"] == pytest.approx(doc["clock"]["offset_s"], abs=5e-6)  # the same clock error
+    assert not any(r.startswith("note: torque: ") for r in two["quality"]["reasons"])  # Park needs no such care
     assert two["quality"]["verdict"] == "ok", two["quality"]["reasons"]
-    truth = two["simulated_truth"]
     assert two["C_Nms_per_rad"] == pytest.approx(truth["C_Nms_per_rad"], rel=0.15)
     assert two["ci95"]["K_Nm_per_rad"][0] <= truth["K_Nm_per_rad"] <= two["ci95"]["K_Nm_per_rad"][1]

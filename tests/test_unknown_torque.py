@@ -1,0 +1,49 @@
+"""The one-phase torque's standard error from the angle (analysis.torque.angle_information_std) and the Welch segments
+left out where it is an outlying share of the torque (analysis.frf.unknown_torque_segments), on synthetic signals."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from analysis.frf import estimate_frf, unknown_torque_segments
+from analysis.torque import angle_information_std
+
+NPERSEG, STEP = 500, 250
+
+
+def _torque(n: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).standard_normal(n)
+
+
+def test_the_standard_error_is_the_noise_over_the_root_of_the_information_in_a_cell() -> None:
+    # 25.6 kS/s, 1.25 ms cells (32 samples): at a fixed angle k_t·σ/(√32·|sin|); where sin = 0 no information at all
+    theta = np.full(1000, 0.1)
+    std = angle_information_std(theta, 0.0, 25600.0, 3.0, 0.01, 1.25e-3)
+    assert std[500] == pytest.approx(3.0 * 0.01 / (np.sqrt(32) * np.sin(0.1)), rel=1e-9)
+    assert np.isinf(angle_information_std(np.zeros(100), 0.0, 25600.0, 3.0, 0.01, 1.25e-3)).all()
+
+
+def test_only_the_segment_where_the_error_stands_out_is_left_out() -> None:
+    x = _torque(NPERSEG + 20 * STEP)
+    std = np.full(x.size, 0.01)
+    assert not unknown_torque_segments(x, std, NPERSEG, STEP).any()  # an even error: nothing stands out
+    std[10 * STEP + NPERSEG // 2 - 5:10 * STEP + NPERSEG // 2 + 5] = 2.0  # 10 samples mid-segment 10
+    out = unknown_torque_segments(x, std, NPERSEG, STEP)
+    assert np.flatnonzero(out).tolist() == [10]  # the neighbours hold it at the window's edges only
+    std[10 * STEP + NPERSEG // 2] = np.inf  # no information at all there: still that segment alone
+    assert np.flatnonzero(unknown_torque_segments(x, std, NPERSEG, STEP)).tolist() == [10]
+    keep = np.ones(out.size, dtype=bool)
+    keep[10] = False  # a segment the selection did not keep is never flagged (nor are the others)
+    assert not unknown_torque_segments(x, std, NPERSEG, STEP, keep).any()
+
+
+def test_the_frf_averages_without_the_left_out_segment() -> None:
+    x = _torque(NPERSEG + 20 * STEP, 1)
+    y = np.cumsum(x) * 1e-3
+    std = np.full(x.size, 0.01)
+    std[10 * STEP + NPERSEG // 2] = 5.0
+    frf = estimate_frf(x, y, 1e-3, torque_std_Nm=std)
+    assert np.flatnonzero(frf.unknown_torque).tolist() == [10]
+    assert frf.n_segments == 20  # 21 segments, one left out
+    assert estimate_frf(x, y, 1e-3, torque_std_Nm=np.full(x.size, 0.01)).n_segments == 21
