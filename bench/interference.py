@@ -37,7 +37,7 @@ CASES: tuple[tuple[str, float | None, dict], ...] = (
 
 def run_one(task: tuple[int, int]) -> tuple[int, int, list[float], list[bool], list[float], str, tuple[str, ...]]:
     from analysis import AnalysisRequest, analyze
-    from bench.accuracy import clock_for
+    from bench.scenarios import clock_for
     from tests.interference import with_interference
     from tests.test_analysis_pipeline import sim_recording
 
