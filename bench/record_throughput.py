@@ -49,18 +49,18 @@ load 5, 0.91–0.94 at 6–7: the floor's own CPU grows more), so only figures a
 
 Session 10 (2026-11-30): the process now runs with ``acq record``'s allocator setting (``acq.entry.keep_freed_memory``;
 ``--default-allocator`` leaves glibc's defaults), as it runs with its BLAS threads: at load 1.0–1.1, three interleaved
-pairs gave per CPU 0.87/0.87, 0.83/0.85, 0.86/0.90 with it against 0.85/0.86, 0.86/0.86, 0.86/0.85 without (floor
-read in one thread / a thread per stream) — no effect beyond the spread. Tried and not kept: a reader's end waking the
+pairs gave per CPU 0.87/0.87, 0.83/0.85, 0.86/0.90 with it against 0.85/0.86, 0.86/0.86, 0.86/0.85 without (floor read
+in one thread / a thread per stream) — no effect beyond the spread. Tried and not kept: a reader's end waking the
 recording thread at once (a ``threading.Event`` instead of its 10 ms tick, so the last blocks of a ``--fast`` session
-wait for nothing), measured with the allocator setting: at load ≈ 1, three pairs interleaved with main gave per wall second (a thread per stream) 0.87,
-0.88, 0.89 against main's 0.90, 0.90, 0.89 — no gain. Where the recorder's extra CPU goes (``perf record -e
-cpu-clock`` of 15 recordings against 15 floor runs, per 10 s session): the kernel 14 ms (GIL hand-overs between three
-threads — futex wake-ups and context switches, ≈ 640 futex calls and 220 switches more per session — and the page
-cache taking 12.6 MB), the interpreter 9 ms, HDF5 8 ms, libc 5 ms, numpy 2.5 ms. Of the writing alone (18 ms by
-itself), Fletcher32 is 2.3 ms and storing the current as float32 instead of float64 would save 2.5 ms; the current's
-chunk length (1×, 2×, 5× 0.1 s) changes nothing (per-byte costs, not per-chunk ones). A lower bound for this file
-format: floor + the writing alone + the handoff ≈ 290 + 18 + 4 ms, 0.93 per CPU second with no interplay at all; the
-interplay of three threads on two cores costs 15–25 ms more, and nothing tried removes it.
+wait for nothing), measured with the allocator setting: at load ≈ 1, three pairs interleaved with main gave per wall
+second (a thread per stream) 0.87, 0.88, 0.89 against main's 0.90, 0.90, 0.89 — no gain. Where the recorder's extra CPU
+goes (``perf record -e cpu-clock`` of 15 recordings against 15 floor runs, per 10 s session): the kernel 14 ms (GIL
+hand-overs between three threads — futex wake-ups and context switches, ≈ 640 futex calls and 220 switches more per
+session — and the page cache taking 12.6 MB), the interpreter 9 ms, HDF5 8 ms, libc 5 ms, numpy 2.5 ms. Of the writing
+alone (18 ms by itself), Fletcher32 is 2.3 ms and storing the current as float32 instead of float64 would save 2.5 ms;
+the current's chunk length (1×, 2×, 5× 0.1 s) changes nothing (per-byte costs, not per-chunk ones). A lower bound for
+this file format: floor + the writing alone + the handoff ≈ 290 + 18 + 4 ms, 0.93 per CPU second with no interplay at
+all; the interplay of three threads on two cores costs 15–25 ms more, and nothing tried removes it.
 
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
