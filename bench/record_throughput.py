@@ -47,6 +47,21 @@ it due, no third thread (built and passing the recorder's tests on branch wp/s8-
 pair over 15 pairs (quartiles 0.97–1.03, load 5) — no gain, not merged. Under load the ratio rises for both (0.90 at
 load 5, 0.91–0.94 at 6–7: the floor's own CPU grows more), so only figures at the same load compare.
 
+Session 10 (2026-11-30): the process now runs with ``acq record``'s allocator setting (``acq.entry.keep_freed_memory``;
+``--default-allocator`` leaves glibc's defaults), as it runs with its BLAS threads: at load 1.0–1.1, three interleaved
+pairs gave per CPU 0.87/0.87, 0.83/0.85, 0.86/0.90 with it against 0.85/0.86, 0.86/0.86, 0.86/0.85 without (floor read
+in one thread / a thread per stream) — no effect beyond the spread. Tried and not kept: a reader's end waking the
+recording thread at once (a ``threading.Event`` instead of its 10 ms tick, so the last blocks of a ``--fast`` session
+wait for nothing), measured with the allocator setting: at load ≈ 1, three pairs interleaved with main gave per wall
+second (a thread per stream) 0.87, 0.88, 0.89 against main's 0.90, 0.90, 0.89 — no gain. Where the recorder's extra CPU
+goes (``perf record -e cpu-clock`` of 15 recordings against 15 floor runs, per 10 s session): the kernel 14 ms (GIL
+hand-overs between three threads — futex wake-ups and context switches, ≈ 640 futex calls and 220 switches more per
+session — and the page cache taking 12.6 MB), the interpreter 9 ms, HDF5 8 ms, libc 5 ms, numpy 2.5 ms. Of the writing
+alone (18 ms by itself), Fletcher32 is 2.3 ms and storing the current as float32 instead of float64 would save 2.5 ms;
+the current's chunk length (1×, 2×, 5× 0.1 s) changes nothing (per-byte costs, not per-chunk ones). A lower bound for
+this file format: floor + the writing alone + the handoff ≈ 290 + 18 + 4 ms, 0.93 per CPU second with no interplay at
+all; the interplay of three threads on two cores costs 15–25 ms more, and nothing tried removes it.
+
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
 (7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it
@@ -70,6 +85,7 @@ from rich.console import Console
 from rich.table import Table
 
 from acq.config import load_bench, load_profile
+from acq.entry import keep_freed_memory
 from acq.recording.recorder import FLUSH_BYTES, Recorder
 from acq.recording.writer import SessionWriter
 from drivers.base import CurrentSource, Drive
@@ -188,10 +204,14 @@ def main() -> None:
     parser.add_argument("--repeat", type=int, default=5, help="--fast runs of each (medians are shown)")
     parser.add_argument("--blas-threads", default="1",
                         help="BLAS threads: a count, or 'default' (OpenBLAS's own); 1 is what acq record runs with")
+    parser.add_argument("--default-allocator", action="store_true",
+                        help="glibc's malloc defaults, not acq record's (acq.entry.keep_freed_memory)")
     args = parser.parse_args()
     env = blas_env(args.blas_threads)
     if env != dict(os.environ):  # numpy has loaded its BLAS already: start again with the threads asked for
         os.execve(sys.executable, [sys.executable, *sys.argv], env)
+    if not args.default_allocator:
+        keep_freed_memory()  # as the acq record process does, for the floor and the recorder alike
     bench = heavy_bench()
     runs: dict[str, list[tuple[float, float, int]]] = {"sim": [], "sim2": [], "recorder": []}
     own_rates: list[float] = []
@@ -210,8 +230,9 @@ def main() -> None:
     rates = {name: (statistics.median(n / wall for wall, _, n in r), statistics.median(n / cpu for _, cpu, n in r))
              for name, r in runs.items()}
     wall = statistics.median(wall for wall, _, _ in runs["recorder"])
+    allocator = "glibc's defaults" if args.default_allocator else "acq record's"
     table = Table(title="recorder throughput — 3 × 51.2 kS/s current + 4 kHz encoder, simulated bench "
-                        f"(medians of {args.repeat}, BLAS threads: {args.blas_threads})")
+                        f"(medians of {args.repeat}, BLAS threads: {args.blas_threads}, allocator: {allocator})")
     table.add_column("figure")
     table.add_column("per wall second", justify="right")
     table.add_column("per CPU second", justify="right")
