@@ -202,3 +202,29 @@ def test_a_restart_with_another_every_goes_on_in_machine_time_from_the_last_wind
     doc = json.loads(run_cli(capsys, "trend", str(out), "--joint", "joint1", "--json").out)
     assert [(p["tags"]["monitor_window"], p["tags"]["monitor_elapsed_s"], p["tags"]["monitor_every_s"])
             for p in doc["points"]] == [(0, 0.0, 60.0), (1, 60.0, 60.0), (2, 120.0, 120.0), (3, 240.0, 120.0)]
+
+
+def test_a_folder_moved_with_its_catalogue_moves_its_windows_from_there(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder moved (``mv a b``) with its own catalogue, then started with --catalogue PLANT --move-catalogue: the
+    copy opened the catalogue monitor.id names, a/catalogue.sqlite, which no longer exists — it made the folder a and
+    an empty catalogue there, copied no window and filed on in PLANT without the history (the third read). The
+    windows come from the catalogue the folder carried; a recorded catalogue that is gone and not in the folder is a
+    refusal, and nothing is made where it was."""
+    bench, first, moved, plant = _robot(tmp_path, "r1", 891.0), tmp_path / "a", tmp_path / "b", tmp_path / "plant.db"
+    assert _start(capsys, bench, first, "--keep", "0", minutes=2).code == 0  # window 2's file is not kept: K only filed
+    first.rename(moved)
+    run = _start(capsys, bench, moved, "--catalogue", str(plant), "--move-catalogue")
+    assert run.code == 0, run.err
+    assert not first.exists()
+    doc = json.loads(run_cli(capsys, "trend", "--catalogue", str(plant), "--joint", "joint1", "--json").out)
+    assert [(p["tags"]["monitor_window"], p["state"]) for p in doc["points"]][:3] == [
+        (0, "baseline"), (1, "baseline"), (2, "ok")]
+    other, gone = tmp_path / "c", tmp_path / "gone.db"
+    assert _start(capsys, bench, other, "--catalogue", str(gone)).code == 0
+    gone.unlink()
+    refused = _start(capsys, bench, other, "--catalogue", str(plant), "--move-catalogue")
+    assert (refused.code, refused.err) == (
+        2, f"acq: error: {other}: its windows are filed in {gone}, which no longer exists: resume once with "
+           f"--catalogue set to where that file is now, then move them with --move-catalogue\n")
+    assert not gone.exists()

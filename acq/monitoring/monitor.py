@@ -315,8 +315,7 @@ class Monitor:
         self._id = identity.monitor_id
         windows = self._own_windows(None)
         bound = check_catalogue(s.out_dir, identity, self.catalogue, self._catalogue_location, bool(windows),
-                                move=s.move_catalogue,
-                                unowned=identity.catalogue == str((s.out_dir / CATALOGUE_NAME).resolve()))
+                                move=s.move_catalogue, own_catalogue=s.out_dir / CATALOGUE_NAME)
         write_identity(s.out_dir, bound)
         return self._own_windows(None) if s.move_catalogue and not windows else windows  # moved here: read anew
 
