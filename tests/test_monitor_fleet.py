@@ -228,3 +228,17 @@ def test_a_folder_moved_with_its_catalogue_moves_its_windows_from_there(
         2, f"acq: error: {other}: its windows are filed in {gone}, which no longer exists: resume once with "
            f"--catalogue set to where that file is now, then move them with --move-catalogue\n")
     assert not gone.exists()
+
+
+def test_an_empty_identity_file_is_refused_not_made_anew(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An empty monitor.id was taken for none: a new identity was made silently — the folder's windows became another
+    monitor's (numbering from 0, a new baseline) and a copied folder with its monitor.id emptied passed the copy check
+    (the third read). Refused like any unreadable identity."""
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "m"
+    assert _start(capsys, bench, out).code == 0
+    (out / "monitor.id").write_text("")
+    refused = _start(capsys, bench, out)
+    assert (refused.code, refused.err) == (
+        2, f"acq: error: {out / 'monitor.id'}: not a monitor identity (the file is empty) — restore it from a backup, "
+           "or move it away to start a new monitor in this folder\n")
+    assert (out / "monitor.id").read_text() == ""

@@ -73,6 +73,8 @@ class Identity:
 
 def _from_text(text: str) -> Identity:
     """An identity file's content: JSON, or the one line of an earlier acq (its binding read from the identity)."""
+    if not text:  # a file there that says nothing: made anew, the folder's windows would be another monitor's
+        raise ValueError("the file is empty")
     if text.startswith("{"):
         doc = json.loads(text)
         return Identity(str(doc["monitor_id"]), doc.get("host"), doc.get("folder"), doc.get("catalogue"))
@@ -93,7 +95,7 @@ def read_identity(out_dir: Path) -> Identity | None:
     except OSError as e:
         raise storage_error(e, path) from None
     try:
-        return _from_text(text) if text else None
+        return _from_text(text)
     except (ValueError, KeyError, TypeError) as e:
         raise ConfigError(f"{path}: not a monitor identity ({e}) — restore it from a backup, or move it away to "
                           "start a new monitor in this folder") from None
