@@ -187,3 +187,24 @@ def test_a_monitors_windows_are_copied_into_another_catalogue_with_their_analyse
             rows = [(e.session_id, e.tags, e.K_Nm_per_rad, e.K_ci95, e.path) for e in new.entries(monitor="m1")]
     assert rows == [("s-01", {"monitor_id": "m1"}, 891.0, (886.0, 896.0), "/bench/s-01.h5"),
                     ("s-03", {"monitor_id": "m1"}, 893.0, (888.0, 898.0), "/bench/s-03.h5")]
+
+
+def test_sessions_an_earlier_acq_files_without_the_monitor_column_get_it_from_their_tags(
+        catalogue_location: Path | str) -> None:
+    """An acq of before schema 6 still running names only the columns it knows: its windows have the monitor_id tag and
+    no monitor_id column, and the scoping query missed them (the third read). fill_monitor_ids fills the column from
+    the tags (SQLite's json_extract, PostgreSQL's ->>), and leaves the sessions of no monitor alone."""
+    with Catalogue(catalogue_location) as c:
+        with c._transaction():
+            for key, tags in (("s1", '{"monitor_id": "h:/m1:0000000a", "monitor_window": 0}'), ("s2", '{"robot": "r"}'),
+                              ("s3", '{}')):
+                c._execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc, tags_json) "
+                           f"VALUES (?, ?, '/{key}.h5', 'joint1', '2026-01-01T00:00:0{key[1]}+00:00', ?)",
+                           (key, key, tags))
+                c._execute("INSERT INTO analyses (session_key, sha256, request_key, analyzed_utc, verdict) "
+                           "VALUES (?, 'h', '{}', '2026-01-01T00:01:00+00:00', 'ok')", (key,))
+        before = [e.session_id for e in c.entries("joint1", monitor="h:/m1:0000000a")]
+        filled = c.fill_monitor_ids(), c.fill_monitor_ids()
+        after = [e.session_id for e in c.entries("joint1", monitor="h:/m1:0000000a")]
+        unowned = [e.session_id for e in c.entries("joint1", monitor="none", unowned=True)]
+    assert (before, filled, after, unowned) == ([], (1, 0), ["s1"], ["s2", "s3"])

@@ -242,3 +242,21 @@ def test_an_empty_identity_file_is_refused_not_made_anew(tmp_path: Path, capsys:
         2, f"acq: error: {out / 'monitor.id'}: not a monitor identity (the file is empty) — restore it from a backup, "
            "or move it away to start a new monitor in this folder\n")
     assert (out / "monitor.id").read_text() == ""
+
+
+def test_windows_an_earlier_acq_filed_after_the_catalogue_was_migrated_stay_the_monitors(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A shared catalogue migrated to schema 6 by one upgraded monitor while another, of an earlier acq, runs on: that
+    one files its windows with the monitor_id tag but no monitor_id column (its INSERT names the columns it knows).
+    Restarted upgraded, it read its windows by the column: none of those — the windows still in its folder analysed
+    again, the rest gone from its trend, the numbering taken up again from the files (two windows 2; the third
+    read). A monitor's start fills the column from the tags."""
+    bench, out, shared = _robot(tmp_path, "r1", 891.0), tmp_path / "m", tmp_path / "shared.sqlite"
+    assert _start(capsys, bench, out, "--catalogue", str(shared), "--keep", "0", minutes=3).code == 0
+    with sqlite3.connect(shared) as db:  # as the earlier acq's INSERT left them
+        db.execute("UPDATE sessions SET monitor_id = NULL")
+    assert _start(capsys, bench, out, "--catalogue", str(shared)).code == 0
+    doc = json.loads(run_cli(capsys, "trend", "--catalogue", str(shared), "--joint", "joint1", "--json").out)
+    assert [p["tags"]["monitor_window"] for p in doc["points"]] == [0, 1, 2, 3]
+    with sqlite3.connect(shared) as db:
+        assert db.execute("SELECT COUNT(*) FROM sessions WHERE monitor_id IS NULL").fetchone()[0] == 0

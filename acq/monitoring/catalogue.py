@@ -292,6 +292,20 @@ class Catalogue:
             (joint, joint, monitor, monitor, unowned))
         return [_entry(r) for r in rows]
 
+    def fill_monitor_ids(self) -> int:
+        """Fill the ``monitor_id`` column of the sessions whose tags name a monitor but whose column does not: the rows
+        an acq of before schema 6 still running files into a catalogue another one migrated (its INSERT names the
+        columns it knows). :meth:`entries` scopes by the column: without this, such a monitor's windows were nobody's
+        once it restarted upgraded. Returns the number of sessions filled (one transaction; a scan of the sessions
+        without a monitor, by the column's index)."""
+        fill = ("UPDATE sessions SET monitor_id = json_extract(tags_json, '$.monitor_id') WHERE monitor_id IS NULL"
+                " AND json_extract(tags_json, '$.monitor_id') IS NOT NULL")
+        try:
+            with self._transaction() as db:
+                return int(db.execute(self._dialect.ddl(fill)).rowcount)  # ddl: PostgreSQL's JSON operator
+        except self._dialect.errors as e:
+            raise StorageError(f"{cause_of(e)}: {self.path} ({e})") from None
+
     def copy_windows(self, source: Catalogue, monitor: str, *, unowned: bool = False) -> int:
         """Copy the sessions of ``monitor`` with their analyses from ``source`` into this catalogue (one transaction;
         rows this catalogue already has are kept); with ``unowned`` also the sessions of no monitor, filed as

@@ -313,6 +313,7 @@ class Monitor:
         s = self.s
         identity: Identity = bound_identity(s.out_dir, new_identity=s.new_identity, moved=s.moved)
         self._id = identity.monitor_id
+        self.catalogue.fill_monitor_ids()  # its windows an earlier acq filed after another one migrated the catalogue
         windows = self._own_windows(None)
         bound = check_catalogue(s.out_dir, identity, self.catalogue, self._catalogue_location, bool(windows),
                                 move=s.move_catalogue, own_catalogue=s.out_dir / CATALOGUE_NAME)
