@@ -260,3 +260,13 @@ def test_windows_an_earlier_acq_filed_after_the_catalogue_was_migrated_stay_the_
     assert [p["tags"]["monitor_window"] for p in doc["points"]] == [0, 1, 2, 3]
     with sqlite3.connect(shared) as db:
         assert db.execute("SELECT COUNT(*) FROM sessions WHERE monitor_id IS NULL").fetchone()[0] == 0
+
+
+def test_moved_and_new_identity_together_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--moved (the same monitor) and --new-identity (another one) together: --new-identity won silently, splitting
+    the history of a monitor its engineer also called the same (the third read)."""
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "m"
+    run = _start(capsys, bench, out, "--moved", "--new-identity")
+    assert (run.code, run.err) == (2, "acq: error: --moved and --new-identity: a folder is either the same monitor "
+                                      "moved here or another one — give one of them\n")
+    assert not out.exists()
