@@ -270,3 +270,20 @@ def test_moved_and_new_identity_together_are_refused(tmp_path: Path, capsys: pyt
     assert (run.code, run.err) == (2, "acq: error: --moved and --new-identity: a folder is either the same monitor "
                                       "moved here or another one — give one of them\n")
     assert not out.exists()
+
+
+def test_a_restart_with_another_every_after_an_earlier_acq_goes_on_at_the_spacing_it_captured_with(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Windows of an earlier acq carry no monitor_every_s: their spacing was taken to be the new --every, and the first
+    window after the upgrade's restart with --every 120 came at 60 + 120 = 180 s instead of 120 s (the third read). An
+    earlier acq placed window n at n × --every: the spacing is read back from the last window's machine time."""
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "m"
+    assert _start(capsys, bench, out, minutes=2).code == 0
+    with sqlite3.connect(out / "catalogue.sqlite") as db:  # as the earlier acq filed them
+        for key, tags in db.execute("SELECT session_key, tags_json FROM sessions").fetchall():
+            db.execute("UPDATE sessions SET tags_json = ? WHERE session_key = ?",
+                       (json.dumps({k: v for k, v in json.loads(tags).items() if k != "monitor_every_s"}), key))
+    assert _start(capsys, bench, out, minutes=4, every="120").code == 0
+    doc = json.loads(run_cli(capsys, "trend", str(out), "--joint", "joint1", "--json").out)
+    assert [(p["tags"]["monitor_window"], p["tags"]["monitor_elapsed_s"]) for p in doc["points"]] == [
+        (0, 0.0), (1, 60.0), (2, 120.0), (3, 240.0)]

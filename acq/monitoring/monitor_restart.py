@@ -98,14 +98,16 @@ class MachineClock:
 
     @classmethod
     def resumed(cls, windows: Sequence[Entry], every_s: float) -> MachineClock:
-        """The clock going on from the newest of ``windows`` (a window of an earlier acq has no :data:`EVERY_TAG`:
-        captured with this ``every_s``)."""
+        """The clock going on from the newest of ``windows``. A window of an earlier acq has no :data:`EVERY_TAG`: its
+        machine time was its number × the --every it was captured with, which gives that --every back (window 0:
+        this ``every_s``)."""
         timed = [e for e in windows if WINDOW_TAG in e.tags and ELAPSED_TAG in e.tags]
         if not timed:
             return cls(every_s)
         last = max(timed, key=lambda e: int(e.tags[WINDOW_TAG]))
-        return cls(every_s, int(last.tags[WINDOW_TAG]), float(last.tags[ELAPSED_TAG]),
-                   float(last.tags.get(EVERY_TAG, every_s)))
+        n, elapsed_s = int(last.tags[WINDOW_TAG]), float(last.tags[ELAPSED_TAG])
+        then_s = float(last.tags[EVERY_TAG]) if EVERY_TAG in last.tags else elapsed_s / n if n > 0 else every_s
+        return cls(every_s, n, elapsed_s, then_s)
 
     def at(self, n: int) -> float:
         """The start of window ``n`` in machine time, s."""
