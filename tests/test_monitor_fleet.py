@@ -7,6 +7,8 @@ import json
 import shutil
 import socket
 import sqlite3
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -287,3 +289,28 @@ def test_a_restart_with_another_every_after_an_earlier_acq_goes_on_at_the_spacin
     doc = json.loads(run_cli(capsys, "trend", str(out), "--joint", "joint1", "--json").out)
     assert [(p["tags"]["monitor_window"], p["tags"]["monitor_elapsed_s"]) for p in doc["points"]] == [
         (0, 0.0), (1, 60.0), (2, 120.0), (3, 240.0)]
+
+
+def test_the_same_folder_by_another_path_is_not_a_copy(tmp_path: Path) -> None:
+    """The folder reached through a bind mount (a service's path and an engineer's) was refused as a copy of itself —
+    and the advice, --new-identity, would have split its history (the third read). Run in a private mount namespace
+    (unshare -rm: no mount left behind); skipped where the system allows none."""
+    if shutil.which("unshare") is None:
+        pytest.skip("no unshare")
+    bench, real, alias = _robot(tmp_path, "r1", 891.0), tmp_path / "real", tmp_path / "alias"
+    real.mkdir()
+    alias.mkdir()
+    monitor = [sys.executable, "-m", "acq", "monitor", "--bench", str(bench), "--fast", "--window", "10", "--every",
+               "60", "--for", "1m", "--baseline-windows", "2", "--out"]
+    first = subprocess.run([*monitor, str(real / "m")], capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    script = f'mount --bind "{real}" "{alias}" || exit 99; exec "$@"'
+    again = subprocess.run(["unshare", "-rm", "sh", "-c", script, "sh", *monitor, str(alias / "m")],
+                           capture_output=True, text=True, timeout=300)
+    if again.returncode == 99 or "unshare:" in again.stderr:
+        pytest.skip(f"no bind mount here: {again.stderr.strip()}")
+    assert again.returncode == 0, again.stderr
+    identity = json.loads((real / "m" / "monitor.id").read_text())
+    assert identity["folder"] == str((alias / "m").resolve())
+    with sqlite3.connect(real / "m" / "catalogue.sqlite") as db:
+        assert {m for (m,) in db.execute("SELECT monitor_id FROM sessions")} == {identity["monitor_id"]}

@@ -15,6 +15,7 @@ elsewhere (:func:`bound_identity`):
 
 * same host, the folder it was made for no longer holds it: the folder was moved (``mv``) — it is the same monitor,
   bound anew, without a word;
+* same host, that folder is this one by another path (a bind mount): the same monitor;
 * same host, that folder still holds it: a copy — refused, naming the folder it was copied from;
 * another host: acq cannot look at the other host's folder — refused, naming host and folder (a folder carried to a
   replacement PC and a disk image cloned for the next station look alike here).
@@ -117,6 +118,14 @@ def _still_there(folder: str, monitor_id: str) -> bool:
     return found is not None and found.monitor_id == monitor_id
 
 
+def _same_folder(folder: str, out_dir: Path) -> bool:
+    """Whether ``folder`` (on this host) is ``out_dir`` itself, reached by another path (same device and inode)."""
+    try:
+        return Path(folder).samefile(out_dir)
+    except OSError:
+        return False
+
+
 def bound_identity(out_dir: Path, *, new_identity: bool = False, moved: bool = False) -> Identity:
     """The identity of the monitor of ``out_dir``, bound to this host and folder: read and checked, or made (not
     written: :func:`write_identity`).
@@ -137,6 +146,8 @@ def bound_identity(out_dir: Path, *, new_identity: bool = False, moved: bool = F
     here = replace(found, host=host, folder=folder)
     if found.host is None or (found.host, found.folder) == (host, folder):
         return here
+    if found.host == host and _same_folder(str(found.folder), out_dir):
+        return here  # the same folder by another path (a bind mount, a network mount's two names): not a copy
     if new_identity:
         return fresh
     if moved or (found.host == host and not _still_there(str(found.folder), found.monitor_id)):
