@@ -222,6 +222,13 @@ def test_a_folder_moved_with_its_catalogue_moves_its_windows_from_there(
     doc = json.loads(run_cli(capsys, "trend", "--catalogue", str(plant), "--joint", "joint1", "--json").out)
     assert [(p["tags"]["monitor_window"], p["state"]) for p in doc["points"]][:3] == [
         (0, "baseline"), (1, "baseline"), (2, "ok")]
+    again = tmp_path / "again"  # moved once more, its catalogue deleted: it starts over there, as one deleted in place
+    assert _start(capsys, bench, moved, "--catalogue", str(moved / "catalogue.sqlite")).code == 0  # the one it carries
+    moved.rename(again)
+    (again / "catalogue.sqlite").unlink()
+    restarted = _start(capsys, bench, again)
+    assert restarted.code == 0, restarted.err
+    assert _identity(again)["catalogue"] == str((again / "catalogue.sqlite").resolve())
     other, gone = tmp_path / "c", tmp_path / "gone.db"
     assert _start(capsys, bench, other, "--catalogue", str(gone)).code == 0
     gone.unlink()

@@ -77,6 +77,8 @@ def check_catalogue(out_dir: Path, identity: Identity, catalogue: Catalogue, loc
             raise ConfigError(f"{out_dir}: its windows are filed in {source}, which no longer exists: resume once "
                               "with --catalogue set to where that file is now, then move them with --move-catalogue")
         source = catalogue_text(own_catalogue)  # the folder moved with its own catalogue
+        if source == here:  # which holds none of its windows (emptied): as a catalogue emptied in place, start over
+            return replace(identity, catalogue=here)
     if not move:
         raise ConfigError(f"{out_dir}: its windows are filed in {source}, not in {here} (--catalogue): "
                           f"resume with --catalogue {source}, or add --move-catalogue to copy them into "
