@@ -311,8 +311,8 @@ class Catalogue:
     def _fill_monitor_ids(self) -> int:
         """:meth:`fill_monitor_ids` inside the caller's transaction: the sessions without the column whose tags name
         the monitor tag (found by text; read by Python's JSON, which reads the NaN it writes)."""
-        rows = self._execute("SELECT session_key, tags_json FROM sessions WHERE monitor_id IS NULL AND tags_json LIKE ?",
-                             (f'%"{MONITOR_TAG}"%',)).fetchall()
+        rows = self._execute("SELECT session_key, tags_json FROM sessions WHERE monitor_id IS NULL"
+                             " AND tags_json LIKE ?", (f'%"{MONITOR_TAG}"%',)).fetchall()
         filled = [(str(tags[MONITOR_TAG]), key) for key, tags in ((r[0], _tags(r[1])) for r in rows)
                   if tags.get(MONITOR_TAG) is not None]
         if filled:
