@@ -3,6 +3,8 @@ conftest.py) — with the same schema, migrations, upserts, and many concurrent 
 
 from __future__ import annotations
 
+import json
+import math
 import os
 import subprocess
 import sys
@@ -187,3 +189,47 @@ def test_a_monitors_windows_are_copied_into_another_catalogue_with_their_analyse
             rows = [(e.session_id, e.tags, e.K_Nm_per_rad, e.K_ci95, e.path) for e in new.entries(monitor="m1")]
     assert rows == [("s-01", {"monitor_id": "m1"}, 891.0, (886.0, 896.0), "/bench/s-01.h5"),
                     ("s-03", {"monitor_id": "m1"}, 893.0, (888.0, 898.0), "/bench/s-03.h5")]
+
+
+def test_sessions_an_earlier_acq_files_without_the_monitor_column_get_it_from_their_tags(
+        catalogue_location: Path | str) -> None:
+    """An acq of before schema 6 still running names only the columns it knows: its windows have the monitor_id tag and
+    no monitor_id column, and the scoping query missed them (the third read). fill_monitor_ids fills the column from
+    the tags (SQLite's json_extract, PostgreSQL's ->>), and leaves the sessions of no monitor alone."""
+    with Catalogue(catalogue_location) as c:
+        with c._transaction():
+            for key, tags in (("s1", '{"monitor_id": "h:/m1:0000000a", "monitor_window": 0}'), ("s2", '{"robot": "r"}'),
+                              ("s3", '{}')):
+                c._execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc, tags_json) "
+                           f"VALUES (?, ?, '/{key}.h5', 'joint1', '2026-01-01T00:00:0{key[1]}+00:00', ?)",
+                           (key, key, tags))
+                c._execute("INSERT INTO analyses (session_key, sha256, request_key, analyzed_utc, verdict) "
+                           "VALUES (?, 'h', '{}', '2026-01-01T00:01:00+00:00', 'ok')", (key,))
+        before = [e.session_id for e in c.entries("joint1", monitor="h:/m1:0000000a")]
+        filled = c.fill_monitor_ids(), c.fill_monitor_ids()
+        after = [e.session_id for e in c.entries("joint1", monitor="h:/m1:0000000a")]
+        unowned = [e.session_id for e in c.entries("joint1", monitor="none", unowned=True)]
+    assert (before, filled, after, unowned) == ([], (1, 0), ["s1"], ["s2", "s3"])
+
+
+def test_a_catalogue_whose_tags_hold_nan_migrates_to_the_monitor_column(catalogue_location: Path | str,
+                                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """``--tag operator=Nan`` is a float tag, NaN, written as Python's JSON writes it. The migration to schema 6 read
+    the tags with json_extract / ::jsonb, which refuse NaN: the catalogue failed to open for every acq command ("not a
+    usable catalogue (malformed JSON)", the third read). The tags are read in Python."""
+    monkeypatch.setattr(acq.monitoring.catalogue, "SCHEMA_VERSION", 5)
+    with Catalogue(catalogue_location) as old, old._transaction():
+        for key, tags in (("s1", {"operator": float("nan"), "monitor_id": "h:/m1:0000000a"}),
+                          ("s2", {"operator": float("nan")}), ("s3", {"monitor_id": "h:/m2:0000000b"})):
+            old._execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc, tags_json) "
+                         f"VALUES (?, ?, '/{key}.h5', 'joint1', '2026-01-01T00:00:0{key[1]}+00:00', ?)",
+                         (key, key, json.dumps(tags)))
+            old._execute("INSERT INTO analyses (session_key, sha256, request_key, analyzed_utc, verdict) "
+                         "VALUES (?, 'h', '{}', '2026-01-01T00:01:00+00:00', 'ok')", (key,))
+    monkeypatch.undo()
+    with Catalogue(catalogue_location) as c:
+        version = c.schema_version
+        m1 = [(e.session_id, math.isnan(e.tags["operator"])) for e in c.entries("joint1", monitor="h:/m1:0000000a")]
+        m2 = [e.session_id for e in c.entries("joint1", monitor="h:/m2:0000000b")]
+        unowned = [e.session_id for e in c.entries("joint1", monitor="-", unowned=True)]
+    assert (version, m1, m2, unowned) == (6, [("s1", True)], ["s3"], ["s2"])

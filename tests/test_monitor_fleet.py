@@ -7,6 +7,8 @@ import json
 import shutil
 import socket
 import sqlite3
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -202,3 +204,120 @@ def test_a_restart_with_another_every_goes_on_in_machine_time_from_the_last_wind
     doc = json.loads(run_cli(capsys, "trend", str(out), "--joint", "joint1", "--json").out)
     assert [(p["tags"]["monitor_window"], p["tags"]["monitor_elapsed_s"], p["tags"]["monitor_every_s"])
             for p in doc["points"]] == [(0, 0.0, 60.0), (1, 60.0, 60.0), (2, 120.0, 120.0), (3, 240.0, 120.0)]
+
+
+def test_a_folder_moved_with_its_catalogue_moves_its_windows_from_there(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder moved (``mv a b``) with its own catalogue, then started with --catalogue PLANT --move-catalogue: the
+    copy opened the catalogue monitor.id names, a/catalogue.sqlite, which no longer exists — it made the folder a and
+    an empty catalogue there, copied no window and filed on in PLANT without the history (the third read). The
+    windows come from the catalogue the folder carried; a recorded catalogue that is gone and not in the folder is a
+    refusal, and nothing is made where it was."""
+    bench, first, moved, plant = _robot(tmp_path, "r1", 891.0), tmp_path / "a", tmp_path / "b", tmp_path / "plant.db"
+    assert _start(capsys, bench, first, "--keep", "0", minutes=2).code == 0  # window 2's file is not kept: K only filed
+    first.rename(moved)
+    run = _start(capsys, bench, moved, "--catalogue", str(plant), "--move-catalogue")
+    assert run.code == 0, run.err
+    assert not first.exists()
+    doc = json.loads(run_cli(capsys, "trend", "--catalogue", str(plant), "--joint", "joint1", "--json").out)
+    assert [(p["tags"]["monitor_window"], p["state"]) for p in doc["points"]][:3] == [
+        (0, "baseline"), (1, "baseline"), (2, "ok")]
+    again = tmp_path / "again"  # moved once more, its catalogue deleted: it starts over there, as one deleted in place
+    assert _start(capsys, bench, moved, "--catalogue", str(moved / "catalogue.sqlite")).code == 0  # the one it carries
+    moved.rename(again)
+    (again / "catalogue.sqlite").unlink()
+    restarted = _start(capsys, bench, again)
+    assert restarted.code == 0, restarted.err
+    assert _identity(again)["catalogue"] == str((again / "catalogue.sqlite").resolve())
+    other, gone = tmp_path / "c", tmp_path / "gone.db"
+    assert _start(capsys, bench, other, "--catalogue", str(gone)).code == 0
+    gone.unlink()
+    refused = _start(capsys, bench, other, "--catalogue", str(plant), "--move-catalogue")
+    assert (refused.code, refused.err) == (
+        2, f"acq: error: {other}: its windows are filed in {gone}, which no longer exists: resume once with "
+           f"--catalogue set to where that file is now, then move them with --move-catalogue\n")
+    assert not gone.exists()
+
+
+def test_an_empty_identity_file_is_refused_not_made_anew(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """An empty monitor.id was taken for none: a new identity was made silently — the folder's windows became another
+    monitor's (numbering from 0, a new baseline) and a copied folder with its monitor.id emptied passed the copy check
+    (the third read). Refused like any unreadable identity."""
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "m"
+    assert _start(capsys, bench, out).code == 0
+    (out / "monitor.id").write_text("")
+    refused = _start(capsys, bench, out)
+    assert (refused.code, refused.err) == (
+        2, f"acq: error: {out / 'monitor.id'}: not a monitor identity (the file is empty) — restore it from a backup, "
+           "or move it away to start a new monitor in this folder\n")
+    assert (out / "monitor.id").read_text() == ""
+
+
+def test_windows_an_earlier_acq_filed_after_the_catalogue_was_migrated_stay_the_monitors(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A shared catalogue migrated to schema 6 by one upgraded monitor while another, of an earlier acq, runs on: that
+    one files its windows with the monitor_id tag but no monitor_id column (its INSERT names the columns it knows).
+    Restarted upgraded, it read its windows by the column: none of those — the windows still in its folder analysed
+    again, the rest gone from its trend, the numbering taken up again from the files (two windows 2; the third
+    read). A monitor's start fills the column from the tags."""
+    bench, out, shared = _robot(tmp_path, "r1", 891.0), tmp_path / "m", tmp_path / "shared.sqlite"
+    assert _start(capsys, bench, out, "--catalogue", str(shared), "--keep", "0", minutes=3).code == 0
+    with sqlite3.connect(shared) as db:  # as the earlier acq's INSERT left them
+        db.execute("UPDATE sessions SET monitor_id = NULL")
+    assert _start(capsys, bench, out, "--catalogue", str(shared)).code == 0
+    doc = json.loads(run_cli(capsys, "trend", "--catalogue", str(shared), "--joint", "joint1", "--json").out)
+    assert [p["tags"]["monitor_window"] for p in doc["points"]] == [0, 1, 2, 3]
+    with sqlite3.connect(shared) as db:
+        assert db.execute("SELECT COUNT(*) FROM sessions WHERE monitor_id IS NULL").fetchone()[0] == 0
+
+
+def test_moved_and_new_identity_together_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """--moved (the same monitor) and --new-identity (another one) together: --new-identity won silently, splitting
+    the history of a monitor its engineer also called the same (the third read)."""
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "m"
+    run = _start(capsys, bench, out, "--moved", "--new-identity")
+    assert (run.code, run.err) == (2, "acq: error: --moved and --new-identity: a folder is either the same monitor "
+                                      "moved here or another one — give one of them\n")
+    assert not out.exists()
+
+
+def test_a_restart_with_another_every_after_an_earlier_acq_goes_on_at_the_spacing_it_captured_with(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Windows of an earlier acq carry no monitor_every_s: their spacing was taken to be the new --every, and the first
+    window after the upgrade's restart with --every 120 came at 60 + 120 = 180 s instead of 120 s (the third read). An
+    earlier acq placed window n at n × --every: the spacing is read back from the last window's machine time."""
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "m"
+    assert _start(capsys, bench, out, minutes=2).code == 0
+    with sqlite3.connect(out / "catalogue.sqlite") as db:  # as the earlier acq filed them
+        for key, tags in db.execute("SELECT session_key, tags_json FROM sessions").fetchall():
+            db.execute("UPDATE sessions SET tags_json = ? WHERE session_key = ?",
+                       (json.dumps({k: v for k, v in json.loads(tags).items() if k != "monitor_every_s"}), key))
+    assert _start(capsys, bench, out, minutes=4, every="120").code == 0
+    doc = json.loads(run_cli(capsys, "trend", str(out), "--joint", "joint1", "--json").out)
+    assert [(p["tags"]["monitor_window"], p["tags"]["monitor_elapsed_s"]) for p in doc["points"]] == [
+        (0, 0.0), (1, 60.0), (2, 120.0), (3, 240.0)]
+
+
+def test_the_same_folder_by_another_path_is_not_a_copy(tmp_path: Path) -> None:
+    """The folder reached through a bind mount (a service's path and an engineer's) was refused as a copy of itself —
+    and the advice, --new-identity, would have split its history (the third read). Run in a private mount namespace
+    (unshare -rm: no mount left behind); skipped where the system allows none."""
+    if shutil.which("unshare") is None:
+        pytest.skip("no unshare")
+    bench, real, alias = _robot(tmp_path, "r1", 891.0), tmp_path / "real", tmp_path / "alias"
+    real.mkdir()
+    alias.mkdir()
+    monitor = [sys.executable, "-m", "acq", "monitor", "--bench", str(bench), "--fast", "--window", "10", "--every",
+               "60", "--for", "1m", "--baseline-windows", "2", "--out"]
+    first = subprocess.run([*monitor, str(real / "m")], capture_output=True, text=True, timeout=300)
+    assert first.returncode == 0, first.stderr
+    script = f'mount --bind "{real}" "{alias}" || exit 99; exec "$@"'
+    again = subprocess.run(["unshare", "-rm", "sh", "-c", script, "sh", *monitor, str(alias / "m")],
+                           capture_output=True, text=True, timeout=300)
+    if again.returncode == 99 or "unshare:" in again.stderr:
+        pytest.skip(f"no bind mount here: {again.stderr.strip()}")
+    assert again.returncode == 0, again.stderr
+    identity = json.loads((real / "m" / "monitor.id").read_text())
+    assert identity["folder"] == str((alias / "m").resolve())
+    with sqlite3.connect(real / "m" / "catalogue.sqlite") as db:
+        assert {m for (m,) in db.execute("SELECT monitor_id FROM sessions")} == {identity["monitor_id"]}

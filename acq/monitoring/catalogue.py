@@ -68,14 +68,17 @@ MIGRATIONS: tuple[str, ...] = (
     ALTER TABLE analyses ADD COLUMN file_path TEXT;
     """,
     # 5 → 6: the monitor that captured a window (its tag MONITOR_TAG, as a column): a monitor reads back its own
-    # windows of a catalogue every robot's joint1 shares by an index, not by reading every row of the joint's name
+    # windows of a catalogue every robot's joint1 shares by an index, not by reading every row of the joint's name.
+    # Filled from the tags by Catalogue._fill_monitor_ids in the same transaction — in Python: tags_json is Python's
+    # JSON, NaN included (--tag operator=Nan), which SQLite's json_extract and PostgreSQL's jsonb refuse
     """
     ALTER TABLE sessions ADD COLUMN monitor_id TEXT;
-    UPDATE sessions SET monitor_id = json_extract(tags_json, '$.monitor_id');
     CREATE INDEX sessions_monitor ON sessions (monitor_id, joint);
     """,
 )
 SCHEMA_VERSION = len(MIGRATIONS)
+#: The schema version that has the column ``monitor_id`` (filled from the tags by the migration to it).
+_MONITOR_COLUMN_VERSION = 6
 #: Session tag of a monitor's window: the identity of the monitor that captured it (also the column ``monitor_id``).
 MONITOR_TAG = "monitor_id"
 
@@ -207,6 +210,8 @@ class Catalogue:
                 for statement in MIGRATIONS[version].split(";"):
                     if statement.strip():
                         db.execute(self._dialect.ddl(statement))
+                if version + 1 == _MONITOR_COLUMN_VERSION:
+                    self._fill_monitor_ids()
                 self._dialect.set_schema_version(db, version + 1)
 
     def current(self, request_key: str) -> set[str]:
@@ -292,6 +297,29 @@ class Catalogue:
             (joint, joint, monitor, monitor, unowned))
         return [_entry(r) for r in rows]
 
+    def fill_monitor_ids(self) -> int:
+        """Fill the ``monitor_id`` column of the sessions whose tags name a monitor but whose column does not: the rows
+        an acq of before schema 6 still running files into a catalogue another one migrated (its INSERT names the
+        columns it knows). :meth:`entries` scopes by the column: without this, such a monitor's windows were nobody's
+        once it restarted upgraded. Returns the number of sessions filled (one transaction)."""
+        try:
+            with self._transaction():
+                return self._fill_monitor_ids()
+        except self._dialect.errors as e:
+            raise StorageError(f"{cause_of(e)}: {self.path} ({e})") from None
+
+    def _fill_monitor_ids(self) -> int:
+        """:meth:`fill_monitor_ids` inside the caller's transaction: the sessions without the column whose tags name
+        the monitor tag (found by text; read by Python's JSON, which reads the NaN it writes)."""
+        rows = self._execute("SELECT session_key, tags_json FROM sessions WHERE monitor_id IS NULL"
+                             " AND tags_json LIKE ?", (f'%"{MONITOR_TAG}"%',)).fetchall()
+        filled = [(str(tags[MONITOR_TAG]), key) for key, tags in ((r[0], _tags(r[1])) for r in rows)
+                  if tags.get(MONITOR_TAG) is not None]
+        if filled:
+            self._db.cursor().executemany(self._dialect.sql("UPDATE sessions SET monitor_id = ? WHERE session_key = ?"),
+                                          filled)
+        return len(filled)
+
     def copy_windows(self, source: Catalogue, monitor: str, *, unowned: bool = False) -> int:
         """Copy the sessions of ``monitor`` with their analyses from ``source`` into this catalogue (one transaction;
         rows this catalogue already has are kept); with ``unowned`` also the sessions of no monitor, filed as
@@ -321,6 +349,15 @@ class Catalogue:
     def joints(self) -> list[str]:
         """The joints the catalogue knows."""
         return [r[0] for r in self._execute("SELECT DISTINCT joint FROM sessions WHERE joint IS NOT NULL")]
+
+
+def _tags(text: str) -> dict[str, Any]:
+    """A session's tags_json as a dict ({} when it is not a JSON object)."""
+    try:
+        tags = json.loads(text)
+    except ValueError:
+        return {}
+    return tags if isinstance(tags, dict) else {}
 
 
 def _entry(r: Any) -> Entry:

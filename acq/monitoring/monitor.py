@@ -316,10 +316,10 @@ class Monitor:
         s = self.s
         identity: Identity = bound_identity(s.out_dir, new_identity=s.new_identity, moved=s.moved)
         self._id = identity.monitor_id
+        self.catalogue.fill_monitor_ids()  # its windows an earlier acq filed after another one migrated the catalogue
         windows = self._own_windows(None)
         bound = check_catalogue(s.out_dir, identity, self.catalogue, self._catalogue_location, bool(windows),
-                                move=s.move_catalogue,
-                                unowned=identity.catalogue == str((s.out_dir / CATALOGUE_NAME).resolve()))
+                                move=s.move_catalogue, own_catalogue=s.out_dir / CATALOGUE_NAME)
         write_identity(s.out_dir, bound)
         return self._own_windows(None) if s.move_catalogue and not windows else windows  # moved here: read anew
 

@@ -58,23 +58,33 @@ def check_comparable(out_dir: Path, windows: Sequence[Entry], bench: Bench, wind
 
 
 def check_catalogue(out_dir: Path, identity: Identity, catalogue: Catalogue, location: Path | str, holds_own: bool,
-                    *, move: bool, unowned: bool) -> Identity:
+                    *, move: bool, own_catalogue: Path) -> Identity:
     """The identity bound to ``catalogue`` (at ``location``), or a refusal when its windows are filed elsewhere.
 
     ``holds_own``: the catalogue already holds windows of this monitor (the same database, or its windows moved
     there). ``move`` (``--move-catalogue``): copy the monitor's windows from the catalogue it filed into to this one
-    first — with ``unowned`` its windows from before monitors had an identity too (the old catalogue was its folder's
-    own).
+    first. ``own_catalogue``: the folder's own catalogue file; a recorded SQLite catalogue that no longer exists was
+    the folder's own when the folder was moved (``mv``) with it: the windows are copied from the one it carried, with
+    its windows from before monitors had an identity (a folder's own catalogue holds no other monitor's).
     """
     here = catalogue_text(location)
     if identity.catalogue is None or identity.catalogue == here or holds_own:
         return replace(identity, catalogue=here)
+    source = identity.catalogue
+    if not is_url(source) and not Path(source).is_file():
+        if Path(source).name != own_catalogue.name or not own_catalogue.is_file():
+            # opening it would make an empty catalogue (and its folder) where it was, and copy nothing from it
+            raise ConfigError(f"{out_dir}: its windows are filed in {source}, which no longer exists: resume once "
+                              "with --catalogue set to where that file is now, then move them with --move-catalogue")
+        source = catalogue_text(own_catalogue)  # the folder moved with its own catalogue
+        if source == here:  # which holds none of its windows (emptied): as a catalogue emptied in place, start over
+            return replace(identity, catalogue=here)
     if not move:
-        raise ConfigError(f"{out_dir}: its windows are filed in {identity.catalogue}, not in {here} (--catalogue): "
-                          f"resume with --catalogue {identity.catalogue}, or add --move-catalogue to copy them into "
+        raise ConfigError(f"{out_dir}: its windows are filed in {source}, not in {here} (--catalogue): "
+                          f"resume with --catalogue {source}, or add --move-catalogue to copy them into "
                           f"{here} and file there from now on")
-    with Catalogue(identity.catalogue) as old:
-        catalogue.copy_windows(old, identity.monitor_id, unowned=unowned)
+    with Catalogue(source) as old:
+        catalogue.copy_windows(old, identity.monitor_id, unowned=source == catalogue_text(own_catalogue))
     return replace(identity, catalogue=here)
 
 
@@ -90,14 +100,16 @@ class MachineClock:
 
     @classmethod
     def resumed(cls, windows: Sequence[Entry], every_s: float) -> MachineClock:
-        """The clock going on from the newest of ``windows`` (a window of an earlier acq has no :data:`EVERY_TAG`:
-        captured with this ``every_s``)."""
+        """The clock going on from the newest of ``windows``. A window of an earlier acq has no :data:`EVERY_TAG`: its
+        machine time was its number × the --every it was captured with, which gives that --every back (window 0:
+        this ``every_s``)."""
         timed = [e for e in windows if WINDOW_TAG in e.tags and ELAPSED_TAG in e.tags]
         if not timed:
             return cls(every_s)
         last = max(timed, key=lambda e: int(e.tags[WINDOW_TAG]))
-        return cls(every_s, int(last.tags[WINDOW_TAG]), float(last.tags[ELAPSED_TAG]),
-                   float(last.tags.get(EVERY_TAG, every_s)))
+        n, elapsed_s = int(last.tags[WINDOW_TAG]), float(last.tags[ELAPSED_TAG])
+        then_s = float(last.tags[EVERY_TAG]) if EVERY_TAG in last.tags else elapsed_s / n if n > 0 else every_s
+        return cls(every_s, n, elapsed_s, then_s)
 
     def at(self, n: int) -> float:
         """The start of window ``n`` in machine time, s."""

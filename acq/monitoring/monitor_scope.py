@@ -15,6 +15,7 @@ elsewhere (:func:`bound_identity`):
 
 * same host, the folder it was made for no longer holds it: the folder was moved (``mv``) — it is the same monitor,
   bound anew, without a word;
+* same host, that folder is this one by another path (a bind mount): the same monitor;
 * same host, that folder still holds it: a copy — refused, naming the folder it was copied from;
 * another host: acq cannot look at the other host's folder — refused, naming host and folder (a folder carried to a
   replacement PC and a disk image cloned for the next station look alike here).
@@ -73,6 +74,8 @@ class Identity:
 
 def _from_text(text: str) -> Identity:
     """An identity file's content: JSON, or the one line of an earlier acq (its binding read from the identity)."""
+    if not text:  # a file there that says nothing: made anew, the folder's windows would be another monitor's
+        raise ValueError("the file is empty")
     if text.startswith("{"):
         doc = json.loads(text)
         return Identity(str(doc["monitor_id"]), doc.get("host"), doc.get("folder"), doc.get("catalogue"))
@@ -93,7 +96,7 @@ def read_identity(out_dir: Path) -> Identity | None:
     except OSError as e:
         raise storage_error(e, path) from None
     try:
-        return _from_text(text) if text else None
+        return _from_text(text)
     except (ValueError, KeyError, TypeError) as e:
         raise ConfigError(f"{path}: not a monitor identity ({e}) — restore it from a backup, or move it away to "
                           "start a new monitor in this folder") from None
@@ -113,6 +116,14 @@ def _still_there(folder: str, monitor_id: str) -> bool:
     except (ConfigError, OSError):
         return False
     return found is not None and found.monitor_id == monitor_id
+
+
+def _same_folder(folder: str, out_dir: Path) -> bool:
+    """Whether ``folder`` (on this host) is ``out_dir`` itself, reached by another path (same device and inode)."""
+    try:
+        return Path(folder).samefile(out_dir)
+    except OSError:
+        return False
 
 
 def bound_identity(out_dir: Path, *, new_identity: bool = False, moved: bool = False) -> Identity:
@@ -135,6 +146,8 @@ def bound_identity(out_dir: Path, *, new_identity: bool = False, moved: bool = F
     here = replace(found, host=host, folder=folder)
     if found.host is None or (found.host, found.folder) == (host, folder):
         return here
+    if found.host == host and _same_folder(str(found.folder), out_dir):
+        return here  # the same folder by another path (a bind mount, a network mount's two names): not a copy
     if new_identity:
         return fresh
     if moved or (found.host == host and not _still_there(str(found.folder), found.monitor_id)):

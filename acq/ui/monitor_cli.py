@@ -134,6 +134,9 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
                     jobs: int, fast: bool, catalogue_path: Path | str | None, tags: tuple[str, ...],
                     move_catalogue: bool, new_identity: bool, moved: bool) -> int:
     """Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in alarm."""
+    if moved and new_identity:  # the same monitor and another one: taking either would be a guess
+        raise ConfigError("--moved and --new-identity: a folder is either the same monitor moved here or another "
+                          "one — give one of them")
     bench = load_bench(bench_path)
     if not bench.listens():
         raise ConfigError(f"{bench_path}: acq monitor listens only — set [drive] motion = \"external\" "
