@@ -97,6 +97,11 @@ class AnalysisRequest:
                 and self.select_segments == default.selects_segments(rec)}
         return replace(self, **{name: None for name, equal in same.items() if equal})
 
+    def names_options_of_the_default(self) -> bool:
+        """Whether :meth:`as_default_where_it_is` may change this request on some recording: one of the options it
+        looks at is given (without one it is this request on every recording, and no session need be read for it)."""
+        return any(v is not None for v in (self.torque_method, self.band_hz, self.select_segments))
+
     def key(self) -> str:
         """The catalogue's key of this request: its fields as asked and the analysis code that answers them
         (:func:`code_fingerprint`), canonical JSON — a change of either is not current."""

@@ -69,3 +69,19 @@ def test_options_document_says_what_ran_and_gives_the_request_back() -> None:
     assert again.torque_method is None and again.chain(THREE) is PAPER_CHAIN
     with pytest.raises(TypeError):
         AnalysisRequest.from_json_dict({"band_hz": 5})
+
+
+def test_a_request_naming_none_of_the_defaults_options_is_filed_as_asked_on_every_recording() -> None:
+    """The batch reads a session for the request it is filed under only when the request names one of the options
+    :meth:`AnalysisRequest.as_default_where_it_is` looks at: every other request is that request on any recording."""
+    plain = [AnalysisRequest(), AnalysisRequest(params="K", nominal=TwoMassParams(900.0, 1e-4, 5e-4, 0.0)),
+             AnalysisRequest(fit="complex"), AnalysisRequest(pipeline="paper"), AnalysisRequest(partial=True),
+             AnalysisRequest(segment_s=1.0), AnalysisRequest(align=False)]
+    for request in plain:
+        assert not request.names_options_of_the_default()
+        assert all(request.as_default_where_it_is(rec) == request for rec in (ONE, THREE))
+    naming = [AnalysisRequest(band_hz=(10.0, 400.0)), AnalysisRequest(torque_method="encoder"),
+              AnalysisRequest(select_segments=True)]
+    assert all(request.names_options_of_the_default() for request in naming)
+    # each names what the default does on a one-phase recording without a profile: filed as the default request
+    assert [r.as_default_where_it_is(ONE) for r in naming] == [AnalysisRequest()] * 3

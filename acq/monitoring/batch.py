@@ -411,7 +411,11 @@ def _not_current(paths: Sequence[Path], hashes: dict[Path, str], catalogue: Cata
 
 def _filed_request(path: Path, request: AnalysisRequest) -> AnalysisRequest:
     """:func:`acq.offline.analyze.filed_request` of the session at ``path``; ``request`` as asked when the file cannot
-    be read that far (then its analysis fails as it did here, and is filed as asked, where the next batch looks)."""
+    be read that far (then its analysis fails as it did here, and is filed as asked, where the next batch looks).
+    A request that names none of the default's options is filed as asked without reading the session (33 ms for
+    60 s)."""
+    if not request.names_options_of_the_default():
+        return request
     try:
         return filed_request(load(path), request)
     except (AcqError, OSError, KeyError, ValueError):
