@@ -11,11 +11,13 @@ import pytest
 
 from tests.pg_server import new_database, server_binaries, throwaway_server
 
+#: The password of ``postgres_server_with_password``'s user.
+PG_PASSWORD = "s3cret"
 
-@pytest.fixture(scope="session")
-def postgres_server() -> Iterator[str]:
-    """A throw-away PostgreSQL server for the session (its URL, no database). Skips when Debian's ``postgresql``
-    package or psycopg is missing — except in CI (``CI=true``), where the PostgreSQL tests must run: it fails."""
+
+def _server_binaries_or_skip() -> Path:
+    """``initdb``/``pg_ctl``'s folder; skips when Debian's ``postgresql`` package or psycopg is missing — except in CI
+    (``CI=true``), where the PostgreSQL tests must run: it fails."""
     binaries = server_binaries()
     missing = ("no PostgreSQL server: initdb/pg_ctl not under /usr/lib/postgresql/*/bin (apt-get install postgresql)"
                if binaries is None else None)
@@ -26,7 +28,21 @@ def postgres_server() -> Iterator[str]:
             pytest.fail(f"{missing} — CI must run the PostgreSQL tests", pytrace=False)
         pytest.skip(missing)
     assert binaries is not None
-    with throwaway_server(binaries) as url:
+    return binaries
+
+
+@pytest.fixture(scope="session")
+def postgres_server() -> Iterator[str]:
+    """A throw-away PostgreSQL server for the session (its URL, no database), asking no password."""
+    with throwaway_server(_server_binaries_or_skip()) as url:
+        yield url
+
+
+@pytest.fixture(scope="session")
+def postgres_server_with_password() -> Iterator[str]:
+    """A throw-away PostgreSQL server asking every connection for the password :data:`PG_PASSWORD` (its URL, which
+    carries it, no database)."""
+    with throwaway_server(_server_binaries_or_skip(), password=PG_PASSWORD) as url:
         yield url
 
 

@@ -32,7 +32,7 @@ def _free_port() -> int:
 
 
 @contextmanager
-def throwaway_server(binaries: Path, durable: bool = False) -> Iterator[str]:
+def throwaway_server(binaries: Path, durable: bool = False, password: str | None = None) -> Iterator[str]:
     """Start a server, yield its URL without a database (``postgresql://acq@127.0.0.1:PORT``), then remove it.
 
     Parameters
@@ -41,6 +41,9 @@ def throwaway_server(binaries: Path, durable: bool = False) -> Iterator[str]:
         The folder with ``initdb`` and ``pg_ctl`` (:func:`server_binaries`).
     durable : bool
         Keep ``fsync`` on (for benchmarks); the tests turn it off, as nothing must survive a crash.
+    password : str or None
+        The user's password, asked of every connection (scram-sha-256; the URL is then
+        ``postgresql://acq:PASSWORD@127.0.0.1:PORT``); None: no password asked (trust).
     """
     root = Path(tempfile.mkdtemp(prefix="acq-pg-"))
     as_user: list[str] = []
@@ -60,11 +63,17 @@ def throwaway_server(binaries: Path, durable: bool = False) -> Iterator[str]:
             log = (root / "log").read_text() if (root / "log").exists() else ""
             raise RuntimeError(f"{' '.join(args[:2])} failed ({done.returncode}): {done.stderr.strip()} {log[-2000:]}")
 
+    auth = ["-A", "trust"]
+    if password is not None:
+        (root / "pwfile").write_text(password + "\n")
+        if as_user:
+            os.chown(root / "pwfile", nobody.pw_uid, nobody.pw_gid)
+        auth = ["-A", "scram-sha-256", f"--pwfile={root / 'pwfile'}"]
     try:
-        run(str(binaries / "initdb"), "-D", str(data), "-U", "acq", "-A", "trust", "-E", "UTF8", "--no-sync")
+        run(str(binaries / "initdb"), "-D", str(data), "-U", "acq", *auth, "-E", "UTF8", "--no-sync")
         run(str(binaries / "pg_ctl"), "-D", str(data), "-l", str(root / "log"), "-w", "-o", settings, "start")
         try:
-            yield f"postgresql://acq@127.0.0.1:{port}"
+            yield f"postgresql://acq{'' if password is None else ':' + password}@127.0.0.1:{port}"
         finally:
             run(str(binaries / "pg_ctl"), "-D", str(data), "-m", "immediate", "-w", "stop")
     finally:

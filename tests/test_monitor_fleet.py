@@ -10,10 +10,14 @@ import sqlite3
 import subprocess
 import sys
 from pathlib import Path
+from urllib.parse import urlsplit
 
 import pytest
 
+from acq.monitoring.catalogue import Catalogue
+from tests.conftest import PG_PASSWORD
 from tests.helpers import CliRun, run_cli
+from tests.pg_server import new_database
 
 ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
 #: The robot program of this seed excites the joint in the windows at 0, 1, 2 min (test_monitor's EXCITING_SEED).
@@ -321,3 +325,37 @@ def test_the_same_folder_by_another_path_is_not_a_copy(tmp_path: Path) -> None:
     assert identity["folder"] == str((alias / "m").resolve())
     with sqlite3.connect(real / "m" / "catalogue.sqlite") as db:
         assert {m for (m,) in db.execute("SELECT monitor_id FROM sessions")} == {identity["monitor_id"]}
+
+
+def test_a_move_from_a_catalogue_with_a_password_in_its_url_reads_the_password_from_libpq_not_monitor_id(
+        postgres_server_with_password: str, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """monitor.id keeps the catalogue's URL with its password masked; --move-catalogue connected with the mask as the
+    password and failed with libpq's authentication error (the review). The mask is dropped, so libpq reads the
+    password from PGPASSWORD or ~/.pgpass; without either: one line naming the catalogue and the way on, nothing
+    copied, monitor.id unchanged. The password is never stored."""
+    monkeypatch.delenv("PGPASSWORD", raising=False)
+    monkeypatch.setenv("PGPASSFILE", str(tmp_path / "no.pgpass"))  # none of the user's own
+    url = new_database(postgres_server_with_password)
+    masked, port = url.replace(f":{PG_PASSWORD}@", ":***@"), urlsplit(url).port
+    bench, out, plant = _robot(tmp_path, "r1", 891.0), tmp_path / "m", tmp_path / "plant.db"
+    first = _start(capsys, bench, out, "--catalogue", url, minutes=2)
+    assert first.code == 0, first.err
+    identity = (out / "monitor.id").read_text()
+    assert _identity(out)["catalogue"] == masked and PG_PASSWORD not in identity
+    refused = _start(capsys, bench, out, "--catalogue", str(plant), "--move-catalogue")
+    assert (refused.code, refused.err) == (
+        2, f"acq: error: {out}: its windows are filed in {masked}: cannot open the catalogue (connection failed: "
+           f"connection to server at \"127.0.0.1\", port {port} failed: fe_sendauth: no password supplied) — "
+           "monitor.id keeps no password: put it in ~/.pgpass or PGPASSWORD (libpq reads them), then restart with "
+           "--move-catalogue\n")
+    assert (out / "monitor.id").read_text() == identity
+    with Catalogue(plant) as c:
+        assert c.entries() == []
+    monkeypatch.setenv("PGPASSWORD", PG_PASSWORD)
+    moved = _start(capsys, bench, out, "--catalogue", str(plant), "--move-catalogue")
+    assert moved.code == 0, moved.err
+    assert _identity(out)["catalogue"] == str(plant.resolve())
+    doc = json.loads(run_cli(capsys, "trend", "--catalogue", str(plant), "--joint", "joint1", "--json").out)
+    assert [(p["tags"]["monitor_window"], p["state"]) for p in doc["points"]][:3] == [
+        (0, "baseline"), (1, "baseline"), (2, "ok")]

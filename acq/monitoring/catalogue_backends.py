@@ -41,13 +41,29 @@ def is_url(location: Path | str) -> bool:
 def open_error(path: Path | str, e: BaseException, what: str) -> ConfigError | StorageError:
     """A full disk is a failed write (exit 1), anything else bad input naming the catalogue (exit 2)."""
     if "full" in str(e) or getattr(e, "errno", None) == errno.ENOSPC:
-        return StorageError(f"disk full: {path} ({e})")
-    return ConfigError(f"{path}: {what} ({e})")
+        return StorageError(f"disk full: {path} ({one_line(e)})")
+    return ConfigError(f"{path}: {what} ({one_line(e)})")
+
+
+def one_line(e: BaseException) -> str:
+    """``e``'s message on one line: its first line, with a PostgreSQL error's DETAIL folded in. psycopg's message
+    goes on with ``DETAIL:``/``HINT:``/``CONTEXT:`` lines, a failed connection's with libpq's hint ("Is the server
+    running …?"): the first line says what failed, the DETAIL which row or value."""
+    lines = [line.strip() for line in str(e).strip().splitlines() if line.strip()]
+    first = lines[0] if lines else type(e).__name__
+    detail = " ".join(str(getattr(getattr(e, "diag", None), "message_detail", None) or "").split())
+    return f"{first}: {detail}" if detail and detail not in first else first
 
 
 def redacted(url: str) -> str:
     """``url`` without its password (for messages)."""
     return re.sub(r"(://[^:/@]+):[^@]*@", r"\1:***@", url)
+
+
+def without_masked_password(url: str) -> str:
+    """``url`` as :func:`redacted` left it, without the masked password: libpq then reads the password from
+    ``~/.pgpass`` or ``PGPASSWORD`` (the mask itself would be sent as the password)."""
+    return re.sub(r"(://[^:/@]+):\*\*\*@", r"\1@", url)
 
 
 class SQLiteDialect:
@@ -132,8 +148,7 @@ class PostgreSQLDialect:
             return self._psycopg.connect(url, autocommit=True, row_factory=_case_insensitive_rows, connect_timeout=10,
                                          options=f"-c lock_timeout={int(BUSY_TIMEOUT_S * 1000)}")
         except self._psycopg.Error as e:
-            reason = str(e).strip().splitlines()[-1] if str(e).strip() else type(e).__name__
-            raise ConfigError(f"{redacted(url)}: cannot open the catalogue ({reason})") from None
+            raise ConfigError(f"{redacted(url)}: cannot open the catalogue ({one_line(e)})") from None
 
     def sql(self, text: str) -> str:
         """``?`` placeholders as psycopg's ``%s`` (the catalogue's SQL has no literal ``?`` or ``%``)."""

@@ -23,8 +23,8 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from acq.monitoring.catalogue import Catalogue, Entry
-from acq.monitoring.catalogue_backends import is_url, redacted
-from acq.monitoring.monitor_scope import WINDOW_TAG, Identity
+from acq.monitoring.catalogue_backends import is_url, redacted, without_masked_password
+from acq.monitoring.monitor_scope import IDENTITY_FILE, WINDOW_TAG, Identity
 from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, filed_rules
 from acq.monitoring.window_bench import differences
 from acqcore.errors import ConfigError
@@ -83,9 +83,26 @@ def check_catalogue(out_dir: Path, identity: Identity, catalogue: Catalogue, loc
         raise ConfigError(f"{out_dir}: its windows are filed in {source}, not in {here} (--catalogue): "
                           f"resume with --catalogue {source}, or add --move-catalogue to copy them into "
                           f"{here} and file there from now on")
-    with Catalogue(source) as old:
+    with _open_source(out_dir, source) as old:
         catalogue.copy_windows(old, identity.monitor_id, unowned=source == catalogue_text(own_catalogue))
     return replace(identity, catalogue=here)
+
+
+def _open_source(out_dir: Path, source: str) -> Catalogue:
+    """The catalogue ``source`` a monitor's windows are filed in, as its identity records it. A URL's password is
+    recorded masked (never stored): it is opened without one, so libpq reads it from ~/.pgpass or PGPASSWORD — the
+    mask sent as the password failed with libpq's authentication error. When that fails: one line naming
+    ``source`` and the way on, before anything is copied or the identity rewritten."""
+    url = without_masked_password(source) if is_url(source) else source
+    try:
+        return Catalogue(url)
+    except ConfigError as e:
+        if url == source:
+            raise
+        reason = str(e).removeprefix(f"{url}: ")
+        raise ConfigError(f"{out_dir}: its windows are filed in {source}: {reason} — {IDENTITY_FILE} keeps no "
+                          "password: put it in ~/.pgpass or PGPASSWORD (libpq reads them), then restart with "
+                          "--move-catalogue") from None
 
 
 @dataclass(frozen=True)
