@@ -148,19 +148,26 @@ def test_an_unreachable_server_is_one_line(capsys: pytest.CaptureFixture[str]) -
                        "connection to server at \"127.0.0.1\", port 1 failed: Connection refused)\n")
 
 
+def _insert_as_an_older_acq(catalogue: Catalogue, tags_by_key: dict[str, str]) -> None:
+    """Sessions of joint1 (``session_key``: tags JSON) with an ok analysis, inserted as an acq before schema 6 did:
+    without the ``monitor_id`` column."""
+    with catalogue._transaction():
+        for key, tags in tags_by_key.items():
+            catalogue._execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc, tags_json) "
+                               f"VALUES (?, ?, '/{key}.h5', 'joint1', '2026-01-01T00:00:0{key[1]}+00:00', ?)",
+                               (key, key, tags))
+            catalogue._execute("INSERT INTO analyses (session_key, sha256, request_key, analyzed_utc, verdict) "
+                               "VALUES (?, 'h', '{}', '2026-01-01T00:01:00+00:00', 'ok')", (key,))
+
+
 def test_a_monitors_windows_are_read_by_its_column_and_an_older_catalogue_gets_it_from_the_tags(
         catalogue_location: Path | str, monkeypatch: pytest.MonkeyPatch) -> None:
     """Scoping to one monitor filtered every row of a joint's name in Python (the review): now a query on the
     ``monitor_id`` column (indexed), which a catalogue of schema 5 gets from its rows' tags when it is opened."""
     monkeypatch.setattr(acq.monitoring.catalogue, "SCHEMA_VERSION", 5)
-    with Catalogue(catalogue_location) as old, old._transaction():
-        for key, tags in (("s1", '{"monitor_id": "h:/m1:0000000a"}'), ("s2", '{"monitor_id": "h:/m2:0000000b"}'),
-                          ("s3", '{"robot": "r1"}')):
-            old._execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc, tags_json) "
-                         f"VALUES (?, ?, '/{key}.h5', 'joint1', '2026-01-01T00:00:0{key[1]}+00:00', ?)",
-                         (key, key, tags))
-            old._execute("INSERT INTO analyses (session_key, sha256, request_key, analyzed_utc, verdict) "
-                         "VALUES (?, 'h', '{}', '2026-01-01T00:01:00+00:00', 'ok')", (key,))
+    with Catalogue(catalogue_location) as old:
+        _insert_as_an_older_acq(old, {"s1": '{"monitor_id": "h:/m1:0000000a"}', "s2": '{"monitor_id": "h:/m2:0000000b"}',
+                                      "s3": '{"robot": "r1"}'})
     monkeypatch.undo()
     with Catalogue(catalogue_location) as c:
         c.record(Outcome("/s4.h5", "h4", "{}", {"session_id": "s4", "joint": "joint1",
@@ -196,16 +203,10 @@ def test_sessions_an_earlier_acq_files_without_the_monitor_column_get_it_from_th
         catalogue_location: Path | str) -> None:
     """An acq of before schema 6 still running names only the columns it knows: its windows have the monitor_id tag and
     no monitor_id column, and the scoping query missed them (the third read). fill_monitor_ids fills the column from
-    the tags (SQLite's json_extract, PostgreSQL's ->>), and leaves the sessions of no monitor alone."""
+    the tags (read in Python: json_extract and ::jsonb reject a NaN tag), and leaves the sessions of no monitor alone."""
     with Catalogue(catalogue_location) as c:
-        with c._transaction():
-            for key, tags in (("s1", '{"monitor_id": "h:/m1:0000000a", "monitor_window": 0}'), ("s2", '{"robot": "r"}'),
-                              ("s3", '{}')):
-                c._execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc, tags_json) "
-                           f"VALUES (?, ?, '/{key}.h5', 'joint1', '2026-01-01T00:00:0{key[1]}+00:00', ?)",
-                           (key, key, tags))
-                c._execute("INSERT INTO analyses (session_key, sha256, request_key, analyzed_utc, verdict) "
-                           "VALUES (?, 'h', '{}', '2026-01-01T00:01:00+00:00', 'ok')", (key,))
+        _insert_as_an_older_acq(c, {"s1": '{"monitor_id": "h:/m1:0000000a", "monitor_window": 0}',
+                                    "s2": '{"robot": "r"}', "s3": '{}'})
         before = [e.session_id for e in c.entries("joint1", monitor="h:/m1:0000000a")]
         filled = c.fill_monitor_ids(), c.fill_monitor_ids()
         after = [e.session_id for e in c.entries("joint1", monitor="h:/m1:0000000a")]
