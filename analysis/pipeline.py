@@ -196,7 +196,8 @@ def _unknown_torque_note(frf: FrequencyResponse, t_s: np.ndarray) -> tuple[str, 
     if frf.unknown_torque is None or not frf.unknown_torque.any():
         return ()
     nperseg = int(round(frf.segment_s / frf.period_s))
-    starts = t_s[0] + np.flatnonzero(frf.unknown_torque) * (nperseg - nperseg // 2) * frf.period_s
+    step = nperseg - int(round(0.5 * nperseg))  # estimate_frf's hop at its 50 % overlap (round: half to even)
+    starts = t_s[0] + np.flatnonzero(frf.unknown_torque) * step * frf.period_s
     where = ", ".join(f"{a:.2f}–{a + frf.segment_s:.2f} s" for a in starts)
     return (f"torque: {frf.unknown_torque.sum()} of {frf.unknown_torque.size} Welch segments left out ({where}): "
             "there the one-phase estimate's own error is an outlying share of the torque — the motor holds or changes "

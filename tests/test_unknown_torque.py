@@ -47,3 +47,19 @@ def test_the_frf_averages_without_the_left_out_segment() -> None:
     assert np.flatnonzero(frf.unknown_torque).tolist() == [10]
     assert frf.n_segments == 20  # 21 segments, one left out
     assert estimate_frf(x, y, 1e-3, torque_std_Nm=np.full(x.size, 0.01)).n_segments == 21
+
+
+def test_the_note_names_the_times_of_the_segments_left_out_also_when_the_hop_rounds() -> None:
+    # 0.503 s at 1 ms: 503 samples, estimate_frf's hop 503 − round(251.5) = 251 (round half to even), not 252
+    from dataclasses import replace
+
+    from analysis.pipeline import _unknown_torque_note
+
+    x = _torque(503 + 31 * 251, 2)
+    frf = estimate_frf(x, np.cumsum(x) * 1e-3, 1e-3, segment_s=0.503)
+    assert frf.n_segments == 32
+    left_out = np.zeros(32, dtype=bool)
+    left_out[30] = True
+    t_s = 1.0 + np.arange(x.size) * 1e-3
+    (note,) = _unknown_torque_note(replace(frf, unknown_torque=left_out), t_s)
+    assert "1 of 32 Welch segments left out (8.53–9.03 s)" in note  # 1 s + 30 · 251 ms
