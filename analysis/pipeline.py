@@ -93,14 +93,18 @@ class Result:
                         else _num(1e6 * self.quality.encoder_jitter_s),
                         "encoder_time_stamps": self.quality.encoder_time_stamps},
             "options": {**self.request.to_json_dict(self.chain), "band_hz": list(self.fit.band)},
-            **({} if self.frf.selection is None else {"excitation": _excitation(self.frf.selection, self.moves)}),
+            **({} if self.frf.selection is None else {"excitation": _excitation(self.frf.selection, self.moves,
+                                                                                 self.frf.unknown_torque)}),
         }
 
 
-def _excitation(sel: SegmentSelection, moves: tuple[Move, ...]) -> dict[str, Any]:
-    """Segment selection's figures: the excited share of the record and which moves excite."""
+def _excitation(sel: SegmentSelection, moves: tuple[Move, ...], unknown_torque: np.ndarray | None) -> dict[str, Any]:
+    """Segment selection's figures: the excited share of the record (``segments_used``: the segments that excite),
+    the segments averaged (those less the ones whose torque is not known, ``unknown_torque``) and which moves
+    excite."""
+    averaged = sel.keep if unknown_torque is None else sel.keep & ~unknown_torque
     return {"excited_fraction": sel.excited_fraction, "segments_used": int(sel.keep.sum()),
-            "segments": int(sel.keep.size), "selection_applied": sel.applied,
+            "segments_averaged": int(averaged.sum()), "segments": int(sel.keep.size), "selection_applied": sel.applied,
             "moves": [{"index": m.index, "start_s": round(m.start_s, 4), "duration_s": round(m.duration_s, 4),
                        "peak_rad_s": round(m.peak_rad_s, 3), "excited": m.excited} for m in moves]}
 

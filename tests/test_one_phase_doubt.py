@@ -38,6 +38,8 @@ def test_segments_where_one_phase_does_not_show_the_torque_are_left_out_and_the_
                      "one-phase estimate's own error is an outlying share of the torque — the motor holds or changes "
                      "its torque at an electrical angle where i_a shows little of it"]
     assert doc["quality"]["verdict"] == "ok", doc["quality"]["reasons"]
+    exc = doc["excitation"]  # the segments that excite, and those averaged: less the 3 left out
+    assert (exc["segments"], exc["segments_used"], exc["segments_averaged"]) == (38, 33, 30)
     truth = doc["simulated_truth"]
     assert doc["K_Nm_per_rad"] == pytest.approx(truth["K_Nm_per_rad"], rel=0.01)  # 893.8 against 891 (before 896.4)
     for p in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2"):
