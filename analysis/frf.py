@@ -98,10 +98,16 @@ def min_duration_s(segment_s: float, overlap: float = 0.5) -> float:
     return segment_s * (2.0 - overlap)
 
 
+def segment_layout(segment_s: float, period_s: float, overlap: float = 0.5) -> tuple[int, int]:
+    """Samples per Welch segment of ``segment_s`` at ``period_s``, and the hop between segment starts with ``overlap``
+    (the share of a segment the next one repeats; Python's round, half to even)."""
+    nperseg = int(round(segment_s / period_s))
+    return nperseg, nperseg - int(round(overlap * nperseg))
+
+
 def require_two_segments(n_samples: int, period_s: float, segment_s: float, overlap: float = 0.5) -> None:
     """Raise :class:`RecordTooShortError` unless ``n_samples`` at ``period_s`` hold two Welch segments."""
-    nperseg = int(round(segment_s / period_s))
-    step = nperseg - int(round(overlap * nperseg))
+    nperseg, step = segment_layout(segment_s, period_s, overlap)
     if n_samples < nperseg + step:
         raise RecordTooShortError(
             f"signals last {n_samples * period_s:.3f} s; the FRF needs at least "
@@ -131,7 +137,7 @@ def window_kernel(frf: FrequencyResponse) -> tuple[np.ndarray, np.ndarray]:
     weights : ndarray, shape (n_bins, m)
         Kernel of each bin of ``frf.f_hz``, rows summing to 1.
     """
-    nperseg = int(round(frf.segment_s / frf.period_s))
+    nperseg, _ = segment_layout(frf.segment_s, frf.period_s)
     spectrum = np.abs(np.fft.fft(signal.get_window("hann", nperseg), nperseg * KERNEL_PER_BIN)) ** 2
     k = np.arange(-KERNEL_HALF_WIDTH_BINS * KERNEL_PER_BIN, KERNEL_HALF_WIDTH_BINS * KERNEL_PER_BIN + 1)
     fine = np.abs(np.arange(frf.f_hz.size)[:, None] * KERNEL_PER_BIN + k[None, :])
@@ -209,8 +215,7 @@ def estimate_frf(
         raise ValueError(f"torque and speed must be 1-D arrays of one length, got {x.shape} and {y.shape}")
     require_two_segments(x.size, period_s, segment_s, overlap)
     fs = 1.0 / period_s
-    nperseg = int(round(segment_s * fs))
-    step = nperseg - int(round(overlap * nperseg))
+    nperseg, step = segment_layout(segment_s, period_s, overlap)
     n_segments = 1 + (x.size - nperseg) // step
     seg = welch.Segments(nperseg, step, fs)
     X, Y = seg.fft(x), seg.fft(y)

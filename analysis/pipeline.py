@@ -21,7 +21,7 @@ from analysis.diagnose import nominal_fault, recording_diagnosis, with_fault, wi
 from analysis.fit import FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit
 from analysis.encoder import longest_gap_free_span
 from analysis.estimator_check import kernel_model_error
-from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments
+from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments, segment_layout
 from analysis.limits import band_problem
 from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.recording import Recording
@@ -152,15 +152,14 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     chain = request.chain(rec)
     request = replace(request, select_segments=request.selects_segments(rec))  # the result says what was done
     select = band if request.select_segments else None
+    # The one-phase torque's standard error (segments whose torque is not known are left out) only where the record
+    # is cut into the segments that excite (a machine's own program: its holds, at any angle, are part of the motion);
+    # on acq's own continuous profiles the outlier rule found no such stretch, but left out 1 of 38 segments in 8 of 15
+    # healthy runs (bench/accuracy.py scenarios 1, 22, 29), moving C's interval coverage of the family from 92 to 91 %
     sig = prepare_signals(rec, chain, torque_std=select is not None)
     frf = estimate_frf(sig.torque_Nm, sig.speed_rad_s, sig.period_s, segment_s=request.segment_s,
                        torque_noise_Nm=sig.torque_noise_Nm, torque_alias_Nm=sig.torque_alias_Nm,
-                       jackknife_blocks=JACKKNIFE_BLOCKS, select_band_hz=select,
-                       # where the record is cut into the segments that excite (a machine's own program: its holds,
-                       # at any angle, are part of the motion); on acq's own continuous profiles the outlier rule found
-                       # no such stretch, but left out 1 of 38 segments in 8 of 15 healthy runs (bench/accuracy.py
-                       # scenarios 1, 22, 29), moving C's interval coverage of the family from 92 to 91 %
-                       torque_std_Nm=None if select is None else sig.torque_std_Nm)
+                       jackknife_blocks=JACKKNIFE_BLOCKS, select_band_hz=select, torque_std_Nm=sig.torque_std_Nm)
     moves = () if frf.selection is None else tuple(
         describe_moves(sig.t_s, sig.speed_rad_s, sig.period_s, rec.counts_per_rev, math.pi / rec.pole_pairs,
                        frf.selection))
@@ -199,8 +198,7 @@ def _unknown_torque_note(frf: FrequencyResponse, t_s: np.ndarray) -> tuple[str, 
     """A note naming the Welch segments left out because the one-phase torque is not known there (none: empty)."""
     if frf.unknown_torque is None or not frf.unknown_torque.any():
         return ()
-    nperseg = int(round(frf.segment_s / frf.period_s))
-    step = nperseg - int(round(0.5 * nperseg))  # estimate_frf's hop at its 50 % overlap (round: half to even)
+    _, step = segment_layout(frf.segment_s, frf.period_s)  # estimate_frf's segments, at its default overlap
     starts = t_s[0] + np.flatnonzero(frf.unknown_torque) * step * frf.period_s
     where = ", ".join(f"{a:.2f}–{a + frf.segment_s:.2f} s" for a in starts)
     return (f"torque: {frf.unknown_torque.sum()} of {frf.unknown_torque.size} Welch segments left out ({where}): "
