@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from acq.monitoring.catalogue_backends import open_catalogue_db, open_error
+from acq.monitoring.catalogue_backends import one_line, open_catalogue_db, open_error
 from acq.recording.storage import cause_of
 from acqcore.errors import ConfigError, StorageError
 
@@ -251,7 +251,7 @@ class Catalogue:
         try:
             self._write_outcome(key, meta, outcome, values)
         except self._dialect.errors as e:  # e.g. "database or disk is full": the row is not there, say which catalogue
-            raise StorageError(f"{cause_of(e) if 'full' not in str(e) else 'disk full'}: {self.path} ({e})") from None
+            raise self._write_error(e) from None
 
     def _write_outcome(self, key: str, meta: dict[str, Any], outcome: Outcome, values: dict[str, Any]) -> None:
         columns = ", ".join(values)
@@ -306,7 +306,7 @@ class Catalogue:
             with self._transaction():
                 return self._fill_monitor_ids()
         except self._dialect.errors as e:
-            raise StorageError(f"{cause_of(e)}: {self.path} ({e})") from None
+            raise self._write_error(e) from None
 
     def _fill_monitor_ids(self) -> int:
         """:meth:`fill_monitor_ids` inside the caller's transaction: the sessions without the column whose tags name
@@ -339,8 +339,12 @@ class Catalogue:
                     self._insert("analyses", {name: r[name] for name in r.keys() if name != "id"},
                                  "session_key, request_key")
         except self._dialect.errors as e:
-            raise StorageError(f"{cause_of(e)}: {self.path} ({e})") from None
+            raise self._write_error(e) from None
         return len(sessions)
+
+    def _write_error(self, e: BaseException) -> StorageError:
+        """The one-line error of a failed write into this catalogue: ``<cause>: <catalogue> (<its message>)``."""
+        return StorageError(f"{cause_of(e) if 'full' not in str(e) else 'disk full'}: {self.path} ({one_line(e)})")
 
     def _insert(self, table: str, row: dict[str, Any], key: str) -> None:
         self._execute(f"INSERT INTO {table} ({', '.join(row)}) VALUES ({', '.join('?' * len(row))})"
