@@ -38,6 +38,7 @@ from acq.environment import pin_blas_threads
 from acq.install import install_hint
 from acq.monitoring.catalogue import Catalogue, Outcome
 from acq.offline.analyze import SessionResult, analyze_session, filed_request, output_paths, sha256_of
+from acq.process_signals import signals_deferred
 from acq.recording.paths import GLOB_CHARS, is_batch, require_session_file
 from acq.recording.reader import load, read_status
 from acq.recording.session import Session
@@ -440,26 +441,6 @@ def _signals_ignored() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
-
-
-@contextmanager
-def signals_deferred() -> Iterator[None]:
-    """A Ctrl-C or SIGTERM inside the block reaches this process's own handlers when the block has run to its end
-    (acq's: a KeyboardInterrupt; an ignored signal stays ignored). For code that must not be cut short: a worker being
-    started, Qt's import (shiboken's start-up interrupted is a fatal error, or swallows the Ctrl-C)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught: list[int] = []
-    previous = {s: signal.signal(s, lambda signum, frame: caught.append(signum))
-                for s in (signal.SIGINT, signal.SIGTERM)}
-    try:
-        yield
-    finally:
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-    for signum in dict.fromkeys(caught):
-        signal.raise_signal(signum)
 
 
 def _stop_workers(executor: Executor, futures: dict[Future[Outcome], Path], outcomes: list[Outcome],

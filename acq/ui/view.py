@@ -97,7 +97,7 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
     if screenshot is None and not has_display():
         click.echo(NO_DISPLAY_MESSAGE, err=True)
         return 1
-    from acq.monitoring.batch import signals_deferred
+    from acq.process_signals import signals_deferred
 
     with signals_deferred():  # a Ctrl-C inside Qt's import was a fatal error in shiboken's start-up (exit 134) or lost
         from acq.ui.plots import ReportView, ensure_app, grab_png
