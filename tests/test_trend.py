@@ -21,8 +21,9 @@ from typing import Any
 
 import pytest
 
-from acq.monitoring.batch import find_sessions, run_batch
+from acq.monitoring.batch import run_batch
 from acq.monitoring.catalogue import SCHEMA_VERSION, Catalogue, Entry
+from acq.monitoring.session_search import find_sessions
 from acq.monitoring.trend import EWMA_L, compute_trend
 from analysis import AnalysisRequest
 from tests.helpers import run_cli, seeded_profile

@@ -35,10 +35,10 @@ from typing import Any, Literal
 
 from scipy.stats import chi2
 
-from acq.monitoring.batch import CATALOGUE_NAME
 from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.catalogue_backends import is_url, redacted
 from acq.monitoring.monitor_scope import MONITOR_TAG, monitors_of, split_by_monitor
+from acq.monitoring.session_outcome import CATALOGUE_NAME
 from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
 from analysis import AnalysisRequest, Z95

@@ -276,7 +276,7 @@ def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_p
     after both (:func:`acq.ui.report_png.draw_report`: a picture that fails is only a note), by the caller. A result
     that could not be written raises :class:`acq.offline.analyze.ResultNotWritten` (nothing catalogued)."""
     from acq.offline.analyze import analyze_session
-    from acq.monitoring.batch import quiet_numerics, record_outcome
+    from acq.monitoring.session_outcome import quiet_numerics, record_outcome
 
     start = time.perf_counter()
     with quiet_numerics():
@@ -577,7 +577,7 @@ def _interrupted_outside_the_command() -> Iterator[None]:
 
 def _run(argv: list[str] | None) -> None:
     try:
-        # numpy's floating-point warnings (the filter of acq.monitoring.batch.quiet_numerics, which an analysis adds;
+        # numpy's floating-point warnings (the filter of acq.monitoring.session_outcome.quiet_numerics, which an analysis adds;
         # numpy is not loaded here yet)
         with _interrupted_outside_the_command(), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
