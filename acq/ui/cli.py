@@ -249,7 +249,7 @@ def _profile_for(bench: Bench, bench_path: Path | None, profile_name: str | None
 
 def _require_enough_motion(profile: Profile, name: str, pole_pairs: int) -> None:
     """Refuse a profile whose own numbers make the identification certain to fail: the motor must turn half an
-    electrical revolution within the torque estimator's window (:func:`analysis.torque.min_speed_rpm`); at most
+    electrical revolution within the torque estimator's window (:func:`analysis.phase_offset.min_speed_rpm`); at most
     the top speed for the whole window, and never more than one half-cycle's swing (a slower drive only moves less).
     A speed-dithered profile is judged by its slowest cycle (``min_speed_factor`` times top speed and swing)."""
     from analysis import PHASE_WINDOW_S, min_speed_rpm
