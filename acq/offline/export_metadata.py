@@ -145,7 +145,8 @@ def read_metadata(current_path: Path, encoder_path: Path, digest: Callable[[Path
             return None, (f"{path.name} describes another {role} file than {given.name} (SHA-256 differs): "
                           "its metadata is not used, the time columns are not taken as one host clock")
     history = {f.name: getattr(read, f.name) for f in fields(SessionHistory)}
-    return ExportMetadata(**history, path=path, bench_json=json.dumps(read.bench), profile_json=json.dumps(read.profile),
+    configs = {"bench_json": json.dumps(read.bench), "profile_json": json.dumps(read.profile)}
+    return ExportMetadata(**history, **configs, path=path,
                           status=read.status, stop_reason=read.stop_reason, damage=tuple(read.damage)), None
 
 
@@ -198,8 +199,8 @@ class _Document(BaseModel):
 
 
 def _one_line(error: ValidationError, doc: dict[str, Any]) -> str:
-    """The first error of the document as ``key = value: what`` (the key path as far as the document has it: a
-    union's member names in pydantic's location are not keys)."""
+    """The first error of the document in one line, ``key = value: what`` (``key: missing``; a value longer than a
+    line is left out), the key path as far as the document holds it."""
     first = error.errors()[0]
     keys: list[str] = []
     node: Any = doc

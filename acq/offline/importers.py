@@ -2,7 +2,9 @@
 
 The files are read and checked by :mod:`acq.offline.import_files`. Beside a pair written by ``acq export``
 its metadata (:mod:`acq.offline.export_metadata`) restores the session's id, joint, start time, tags, bench
-and profile; otherwise ``--started`` (or a TDMS ``wf_start_time``) dates the recording.
+and profile; otherwise ``--started`` (or a TDMS ``wf_start_time``) dates the recording. Without a profile (an
+exported passive recording, or files of a bench whose machine moves the joint) the session is passive, as
+``acq record`` stores one: profile None.
 
 Host stamps: the encoder file's ``t_s`` are stored uncorrected as ``host_ns``; the current's blocks
 (0.1 s) are stamped with their last sample's time on the same axis. The two time columns are one
@@ -129,9 +131,9 @@ def _configs(meta: ExportMetadata | None, bench: Bench | None, profile: Profile 
         if meta is not None and not profile_given:  # both from metadata no recorder writes (it refuses the pair)
             raise ConfigError(f"{meta.path.name}: the exported session has a profile, yet its bench has [drive] "
                               "motion = \"external\" (acq commands no motion there) — give --bench")
-        raise ConfigError("--profile: the bench has [drive] motion = \"external\": the machine's own controller moved "
-                          "the joint and acq commanded no motion — leave out --profile to import a passive recording, "
-                          "or give a --bench that commands the motion")
+        raise ConfigError("--profile: the bench has [drive] motion = \"external\": the machine's own controller "
+                          "moved the joint and acq commanded no motion — leave out --profile to import a passive "
+                          "recording, or give a --bench that commands the motion")
     return with_joint(bench, joint), profile
 
 
