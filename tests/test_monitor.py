@@ -473,7 +473,7 @@ def test_the_status_counts_every_window_filed_once_and_they_add_up_to_the_catalo
     assert (st.captured, st.analysed) == (2, 2)  # the interrupted one is filed, not captured whole nor analysed
     console = Console(width=120, record=True)
     console.print(status_table(st))
-    assert "│ windows filed in the catalogue (this run) │ 3 = 2 ok + 1 interrupted │" in [
+    assert "│ windows filed (this run) │ 3 = 2 ok + 1 interrupted │" in [
         " ".join(line.split()) for line in console.export_text().splitlines()]
 
 
@@ -621,7 +621,7 @@ def test_a_window_the_joint_barely_moved_in_is_not_excited_and_not_counted_as_ex
     assert json.loads(rows[1]["reasons_json"]) == [
         "0 of the window's 12 moves put torque into 10…400 Hz beyond chance; time that does: 0 % of the window",
         "clock alignment residual 1753 µs exceeds 1000 µs for an amplitude fit"]
-    assert "windows filed in the catalogue (this run) │ 2 = 2 not excited │" in " ".join(run.err.split())
+    assert "windows filed (this run) │ 2 = 2 not excited │" in " ".join(run.err.split())
     trend = run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1")
     assert "31084" not in trend.out and "PWM" not in trend.out
 
@@ -961,7 +961,7 @@ def test_a_restart_says_both_counts_and_goes_on_from_the_resumed_machine_time(
     assert lines[0].startswith("3.2 min: 0 filed in this run (4 in the folder), "), lines
     assert lines[-1].startswith("5.2 min: 2 filed in this run (6 in the folder) = 2 ok, "), lines
     table = " ".join(run.err.split())
-    assert "windows filed in the catalogue (this run) │ 2 = 2 ok │" in table
+    assert "windows filed (this run) │ 2 = 2 ok │" in table
     assert "windows in the folder (earlier runs too) │ 6 │" in table
 
 

@@ -90,7 +90,8 @@ def summarize(session: Session) -> SessionSummary:
     n_cur = cur.sample_count
     cur_gaps, cur_missing = _gaps(cur.sample_index())
     cur_rate = float("nan")
-    block_end = cur.block_first_index + cur.block_count  # a block's host stamp: when the read of its last sample returned
+    # a block's host stamp: when the read of its last sample returned
+    block_end = cur.block_first_index + cur.block_count
     if cur.block_count.size > 1:
         span = block_end[-1] - block_end[0]
         cur_rate = _rate(span, int(cur.block_host_ns[0]), int(cur.block_host_ns[-1]))

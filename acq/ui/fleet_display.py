@@ -104,8 +104,9 @@ def render_fleet_png(statuses: Sequence[JointStatus], path: Path | str, *, now: 
 def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pct: float, stale_days: float) -> Any:
     """The fleet figure (needs a QApplication): one row per joint, worst at the top, coloured by ΔK against its
     baseline from each judged session until the next, the last for at most ``stale_days`` (red: K below; pale
-    yellow: at the baseline; blue: above; grey: no ΔK — before the baseline, or stale); the colour scale spans ±2 × the alarm threshold.
-    Each session is marked on its row (judged, in alarm, not judged), and a legend says what marks and grey mean."""
+    yellow: at the baseline; blue: above; grey: no ΔK — before the baseline, or stale); the colour scale spans ±2 ×
+    the alarm threshold. Each session is marked on its row (judged, in alarm, not judged), and a legend says what the
+    marks and the grey mean."""
     import numpy as np
     import pyqtgraph as pg
     from pyqtgraph.Qt import QtCore, QtWidgets

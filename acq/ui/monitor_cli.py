@@ -47,7 +47,7 @@ def status_table(st: MonitorStatus) -> Table:
                                             f" · window {st.last_K_window}")
     rows = [
         ("machine time", duration_text(st.machine_time_s)),
-        ("windows filed in the catalogue (this run)", filed_text(st)),
+        ("windows filed (this run)", filed_text(st)),
         *([("windows in the folder (earlier runs too)", str(st.in_folder))] if st.resumed else []),
         *([("not captured: the disk budget (--max-disk) was full", str(st.not_captured))] if st.not_captured else []),
         ("last K N·m/rad (95 %) · its window", k_text),

@@ -192,7 +192,8 @@ class ReportView(QtWidgets.QWidget):
                            rowspan=len(bottom_rows)),
             "frf": _plot(layout, frf_row, 1, None, ("f", "Hz"), ("|H|", "rad/(s·N·m)")),
         }
-        lower_axes = {"misfit": ("model / measured − 1", "%"), "phase": ("phase of H", "°"), "coherence": ("γ²", "")}
+        lower_axes = {"misfit": ("model / measured − 1", "%"), "phase": ("phase of H", "°"),
+                      "coherence": ("γ²", "")}
         for name, row in zip(lower, bottom_rows):
             self.plots[name] = _plot(layout, row, 1, None, ("f", "Hz"), lower_axes[name])
         for row, stretch in ((frf_row, 3), *((r, 2) for r in bottom_rows)):
