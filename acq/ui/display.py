@@ -276,10 +276,11 @@ def start_times(isos: Sequence[str | None]) -> tuple[Column, Column]:
 def monitor_bookkeeping_tags() -> frozenset[str]:
     """The tags acq monitor files with every window for its own use (number, identity, machine time, the alarm rules,
     the bench facts a restart compares): the same in every window or a count, they say nothing a table row needs."""
+    from acq.monitoring.alarm_rules import RULE_TAGS
     from acq.monitoring.catalogue import MONITOR_TAG
     from acq.monitoring.monitor_restart import EVERY_TAG
     from acq.monitoring.monitor_scope import WINDOW_TAG
-    from acq.monitoring.trend import ELAPSED_TAG, RULE_TAGS
+    from acq.monitoring.trend import ELAPSED_TAG
     from acq.monitoring.window_bench import FACT_TAGS
 
     return frozenset((MONITOR_TAG, WINDOW_TAG, EVERY_TAG, ELAPSED_TAG, *RULE_TAGS.values(), *FACT_TAGS))
