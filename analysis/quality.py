@@ -123,6 +123,11 @@ class Quality:
     third_mode_hz : float or None
         The frequency of the third mode a reason names (:mod:`analysis.third_mode`), Hz; None when none is named
         (none found, or the misfit band is named instead).
+    misfit_windows : tuple of (float, float, float, float)
+        Each window the misfit test judged (:func:`analysis.adequacy.band_misfits`): its first and last bin (Hz),
+        its mean ln|H_model| − ln|H| and the most that may be before the window is called missed (the bound taken
+        off plus the critical t × √(noise² + systematic²)); empty when the test was not made. For the report's
+        picture: the misfit and the allowance the verdict weighed.
     """
 
     verdict: Verdict
@@ -138,6 +143,7 @@ class Quality:
     encoder_time_stamps: bool = False
     misfit_band_hz: tuple[float, float] | None = None
     third_mode_hz: float | None = None
+    misfit_windows: tuple[tuple[float, float, float, float], ...] = ()
 
 
 def assess(
@@ -233,8 +239,9 @@ def assess(
     # without the encoder's resolution the share of |H|'s misfit that its quantisation repeats with every
     # motion period is unknown (±8 % at 200–250 Hz on a healthy 2^17 counts/rev bench): no misfit test then
     known_resolution = encoder_jitter is not None and encoder_jitter.lsb_rad > 0.0
-    missed, mode = (_missed_band(frf, fit, encoder_jitter, kernel_error, phase_is_meaningful(clock_residual_s, th))
-                    if fit.status != "failed" and known_resolution else (None, None))
+    missed, mode, judged = (_missed_band(frf, fit, encoder_jitter, kernel_error,
+                                         phase_is_meaningful(clock_residual_s, th))
+                            if fit.status != "failed" and known_resolution else (None, None, ()))
     named_mode = mode if missed is None and mode is not None and mode.found else None
     if named_mode is not None:
         findings.append(("poor", f"the two-mass model misses a third mode near {mode.f_hz:.0f} Hz ({mode.t:.1f} σ "
@@ -303,6 +310,7 @@ def assess(
         encoder_time_stamps=encoder_jitter is not None and encoder_jitter.stamped,
         misfit_band_hz=None if missed is None else missed[:2],
         third_mode_hz=None if named_mode is None else float(named_mode.f_hz),
+        misfit_windows=judged,
     )
 
 
@@ -372,10 +380,12 @@ def _joint_cause(worst: BandMisfit, fit: FitResult) -> str:
 
 
 def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, kernel_error: np.ndarray | None,
-                 use_phase: bool) -> tuple[tuple[float, float, BandMisfit] | None, ThirdMode | None]:
+                 use_phase: bool) -> tuple[tuple[float, float, BandMisfit] | None, ThirdMode | None,
+                                           tuple[tuple[float, float, float, float], ...]]:
     """Where the model misses |H| beyond noise and the encoder's quantisation (:mod:`analysis.adequacy`): the worst
-    stretch of the band (low Hz, high Hz, worst window) or None, and the most evident third mode
-    (:mod:`analysis.third_mode`, judging the phase too when ``use_phase``) or None.
+    stretch of the band (low Hz, high Hz, worst window) or None, the most evident third mode
+    (:mod:`analysis.third_mode`, judging the phase too when ``use_phase``) or None, and the windows judged
+    (:attr:`Quality.misfit_windows`).
 
     The fitted model is judged up to the default band's top even where the fit's band ends below it
     (:func:`analysis.fit.judged_fit`; ``kernel_error`` at those bins), against the measurement as the Welch estimator
@@ -404,14 +414,17 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, 
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0) | unknown
     bound = loop_feedback_bound(quant, jitter.repeating_share)
     windows = band_misfits(f, misfit.real, reps.real, carried[:f.size, :f.size], blind, CHAIN_WINDOW_STD, bound)
-    spans = missed_spans(windows, critical_t(len(windows), reps.shape[0]))
+    t_crit = critical_t(len(windows), reps.shape[0])
+    spans = missed_spans(windows, t_crit)
+    judged = tuple((w.low_hz, w.high_hz, w.misfit, w.bound + t_crit * float(np.hypot(w.noise, w.systematic)))
+                   for w in windows if np.isfinite(w.misfit))
     mode = None
     if "K_Nm_per_rad" in fit.fitted:
         mode = third_mode(f, misfit, reps, model_log_ratios(frf, seen), jac, sqrt_w, fit.options.kind,
                           fit.fitted.index("K_Nm_per_rad"), _rel_halfwidth(fit, "K_Nm_per_rad"),
                           candidate_frequencies(fit.f_a, seen.band), fitted=fitted, use_phase=use_phase,
                           systematic_cov=carried, blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound)
-    return (spans[0] if spans else None), mode
+    return (spans[0] if spans else None), mode, judged
 
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,

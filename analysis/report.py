@@ -1,7 +1,8 @@
 """The data of the report figures, as plain arrays (no plotting library here).
 
 A viewer or the PNG writer draws: the torque and speed traces (decimated), the measured |H| with
-the fitted model and its 95 % band, f_a and f_r marked, the misfit band or third mode a ``poor`` verdict names,
+the fitted model and its 95 % band, how far the model misses the measured |H| (in %) over the fit band, f_a and
+f_r marked, the misfit band or third mode a ``poor`` verdict names,
 the coherence, and — when the clocks are aligned well enough for a phase to mean something — the measured and the
 model's phase.
 """
@@ -9,7 +10,8 @@ model's phase.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -52,6 +54,15 @@ class FigureData:
         Hz; (NaN, NaN) when it names none.
     third_mode_hz : float
         The third mode the verdict names (:attr:`analysis.quality.Quality.third_mode_hz`), Hz; NaN when none.
+    misfit_pct : ndarray
+        How far the fitted model misses the measured |H| at ``f_hz``: 100 · (|H_model| / |H| − 1), %, the sign of
+        the verdict's "misses by +5.9 %" (the quality check's ln|H_model| − ln|H|, :func:`analysis.fit.model_misfits`)
+        — a misfit a log axis hides (6 % is 0.025 decades); NaN outside the fit band and where the fit failed.
+        Empty: not computed (figure data made before it was).
+    misfit_windows : ndarray, shape (n, 4)
+        The windows the verdict's misfit test judged (:attr:`analysis.quality.Quality.misfit_windows`): first and
+        last bin (Hz), mean ln|H_model| − ln|H| and the most it may be before the window is missed (ln); no rows
+        when the test was not made.
     """
 
     t_s: np.ndarray
@@ -72,6 +83,8 @@ class FigureData:
     phase_valid: bool
     misfit_band_hz: tuple[float, float] = (math.nan, math.nan)
     third_mode_hz: float = math.nan
+    misfit_pct: np.ndarray = field(default_factory=lambda: np.empty(0))
+    misfit_windows: np.ndarray = field(default_factory=lambda: np.empty((0, 4)))
 
 
 def decimate_trace(n: int, max_points: int = MAX_TRACE_POINTS) -> slice:
@@ -113,7 +126,8 @@ def model_band(fit: FitResult, f_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 def figure_data(
     t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: np.ndarray, frf: FrequencyResponse, fit: FitResult,
-    *, phase_valid: bool = False, misfit_band_hz: tuple[float, float] | None = None, third_mode_hz: float | None = None
+    *, phase_valid: bool = False, misfit_band_hz: tuple[float, float] | None = None, third_mode_hz: float | None = None,
+    misfit_windows: Sequence[tuple[float, float, float, float]] = ()
 ) -> FigureData:
     """Assemble the report's figure data.
 
@@ -131,6 +145,8 @@ def figure_data(
         The misfit band the verdict names, Hz (None: none).
     third_mode_hz : float, optional
         The third mode the verdict names, Hz (None: none).
+    misfit_windows : sequence of (float, float, float, float), optional
+        The windows the verdict's misfit test judged (:attr:`analysis.quality.Quality.misfit_windows`).
 
     Returns
     -------
@@ -139,6 +155,11 @@ def figure_data(
     keep = decimate_trace(len(t_s))
     f_model = np.geomspace(fit.band[0], fit.band[1], MODEL_POINTS)
     abs_h, low, high = model_band(fit, f_model)
+    in_band = (frf.f_hz >= fit.band[0]) & (frf.f_hz <= fit.band[1])
+    misfit = np.full(frf.f_hz.shape, np.nan)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a failed fit's model is NaN: so is its misfit
+        misfit[in_band] = 100.0 * (np.abs(frequency_response(fit.values, frf.f_hz[in_band])) / np.abs(frf.H[in_band])
+                                   - 1.0)
     return FigureData(
         t_s=np.asarray(t_s)[keep], torque_Nm=np.asarray(torque_Nm)[keep], speed_rad_s=np.asarray(speed_rad_s)[keep],
         f_hz=frf.f_hz, H_abs=np.abs(frf.H), coherence=frf.coherence,
@@ -149,4 +170,6 @@ def figure_data(
         phase_valid=phase_valid,
         misfit_band_hz=(math.nan, math.nan) if misfit_band_hz is None else misfit_band_hz,
         third_mode_hz=math.nan if third_mode_hz is None else third_mode_hz,
+        misfit_pct=misfit,
+        misfit_windows=np.asarray(misfit_windows, dtype=float).reshape(-1, 4),
     )

@@ -5,15 +5,18 @@ from __future__ import annotations
 
 import io
 import re
+from dataclasses import replace
 from typing import Any
 
+import numpy as np
+import pytest
 from rich.console import Console
 
 from acq.commissioning.devices import Section
 from acq.monitoring.batch import BatchReport
 from acq.monitoring.catalogue import Entry, Outcome
 from acq.monitoring.trend import compute_trend
-from acq.recording.summary import SessionSummary, StreamSummary
+from acq.recording.summary import SessionSummary, StreamSummary, fitted_rate
 from acq.ui.display import batch_table, result_table, sections_table, summary_table, trend_table
 
 TRUTH = {"K_Nm_per_rad": 891.0, "Jm_kgm2": 0.003027, "Jl_kgm2": 0.00748, "C_Nms_per_rad": 0.1, "offset_s": 0.037,
@@ -97,6 +100,28 @@ def test_trend_table_at_80_columns_keeps_K_change_and_spelled_out_states() -> No
     assert "not shown" not in wide
 
 
+def test_a_monitors_trend_numbers_its_windows_as_the_monitor_does_and_leaves_its_bookkeeping_tags_out() -> None:
+    """The new-user trial: the monitor's "window 9" was the trend's "#10", and at 160 columns each row was 17 lines
+    tall with the monitor's own tags (monitor_daq_driver=sim, monitor_pole_pairs=4, …)."""
+    from acq.monitoring.window_bench import FACT_TAGS
+
+    bookkeeping = {"monitor_id": "vm:/m:049fad40", "monitor_elapsed_s": 0.0, "monitor_every_s": 5.0,
+                   "alarm_baseline_sessions": 2, "alarm_threshold_pct": 10.0, "alarm_ewma_lambda": 0.2,
+                   **{tag: 1.0 for tag in FACT_TAGS}}
+    entries = [replace(_entry(i, k, 891.0), tags={"payload_kg": 1.0 + i, "monitor_window": i, **bookkeeping})
+               for i, k in enumerate((891.0, 890.0, 889.0))]
+    entries[1] = replace(entries[1], verdict="not excited", K_Nm_per_rad=None, K_ci95=(None, None))
+    text = render(trend_table(compute_trend("joint1", entries)), width=160)
+    rows = [line for line in text.splitlines() if "│" in line]
+    assert [row.split("│")[0].strip() for row in rows] == ["1", "2", "3"]  # one line each, numbered from 1
+    assert "window 2 below" in rows[1] and "payload_kg=2" in rows[1]
+    assert "monitor_" not in text.replace("acq monitor's", "") and "alarm_" not in text
+    flat = " ".join(text.split())
+    assert "acq monitor's own tags (window number, identity, alarm rules, bench facts) not shown: --json has every " \
+           "tag" in flat and "window 2 skipped: verdict not excited" in flat
+    assert re.search(r"^\s*window ┃", text, re.M)
+
+
 def test_trend_without_a_baseline_says_what_it_needs_and_shows_a_missing_interval_as_one_dash() -> None:
     failed = Entry("id0", "id0", "/s/0.h5", "joint1", "2026-11-29T19:50:02.5+00:00", {}, None, [], "0.h5: too short",
                    None, (None, None), None, None, "{}", "2026-11-30T00:00:00+00:00", None)
@@ -124,12 +149,28 @@ def test_batch_table_wraps_a_long_error_and_keeps_K_whole() -> None:
 def test_summary_table_at_80_columns() -> None:
     summary = SessionSummary("/tmp/disp/2026-11-29T19-54-08_joint1.h5", "joint1", "complete", "recorded 10 s",
                              "2026-11-29T19:54:08.123+00:00",
-                             (StreamSummary("current", 256000, 10.0, 25600.0, 25599.04, 0, 0),
-                              StreamSummary("encoder", 10000, 10.0, 1000.0, 999.96, 3, 12)), 0)
-    text = render(summary_table(summary))
-    for value in ("256000", "25600.0", "25599.04", "999.96", "12", "missing", "2026-11-29 19:54:08 UTC",
-                  "recorded 10 s"):
+                             (StreamSummary("current", 256000, 10.0, 25600.0, 25599.04, 0, 0, 25599.11),
+                              StreamSummary("encoder", 10000, 10.0, 1000.0, 1061.35, 3, 12, 999.96)), 0)
+    text = " ".join(render(summary_table(summary)).split())  # the title and caption wrap at spaces
+    for value in ("256000", "25600.0", "25599.11", "999.96", "12", "missing", "2026-11-29 19:54:08 UTC",
+                  "recorded 10 s", "rate fit", "(Theil–Sen) line", "not shown at this width: first–last Hz"):
         assert value in text, value
+    assert "1061.35" not in text  # the first-to-last rate, left out at 80 columns (the caption says so)
+    assert "1061.35" in render(summary_table(summary), width=120)
+
+
+def test_the_rate_is_a_line_through_the_host_stamps_that_a_late_start_and_a_burst_do_not_move() -> None:
+    """The new-user trial's CANopen session: its first TPDOs reached the host late, then in a burst; acq info said
+    1061.35 Hz of a 1000 Hz drive (first to last host stamp) while acq selftest said "period 0.9999 ms"."""
+    rng = np.random.default_rng(1)
+    index = np.arange(4043)
+    host_s = 1e-3 * index + 0.4e-3 + rng.exponential(0.2e-3, index.size)  # on time, with the bus's latency
+    host_s[:250] = 0.25 + 5e-6 * index[:250]  # the first 250 held back 0.25 s, then in a burst 5 µs apart
+    host_ns = (1e9 * host_s).astype(np.int64)
+    first_last = (index[-1] - index[0]) / (host_s[-1] - host_s[0])
+    assert first_last > 1060.0  # what acq info showed
+    assert fitted_rate(index, host_ns) == pytest.approx(1000.0, rel=1e-4)
+    assert np.isnan(fitted_rate(index[:1], host_ns[:1]))
 
 
 def test_devices_table_at_80_columns_wraps_reasons_at_spaces() -> None:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import io
 import re
 import json
+from dataclasses import replace
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
@@ -92,6 +93,54 @@ def test_fleet_table_shows_every_value_at_80_columns(catalogue_location: Path | 
                     "r1/j2": ["498.0", "± 1.0", "-0.4", "500.0", times["r1/j2"], "0/0", "stale"],
                     "r2/j1": ["1001.0", "± 0.5", "+0.1", "1000.0", times["r2/j1"], "3/4", "ok"]}
     assert run.out.count("threshold") == 2  # "ALARM threshold + EWMA" wrapped at spaces, in both alarm rows
+
+
+def test_fleet_of_several_sources_at_80_columns_leaves_the_baseline_out_and_breaks_no_header(
+        catalogue_location: Path | str) -> None:
+    """acq fleet DIR sessions at 80 columns broke its headers inside words: "sour|ce", "sta|te", "bas|eli|ne"."""
+    _fill(catalogue_location)
+    statuses = [replace(s, source=f"plant/site{i}") for i, s in
+                enumerate(load_fleet((), [catalogue_location], now=datetime.now(UTC), stale_days=7.0))]
+    console = Console(width=80, file=io.StringIO(), color_system=None)
+    console.print(fleet_table(statuses, stale_days=7.0))
+    text = console.file.getvalue()  # type: ignore[attr-defined]
+    head = [line.split("┃") for line in text.splitlines() if "┃" in line]
+    assert [" ".join(" ".join(cells).split()) for cells in zip(*head)][:2] == ["robot/ joint", "source"]
+    assert " ".join(head[-1][-1].split()) == "state" and max(len(line) for line in text.splitlines()) <= 80
+    assert "plant/site0" in text and "not shown at this width: baseline N·m/rad" in " ".join(text.split())
+
+
+def test_the_fleet_png_shows_each_session_and_says_what_grey_means(catalogue_location: Path | str,
+                                                                   tmp_path: Path) -> None:
+    """The fleet PNG was nearly blank at ΔK ≈ 0 (white on white) and its grey cells had no legend."""
+    import numpy as np
+    import pyqtgraph as pg
+    from pyqtgraph.Qt import QtGui
+
+    from acq.ui.fleet_display import NO_DELTA_K_GREY, fleet_widget, render_fleet_png
+    from acq.ui.plots import ensure_app
+
+    _fill(catalogue_location)
+    now = datetime.now(UTC)
+    statuses = load_fleet((), [catalogue_location], now=now, stale_days=7.0, tags=["site=A"])
+    ensure_app(offscreen=True)
+    frame = fleet_widget(statuses, now=now, threshold_pct=10.0, stale_days=7.0)
+    (layout,) = [item for item in frame.findChildren(object) if type(item).__name__ == "GraphicsLayoutWidget"]
+    legend = next(item for item in layout.ci.items if isinstance(item, pg.LegendItem))
+    assert [label.text for _, label in legend.items] == [
+        "session judged (its ΔK colours the strip until the next)", "session in alarm",
+        "session not judged (not excited, failed, before the baseline)",
+        "grey: no ΔK (before the baseline, or no session for 7 days)"]
+    plot = next(item for item in layout.ci.items if isinstance(item, pg.PlotItem))
+    # every session of site A: judged, in alarm (r1/j1's last), not judged (r2/j1's failed analysis)
+    assert [len(item.data) for item in plot.items if isinstance(item, pg.ScatterPlotItem)] == [10, 1, 1]
+    png = render_fleet_png(statuses, tmp_path / "fleet.png", now=now, threshold_pct=10.0, stale_days=7.0)
+    image = QtGui.QImage(str(png)).convertToFormat(QtGui.QImage.Format.Format_RGB888)
+    pixels = np.frombuffer(image.constBits(), np.uint8, count=image.sizeInBytes()).reshape(image.height(), -1)
+    pixels = pixels[:, : 3 * image.width()].reshape(image.height(), image.width(), 3).astype(int)
+    grey = np.all(np.abs(pixels - NO_DELTA_K_GREY) <= 2, axis=-1).sum()
+    at_baseline = np.all(np.abs(pixels - (255, 255, 191)) <= 12, axis=-1).sum()  # the scale's ΔK ≈ 0
+    assert grey > 20_000 and at_baseline > 20_000  # r1/j2 stale (grey after 7 days), r2/j1 at its baseline
 
 
 def test_fleet_at_80_columns_splits_long_names_at_the_slash_never_inside_a_word(

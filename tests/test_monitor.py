@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import json
 import os
@@ -295,12 +296,13 @@ def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: p
     assert run.code == 3
     seen = dict(item.split("=", 1) for item in env_file.read_text().split("\0") if item)
     env = {name: value for name, value in seen.items() if name.startswith("ACQ_")}
-    assert set(env) == {"ACQ_JOINT", "ACQ_K", "ACQ_BASELINE_K", "ACQ_CHANGE_PCT", "ACQ_SESSION"}
+    assert set(env) == {"ACQ_JOINT", "ACQ_K", "ACQ_BASELINE_K", "ACQ_CHANGE_PCT", "ACQ_SESSION", "ACQ_WINDOW"}
     assert {name: value for name, value in seen.items() if name not in env and name not in ("PWD", "SHLVL", "_")} \
         == {name: value for name, value in users.items() if name not in ("PWD", "SHLVL", "_")}
     assert seen["OPENBLAS_NUM_THREADS"] == "3"
     rows = _rows(tmp_path / "m")
     alarming = next(r for r in rows if r["path"] == env["ACQ_SESSION"])
+    assert env["ACQ_WINDOW"] == str(alarming["window"] + 1)  # numbered from 1, as the status lines and acq trend
     assert env["ACQ_JOINT"] == "joint1" and float(env["ACQ_K"]) == pytest.approx(alarming["K_Nm_per_rad"], rel=1e-5)
     baseline = (rows[0]["K_Nm_per_rad"] + rows[1]["K_Nm_per_rad"]) / 2
     assert float(env["ACQ_BASELINE_K"]) == pytest.approx(baseline, rel=1e-5)
@@ -325,7 +327,7 @@ def test_on_alarm_runs_through_the_shell_and_its_failure_is_reported(capsys: pyt
     assert said.read_text() == f"joint joint1: K {rows[3]['K_Nm_per_rad']:.6g} (baseline {baseline:.6g})\n"
     failure = ("alarm command failed: exit 127 (command not found): echo \"joint $ACQ_JOINT: K $ACQ_K (baseline "
                f"$ACQ_BASELINE_K)\" | tee {said} && acq-no-such-notifier")
-    status_lines = [line for line in run.err.splitlines() if " captured, " in line]
+    status_lines = [line for line in run.err.splitlines() if " filed = " in line]
     assert any(line.endswith(f" — {failure}") for line in status_lines)  # the status line when it failed
     summary = " ".join(run.err.split())  # the final table: the failure beside "alarms raised"
     assert "alarms raised │ 1 · alarm command failed: exit 127 (command not found) │" in summary
@@ -442,6 +444,39 @@ def test_a_stop_request_ends_the_monitor_after_the_window_under_way(tmp_path: Pa
     assert monitor.status.last_K == rows[0]["K_Nm_per_rad"] and monitor.status.change_pct is None
 
 
+def test_the_status_counts_every_window_filed_once_and_they_add_up_to_the_catalogue(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The new-user trial: after Ctrl-C "captured 26 / 19 / 26" and "not excited · skipped · interrupted 7 · 0 · 1"
+    while the catalogue held 27 windows. Here a Ctrl-C as the third window's capture starts: 2 ok + 1 interrupted."""
+    from rich.console import Console
+
+    from acq.monitoring.monitor import Monitor, MonitorSettings
+    from acq.ui.monitor_cli import status_table
+
+    capture = Recorder.run
+
+    def ctrl_c_at_the_third(recorder: Recorder) -> object:
+        if monitor.status.captured == 2:
+            monitor.request_stop("interrupted by user (Ctrl-C)")
+        return capture(recorder)
+
+    monkeypatch.setattr(Recorder, "run", ctrl_c_at_the_third)
+    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=tmp_path, window_s=10.0, every_s=60.0,
+                               for_s=3600.0, fast=True, baseline_windows=2)
+    monitor = Monitor(settings)
+    assert monitor.run() == 130
+    rows, st = _rows(tmp_path), monitor.status
+    assert [r["verdict"] for r in rows] == ["ok", "ok", "interrupted"]
+    assert st.filed == {"ok": 2, "poor or failed": 0, "not excited": 0, "skipped": 0, "analysis failed": 0,
+                        "interrupted": 1}
+    assert st.filed_total == sum(st.filed.values()) == len(rows) == 3
+    assert (st.captured, st.analysed) == (2, 2)  # the interrupted one is filed, not captured whole nor analysed
+    console = Console(width=120, record=True)
+    console.print(status_table(st))
+    assert "│ windows filed (this run) │ 3 = 2 ok + 1 interrupted │" in [
+        " ".join(line.split()) for line in console.export_text().splitlines()]
+
+
 def test_a_ctrl_c_while_a_complete_window_is_shut_down_still_ends_the_monitor(tmp_path: Path,
                                                                             monkeypatch: pytest.MonkeyPatch) -> None:
     """The flaky hang: a Ctrl-C the recorder's handler took once both streams were complete (while it shut the window
@@ -480,14 +515,21 @@ def test_ctrl_c_ends_the_monitor_with_exit_130_and_one_line_of_what_it_kept(tmp_
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     assert "Traceback" not in err and "Error" not in err, err
-    verdicts = [r["verdict"] for r in _rows(out)]
-    captured = sum(v != "interrupted" for v in verdicts)
-    analysed = sum(v not in ("interrupted", "not analysed") for v in verdicts)
-    assert captured >= 1
-    windows = "window" if captured == 1 else "windows"  # "1 windows captured" (the new-user trial)
-    assert err.splitlines()[-1] == (f"acq: interrupted by user (Ctrl-C): {captured} {windows} captured, {analysed} "
-                                    f"analysed, all kept in {out / 'catalogue.sqlite'} (trend state: learning "
-                                    "baseline); the same command resumes")
+    rows = _rows(out)
+    assert len(rows) >= 1
+    windows = "window" if len(rows) == 1 else "windows"  # "1 windows captured" (the new-user trial)
+    # every window the catalogue holds counted once, under its verdict ("captured 26" of 27 in the new-user trial)
+    counts = collections.Counter(r["verdict"] for r in rows)
+    names = {"ok": "ok", "poor": "poor or failed", "failed": "poor or failed", "not excited": "not excited",
+             "interrupted": "interrupted"}
+    parts = collections.Counter()
+    for verdict, n in counts.items():
+        parts[names[verdict]] += n
+    kinds = ("ok", "poor or failed", "not excited", "skipped", "analysis failed", "interrupted")
+    said = " + ".join(f"{parts[k]} {k}" for k in kinds if parts[k])
+    assert err.splitlines()[-1] == (f"acq: interrupted by user (Ctrl-C): {len(rows)} {windows} filed ({said}), all "
+                                    f"kept in {out / 'catalogue.sqlite'} (trend state: learning baseline); the same "
+                                    "command resumes")
     assert not (out / "monitor.lock").exists()  # released and removed on Ctrl-C too
 
 
@@ -554,7 +596,7 @@ def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None
 
 def test_a_window_whose_segments_do_not_excite_is_not_excited_whatever_its_clock_residual() -> None:
     """The analysis' segment selection decides first: fewer than two segments that excite (selection not applied)."""
-    from acq.monitoring.window_judge import excites, not_excited
+    from acq.monitoring.window_judge import not_excited
 
     strong = {"verdict": "failed", "mean_coherence": 0.9, "excitation_coherence": 0.95}
     still = {"excited_fraction": 0.0, "selection_applied": False}
@@ -563,8 +605,6 @@ def test_a_window_whose_segments_do_not_excite_is_not_excited_whatever_its_clock
     assert not not_excited({"quality": strong, "clock": {"residual_s": 1.75e-3}, "excitation": moving})
     assert not not_excited({"quality": strong, "clock": {"failure": "clock: no alignment found"}, "excitation": still})
     assert not not_excited({"quality": {**strong, "verdict": "ok"}, "clock": {}, "excitation": still})
-    assert [excites({"quality": strong, "excitation": e}) for e in (still, moving)] == [False, True]
-    assert not excites({"quality": {"verdict": "not excited"}}) and not excites(None)
 
 
 def test_a_window_the_joint_barely_moved_in_is_not_excited_and_not_counted_as_excited(
@@ -581,7 +621,7 @@ def test_a_window_the_joint_barely_moved_in_is_not_excited_and_not_counted_as_ex
     assert json.loads(rows[1]["reasons_json"]) == [
         "0 of the window's 12 moves put torque into 10…400 Hz beyond chance; time that does: 0 % of the window",
         "clock alignment residual 1753 µs exceeds 1000 µs for an amplitude fit"]
-    assert "windows captured / excited / analysed │ 2 / 0 / 2 │" in " ".join(run.err.split())
+    assert "windows filed (this run) │ 2 = 2 not excited │" in " ".join(run.err.split())
     trend = run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1")
     assert "31084" not in trend.out and "PWM" not in trend.out
 
@@ -694,8 +734,9 @@ def test_a_short_monitor_says_its_machine_time_in_seconds_and_leaves_no_lock(
     run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--fast", "--window", "10", "--every", "10", "--for", "10s",
                   "--out", str(out))
     assert run.code == 0, run.err
-    lines = [line for line in run.err.splitlines() if " captured, " in line]
-    assert lines and all(line.startswith("10 s: 1 captured, ") for line in lines), lines
+    lines = [line for line in run.err.splitlines() if " filed" in line and line[0].isdigit()]
+    assert lines and all(line.startswith("10 s: ") for line in lines), lines
+    assert lines[-1].startswith("10 s: 1 filed = 1 "), lines
     assert [[cell.strip() for cell in line.split("│")[1:3]] for line in run.err.splitlines()
             if "machine time" in line] == [["machine time", "10 s"]]
     assert sorted(p.name for p in out.iterdir() if not p.name.endswith((".h5", ".json"))) == [
@@ -916,11 +957,11 @@ def test_a_restart_says_both_counts_and_goes_on_from_the_resumed_machine_time(
     run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for",
                   "2m", "--baseline-windows", "2", "--keep", "1", "--out", str(out))
     assert run.code == 0, run.err
-    lines = [line for line in run.err.splitlines() if " captured" in line and line[0].isdigit()]
-    assert lines[0].startswith("3.2 min: 0 captured in this run (4 in the folder), "), lines
-    assert lines[-1].startswith("5.2 min: 2 captured in this run (6 in the folder), "), lines
+    lines = [line for line in run.err.splitlines() if " filed" in line and line[0].isdigit()]
+    assert lines[0].startswith("3.2 min: 0 filed in this run (4 in the folder), "), lines
+    assert lines[-1].startswith("5.2 min: 2 filed in this run (6 in the folder) = 2 ok, "), lines
     table = " ".join(run.err.split())
-    assert "windows captured / excited / analysed │ 2 / 2 / 2 │" in table
+    assert "windows filed (this run) │ 2 = 2 ok │" in table
     assert "windows in the folder (earlier runs too) │ 6 │" in table
 
 
@@ -953,7 +994,7 @@ def test_status_shows_the_latest_K_in_alarm_and_which_window_it_is_from(capsys: 
     run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--for", "6m", "--baseline-windows", "2",
                   "--keep", "0", "--out", str(tmp_path / "m"))
     assert run.code == 3
-    rows = {r["window"]: r["K_Nm_per_rad"] for r in _rows(tmp_path / "m")}
+    rows = {r["window"] + 1: r["K_Nm_per_rad"] for r in _rows(tmp_path / "m")}  # shown from 1, filed from 0
     alarms = [line for line in run.err.splitlines() if "— ALARM: K" in line]
     assert len(alarms) >= 2
     for line in alarms:

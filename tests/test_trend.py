@@ -449,14 +449,15 @@ def _monitor_trend(tmp_path: Path, windows: list[tuple[float | None, str]], ever
 def test_a_monitor_trend_is_drawn_over_machine_time_and_shows_the_windows_without_K(tmp_path: Path) -> None:
     import pyqtgraph as pg
 
-    # windows every 30 min of machine time; 2 not excited, 1 skipped with a wild K
+    # windows every 30 min of machine time; 2 not excited, 1 skipped with a wild K, the last one interrupted
     k_plot, f_plot, legend = _monitor_trend(tmp_path, [(890.0, "ok"), (None, "not excited"), (891.0, "ok"),
                                                        (889.0, "ok"), (13_000.0, "poor"), (None, "not excited"),
-                                                       (850.0, "ok")], 1800.0)
+                                                       (850.0, "ok"), (None, "interrupted")], 1800.0)
     ticks = [label for _, label in f_plot.getAxis("bottom")._tickLevels[0]]
-    assert ticks == ["0:00", "0:30", "1:00", "1:30", "2:00", "2:30", "3:00"]
+    assert ticks == ["0:00", "0:30", "1:00", "1:30", "2:00", "2:30", "3:00", "3:30"]
     assert f_plot.getAxis("bottom").labelText == "machine time at the window's start (h:min)"
-    assert "no K: 2 not excited / failed" in [label.text for _, label in legend.items]
+    # each window without K counted under its own verdict (it said "3 not excited / failed" of 2 + 1 interrupted)
+    assert "no K: 2 not excited · 1 interrupted" in [label.text for _, label in legend.items]
     (bars,) = [item for item in k_plot.items if isinstance(item, pg.ErrorBarItem)]
     assert sorted(bars.opts["x"]) == [0.0, 2.0, 3.0, 6.0]  # no bar for the skipped window 4
 

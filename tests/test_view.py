@@ -79,9 +79,10 @@ def test_window_holds_traces_frf_coherence_and_values(session: Path) -> None:
     ensure_app()
     view = ReportView([session_figure(session)], title="test")
     plots = view.plots
-    assert list(plots) == ["torque", "speed", "frf", "phase", "coherence"]
+    assert list(plots) == ["torque", "speed", "frf", "misfit", "phase", "coherence"]
     labels = {name: {side: (p.getAxis(side).labelText, p.getAxis(side).labelUnits) for side in ("bottom", "left")}
               for name, p in plots.items()}
+    assert labels["misfit"] == {"bottom": ("f", "Hz"), "left": ("model / measured − 1", "%")}
     assert labels["torque"] == {"bottom": ("t (drive clock)", "s"), "left": ("T_e", "N·m")}
     assert labels["speed"] == {"bottom": ("t (drive clock)", "s"), "left": ("ω_m", "rad/s")}
     assert labels["frf"] == {"bottom": ("f", "Hz"), "left": ("|H|", "rad/(s·N·m)")}
@@ -90,7 +91,9 @@ def test_window_holds_traces_frf_coherence_and_values(session: Path) -> None:
     assert plots["coherence"].getViewBox().linkedView(pg.ViewBox.XAxis) is plots["frf"].getViewBox()
     assert plots["frf"].getAxis("bottom").logMode and plots["frf"].getAxis("left").logMode
     assert plots["phase"].getViewBox().linkedView(pg.ViewBox.XAxis) is plots["frf"].getViewBox()
-    assert [len(plots[n].listDataItems()) for n in plots] == [1, 1, 4, 2, 1]  # |H|, band low/high, model; phase
+    # |H|, band low/high, model; the model's band about 0 (2), the misfit per bin, the test's allowance (2) and its
+    # window means; phase
+    assert [len(plots[n].listDataItems()) for n in plots] == [1, 1, 4, 6, 2, 1]
     items = plots["frf"].items
     assert sum(isinstance(i, pg.FillBetweenItem) for i in items) == 1
     lines = [i for i in items if isinstance(i, pg.InfiniteLine)]
@@ -98,8 +101,13 @@ def test_window_holds_traces_frf_coherence_and_values(session: Path) -> None:
     f_a, f_r = sorted(10 ** line.value() for line in lines)
     assert 45 < f_a < 65 and 90 < f_r < 115  # the simulated plant: 55 Hz, 102 Hz
     names = [label.text for _, label in view.legend.items]
-    assert names[0] == "measured" and names[1].startswith("two-mass fit, 95 % band ± ")
-    assert names[2] == "fit band 10–400 Hz"
+    assert names[0] == "measured |H|" and names[1].startswith("two-mass fit, 95 % band ± ")
+    assert names[2:] == ["misfit (model / measured − 1), test windows", "allowed misfit (noise, quantisation)",
+                         "fit band 10–400 Hz"]
+    # measured and model apart: dark grey dots, the model in the session's colour (both were the same blue)
+    measured, *_, model = plots["frf"].listDataItems()
+    assert pg.mkBrush(measured.opts["symbolBrush"]).color().name() == "#404040"
+    assert pg.mkPen(model.opts["pen"]).color().name() == "#1f77b4"
     regions = [i for i in items if isinstance(i, pg.LinearRegionItem)]  # the fit band, shaded
     assert [tuple(round(10 ** v) for v in r.getRegion()) for r in regions] == [(10, 400)]
     assert all(any(isinstance(i, pg.LinearRegionItem) for i in plots[n].items) for n in ("phase", "coherence"))
@@ -170,7 +178,7 @@ def test_phase_panel_when_the_clocks_are_aligned_and_none_when_not(session: Path
     aligned = session_figure(session)
     assert aligned.figures.phase_valid and aligned.values["clock"]["residual_s"] < 100e-6
     view = ReportView([aligned])
-    assert list(view.plots) == ["torque", "speed", "frf", "phase", "coherence"]
+    assert list(view.plots) == ["torque", "speed", "frf", "misfit", "phase", "coherence"]
     assert view.plots["phase"].getAxis("left").labelText == "phase of H"
     fd = aligned.figures
     in_band = (fd.f_hz >= fd.band_hz[0]) & (fd.f_hz <= fd.band_hz[1]) & (fd.coherence > 0.9)
@@ -181,7 +189,7 @@ def test_phase_panel_when_the_clocks_are_aligned_and_none_when_not(session: Path
     paper = analyze_session(session, AnalysisRequest(pipeline="paper"), write=False)  # the paper's chain: clocks not aligned
     assert not paper.result.figures.phase_valid
     unaligned = ReportView([SessionFigure("paper", paper.result.figures, paper.json_dict)])
-    assert "phase" not in unaligned.plots
+    assert "phase" not in unaligned.plots and list(unaligned.plots)[-2:] == ["misfit", "coherence"]
     assert "phase not shown: the clocks were not aligned" in unaligned.panel.text()
     assert "chain (--paper) · torque hilbert" in unaligned.panel.text()
 
@@ -421,9 +429,18 @@ def test_the_report_marks_where_a_poor_verdict_says_the_model_misses(tmp_path: P
         named, label = f"misses a third mode near {low:.0f} Hz", f"third mode ≈ {low:.0f} Hz"
     assert any(named in r for r in quality.reasons), quality.reasons  # the mark is where the reason says
 
+    fd = done.result.figures
+    if kind == "misfit":  # the picture shows what the text says: the test's window that "misses by +x %", beyond the
+        # allowance the test held it to, in the misfit panel's range (on the log |H| axis, 6 % was not to be seen)
+        (said,) = [float(m.group(1)) for r in quality.reasons if (m := re.search(r"misses by ([+-][0-9.]+) %", r))]
+        windows = fd.misfit_windows[(fd.misfit_windows[:, 0] >= low) & (fd.misfit_windows[:, 1] <= high)]
+        (worst,) = [w for w in windows if round(100 * w[2], 1) == said]
+        assert abs(worst[2]) > worst[3]
     ensure_app()
-    view = ReportView([SessionFigure("s", done.result.figures, done.json_dict)])
-    for plot in ("frf", "phase"):
+    view = ReportView([SessionFigure("s", fd, done.json_dict)])
+    if kind == "misfit":
+        assert view.plots["misfit"].viewRange()[1][1] > 100 * np.expm1(worst[2])
+    for plot in ("frf", "misfit", "phase"):
         (mark,) = [i for i in view.plots[plot].items if getattr(i, "objectName", str)() == kind]
         if kind == "misfit":
             assert isinstance(mark, pg.LinearRegionItem)

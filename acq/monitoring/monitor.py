@@ -7,11 +7,12 @@ a window beyond that is not analysed and says so — back-pressure, never an unb
 outcome goes into the catalogue (:mod:`acq.monitoring.catalogue`, the batch's record of an outcome); the trend
 (:mod:`acq.monitoring.trend`: baseline, threshold and EWMA rules) judges it; on entering alarm ``on_alarm`` runs
 through the shell (``sh -c``, in the background) with ``ACQ_JOINT``, ``ACQ_K``, ``ACQ_BASELINE_K``,
-``ACQ_CHANGE_PCT``, ``ACQ_SESSION`` in its environment; a command that fails is reported
-(:attr:`MonitorStatus.alarm_command_failure`).
+``ACQ_CHANGE_PCT``, ``ACQ_SESSION``, ``ACQ_WINDOW`` (the window's number, from 1) in its environment; a command that
+fails is reported (:attr:`MonitorStatus.alarm_command_failure`).
 
 Each window is judged for excitation (:mod:`acq.monitoring.window_judge`): a window that does not excite is catalogued
-with verdict ``not excited`` and the reason, without K. Windows are numbered (session tag ``monitor_window``) and
+with verdict ``not excited`` and the reason, without K. Windows are numbered (session tag ``monitor_window``, from 0;
+shown from 1: :func:`acq.monitoring.monitor_scope.window_number`) and
 placed in machine time (``monitor_elapsed_s``: number × ``every_s``, after a restart going on from the last window at
 the new ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
@@ -41,7 +42,7 @@ from acq.monitoring.catalogue_backends import is_url
 from acq.monitoring.folder_lock import folder_lock
 from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, check_catalogue, check_comparable
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
-                                          check_user_tags, write_identity)
+                                          check_user_tags, window_number, write_identity)
 from acq.monitoring.monitor_status import SIZE_MARGIN, MonitorSettings, MonitorStatus, expected_window_bytes
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.monitoring.session_outcome import CATALOGUE_NAME, session_meta
@@ -150,7 +151,7 @@ class Monitor:
         self.status.machine_time_s = self._clock.at(n)
         if not self._room_for_window():
             self.status.not_captured += 1
-            self.status.message = f"window {n} not captured: the disk budget would be exceeded"
+            self.status.message = f"window {n + 1} not captured: the disk budget would be exceeded"
             self._show()
             return
         bench = self.s.bench
@@ -186,8 +187,7 @@ class Monitor:
         self._collect(at_most=self.s.jobs - 1 if self.s.fast else None)
         if len(self._pending) > self.s.jobs:  # jobs running and one waiting: no more (back-pressure)
             self._mark(key, "not analysed", f"the analysis fell behind the capture ({len(self._pending)} windows "
-                                            "waiting): this window was skipped")
-            self.status.skipped += 1
+                                            "waiting): this window was skipped", skipped=True)
             return
         self._submit(pool, key)
         self._show()
@@ -214,19 +214,21 @@ class Monitor:
                     continue
                 self._record(key, outcome)
 
-    def _mark(self, key: str, verdict: str, reason: str) -> None:
+    def _mark(self, key: str, verdict: str, reason: str, skipped: bool = False) -> None:
         path = self._windows[key].path
         try:
             meta = session_meta(load(path))
         except Exception:  # noqa: BLE001 - a window too broken to read is still marked
             meta = {}
-        self._record(key, marked(str(path.resolve()), sha256_of(path), self.s.request, meta, verdict, [reason]))
+        outcome = marked(str(path.resolve()), sha256_of(path), self.s.request, meta, verdict, [reason])
+        self._record(key, outcome, skipped)
 
-    def _record(self, key: str, outcome: Outcome) -> None:
-        """Catalogue one window, update the trend, the alarm and the figures, apply retention."""
+    def _record(self, key: str, outcome: Outcome, skipped: bool = False) -> None:
+        """Catalogue one window (``skipped``: not analysed, the analysis fell behind), update the trend, the alarm and
+        the figures, apply retention."""
         self.catalogue.record(outcome)
         self._filed += 1
-        self.status.count(outcome)
+        self.status.count(outcome, skipped)
         self._windows[key] = replace(self._windows[key], done=True)
         trend = self._trend()
         self._judge(trend, key)
@@ -255,7 +257,7 @@ class Monitor:
         if with_k:  # while the baseline is learned too: a person watching wants to see K from the first good window
             last = with_k[-1]
             st.last_K, st.last_K_ci, st.change_pct = last.entry.K_Nm_per_rad, last.entry.K_ci95, last.change_pct
-            st.last_K_window = last.entry.tags.get(WINDOW_TAG)
+            st.last_K_window = window_number(last.entry.tags)
         st.baseline_warning = trend.baseline_warning
         st.state = "alarm" if trend.alarm else ("ok" if trend.judged else
                                                 "baseline" if trend.baseline_K_Nm_per_rad else "learning baseline")
@@ -276,6 +278,7 @@ class Monitor:
         self._alarms.start({
             "ACQ_JOINT": trend.joint, "ACQ_K": f"{entry.K_Nm_per_rad:.6g}",
             "ACQ_BASELINE_K": f"{trend.baseline_K_Nm_per_rad:.6g}", "ACQ_SESSION": entry.path,
+            "ACQ_WINDOW": str(window_number(entry.tags) or ""),
             "ACQ_CHANGE_PCT": f"{100 * (entry.K_Nm_per_rad / trend.baseline_K_Nm_per_rad - 1):.3g}"})  # type: ignore
 
     def _alarm_problem(self, what: str) -> None:
@@ -390,6 +393,7 @@ class Monitor:
 
 def _alarm_message(entry: Entry) -> str:
     """The status line of a window in alarm: its K, its number and its file."""
-    window = f" in window {entry.tags[WINDOW_TAG]}" if WINDOW_TAG in entry.tags else ""
+    number = window_number(entry.tags)
+    window = f" in window {number}" if number is not None else ""
     return f"ALARM: K {entry.K_Nm_per_rad:.1f} N·m/rad{window} ({entry.path})"
 

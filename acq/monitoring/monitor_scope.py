@@ -43,10 +43,24 @@ from acq.recording.storage import storage_error, write_text_atomically
 from acqcore.errors import ConfigError
 
 __all__ = ["IDENTITY_FILE", "MONITOR_TAG", "WINDOW_TAG", "Identity", "bound_identity", "check_user_tags",
-           "monitors_of", "read_identity", "split_by_monitor", "write_identity"]
+           "monitors_of", "read_identity", "split_by_monitor", "window_number", "write_identity"]
 
-#: Session tag of a monitor's window: its number in the monitor (every window has it, from before identities too).
+#: Session tag of a monitor's window: its number in the monitor from 0 (every window has it, from before identities
+#: too). Shown from 1 (:func:`window_number`).
 WINDOW_TAG = "monitor_window"
+
+
+def window_number(tags: Mapping[str, Any]) -> int | None:
+    """The window's number as acq shows it everywhere (status lines, alarm text and ``ACQ_WINDOW``, acq trend's rows):
+    from 1, the stored :data:`WINDOW_TAG` (from 0) + 1; None for a session that is no monitor window.
+
+    The tag stays as filed (old catalogues keep working); only what a person reads counts from 1, so "window 10" of
+    an alarm is row 10 of acq trend (the monitor said "window 9" where the trend said "#10": the new-user trial)."""
+    value = tags.get(WINDOW_TAG)
+    try:
+        return int(value) + 1  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return None
 #: The file in a monitor's ``--out`` folder holding its identity and what it is bound to (JSON; one line before).
 IDENTITY_FILE = "monitor.id"
 

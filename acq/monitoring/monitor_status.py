@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.catalogue import Outcome
-from acq.monitoring.window_judge import excites
 from analysis import AnalysisRequest
 from drivers.config import Bench
 
@@ -49,26 +48,30 @@ class MonitorSettings:
     move_catalogue: bool = False  # copy the windows from the catalogue they are filed in to `catalogue` first
 
 
+#: How a window filed in the catalogue counts (:meth:`MonitorStatus.count`), in the order shown: every filed window is
+#: in exactly one, so the counts add up to the catalogue's rows of the run.
+FILED_KINDS = ("ok", "poor or failed", "not excited", "skipped", "analysis failed", "interrupted")
+
+
 @dataclass
 class MonitorStatus:
     """The live figures of a monitor (shown by :func:`acq.ui.monitor_cli.status_table`)."""
 
     joint: str
-    captured: int = 0  # in this run
+    captured: int = 0  # in this run, captures that completed (an interrupted one is filed, not captured)
     in_folder: int = 0  # windows the folder holds: those of earlier runs (a restart resumes them) and this run's
     resumed: int = 0  # of them, those of earlier runs
-    excited: int = 0
-    not_excited: int = 0
-    analysed: int = 0
-    skipped: int = 0  # captured, not analysed: the analysis fell behind
-    not_captured: int = 0  # not captured: the disk budget would have been exceeded
-    interrupted: int = 0
+    # the windows this run filed in the catalogue, by how they count (FILED_KINDS: verdict ok; poor or failed — a K
+    # the trend does not judge; not excited; skipped — the analysis fell behind the capture; analysis failed — a
+    # worker died or the analysis raised; interrupted — the capture was cut)
+    filed: dict[str, int] = field(default_factory=lambda: dict.fromkeys(FILED_KINDS, 0))
+    not_captured: int = 0  # not captured: the disk budget would have been exceeded (not filed)
     alarms: int = 0
     alarm_command_failure: str | None = None  # the last --on-alarm command's problem: "alarm command failed: exit 1"
     machine_time_s: float = 0.0  # the start of the window being captured; its end once it is captured
     disk_bytes: int = 0
     last_K: float | None = None
-    last_K_window: int | None = None  # the window last_K is of (not the last window when that had no K)
+    last_K_window: int | None = None  # the window last_K is of, as shown (from 1: monitor_scope.window_number)
     last_K_ci: tuple[float | None, float | None] = (None, None)
     change_pct: float | None = None
     baseline_K: float | None = None
@@ -80,14 +83,30 @@ class MonitorStatus:
     excited_fraction_sum: float = 0.0  # over the windows judged for excitation (for the share of the program)
     excitation_judged: int = 0
 
-    def count(self, outcome: Outcome) -> None:
-        """Count a window just catalogued: analysed, excited, not excited, interrupted; and which share of it and
-        which moves excite (segment selection; a window the joint did not travel in excites nowhere)."""
+    @property
+    def filed_total(self) -> int:
+        """Windows this run filed in the catalogue (the sum of :attr:`filed`)."""
+        return sum(self.filed.values())
+
+    @property
+    def analysed(self) -> int:
+        """Filed windows the analysis judged: ok, poor or failed, not excited."""
+        return self.filed["ok"] + self.filed["poor or failed"] + self.filed["not excited"]
+
+    @property
+    def skipped(self) -> int:
+        """Captured windows not analysed because the analysis fell behind (back-pressure)."""
+        return self.filed["skipped"]
+
+    def count(self, outcome: Outcome, skipped: bool = False) -> None:
+        """Count a window just catalogued in one of :data:`FILED_KINDS` (``skipped``: not analysed because the
+        analysis fell behind), and which share of it and which moves excite (segment selection; a window the joint
+        did not travel in excites nowhere)."""
         verdict = (outcome.doc or {}).get("quality", {}).get("verdict")
-        self.analysed += verdict not in ("not analysed", "interrupted")
-        self.excited += excites(outcome.doc)
-        self.not_excited += verdict == "not excited"
-        self.interrupted += verdict == "interrupted"
+        kind = ("ok" if verdict == "ok" else "poor or failed" if verdict in ("poor", "failed") else
+                "not excited" if verdict == "not excited" else "interrupted" if verdict == "interrupted" else
+                "skipped" if skipped else "analysis failed")  # "not analysed" of a dead worker, or no result at all
+        self.filed[kind] += 1
         excitation = (outcome.doc or {}).get("excitation")
         if excitation is None and verdict != "not excited":
             return

@@ -63,13 +63,6 @@ def not_excited(doc: dict[str, Any]) -> bool:
     return _unselected(doc) or (aligned and _weak_coherence(quality) is not None)
 
 
-def excites(doc: dict[str, Any] | None) -> bool:
-    """True when an outcome's window excites the joint: analysed to a verdict with numbers, and not with a segment
-    selection that found fewer than two segments that excite (the monitor's "excited" count)."""
-    analysed = doc is not None and doc.get("quality", {}).get("verdict") in ("ok", "poor", "failed")
-    return analysed and not _unselected(doc)  # type: ignore[arg-type]
-
-
 def _but(doc: dict[str, Any], excited_moves: int) -> str:
     """Why moves that excite the band still leave the window unexcited: the coherence check that failed."""
     weakness = _weak_coherence(doc["quality"]) if excited_moves else None

@@ -1,17 +1,28 @@
-"""What a session holds, in numbers: samples, durations, effective rates and gaps per stream."""
+"""What a session holds, in numbers: samples, durations, rates measured on the host clock and gaps per stream."""
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
 import numpy as np
+from scipy.stats import theilslopes
 
 from acq.recording.session import Session
 
 
+#: Points (evenly spaced) the rate's line is fitted through: Theil–Sen takes every pair's slope, O(n²) in time and
+#: memory; 1000 points (5·10⁵ slopes, 0.08 s) gave the 4 s CANopen session 1000.003 Hz, 2000 points 1000.004 Hz.
+FIT_POINTS = 1000
+
+
 @dataclass(frozen=True)
 class StreamSummary:
-    """One stream: samples stored, seconds covered, nominal and host-measured rates (Hz), gaps."""
+    """One stream: samples stored, seconds covered, nominal and host-measured rates (Hz), gaps.
+
+    ``effective_rate_hz`` is the samples between the first and the last host stamp over the time between them: a
+    first sample that arrived late, or a burst, moves it (a CANopen drive's first TPDOs: 1004 Hz of a 1000 Hz
+    stream). ``fitted_rate_hz`` is the slope of a robust line through every host stamp against its sample index
+    (:func:`fitted_rate`), which neither moves."""
 
     name: str
     samples: int
@@ -20,6 +31,7 @@ class StreamSummary:
     effective_rate_hz: float
     gaps: int
     missing: int
+    fitted_rate_hz: float = float("nan")
 
 
 @dataclass(frozen=True)
@@ -56,22 +68,41 @@ def _rate(span_samples: float, host_first_ns: int, host_last_ns: int) -> float:
     return float(span_samples / span_s) if span_s > 0 else float("nan")
 
 
+def fitted_rate(index: np.ndarray, host_ns: np.ndarray) -> float:
+    """Samples per second of host time: 1 / the Theil–Sen slope (median of the pairwise slopes) of host stamp against
+    sample index, through at most :data:`FIT_POINTS` evenly spaced samples; NaN with fewer than two.
+
+    Host stamps lag the samples by a delay that varies (the bus, the driver, the scheduler): a late first sample or a
+    burst makes a few stamps outliers, which the median of the slopes ignores while fewer than ~29 % of the points
+    are (the estimator's breakdown point)."""
+    if index.size < 2:
+        return float("nan")
+    step = max(1, index.size // FIT_POINTS)
+    i = (index[::step] - index[0]).astype(float)
+    t_s = (host_ns[::step] - host_ns[0]).astype(float) * 1e-9
+    slope_s = theilslopes(t_s, i).slope
+    return float(1.0 / slope_s) if slope_s > 0 else float("nan")
+
+
 def summarize(session: Session) -> SessionSummary:
     """Count samples and gaps from the stream indices; rates measured against the host clock."""
     cur, enc = session.current, session.encoder
     n_cur = cur.sample_count
     cur_gaps, cur_missing = _gaps(cur.sample_index())
     cur_rate = float("nan")
+    # a block's host stamp: when the read of its last sample returned
+    block_end = cur.block_first_index + cur.block_count
     if cur.block_count.size > 1:
-        span = (cur.block_first_index[-1] + cur.block_count[-1]) - (cur.block_first_index[0] + cur.block_count[0])
+        span = block_end[-1] - block_end[0]
         cur_rate = _rate(span, int(cur.block_host_ns[0]), int(cur.block_host_ns[-1]))
     n_enc = int(enc.index.size)
     enc_gaps, enc_missing = _gaps(enc.index)
     enc_rate = _rate(float(enc.index[-1] - enc.index[0]), int(enc.host_ns[0]), int(enc.host_ns[-1])) if n_enc > 1 else float("nan")
     streams = (
-        StreamSummary("current", n_cur, n_cur / cur.rate_hz, cur.rate_hz, cur_rate, cur_gaps, cur_missing),
+        StreamSummary("current", n_cur, n_cur / cur.rate_hz, cur.rate_hz, cur_rate, cur_gaps, cur_missing,
+                      fitted_rate(block_end, cur.block_host_ns)),
         StreamSummary("encoder", n_enc, (n_enc + enc_missing) * enc.period_s, 1.0 / enc.period_s, enc_rate,
-                      enc_gaps, enc_missing),
+                      enc_gaps, enc_missing, fitted_rate(enc.index, enc.host_ns)),
     )
     return SessionSummary(
         path=str(session.path),

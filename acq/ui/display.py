@@ -219,7 +219,8 @@ _EXTRA_TEXT = {"drive_time_s": "drive time stamps", "velocity_counts_per_s": "ve
 
 
 def summary_table(summary: SessionSummary) -> FittedTable:
-    """A session at a glance, one row per stream: samples, duration, nominal and effective rates, gaps."""
+    """A session at a glance, one row per stream: samples, duration, nominal rate and the rates measured on the host
+    clock (line fit; first to last stamp), gaps."""
     title = (f"{escape(summary.path)}\njoint {escape(summary.joint)} · {escape(_utc_text(summary.created_utc))} · "
              f"status [bold]{escape(summary.status)}[/bold]")
     if summary.stop_reason:
@@ -235,10 +236,14 @@ def summary_table(summary: SessionSummary) -> FittedTable:
                Column("duration\ns", [f"{x.duration_s:.3f}" for x in s]),
                Column("nominal rate\nHz", [f"{x.nominal_rate_hz:.1f}" for x in s],
                       narrow=Column("nominal\nHz", [f"{x.nominal_rate_hz:.1f}" for x in s])),
-               Column("effective rate\nHz", [format_value(x.effective_rate_hz, ".2f") for x in s],
-                      narrow=Column("measured\nHz", [format_value(x.effective_rate_hz, ".2f") for x in s])),
-               Column("gaps", [f"{x.gaps}" for x in s]), Column("missing", [f"{x.missing}" for x in s])]
-    return FittedTable(title, columns)
+               Column("rate, line fit\nHz", [format_value(x.fitted_rate_hz, ".2f") for x in s],
+                      narrow=Column("rate fit\nHz", [format_value(x.fitted_rate_hz, ".2f") for x in s])),
+               Column("gaps", [f"{x.gaps}" for x in s]), Column("missing", [f"{x.missing}" for x in s]),
+               Column("first–last\nHz", [format_value(x.effective_rate_hz, ".2f") for x in s], drop=1)]
+    caption = ["rate, line fit: samples per second of the host clock, a robust (Theil–Sen) line through each "
+               "sample's host stamp against its index — a late first sample or a burst does not move it; first–last: "
+               "the samples between the first and the last host stamp over the time between them, which they do"]
+    return FittedTable(title, columns, caption)
 
 
 def _utc_text(iso: str | None) -> str:
@@ -268,24 +273,47 @@ def start_times(isos: Sequence[str | None]) -> tuple[Column, Column]:
     return wide, Column(header, cells, "left")
 
 
-def trend_table(trend: Trend) -> FittedTable:
-    """The trend: per session its start, K with its interval, change, EWMA, f_a, f_r, simulated K, tags and state.
+def monitor_bookkeeping_tags() -> frozenset[str]:
+    """The tags acq monitor files with every window for its own use (number, identity, machine time, the alarm rules,
+    the bench facts a restart compares): the same in every window or a count, they say nothing a table row needs."""
+    from acq.monitoring.alarm_rules import RULE_TAGS
+    from acq.monitoring.catalogue import MONITOR_TAG
+    from acq.monitoring.monitor_restart import EVERY_TAG
+    from acq.monitoring.monitor_scope import WINDOW_TAG
+    from acq.monitoring.trend import ELAPSED_TAG
+    from acq.monitoring.window_bench import FACT_TAGS
 
-    Skipped sessions' reasons are in the caption, with the baseline and the rules.
+    return frozenset((MONITOR_TAG, WINDOW_TAG, EVERY_TAG, ELAPSED_TAG, *RULE_TAGS.values(), *FACT_TAGS))
+
+
+def trend_table(trend: Trend) -> FittedTable:
+    """The trend: per session its number (a monitor's window: the window's), start, K with its interval, change, EWMA,
+    f_a, f_r, simulated K, tags and state.
+
+    Skipped sessions' reasons are in the caption, with the baseline and the rules. acq monitor's bookkeeping tags
+    (:func:`monitor_bookkeeping_tags`) are left out, and the caption says so (``--json`` has them).
     """
+    from acq.monitoring.monitor_scope import window_number
+
     pts = trend.points
     f1 = functools.partial(format_value, spec=".1f")
     wide_time, short_time = start_times([p.entry.created_utc for p in pts])
-    tags = [" ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.entry.tags.items())
-            for p in pts]
+    bookkeeping = monitor_bookkeeping_tags()
+    tags = [" ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in p.entry.tags.items()
+                     if k not in bookkeeping) for p in pts]
+    # a monitor's windows by the number the monitor's status and alarm lines give them; other sessions by their row
+    windows = [window_number(p.entry.tags) for p in pts]
+    by_window = bool(pts) and None not in windows
+    numbers = [str(n) for n in windows] if by_window else [str(i) for i in range(1, len(pts) + 1)]
+    refs = [f"window {n}" if by_window else f"#{n}" for n in numbers]
     # "learning baseline" as acq monitor and acq fleet say it; "before baseline" only before a pinned one (--baseline)
     words = {**TREND_STATES,
              "before baseline": "before baseline" if trend.baseline_K_Nm_per_rad else "learning baseline"}
     states = [words[p.state] + (f": {p.reason.replace('+', ' + ')}" if p.state == "alarm" else "")
-              + (f" (#{i} below)" if p.state == "skipped" else "") for i, p in enumerate(pts, 1)]
+              + (f" ({ref} below)" if p.state == "skipped" else "") for ref, p in zip(refs, pts)]
     rel = [f"± {50.0 * (p.entry.K_ci95[1] - p.entry.K_ci95[0]) / p.entry.K_Nm_per_rad:.1f}"
            if None not in (*p.entry.K_ci95, p.entry.K_Nm_per_rad) else "—" for p in pts]
-    columns = [Column("#", [str(i) for i in range(1, len(pts) + 1)]),
+    columns = [Column("window" if by_window else "#", numbers),
                replace(wide_time, narrow=short_time),
                Column("K\nN·m/rad", [f1(p.entry.K_Nm_per_rad) for p in pts]),
                Column("K 95 % interval\nN·m/rad", ["—" if None in p.entry.K_ci95 else
@@ -302,6 +330,9 @@ def trend_table(trend: Trend) -> FittedTable:
         caption.append(f"every session tagged {tags[0]}")
     elif any(tags):
         columns.append(Column("tags", tags, "left", wrap=True, drop=1))
+    if any(k in bookkeeping for p in pts for k in p.entry.tags):
+        caption.append("acq monitor's own tags (window number, identity, alarm rules, bench facts) not shown: "
+                       "--json has every tag")
     columns.append(Column("state", states, "left", wrap=True))
     base = (f"no baseline yet ({trend.baseline_note})" if trend.baseline_K_Nm_per_rad is None else
             f"baseline {trend.baseline_K_Nm_per_rad:.1f} N·m/rad ({trend.baseline_note})")
@@ -309,7 +340,7 @@ def trend_table(trend: Trend) -> FittedTable:
     caption += [f"{base}; ALARM below −{trend.threshold_pct:g} % (threshold) or "
                 f"EWMA (λ = {trend.ewma_lambda:g}) below its −{trend.ewma_L:g}σ limit (EWMA){sigma}; rules: "
                 f"{trend.rules_source}", *([trend.baseline_warning] if trend.baseline_warning else []),
-                *(f"#{i} skipped: {p.reason}" for i, p in enumerate(pts, 1) if p.state == "skipped")]
+                *(f"{ref} skipped: {p.reason}" for ref, p in zip(refs, pts) if p.state == "skipped")]
     title = f"stiffness trend — {escape(trend.joint)}" + ("  [bold red]ALARM[/]" if trend.alarm else "")
     return FittedTable(title, columns, caption, row_styles=[_TREND_STYLES[p.state] for p in pts])
 

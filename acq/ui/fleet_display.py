@@ -20,7 +20,7 @@ from rich.console import Console
 from acq.monitoring.catalogue import Entry
 from acq.ui.display import Column, FittedTable, start_times
 from acq.ui.options import CatalogueLocation, alarm_rule_options
-from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet
+from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet, session_start
 from acq.monitoring.trend import EXIT_ALARM
 from acq.ui.values import alarm_rules_line, format_value
 
@@ -29,14 +29,22 @@ _STYLES = {"alarm": "bold red", "stale": "yellow", "no baseline": "dim", "baseli
 _STATE_WORDS = {"no baseline": "learning baseline"}
 #: Time bins of the PNG's heat strips (the width of a strip is the time since the oldest session).
 HEAT_BINS = 400
+#: The PNG's cells with no judged ΔK (before the baseline, not judged, stale): a grey apart from the colour scale's
+#: white at ΔK = 0 (both were white: a fleet at ΔK ≈ 0 looked blank, and "no ΔK" had no legend).
+NO_DELTA_K_GREY = (200, 200, 200)
+#: Each session's mark on its strip, by how the trend took it: (symbol, brush, pen, legend text).
+_SESSION_MARKS = {"judged": ("o", "#202020", None, "session judged (its ΔK colours the strip until the next)"),
+                  "alarm": ("t", "#d62728", "#202020", "session in alarm"),
+                  "not judged": ("o", None, "#202020", "session not judged (not excited, failed, before the baseline)")}
 
 
 def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> FittedTable:
     """One row per joint, worst first: robot/joint, latest K and its 95 % interval, ΔK, baseline, last session,
     sessions excited / analysed in the last day, state.
 
-    At 80 columns the interval is relative (± %) and the time short (month-day hour:minute); every value stays
-    shown, the state wraps at spaces.
+    At 80 columns the interval is relative (± %) and the time short (month-day hour:minute), the state wraps at
+    spaces; where that is not enough (a source column) the baseline (ΔK says how far K is from it), then the 24 h
+    counts are left out, and the caption names them.
     """
     alarms = sum(s.state == "alarm" for s in statuses)
     title = (f"fleet — {len(statuses)} joint{'s' if len(statuses) != 1 else ''}"
@@ -53,10 +61,10 @@ def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> FittedTab
                       ["—" if e is None else f"{f1(e.K_ci95[0])}–{f1(e.K_ci95[1])}" for e in entries],
                       narrow=Column("95 %\n± %", [_relative_half_width(e) for e in entries])),
                Column("ΔK\n%", [format_value(s.change_pct, "+.1f") for s in statuses]),
-               Column("baseline\nN·m/rad", [f1(s.trend.baseline_K_Nm_per_rad) for s in statuses]),
+               Column("baseline\nN·m/rad", [f1(s.trend.baseline_K_Nm_per_rad) for s in statuses], drop=1),
                replace(wide_time, header="last session\n(UTC)",
                        narrow=replace(short_time, header=short_time.header.replace("started", "last"))),
-               Column("24 h\nok/all", [f"{s.excited_last_day}/{s.analysed_last_day}" for s in statuses]),
+               Column("24 h\nok/all", [f"{s.excited_last_day}/{s.analysed_last_day}" for s in statuses], drop=2),
                Column("state", [(f"ALARM {s.latest.reason.replace('+', ' + ')}" if s.state == "alarm" and
                                  s.latest is not None else _STATE_WORDS.get(s.state, s.state))
                                 + (" · baseline unstable" if s.trend.baseline_warning else "") for s in statuses],
@@ -80,7 +88,7 @@ def _relative_half_width(entry: Entry | None) -> str:
 
 def render_fleet_png(statuses: Sequence[JointStatus], path: Path | str, *, now: datetime, threshold_pct: float,
                      stale_days: float, size: tuple[int, int] | None = None) -> Path:
-    """Draw :func:`fleet_widget` offscreen into a PNG (default 1400 px wide, 40 px per joint)."""
+    """Draw :func:`fleet_widget` offscreen into a PNG (default 1400 px wide, 40 px per joint and the legend)."""
     import shiboken6
 
     from acq.ui.plots import ensure_app, grab_png
@@ -88,18 +96,22 @@ def render_fleet_png(statuses: Sequence[JointStatus], path: Path | str, *, now: 
     ensure_app(offscreen=True)
     frame = fleet_widget(statuses, now=now, threshold_pct=threshold_pct, stale_days=stale_days)
     try:
-        return grab_png(frame, path, size or (1400, 220 + 40 * len(statuses)))
+        return grab_png(frame, path, size or (1400, 270 + 40 * len(statuses)))
     finally:
         shiboken6.delete(frame)  # now, not at interpreter exit (deleteLater there crashes Qt's teardown)
 
 
 def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pct: float, stale_days: float) -> Any:
     """The fleet figure (needs a QApplication): one row per joint, worst at the top, coloured by ΔK against its
-    baseline from each judged session until the next, the last for at most ``stale_days`` (red: K below; white:
-    at the baseline; blank: not judged, or stale); the colour scale spans ±2 × the alarm threshold."""
+    baseline from each judged session until the next, the last for at most ``stale_days`` (red: K below; pale
+    yellow: at the baseline; blue: above; grey: no ΔK — before the baseline, or stale); the colour scale spans ±2 ×
+    the alarm threshold. Each session is marked on its row (judged, in alarm, not judged), and a legend says what the
+    marks and the grey mean."""
     import numpy as np
     import pyqtgraph as pg
     from pyqtgraph.Qt import QtCore, QtWidgets
+
+    from acq.ui.plots import legend_box
 
     frame = QtWidgets.QWidget()
     widget = pg.GraphicsLayoutWidget()
@@ -107,7 +119,9 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
     alarms = sum(s.state == "alarm" for s in statuses)
     widget.ci.addLabel("fleet — ΔK against each joint's baseline" + (f"  ({alarms} in ALARM)" if alarms else ""),
                        row=0, col=0, colspan=2, size="14pt")
-    plot = widget.addPlot(row=1, col=0, axisItems={"bottom": pg.DateAxisItem()})
+    legend = pg.LegendItem(colCount=2, labelTextSize="9pt")  # a row of its own: it covers no strip
+    widget.ci.addItem(legend, row=1, col=0)
+    plot = widget.addPlot(row=2, col=0, axisItems={"bottom": pg.DateAxisItem()})
     histories = [s.history() for s in statuses]
     t0 = min((h[0][0] for h in histories if h), default=now - timedelta(days=1))
     span_s = max((now - t0).total_seconds(), 3600.0)
@@ -121,13 +135,40 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
             heat[max(first, 0):last + 1, len(statuses) - 1 - row] = change
             heat[last + 1:, len(statuses) - 1 - row] = np.nan
     limit = 2.0 * threshold_pct
-    colormap = pg.ColorMap(pos=[0.0, 0.5, 1.0], color=[(214, 39, 40), (247, 247, 247), (31, 119, 180)])
+    # ColorBrewer's RdYlBu (red: K below its baseline; blue: above): its pale yellow at ΔK = 0 is seen on the white
+    # page and apart from the grey of no ΔK (a white centre made a healthy fleet a blank picture); safe for the common
+    # colour blindness (no red against green)
+    colormap = pg.ColorMap(pos=[0.0, 0.25, 0.5, 0.75, 1.0], color=[(215, 48, 39), (252, 141, 89), (255, 255, 191),
+                                                                   (145, 191, 219), (69, 117, 180)])
     image = pg.ImageItem(heat, levels=(-limit, limit), lut=colormap.getLookupTable(nPts=256))
-    image.setRect(QtCore.QRectF(t0.timestamp(), 0.0, span_s, float(len(statuses))))
+    rect = QtCore.QRectF(t0.timestamp(), 0.0, span_s, float(len(statuses)))
+    grey = pg.mkBrush(*NO_DELTA_K_GREY)
+    underlay = QtWidgets.QGraphicsRectItem(rect)  # shows through the cells without ΔK (NaN: transparent)
+    underlay.setBrush(grey)
+    underlay.setPen(pg.mkPen(None))
+    plot.addItem(underlay)
+    image.setRect(rect)
     plot.addItem(image)
     bar = pg.ColorBarItem(values=(-limit, limit), colorMap=colormap, label="ΔK %", interactive=False)
     bar.setImageItem(image)
-    widget.addItem(bar, row=1, col=1)
+    widget.addItem(bar, row=2, col=1)
+    marks: dict[str, tuple[list[float], list[float]]] = {kind: ([], []) for kind in _SESSION_MARKS}
+    for row, s in enumerate(statuses):
+        for point in s.trend.points:
+            start = session_start(point.entry)
+            if start is None:
+                continue
+            kind = ("alarm" if point.state == "alarm" else "judged" if point.change_pct is not None else "not judged")
+            marks[kind][0].append(start.timestamp())
+            marks[kind][1].append(len(statuses) - 1 - row + 0.5)
+    for kind, (symbol, brush, pen, text) in _SESSION_MARKS.items():
+        xs, ys = marks[kind]
+        item = pg.ScatterPlotItem(xs, ys, symbol=symbol, size=8, brush=pg.mkBrush(brush) if brush else None,
+                                  pen=pg.mkPen(pen) if pen else pg.mkPen(None))
+        plot.addItem(item)
+        legend.addItem(item, text)
+    legend.addItem(legend_box(grey), f"grey: no ΔK (before the baseline, or no session for {stale_days:g} days)")
+    widget.ci.layout.setRowFixedHeight(1, 20 * -(-len(legend.items) // 2) + 6)
     labels = [(len(statuses) - 1 - i + 0.5, f"{s.robot}/{s.joint}{f' ({s.source})' if s.source else ''} · {s.state}"
                + ("" if s.change_pct is None else f" {s.change_pct:+.1f} %")) for i, s in enumerate(statuses)]
     plot.getAxis("left").setTicks([labels])

@@ -47,9 +47,8 @@ def status_table(st: MonitorStatus) -> Table:
                                             f" · window {st.last_K_window}")
     rows = [
         ("machine time", duration_text(st.machine_time_s)),
-        ("windows captured / excited / analysed", f"{st.captured} / {st.excited} / {st.analysed}"),
+        ("windows filed (this run)", filed_text(st)),
         *([("windows in the folder (earlier runs too)", str(st.in_folder))] if st.resumed else []),
-        ("not excited · skipped · interrupted", f"{st.not_excited} · {st.skipped} · {st.interrupted}"),
         *([("not captured: the disk budget (--max-disk) was full", str(st.not_captured))] if st.not_captured else []),
         ("last K N·m/rad (95 %) · its window", k_text),
         ("ΔK against the baseline", format_value(st.change_pct, "+.1f") + " %"),
@@ -70,10 +69,23 @@ def status_table(st: MonitorStatus) -> Table:
     return table
 
 
-def _captured(st: MonitorStatus) -> str:
-    """'1 window captured', '12 captured in this run, 15 in the folder' (after a restart)."""
-    text = f"{st.captured} window{'s' if st.captured != 1 else ''} captured"
-    return text + (f" in this run, {st.in_folder} in the folder" if st.resumed else "")
+def filed_parts(st: MonitorStatus) -> str:
+    """How the windows this run filed count, adding up to them: '19 ok + 7 not excited + 1 interrupted' (the kinds of
+    :data:`acq.monitoring.monitor_status.FILED_KINDS` that have any)."""
+    return " + ".join(f"{n} {kind}" for kind, n in st.filed.items() if n)
+
+
+def filed_text(st: MonitorStatus) -> str:
+    """'27 = 19 ok + 7 not excited + 1 interrupted'; '0' before the first window is filed."""
+    return f"{st.filed_total}" + (f" = {filed_parts(st)}" if st.filed_total else "")
+
+
+def _filed(st: MonitorStatus) -> str:
+    """'1 window filed (1 ok)', '12 windows filed in this run (…), 15 in the folder' (after a restart)."""
+    text = f"{st.filed_total} window{'s' if st.filed_total != 1 else ''} filed"
+    text += " in this run" if st.resumed else ""
+    text += f" ({filed_parts(st)})" if st.filed_total else ""
+    return text + (f", {st.in_folder} in the folder" if st.resumed else "")
 
 
 def _pct(fraction: float | None) -> str:
@@ -103,7 +115,8 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
 @click.option("--for", "for_text", default=None, help="Stop after this (8h); default: until Ctrl-C.")
 @click.option("--on-alarm", default=None, metavar="CMD",
               help="Run CMD through sh -c on entering alarm (in the background; a failure is reported), with "
-                   "ACQ_JOINT, ACQ_K, ACQ_BASELINE_K, ACQ_CHANGE_PCT, ACQ_SESSION in its environment.")
+                   "ACQ_JOINT, ACQ_K, ACQ_BASELINE_K, ACQ_CHANGE_PCT, ACQ_SESSION, ACQ_WINDOW (from 1) in its "
+                   "environment.")
 @click.option("--keep", type=click.IntRange(min=0), default=10, show_default=True,
               help="Keep the raw files of the last N windows (baseline and alarming windows are always kept).")
 @click.option("--max-disk", default=None, help="Disk budget of the folder (2GB, 500MB); never exceeded.")
@@ -162,10 +175,10 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
 
     def log(st: MonitorStatus) -> None:  # one line per change when not on a terminal (a service, a log file)
         last_k = "—" if st.last_K is None else f"{st.last_K:.1f} (window {st.last_K_window})"
-        line = (f"{duration_text(st.machine_time_s)}: {st.captured} captured"
+        line = (f"{duration_text(st.machine_time_s)}: {st.filed_total} filed"
                 + (f" in this run ({st.in_folder} in the folder)" if st.resumed else "")
-                + f", {st.excited} excited, {st.analysed} "
-                f"analysed" + (f", {st.not_captured} not captured (disk budget)" if st.not_captured else "")
+                + (f" = {filed_parts(st)}" if st.filed_total else "")
+                + (f", {st.not_captured} not captured (disk budget)" if st.not_captured else "")
                 + f", excited {_pct(st.last_excited_fraction)} of the last window, last K {last_k}, "
                 f"ΔK {format_value(st.change_pct, '+.1f')} %, {st.state}"
                 + (" (baseline unstable)" if st.baseline_warning else "") + f", {st.disk_bytes / 1e6:.1f} MB"
@@ -187,5 +200,5 @@ def _say_if_stopped(monitor: Monitor, catalogue: Path | str) -> None:
         return
     st = monitor.status
     catalogue = redacted(catalogue) if is_url(catalogue) else catalogue  # type: ignore[arg-type]
-    click.echo(f"acq: {monitor.stopped_by}: {_captured(st)}, {st.analysed} analysed, all kept in "
+    click.echo(f"acq: {monitor.stopped_by}: {_filed(st)}, all kept in "
                f"{catalogue} (trend state: {st.state}); the same command resumes", err=True)

@@ -3,12 +3,16 @@
 :class:`ReportView` lays out, for one or several sessions (each its own colour):
 
 * ``torque`` and ``speed``: the time traces on the aligned (drive) time base, x axes linked;
-* ``frf``: measured |H| = |ω_m/T_e| on log–log axes with the fitted two-mass model and its 95 % band
-  (shaded; the legend says its width, as it is often a line's width), f_a/f_r marked by vertical lines, and
+* ``frf``: measured |H| = |ω_m/T_e| on log–log axes (one session: dark grey dots) with the fitted two-mass model
+  and its 95 % band (the session's colour, shaded; the legend says its width, as it is often a line's width),
+  f_a/f_r marked by vertical lines, and
   what a ``poor`` verdict names there in :data:`VERDICT_MARK_COLOR` (also on the phase): the band where the
   model misses |H| shaded, labelled "misfit LO–HI Hz", a third mode a dash-dot line, "third mode ≈ F Hz";
   the legend and the f_a/f_r labels sit in strips of their own above the plot, so they never cover a
   curve, and the labels are packed into rows so that none overlaps another;
+* ``misfit``: how far the model misses the measured |H|, model / measured − 1 in % over the fit band (the sign of
+  the verdict's "misses by +5.9 %"), with the model's 95 % band about 0 and the verdict's marks: a misfit the
+  verdict names, which a log axis hides (6 % is 0.025 decades);
 * ``phase``: measured and model phase, when the clocks were aligned well enough for a phase to be the
   plant's (the residual a complex fit accepts, :func:`analysis.quality.phase_is_meaningful`);
 * ``coherence``: γ²; FRF, phase and coherence share their x axis and show the fit band shaded;
@@ -49,6 +53,13 @@ DEFAULT_SIZE_PX = (1600, 1000)
 LEGEND_ROW_PX = 20  # height of a legend row (9 pt text, pyqtgraph's 20 px samples)
 MARK_GAP_PX = 8  # least space between two labels in one row
 VERDICT_MARK_COLOR = "#e6550d"  # what a verdict names on the FRF (misfit, third mode): no session's colour
+#: The measured |H| of a single session: dark grey, apart from the model in the session's colour (both were blue). With
+#: several sessions the colour tells the sessions apart, and the measured dots are a faint shade of it.
+MEASURED_COLOR = "#404040"
+#: The allowance of the verdict's misfit test, shaded on the misfit panel.
+ALLOWANCE_COLOR = "#2ca02c"
+#: The misfit panel's y range: at least ± this, % (a model that fits to ±1 % is drawn flat, not as noise magnified).
+MISFIT_MIN_RANGE_PCT = 5.0
 
 
 @dataclass(frozen=True)
@@ -108,7 +119,12 @@ def _with_alpha(color: str, alpha: int) -> QtGui.QColor:
     return c
 
 
-def _legend_box(brush: QtGui.QBrush, pen: QtGui.QPen | None = None) -> pg.BarGraphItem:
+def _allowance_style() -> tuple[QtGui.QBrush, QtGui.QPen]:
+    """Brush and edge of the misfit test's allowance (on the misfit panel and in the legend)."""
+    return pg.mkBrush(_with_alpha(ALLOWANCE_COLOR, 70)), pg.mkPen(_with_alpha(ALLOWANCE_COLOR, 160), width=1)
+
+
+def legend_box(brush: QtGui.QBrush, pen: QtGui.QPen | None = None) -> pg.BarGraphItem:
     """A legend sample for a shaded region: a filled square (with a line across it when ``pen`` is given)."""
     return pg.BarGraphItem(x=[0.0], height=[1.0], width=1.0, brush=brush, pen=pen)
 
@@ -161,11 +177,14 @@ class ReportView(QtWidgets.QWidget):
         if title:
             layout.addLabel(escape(title), row=0, col=0, colspan=2, size="12pt")
         phase = any(s.figures.phase_valid for s in sessions)
+        misfit = any(s.figures.misfit_pct.size == s.figures.f_hz.size for s in sessions)
         layout.addLabel("FRF |ω_m / T_e| with the fitted two-mass model", row=1, col=1, size="11pt")
         self.legend = pg.LegendItem(colCount=1 if len(sessions) > 1 else 3, labelTextSize="9pt")
         layout.addItem(self.legend, row=2, col=1)
         marks = layout.addPlot(row=3, col=1)
-        frf_row, bottom_rows = 4, (5, 6) if phase else (5,)
+        frf_row = 4
+        lower = [name for name, shown in (("misfit", misfit), ("phase", phase), ("coherence", True)) if shown]
+        bottom_rows = tuple(range(frf_row + 1, frf_row + 1 + len(lower)))
         self.plots = {
             "torque": _plot(layout, 1, 0, "Electromagnetic torque", ("t (drive clock)", "s"), ("T_e", "N·m"),
                             rowspan=frf_row),
@@ -173,23 +192,23 @@ class ReportView(QtWidgets.QWidget):
                            rowspan=len(bottom_rows)),
             "frf": _plot(layout, frf_row, 1, None, ("f", "Hz"), ("|H|", "rad/(s·N·m)")),
         }
-        if phase:
-            self.plots["phase"] = _plot(layout, 5, 1, None, ("f", "Hz"), ("phase of H", "°"))
-        self.plots["coherence"] = _plot(layout, bottom_rows[-1], 1, None, ("f", "Hz"), ("γ²", ""))
+        lower_axes = {"misfit": ("model / measured − 1", "%"), "phase": ("phase of H", "°"),
+                      "coherence": ("γ²", "")}
+        for name, row in zip(lower, bottom_rows):
+            self.plots[name] = _plot(layout, row, 1, None, ("f", "Hz"), lower_axes[name])
         for row, stretch in ((frf_row, 3), *((r, 2) for r in bottom_rows)):
             layout.layout.setRowStretchFactor(row, stretch)
         self.plots["speed"].setXLink(self.plots["torque"])
         frf = self.plots["frf"]
         frf.setLogMode(x=True, y=True)
-        for name in ("phase", "coherence"):
-            if name in self.plots:
-                self.plots[name].setLogMode(x=True, y=False)
-                self.plots[name].setXLink(frf)
+        for name in lower:
+            self.plots[name].setLogMode(x=True, y=False)
+            self.plots[name].setXLink(frf)
         self.plots["coherence"].setYRange(0.0, 1.0)
         if phase:
             self.plots["phase"].setYRange(-180.0, 180.0)
             self.plots["phase"].getAxis("left").setTicks([[(float(d), f"{d}") for d in range(-180, 181, 90)], []])
-        for name in ("frf", "phase", "coherence"):
+        for name in ("frf", *lower):
             if name in self.plots:
                 self.plots[name].getAxis("bottom").setTicks(log_ticks())
                 self.plots[name].getAxis("left").setWidth(70)  # one width: the linked x axes line up
@@ -197,11 +216,19 @@ class ReportView(QtWidgets.QWidget):
         self.marks = marks
         self._setup_marks(marks, frf)
         self.mark_labels: list[pg.TextItem] = []
+        self.misfit_tested = False  # a session's misfit test drawn (its legend entries then)
         several = len(sessions) > 1
         for i, s in enumerate(sessions):
             self._draw_session(s, i, s.name if several else "")
+        if misfit:
+            self._misfit_range(sessions)
+        if self.misfit_tested:  # the misfit test's line (grey in the legend: the sessions' colours) and allowance
+            line = pg.PlotDataItem(pen=pg.mkPen(MEASURED_COLOR if not several else "#888", width=2.5))
+            self.legend.addItem(line, "misfit (model / measured − 1), test windows" +
+                                (" (in the session's colour)" if several else ""))
+            self.legend.addItem(legend_box(*_allowance_style()), "allowed misfit (noise, quantisation)")
         for band in dict.fromkeys(s.figures.band_hz for s in sessions):
-            self.legend.addItem(_legend_box(self._shade_band(band)), f"fit band {band[0]:g}–{band[1]:g} Hz")
+            self.legend.addItem(legend_box(self._shade_band(band)), f"fit band {band[0]:g}–{band[1]:g} Hz")
         rows = -(-len(self.legend.items) // self.legend.columnCount)
         layout.layout.setRowFixedHeight(1, 24)
         layout.layout.setRowFixedHeight(2, rows * LEGEND_ROW_PX + 6)
@@ -236,9 +263,9 @@ class ReportView(QtWidgets.QWidget):
         marks.vb.sigXRangeChanged.connect(lambda *_: place_marks(marks))
 
     def _shade_band(self, band_hz: tuple[float, float]) -> QtGui.QBrush:
-        """The fit band, shaded on the FRF, the phase and the coherence; returns its brush."""
+        """The fit band, shaded on the FRF, the misfit, the phase and the coherence; returns its brush."""
         brush = pg.mkBrush(0, 0, 0, 14)
-        for name in ("frf", "phase", "coherence"):
+        for name in ("frf", "misfit", "phase", "coherence"):
             if name in self.plots:
                 region = pg.LinearRegionItem(values=[math.log10(f) for f in band_hz], movable=False, brush=brush,
                                              pen=pg.mkPen(None))
@@ -258,11 +285,11 @@ class ReportView(QtWidgets.QWidget):
         self.plots["speed"].plot(fd.t_s, fd.speed_rad_s, pen=trace_pen, name=f"{prefix}ω_m")
         f, h, coh = _positive(fd.f_hz, fd.H_abs, fd.coherence)
         frf, coherence = self.plots["frf"], self.plots["coherence"]
-        faint = _with_alpha(color, 110)
+        faint = _with_alpha(color if name else MEASURED_COLOR, 110)
         measured = frf.plot(f, h, pen=pg.mkPen(faint, width=1), symbol="o", symbolSize=3, symbolPen=None,
                             symbolBrush=faint)
         if not name:
-            self.legend.addItem(measured, "measured")
+            self.legend.addItem(measured, "measured |H|")
         elif index == 0:  # several sessions: one entry for the dots of all, one per session for its model
             self.legend.addItem(pg.PlotDataItem(pen=None, symbol="o", symbolSize=5, symbolPen=None, symbolBrush="#888"),
                                 "measured (dots in the session's colour)")
@@ -280,11 +307,22 @@ class ReportView(QtWidgets.QWidget):
         frf.addItem(pg.FillBetweenItem(low_curve, high_curve, brush=fill))
         model_pen = pg.mkPen(color, width=2)
         frf.plot(mf, model, pen=model_pen)
-        self.legend.addItem(_legend_box(pg.mkBrush(fill), model_pen), f"{prefix}two-mass fit, 95 % band "
+        self.legend.addItem(legend_box(pg.mkBrush(fill), model_pen), f"{prefix}two-mass fit, 95 % band "
                                                                       f"{band_width_text(fd)}")
         if phase is not None:
             mp, model_phase = _positive(fd.model_f_hz, fd.model_phase_deg)
             phase.plot(mp, model_phase, pen=model_pen)
+        misfit = self.plots.get("misfit")
+        if misfit is not None and fd.misfit_pct.size == fd.f_hz.size:  # the model's own 95 % band about 0
+            with np.errstate(divide="ignore", invalid="ignore"):
+                rel_low, rel_high = 100.0 * (low / model - 1.0), 100.0 * (high / model - 1.0)
+            misfit.addItem(pg.FillBetweenItem(misfit.plot(mf, rel_low, pen=pg.mkPen(_with_alpha(color, 110))),
+                                              misfit.plot(mf, rel_high, pen=pg.mkPen(_with_alpha(color, 110))),
+                                              brush=fill))
+            misfit.addItem(pg.InfiniteLine(pos=0.0, angle=0, movable=False, pen=model_pen), ignoreBounds=True)
+            fm, pct = _positive(fd.f_hz, fd.misfit_pct)
+            misfit.plot(fm, pct, pen=None, symbol="o", symbolSize=4, symbolPen=None, symbolBrush=faint)
+            self._draw_misfit_test(fd, misfit, color if name else MEASURED_COLOR)
         for label, f_hz in (("f_a", fd.f_a_hz), ("f_r", fd.f_r_hz)):
             if math.isfinite(f_hz) and f_hz > 0:
                 for plot in (frf, phase):
@@ -298,7 +336,7 @@ class ReportView(QtWidgets.QWidget):
                 self.marks.addItem(text, ignoreBounds=True)
                 self.mark_labels.append(text)
         for label, low_hz, high_hz in verdict_marks(fd):
-            for plot in (frf, phase):
+            for plot in (frf, misfit, phase):
                 if plot is not None:
                     plot.addItem(_verdict_mark(low_hz, high_hz, f"{prefix}{label}"), ignoreBounds=True)
             where = f"≈ {low_hz:.0f} Hz" if low_hz == high_hz else f"{low_hz:.0f}–{high_hz:.0f} Hz"
@@ -307,6 +345,40 @@ class ReportView(QtWidgets.QWidget):
             self.marks.addItem(text, ignoreBounds=True)
             self.mark_labels.append(text)
         place_marks(self.marks)
+
+    def _draw_misfit_test(self, fd: FigureData, plot: pg.PlotItem, color: str) -> None:
+        """What the verdict's misfit test weighed (:attr:`analysis.report.FigureData.misfit_windows`): each window's
+        mean misfit (a line through the windows' centres, %, in ``color``) and the allowance it was held to (shaded
+        about 0); a window beyond it is what the verdict names. The legend's entries come once, after the sessions."""
+        windows = fd.misfit_windows.reshape(-1, 4)
+        windows = windows[np.all(np.isfinite(windows), axis=1)]
+        if windows.shape[0] < 2:
+            return
+        centre = np.sqrt(windows[:, 0] * windows[:, 1])
+        mean_pct, upper, lower = (100.0 * np.expm1(windows[:, 2]), 100.0 * np.expm1(windows[:, 3]),
+                                  100.0 * np.expm1(-windows[:, 3]))
+        brush, edge = _allowance_style()
+        plot.addItem(pg.FillBetweenItem(plot.plot(centre, lower, pen=edge), plot.plot(centre, upper, pen=edge),
+                                        brush=brush))
+        plot.plot(centre, mean_pct, pen=pg.mkPen(color, width=2.5))
+        self.misfit_tested = True
+
+    def _misfit_range(self, sessions: Sequence[SessionFigure]) -> None:
+        """The misfit panel's y range: 1.5 × the largest window mean of the misfit test (what the verdict weighs),
+        else (no test made) the 2nd…98th percentiles of the bins' misfits; at least ± :data:`MISFIT_MIN_RANGE_PCT`.
+        Single bins scatter far wider where the coherence falls (and at f_a, where |H| dips to the noise floor):
+        they would flatten the window means the verdict is about; they are drawn, partly off the range."""
+        means = [100.0 * np.expm1(s.figures.misfit_windows[:, 2]) for s in sessions if s.figures.misfit_windows.size]
+        joined = np.concatenate(means) if means else np.empty(0)
+        joined = joined[np.isfinite(joined)]
+        if joined.size:
+            span = 1.5 * float(np.max(np.abs(joined)))
+        else:
+            bins = np.concatenate([s.figures.misfit_pct for s in sessions])
+            bins = bins[np.isfinite(bins)]
+            span = float(np.max(np.abs(np.percentile(bins, [2.0, 98.0])))) if bins.size else 0.0
+        span = max(span, MISFIT_MIN_RANGE_PCT)
+        self.plots["misfit"].setYRange(-1.1 * span, 1.1 * span, padding=0.0)
 
 
 def verdict_marks(fd: FigureData) -> list[tuple[str, float, float]]:

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from pathlib import Path
 from typing import Any
 
@@ -95,7 +96,7 @@ def trend_widget(trend: Trend) -> Any:
         if no_k:  # a gap in the trend says why: those windows are there, without a number
             legend.addItem(k_plot.plot(no_k, [values.min() - 0.5 * pad] * len(no_k), pen=None, symbol="x",
                                        symbolSize=9, symbolPen="#777", symbolBrush="#777"),
-                           f"no K: {len(no_k)} not excited / failed")
+                           f"no K: {no_k_counts(trend.points)}")
         outside = int(np.sum(~judged_pts & ((k < values.min() - pad) | (k > values.max() + pad))))
         if outside:
             # a legend line only: an empty curve in the plot would upset its x range
@@ -125,6 +126,14 @@ def trend_widget(trend: Trend) -> Any:
     widget.ci.addLabel(alarm_rules_line([(trend.joint, trend.rules_source)]), row=4, col=0, size="9pt")
     widget.ci.layout.setRowFixedHeight(1, 20 * -(-len(legend.items) // 3) + 5)  # every legend row, none clipped
     return frame
+
+
+def no_k_counts(points: list[TrendPoint]) -> str:
+    """The points without K counted by why: '7 not excited · 1 interrupted' (the catalogue's verdict; 'analysis
+    failed' for one without a result), so the legend's count is the catalogue's and each is named."""
+    why = Counter("analysis failed" if p.entry.error is not None or p.entry.verdict is None else p.entry.verdict
+                  for p in points if p.entry.K_Nm_per_rad is None)
+    return " · ".join(f"{n} {verdict}" for verdict, n in sorted(why.items(), key=lambda item: -item[1]))
 
 
 def _category(p: TrendPoint) -> str:
