@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from acq.ui.options import CatalogueLocation, alarm_rule_options
+from acq.ui.options import CatalogueLocation, PngPath, alarm_rule_options
 from acq.monitoring.trend import EXIT_ALARM, catalogue_sources, load_trend, trend_json
 from acq.ui.display import trend_table
 from acq.ui.trend_plot import render_trend_png
@@ -25,7 +25,7 @@ from acqcore.errors import ConfigError
 @alarm_rule_options("the joint's")
 @click.option("--baseline", "baseline_id", default=None, help="Baseline = this session id (or a unique prefix).")
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE", help="Only sessions with this tag (repeatable).")
-@click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
+@click.option("--png", "png_path", type=PngPath(), default=None,
               help="Also draw the trend into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the trend as JSON.")
 def trend_command(folders: tuple[Path, ...], catalogues: tuple[Path | str, ...], joint: str,
