@@ -315,8 +315,8 @@ def trend_table(trend: Trend) -> FittedTable:
 
 
 #: Sessions a batch did not analyse as they are still being recorded (after their count).
-STILL_RECORDING = ("skipped as still recording (acq check repairs a killed recorder's session; --partial analyses it as "
-                   "it is)")
+STILL_RECORDING = ("skipped as still recording (acq check repairs a killed recorder's session; --partial analyses it "
+                   "as it is)")
 
 
 def batch_table(report: BatchReport) -> FittedTable:

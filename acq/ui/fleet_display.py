@@ -145,7 +145,8 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
               help="A catalogue, a file or postgresql:// URL (repeatable; default: FOLDER/catalogue.sqlite of each "
                    "FOLDER, FOLDER defaulting to sessions/). Several are judged apart, each row saying its source.")
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
-              help="Only sessions with this tag (repeatable), e.g. --tag site=plant2.")
+              help="Only sessions with this tag (repeatable), e.g. --tag site=plant2; read as acq record --tag reads "
+                   "it.")
 @click.option("--stale-days", type=click.FloatRange(0, min_open=True), default=7.0, show_default=True,
               help="A joint with no session for this many days is stale.")
 @alarm_rule_options("each joint's")

@@ -24,7 +24,9 @@ from acqcore.errors import ConfigError
 @click.option("--joint", required=True, help="The joint to trend.")
 @alarm_rule_options("the joint's")
 @click.option("--baseline", "baseline_id", default=None, help="Baseline = this session id (or a unique prefix).")
-@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE", help="Only sessions with this tag (repeatable).")
+@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+              help="Only sessions with this tag (repeatable; read as acq record --tag reads it: 2.5 a number, 007 "
+                   "text).")
 @click.option("--png", "png_path", type=PngPath(), default=None,
               help="Also draw the trend into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the trend as JSON.")

@@ -98,8 +98,8 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
     if tags and trend_joint is None:  # a session is shown whatever its tags: the filter would be silently ignored
         raise ConfigError(f"--tag {tags[0]}: only with --trend JOINT (it selects the trend's sessions)")
     if screenshot is None and not has_display():
-        raise ConfigError(NO_DISPLAY_MESSAGE.format(form="SESSION" if trend_joint is None else
-                                                    f"--trend {trend_joint} {sessions[0] if sessions else ''}".rstrip()))
+        form = "SESSION" if trend_joint is None else f"--trend {trend_joint} {sessions[0] if sessions else ''}".rstrip()
+        raise ConfigError(NO_DISPLAY_MESSAGE.format(form=form))
     from acq.process_signals import signals_deferred
 
     with signals_deferred():  # a Ctrl-C inside Qt's import was a fatal error in shiboken's start-up (exit 134) or lost
