@@ -106,11 +106,11 @@ def test_a_batch_of_a_read_only_folder_names_the_cause_and_the_way_out(tmp_path:
     with read_only_view(tmp_path / "sessions") as ro:
         run = run_cli(capsys, "analyze", str(ro), "--no-report")
         assert (run.code, run.out) == (1, "")
-        assert run.err == (f"acq: error: read-only file system: {ro / 'catalogue.sqlite'} (cannot open the catalogue) "
-                           "— --result-dir DIR writes the results and the catalogue elsewhere\n")
+        assert run.err == (f"acq: error: read-only file system: {ro / 'catalogue.sqlite'} (no catalogue can be made "
+                           "there) — --result-dir DIR writes the results and the catalogue elsewhere\n")
         run = run_cli(capsys, "analyze", str(ro), "--no-report", "--catalogue", str(ro / "c.sqlite"))
-        assert (run.code, run.err) == (1, f"acq: error: read-only file system: {ro / 'c.sqlite'} (cannot open the "
-                                          "catalogue) — give --catalogue a file acq may write\n")
+        assert (run.code, run.err) == (1, f"acq: error: read-only file system: {ro / 'c.sqlite'} (no catalogue can "
+                                          "be made there) — give --catalogue a file acq may write\n")
         trend = run_cli(capsys, "trend", str(ro), "--joint", "joint1")
         assert (trend.code, trend.err) == (2, f"acq: error: {ro / 'catalogue.sqlite'}: no catalogue — {ro} is not "
                                               f"writable (read-only file system): fill one with acq analyze {ro}/ "
@@ -120,6 +120,10 @@ def test_a_batch_of_a_read_only_folder_names_the_cause_and_the_way_out(tmp_path:
         assert run.code == 0, run.err
     trend = run_cli(capsys, "trend", str(tmp_path / "results"), "--joint", "joint1", "--json")
     assert trend.code == 0 and len(json.loads(trend.out)["points"]) == 1
+    with read_only_view(tmp_path / "results") as ro:  # a catalogue there, in a read-only folder: SQLite cannot read it
+        trend = run_cli(capsys, "trend", str(ro), "--joint", "joint1")
+    assert (trend.code, trend.err) == (1, f"acq: error: read-only file system: {ro / 'catalogue.sqlite'} (SQLite "
+                                          "writes beside a catalogue, also to read it)\n")
 
 
 # ---- 4. --tag: one parser, nothing silently changed ------------------------------------------------------------------

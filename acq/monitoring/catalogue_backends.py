@@ -45,8 +45,10 @@ def open_error(path: Path | str, e: BaseException, what: str) -> ConfigError | S
     if "full" in str(e) or getattr(e, "errno", None) == errno.ENOSPC:
         return StorageError(f"disk full: {path} ({one_line(e)})")
     refused = None if is_url(path) else refused_write(Path(path).parent)
-    if refused is not None:  # SQLite says only "unable to open database file" (also to read one in WAL mode)
-        return StorageError(f"{refused}: {path} ({what})")
+    if refused is not None:  # SQLite says only "unable to open database file"
+        why = ("SQLite writes beside a catalogue, also to read it" if Path(path).exists()
+               else "no catalogue can be made there")
+        return StorageError(f"{refused}: {path} ({why})")
     return ConfigError(f"{path}: {what} ({one_line(e)})")
 
 
