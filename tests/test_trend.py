@@ -285,7 +285,9 @@ def test_a_recorded_session_is_in_the_catalogue_at_once(tmp_path: Path, capsys: 
     (point,) = json.loads(trend.out)["points"]
     assert point["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
     batch = run_cli(capsys, "analyze", str(out), "--no-report")
-    assert batch.code == 0 and "0 analysed (0 failed), 1 skipped" in batch.out.replace("\n", " ")
+    # nothing to do is one line, not a table header without rows
+    assert (batch.code, batch.out) == (0, "nothing to analyse: 1 session already analysed (same file, same options) in "
+                                          f"{out / 'catalogue.sqlite'}\n")
 
 
 def test_the_trend_window_redraws_when_a_writer_adds_sessions(tmp_path: Path) -> None:
@@ -334,8 +336,9 @@ def test_the_trend_window_started_before_the_first_window_waits_for_it(tmp_path:
     folder = tmp_path / "monitor"
     png = tmp_path / "waiting.png"
     run = run_cli(capsys, "view", "--trend", "joint1", str(folder), "--screenshot", str(png))
-    # a screenshot (a script) of a trend with no window yet is an error, not a picture of "waiting" (the second read)
-    assert run.code == 1 and not png.exists()
+    # a screenshot (a script) of a trend with no window yet is an error, not a picture of "waiting" (the second read);
+    # bad input (exit 2), as acq trend says it
+    assert run.code == 2 and not png.exists()
     assert run.err == (f"acq: error: {folder / 'catalogue.sqlite'}: no catalogue — fill one with acq analyze "
                        f"{folder}/ first\n")
 
@@ -369,7 +372,7 @@ def test_the_trend_window_started_before_the_first_window_waits_for_it(tmp_path:
 def test_the_trend_window_of_a_joint_the_catalogue_does_not_have_is_one_line_not_a_wait(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A misspelt joint (or tag) in a catalogue that has sessions waited for ever: now one line naming the joint and
-    the joints there, exit 1. An empty catalogue (or none yet) is a monitor yet to file its first window: waited for."""
+    the joints there, exit 2 (bad input, as acq trend). An empty catalogue (or none yet) is a monitor yet to file its first window: waited for."""
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from acq.monitoring.catalogue import Outcome
 
@@ -381,11 +384,13 @@ def test_the_trend_window_of_a_joint_the_catalogue_does_not_have_is_one_line_not
         with Catalogue(tmp_path / "catalogue.sqlite") as c:
             c.record(Outcome(f"/m/{joint}.h5", f"h{joint}", "r", meta, doc, None, 1.0))
     run = run_cli(capsys, "view", "--trend", "jiont1", str(tmp_path))
-    assert (run.code, run.out) == (1, "")
+    assert (run.code, run.out) == (2, "")
     assert run.err == (f"acq: error: {tmp_path / 'catalogue.sqlite'}: no sessions of joint jiont1 (joints: joint1, "
                        "joint2)\n")
+    trend = run_cli(capsys, "trend", str(tmp_path), "--joint", "jiont1")  # the same error, the same exit code
+    assert (trend.code, trend.err) == (run.code, run.err)
     run = run_cli(capsys, "view", "--trend", "joint1", str(tmp_path), "--tag", "robot=r2")  # a tag no session has
-    assert run.code == 1 and "no sessions of joint joint1 tagged robot=r2 (joints: joint1, joint2)" in run.err
+    assert run.code == 2 and "no sessions of joint joint1 tagged robot=r2 (joints: joint1, joint2)" in run.err
 
 
 def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> None:

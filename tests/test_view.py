@@ -208,9 +208,19 @@ def test_without_a_display_view_says_so_in_one_line(session: Path, monkeypatch: 
     for name in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM"):
         monkeypatch.delenv(name, raising=False)
     run = run_cli(capsys, "view", str(session))
-    assert run.code == 1
-    assert run.err == ("acq view: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window as an image "
+    # bad input (exit 2), as acq record --live without a display
+    assert (run.code, run.out) == (2, "")
+    assert run.err == ("acq: error: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window as an image "
                        "instead: acq view SESSION --screenshot out.png\n")
+    run = run_cli(capsys, "view", "--trend", "joint1", str(session.parent))  # a trend's own form, not a session's
+    assert (run.code, run.err) == (2, "acq: error: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window "
+                                      f"as an image instead: acq view --trend joint1 {session.parent} --screenshot "
+                                      "out.png\n")
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--live", "--out",
+                  str(session.parent / "live"))
+    assert (run.code, run.err) == (2, "acq: error: --live needs a display (DISPLAY or WAYLAND_DISPLAY is unset); "
+                                      "record without --live\n")
+    assert not (session.parent / "live").exists()
 
 
 @pytest.fixture

@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.install import install_hint
+from acq.recording.storage import refused_write
 from acqcore.errors import ConfigError, StorageError
 
 #: Seconds a writer waits for another process's lock (SQLite's busy timeout, PostgreSQL's lock_timeout).
@@ -39,9 +40,15 @@ def is_url(location: Path | str) -> bool:
 
 
 def open_error(path: Path | str, e: BaseException, what: str) -> ConfigError | StorageError:
-    """A full disk is a failed write (exit 1), anything else bad input naming the catalogue (exit 2)."""
+    """A full disk, or a folder acq may not write into (read-only, no permission), is a failed write (exit 1),
+    anything else bad input naming the catalogue (exit 2)."""
     if "full" in str(e) or getattr(e, "errno", None) == errno.ENOSPC:
         return StorageError(f"disk full: {path} ({one_line(e)})")
+    refused = None if is_url(path) else refused_write(Path(path).parent)
+    if refused is not None:  # SQLite says only "unable to open database file"
+        why = ("SQLite writes beside a catalogue, also to read it" if Path(path).exists()
+               else "no catalogue can be made there")
+        return StorageError(f"{refused}: {path} ({why})")
     return ConfigError(f"{path}: {what} ({one_line(e)})")
 
 

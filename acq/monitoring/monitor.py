@@ -29,7 +29,7 @@ import math
 import time
 from collections.abc import Callable
 from concurrent.futures import Future
-from contextlib import AbstractContextManager
+from contextlib import AbstractContextManager, suppress
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -115,6 +115,7 @@ class Monitor:
         # may be writing to — they start together — or a database of a URL is not ours to remove: the second read)
         own = None if self.s.catalogue is not None else self.s.out_dir / CATALOGUE_NAME
         made = [p for p in (own, self.s.out_dir / IDENTITY_FILE) if p is not None and not p.exists()]
+        folders = [f for f in (self.s.out_dir, *self.s.out_dir.parents) if not f.exists()]  # the deepest first
         try:
             self._run()
         finally:
@@ -122,6 +123,10 @@ class Monitor:
                 for path in made:
                     for left in (path, *(path.with_name(path.name + end) for end in ("-wal", "-shm", "-journal"))):
                         left.unlink(missing_ok=True)
+            if not self._filed:  # nor the folders it made for it, if nothing else is in them
+                with suppress(OSError):
+                    for folder in folders:
+                        folder.rmdir()
         if self._stop is not None:
             return EXIT_INTERRUPTED
         return 3 if self._in_alarm else 0

@@ -13,6 +13,7 @@ from acq.monitoring.catalogue_backends import is_url, redacted
 from acq.monitoring.monitor_scope import MONITOR_TAG, monitors_of, split_by_monitor
 from acq.monitoring.session_outcome import CATALOGUE_NAME
 from acq.monitoring.trend import Trend, compute_trend
+from acq.recording.storage import refused_write
 from acq.recording.tags import parse_tags, tags_match
 from acqcore.errors import ConfigError
 
@@ -31,7 +32,12 @@ def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Pat
     """The catalogue to read: ``catalogue`` (a file or URL) or FOLDER/catalogue.sqlite; an error when no file."""
     path = catalogue or (folder or Path("sessions")) / CATALOGUE_NAME
     if not is_url(path) and not Path(path).is_file():
-        raise NoSessions(f"{path}: no catalogue — fill one with acq analyze {folder or 'sessions'}/ first", path)
+        sessions = folder or Path("sessions")
+        refused = None if catalogue else refused_write(sessions)  # acq analyze can make no catalogue there
+        fill = (f"fill it with acq analyze FOLDER/ --catalogue {path}" if catalogue else
+                f"{sessions} is not writable ({refused}): fill one with acq analyze {sessions}/ --result-dir DIR, "
+                "then acq trend DIR" if refused else f"fill one with acq analyze {sessions}/ first")
+        raise NoSessions(f"{path}: no catalogue — {fill}", path)
     return path
 
 

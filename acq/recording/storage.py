@@ -53,6 +53,18 @@ def storage_error(e: BaseException, path: Path | str) -> StorageError:
     return StorageError(f"{cause_of(e)}: {path}")
 
 
+def refused_write(folder: Path | str) -> str | None:
+    """Why this process may not write into the existing ``folder`` ("read-only file system", "permission denied"),
+    or None when it may (or the folder does not exist): for a library that says only that it failed (SQLite's
+    "unable to open database file")."""
+    if not Path(folder).is_dir() or os.access(folder, os.W_OK):
+        return None
+    try:
+        return _CAUSES[errno.EROFS] if os.statvfs(folder).f_flag & os.ST_RDONLY else _CAUSES[errno.EACCES]
+    except OSError:
+        return _CAUSES[errno.EACCES]
+
+
 def free_bytes(folder: Path | str) -> int:
     """Bytes an unprivileged writer can still put into the file system holding ``folder``."""
     st = os.statvfs(folder)

@@ -7,27 +7,55 @@ by them.
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Iterable
 from typing import Any
 
 from acqcore.errors import ConfigError
 
 
-def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
-    """``KEY=VALUE`` texts as a tag dict; numeric values become floats (``payload_kg=2.5`` → 2.5).
+#: A tag key: letters, digits, ``_``, ``.`` and ``-`` (no spaces, no ``=``).
+_KEY = re.compile(r"[\w.-]+")
+#: A number's canonical spelling: an optional minus, an integer part without leading zeros, an optional fraction and
+#: exponent (2.5, -3, 31, 1e-3). Anything else that float() would also read (007, +5, .5, 5., 1_000) stays text: a
+#: serial number or code keeps its spelling.
+_NUMBER = re.compile(r"-?(?:0|[1-9][0-9]*)(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?", re.ASCII)
 
-    Raises :class:`ConfigError` naming a text without ``=`` or with an empty key.
+
+def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
+    """``KEY=VALUE`` texts as a tag dict; a value spelt as a number (:data:`_NUMBER`) becomes a float
+    (``payload_kg=2.5`` → 2.5), any other stays text (``serial=007`` → "007").
+
+    Raises :class:`ConfigError` naming the tag for a text without ``=``, a key with other than letters, digits,
+    ``_ . -``, an empty value, a number that is not finite (nan, inf: a tag that could never be matched, and not
+    JSON) and a key given twice.
     """
     tags: dict[str, str | float] = {}
+    given: dict[str, str] = {}
     for text in texts:
-        key, sep, value = text.partition("=")
-        if not sep or not key.strip():
+        key, sep, value = (part.strip() for part in text.partition("="))
+        if not sep or not key:
             raise ConfigError(f"--tag {text}: must be KEY=VALUE, e.g. payload_kg=2.5")
-        try:
-            tags[key.strip()] = float(value)
-        except ValueError:
-            tags[key.strip()] = value.strip()
+        if not _KEY.fullmatch(key):
+            raise ConfigError(f"--tag {text}: the key {key!r} may hold only letters, digits, _ . - (no spaces)")
+        if not value:
+            raise ConfigError(f"--tag {text}: the value is empty — give KEY=VALUE, e.g. pose=home")
+        if key in given:
+            raise ConfigError(f"--tag {text}: {key} is given twice ({given[key]}, {text}) — give each key once")
+        given[key] = text
+        tags[key] = _value(text, value)
     return tags
+
+
+def _value(text: str, value: str) -> str | float:
+    """A tag's value: a float when spelt as a number, else the text; a non-finite number is refused."""
+    try:
+        number = float(value)
+    except ValueError:
+        return value
+    if not math.isfinite(number):
+        raise ConfigError(f"--tag {text}: {value} is not a finite number (a tag's number must be finite)")
+    return number if _NUMBER.fullmatch(value) else value
 
 
 def tags_match(tags: dict[str, Any], wanted: dict[str, str | float]) -> bool:

@@ -16,9 +16,9 @@ from acq.monitoring.batch import BatchReport, OnProgress, report_json, run_batch
 from acq.monitoring.session_outcome import CATALOGUE_NAME
 from acq.monitoring.session_search import find_all_sessions
 from acq.monitoring.catalogue import Catalogue
-from acq.ui.display import batch_table
+from acq.ui.display import STILL_RECORDING, batch_table
 from acq.ui.report_png import draw_report
-from acqcore.errors import EXIT_INTERRUPTED, ConfigError
+from acqcore.errors import EXIT_INTERRUPTED, ConfigError, StorageError
 from analysis import AnalysisRequest
 
 
@@ -65,7 +65,13 @@ def analyze_many(specs: Sequence[Path], request: AnalysisRequest, *, jobs: int |
         _one_result_name_each(paths, result_dir)
     done: BatchReport | None = None
     location = catalogue_path if catalogue_path is not None else (result_dir or base or Path()) / CATALOGUE_NAME
-    with Catalogue(location) as catalogue:
+    try:
+        catalogue = Catalogue(location)
+    except StorageError as e:  # e.g. a read-only folder of sessions: the way out, as for one session
+        raise StorageError(f"{e} — " + ("--result-dir DIR writes the results and the catalogue elsewhere"
+                                         if catalogue_path is None else "give --catalogue a file acq may write")
+                           ) from None
+    with catalogue:
         try:
             with batch_progress() as on_progress:
                 done = run_batch(paths, catalogue, request, jobs=jobs, scheduler=scheduler,
@@ -78,10 +84,21 @@ def analyze_many(specs: Sequence[Path], request: AnalysisRequest, *, jobs: int |
             return EXIT_INTERRUPTED
     if as_json:
         out.print_json(json.dumps(report_json(done)))
-    else:
+    elif done.outcomes:
         out.print(batch_table(done))
         out.print(f"catalogue: {catalogue.path}")
+    else:  # every session current (or still recording): one line, not a table without rows
+        out.print(nothing_analysed_line(done, catalogue.path), highlight=False, soft_wrap=True)
     return 1 if done.failed else 0
+
+
+def nothing_analysed_line(done: BatchReport, catalogue: Path | str) -> str:
+    """A batch's one line when it analysed no session: how many were current in ``catalogue``, how many are still
+    being recorded."""
+    parts = [f"{len(done.skipped)} session{'s' if len(done.skipped) != 1 else ''} already analysed (same file, same "
+             f"options) in {catalogue}"] if done.skipped else []
+    parts += [f"{len(done.not_ready)} {STILL_RECORDING}"] if done.not_ready else []
+    return "nothing to analyse: " + ("; ".join(parts) or "no session")
 
 
 def _one_result_name_each(paths: list[Path], result_dir: Path) -> None:

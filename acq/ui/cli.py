@@ -172,6 +172,7 @@ def record(profile_name: str | None, bench_path: Path | None, duration_s: float 
     from drivers.limits import refuse_beyond_limits
     from drivers.registry import open_bench
 
+    session_tags = parse_tags(tags)  # a bad --tag is one line before anything starts
     bench = with_joint(load_bench(bench_path), joint)
     profile = _profile_for(bench, bench_path, profile_name, duration_s)
     if out_dir.exists() and not out_dir.is_dir():  # before any device starts
@@ -192,7 +193,7 @@ def record(profile_name: str | None, bench_path: Path | None, duration_s: float 
         refuse_beyond_limits(profile, bench, str(resolve_profile_path(profile_name)), bench_label(bench_path))
     check_memory(bench)
     current, drive = open_bench(bench, fast=fast)
-    recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=parse_tags(tags))
+    recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=session_tags)
     if live:
         from acq.ui.live import LiveView, require_display  # Qt is imported only when asked for
 
@@ -575,6 +576,18 @@ def _interrupted_outside_the_command() -> Iterator[None]:
         _command_handlers.clear()  # a group invoked otherwise (click's test runner) leaves the handlers alone
 
 
+def _os_error(e: OSError) -> AcqError:
+    """An :class:`OSError` as acq's one line: a write the storage refused (read-only, full, no permission) is a
+    failed write, ``<cause>: <path>`` (:func:`acq.recording.storage.storage_error`), anything else bad input."""
+    from acq.recording.storage import WRITE_FAILURES, storage_error
+
+    if e.errno in WRITE_FAILURES and e.filename is not None:
+        return storage_error(e, e.filename)
+    if e.strerror and e.filename is not None:
+        return ConfigError(f"{e.filename}: {e.strerror[0].lower()}{e.strerror[1:]}")
+    return ConfigError(str(e))
+
+
 def _run(argv: list[str] | None) -> None:
     try:
         # numpy's floating-point warnings (the filter of acq.monitoring.session_outcome.quiet_numerics, which an analysis adds;
@@ -597,9 +610,10 @@ def _run(argv: list[str] | None) -> None:
     except click.ClickException as e:
         e.show()
         sys.exit(e.exit_code)
-    except OSError as e:
-        click.echo(f"acq: error: {e}", err=True)
-        sys.exit(ConfigError("").exit_code)
+    except OSError as e:  # one a command did not name itself: a write the storage refused is a failed write (exit 1)
+        error = _os_error(e)
+        click.echo(f"acq: error: {error}", err=True)
+        sys.exit(error.exit_code)
     if code == EXIT_INTERRUPTED:  # a command that tidied up after a Ctrl-C (a batch, a recording, a monitor)
         _exit_now(code)
     sys.exit(code if isinstance(code, int) else 0)

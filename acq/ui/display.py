@@ -345,6 +345,11 @@ def trend_table(trend: Trend) -> FittedTable:
     return FittedTable(title, columns, caption, row_styles=[_TREND_STYLES[p.state] for p in pts])
 
 
+#: Sessions a batch did not analyse as they are still being recorded (after their count).
+STILL_RECORDING = ("skipped as still recording (acq check repairs a killed recorder's session; --partial analyses it "
+                   "as it is)")
+
+
 def batch_table(report: BatchReport) -> FittedTable:
     """One row per session analysed (K, verdict or the error), a caption counting the skipped ones.
 
@@ -365,8 +370,7 @@ def batch_table(report: BatchReport) -> FittedTable:
     caption = [f"{len(report.outcomes)} analysed ({len(report.failed)} failed), {len(report.skipped)} skipped as "
                f"current, {report.seconds:.1f} s"]
     if report.not_ready:
-        caption.append(f"{len(report.not_ready)} skipped as still recording (acq check repairs a killed recorder's "
-                       "session; --partial analyses it as it is)")
+        caption.append(f"{len(report.not_ready)} {STILL_RECORDING}")
     return FittedTable("batch analysis" + (f" — joint {escape(joints[0])}" if one_joint and joints else ""),
                        columns, caption)
 

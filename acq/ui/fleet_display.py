@@ -19,7 +19,7 @@ from rich.console import Console
 
 from acq.monitoring.catalogue import Entry
 from acq.ui.display import Column, FittedTable, start_times
-from acq.ui.options import CatalogueLocation, alarm_rule_options
+from acq.ui.options import CatalogueLocation, PngPath, alarm_rule_options
 from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet, session_start
 from acq.monitoring.trend import EXIT_ALARM
 from acq.ui.values import alarm_rules_line, format_value
@@ -186,11 +186,12 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
               help="A catalogue, a file or postgresql:// URL (repeatable; default: FOLDER/catalogue.sqlite of each "
                    "FOLDER, FOLDER defaulting to sessions/). Several are judged apart, each row saying its source.")
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
-              help="Only sessions with this tag (repeatable), e.g. --tag site=plant2.")
+              help="Only sessions with this tag (repeatable), e.g. --tag site=plant2; read as acq record --tag reads "
+                   "it.")
 @click.option("--stale-days", type=click.FloatRange(0, min_open=True), default=7.0, show_default=True,
               help="A joint with no session for this many days is stale.")
 @alarm_rule_options("each joint's")
-@click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
+@click.option("--png", "png_path", type=PngPath(), default=None,
               help="Also draw the fleet (ΔK over time, one row per joint) into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the fleet as JSON.")
 def fleet_command(folders: tuple[Path, ...], catalogues: tuple[Path | str, ...], tags: tuple[str, ...],

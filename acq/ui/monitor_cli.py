@@ -127,7 +127,7 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
                    "benches may share (default: OUT/catalogue.sqlite).")
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
               help="Tag every window (repeatable), e.g. --tag robot=r1: acq fleet and acq trend --tag tell the "
-                   "robots apart by it.")
+                   "robots apart by it. Values as acq record --tag reads them (2.5 a number, 007 text).")
 @click.option("--move-catalogue", is_flag=True,
               help="Resume with another --catalogue than the monitor filed into (e.g. SQLite to PostgreSQL): copy its "
                    "windows there first.")

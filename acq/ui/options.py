@@ -9,6 +9,7 @@ from typing import Any, TypeVar
 import click
 
 from acq.monitoring.catalogue_backends import is_url
+from acqcore.errors import ConfigError
 
 
 class CatalogueLocation(click.ParamType):
@@ -21,11 +22,31 @@ class CatalogueLocation(click.ParamType):
         return value if is_url(value) or isinstance(value, Path) else Path(value)
 
 
+class PngPath(click.ParamType):
+    """A PNG acq writes on request (``--png``, ``--screenshot``): a :class:`Path` named ``*.png`` that is not a folder,
+    refused in one line (bad input, exit 2) before anything is drawn. A write that then fails is a failed write
+    (:func:`acq.ui.plots.grab_png`, exit 1)."""
+
+    name = "PATH"
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Path:
+        """``value`` as a Path; :class:`ConfigError` naming the option for another suffix or a folder."""
+        path, option = Path(value), param.opts[0] if param is not None else "PNG"
+        if path.is_dir():
+            raise ConfigError(f"{option} {value}: is a folder — give the PNG's file name, e.g. {path / 'out.png'}")
+        if path.suffix.lower() != ".png":
+            raise ConfigError(f"{option} {value}: acq writes PNG only — name the file *.png, e.g. "
+                              f"{path.with_suffix('.png') if path.suffix else f'{path}.png'}")
+        return path
+
+
 #: ``--tag KEY=VALUE`` (repeatable) of the commands that make a session; read by
 #: :func:`acq.recording.tags.parse_tags`.
 tag_option = click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
                           help="Tag the session (repeatable), e.g. --tag pose=home --tag payload_kg=2.5 "
-                               "--tag temperature_C=31.")
+                               "--tag temperature_C=31. A value spelt as a decimal number (2.5, -3, 31, 1e3) is "
+                               "stored as a number, any other (home, 007, +5) as text; each key once, no empty value, "
+                               "no nan or inf.")
 
 
 F = TypeVar("F", bound=Callable[..., Any])

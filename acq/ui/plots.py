@@ -40,6 +40,7 @@ import pyqtgraph as pg
 import shiboken6
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
+from acq.recording.storage import atomic_path, storage_error
 from acq.ui.values import PARAMS, format_value, interval_text, options_text
 from analysis import FigureData, Thresholds
 
@@ -492,13 +493,28 @@ def phase_text(s: SessionFigure) -> str:
 
 
 def grab_png(widget: QtWidgets.QWidget, path: Path | str, size: tuple[int, int] = DEFAULT_SIZE_PX) -> Path:
-    """Draw ``widget`` at exactly ``size`` (width, height) pixels into a PNG.
-
-    The widget is shown (on the offscreen platform this puts nothing on a screen) so that its
-    layout is activated, then rendered into an image of that size, whatever the device-pixel ratio.
-    (``WA_DontShowOnScreen`` would avoid a flash on a real screen but makes PySide 6.12 abort at exit.)
+    """Draw ``widget`` at exactly ``size`` (width, height) pixels into the PNG ``path``, written atomically
+    (:func:`acq.recording.storage.atomic_path`): the one writer of the pictures acq draws on request (``acq trend
+    --png``, ``acq fleet --png``, ``acq view --screenshot``). A failed write raises :class:`StorageError` naming
+    ``path`` and the cause ("read-only file system: out.png"), exit 1; no partial file is left.
     """
     path = Path(path)
+    image = _widget_image(widget, size)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise storage_error(e, path) from None
+    with atomic_path(path) as tmp:
+        _save_png(image, tmp)
+    return path
+
+
+def _widget_image(widget: QtWidgets.QWidget, size: tuple[int, int]) -> QtGui.QImage:
+    """``widget`` rendered into an image of exactly ``size`` (width, height) pixels, whatever the device-pixel ratio.
+
+    The widget is shown (on the offscreen platform this puts nothing on a screen) so that its layout is activated.
+    (``WA_DontShowOnScreen`` would avoid a flash on a real screen but makes PySide 6.12 abort at exit.)
+    """
     widget.resize(*size)
     widget.show()
     for _ in range(3):  # a layout change made while laying out (the f_a/f_r label rows) needs another pass
@@ -507,10 +523,15 @@ def grab_png(widget: QtWidgets.QWidget, path: Path | str, size: tuple[int, int] 
     image.fill(QtGui.QColor("white"))
     widget.render(image)
     widget.hide()
-    path.parent.mkdir(parents=True, exist_ok=True)
+    return image
+
+
+def _save_png(image: QtGui.QImage, path: Path) -> None:
+    """Write ``image`` as a PNG to ``path`` as it stands (the caller makes it atomic); Qt says only whether it could,
+    so a failure is an :class:`OSError` without errno (:func:`acq.recording.storage.atomic_path` then names the
+    cause: disk full, else I/O error)."""
     if not image.save(str(path), "PNG"):
         raise OSError(f"{path}: could not write the PNG")
-    return path
 
 
 def render_report_png(figure_data: FigureData, path: Path | str, size: tuple[int, int] = DEFAULT_SIZE_PX, *,
@@ -537,7 +558,8 @@ def render_report_png(figure_data: FigureData, path: Path | str, size: tuple[int
     """
     ensure_app(offscreen=True)
     view = ReportView([SessionFigure(title or "session", figure_data, values or {})], title=title)
-    try:
-        return grab_png(view, path, size)
+    try:  # written as it stands: its caller writes it atomically, putting it in place only if still current
+        _save_png(_widget_image(view, size), Path(path))
+        return Path(path)
     finally:
         shiboken6.delete(view)  # now, not at interpreter exit after the QApplication (that segfaults)

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from acq.ui.options import CatalogueLocation, alarm_rule_options
+from acq.ui.options import CatalogueLocation, PngPath, alarm_rule_options
 from acq.monitoring.trend import EXIT_ALARM, trend_json
 from acq.monitoring.trend_catalogue import catalogue_sources, load_trend
 from acq.ui.display import trend_table
@@ -25,8 +25,10 @@ from acqcore.errors import ConfigError
 @click.option("--joint", required=True, help="The joint to trend.")
 @alarm_rule_options("the joint's")
 @click.option("--baseline", "baseline_id", default=None, help="Baseline = this session id (or a unique prefix).")
-@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE", help="Only sessions with this tag (repeatable).")
-@click.option("--png", "png_path", type=click.Path(path_type=Path), default=None,
+@click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
+              help="Only sessions with this tag (repeatable; read as acq record --tag reads it: 2.5 a number, 007 "
+                   "text).")
+@click.option("--png", "png_path", type=PngPath(), default=None,
               help="Also draw the trend into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the trend as JSON.")
 def trend_command(folders: tuple[Path, ...], catalogues: tuple[Path | str, ...], joint: str,

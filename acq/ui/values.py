@@ -54,7 +54,7 @@ def interval_text(doc: dict[str, Any], key: str, *, relative: bool = False) -> s
         nominal = (doc.get("options", {}).get("nominal") or {}).get(key)
         return "fixed (nominal)" if nominal == value else "fixed"
     if not relative:
-        return f"{format_value(lo)} – {format_value(hi)}"
+        return "—" if lo is None and hi is None else f"{format_value(lo)} – {format_value(hi)}"
     if value is None or lo is None or hi is None or value == 0:
         return "—"
     return f"± {50.0 * (hi - lo) / abs(value):.2g} %"
@@ -65,7 +65,8 @@ def options_text(doc: dict[str, Any]) -> str:
     opts = doc.get("options", {})
     band = opts.get("band_hz")
     parts = ["paper's chain (--paper)"] if opts.get("pipeline") == "paper" else []
-    parts += [f"torque {opts.get('torque_method', '?')}", f"params {opts.get('params', '?')}",
+    torque = opts.get("torque_method", "?") or "default"  # None: no chain ran (the joint did not move)
+    parts += [f"torque {torque}", f"params {opts.get('params', '?')}",
               f"fit {opts.get('fit', '?')}"]
     if band:
         parts.append(f"band {band[0]:g}–{band[1]:g} Hz")

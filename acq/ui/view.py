@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import click
 
-from acq.ui.options import CatalogueLocation
+from acq.ui.options import CatalogueLocation, PngPath
 from acq.offline.analyze import analyze_session
 from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 from analysis import AnalysisRequest
@@ -30,8 +30,9 @@ if TYPE_CHECKING:
     from acq.monitoring.trend import Trend
     from acq.monitoring.trend_catalogue import NoSessions
 
-NO_DISPLAY_MESSAGE = ("acq view: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window as an image "
-                      "instead: acq view SESSION --screenshot out.png")
+#: ``acq view`` without a display (bad input, exit 2, as ``acq record --live``): the form that draws it into a PNG.
+NO_DISPLAY_MESSAGE = ("no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window as an image instead: "
+                      "acq view {form} --screenshot out.png")
 
 
 def has_display() -> bool:
@@ -73,7 +74,7 @@ def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[
 
 @click.command(name="view")
 @click.argument("sessions", nargs=-1, type=click.Path(path_type=Path))
-@click.option("--screenshot", type=click.Path(path_type=Path), default=None,
+@click.option("--screenshot", type=PngPath(), default=None,
               help="Draw the window offscreen into this PNG and exit (needs no display).")
 @click.option("--size", default="1600x1000", show_default=True, callback=_parse_size,
               help="Window / screenshot size WIDTHxHEIGHT, px.")
@@ -95,9 +96,11 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         raise click.UsageError("give one or more SESSION files, or --trend JOINT [FOLDER]")
     if trend_joint is not None and len(sessions) > 1:
         raise click.UsageError("--trend takes one FOLDER (or none for sessions/)")
+    if tags and trend_joint is None:  # a session is shown whatever its tags: the filter would be silently ignored
+        raise ConfigError(f"--tag {tags[0]}: only with --trend JOINT (it selects the trend's sessions)")
     if screenshot is None and not has_display():
-        click.echo(NO_DISPLAY_MESSAGE, err=True)
-        return 1
+        form = "SESSION" if trend_joint is None else f"--trend {trend_joint} {sessions[0] if sessions else ''}".rstrip()
+        raise ConfigError(NO_DISPLAY_MESSAGE.format(form=form))
     from acq.process_signals import signals_deferred
 
     with signals_deferred():  # a Ctrl-C inside Qt's import was a fatal error in shiboken's start-up (exit 134) or lost
@@ -114,10 +117,9 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         except NoSessions as e:  # started before the monitor has filed its first window: the window waits for it
             # — only when the catalogue has no session yet: one with sessions, none of this joint (and tags), holds a
             # misspelt joint or tag, which was waited for for ever. A script's picture of "waiting" with exit 0 would
-            # hide a wrong joint or folder
+            # hide a wrong joint or folder; bad input (exit 2), as acq trend says it
             if screenshot is not None or e.joints:
-                click.echo(f"acq: error: {e}", err=True)
-                return 1
+                raise
             first = e
     else:
         figures = [session_figure(p) for p in sessions]

@@ -1,0 +1,210 @@
+"""One clear line and the right exit code (README: 1 failed write, 2 bad input) where the new-user trial found
+otherwise: failed PNG writes, a monitor on a read-only folder, a batch into a read-only folder, ``--tag`` values,
+and the same error given the same exit code by every command."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import pytest
+
+from acq.monitoring.catalogue import Catalogue, Outcome
+from acq.recording.reader import load
+from acq.recording.tags import parse_tags, tags_match
+from acq.ui.values import interval_text, options_text
+from acqcore.errors import ConfigError
+from tests.helpers import read_only_view, record_session_in_subprocess, run_cli, seeded_profile
+
+ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
+
+
+def _catalogue(folder: Path, joint: str = "joint1", n: int = 3) -> Path:
+    """A catalogue in ``folder`` with ``n`` sessions of ``joint`` of verdict ok (K 890 N·m/rad), as acq analyze files
+    them."""
+    folder.mkdir(parents=True, exist_ok=True)
+    doc = {"options": {}, "K_Nm_per_rad": 890.0, "ci95": {"K_Nm_per_rad": [886.0, 894.0]},
+           "quality": {"verdict": "ok", "reasons": []}}
+    with Catalogue(folder / "catalogue.sqlite") as c:
+        for i in range(n):
+            meta = {"session_id": f"s{i}", "joint": joint, "tags": {"pose": "home"},
+                    "created_utc": f"2026-11-29T10:0{i}:00+00:00"}
+            c.record(Outcome(f"/m/s{i}.h5", f"h{i}", "r", meta, doc, None, 1.0))
+    return folder
+
+
+# ---- 1. a PNG acq cannot write: the cause, exit 1; a PNG path that cannot be one: bad input, exit 2 ------------------
+@pytest.mark.parametrize("command", [("trend", "{folder}", "--joint", "joint1", "--png"),
+                                     ("fleet", "{folder}", "--png"),
+                                     ("view", "--trend", "joint1", "{folder}", "--screenshot")])
+def test_a_png_into_a_read_only_folder_is_a_failed_write_naming_the_cause(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], command: tuple[str, ...]) -> None:
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    folder = _catalogue(tmp_path / "sessions")
+    (tmp_path / "ro").mkdir()
+    with read_only_view(tmp_path / "ro") as ro:
+        png = ro / "out.png"
+        run = run_cli(capsys, *(part.format(folder=folder) for part in command), str(png))
+        assert (run.code, run.err) == (1, f"acq: error: read-only file system: {png}\n")
+        assert not png.exists() and not list(ro.iterdir())  # no temp file left behind either
+
+
+@pytest.mark.parametrize(("name", "message"), [
+    ("out.jpg", "--png {png}: acq writes PNG only — name the file *.png, e.g. {stem}.png"),
+    ("out", "--png {png}: acq writes PNG only — name the file *.png, e.g. {stem}.png"),
+    ("folder", "--png {png}: is a folder — give the PNG's file name, e.g. {png}/out.png")])
+def test_a_png_path_that_cannot_be_a_png_is_refused_before_anything_is_drawn(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], name: str, message: str) -> None:
+    folder = _catalogue(tmp_path / "sessions")
+    (tmp_path / "folder").mkdir()
+    png = tmp_path / name
+    run = run_cli(capsys, "trend", str(folder), "--joint", "joint1", "--png", str(png))
+    assert (run.code, run.out) == (2, "")
+    assert run.err == "acq: error: " + message.format(png=png, stem=tmp_path / "out") + "\n"
+    run = run_cli(capsys, "view", "--trend", "joint1", str(folder), "--screenshot", str(tmp_path / "out.jpg"))
+    assert (run.code, run.err) == (2, f"acq: error: --screenshot {tmp_path / 'out.jpg'}: acq writes PNG only — name "
+                                      f"the file *.png, e.g. {tmp_path / 'out.png'}\n")
+    assert not (tmp_path / "out.jpg").exists()
+
+
+def test_a_png_that_can_be_written_is_written(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    folder = _catalogue(tmp_path / "sessions")
+    png = tmp_path / "new" / "trend.PNG"  # its folder made, the suffix's case free
+    run = run_cli(capsys, "trend", str(folder), "--joint", "joint1", "--png", str(png))
+    assert run.code == 0, run.err
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and [p.name for p in png.parent.iterdir()] == ["trend.PNG"]
+
+
+# ---- 2. acq monitor: a read-only --out is a failed write; a refused start leaves nothing it made --------------------
+def test_a_monitor_into_a_read_only_folder_is_one_line_exit_1(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    (tmp_path / "ro").mkdir()
+    with read_only_view(tmp_path / "ro") as ro:
+        run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--window", "4", "--every", "5", "--fast", "--for",
+                      "10s", "--out", str(ro / "mon"))
+    assert (run.code, run.err) == (1, f"acq: error: read-only file system: {ro / 'mon'}\n")
+
+
+def test_a_refused_monitor_start_leaves_no_folder_behind(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "new" / "mon"
+    bench = ROBOT.with_name("sim_robot_canopen.toml")
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--out", str(out))
+    assert (run.code, run.err) == (2, "acq: error: --fast: the simulated CANopen drive runs on the bus in real time; "
+                                      "run without --fast\n")
+    assert list(tmp_path.iterdir()) == []  # neither mon nor the folder new it made above it
+    (tmp_path / "kept").mkdir()  # a folder that was there stays
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--out", str(tmp_path / "kept"))
+    assert run.code == 2 and [p.name for p in tmp_path.iterdir()] == ["kept"]
+    assert not list((tmp_path / "kept").iterdir())
+
+
+# ---- 3. acq analyze of a read-only folder: say so and the way out; trend's advice the way that works -----------------
+def test_a_batch_of_a_read_only_folder_names_the_cause_and_the_way_out(tmp_path: Path,
+                                                                        capsys: pytest.CaptureFixture[str]) -> None:
+    record_session_in_subprocess(tmp_path / "sessions", 3.0)
+    with read_only_view(tmp_path / "sessions") as ro:
+        run = run_cli(capsys, "analyze", str(ro), "--no-report")
+        assert (run.code, run.out) == (1, "")
+        assert run.err == (f"acq: error: read-only file system: {ro / 'catalogue.sqlite'} (no catalogue can be made "
+                           "there) — --result-dir DIR writes the results and the catalogue elsewhere\n")
+        run = run_cli(capsys, "analyze", str(ro), "--no-report", "--catalogue", str(ro / "c.sqlite"))
+        assert (run.code, run.err) == (1, f"acq: error: read-only file system: {ro / 'c.sqlite'} (no catalogue can "
+                                          "be made there) — give --catalogue a file acq may write\n")
+        trend = run_cli(capsys, "trend", str(ro), "--joint", "joint1")
+        assert (trend.code, trend.err) == (2, f"acq: error: {ro / 'catalogue.sqlite'}: no catalogue — {ro} is not "
+                                              f"writable (read-only file system): fill one with acq analyze {ro}/ "
+                                              "--result-dir DIR, then acq trend DIR\n")
+        # the advice works
+        run = run_cli(capsys, "analyze", str(ro), "--no-report", "--result-dir", str(tmp_path / "results"))
+        assert run.code == 0, run.err
+    trend = run_cli(capsys, "trend", str(tmp_path / "results"), "--joint", "joint1", "--json")
+    assert trend.code == 0 and len(json.loads(trend.out)["points"]) == 1
+    with read_only_view(tmp_path / "results") as ro:  # a catalogue there, in a read-only folder: SQLite cannot read it
+        trend = run_cli(capsys, "trend", str(ro), "--joint", "joint1")
+    assert (trend.code, trend.err) == (1, f"acq: error: read-only file system: {ro / 'catalogue.sqlite'} (SQLite "
+                                          "writes beside a catalogue, also to read it)\n")
+
+
+# ---- 4. --tag: one parser, nothing silently changed ------------------------------------------------------------------
+def test_tag_values_spelt_as_numbers_are_numbers_and_any_other_spelling_stays_text() -> None:
+    tags = parse_tags(["pose=home", "payload_kg=2.5", "temperature_C=31", "offset=-3", "rate=1e3", "serial=007",
+                       "plus=+5", "dot=.5", "under=1_000", "eq=a=b", " pad = x y "])
+    assert tags == {"pose": "home", "payload_kg": 2.5, "temperature_C": 31.0, "offset": -3.0, "rate": 1000.0,
+                    "serial": "007", "plus": "+5", "dot": ".5", "under": "1_000", "eq": "a=b", "pad": "x y"}
+    assert [type(tags[k]) for k in ("serial", "payload_kg")] == [str, float]
+    assert tags_match({"serial": "007", "payload_kg": 2.5}, parse_tags(["serial=007", "payload_kg=2.50"]))
+    assert not tags_match({"serial": "007"}, parse_tags(["serial=7"]))
+
+
+@pytest.mark.parametrize(("texts", "message"), [
+    (["pose=a", "pose=b"], "--tag pose=b: pose is given twice (pose=a, pose=b) — give each key once"),
+    (["payload_kg=nan"], "--tag payload_kg=nan: nan is not a finite number (a tag's number must be finite)"),
+    (["payload_kg=-inf"], "--tag payload_kg=-inf: -inf is not a finite number (a tag's number must be finite)"),
+    (["big=1e999"], "--tag big=1e999: 1e999 is not a finite number (a tag's number must be finite)"),
+    (["po se=home"], "--tag po se=home: the key 'po se' may hold only letters, digits, _ . - (no spaces)"),
+    (["pose="], "--tag pose=: the value is empty — give KEY=VALUE, e.g. pose=home"),
+    (["pose=  "], "--tag pose=  : the value is empty — give KEY=VALUE, e.g. pose=home"),
+    (["pose"], "--tag pose: must be KEY=VALUE, e.g. payload_kg=2.5"),
+    (["=home"], "--tag =home: must be KEY=VALUE, e.g. payload_kg=2.5")])
+def test_a_tag_that_would_be_corrupted_or_never_match_is_refused_naming_it(texts: list[str], message: str) -> None:
+    with pytest.raises(ConfigError) as refused:
+        parse_tags(texts)
+    assert str(refused.value) == message
+
+
+@pytest.mark.parametrize("command", [
+    ("record", "--profile", "triangle_0.2s", "--fast", "--duration", "3", "--no-analyze", "--out", "{out}"),
+    ("monitor", "--bench", str(ROBOT), "--fast", "--for", "10s", "--out", "{out}"),
+    ("trend", "{out}", "--joint", "joint1"),
+    ("fleet", "{out}"),
+    ("view", "--trend", "joint1", "{out}", "--screenshot", "{out}/t.png")])
+def test_every_command_taking_tags_refuses_a_duplicate_key_in_one_line(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], command: tuple[str, ...]) -> None:
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    out = tmp_path / "out"
+    if command[0] in ("trend", "fleet", "view"):
+        _catalogue(out)
+    before = sorted(tmp_path.rglob("*"))
+    run = run_cli(capsys, *(part.format(out=out) for part in command), "--tag", "pose=a", "--tag", "pose=b")
+    assert (run.code, run.out) == (2, "")
+    assert run.err == "acq: error: --tag pose=b: pose is given twice (pose=a, pose=b) — give each key once\n"
+    assert sorted(tmp_path.rglob("*")) == before  # nothing made
+
+
+def test_a_recorded_tag_keeps_its_spelling(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    out = tmp_path / "sessions"
+    run = run_cli(capsys, "record", "--profile", str(seeded_profile(tmp_path)), "--fast", "--duration", "4", "--out",
+                  str(out), "--tag", "serial=007", "--tag", "payload_kg=2.5", "--no-analyze")
+    assert run.code == 0, run.err
+    (path,) = out.glob("*.h5")
+    assert load(path).tags == {"serial": "007", "payload_kg": 2.5}
+
+
+# ---- 5, 6. one exit code per error, small refusals, readable empty results ------------------------------------------
+def test_no_catalogue_is_the_same_error_and_exit_code_for_trend_and_view(tmp_path: Path,
+                                                                       capsys: pytest.CaptureFixture[str]) -> None:
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    message = (f"acq: error: {tmp_path / 'catalogue.sqlite'}: no catalogue — fill one with acq analyze {tmp_path}/ "
+               "first\n")
+    trend = run_cli(capsys, "trend", str(tmp_path), "--joint", "joint1")
+    view = run_cli(capsys, "view", "--trend", "joint1", str(tmp_path), "--screenshot", str(tmp_path / "t.png"))
+    assert (trend.code, trend.err) == (view.code, view.err) == (2, message)
+
+
+def test_view_refuses_a_tag_without_a_trend(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    run = run_cli(capsys, "view", str(tmp_path / "s.h5"), "--tag", "pose=x", "--screenshot", str(tmp_path / "v.png"))
+    assert (run.code, run.out) == (2, "")
+    assert run.err == "acq: error: --tag pose=x: only with --trend JOINT (it selects the trend's sessions)\n"
+
+
+def test_a_result_without_numbers_reads_as_such() -> None:
+    """A window where the joint did not move: no interval ("—", not "— – —"), no torque method chosen
+    ("default", not "None")."""
+    doc = {"K_Nm_per_rad": None, "ci95": {"K_Nm_per_rad": None},
+           "options": {"pipeline": "acq", "torque_method": None, "params": "K,Jm,Jl", "fit": "amplitude"}}
+    assert interval_text(doc, "K_Nm_per_rad") == "—"
+    assert interval_text(doc, "K_Nm_per_rad", relative=True) == "—"
+    assert options_text(doc) == "torque default · params K,Jm,Jl · fit amplitude"
+    doc = {"K_Nm_per_rad": 890.0, "ci95": {"K_Nm_per_rad": [886.0, 894.0]}, "options": {"torque_method": "encoder"}}
+    assert interval_text(doc, "K_Nm_per_rad") == "886 – 894" and options_text(doc).startswith("torque encoder ·")
