@@ -30,8 +30,10 @@ taken instead: the share of the encoder's quantisation error that repeats with t
 (:func:`analysis.adequacy.quantisation_pull` times :attr:`FitOptions.quantisation_repeating_share`: the part the fit
 absorbed leaves no residual) and the smooth errors of the chain and of the speed loop's feedback of the rest of the
 quantisation (:func:`analysis.adequacy.chain_pull`) — computed from the session's own spectra and the encoder's
-resolution (:attr:`FitOptions.speed_lsb_rad`); without the resolution, the constant :data:`CHAIN_REL_STD`. The 95 %
-interval is exp(ln θ ± half-width) on each value.
+resolution (:attr:`FitOptions.speed_lsb_rad`); without the resolution, the constant :data:`CHAIN_REL_STD`. Last, the
+bias an error on the torque estimate may leave (noise on the FRF's input flattens the resonance peak of H1, and C
+reads high): the shift of the parameters when the resonance is read from H2 instead (:mod:`analysis.input_noise`),
+the truth lying between the two readings. The 95 % interval is exp(ln θ ± half-width) on each value.
 
 The model is compared with the measurement as the Welch estimator sees it: H convolved with the
 Hann window's spectral kernel |W(ν)|², weighted by the finely resolved torque spectrum
@@ -52,6 +54,7 @@ from scipy.ndimage import median_filter
 from analysis.adequacy import chain_pull, lines_per_bin, misfit_covariance, quantisation_pull, systematic_std
 from analysis.encoder import quantisation_bound
 from analysis.frf import KERNEL_PER_BIN, FrequencyResponse, window_kernel
+from analysis.input_noise import h2_at_resonance
 from analysis.model import TwoMassParams, antiresonance_hz, frequency_response, resonance_hz
 
 FitKind = Literal["amplitude", "complex"]
@@ -400,7 +403,24 @@ def fit_two_mass(
                 best = res
         if best is None:
             return _failed(problem, band, options, "no start gave a finite cost")
-        return _result(problem, best, band, options, n_res, _quantisation_floor(frf, problem, best.x, options))
+        return _result(problem, best, band, options, n_res, _quantisation_floor(frf, problem, best.x, options),
+                       _input_noise_shift(frf, problem, best.x, options))
+
+
+def _input_noise_shift(frf: FrequencyResponse, problem: _Problem, x: np.ndarray, options: FitOptions) -> np.ndarray:
+    """How far the free log parameters move when the resonance is read from H2 instead of H1
+    (:func:`analysis.input_noise.h2_at_resonance`, one Levenberg–Marquardt run from the optimum ``x``): the bias an
+    error on the torque estimate may leave (zero when the band holds no resonance peak; infinite when the refit
+    diverges: the fit is not stable under it)."""
+    h2 = h2_at_resonance(frf, problem.params(x), problem.band)
+    if h2 is None:
+        return np.zeros_like(x)
+    try:
+        moved = optimize.least_squares(_Problem(h2, problem.band, options, problem.fixed).residuals, x, method="lm",
+                                       x_scale=1.0).x
+    except (ValueError, FloatingPointError):
+        return np.full_like(x, np.inf)
+    return moved - x
 
 
 def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
@@ -446,8 +466,10 @@ def _starts_inertias_fixed(guess: TwoMassParams, nominal: TwoMassParams) -> list
 
 
 def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, float],
-            options: FitOptions, n_res: int, quantisation_floor: np.ndarray | None = None) -> FitResult:
-    """Package the best least-squares solution with its covariance and intervals."""
+            options: FitOptions, n_res: int, quantisation_floor: np.ndarray | None = None,
+            input_noise_shift: np.ndarray | None = None) -> FitResult:
+    """Package the best least-squares solution with its covariance and intervals (``input_noise_shift``: the log
+    parameters' shift from H1 to H2 at the resonance, :func:`_input_noise_shift`; None: none)."""
     values = problem.params(res.x)
     n_free = res.x.size
     dof = max(n_res - n_free, 1)
@@ -465,6 +487,11 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
     floor = (quantisation_floor if quantisation_floor is not None
              else np.full(n_free, np.log1p(CHAIN_REL_STD) ** 2))
     cov += misfit + np.diag(np.clip(floor - np.diag(misfit), 0.0, None))
+    if input_noise_shift is not None:
+        # the truth lies between the H1 and the H2 reading of the resonance (analysis.input_noise): a bias bounded by
+        # the shift d, of unknown size within it, carried as a rectangular distribution of half-width |d| (GUM:
+        # variance d²/3, so the 95 % interval holds the whole bracket, 1.96/√3 = 1.13 |d|), along d (a joint shift)
+        cov += np.outer(input_noise_shift, input_noise_shift) / 3.0
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     ci = {n: (getattr(values, n), getattr(values, n)) for n in PARAM_NAMES}
     for name, x, s in zip(problem.free, res.x, sigma):

@@ -180,8 +180,8 @@ def angle_information_std(theta_e_rad: np.ndarray, theta0_rad: float, rate_hz: f
     cell = max(1, int(round(resolution_s * rate_hz)))
     information = uniform_filter1d(np.sin(np.asarray(theta_e_rad, dtype=np.float64) + theta0_rad) ** 2, cell,
                                    mode="nearest") * cell
-    with np.errstate(divide="ignore"):
-        return k_t_Nm_per_A * noise_rms_a / np.sqrt(information)
+    with np.errstate(divide="ignore", invalid="ignore"):  # no information: unknown (∞) even with no noise (σ = 0)
+        return np.where(information > 0.0, k_t_Nm_per_A * noise_rms_a / np.sqrt(information), np.inf)
 
 
 # Knot spacing of the sensor-offset spline, s: a thermal drift of a Hall sensor's offset is slower

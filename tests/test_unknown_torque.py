@@ -3,6 +3,8 @@ left out where it is an outlying share of the torque (analysis.frf.unknown_torqu
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -36,6 +38,27 @@ def test_only_the_segment_where_the_error_stands_out_is_left_out() -> None:
     keep = np.ones(out.size, dtype=bool)
     keep[10] = False  # a segment the selection did not keep is never flagged (nor are the others)
     assert not unknown_torque_segments(x, std, NPERSEG, STEP, keep).any()
+
+
+def test_a_noise_free_phase_flags_only_the_segments_without_information_and_warns_nothing() -> None:
+    # σ = 0 (a noise-free phase current): the standard error is 0 wherever the angle shows the torque and ∞ where it
+    # never does; log R = −∞ has no spread to fence by (the rule overflowed to nothing, with a RuntimeWarning)
+    x = _torque(NPERSEG + 20 * STEP, 3)
+    theta = np.full(x.size, 0.7)
+    theta[10 * STEP + NPERSEG // 2 - 40:10 * STEP + NPERSEG // 2 + 40] = 0.0  # sin = 0 over 80 samples mid-segment 10
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any RuntimeWarning fails the test
+        std = angle_information_std(theta, 0.0, 25600.0, 3.0, 0.0, 1.25e-3)
+        assert np.isinf(std).sum() == 80 - 31 and np.count_nonzero(std[np.isfinite(std)]) == 0
+        # the three segments that hold the samples without information, as with a noisy phase
+        assert np.flatnonzero(unknown_torque_segments(x, std, NPERSEG, STEP)).tolist() == [9, 10, 11]
+        noisy = angle_information_std(theta, 0.0, 25600.0, 3.0, 0.01, 1.25e-3)
+        assert np.flatnonzero(unknown_torque_segments(x, noisy, NPERSEG, STEP)).tolist() == [9, 10, 11]
+        assert not unknown_torque_segments(x, np.zeros(x.size), NPERSEG, STEP).any()  # all known exactly: none
+        frf = estimate_frf(x, np.cumsum(x) * 1e-3, 1e-3, torque_std_Nm=std)
+    assert frf.n_segments == 18
+    std[:] = np.inf  # no information anywhere: nothing to tell the segments apart by, none flagged
+    assert not unknown_torque_segments(x, std, NPERSEG, STEP).any()
 
 
 def test_the_frf_averages_without_the_left_out_segment() -> None:
