@@ -14,6 +14,7 @@ from urllib.parse import urlsplit
 
 import pytest
 
+from acq.monitoring import monitor_scope
 from acq.monitoring.catalogue import Catalogue
 from tests.conftest import PG_PASSWORD
 from tests.helpers import CliRun, run_cli
@@ -164,15 +165,63 @@ def test_a_copied_monitor_folder_is_refused_and_a_moved_one_is_the_same_monitor(
     assert (_identity(moved)["monitor_id"], _identity(moved)["folder"]) == (mid, str(moved.resolve()))
     doc = json.loads(run_cli(capsys, "trend", str(moved), "--joint", "joint1", "--json").out)
     assert [(p["tags"]["monitor_window"], p["tags"]["monitor_id"]) for p in doc["points"]] == [(0, mid), (1, mid)]
+    carried = tmp_path / "carried"  # copied to another host (a new folder there), nothing left here
+    shutil.copytree(moved, carried)
+    shutil.rmtree(moved)
     monkeypatch.setattr(socket, "gethostname", lambda: "newpc")
-    other_host = _start(capsys, bench, moved)
+    other_host = _start(capsys, bench, carried)
     assert (other_host.code, other_host.err) == (
-        2, f"acq: error: {moved}: its monitor.id was made on host {ident['host']} "
+        2, f"acq: error: {carried}: its monitor.id was made on host {ident['host']} "
            f"for {moved.resolve()} ({mid}) — a copy would file its windows as that monitor's: start it with "
            "--new-identity if this is another monitor (the windows copied here stay that one's), or with --moved if "
            f"the monitor on {ident['host']} no longer runs (the folder moved here)\n")
-    assert _start(capsys, bench, moved, "--moved").code == 0
-    assert (_identity(moved)["monitor_id"], _identity(moved)["host"]) == (mid, "newpc")
+    assert _start(capsys, bench, carried, "--moved").code == 0
+    assert (_identity(carried)["monitor_id"], _identity(carried)["host"]) == (mid, "newpc")
+
+
+def test_a_container_restart_with_a_new_host_name_is_the_same_monitor_and_another_machine_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The host name changes at every container start (Docker's container id, a pod's name): every restart there
+    was refused as another host until --moved, which then switched the host check off (the last closing note). The
+    folder's own filesystem object (st_dev, st_ino), which a container's volume keeps and a copy does not, tells it is
+    the same folder; a machine-id other than the one recorded tells another machine, even under the same host name
+    and path. The machine-id files are the test's own (the machine's is the machine's)."""
+    ids = tmp_path / "machine-id"
+    monkeypatch.setattr(monitor_scope, "MACHINE_ID_FILES", (str(ids), str(tmp_path / "dbus-machine-id")))
+    ids.write_text("0123456789abcdef0123456789abcdef\n")
+    monkeypatch.setattr(socket, "gethostname", lambda: "4f2a9c1d7e3b")  # a container's host name: its id
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "volume" / "m"
+    assert _start(capsys, bench, out).code == 0
+    mid = _identity(out)["monitor_id"]
+    assert (_identity(out)["machine_id"], _identity(out)["folder_object"]) == (
+        "0123456789abcdef0123456789abcdef", [out.stat().st_dev, out.stat().st_ino])
+    monkeypatch.setattr(socket, "gethostname", lambda: "9b8e7d6c5a41")  # the container made anew on the same volume
+    restarted = _start(capsys, bench, out)
+    assert restarted.code == 0, restarted.err
+    ids.unlink()  # and one whose image has no machine-id
+    monkeypatch.setattr(socket, "gethostname", lambda: "monitor-5d8f7-x2k4q")
+    assert _start(capsys, bench, out).code == 0
+    assert (_identity(out)["monitor_id"], _identity(out)["host"], _identity(out)["machine_id"]) == (
+        mid, "monitor-5d8f7-x2k4q", None)
+    doc = json.loads(run_cli(capsys, "trend", str(out), "--joint", "joint1", "--json").out)
+    assert [(p["tags"]["monitor_window"], p["tags"]["monitor_id"]) for p in doc["points"]] == [
+        (0, mid), (1, mid), (2, mid)]
+    ids.write_text("0123456789abcdef0123456789abcdef\n")
+    assert _start(capsys, bench, out).code == 0  # bound to this machine's id again
+    # the folder copied to another machine, to the same path under the same host name (a station cloned file by file)
+    shutil.copytree(out, tmp_path / "carried")
+    shutil.rmtree(out)
+    shutil.copytree(tmp_path / "carried", out)
+    ids.write_text("fedcba9876543210fedcba9876543210\n")
+    refused = _start(capsys, bench, out)
+    assert (refused.code, refused.err) == (
+        2, f"acq: error: {out}: its monitor.id was made on host monitor-5d8f7-x2k4q (machine-id "
+           "0123456789abcdef0123456789abcdef, this one's fedcba9876543210fedcba9876543210) for "
+           f"{out.resolve()} ({mid}) — a copy would file its windows as that monitor's: start it with --new-identity "
+           "if this is another monitor (the windows copied here stay that one's), or with --moved if the monitor on "
+           "monitor-5d8f7-x2k4q no longer runs (the folder moved here)\n")
+    assert _start(capsys, bench, out, "--moved").code == 0
+    assert (_identity(out)["monitor_id"], _identity(out)["machine_id"]) == (mid, "fedcba9876543210fedcba9876543210")
 
 
 def test_a_restart_into_another_catalogue_is_refused_unless_its_windows_move_there(
