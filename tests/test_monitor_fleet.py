@@ -224,6 +224,34 @@ def test_a_container_restart_with_a_new_host_name_is_the_same_monitor_and_anothe
     assert (_identity(out)["monitor_id"], _identity(out)["machine_id"]) == (mid, "fedcba9876543210fedcba9876543210")
 
 
+def test_windows_copied_from_another_monitor_go_first_when_the_disk_budget_needs_room(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A copied folder started with --new-identity: the windows copied along are the first monitor's, and were never
+    deleted, yet counted against --max-disk — with the baseline they filled it, and no window was captured again (the
+    last closing note). They go first when the budget needs room (retention's docstring says why), and the summary
+    counts them; their catalogue rows stay."""
+    bench, first, copy = _robot(tmp_path, "r1", 891.0), tmp_path / "first", tmp_path / "copy"
+    assert _start(capsys, bench, first, minutes=2).code == 0  # windows 0, 1 (the baseline): their raw files kept
+    shutil.copytree(first, copy)
+    copied = sorted(p.name for p in copy.glob("*.h5"))
+    assert len(copied) == 2
+    # the budget of the 2 baseline windows and the next (3 × 3.9 MB expected, 2.6 MB each as written): once this
+    # monitor's baseline is kept, the copied windows must go for its next windows to fit
+    run = _start(capsys, bench, copy, "--new-identity", "--max-disk", "12MB", minutes=4)
+    assert run.code == 0, run.err
+    summary = {" ".join(cells.split("│")[1].split()): cells.split("│")[2].strip()
+               for cells in run.err.splitlines() if cells.count("│") == 3}
+    assert summary["windows captured / excited / analysed"].startswith("4 / ")
+    assert "not captured: the disk budget (--max-disk) was full" not in summary
+    assert summary["copies of other monitors' windows deleted"] == "2"
+    assert not [name for name in copied if (copy / name).exists()]
+    assert sum(f.stat().st_size for f in copy.iterdir() if f.is_file()) <= 12_000_000
+    first_id = _identity(first)["monitor_id"]
+    with sqlite3.connect(copy / "catalogue.sqlite") as db:
+        counts = dict(db.execute("SELECT monitor_id, COUNT(*) FROM sessions GROUP BY monitor_id").fetchall())
+    assert counts == {first_id: 2, _identity(copy)["monitor_id"]: 4}
+
+
 def test_a_restart_into_another_catalogue_is_refused_unless_its_windows_move_there(
         catalogue_location: Path | str, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A restart with another --catalogue started over in an empty one (numbering, baseline, alarm) and left the

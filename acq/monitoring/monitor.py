@@ -306,6 +306,7 @@ class Monitor:
             for w in victims:
                 delete(w)
                 del self._windows[w.key]
+            self.status.copied_deleted += sum(w.copied for w in victims)
         self.status.disk_bytes = folder_bytes(self.s.out_dir)
         return fits
 
@@ -340,9 +341,12 @@ class Monitor:
                 session = load(path)
             except Exception:  # noqa: BLE001 - not a readable session: not ours to judge
                 continue
-            if WINDOW_TAG not in session.tags or session.tags.get(MONITOR_TAG, self._id) != self._id:
-                continue  # not a window, or another monitor's (copied here): not ours to file
+            if WINDOW_TAG not in session.tags:
+                continue  # not a window: not ours to file or delete
             n, key = int(session.tags[WINDOW_TAG]), str(session.meta.session_id)
+            if session.tags.get(MONITOR_TAG, self._id) != self._id:  # another monitor's, copied here: not ours to file
+                self._windows[key] = WindowFiles(n, path, True, False, key, copied=True)  # (retention's docstring)
+                continue
             numbers.append(n)
             self._windows[key] = WindowFiles(n, path, key in known, False, key)
             if key in known:

@@ -62,6 +62,7 @@ class MonitorStatus:
     analysed: int = 0
     skipped: int = 0  # captured, not analysed: the analysis fell behind
     not_captured: int = 0  # not captured: the disk budget would have been exceeded
+    copied_deleted: int = 0  # raw windows of other monitors copied into the folder, deleted for the disk budget
     interrupted: int = 0
     alarms: int = 0
     alarm_command_failure: str | None = None  # the last --on-alarm command's problem: "alarm command failed: exit 1"
