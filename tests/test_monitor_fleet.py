@@ -274,6 +274,31 @@ def test_a_restart_into_another_catalogue_is_refused_unless_its_windows_move_the
     assert _start(capsys, bench, out, "--catalogue", str(catalogue_location)).code == 0  # bound there now
 
 
+def test_a_refused_start_with_a_new_catalogue_file_leaves_nothing_behind(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A --catalogue naming a SQLite file not there yet was made (with its folder) before the start was refused, and
+    stayed behind empty (the last closing note). Each refusal comes before it is made: windows filed elsewhere,
+    a copied folder, windows of another --window (judged where they are filed, before --move-catalogue copies them —
+    monitor.id was rewritten to the new catalogue before that refusal)."""
+    bench, out, new = _robot(tmp_path, "r1", 891.0), tmp_path / "m", tmp_path / "plant" / "new.sqlite"
+    assert _start(capsys, bench, out).code == 0
+    identity = (out / "monitor.id").read_text()
+    refused = _start(capsys, bench, out, "--catalogue", str(new))
+    assert refused.code == 2 and refused.err.startswith(f"acq: error: {out}: its windows are filed in ")
+    other_window = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--window", "20", "--every", "60",
+                           "--for", "1m", "--baseline-windows", "2", "--out", str(out), "--catalogue", str(new),
+                           "--move-catalogue")
+    assert other_window.code == 2 and "its windows were captured with another bench or window" in other_window.err
+    shutil.copytree(out, tmp_path / "copy")
+    copied = _start(capsys, bench, tmp_path / "copy", "--catalogue", str(new))
+    assert copied.code == 2 and "this folder looks copied from" in copied.err
+    assert not (tmp_path / "plant").exists()
+    assert (out / "monitor.id").read_text() == identity
+    assert _start(capsys, bench, out, "--catalogue", str(new), "--move-catalogue").code == 0  # accepted: made now
+    with Catalogue(new) as c:
+        assert [e.tags["monitor_window"] for e in c.entries()] == [0, 1]
+
+
 def test_a_restart_with_another_every_goes_on_in_machine_time_from_the_last_window(
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """--every spaces the windows, it changes no K: watching a joint more closely is allowed. Machine time was the
@@ -427,8 +452,7 @@ def test_a_move_from_a_catalogue_with_a_password_in_its_url_reads_the_password_f
            "monitor.id keeps no password: put it in ~/.pgpass or PGPASSWORD (libpq reads them), then restart with "
            "--move-catalogue\n")
     assert (out / "monitor.id").read_text() == identity
-    with Catalogue(plant) as c:
-        assert c.entries() == []
+    assert not plant.exists()  # a refusal leaves nothing: the new catalogue is made only once the start is accepted
     monkeypatch.setenv("PGPASSWORD", PG_PASSWORD)
     moved = _start(capsys, bench, out, "--catalogue", str(plant), "--move-catalogue")
     assert moved.code == 0, moved.err

@@ -54,12 +54,12 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-from acq.monitoring.catalogue import MONITOR_TAG, Entry
+from acq.monitoring.catalogue import MONITOR_TAG, Catalogue, Entry
 from acq.recording.storage import storage_error, write_text_atomically
 from acqcore.errors import ConfigError
 
 __all__ = ["IDENTITY_FILE", "MONITOR_TAG", "WINDOW_TAG", "Identity", "bound_identity", "check_user_tags",
-           "machine_id", "monitors_of", "read_identity", "split_by_monitor", "write_identity"]
+           "machine_id", "monitors_of", "own_windows", "read_identity", "split_by_monitor", "write_identity"]
 
 #: Session tag of a monitor's window: its number in the monitor (every window has it, from before identities too).
 WINDOW_TAG = "monitor_window"
@@ -216,6 +216,13 @@ def check_user_tags(tags: Mapping[str, Any], reserved: Sequence[str]) -> None:
         if key in reserved or key == MONITOR_TAG:
             raise ConfigError(f"--tag {key}=…: acq monitor files {key} itself with every window — "
                               "choose another key")
+
+
+def own_windows(catalogue: Catalogue, monitor: str, joint: str | None = None, *, unowned: bool) -> list[Entry]:
+    """The windows of ``monitor`` in ``catalogue`` (of ``joint``; None: any), oldest first — never another monitor's of
+    a joint of the same name in a shared catalogue; with ``unowned`` its windows without an identity too (only in the
+    catalogue of its own folder): a query on the catalogue's monitor_id column."""
+    return [e for e in catalogue.entries(joint, monitor=monitor, unowned=unowned) if WINDOW_TAG in e.tags]
 
 
 def monitors_of(entries: Iterable[Entry]) -> list[str]:
