@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from acq.monitoring import monitor_scope
-from acq.monitoring.catalogue import Catalogue
+from acq.monitoring.catalogue import Catalogue, Outcome
 from tests.conftest import PG_PASSWORD
 from tests.helpers import CliRun, run_cli
 from tests.pg_server import new_database
@@ -462,3 +462,46 @@ def test_a_move_from_a_catalogue_with_a_password_in_its_url_reads_the_password_f
     doc = json.loads(run_cli(capsys, "trend", "--catalogue", str(plant), "--joint", "joint1", "--json").out)
     assert [(p["tags"]["monitor_window"], p["state"]) for p in doc["points"]][:3] == [
         (0, "baseline"), (1, "baseline"), (2, "ok")]
+
+
+def _window(monitor: str | None, n: int, k: float, *, robot: str = "r1") -> Outcome:
+    """A window (or, without ``monitor``, a bench's session) of joint1 as a monitor files it, n minutes in."""
+    tags: dict[str, object] = {"robot": robot, "monitor_window": n}
+    if monitor is not None:
+        tags["monitor_id"] = monitor
+    doc = {"options": {}, "analyzed_utc": f"2026-01-02T00:{n:02d}:30+00:00", "acq_version": "t", "K_Nm_per_rad": k,
+           "ci95": {"K_Nm_per_rad": [k - 5.0, k + 5.0]}, "quality": {"verdict": "ok", "reasons": []}}
+    meta = {"session_id": f"{monitor}-{n}", "joint": "joint1", "created_utc": f"2026-01-02T00:{n:02d}:00+00:00",
+            "start_monotonic_ns": n, "status": "complete", "tags": tags}
+    return Outcome(f"/m/{monitor}-{n}.h5", f"sha-{monitor}-{n}", "{}", meta, doc, None, 1.0)
+
+
+def test_trend_and_fleet_read_one_monitor_by_the_catalogue_column(catalogue_location: Path | str,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """acq trend / acq fleet --tag monitor_id=ID read every window of the catalogue and kept the monitor's in Python
+    (the last closing note); the query now names the monitor (its column's index). What it returns: the monitor's
+    windows and no other's, a window an earlier acq filed without the column (its tag says whose) among them, and a
+    monitor whose identity is digits (a monitor.id not made by acq), which the tag's number parsing matched to none."""
+    with Catalogue(catalogue_location) as c:
+        for n in range(4):
+            c.record(_window("r1:/srv/m:0a0b0c0d", n, 890.0 + n))
+            c.record(_window("r2:/srv/m:01020304", n, 700.0 + n, robot="r2"))
+            c.record(_window("4711", n, 500.0 + n, robot="r3"))
+        c.record(_window(None, 9, 100.0))  # a bench's session of the same joint name
+        c.record(_window("r1:/srv/m:0a0b0c0d", 4, 894.0))
+        c._execute("UPDATE sessions SET monitor_id = NULL WHERE session_id = ?", ("r1:/srv/m:0a0b0c0d-4",))
+    where = ["--catalogue", str(catalogue_location)]
+    trend = run_cli(capsys, "trend", *where, "--joint", "joint1", "--tag", "monitor_id=r1:/srv/m:0a0b0c0d", "--json")
+    assert trend.code == 0, trend.err
+    assert [(p["tags"]["monitor_window"], p["K_Nm_per_rad"]) for p in json.loads(trend.out)["points"]] == [
+        (0, 890.0), (1, 891.0), (2, 892.0), (3, 893.0), (4, 894.0)]
+    digits = run_cli(capsys, "trend", *where, "--joint", "joint1", "--tag", "monitor_id=4711", "--json")
+    assert digits.code == 0, digits.err
+    assert [p["K_Nm_per_rad"] for p in json.loads(digits.out)["points"]] == [500.0, 501.0, 502.0, 503.0]
+    fleet = run_cli(capsys, "fleet", *where, "--tag", "monitor_id=r2:/srv/m:01020304", "--tag", "robot=r2", "--json")
+    assert fleet.code == 0, fleet.err
+    assert [(r["robot"], r["monitor_id"], r["K_Nm_per_rad"]) for r in json.loads(fleet.out)] == [
+        ("r2", "r2:/srv/m:01020304", 703.0)]
+    none = run_cli(capsys, "fleet", *where, "--tag", "monitor_id=r2:/srv/m:01020304", "--tag", "robot=r1")
+    assert (none.code, none.err) == (2, f"acq: error: {catalogue_location}: no sessions of any joint tagged "
+                                        "monitor_id=r2:/srv/m:01020304 robot=r1\n")

@@ -56,10 +56,11 @@ from typing import Any
 
 from acq.monitoring.catalogue import MONITOR_TAG, Catalogue, Entry
 from acq.recording.storage import storage_error, write_text_atomically
+from acq.recording.tags import parse_tags
 from acqcore.errors import ConfigError
 
 __all__ = ["IDENTITY_FILE", "MONITOR_TAG", "WINDOW_TAG", "Identity", "bound_identity", "check_user_tags",
-           "machine_id", "monitors_of", "own_windows", "read_identity", "split_by_monitor", "write_identity"]
+           "machine_id", "monitor_and_tags", "monitors_of", "own_windows", "read_identity", "split_by_monitor", "write_identity"]
 
 #: Session tag of a monitor's window: its number in the monitor (every window has it, from before identities too).
 WINDOW_TAG = "monitor_window"
@@ -223,6 +224,19 @@ def own_windows(catalogue: Catalogue, monitor: str, joint: str | None = None, *,
     a joint of the same name in a shared catalogue; with ``unowned`` its windows without an identity too (only in the
     catalogue of its own folder): a query on the catalogue's monitor_id column."""
     return [e for e in catalogue.entries(joint, monitor=monitor, unowned=unowned) if WINDOW_TAG in e.tags]
+
+
+def monitor_and_tags(texts: Sequence[str]) -> tuple[str | None, dict[str, str | float]]:
+    """``acq trend`` / ``acq fleet``'s ``--tag KEY=VALUE`` texts as the monitor they name (``monitor_id=ID``, the last
+    one given, as :func:`parse_tags` takes it; None: none) — read by the catalogue's monitor_id column and its index —
+    and the other tags (matched in Python). The identity is its text as given: parsed as a number, an identity of
+    digits (a monitor.id not made by acq) matched none of its windows."""
+    monitor = None
+    for text in texts:
+        key, sep, value = text.partition("=")
+        if sep and key.strip() == MONITOR_TAG:
+            monitor = value.strip()
+    return monitor, {key: value for key, value in parse_tags(texts).items() if key != MONITOR_TAG}
 
 
 def monitors_of(entries: Iterable[Entry]) -> list[str]:

@@ -38,8 +38,8 @@ from scipy.stats import chi2
 from acq.monitoring.batch import CATALOGUE_NAME
 from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.catalogue_backends import is_url, redacted
-from acq.monitoring.monitor_scope import MONITOR_TAG, monitors_of, split_by_monitor
-from acq.recording.tags import parse_tags, tags_match
+from acq.monitoring.monitor_scope import MONITOR_TAG, monitor_and_tags, monitors_of, split_by_monitor
+from acq.recording.tags import tags_match
 from acqcore.errors import ConfigError
 from analysis import AnalysisRequest, Z95
 
@@ -401,9 +401,9 @@ def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: st
                **options: Any) -> Trend:
     """The trend of ``joint`` from a catalogue (``folder``/catalogue.sqlite or ``catalogue_path``), sessions
     filtered on ``tags`` (``KEY=VALUE``); ``options`` go to :func:`compute_trend`."""
-    wanted = parse_tags(tags)
+    monitor, wanted = monitor_and_tags(tags)
     with Catalogue(catalogue_location(folder, catalogue_path)) as catalogue:
-        entries = [e for e in catalogue.entries(joint) if tags_match(e.tags, wanted)]
+        entries = [e for e in catalogue.entries(joint, monitor=monitor) if tags_match(e.tags, wanted)]
         tagged = f" tagged {' '.join(tags)}" if tags else ""
         if not entries:
             joints = catalogue.joints()
