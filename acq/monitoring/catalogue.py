@@ -306,12 +306,12 @@ class Catalogue:
             "SELECT s.*, a.*, COALESCE(a.file_path, s.path) AS analysed_path FROM sessions s JOIN analyses a"
             " ON a.session_key = s.session_key" + "".join(f" {'AND' if i else 'WHERE'} {t}" for i, t in enumerate(terms))
             + " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path, a.analyzed_utc, a.id",
-            params)
-        entries = [_entry(r) for r in rows]
+            params).fetchall()
         if monitor is None:
-            return entries
-        return [e for e in entries if (str(e.tags[MONITOR_TAG]) == monitor if e.tags.get(MONITOR_TAG) is not None
-                                       else unowned)]
+            return [_entry(r) for r in rows]
+        entries = [(r["monitor_id"], _entry(r)) for r in rows]  # a session without the column is whose its tag says
+        return [e for column, e in entries if column is not None or (
+            str(e.tags[MONITOR_TAG]) == monitor if e.tags.get(MONITOR_TAG) is not None else unowned)]
 
     def fill_monitor_ids(self) -> int:
         """Fill the ``monitor_id`` column of the sessions whose tags name a monitor but whose column does not: the rows
