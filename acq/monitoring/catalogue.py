@@ -292,7 +292,8 @@ class Catalogue:
         (``acq trend``, ``acq fleet``) write nothing, and without it the latest windows of such a monitor were
         missing from its trend.
         """
-        terms, params = [], []
+        terms: list[str] = []
+        params: list[Any] = []
         if monitor is not None:  # by the monitor_id index (both terms of the OR are index searches)
             terms.append("(s.monitor_id = ? OR (s.monitor_id IS NULL AND (? = 1 OR s.tags_json LIKE ?)))")
             params += [monitor, unowned, f'%"{MONITOR_TAG}"%']
@@ -302,10 +303,11 @@ class Catalogue:
             # TEXT) IS NULL OR" form of these terms read every row of the catalogue)
             terms.append("s.joint = ?" if monitor is None else "s.joint || '' = ?")
             params.append(joint)
+        where = "".join(f" {'AND' if i else 'WHERE'} {term}" for i, term in enumerate(terms))
         rows = self._execute(
             "SELECT s.*, a.*, COALESCE(a.file_path, s.path) AS analysed_path FROM sessions s JOIN analyses a"
-            " ON a.session_key = s.session_key" + "".join(f" {'AND' if i else 'WHERE'} {t}" for i, t in enumerate(terms))
-            + " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path, a.analyzed_utc, a.id",
+            f" ON a.session_key = s.session_key{where}"
+            " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path, a.analyzed_utc, a.id",
             params).fetchall()
         if monitor is None:
             return [_entry(r) for r in rows]
@@ -316,7 +318,8 @@ class Catalogue:
     def fill_monitor_ids(self) -> int:
         """Fill the ``monitor_id`` column of the sessions whose tags name a monitor but whose column does not: the rows
         an acq of before schema 6 still running files into a catalogue another one migrated (its INSERT names the
-        columns it knows). :meth:`entries` scopes by the column: without this, such a monitor's windows were nobody's
+        columns it knows). :meth:`entries` scopes by the column's index (such a session only by its tag, read outside
+        the index) and :meth:`copy_windows` by the column alone: without this, such a monitor's windows were nobody's
         once it restarted upgraded. Returns the number of sessions filled (one transaction)."""
         try:
             with self._transaction():

@@ -19,12 +19,14 @@ machine and a folder, and what each assumes:
   may carry one file for every container made from it on every machine, and a disk cloned block by block keeps it;
   a container without systemd has none (or the host's, mounted in). A container running systemd without a kept id
   gets a new one at every start: its restarts are refused until ``--moved``.
-* the folder's filesystem identity (``st_dev``, ``st_ino`` of the folder): the same folder object, whatever path
-  reaches it — kept by ``mv`` within a filesystem, a bind mount at another path, a container's volume across
-  restarts; never by a copy (``cp``, ``rsync``, ``tar``, a backup restored), which makes a new folder. It assumes the
-  device number is kept across reboots: true of a disk's partition (its major:minor), not always of NFS, btrfs or
-  ZFS, whose numbers are handed out at mount — there a restart after a reboot falls back to the host name and path.
-  A block-level clone of the disk keeps it too (see the machine-id).
+* the folder's filesystem object (its filesystem's id and the folder's inode): the same folder object, whatever
+  path reaches it — kept by ``mv`` within a filesystem, a bind mount at another path, a container's volume across
+  restarts; never by a copy (``cp``, ``rsync``, ``tar``, a backup restored), which makes a new folder. The filesystem
+  is told by ``statvfs``'s ``f_fsid``, which ext4 and btrfs derive from the filesystem's UUID (kept across remounts,
+  reboots, a block device numbered anew — a volume attached to another node); where a filesystem gives none (0: NFS)
+  by ``st_dev``, which assumes the device keeps its number: true of a disk's partition (its major:minor), not always
+  of network filesystems, whose numbers are handed out at mount — there a restart after a remount falls back to the
+  host name and path. A block-level clone of the disk keeps both (see the machine-id).
 * the host name (``socket.gethostname()``): set once per machine outside containers; a container's is new at every
   container start (Docker's container id, Kubernetes' pod name), so it tells nothing there about the machine.
 
@@ -46,6 +48,7 @@ host name. At a start (:func:`bound_identity`):
 from __future__ import annotations
 
 import json
+import os
 import re
 import socket
 import uuid
@@ -60,7 +63,8 @@ from acq.recording.tags import parse_tags
 from acqcore.errors import ConfigError
 
 __all__ = ["IDENTITY_FILE", "MONITOR_TAG", "WINDOW_TAG", "Identity", "bound_identity", "check_user_tags",
-           "machine_id", "monitor_and_tags", "monitors_of", "own_windows", "read_identity", "split_by_monitor", "write_identity"]
+           "folder_object", "machine_id", "monitor_and_tags", "monitors_of", "own_windows", "read_identity",
+           "split_by_monitor", "write_identity"]
 
 #: Session tag of a monitor's window: its number in the monitor (every window has it, from before identities too).
 WINDOW_TAG = "monitor_window"
@@ -86,7 +90,8 @@ class Identity:
     machine_id : str or None
         The machine's id (:data:`MACHINE_ID_FILES`; None: it has none, or a file of an earlier acq).
     folder_object : tuple of int or None
-        ``(st_dev, st_ino)`` of the folder (None: a file of an earlier acq).
+        The folder's filesystem object, ``(filesystem id, inode)`` (:func:`folder_object`; None: a file of an earlier
+        acq).
     """
 
     monitor_id: str
@@ -159,6 +164,16 @@ def machine_id() -> str | None:
     return None
 
 
+def folder_object(folder: Path) -> tuple[int, int]:
+    """``(filesystem id, inode)`` of ``folder``: the filesystem by ``statvfs``'s ``f_fsid`` (ext4, btrfs: from its
+    UUID), by ``st_dev`` where that is 0 (the module's docstring says what each assumes)."""
+    try:
+        stat, fsid = folder.stat(), os.statvfs(folder).f_fsid
+    except OSError as e:
+        raise storage_error(e, folder) from None
+    return (fsid or stat.st_dev, stat.st_ino)
+
+
 def _same_folder(folder: str, out_dir: Path) -> bool:
     """Whether ``folder`` (on this host) is ``out_dir`` itself, reached by another path (same device and inode)."""
     try:
@@ -181,12 +196,8 @@ def bound_identity(out_dir: Path, *, new_identity: bool = False, moved: bool = F
         The folder's identity is bound to another folder that still holds it (a copy), or to another host.
     """
     host, folder, machine = socket.gethostname(), str(out_dir.resolve()), machine_id()
-    try:
-        stat = out_dir.stat()
-    except OSError as e:
-        raise storage_error(e, out_dir) from None
     found = read_identity(out_dir)
-    fresh = Identity(f"{host}:{folder}:{uuid.uuid4().hex[:8]}", host, folder, None, machine, (stat.st_dev, stat.st_ino))
+    fresh = Identity(f"{host}:{folder}:{uuid.uuid4().hex[:8]}", host, folder, None, machine, folder_object(out_dir))
     if found is None:
         return fresh
     here = replace(found, host=host, folder=folder, machine_id=machine, folder_object=fresh.folder_object)
