@@ -23,7 +23,7 @@ machine and a folder, and what each assumes:
   path reaches it — kept by ``mv`` within a filesystem, a bind mount at another path, a container's volume across
   restarts; never by a copy (``cp``, ``rsync``, ``tar``, a backup restored), which makes a new folder. The filesystem
   is told by ``statvfs``'s ``f_fsid``, which ext4 and btrfs derive from the filesystem's UUID (kept across remounts,
-  reboots, a block device numbered anew — a volume attached to another node); where a filesystem gives none (0: NFS)
+  reboots, a block device numbered anew — a volume attached to another node); where a filesystem gives none (0)
   by ``st_dev``, which assumes the device keeps its number: true of a disk's partition (its major:minor), not always
   of network filesystems, whose numbers are handed out at mount — there a restart after a remount falls back to the
   host name and path. A block-level clone of the disk keeps both (see the machine-id).
@@ -43,6 +43,13 @@ host name. At a start (:func:`bound_identity`):
 * another host: acq cannot look at the other host's folder — refused, naming host and folder (a folder carried to a
   replacement PC and a copy for the next station look alike here). A copy on a machine of the same machine-id (or
   none), host name and path — a cloned disk whose host name was kept — is not told from the original.
+
+The way on is a flag, not a file to delete: ``--new-identity`` (this folder is another monitor; the windows copied
+here stay the monitor's that captured them) or ``--moved`` (it is the same monitor, the one at the old place no
+longer runs). Both act only on a folder whose identity is bound elsewhere, so either is harmless left on a service's
+command line; asking an engineer to delete a state file invites deleting it in the wrong folder — the original's,
+whose history would then be split. A file of an earlier acq holds the identity alone (one line,
+``host:folder:suffix``): its binding is read from the identity itself, so a copy made before the upgrade is found too.
 """
 
 from __future__ import annotations
@@ -129,7 +136,7 @@ def read_identity(out_dir: Path) -> Identity | None:
         raise storage_error(e, path) from None
     try:
         return _from_text(text)
-    except (ValueError, KeyError, TypeError) as e:
+    except (ValueError, KeyError, TypeError, IndexError) as e:
         raise ConfigError(f"{path}: not a monitor identity ({e}) — restore it from a backup, or move it away to "
                           "start a new monitor in this folder") from None
 
