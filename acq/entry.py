@@ -13,7 +13,7 @@ from acq.environment import pin_blas_threads
 #: 21.5 s with two; with the machine loaded (load 2.6) OpenBLAS's default threads took 71 s wall against 12.4 s.
 #: After the blocked spline products (issue 17; bench/analysis_speed.py, load ≈ 14): 60 s session 1.16 s CPU with
 #: one thread, 2.29 s with the default; 10 min 10.8 s against 26.3 s, and 70 s wall against 152 s. Batch and monitor
-#: workers pin one thread as well (acq/monitoring/batch.py).
+#: workers pin one thread as well (acq/monitoring/analysis_pool.py).
 BLAS_THREADS = "1"
 #: glibc's malloc gives freed memory at the top of its heap back to the system once more than its trim threshold lies
 #: free (by default twice the largest array it has mapped, at most 64 MB) and maps arrays above its mmap threshold

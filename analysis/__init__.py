@@ -38,7 +38,7 @@ from analysis.sample_instants import MAX_STAMP_DEVIATION, cycle_deviation_s
 from analysis.segments import excitation_summary
 from analysis.signals import PreparedSignals, prepare_signals
 from analysis.speed_ratio import SpeedRatio, electrical_speed_ratio, likely_counts_per_rev, ratio_doubt, ratio_fault
-from analysis.torque import PHASE_WINDOW_S, min_speed_rpm
+from analysis.phase_offset import PHASE_WINDOW_S, min_speed_rpm
 
 __all__ = [
     "MAX_STAMP_DEVIATION", "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",

@@ -28,7 +28,8 @@ class SignalChain:
     Attributes
     ----------
     torque_method : {"encoder", "hilbert", "park"}
-        Torque estimator (:mod:`analysis.torque`); ``park`` needs ``i_a`` and ``i_b``.
+        Torque estimator (:mod:`analysis.torque`, :mod:`analysis.torque_park`, :mod:`analysis.torque_hilbert`); ``park``
+        needs ``i_a`` and ``i_b``.
     align : bool
         Fit the clock relation from the data (True) or take both streams as started together, no drift (False).
     resampling : {"antialias", "linear"}

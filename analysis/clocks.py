@@ -39,7 +39,7 @@ from scipy.ndimage import median_filter
 from analysis import trig
 from analysis.clock_search import starting_relation, wide_search
 from analysis.fit import Z95
-from analysis.torque import window_phasors
+from analysis.phase_offset import window_phasors
 
 _CHUNK = 1 << 18  # samples per pass over the DAQ record (each pass holds ~15 float64 temporaries of this length: 30 MB)
 _GRID_HZ = 1000.0  # grid of the frequency stage

@@ -2,10 +2,10 @@
 
 :func:`prepare_signals` runs it in two stages. :func:`spans_and_clock`: gap-free spans, clock fit
 (:mod:`analysis.clocks`), speed by backward difference on k·T (:mod:`analysis.encoder`).
-:func:`torque_on_instants`: torque by the chosen method at the DAQ samples (:mod:`analysis.torque`),
-moved to the encoder instants after a zero-phase anti-alias filter (:mod:`analysis.resample`); long
-records are processed in chunks of ~20 s with overlapping margins, so memory stays a few times one
-chunk whatever the length.
+:func:`torque_on_instants`: torque by the chosen method at the DAQ samples (:mod:`analysis.torque`,
+:mod:`analysis.torque_park`, :mod:`analysis.torque_hilbert`), moved to the encoder instants after a zero-phase
+anti-alias filter (:mod:`analysis.resample`); long records are processed in chunks of ~20 s with overlapping
+margins, so memory stays a few times one chunk whatever the length.
 
 The :class:`analysis.chain.SignalChain` given decides the differences between our chain and the
 paper's (:data:`analysis.chain.PAPER_CHAIN`: Hilbert torque, no alignment — both streams taken as
@@ -24,8 +24,11 @@ from analysis.chain import SignalChain, TorqueMethod
 from analysis.clocks import ClockFit, fit_clock, host_relation
 from analysis.recording import CommandedProfile, Recording
 from analysis.fit import Z95
+from analysis.phase_offset import PhaseOffset, phase_offset
 from analysis.quantisation_lock import NOTED_LOCKED_SHARE, locked_share
 from analysis.sample_instants import EncoderJitter
+from analysis.torque_hilbert import apex_sign, torque_hilbert
+from analysis.torque_park import PhaseGains, phase_gains, torque_park
 
 _CHUNK_S = 20.0
 _MARGIN_S = 0.1
@@ -224,14 +227,14 @@ def torque_on_instants(rec: Recording, spans: Spans, chain: SignalChain = Signal
                                              spans.n0, spans.clock)
     f_pass, f_stop = _band_edges_hz(rec)
     antialias = chain.resampling == "antialias"
-    sign = torque.apex_sign(speed, rec.period_s) if chain.torque_method == "hilbert" else None
+    sign = apex_sign(speed, rec.period_s) if chain.torque_method == "hilbert" else None
     out = np.empty(t_s.size)
     noise = np.empty(t_s.size) if chain.torque_method == "encoder" and antialias else None
     alias = np.empty((ALIAS_ORDERS, t_s.size), complex) if sign is None and antialias else None
     std = np.empty(t_s.size) if noise is not None and torque_std else None
     theta0 = np.nan if sign is not None else clock.theta0_rad  # NaN: the first chunk estimates it
     found: list[torque.Interference] = []
-    gains: list[torque.PhaseGains] = []
+    gains: list[PhaseGains] = []
     for a, b, m0, m1 in _chunks(current["i_a"].size, rec.rate_hz):
         t0 = (n0 + a - m0) / rec.rate_hz
         sel = (t_daq >= (n0 + a) / rec.rate_hz) & (t_daq < (n0 + b) / rec.rate_hz)
@@ -260,7 +263,7 @@ def torque_on_instants(rec: Recording, spans: Spans, chain: SignalChain = Signal
                 continue
         else:
             k = np.clip(np.searchsorted(t_daq, t_piece), 0, t_daq.size - 1)
-            tq = torque.torque_hilbert(piece["i_a"], rec.k_t_Nm_per_A, sign[k])
+            tq = torque_hilbert(piece["i_a"], rec.k_t_Nm_per_A, sign[k])
         out[sel] = chain.to_instants(tq, rec.rate_hz, t0, t_daq[sel], f_pass, f_stop)
     notes = [*spans.notes, *_interference_notes(found), *_gain_notes(gains)]
     prepared = PreparedSignals(t_s, out, speed, rec.period_s, clock, chain.torque_method, chain.align, theta0, notes,
@@ -439,7 +442,7 @@ def _interference_notes(found: list[torque.Interference]) -> list[str]:
             f"({_OFFSET_CAUSES})"]
 
 
-def _gain_notes(found: list[torque.PhaseGains]) -> list[str]:
+def _gain_notes(found: list[PhaseGains]) -> list[str]:
     """One note on the phases' relative sensor gains (divided out) when one differs from 1 beyond its 95 %
     interval (in the longest chunk)."""
     if not found:
@@ -454,7 +457,7 @@ def _gain_notes(found: list[torque.PhaseGains]) -> list[str]:
 def _demodulated(piece: dict[str, np.ndarray], rec: Recording, theta_m_rad: np.ndarray, method: TorqueMethod,
                  theta0: float, noise_seed: int | None = None,
                  found: list[torque.Interference] | None = None,
-                 gains_found: list[torque.PhaseGains] | None = None) -> tuple[np.ndarray, float]:
+                 gains_found: list[PhaseGains] | None = None) -> tuple[np.ndarray, float]:
     """Torque of one chunk by the encoder or park method, and the θ_0 used (mod π; estimated if NaN).
 
     The park method divides three phases by their relative sensor gains, estimated from the chunk itself
@@ -465,20 +468,20 @@ def _demodulated(piece: dict[str, np.ndarray], rec: Recording, theta_m_rad: np.n
     theta_e = rec.pole_pairs * theta_m_rad
     if method == "encoder":
         if np.isnan(theta0):
-            theta0 = torque.phase_offset(piece["i_a"], theta_e, rec.rate_hz, pole_pairs=rec.pole_pairs,
-                                         commanded=rec.profile is not None).theta0_rad
+            theta0 = phase_offset(piece["i_a"], theta_e, rec.rate_hz, pole_pairs=rec.pole_pairs,
+                                  commanded=rec.profile is not None).theta0_rad
         # the sensor DC is estimated jointly by the spline fit, θ_0 refined there
         return torque.torque_encoder(piece["i_a"], theta_e, rec.rate_hz, rec.k_t_Nm_per_A,
-                                     torque.PhaseOffset(theta0, 0.0, 0), noise_seed=noise_seed, found=found), theta0
-    offsets = {name: torque.phase_offset(c, theta_e, rec.rate_hz, pole_pairs=rec.pole_pairs,
-                                         commanded=rec.profile is not None)
+                                     PhaseOffset(theta0, 0.0, 0), noise_seed=noise_seed, found=found), theta0
+    offsets = {name: phase_offset(c, theta_e, rec.rate_hz, pole_pairs=rec.pole_pairs,
+                                  commanded=rec.profile is not None)
                for name, c in piece.items()}
     theta0 = offsets["i_a"].theta0_rad if np.isnan(theta0) else theta0
-    gains = torque.phase_gains(piece)
+    gains = phase_gains(piece)
     if gains is not None and gains_found is not None:
         gains_found.append(gains)
-    return torque.torque_park(piece, theta_e, rec.k_t_Nm_per_A, theta0, {n: o.dc_a for n, o in offsets.items()},
-                              None if gains is None else gains.gain), theta0
+    return torque_park(piece, theta_e, rec.k_t_Nm_per_A, theta0, {n: o.dc_a for n, o in offsets.items()},
+                       None if gains is None else gains.gain), theta0
 
 
 def _signed(p: PreparedSignals) -> PreparedSignals:

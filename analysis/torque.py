@@ -1,18 +1,21 @@
-"""Electromagnetic torque T_e = k_t·i_q from the measured phase currents (design §5.1).
+"""Electromagnetic torque T_e = k_t·i_q from one phase current demodulated with the encoder angle (design §5.1),
+acq's default estimator (``--torque encoder``).
 
 Motor model (i_d = 0): i_a = −i_q·sin(θ_e + θ_0) + dc, i_b and i_c shifted by ∓2π/3, where θ_e = p·θ_m
 is the encoder's electrical angle at the DAQ instants (mapped through the clock fit) and θ_0 the
-motor's electrical offset. All functions return torque at the DAQ samples they were given.
+motor's electrical offset (:mod:`analysis.phase_offset`). The functions return torque at the DAQ samples they
+were given.
 
-* :func:`torque_hilbert` — the paper's baseline: k_t·|hilbert(i_a)| with a sign per sample.
 * :func:`torque_encoder` — one phase, demodulated with the encoder angle: i_q is a cubic B-spline in
   time fitted by penalised least squares to i_a. Every sample counts with weight sin²(θ_e + θ_0), so
   where the phase carries no information (|sin| small) the spline is carried by its neighbours instead
   of an explicit interpolation; the penalty only bridges those holes. No speed enters the estimate.
-* :func:`torque_park` — two or three phases, Clarke + Park with the encoder angle, exact.
+  Interference the angle does not modulate (sensor offset drift, mains hum, aliased PWM ripple) is
+  removed in the same least squares (:class:`Interference`).
+* :func:`angle_information_std` — the estimate's standard error where the phase carries little about i_q.
 
-θ_0 is known from one phase only modulo π (the sign of i_q and θ_0 + π give the same current);
-:func:`phase_offset` returns θ_0 in (−π/2, π/2] and the caller fixes the sign (one bit) from the motion.
+The other estimators: two or three phases by Clarke + Park (:mod:`analysis.torque_park`) and the paper's
+Hilbert envelope (:mod:`analysis.torque_hilbert`).
 """
 
 from __future__ import annotations
@@ -21,193 +24,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.ndimage import median_filter, uniform_filter1d
-from scipy.signal import butter, find_peaks, hilbert, sosfiltfilt
+from scipy.signal import find_peaks
 
 from analysis import trig, welch
+from analysis.phase_offset import PhaseOffset
 from analysis.torque_spline import SlowOffset, spline_factor, spline_fit
-
-_SQRT3 = np.sqrt(3.0)
-
-
-@dataclass(frozen=True)
-class WindowPhasors:
-    """Least-squares fits i ≈ a·sin θ_e + b·cos θ_e + c over consecutive windows.
-
-    Attributes
-    ----------
-    centre_index : ndarray of float
-        Sample position of each window's centre (0 = first sample given).
-    phasor_a : ndarray of complex
-        a + j·b, A; for i = −i_q·sin(θ_e + θ_0) + dc this is −i_q·e^{jθ_0}.
-    dc_a : ndarray of float
-        c, A.
-    valid : ndarray of bool
-        The window's angle spans at least ``min_span_rad`` (else the fit is ill-posed; values NaN).
-    """
-
-    centre_index: np.ndarray
-    phasor_a: np.ndarray
-    dc_a: np.ndarray
-    valid: np.ndarray
-
-
-@dataclass(frozen=True)
-class PhaseOffset:
-    """Electrical offset and sensor DC of one phase.
-
-    Attributes
-    ----------
-    theta0_rad : float
-        θ_0 modulo π, in (−π/2, π/2], rad.
-    dc_a : float
-        Sensor DC offset, A.
-    n_windows : int
-        Windows that carried the estimate.
-    """
-
-    theta0_rad: float
-    dc_a: float
-    n_windows: int
-
-
-def window_phasors(current_a: np.ndarray, theta_e_rad: np.ndarray, window_len: int,
-                   min_span_rad: float = np.pi) -> WindowPhasors:
-    """Fit a·sin θ_e + b·cos θ_e + c to ``current_a`` over consecutive windows of ``window_len`` samples.
-
-    Parameters
-    ----------
-    current_a : ndarray
-        One phase current, A.
-    theta_e_rad : ndarray
-        Electrical angle at the same samples, rad.
-    window_len : int
-        Samples per window (a trailing remainder is dropped).
-    min_span_rad : float
-        Smallest angle excursion in a window for its fit to count, rad.
-    """
-    i = np.asarray(current_a, dtype=np.float64)
-    th = np.asarray(theta_e_rad, dtype=np.float64)
-    if i.shape != th.shape or i.ndim != 1:
-        raise ValueError("current_a and theta_e_rad must be 1-D arrays of the same length")
-    if window_len < 8:
-        raise ValueError(f"window_len must be at least 8 samples, got {window_len}")
-    nw = i.size // window_len
-    i = i[: nw * window_len].reshape(nw, window_len)
-    th = th[: nw * window_len].reshape(nw, window_len)
-    s, c = trig.sin_cos(th)
-    M = np.empty((nw, 3, 3))
-    M[:, 0, 0] = np.einsum("ij,ij->i", s, s)
-    M[:, 1, 1] = np.einsum("ij,ij->i", c, c)
-    M[:, 0, 1] = M[:, 1, 0] = np.einsum("ij,ij->i", s, c)
-    M[:, 0, 2] = M[:, 2, 0] = s.sum(axis=1)
-    M[:, 1, 2] = M[:, 2, 1] = c.sum(axis=1)
-    M[:, 2, 2] = window_len
-    rhs = np.stack([np.einsum("ij,ij->i", s, i), np.einsum("ij,ij->i", c, i), i.sum(axis=1)], axis=1)
-    valid = (th.max(axis=1) - th.min(axis=1)) >= min_span_rad
-    sol = np.full((nw, 3), np.nan)
-    if valid.any():
-        sol[valid] = np.linalg.solve(M[valid], rhs[valid, :, None])[..., 0]
-    centre = (np.arange(nw) + 0.5) * window_len - 0.5
-    return WindowPhasors(centre, sol[:, 0] + 1j * sol[:, 1], sol[:, 2], valid)
-
-
-#: Window of :func:`phase_offset`, s: the motor must turn half an electrical revolution within it.
-PHASE_WINDOW_S = 0.02
-
-
-def min_speed_rpm(pole_pairs: int, window_s: float = PHASE_WINDOW_S) -> float:
-    """Slowest motor speed, rpm, that turns half an electrical revolution (1/(2·pole_pairs) rev) within ``window_s``:
-    the joint must run faster for that long at a time or :func:`phase_offset` cannot estimate θ_0."""
-    return 60.0 * 0.5 / pole_pairs / window_s
-
-
-def phase_offset(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float,
-                 window_s: float = PHASE_WINDOW_S, pole_pairs: int | None = None,
-                 commanded: bool = True) -> PhaseOffset:
-    """Estimate θ_0 (mod π) and the sensor DC of one phase by windowed least squares.
-
-    θ_0 is the argument of Σ phasor² / 2 (each window weighted by i_q²); dc the median of the windows'
-    constants. Windows where the motor moves less than π electrical are skipped.
-
-    Parameters
-    ----------
-    current_a, theta_e_rad : ndarray
-        Phase current, A, and electrical angle at the same samples, rad.
-    rate_hz : float
-        Sampling rate, Hz.
-    window_s : float
-        Window length, s.
-    pole_pairs : int, optional
-        The motor's pole pairs: the error then says how fast the motor must run.
-    commanded : bool
-        acq commanded the motion (the error's advice is the profile's); False: a machine's own program moved the
-        joint (the advice is to record while it runs fast moves — there is no profile to change).
-    """
-    w = window_phasors(current_a, theta_e_rad, max(8, int(round(window_s * rate_hz))))
-    if not w.valid.any():
-        need = "" if pole_pairs is None else (
-            f": the motor must run faster than {min_speed_rpm(pole_pairs, window_s):.0f} rpm for {1e3 * window_s:.0f} ms "
-            f"at a time ({pole_pairs} pole pairs) — " + (
-                "raise the profile's top_speed_rpm, and lengthen accel_time_s and decel_time_s if the drive cannot "
-                "follow them" if commanded else "record while the machine runs fast moves of this joint"))
-        raise ValueError(f"the motor never turns half an electrical revolution within {1e3 * window_s:.0f} ms, so the "
-                         f"current's phase (θ_0) and DC cannot be estimated{need}")
-    z = np.sum(w.phasor_a[w.valid] ** 2)
-    return PhaseOffset(float(np.angle(z) / 2.0), float(np.median(w.dc_a[w.valid])), int(w.valid.sum()))
-
-
-def apex_sign(speed_rad_s: np.ndarray, period_s: float, smooth_hz: float = 20.0) -> np.ndarray:
-    """Sign of the torque restored at the speed apexes (paper §3.2), ±1 per speed sample.
-
-    Between two apexes (extrema of the speed above half its peak) the sign is that of the speed change
-    from one apex to the next; before the first apex it heads towards it, after the last away from it.
-    The speed is only used to place the sign flips, never to shape the torque.
-
-    Parameters
-    ----------
-    speed_rad_s : ndarray
-        Motor speed, rad/s, on the drive's grid.
-    period_s : float
-        Drive cycle, s.
-    smooth_hz : float
-        Cut-off of the zero-phase low-pass applied before looking for apexes, Hz.
-    """
-    w = np.asarray(speed_rad_s, dtype=np.float64)
-    if w.size < 32:
-        raise ValueError("need at least 32 speed samples to find apexes")
-    ws = sosfiltfilt(butter(2, smooth_hz, fs=1.0 / period_s, output="sos"), w)
-    height = 0.5 * np.max(np.abs(ws))
-    distance = max(1, int(0.05 / period_s))
-    hi, _ = find_peaks(ws, height=height, distance=distance)
-    lo, _ = find_peaks(-ws, height=height, distance=distance)
-    apex = np.sort(np.concatenate((hi, lo)))
-    if apex.size == 0:
-        return np.full(w.size, 1.0 if ws[-1] >= ws[0] else -1.0)
-    sign = np.empty(w.size)
-    sign[: apex[0]] = np.sign(ws[apex[0]])
-    for a, b in zip(apex[:-1], apex[1:]):
-        sign[a:b] = 1.0 if ws[b] > ws[a] else -1.0
-    sign[apex[-1]:] = -np.sign(ws[apex[-1]])
-    sign[sign == 0] = 1.0
-    return sign
-
-
-def torque_hilbert(current_a: np.ndarray, k_t_Nm_per_A: float, sign: np.ndarray) -> np.ndarray:
-    """The paper's torque: T_e = sign·k_t·|hilbert(i_a − mean)|, N·m.
-
-    Parameters
-    ----------
-    current_a : ndarray
-        One phase current, A.
-    k_t_Nm_per_A : float
-        Torque constant, N·m/A.
-    sign : ndarray
-        ±1 per sample (e.g. :func:`apex_sign` mapped onto the DAQ instants).
-    """
-    i = np.asarray(current_a, dtype=np.float64)
-    if np.shape(sign) != i.shape:
-        raise ValueError("sign must have one entry per current sample")
-    return k_t_Nm_per_A * np.asarray(sign) * np.abs(hilbert(i - i.mean()))
 
 
 def torque_encoder(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float, k_t_Nm_per_A: float,
@@ -480,94 +301,3 @@ def _broadband_noise_rms(resid_a: np.ndarray, rate_hz: float, m: int) -> float:
     if floor.size < 8:
         return 1.4826 * float(np.median(np.abs(resid_a - np.median(resid_a))))
     return float(np.sqrt(np.median(floor) * rate_hz / 2.0))
-
-
-@dataclass(frozen=True)
-class PhaseGains:
-    """Relative sensor gains of three recorded phases, each divided by their mean (the common scale is k_t's).
-
-    Attributes
-    ----------
-    gain : dict
-        Phase name → gain / mean gain of the three phases.
-    sigma : dict
-        Phase name → standard error of that ratio (block jackknife).
-    n_samples : int
-        Samples that carried the estimate.
-    """
-
-    gain: dict[str, float]
-    sigma: dict[str, float]
-    n_samples: int
-
-
-def phase_gains(currents_a: dict[str, np.ndarray], blocks: int = 10) -> PhaseGains | None:
-    """Relative sensor gains of three phases from i_a + i_b + i_c = 0; None with fewer than three phases.
-
-    The motor's currents sum to zero at every instant (star point not connected — the usual drive), so
-    the measured m_x = g_x·i_x + dc_x satisfy Σ m_x / g_x = const. The vector (1/g_a, 1/g_b, 1/g_c) is the
-    direction in which the centred currents have least variance: the smallest eigenvector of their 3×3
-    covariance (total least squares — the sensors' noise enters all three alike). No angle and no model
-    of the torque enter. The standard error is a jackknife over ``blocks`` contiguous pieces (a choice of
-    resolution, not a tuned value: ~10 pieces leave each enough motion).
-
-    Parameters
-    ----------
-    currents_a : dict
-        ``"i_a"``, ``"i_b"``, ``"i_c"`` at the same samples, A.
-    blocks : int
-        Pieces of the jackknife.
-    """
-    names = ("i_a", "i_b", "i_c")
-    if not all(n in currents_a for n in names):
-        return None
-    m = np.stack([np.asarray(currents_a[n], dtype=np.float64) for n in names])
-    m = m - m.mean(axis=1, keepdims=True)
-    n = m.shape[1] // blocks * blocks
-    scatter = np.einsum("ibk,jbk->bij", m[:, :n].reshape(3, blocks, -1), m[:, :n].reshape(3, blocks, -1))
-
-    def gains(s: np.ndarray) -> np.ndarray:
-        inv = np.linalg.eigh(s)[1][:, 0]  # ∝ 1/g, sign arbitrary
-        g = 1.0 / inv
-        return g / g.mean()
-
-    total = scatter.sum(axis=0)
-    g = gains(total)
-    jack = np.array([gains(total - s) for s in scatter])
-    se = np.sqrt((blocks - 1) / blocks * np.sum((jack - jack.mean(axis=0)) ** 2, axis=0))
-    return PhaseGains({k: float(v) for k, v in zip(names, g)}, {k: float(v) for k, v in zip(names, se)}, n)
-
-
-def torque_park(currents_a: dict[str, np.ndarray], theta_e_rad: np.ndarray, k_t_Nm_per_A: float,
-                theta0_rad: float, dc_a: dict[str, float], gain: dict[str, float] | None = None) -> np.ndarray:
-    """Torque from two or three phases by Clarke + Park with the encoder angle, N·m.
-
-    i_α = i_a, i_β = (i_b − i_c)/√3 (amplitude-invariant; i_c = −i_a − i_b when only a and b are
-    recorded), i_q = −i_α·sin φ + i_β·cos φ with φ = θ_e + θ_0.
-
-    Parameters
-    ----------
-    currents_a : dict
-        ``"i_a"``, ``"i_b"`` and optionally ``"i_c"``, A.
-    theta_e_rad : ndarray
-        Electrical angle at the same samples, rad.
-    k_t_Nm_per_A : float
-        Torque constant, N·m/A.
-    theta0_rad : float
-        Electrical offset θ_0 (sign chosen), rad.
-    dc_a : dict
-        Sensor DC of each phase used, A.
-    gain : dict, optional
-        Relative sensor gain of each phase used (:func:`phase_gains`); the currents are divided by it.
-    """
-    if "i_a" not in currents_a or "i_b" not in currents_a:
-        raise ValueError("park needs at least the phases i_a and i_b")
-    g = gain or {}
-    ia = (np.asarray(currents_a["i_a"], dtype=np.float64) - dc_a["i_a"]) / g.get("i_a", 1.0)
-    ib = (np.asarray(currents_a["i_b"], dtype=np.float64) - dc_a["i_b"]) / g.get("i_b", 1.0)
-    ic = ((np.asarray(currents_a["i_c"], dtype=np.float64) - dc_a["i_c"]) / g.get("i_c", 1.0)
-          if "i_c" in currents_a else -ia - ib)
-    i_alpha = (2.0 * ia - ib - ic) / 3.0
-    i_beta = (ib - ic) / _SQRT3
-    phi = np.asarray(theta_e_rad, dtype=np.float64) + theta0_rad
-    return k_t_Nm_per_A * (-i_alpha * np.sin(phi) + i_beta * np.cos(phi))

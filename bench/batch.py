@@ -29,10 +29,11 @@ from typing import Any
 from rich.console import Console
 from rich.table import Table
 
-from acq.monitoring.batch import find_sessions, run_batch
+from acq.monitoring.batch import run_batch
 from analysis import AnalysisRequest
 from acq.config import load_bench, load_profile
 from acq.monitoring.catalogue import Catalogue, Outcome
+from acq.monitoring.session_search import find_sessions
 from acq.recording.recorder import Recorder
 from acq.ui.batch_cli import batch_progress
 from acq.ui.report_png import draw_report

@@ -32,7 +32,7 @@ from typing import Any
 from acq.monitoring.catalogue import MONITOR_TAG, Catalogue, Outcome
 from acq.monitoring.catalogue_backends import is_url
 from acq.monitoring.fleet import load_fleet
-from acq.monitoring.trend import load_trend
+from acq.monitoring.trend_catalogue import load_trend
 
 JOINT = "joint1"
 START = datetime(2026, 1, 1, tzinfo=UTC)

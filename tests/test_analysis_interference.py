@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from analysis import torque
+from analysis.phase_offset import PhaseOffset
 from analysis import AnalysisRequest, analyze
 from analysis.quality import assess
 from tests.interference import with_interference
@@ -80,10 +81,10 @@ def _dwell_record(tone_a: float) -> tuple[np.ndarray, np.ndarray, float]:
 
 def test_a_tone_at_an_electrical_frequency_the_motor_dwells_at_is_inseparable_and_named():
     found: list[torque.Interference] = []
-    torque.torque_encoder(*_dwell_record(0.025), 1.0, torque.PhaseOffset(0.0, 0.0, 0), found=found)
+    torque.torque_encoder(*_dwell_record(0.025), 1.0, PhaseOffset(0.0, 0.0, 0), found=found)
     assert found[0].inseparable_hz and found[0].inseparable_hz[0] == pytest.approx(50.0, abs=0.05)
     clean: list[torque.Interference] = []
-    torque.torque_encoder(*_dwell_record(0.0), 1.0, torque.PhaseOffset(0.0, 0.0, 0), found=clean)
+    torque.torque_encoder(*_dwell_record(0.0), 1.0, PhaseOffset(0.0, 0.0, 0), found=clean)
     assert clean[0].inseparable_hz == () and clean[0].lines_hz == ()
 
 

@@ -10,6 +10,9 @@ import numpy as np
 import pytest
 
 from analysis import encoder, resample, torque
+from analysis.phase_offset import PhaseOffset, phase_offset
+from analysis.torque_hilbert import apex_sign, torque_hilbert
+from analysis.torque_park import phase_gains, torque_park
 from analysis.clocks import ClockFit
 from analysis.chain import PAPER_CHAIN, our_chain
 from analysis.recording import Recording
@@ -136,13 +139,13 @@ def test_longest_gap_free_span_reports_every_gap() -> None:
 # ---- torque --------------------------------------------------------------------------------------------
 
 def test_phase_offset_recovers_theta0_modulo_pi_and_dc(synth: dict[str, np.ndarray]) -> None:
-    off = torque.phase_offset(synth["i_a"], synth["theta_e"], RATE_HZ)
+    off = phase_offset(synth["i_a"], synth["theta_e"], RATE_HZ)
     assert np.angle(np.exp(2j * (off.theta0_rad - THETA0))) / 2 == pytest.approx(0.0, abs=0.01)
     assert off.dc_a == pytest.approx(DC, abs=0.01)
 
 
 def test_encoder_torque_tracks_a_rectangular_iq_and_beats_pointwise_division(synth: dict[str, np.ndarray]) -> None:
-    start = torque.PhaseOffset(THETA0 + 0.005, 0.0, 0)  # θ_0 a little off and no DC: both refined jointly
+    start = PhaseOffset(THETA0 + 0.005, 0.0, 0)  # θ_0 a little off and no DC: both refined jointly
     est = torque.torque_encoder(synth["i_a"], synth["theta_e"], RATE_HZ, K_T, start)
     true = K_T * synth["iq"]
     err = rms_pct(in_band(est), in_band(true))
@@ -155,10 +158,10 @@ def test_encoder_torque_tracks_a_rectangular_iq_and_beats_pointwise_division(syn
 
 def test_park_torque_is_exact_with_three_and_with_two_phases(synth: dict[str, np.ndarray]) -> None:
     true = K_T * synth["iq"]
-    three = torque.torque_park({k: synth[k] for k in ("i_a", "i_b", "i_c")}, synth["theta_e"], K_T, THETA0,
-                               {"i_a": DC, "i_b": -DC, "i_c": 0.0})
-    two = torque.torque_park({k: synth[k] for k in ("i_a", "i_b")}, synth["theta_e"], K_T, THETA0,
-                             {"i_a": DC, "i_b": -DC})
+    three = torque_park({k: synth[k] for k in ("i_a", "i_b", "i_c")}, synth["theta_e"], K_T, THETA0,
+                        {"i_a": DC, "i_b": -DC, "i_c": 0.0})
+    two = torque_park({k: synth[k] for k in ("i_a", "i_b")}, synth["theta_e"], K_T, THETA0,
+                      {"i_a": DC, "i_b": -DC})
     assert rms_pct(in_band(three), in_band(true)) < 0.2
     assert rms_pct(in_band(two), in_band(true)) < 0.3
 
@@ -168,30 +171,30 @@ def test_park_divides_out_per_phase_gain_errors_estimated_from_the_zero_sum(synt
     truth = {"i_a": 1.0, "i_b": 1.02, "i_c": 0.98}  # mean 1: the common scale is k_t's, not observable
     dc = {"i_a": DC, "i_b": -DC, "i_c": 0.0}
     measured = {k: truth[k] * (synth[k] - dc[k]) + dc[k] + 2e-3 * rng.standard_normal(synth[k].size) for k in truth}
-    est = torque.phase_gains(measured)
+    est = phase_gains(measured)
     assert est is not None
     for k, g in truth.items():
         assert abs(est.gain[k] - g) < max(3 * est.sigma[k], 2e-4)
         assert 0 < est.sigma[k] < 1e-3
     true = K_T * synth["iq"]
-    raw = torque.torque_park(measured, synth["theta_e"], K_T, THETA0, dc)
-    fixed = torque.torque_park(measured, synth["theta_e"], K_T, THETA0, dc, est.gain)
+    raw = torque_park(measured, synth["theta_e"], K_T, THETA0, dc)
+    fixed = torque_park(measured, synth["theta_e"], K_T, THETA0, dc, est.gain)
     assert rms_pct(in_band(raw), in_band(true)) > 0.8  # the 2·f_e ripple of the unequal gains
     assert rms_pct(in_band(fixed), in_band(true)) < 0.3
-    assert torque.phase_gains({k: measured[k] for k in ("i_a", "i_b")}) is None
+    assert phase_gains({k: measured[k] for k in ("i_a", "i_b")}) is None
 
 
 def test_hilbert_envelope_is_the_current_amplitude_at_constant_speed() -> None:
     t = np.arange(int(RATE_HZ)) / RATE_HZ
     i_a = -1.8 * np.sin(2 * np.pi * 60.0 * t + 0.4)
-    est = torque.torque_hilbert(i_a, K_T, np.ones_like(t))
+    est = torque_hilbert(i_a, K_T, np.ones_like(t))
     assert np.allclose(est[2000:-2000], K_T * 1.8, rtol=2e-3)
 
 
 def test_apex_sign_flips_at_the_speed_extrema(synth: dict[str, np.ndarray]) -> None:
     stride = 32  # 1.25 ms
     speed, t = synth["speed"][::stride], synth["t"][::stride]
-    sign = torque.apex_sign(speed, stride / RATE_HZ)
+    sign = apex_sign(speed, stride / RATE_HZ)
     tau = np.mod(t, 0.8)
     expected = np.where((tau < 0.2) | (tau >= 0.6), 1.0, -1.0)
     away = np.abs((tau % 0.4) - 0.2) > 0.01  # more than 10 ms from an apex (τ = 0.2, 0.6 s)

@@ -376,7 +376,7 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     import shutil
     import sys
 
-    from acq.monitoring.batch import analyze_one
+    from acq.monitoring.session_outcome import analyze_one
     from analysis import AnalysisRequest
     from acq.monitoring.catalogue import Catalogue
     from analysis import AnalysisRequest

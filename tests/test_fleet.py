@@ -114,7 +114,7 @@ def test_the_fleet_says_where_its_alarm_rules_came_from(catalogue_location: Path
                                                         monkeypatch: pytest.MonkeyPatch) -> None:
     """The table judged each joint by the rules its windows were filed with, or by the command line's, or by acq's
     defaults, and said not which."""
-    from acq.monitoring.trend import AlarmRules
+    from acq.monitoring.alarm_rules import AlarmRules
 
     monkeypatch.setenv("COLUMNS", "250")
     _fill(catalogue_location)

@@ -62,7 +62,7 @@ def test_spline_fit_equals_the_dense_penalised_least_squares() -> None:
     (False, "record while the machine runs fast moves of this joint")])  # no profile to change (the second trial)
 def test_a_motor_that_never_turns_half_an_electrical_revolution_gets_advice_for_who_moved_it(
         commanded: bool, advice: str) -> None:
-    from analysis.torque import phase_offset
+    from analysis.phase_offset import phase_offset
 
     with pytest.raises(ValueError) as err:
         phase_offset(np.zeros(25600), np.zeros(25600), 25600.0, pole_pairs=4, commanded=commanded)

@@ -21,8 +21,9 @@ from typing import Any
 
 import pytest
 
-from acq.monitoring.batch import find_sessions, run_batch
+from acq.monitoring.batch import run_batch
 from acq.monitoring.catalogue import SCHEMA_VERSION, Catalogue, Entry
+from acq.monitoring.session_search import find_sessions
 from acq.monitoring.trend import EWMA_L, compute_trend
 from analysis import AnalysisRequest
 from tests.helpers import run_cli, seeded_profile
@@ -254,7 +255,7 @@ def test_two_processes_share_a_catalogue(wear: Path, tmp_path: Path) -> None:
 def test_view_shows_the_trend_window(wear: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
     from acq.ui.plots import ensure_app
-    from acq.monitoring.trend import load_trend
+    from acq.monitoring.trend_catalogue import load_trend
     from acq.ui.trend_plot import trend_widget
 
     ensure_app(offscreen=True)
@@ -293,7 +294,7 @@ def test_the_trend_window_redraws_when_a_writer_adds_sessions(tmp_path: Path) ->
 
     from acq.monitoring.catalogue import Catalogue, Outcome
     from acq.ui.plots import ensure_app
-    from acq.monitoring.trend import load_trend
+    from acq.monitoring.trend_catalogue import load_trend
     from acq.ui.view import LiveTrend
 
     path = tmp_path / "catalogue.sqlite"
@@ -326,7 +327,7 @@ def test_the_trend_window_started_before_the_first_window_waits_for_it(tmp_path:
     import functools
 
     from acq.monitoring.catalogue import Catalogue, Outcome
-    from acq.monitoring.trend import NoSessions, load_trend
+    from acq.monitoring.trend_catalogue import NoSessions, load_trend
     from acq.ui.plots import ensure_app
     from acq.ui.view import LiveTrend
 
@@ -393,7 +394,7 @@ def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> Non
 
     from acq.monitoring.catalogue import Catalogue, Outcome
     from acq.ui.plots import ensure_app
-    from acq.monitoring.trend import load_trend
+    from acq.monitoring.trend_catalogue import load_trend
     from acq.ui.trend_plot import trend_widget
 
     path = tmp_path / "catalogue.sqlite"
@@ -424,7 +425,7 @@ def _monitor_trend(tmp_path: Path, windows: list[tuple[float | None, str]], ever
     import pyqtgraph as pg
 
     from acq.monitoring.catalogue import Catalogue, Outcome
-    from acq.monitoring.trend import load_trend
+    from acq.monitoring.trend_catalogue import load_trend
     from acq.ui.plots import ensure_app
     from acq.ui.trend_plot import trend_widget
 

@@ -285,7 +285,7 @@ def test_ctrl_c_or_sigterm_closes_the_view_window_with_exit_130_and_one_line(ses
     """The trial: acq view (a session, or --trend) could not be stopped from the terminal — SIGTERM printed a
     traceback (KeyboardInterrupt raised in Qt's frames) and both ran on until kill -9."""
     if what == "trend":
-        from acq.monitoring.batch import record_outcome
+        from acq.monitoring.session_outcome import record_outcome
 
         record_outcome(analyze_session(session, write=False, report=False), None, 1.0)
         args = ["--trend", "joint1", str(session.parent), "--refresh", "1"]

@@ -17,14 +17,10 @@ batch goes on.
 from __future__ import annotations
 
 import contextlib
-import glob
-import multiprocessing
 import os
-import select
 import signal
 import threading
 import time
-import warnings
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Executor, Future, ProcessPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -32,25 +28,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from acq.environment import pin_blas_threads
-from acq.install import install_hint
+from acq.monitoring.analysis_pool import analysis_executor
 from acq.monitoring.catalogue import Catalogue, Outcome
-from acq.offline.analyze import SessionResult, analyze_session, filed_request, output_paths, sha256_of
+from acq.monitoring.session_outcome import DrawReport, analyze_one
+from acq.offline.analyze import filed_request, output_paths, sha256_of
 from acq.process_signals import signals_deferred
-from acq.recording.paths import GLOB_CHARS, is_batch, require_session_file
 from acq.recording.reader import load, read_status
-from acq.recording.session import Session
 from acq.recording.storage import remove_temp_files
-from acqcore.errors import AcqError, ConfigError
+from acqcore.errors import AcqError
 from analysis import AnalysisRequest
-
-CATALOGUE_NAME = "catalogue.sqlite"
-
-#: Draws a written result's report PNG and returns the result (with a note if the picture failed), e.g.
-#: :func:`acq.ui.report_png.draw_report`; a module-level function, so it reaches the workers by name.
-DrawReport = Callable[[SessionResult], SessionResult]
 
 #: Told how far a batch is: (sessions done, sessions to analyse, of them failed); first called with (0, n, 0).
 OnProgress = Callable[[int, int, int], None]
@@ -72,244 +58,6 @@ class BatchReport:
         return [o for o in self.outcomes if o.error is not None]
 
 
-def find_sessions(spec: Path | str) -> tuple[list[Path], Path]:
-    """The session files (``*.h5``) of a folder or glob, sorted, and the folder they were sought in.
-
-    The folder is where the catalogue goes by default: the folder itself, or a glob's deepest
-    folder without wildcards.
-    """
-    spec = Path(spec)
-    if spec.is_dir():
-        paths, base = spec.glob("*.h5"), spec
-    else:
-        paths = (Path(p) for p in glob.glob(str(spec), recursive=True))
-        base = Path(*_prefix(spec.parts))
-    sessions = sorted(p for p in paths if p.suffix == ".h5" and p.is_file())
-    if not sessions:
-        raise ConfigError(f"{spec}: no session files (*.h5) found")
-    return sessions, base
-
-
-def find_all_sessions(specs: Sequence[Path | str]) -> tuple[list[Path], Path | None]:
-    """The session files of several command-line arguments — session files, folders, globs (also as the shell
-    expanded ``par/*.h5``) — each once, sorted; and the folder the catalogue goes in by default: the one all were
-    sought in (as a glob's deepest folder without wildcards), None when they lie in different folders (their common
-    folder could be /: the review)."""
-    found: dict[Path, Path] = {}
-    bases: list[Path] = []
-    for spec in map(Path, specs):
-        if is_batch(spec):
-            paths, base = find_sessions(spec)
-        else:
-            require_session_file(spec)
-            paths, base = [spec], spec.parent
-        bases.append(base)
-        for p in paths:
-            found.setdefault(p.resolve(), p)
-    if any(b.resolve() != bases[0].resolve() for b in bases):
-        return sorted(found.values()), None
-    return sorted(found.values()), bases[0]
-
-
-def _prefix(parts: Sequence[str]) -> Iterator[str]:
-    """The path parts before the first one with a wildcard ('.' when the first has one)."""
-    if not parts or GLOB_CHARS & set(parts[0]):
-        yield "."
-        return
-    for part in parts:
-        if GLOB_CHARS & set(part):
-            return
-        yield part
-
-
-def record_outcome(done: SessionResult, catalogue_path: Path | str | None, seconds: float) -> Path | str:
-    """Put one session's analysis (done outside a batch) into its catalogue; return the catalogue's path.
-
-    The catalogue is ``catalogue_path`` or ``catalogue.sqlite`` in the folder of the result (the session's, or
-    ``--result-dir``), so a later ``acq analyze FOLDER`` finds the session current and ``acq trend`` sees it at once.
-    """
-    path = catalogue_path or done.json_path.parent / CATALOGUE_NAME
-    with Catalogue(path) as catalogue:
-        catalogue.record(succeeded(str(done.session.path), done, seconds))
-    return path
-
-
-def succeeded(path: str, done: SessionResult, seconds: float) -> Outcome:
-    """The catalogue's record of a successful analysis of the session at ``path``, filed under the request it
-    answered (an option that named the default left to it: :meth:`analysis.AnalysisRequest.as_default_where_it_is`)."""
-    return Outcome(path, done.json_dict["session"]["sha256"], done.request.key(), session_meta(done.session),
-                   done.json_dict, None, seconds)
-
-
-def session_meta(session: Session) -> dict[str, Any]:
-    """What the catalogue keeps of a session's root attributes."""
-    meta = session.meta
-    return {"session_id": meta.session_id, "joint": meta.joint, "created_utc": meta.created_utc,
-            "start_monotonic_ns": meta.host_ns_at_start or 0, "status": meta.status, "tags": meta.tags}
-
-
-@contextmanager
-def quiet_numerics() -> Iterator[None]:
-    """No numpy floating-point warning (divide by zero, invalid value, overflow) reaches the person: the analysis
-    reports unusable data through its errors and verdict, and a warning line before them only confuses."""
-    with np.errstate(all="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        yield
-
-
-def analyze_one(path: str, sha256: str, request: AnalysisRequest, draw_report: DrawReport | None = None, *,
-                write: bool = True, result_dir: Path | None = None) -> Outcome:
-    """Analyse one session (runs in a worker process or on a Dask worker); never raises.
-
-    Parameters
-    ----------
-    path : str
-        Absolute path of the session file, as the worker sees it.
-    sha256 : str
-        The file's hash when the batch looked at it (kept when the analysis fails).
-    request : AnalysisRequest
-        What is asked, as filed for this session (:func:`acq.offline.analyze.filed_request`): its key files the
-        outcome in the catalogue, a failure too.
-    draw_report : callable, optional
-        Draws ``<session>.report.png`` once the result is written (None: no report).
-    write : bool, optional
-        Write ``<session>.result.json`` (False: the caller writes the document it makes of the outcome).
-    result_dir : Path, optional
-        Where the result and report go (None: beside the session).
-    """
-    start = time.perf_counter()
-    try:
-        with quiet_numerics():
-            done = analyze_session(path, request, write=write, report=draw_report is not None, result_dir=result_dir)
-    except Exception as e:  # noqa: BLE001 — a batch records any session's failure and goes on
-        error = str(e) if isinstance(e, AcqError) else f"{path}: {type(e).__name__}: {e}"
-        return Outcome(path, sha256, request.key(), _meta_if_readable(path), None, error,
-                       time.perf_counter() - start)
-    if draw_report is not None:
-        done = draw_report(done)  # the result is written; a picture that fails is a note on it, not a failure
-    return succeeded(path, done, time.perf_counter() - start)
-
-
-def _meta_if_readable(path: str) -> dict[str, Any]:
-    try:
-        return session_meta(load(path))
-    except (AcqError, OSError, KeyError, ValueError):
-        return {}
-
-
-def _start_forkserver_without_cwd() -> None:
-    """Start the forkserver as ``python -P`` would (PYTHONSAFEPATH): it runs ``python -c``, which puts the current
-    folder first on sys.path, so a folder named ``acq``, ``analysis`` or ``drivers`` where the user stands would be
-    imported by every worker in place of ours (they then die: BrokenProcessPool). The server and its workers keep
-    the variable (they run no program of the user's); acq's own process has it only while the server starts, so
-    the commands it runs later (``--on-alarm``) see the user's environment.
-
-    The server (and the resource tracker it starts) begin with SIGINT ignored, which they and every worker forked
-    from them keep: a Ctrl-C at the terminal reaches the whole process group, and only acq's own process stops the
-    workers (a worker or the server's preload stopped mid-import printed tracebacks, Qt a fatal error)."""
-    from multiprocessing import forkserver, resource_tracker
-
-    before = os.environ.get("PYTHONSAFEPATH")
-    os.environ["PYTHONSAFEPATH"] = "1"
-    try:
-        # the resource tracker first, outside the window: its start blocks and then unblocks SIGINT itself, which
-        # inside the window left SIGINT unblocked while ignored — a Ctrl-C then was lost (the batch ran to its end,
-        # 3 of 8 runs of test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line[catalogue opened]); it ignores SIGINT
-        # on its own (CPython's resource_tracker.main)
-        resource_tracker.ensure_running()
-        with _sigint_ignored_by_children():
-            forkserver.ensure_running()
-    finally:
-        if before is None:
-            del os.environ["PYTHONSAFEPATH"]
-        else:
-            os.environ["PYTHONSAFEPATH"] = before
-
-
-@contextmanager
-def _sigint_ignored_by_children() -> Iterator[None]:
-    """Processes started inside the block begin with SIGINT ignored (the disposition survives exec; Python then
-    installs no KeyboardInterrupt handler). A Ctrl-C meanwhile is held (blocked) and reaches this process after it."""
-    if threading.current_thread() is not threading.main_thread():
-        yield  # signal handlers can only change in the main thread (acq starts its pools there)
-        return
-    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
-
-
-def end_with_process(pid: int) -> None:
-    """Worker initializer: the worker ends when process ``pid`` (acq, which made the pool) ends, by kill -9 too.
-
-    A worker otherwise waits for work forever once acq is killed (it holds both ends of its task pipe: no EOF), and
-    through it the forkserver and the resource tracker live on, re-parented to PID 1 (≈ 270 MB per killed monitor).
-    ``prctl(PR_SET_PDEATHSIG)`` cannot do this: a worker's parent is the forkserver, which lives as long as a worker
-    holds its end of the server's "alive" pipe. So a daemon thread waits on a pidfd of acq's process (readable when it
-    has ended; no polling, no pid reuse once open) and ends the worker; the forkserver then sees EOF on its pipe and
-    exits, and the resource tracker exits when the last of its clients' pipes closes (measured: all three gone < 1 s
-    after kill -9 of acq). Without pidfds (not Linux ≥ 5.3) the thread checks the pid once a second.
-    """
-    try:
-        pidfd: int | None = os.pidfd_open(pid)
-    except ProcessLookupError:  # acq ended before this worker started
-        os._exit(1)
-    except (AttributeError, OSError):  # no pidfd_open here
-        pidfd = None
-    threading.Thread(target=_exit_when_ended, args=(pid, pidfd), name="acq-end-with-parent", daemon=True).start()
-
-
-def _exit_when_ended(pid: int, pidfd: int | None) -> None:
-    if pidfd is not None:
-        select.select([pidfd], [], [])
-    else:
-        while _running(pid):
-            time.sleep(1.0)
-    os._exit(1)  # acq is gone: nobody waits for this worker's result
-
-
-def _running(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except (ProcessLookupError, PermissionError):  # gone, or its pid is another user's process now
-        return False
-    return True
-
-
-@contextmanager
-def analysis_executor(jobs: int, scheduler: str | None) -> Iterator[Executor]:
-    """Workers for analyses: a process pool of ``jobs`` (one BLAS thread each), or a Dask cluster's executor at
-    ``scheduler`` (tcp://host:port); used by the batch and by ``acq monitor``."""
-    if scheduler is None:
-        # forkserver: workers fork from a clean single-threaded server that has imported acq once (a plain fork
-        # of this process inherits the locks its threads — recorder, progress, BLAS — may hold, and can hang);
-        # one BLAS thread per worker, as Dask's workers have, so N jobs do not fight over the cores
-        pin_blas_threads()
-        context = multiprocessing.get_context("forkserver")
-        context.set_forkserver_preload(["acq.monitoring.batch"])
-        _start_forkserver_without_cwd()
-        pool = ProcessPoolExecutor(max_workers=jobs, mp_context=context, initializer=end_with_process,
-                                   initargs=(os.getpid(),))
-        try:
-            yield pool
-        except BaseException:
-            pool.shutdown(wait=True, cancel_futures=True)  # the caller stopped the workers: quick, frees the pool's locks
-            raise
-        pool.shutdown(wait=True)
-        return
-    try:
-        from distributed import Client
-    except ImportError:
-        raise ConfigError(f"--scheduler needs Dask distributed: {install_hint('cluster')}") from None
-    try:
-        client = Client(scheduler, timeout="10s")
-    except OSError as e:
-        raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({e})") from None
-    with client:
-        yield client.get_executor(pure=False)
 
 
 #: Seconds a Ctrl-C'd batch gives running workers to finish before they are killed (what they wrote without a

@@ -30,7 +30,8 @@ from typing import Any, Literal
 
 from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.monitor_scope import monitor_and_tags, split_by_monitor
-from acq.monitoring.trend import Trend, TrendPoint, catalogue_sources, compute_trend
+from acq.monitoring.trend import Trend, TrendPoint, compute_trend
+from acq.monitoring.trend_catalogue import catalogue_sources
 from acq.recording.tags import tags_match
 from acqcore.errors import ConfigError
 

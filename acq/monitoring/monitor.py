@@ -34,7 +34,8 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.alarm_command import AlarmCommands
-from acq.monitoring.batch import CATALOGUE_NAME, analysis_executor, session_meta
+from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules
+from acq.monitoring.analysis_pool import analysis_executor
 from acq.monitoring.catalogue import Entry, Outcome
 from acq.monitoring.catalogue_backends import is_url
 from acq.monitoring.folder_lock import folder_lock
@@ -43,7 +44,8 @@ from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG
                                           check_user_tags, own_windows)
 from acq.monitoring.monitor_status import SIZE_MARGIN, MonitorSettings, MonitorStatus, expected_window_bytes
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
-from acq.monitoring.trend import ELAPSED_TAG, RULE_TAGS, AlarmRules, Trend, alarm_onsets, compute_trend
+from acq.monitoring.session_outcome import CATALOGUE_NAME, session_meta
+from acq.monitoring.trend import ELAPSED_TAG, Trend, alarm_onsets, compute_trend
 from acq.monitoring.window_bench import FACT_TAGS, window_facts
 from acq.monitoring.window_judge import analyse_window, marked
 from acq.offline.analyze import sha256_of

@@ -23,10 +23,11 @@ from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 
+from acq.monitoring.alarm_rules import AlarmRules, filed_rules
 from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.catalogue_backends import is_url, redacted, without_masked_password
 from acq.monitoring.monitor_scope import IDENTITY_FILE, WINDOW_TAG, Identity, own_windows, write_identity
-from acq.monitoring.trend import ELAPSED_TAG, AlarmRules, filed_rules
+from acq.monitoring.trend import ELAPSED_TAG
 from acq.monitoring.window_bench import differences
 from acqcore.errors import ConfigError
 from drivers.config import Bench

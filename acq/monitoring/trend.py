@@ -17,9 +17,8 @@ The alarm state is the latest judged session's: exit code 3 while it is in alarm
 PLC script can act; re-pin the baseline (``--baseline``) after a repair.
 
 The rules (baseline sessions, threshold, λ) are each the one asked for, else the one ``acq monitor`` judged its
-windows by — it files them with every window as tags (:data:`RULE_TAGS`) — else acq's defaults: ``acq trend``,
-``acq fleet`` and ``acq view --trend`` of a monitor's windows then raise the alarms the monitor raised (with their own
-defaults, a baseline of the first window where the monitor took the mean of five, they alarmed five windows apart).
+windows by, else acq's defaults (:mod:`acq.monitoring.alarm_rules`). :mod:`acq.monitoring.trend_catalogue` reads a
+joint's sessions from the catalogue.
 """
 
 from __future__ import annotations
@@ -30,16 +29,12 @@ import statistics
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass, replace
-from pathlib import Path
 from typing import Any, Literal
 
 from scipy.stats import chi2
 
-from acq.monitoring.batch import CATALOGUE_NAME
-from acq.monitoring.catalogue import Catalogue, Entry
-from acq.monitoring.catalogue_backends import is_url, redacted
-from acq.monitoring.monitor_scope import MONITOR_TAG, monitor_and_tags, monitors_of, split_by_monitor
-from acq.recording.tags import tags_match
+from acq.monitoring.alarm_rules import AlarmRules, rules_for
+from acq.monitoring.catalogue import Entry
 from acqcore.errors import ConfigError
 from analysis import AnalysisRequest, Z95
 
@@ -55,62 +50,6 @@ State = Literal["baseline", "ok", "alarm", "skipped", "before baseline"]
 #: Tag of a monitor window (set by :mod:`acq.monitoring.monitor`): machine time at its start, s; the x axis of a monitor's trend.
 ELAPSED_TAG = "monitor_elapsed_s"
 
-
-@dataclass(frozen=True)
-class AlarmRules:
-    """How a trend is judged: the baseline is the mean K of the first ``baseline_sessions`` good sessions; an alarm is
-    K more than ``threshold_pct`` % below it, or the EWMA of weight ``ewma_lambda`` below its control limit.
-    ``source`` says where the rules came from (for the table's caption)."""
-
-    baseline_sessions: int = 1
-    threshold_pct: float = 10.0
-    ewma_lambda: float = 0.2
-    source: str = "acq's defaults"
-
-    def as_tags(self) -> dict[str, float]:
-        """The rules as the session tags :func:`rules_for` reads back."""
-        return {tag: getattr(self, name) for name, tag in RULE_TAGS.items()}
-
-
-#: The session tags that carry the alarm rules a session was judged by (set by acq monitor on every window).
-RULE_TAGS = {"baseline_sessions": "alarm_baseline_sessions", "threshold_pct": "alarm_threshold_pct",
-             "ewma_lambda": "alarm_ewma_lambda"}
-
-
-def _tagged_rules(entry: Entry) -> AlarmRules | None:
-    """The rules ``entry``'s session was filed with, or None (no rule tags, or values that are none)."""
-    try:
-        values = {name: entry.tags[tag] for name, tag in RULE_TAGS.items()}
-        rules = AlarmRules(int(values["baseline_sessions"]), float(values["threshold_pct"]),
-                           float(values["ewma_lambda"]), source="as acq monitor judged its windows")
-    except (KeyError, TypeError, ValueError):
-        return None
-    valid = rules.baseline_sessions >= 1 and 0 < rules.threshold_pct <= 100 and 0 < rules.ewma_lambda <= 1
-    return rules if valid else None
-
-
-def filed_rules(entries: Sequence[Entry]) -> AlarmRules | None:
-    """The rules the newest of ``entries`` (oldest first) was filed with (:data:`RULE_TAGS`), or None."""
-    return next((r for r in map(_tagged_rules, reversed(entries)) if r is not None), None)
-
-
-def rules_for(entries: Sequence[Entry], *, baseline_sessions: int | None = None, threshold_pct: float | None = None,
-              ewma_lambda: float | None = None) -> AlarmRules:
-    """The rules to judge ``entries`` (oldest first) by: each one given here, else the newest session's filed ones
-    (:data:`RULE_TAGS`), else acq's defaults."""
-    filed = filed_rules(entries)
-    rules = filed or AlarmRules()
-    given = {name: value for name, value in (("baseline_sessions", baseline_sessions), ("threshold_pct", threshold_pct),
-                                             ("ewma_lambda", ewma_lambda)) if value is not None}
-    if not given:
-        return rules
-    options = ", ".join(f"--{name.replace('_', '-')}" for name in given)  # the options of acq trend, fleet, view
-    if len(given) == len(RULE_TAGS):
-        source = "from the command line"
-    else:
-        rest = "acq's defaults" if filed is None else filed.source
-        source = f"{options} from the command line, the rest {rest}"
-    return replace(rules, **given, source=source)
 
 @dataclass(frozen=True)
 class TrendPoint:
@@ -364,58 +303,3 @@ def trend_json(trend: Trend) -> dict[str, Any]:
             "points": [{**asdict(p.entry), "state": p.state, "reason": p.reason, "change_pct": p.change_pct,
                         "ewma_change_pct": p.ewma_change_pct, "ewma_limit_pct": p.ewma_limit_pct}
                        for p in trend.points]}
-
-
-class NoSessions(ConfigError):
-    """The catalogue has no session of the joint asked for, or there is no catalogue file yet (``acq view --trend``
-    waits for a monitor's first window). ``location``: the catalogue (a URL without its password); ``joints``: the
-    joints it has."""
-
-    def __init__(self, message: str, location: Path | str, joints: Sequence[str] = ()) -> None:
-        super().__init__(message)
-        self.location, self.joints = location, list(joints)
-
-
-def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Path | str:
-    """The catalogue to read: ``catalogue`` (a file or URL) or FOLDER/catalogue.sqlite; an error when no file."""
-    path = catalogue or (folder or Path("sessions")) / CATALOGUE_NAME
-    if not is_url(path) and not Path(path).is_file():
-        raise NoSessions(f"{path}: no catalogue — fill one with acq analyze {folder or 'sessions'}/ first", path)
-    return path
-
-
-def catalogue_sources(folders: Sequence[Path], catalogues: Sequence[Path | str]) -> list[tuple[str, Path | str]]:
-    """The catalogues of ``acq fleet`` / ``acq trend`` FOLDER… [--catalogue C]…, each with its label (the folder or
-    catalogue as given, a URL without its password): FOLDER/catalogue.sqlite of each folder, then each catalogue;
-    none given: ``sessions/catalogue.sqlite`` (label ''). A catalogue named twice is refused (it would be read twice).
-    """
-    sources = [(str(f), catalogue_location(f, None)) for f in folders] + \
-        [(redacted(str(c)) if is_url(c) else str(c), catalogue_location(None, c)) for c in catalogues] \
-        or [("", catalogue_location(None, None))]
-    if len({str(loc) if is_url(loc) else str(Path(loc).resolve()) for _, loc in sources}) < len(sources):
-        raise ConfigError(f"{' '.join(label for label, _ in sources)}: a catalogue is given twice")
-    return sources
-
-
-def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: str, tags: Sequence[str] = (),
-               **options: Any) -> Trend:
-    """The trend of ``joint`` from a catalogue (``folder``/catalogue.sqlite or ``catalogue_path``), sessions
-    filtered on ``tags`` (``KEY=VALUE``); ``options`` go to :func:`compute_trend`."""
-    monitor, wanted = monitor_and_tags(tags)
-    with Catalogue(catalogue_location(folder, catalogue_path)) as catalogue:
-        entries = [e for e in catalogue.entries(joint, monitor=monitor) if tags_match(e.tags, wanted)]
-        tagged = f" tagged {' '.join(tags)}" if tags else ""
-        if not entries:
-            joints = catalogue.joints()
-            raise NoSessions(f"{catalogue.path}: no sessions of joint {joint}{tagged} "
-                             f"(joints: {', '.join(joints) or 'none'})", catalogue.path, joints)
-        histories = split_by_monitor(entries)
-        if len(histories) > 1:  # several monitors (or one and a bench's sessions), one joint name: one trend mixes them
-            monitors = monitors_of(entries)
-            robots = sorted({str(e.tags["robot"]) for e in entries if "robot" in e.tags})
-            others = len(histories.get(None, []))
-            what = (f"the windows of {len(monitors)} monitor{'s' if len(monitors) > 1 else ''} "
-                    f"({', '.join(monitors)})" + (f" and {others} session(s) of no monitor" if others else ""))
-            raise ConfigError(f"{catalogue.path}: joint {joint}{tagged} has {what} — trend one: --tag {MONITOR_TAG}=ID"
-                              + (f" or --tag robot=R ({', '.join(robots)})" if robots else ""))
-    return compute_trend(joint, entries, **options)

@@ -16,8 +16,8 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from acq.monitoring.batch import analyze_one, session_meta
 from acq.monitoring.catalogue import Outcome
+from acq.monitoring.session_outcome import analyze_one, session_meta
 from acq.offline.analyze import idle_reason, output_paths, write_json
 from acq.recording.reader import load
 from acqcore.errors import StorageError

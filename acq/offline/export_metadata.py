@@ -13,13 +13,19 @@ from __future__ import annotations
 import json
 from collections.abc import Callable
 from dataclasses import dataclass, fields
+from datetime import datetime
 from pathlib import Path
+from typing import Annotated, Any
+
+from pydantic import AfterValidator, BaseModel, ConfigDict, StrictStr, ValidationError, field_validator
 
 from acq import __version__
+from acq.config import validate
 from acq.offline.analyze import sha256_of
 from acq.recording.layout import Status, utc_now_iso
 from acq.recording.session import Session, SessionHistory
 from acqcore.errors import ConfigError
+from drivers.config import Bench, Profile
 
 FORMAT = "acq-export-metadata"
 FORMAT_VERSION = 1
@@ -36,7 +42,7 @@ class ExportMetadata(SessionHistory):
     path : Path
         The metadata file read.
     bench_json, profile_json : str
-        The bench and profile as used, JSON.
+        The bench and profile as used, JSON (``null``: a passive recording, acq commanded no motion).
     status, stop_reason : str
         The exported session's (``"complete"``, ``""`` in metadata written before they were recorded).
     damage : tuple of str
@@ -50,6 +56,15 @@ class ExportMetadata(SessionHistory):
     status: str = "complete"
     stop_reason: str = ""
     damage: tuple[str, ...] = ()
+
+    def bench(self) -> Bench:
+        """The bench as used; a malformed one is a ConfigError naming this file and the key."""
+        return validate(Bench, json.loads(self.bench_json), f"{self.path}: bench")
+
+    def profile(self) -> Profile | None:
+        """The profile as executed; None for a passive recording (the machine moved the joint, acq commanded none)."""
+        doc = json.loads(self.profile_json)
+        return None if doc is None else validate(Profile, doc, f"{self.path}: profile")
 
     def incomplete(self) -> tuple[Status, str | None]:
         """The status a session imported from the files gets, and why it is not ``complete`` (None when it is).
@@ -122,18 +137,82 @@ def read_metadata(current_path: Path, encoder_path: Path, digest: Callable[[Path
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ConfigError(f"{path}: format: not {FORMAT!r}")
     try:
-        files = {role: doc["files"][role] for role in ("current", "encoder")}
-        for role, given in (("current", current_path), ("encoder", encoder_path)):
-            if files[role]["sha256"] != digest(given):
-                return None, (f"{path.name} describes another {role} file than {given.name} (SHA-256 differs): "
-                              "its metadata is not used, the time columns are not taken as one host clock")
-        meta = ExportMetadata(session_id=str(doc["session_id"]), joint=str(doc["joint"]),
-                              created_utc=str(doc["created_utc"]), operator=str(doc.get("operator", "")),
-                              origin=dict(doc["origin"]), tags=dict(doc["tags"]),
-                              host_clock_shared=bool(doc["host_clock_shared"]), path=path,
-                              bench_json=json.dumps(doc["bench"]), profile_json=json.dumps(doc["profile"]),
-                              status=str(doc.get("status", "complete")), stop_reason=str(doc.get("stop_reason", "")),
-                              damage=tuple(str(line) for line in doc.get("damage", [])))
-    except (KeyError, TypeError) as e:
-        raise ConfigError(f"{path}: key {e}: missing or malformed") from None
-    return meta, None
+        read = _Document.model_validate(doc)
+    except ValidationError as e:
+        raise ConfigError(f"{path}: {_one_line(e, doc)}") from None
+    for role, given in (("current", current_path), ("encoder", encoder_path)):
+        if getattr(read.files, role).sha256 != digest(given):
+            return None, (f"{path.name} describes another {role} file than {given.name} (SHA-256 differs): "
+                          "its metadata is not used, the time columns are not taken as one host clock")
+    history = {f.name: getattr(read, f.name) for f in fields(SessionHistory)}
+    configs = {"bench_json": json.dumps(read.bench), "profile_json": json.dumps(read.profile)}
+    return ExportMetadata(**history, **configs, path=path,
+                          status=read.status, stop_reason=read.stop_reason, damage=tuple(read.damage)), None
+
+
+def _tag_value(value: Any) -> Any:
+    """A tag's value as the session stores it: a text or a number (an int stays int: ``monitor_window``)."""
+    if isinstance(value, bool) or not isinstance(value, str | int | float):
+        raise ValueError("a tag's value must be a text or a number")
+    return value
+
+
+class _File(BaseModel):
+    name: StrictStr
+    sha256: StrictStr
+
+
+class _Files(BaseModel):
+    current: _File
+    encoder: _File
+
+
+class _Document(BaseModel):
+    """The metadata document as :func:`metadata_text` writes it, strictly typed: a value of another type is named
+    (``bool("no")`` would have claimed one host clock, ``str(None)`` a session id "None")."""
+
+    model_config = ConfigDict(strict=True, extra="ignore")  # format, format_version, exported_utc, acq_version: checked
+    # by read_metadata or only informative
+    session_id: StrictStr | None
+    joint: StrictStr | None
+    created_utc: StrictStr | None
+    operator: StrictStr = ""
+    origin: dict[str, Any]
+    tags: dict[str, Annotated[Any, AfterValidator(_tag_value)]]
+    host_clock_shared: bool
+    bench: dict[str, Any]  # validated as a Bench when used (ExportMetadata.bench): --bench may replace it
+    profile: dict[str, Any] | None
+    status: StrictStr = "complete"
+    stop_reason: StrictStr = ""
+    damage: list[StrictStr] = []
+    files: _Files
+
+    @field_validator("created_utc")
+    @classmethod
+    def _iso_time(cls, text: str | None) -> str | None:
+        if text is not None:
+            try:
+                datetime.fromisoformat(text)
+            except ValueError:
+                raise ValueError("not an ISO 8601 time (e.g. 2026-11-20T10:15:03+00:00)") from None
+        return text
+
+
+def _one_line(error: ValidationError, doc: dict[str, Any]) -> str:
+    """The first error of the document in one line, ``key = value: what`` (``key: missing``; a value longer than a
+    line is left out), the key path as far as the document holds it."""
+    first = error.errors()[0]
+    keys: list[str] = []
+    node: Any = doc
+    for part in first["loc"]:
+        if not isinstance(node, dict) or part not in node:
+            break
+        keys.append(str(part))
+        node = node[part]
+    key = ".".join(keys) or "(top level)"
+    if first["type"] == "missing":
+        return f"{key}.{first['loc'][len(keys)]}: missing" if keys else f"{first['loc'][0]}: missing"
+    what = str(first["ctx"]["error"]) if first["type"] == "value_error" else (  # not "… or instance of _Files"
+        first["msg"].lower().replace("input should be", "must be").split(" or instance of ")[0])
+    shown = json.dumps(node)
+    return f"{key} = {shown}: {what}" if len(shown) <= 60 else f"{key}: {what}"

@@ -2,7 +2,9 @@
 
 The files are read and checked by :mod:`acq.offline.import_files`. Beside a pair written by ``acq export``
 its metadata (:mod:`acq.offline.export_metadata`) restores the session's id, joint, start time, tags, bench
-and profile; otherwise ``--started`` (or a TDMS ``wf_start_time``) dates the recording.
+and profile; otherwise ``--started`` (or a TDMS ``wf_start_time``) dates the recording. Without a profile (an
+exported passive recording, or files of a bench whose machine moves the joint) the session is passive, as
+``acq record`` stores one: profile None.
 
 Host stamps: the encoder file's ``t_s`` are stored uncorrected as ``host_ns``; the current's blocks
 (0.1 s) are stamped with their last sample's time on the same axis. The two time columns are one
@@ -96,15 +98,42 @@ def parse_started(text: str) -> str:
 
 
 def _configs(meta: ExportMetadata | None, bench: Bench | None, profile: Profile | None, joint: str | None,
-             current_path: Path, meta_warning: str | None = None) -> tuple[Bench, Profile]:
+             current_path: Path, meta_warning: str | None = None) -> tuple[Bench, Profile | None]:
     """Bench and profile as given, else as used when the exported session was recorded; ``joint`` applied.
-    ``meta_warning``: why metadata that is there was not used (it is then the reason a config is needed)."""
+    ``meta_warning``: why metadata that is there was not used (it is then the reason a config is needed).
+
+    The profile is None — a passive session, as ``acq record`` stores one — when the machine moved the joint: the
+    exported session had none, or the bench says so (``[drive] motion = "external"``). As the recorder does, the
+    bench's motion and the profile must agree: a profile the data did not have is never written."""
+    profile_given = profile is not None
     if meta is not None:
-        bench = bench or Bench.model_validate_json(meta.bench_json)
-        profile = profile or Profile.model_validate_json(meta.profile_json)
-    if bench is None or profile is None:
-        option = "--bench" if bench is None else "--profile"
-        raise ConfigError(f"{option}: needed ({meta_warning or f'no acq export metadata beside {current_path.name}'})")
+        recorded = meta.profile()
+        if profile is not None and recorded is None:
+            raise ConfigError(f"--profile: {meta.path.name} says the exported session was recorded passively (profile "
+                              "null: the machine's own controller moved the joint, acq commanded none) — leave out "
+                              "--profile")
+        if bench is not None and profile is None and bench.listens() != (recorded is None):
+            was, want = (("recorded passively (no profile)", "external") if recorded is None
+                         else ("commanded by acq (its profile is in the file)", "commanded"))
+            raise ConfigError(f"--bench: [drive] motion = \"{bench.drive.motion}\", but {meta.path.name} says the "
+                              f"exported session was {was} — give a bench with motion = \"{want}\", or leave out "
+                              "--bench to use the bench as recorded")
+        bench = bench or meta.bench()
+        profile = profile or recorded
+    why = meta_warning or (f"no acq export metadata beside {current_path.name}" if meta is None
+                           else f"{meta.path.name} holds no profile")
+    if bench is None:
+        raise ConfigError(f"--bench: needed ({why})")
+    if profile is None and not bench.listens():
+        raise ConfigError(f"--profile: needed ({why}): give the profile acq commanded, or a --bench with [drive] "
+                          "motion = \"external\" if the machine's own controller moved the joint (a passive import)")
+    if profile is not None and bench.listens():
+        if meta is not None and not profile_given:  # both from metadata no recorder writes (it refuses the pair)
+            raise ConfigError(f"{meta.path.name}: the exported session has a profile, yet its bench has [drive] "
+                              "motion = \"external\" (acq commands no motion there) — give --bench")
+        raise ConfigError("--profile: the bench has [drive] motion = \"external\": the machine's own controller "
+                          "moved the joint and acq commanded no motion — leave out --profile to import a passive "
+                          "recording, or give a --bench that commands the motion")
     return with_joint(bench, joint), profile
 
 
@@ -112,7 +141,7 @@ def _start_time(started_utc: str | None, meta: ExportMetadata | None, cur: Curre
     """When the recording started (ISO 8601, UTC; None: now) and what says so."""
     if started_utc:
         return started_utc, "--started"
-    if meta is not None:
+    if meta is not None and meta.created_utc:
         return meta.created_utc, "acq export metadata"
     if cur.start_utc:
         return cur.start_utc, "TDMS wf_start_time"
@@ -137,7 +166,8 @@ def import_session(current_path: Path, encoder_path: Path, bench: Bench | None, 
 
     Parameters
     ----------
-    bench, profile : the configs; None takes them from the ``acq export`` metadata beside the files.
+    bench, profile : the configs; None takes them from the ``acq export`` metadata beside the files. Without
+        metadata, profile None imports a passive recording (the bench's ``[drive] motion = "external"``).
     tags : tags, added to (and overriding) those the metadata restores.
     joint : joint name overriding the bench's.
     same_clock : the two files' ``t_s`` are stamps on one host clock (``--same-clock``).
@@ -211,7 +241,7 @@ def _sha256_hex(data: pa.Buffer) -> str:
     return hashlib.sha256(data).hexdigest()
 
 
-def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profile, out: Path,
+def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profile | None, out: Path,
             current_channels: tuple[str, ...], tags: dict[str, str | float] | None, meta: ExportMetadata | None,
             meta_warning: str | None, same_clock: bool, started_utc: str | None,
             sha256: dict[Path, Future[str]], data: dict[Path, pa.Buffer | None]) -> ImportResult:

@@ -12,7 +12,9 @@ from rich.console import Console
 from rich.progress import (BarColumn, MofNCompleteColumn, Progress, TaskID, TextColumn, TimeElapsedColumn,
                            TimeRemainingColumn)
 
-from acq.monitoring.batch import CATALOGUE_NAME, BatchReport, OnProgress, find_all_sessions, report_json, run_batch
+from acq.monitoring.batch import BatchReport, OnProgress, report_json, run_batch
+from acq.monitoring.session_outcome import CATALOGUE_NAME
+from acq.monitoring.session_search import find_all_sessions
 from acq.monitoring.catalogue import Catalogue
 from acq.ui.display import batch_table
 from acq.ui.report_png import draw_report

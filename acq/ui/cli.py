@@ -249,7 +249,7 @@ def _profile_for(bench: Bench, bench_path: Path | None, profile_name: str | None
 
 def _require_enough_motion(profile: Profile, name: str, pole_pairs: int) -> None:
     """Refuse a profile whose own numbers make the identification certain to fail: the motor must turn half an
-    electrical revolution within the torque estimator's window (:func:`analysis.torque.min_speed_rpm`); at most
+    electrical revolution within the torque estimator's window (:func:`analysis.phase_offset.min_speed_rpm`); at most
     the top speed for the whole window, and never more than one half-cycle's swing (a slower drive only moves less).
     A speed-dithered profile is judged by its slowest cycle (``min_speed_factor`` times top speed and swing)."""
     from analysis import PHASE_WINDOW_S, min_speed_rpm
@@ -276,7 +276,7 @@ def _identify(path: Path, request: AnalysisRequest, *, report: bool, catalogue_p
     after both (:func:`acq.ui.report_png.draw_report`: a picture that fails is only a note), by the caller. A result
     that could not be written raises :class:`acq.offline.analyze.ResultNotWritten` (nothing catalogued)."""
     from acq.offline.analyze import analyze_session
-    from acq.monitoring.batch import quiet_numerics, record_outcome
+    from acq.monitoring.session_outcome import quiet_numerics, record_outcome
 
     start = time.perf_counter()
     with quiet_numerics():
@@ -577,7 +577,7 @@ def _interrupted_outside_the_command() -> Iterator[None]:
 
 def _run(argv: list[str] | None) -> None:
     try:
-        # numpy's floating-point warnings (the filter of acq.monitoring.batch.quiet_numerics, which an analysis adds;
+        # numpy's floating-point warnings (the filter of acq.monitoring.session_outcome.quiet_numerics, which an analysis adds;
         # numpy is not loaded here yet)
         with _interrupted_outside_the_command(), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)

@@ -22,7 +22,8 @@ from acq.ui.options import tag_option
 @click.option("--bench", "bench_path", default=None, type=click.Path(path_type=Path),
               help="Bench TOML (default: the bench as used, from the acq export metadata beside the files).")
 @click.option("--profile", "profile_name", default=None,
-              help="Profile name in configs/profiles/ or a TOML path (default: from the acq export metadata).")
+              help="Profile name in configs/profiles/ or a TOML path (default: from the acq export metadata; none "
+                   "for a bench with [drive] motion = \"external\": a passive recording).")
 @click.option("--joint", default=None, help="Joint name (default: the bench config's).")
 @click.option("--same-clock", is_flag=True,
               help="Both files' t_s are stamps on one host clock (one tool wrote both): let them narrow the clock "

@@ -13,7 +13,7 @@ from rich.markup import escape
 from rich.table import Table
 
 from acq.config import load_bench
-from acq.monitoring.batch import CATALOGUE_NAME
+from acq.monitoring.session_outcome import CATALOGUE_NAME
 from acq.monitoring.catalogue_backends import is_url, redacted
 from acq.monitoring.monitor import Monitor, MonitorSettings, MonitorStatus
 from acq.monitoring.retention import parse_size

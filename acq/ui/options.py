@@ -32,7 +32,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def alarm_rule_options(whose: str) -> Callable[[F], F]:
-    """``--baseline-sessions``, ``--threshold-pct``, ``--ewma-lambda`` of :class:`acq.monitoring.trend.AlarmRules`,
+    """``--baseline-sessions``, ``--threshold-pct``, ``--ewma-lambda`` of :class:`acq.monitoring.alarm_rules.AlarmRules`,
     each None unless given (then the rules acq monitor filed with ``whose`` windows, else acq's defaults)."""
     default = f"default: as acq monitor judged {whose} windows, else"
 

@@ -10,7 +10,8 @@ import click
 from rich.console import Console
 
 from acq.ui.options import CatalogueLocation, alarm_rule_options
-from acq.monitoring.trend import EXIT_ALARM, catalogue_sources, load_trend, trend_json
+from acq.monitoring.trend import EXIT_ALARM, trend_json
+from acq.monitoring.trend_catalogue import catalogue_sources, load_trend
 from acq.ui.display import trend_table
 from acq.ui.trend_plot import render_trend_png
 from acqcore.errors import ConfigError

@@ -27,7 +27,8 @@ from analysis import AnalysisRequest
 
 if TYPE_CHECKING:
     from acq.ui.plots import SessionFigure
-    from acq.monitoring.trend import NoSessions, Trend
+    from acq.monitoring.trend import Trend
+    from acq.monitoring.trend_catalogue import NoSessions
 
 NO_DISPLAY_MESSAGE = ("acq view: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window as an image "
                       "instead: acq view SESSION --screenshot out.png")
@@ -104,7 +105,7 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         from acq.ui.qt_signals import loop_ended_by_signals
 
     if trend_joint is not None:
-        from acq.monitoring.trend import NoSessions, load_trend
+        from acq.monitoring.trend_catalogue import NoSessions, load_trend
 
         folder = sessions[0] if sessions else None
         load = functools.partial(load_trend, folder, catalogue_path, trend_joint, tags)
@@ -154,7 +155,7 @@ class LiveTrend:
     ``load`` re-reads the catalogue (SQLite in WAL mode or PostgreSQL: reading does not block a monitor that
     writes); a failed re-read (the catalogue busy, a server away) keeps the figure shown and says why in the
     title. The figure itself is :func:`acq.ui.trend_plot.trend_widget`. Started before the catalogue has a
-    session of the joint (``first`` is that :class:`acq.monitoring.trend.NoSessions`: a monitor that has not filed
+    session of the joint (``first`` is that :class:`acq.monitoring.trend_catalogue.NoSessions`: a monitor that has not filed
     its first window, or not yet made its catalogue), it says what it waits for until the first one arrives.
     ``shown`` is the trend drawn (None while waiting).
     """
@@ -163,7 +164,7 @@ class LiveTrend:
                  joint: str | None = None) -> None:
         from pyqtgraph.Qt import QtCore, QtWidgets
 
-        from acq.monitoring.trend import NoSessions
+        from acq.monitoring.trend_catalogue import NoSessions
         from acq.ui.trend_plot import trend_widget
 
         self._load, self._draw = load, trend_widget
@@ -184,7 +185,7 @@ class LiveTrend:
 
     def refresh(self) -> bool:
         """Re-read the catalogue; redraw when the joint's sessions changed. True when redrawn."""
-        from acq.monitoring.trend import NoSessions
+        from acq.monitoring.trend_catalogue import NoSessions
 
         try:
             trend = self._load()

@@ -1,0 +1,72 @@
+"""The catalogues a trend reads (``acq trend`` / ``acq fleet`` FOLDER… [--catalogue C]…) and a joint's trend loaded
+from one (:func:`load_trend`): its sessions filtered on tags, refused when the windows of several monitors share the
+joint's name."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from acq.monitoring.catalogue import Catalogue
+from acq.monitoring.catalogue_backends import is_url, redacted
+from acq.monitoring.monitor_scope import MONITOR_TAG, monitor_and_tags, monitors_of, split_by_monitor
+from acq.monitoring.session_outcome import CATALOGUE_NAME
+from acq.monitoring.trend import Trend, compute_trend
+from acq.recording.tags import tags_match
+from acqcore.errors import ConfigError
+
+
+class NoSessions(ConfigError):
+    """The catalogue has no session of the joint asked for, or there is no catalogue file yet (``acq view --trend``
+    waits for a monitor's first window). ``location``: the catalogue (a URL without its password); ``joints``: the
+    joints it has."""
+
+    def __init__(self, message: str, location: Path | str, joints: Sequence[str] = ()) -> None:
+        super().__init__(message)
+        self.location, self.joints = location, list(joints)
+
+
+def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Path | str:
+    """The catalogue to read: ``catalogue`` (a file or URL) or FOLDER/catalogue.sqlite; an error when no file."""
+    path = catalogue or (folder or Path("sessions")) / CATALOGUE_NAME
+    if not is_url(path) and not Path(path).is_file():
+        raise NoSessions(f"{path}: no catalogue — fill one with acq analyze {folder or 'sessions'}/ first", path)
+    return path
+
+
+def catalogue_sources(folders: Sequence[Path], catalogues: Sequence[Path | str]) -> list[tuple[str, Path | str]]:
+    """The catalogues of ``acq fleet`` / ``acq trend`` FOLDER… [--catalogue C]…, each with its label (the folder or
+    catalogue as given, a URL without its password): FOLDER/catalogue.sqlite of each folder, then each catalogue;
+    none given: ``sessions/catalogue.sqlite`` (label ''). A catalogue named twice is refused (it would be read twice).
+    """
+    sources = [(str(f), catalogue_location(f, None)) for f in folders] + \
+        [(redacted(str(c)) if is_url(c) else str(c), catalogue_location(None, c)) for c in catalogues] \
+        or [("", catalogue_location(None, None))]
+    if len({str(loc) if is_url(loc) else str(Path(loc).resolve()) for _, loc in sources}) < len(sources):
+        raise ConfigError(f"{' '.join(label for label, _ in sources)}: a catalogue is given twice")
+    return sources
+
+
+def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: str, tags: Sequence[str] = (),
+               **options: Any) -> Trend:
+    """The trend of ``joint`` from a catalogue (``folder``/catalogue.sqlite or ``catalogue_path``), sessions
+    filtered on ``tags`` (``KEY=VALUE``); ``options`` go to :func:`compute_trend`."""
+    monitor, wanted = monitor_and_tags(tags)
+    with Catalogue(catalogue_location(folder, catalogue_path)) as catalogue:
+        entries = [e for e in catalogue.entries(joint, monitor=monitor) if tags_match(e.tags, wanted)]
+        tagged = f" tagged {' '.join(tags)}" if tags else ""
+        if not entries:
+            joints = catalogue.joints()
+            raise NoSessions(f"{catalogue.path}: no sessions of joint {joint}{tagged} "
+                             f"(joints: {', '.join(joints) or 'none'})", catalogue.path, joints)
+        histories = split_by_monitor(entries)
+        if len(histories) > 1:  # several monitors (or one and a bench's sessions), one joint name: one trend mixes them
+            monitors = monitors_of(entries)
+            robots = sorted({str(e.tags["robot"]) for e in entries if "robot" in e.tags})
+            others = len(histories.get(None, []))
+            what = (f"the windows of {len(monitors)} monitor{'s' if len(monitors) > 1 else ''} "
+                    f"({', '.join(monitors)})" + (f" and {others} session(s) of no monitor" if others else ""))
+            raise ConfigError(f"{catalogue.path}: joint {joint}{tagged} has {what} — trend one: --tag {MONITOR_TAG}=ID"
+                              + (f" or --tag robot=R ({', '.join(robots)})" if robots else ""))
+    return compute_trend(joint, entries, **options)
