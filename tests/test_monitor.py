@@ -396,6 +396,21 @@ def test_disk_budget_frees_the_oldest_unprotected_windows_or_refuses(tmp_path: P
     assert not fits  # even without 1, 2, 3 the protected window 0 leaves no room
 
 
+def test_windows_of_another_monitor_copied_here_go_first_for_the_budget_and_never_for_keep(tmp_path: Path) -> None:
+    """Retention's docstring: copies of another monitor's windows are none of this monitor's last --keep (and without
+    a budget are left alone), and go before any of its own windows when the budget needs room."""
+    windows = []
+    for i, copied in ((0, False), (1, False), (7, True), (8, True)):
+        path = tmp_path / f"w{i}{'c' if copied else ''}.h5"
+        path.write_bytes(b"x" * 1000)
+        windows.append(WindowFiles(i, path, done=True, protected=i == 0, key=path.stem, copied=copied))
+    assert [w.key for w in to_delete(windows, keep=1)] == []  # window 1 is the last of its own, 0 protected
+    victims, fits = make_room(windows, tmp_path, need_bytes=1500, budget_bytes=4000)
+    assert fits and [w.key for w in victims] == ["w7c", "w8c"]
+    victims, fits = make_room(windows, tmp_path, need_bytes=2500, budget_bytes=4000)
+    assert fits and [w.key for w in victims] == ["w7c", "w8c", "w1"]
+
+
 def test_a_disk_budget_that_cannot_hold_one_window_is_refused_before_anything_is_captured(
         capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     """It ran on, capturing nothing ("not captured: the disk budget would be exceeded" every window), exit 0; and a

@@ -10,11 +10,11 @@ import sqlite3
 import subprocess
 import sys
 from pathlib import Path
-from urllib.parse import urlsplit
 
 import pytest
 
-from acq.monitoring.catalogue import Catalogue
+from acq.monitoring import monitor_scope
+from acq.monitoring.catalogue import Catalogue, Outcome
 from tests.conftest import PG_PASSWORD
 from tests.helpers import CliRun, run_cli
 from tests.pg_server import new_database
@@ -164,15 +164,91 @@ def test_a_copied_monitor_folder_is_refused_and_a_moved_one_is_the_same_monitor(
     assert (_identity(moved)["monitor_id"], _identity(moved)["folder"]) == (mid, str(moved.resolve()))
     doc = json.loads(run_cli(capsys, "trend", str(moved), "--joint", "joint1", "--json").out)
     assert [(p["tags"]["monitor_window"], p["tags"]["monitor_id"]) for p in doc["points"]] == [(0, mid), (1, mid)]
+    carried = tmp_path / "carried"  # copied to another host (a new folder there), nothing left here
+    shutil.copytree(moved, carried)
+    shutil.rmtree(moved)
     monkeypatch.setattr(socket, "gethostname", lambda: "newpc")
-    other_host = _start(capsys, bench, moved)
+    other_host = _start(capsys, bench, carried)
     assert (other_host.code, other_host.err) == (
-        2, f"acq: error: {moved}: its monitor.id was made on host {ident['host']} "
+        2, f"acq: error: {carried}: its monitor.id was made on host {ident['host']} "
            f"for {moved.resolve()} ({mid}) — a copy would file its windows as that monitor's: start it with "
            "--new-identity if this is another monitor (the windows copied here stay that one's), or with --moved if "
            f"the monitor on {ident['host']} no longer runs (the folder moved here)\n")
-    assert _start(capsys, bench, moved, "--moved").code == 0
-    assert (_identity(moved)["monitor_id"], _identity(moved)["host"]) == (mid, "newpc")
+    assert _start(capsys, bench, carried, "--moved").code == 0
+    assert (_identity(carried)["monitor_id"], _identity(carried)["host"]) == (mid, "newpc")
+
+
+def test_a_container_restart_with_a_new_host_name_is_the_same_monitor_and_another_machine_is_refused(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The host name changes at every container start (Docker's container id, a pod's name): every restart there
+    was refused as another host until --moved, which then switched the host check off (the last closing note). The
+    folder's own filesystem object (st_dev, st_ino), which a container's volume keeps and a copy does not, tells it is
+    the same folder; a machine-id other than the one recorded tells another machine, even under the same host name
+    and path. The machine-id files are the test's own (the machine's is the machine's)."""
+    ids = tmp_path / "machine-id"
+    monkeypatch.setattr(monitor_scope, "MACHINE_ID_FILES", (str(ids), str(tmp_path / "dbus-machine-id")))
+    ids.write_text("0123456789abcdef0123456789abcdef\n")
+    monkeypatch.setattr(socket, "gethostname", lambda: "4f2a9c1d7e3b")  # a container's host name: its id
+    bench, out = _robot(tmp_path, "r1", 891.0), tmp_path / "volume" / "m"
+    assert _start(capsys, bench, out).code == 0
+    mid = _identity(out)["monitor_id"]
+    assert (_identity(out)["machine_id"], _identity(out)["folder_object"][1]) == (
+        "0123456789abcdef0123456789abcdef", out.stat().st_ino)
+    monkeypatch.setattr(socket, "gethostname", lambda: "9b8e7d6c5a41")  # the container made anew on the same volume
+    restarted = _start(capsys, bench, out)
+    assert restarted.code == 0, restarted.err
+    ids.unlink()  # and one whose image has no machine-id
+    monkeypatch.setattr(socket, "gethostname", lambda: "monitor-5d8f7-x2k4q")
+    assert _start(capsys, bench, out).code == 0
+    assert (_identity(out)["monitor_id"], _identity(out)["host"], _identity(out)["machine_id"]) == (
+        mid, "monitor-5d8f7-x2k4q", None)
+    doc = json.loads(run_cli(capsys, "trend", str(out), "--joint", "joint1", "--json").out)
+    assert [(p["tags"]["monitor_window"], p["tags"]["monitor_id"]) for p in doc["points"]] == [
+        (0, mid), (1, mid), (2, mid)]
+    ids.write_text("0123456789abcdef0123456789abcdef\n")
+    assert _start(capsys, bench, out).code == 0  # bound to this machine's id again
+    # the folder copied to another machine, to the same path under the same host name (a station cloned file by file)
+    shutil.copytree(out, tmp_path / "carried")
+    shutil.rmtree(out)
+    shutil.copytree(tmp_path / "carried", out)
+    ids.write_text("fedcba9876543210fedcba9876543210\n")
+    refused = _start(capsys, bench, out)
+    assert (refused.code, refused.err) == (
+        2, f"acq: error: {out}: its monitor.id was made on host monitor-5d8f7-x2k4q (machine-id "
+           "0123456789abcdef0123456789abcdef, this one's fedcba9876543210fedcba9876543210) for "
+           f"{out.resolve()} ({mid}) — a copy would file its windows as that monitor's: start it with --new-identity "
+           "if this is another monitor (the windows copied here stay that one's), or with --moved if the monitor on "
+           "monitor-5d8f7-x2k4q no longer runs (the folder moved here)\n")
+    assert _start(capsys, bench, out, "--moved").code == 0
+    assert (_identity(out)["monitor_id"], _identity(out)["machine_id"]) == (mid, "fedcba9876543210fedcba9876543210")
+
+
+def test_windows_copied_from_another_monitor_go_first_when_the_disk_budget_needs_room(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A copied folder started with --new-identity: the windows copied along are the first monitor's, and were never
+    deleted, yet counted against --max-disk — with the baseline they filled it, and no window was captured again (the
+    last closing note). They go first when the budget needs room (retention's docstring says why), and the summary
+    counts them; their catalogue rows stay."""
+    bench, first, copy = _robot(tmp_path, "r1", 891.0), tmp_path / "first", tmp_path / "copy"
+    assert _start(capsys, bench, first, minutes=2).code == 0  # windows 0, 1 (the baseline): their raw files kept
+    shutil.copytree(first, copy)
+    copied = sorted(p.name for p in copy.glob("*.h5"))
+    assert len(copied) == 2
+    # the budget of the 2 baseline windows and the next (3 × 3.9 MB expected, 2.6 MB each as written): once this
+    # monitor's baseline is kept, the copied windows must go for its next windows to fit
+    run = _start(capsys, bench, copy, "--new-identity", "--max-disk", "12MB", minutes=4)
+    assert run.code == 0, run.err
+    summary = {" ".join(cells.split("│")[1].split()): cells.split("│")[2].strip()
+               for cells in run.err.splitlines() if cells.count("│") == 3}
+    assert summary["windows captured / excited / analysed"].startswith("4 / ")
+    assert "not captured: the disk budget (--max-disk) was full" not in summary
+    assert summary["copies of other monitors' windows deleted"] == "2"
+    assert not [name for name in copied if (copy / name).exists()]
+    assert sum(f.stat().st_size for f in copy.iterdir() if f.is_file()) <= 12_000_000
+    first_id = _identity(first)["monitor_id"]
+    with sqlite3.connect(copy / "catalogue.sqlite") as db:
+        counts = dict(db.execute("SELECT monitor_id, COUNT(*) FROM sessions GROUP BY monitor_id").fetchall())
+    assert counts == {first_id: 2, _identity(copy)["monitor_id"]: 4}
 
 
 def test_a_restart_into_another_catalogue_is_refused_unless_its_windows_move_there(
@@ -195,6 +271,31 @@ def test_a_restart_into_another_catalogue_is_refused_unless_its_windows_move_the
     assert [p["tags"]["monitor_window"] for p in doc["points"]] == [0, 1, 2]
     assert [p["state"] for p in doc["points"]] == ["baseline", "baseline", "ok"]  # the baseline came along
     assert _start(capsys, bench, out, "--catalogue", str(catalogue_location)).code == 0  # bound there now
+
+
+def test_a_refused_start_with_a_new_catalogue_file_leaves_nothing_behind(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A --catalogue naming a SQLite file not there yet was made (with its folder) before the start was refused, and
+    stayed behind empty (the last closing note). Each refusal comes before it is made: windows filed elsewhere,
+    a copied folder, windows of another --window (judged where they are filed, before --move-catalogue copies them —
+    monitor.id was rewritten to the new catalogue before that refusal)."""
+    bench, out, new = _robot(tmp_path, "r1", 891.0), tmp_path / "m", tmp_path / "plant" / "new.sqlite"
+    assert _start(capsys, bench, out).code == 0
+    identity = (out / "monitor.id").read_text()
+    refused = _start(capsys, bench, out, "--catalogue", str(new))
+    assert refused.code == 2 and refused.err.startswith(f"acq: error: {out}: its windows are filed in ")
+    other_window = run_cli(capsys, "monitor", "--bench", str(bench), "--fast", "--window", "20", "--every", "60",
+                           "--for", "1m", "--baseline-windows", "2", "--out", str(out), "--catalogue", str(new),
+                           "--move-catalogue")
+    assert other_window.code == 2 and "its windows were captured with another bench or window" in other_window.err
+    shutil.copytree(out, tmp_path / "copy")
+    copied = _start(capsys, bench, tmp_path / "copy", "--catalogue", str(new))
+    assert copied.code == 2 and "this folder looks copied from" in copied.err
+    assert not (tmp_path / "plant").exists()
+    assert (out / "monitor.id").read_text() == identity
+    assert _start(capsys, bench, out, "--catalogue", str(new), "--move-catalogue").code == 0  # accepted: made now
+    with Catalogue(new) as c:
+        assert [e.tags["monitor_window"] for e in c.entries()] == [0, 1]
 
 
 def test_a_restart_with_another_every_goes_on_in_machine_time_from_the_last_window(
@@ -337,21 +438,23 @@ def test_a_move_from_a_catalogue_with_a_password_in_its_url_reads_the_password_f
     monkeypatch.delenv("PGPASSWORD", raising=False)
     monkeypatch.setenv("PGPASSFILE", str(tmp_path / "no.pgpass"))  # none of the user's own
     url = new_database(postgres_server_with_password)
-    masked, port = url.replace(f":{PG_PASSWORD}@", ":***@"), urlsplit(url).port
+    masked = url.replace(f":{PG_PASSWORD}@", ":***@")
     bench, out, plant = _robot(tmp_path, "r1", 891.0), tmp_path / "m", tmp_path / "plant.db"
     first = _start(capsys, bench, out, "--catalogue", url, minutes=2)
     assert first.code == 0, first.err
     identity = (out / "monitor.id").read_text()
     assert _identity(out)["catalogue"] == masked and PG_PASSWORD not in identity
     refused = _start(capsys, bench, out, "--catalogue", str(plant), "--move-catalogue")
-    assert (refused.code, refused.err) == (
-        2, f"acq: error: {out}: its windows are filed in {masked}: cannot open the catalogue (connection failed: "
-           f"connection to server at \"127.0.0.1\", port {port} failed: fe_sendauth: no password supplied) — "
-           "monitor.id keeps no password: put it in ~/.pgpass or PGPASSWORD (libpq reads them), then restart with "
-           "--move-catalogue\n")
+    # ours exactly, around libpq's reason (its wording is libpq's: "fe_sendauth: no password supplied" here, another
+    # version may say it otherwise, with or without the server's address): one line, no password in it
+    head = f"acq: error: {out}: its windows are filed in {masked}: cannot open the catalogue ("
+    tail = (") — monitor.id keeps no password: put it in ~/.pgpass or PGPASSWORD (libpq reads them), then restart "
+            "with --move-catalogue\n")
+    assert refused.code == 2 and refused.err.startswith(head) and refused.err.endswith(tail), refused.err
+    reason = refused.err[len(head):-len(tail)]
+    assert reason.strip() and "\n" not in reason and PG_PASSWORD not in reason, reason
     assert (out / "monitor.id").read_text() == identity
-    with Catalogue(plant) as c:
-        assert c.entries() == []
+    assert not plant.exists()  # a refusal leaves nothing: the new catalogue is made only once the start is accepted
     monkeypatch.setenv("PGPASSWORD", PG_PASSWORD)
     moved = _start(capsys, bench, out, "--catalogue", str(plant), "--move-catalogue")
     assert moved.code == 0, moved.err
@@ -359,3 +462,46 @@ def test_a_move_from_a_catalogue_with_a_password_in_its_url_reads_the_password_f
     doc = json.loads(run_cli(capsys, "trend", "--catalogue", str(plant), "--joint", "joint1", "--json").out)
     assert [(p["tags"]["monitor_window"], p["state"]) for p in doc["points"]][:3] == [
         (0, "baseline"), (1, "baseline"), (2, "ok")]
+
+
+def _window(monitor: str | None, n: int, k: float, *, robot: str = "r1") -> Outcome:
+    """A window (or, without ``monitor``, a bench's session) of joint1 as a monitor files it, n minutes in."""
+    tags: dict[str, object] = {"robot": robot, "monitor_window": n}
+    if monitor is not None:
+        tags["monitor_id"] = monitor
+    doc = {"options": {}, "analyzed_utc": f"2026-01-02T00:{n:02d}:30+00:00", "acq_version": "t", "K_Nm_per_rad": k,
+           "ci95": {"K_Nm_per_rad": [k - 5.0, k + 5.0]}, "quality": {"verdict": "ok", "reasons": []}}
+    meta = {"session_id": f"{monitor}-{n}", "joint": "joint1", "created_utc": f"2026-01-02T00:{n:02d}:00+00:00",
+            "start_monotonic_ns": n, "status": "complete", "tags": tags}
+    return Outcome(f"/m/{monitor}-{n}.h5", f"sha-{monitor}-{n}", "{}", meta, doc, None, 1.0)
+
+
+def test_trend_and_fleet_read_one_monitor_by_the_catalogue_column(catalogue_location: Path | str,
+                                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    """acq trend / acq fleet --tag monitor_id=ID read every window of the catalogue and kept the monitor's in Python
+    (the last closing note); the query now names the monitor (its column's index). What it returns: the monitor's
+    windows and no other's, a window an earlier acq filed without the column (its tag says whose) among them, and a
+    monitor whose identity is digits (a monitor.id not made by acq), which the tag's number parsing matched to none."""
+    with Catalogue(catalogue_location) as c:
+        for n in range(4):
+            c.record(_window("r1:/srv/m:0a0b0c0d", n, 890.0 + n))
+            c.record(_window("r2:/srv/m:01020304", n, 700.0 + n, robot="r2"))
+            c.record(_window("4711", n, 500.0 + n, robot="r3"))
+        c.record(_window(None, 9, 100.0))  # a bench's session of the same joint name
+        c.record(_window("r1:/srv/m:0a0b0c0d", 4, 894.0))
+        c._execute("UPDATE sessions SET monitor_id = NULL WHERE session_id = ?", ("r1:/srv/m:0a0b0c0d-4",))
+    where = ["--catalogue", str(catalogue_location)]
+    trend = run_cli(capsys, "trend", *where, "--joint", "joint1", "--tag", "monitor_id=r1:/srv/m:0a0b0c0d", "--json")
+    assert trend.code == 0, trend.err
+    assert [(p["tags"]["monitor_window"], p["K_Nm_per_rad"]) for p in json.loads(trend.out)["points"]] == [
+        (0, 890.0), (1, 891.0), (2, 892.0), (3, 893.0), (4, 894.0)]
+    digits = run_cli(capsys, "trend", *where, "--joint", "joint1", "--tag", "monitor_id=4711", "--json")
+    assert digits.code == 0, digits.err
+    assert [p["K_Nm_per_rad"] for p in json.loads(digits.out)["points"]] == [500.0, 501.0, 502.0, 503.0]
+    fleet = run_cli(capsys, "fleet", *where, "--tag", "monitor_id=r2:/srv/m:01020304", "--tag", "robot=r2", "--json")
+    assert fleet.code == 0, fleet.err
+    assert [(r["robot"], r["monitor_id"], r["K_Nm_per_rad"]) for r in json.loads(fleet.out)] == [
+        ("r2", "r2:/srv/m:01020304", 703.0)]
+    none = run_cli(capsys, "fleet", *where, "--tag", "monitor_id=r2:/srv/m:01020304", "--tag", "robot=r1")
+    assert (none.code, none.err) == (2, f"acq: error: {catalogue_location}: no sessions of any joint tagged "
+                                        "monitor_id=r2:/srv/m:01020304 robot=r1\n")

@@ -286,21 +286,40 @@ class Catalogue:
         """Every session's analyses (one per request), oldest session first (all joints when ``joint`` is None).
 
         ``monitor``: only the windows of this monitor (:data:`MONITOR_TAG`), read by the column's index — and with
-        ``unowned`` also the sessions of no monitor (windows filed before monitors had an identity).
+        ``unowned`` also the sessions of no monitor (windows filed before monitors had an identity). A session whose
+        column is empty but whose tags name a monitor (filed by an acq of before schema 6 into a catalogue another
+        one migrated, until a monitor's start fills the column: :meth:`fill_monitor_ids`) is read by its tag: readers
+        (``acq trend``, ``acq fleet``) write nothing, and without it the latest windows of such a monitor were
+        missing from its trend.
         """
+        terms: list[str] = []
+        params: list[Any] = []
+        if monitor is not None:  # by the monitor_id index (both terms of the OR are index searches)
+            terms.append("(s.monitor_id = ? OR (s.monitor_id IS NULL AND (? = 1 OR s.tags_json LIKE ?)))")
+            params += [monitor, unowned, f'%"{MONITOR_TAG}"%']
+        if joint is not None:
+            # with a monitor the joint filters its windows, as an expression no index serves: SQLite (no statistics)
+            # took the joint's index, which every robot's joint1 shares, and read all their windows (a "CAST(? AS
+            # TEXT) IS NULL OR" form of these terms read every row of the catalogue)
+            terms.append("s.joint = ?" if monitor is None else "s.joint || '' = ?")
+            params.append(joint)
+        where = "".join(f" {'AND' if i else 'WHERE'} {term}" for i, term in enumerate(terms))
         rows = self._execute(
             "SELECT s.*, a.*, COALESCE(a.file_path, s.path) AS analysed_path FROM sessions s JOIN analyses a"
-            " ON a.session_key = s.session_key"
-            " WHERE (CAST(? AS TEXT) IS NULL OR s.joint = ?)"
-            " AND (CAST(? AS TEXT) IS NULL OR s.monitor_id = ? OR (? = 1 AND s.monitor_id IS NULL))"
+            f" ON a.session_key = s.session_key{where}"
             " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path, a.analyzed_utc, a.id",
-            (joint, joint, monitor, monitor, unowned))
-        return [_entry(r) for r in rows]
+            params).fetchall()
+        if monitor is None:
+            return [_entry(r) for r in rows]
+        entries = [(r["monitor_id"], _entry(r)) for r in rows]  # a session without the column is whose its tag says
+        return [e for column, e in entries if column is not None or (
+            str(e.tags[MONITOR_TAG]) == monitor if e.tags.get(MONITOR_TAG) is not None else unowned)]
 
     def fill_monitor_ids(self) -> int:
         """Fill the ``monitor_id`` column of the sessions whose tags name a monitor but whose column does not: the rows
         an acq of before schema 6 still running files into a catalogue another one migrated (its INSERT names the
-        columns it knows). :meth:`entries` scopes by the column: without this, such a monitor's windows were nobody's
+        columns it knows). :meth:`entries` scopes by the column's index (such a session only by its tag, read outside
+        the index) and :meth:`copy_windows` by the column alone: without this, such a monitor's windows were nobody's
         once it restarted upgraded. Returns the number of sessions filled (one transaction)."""
         try:
             with self._transaction():

@@ -29,10 +29,10 @@ from pathlib import Path
 from typing import Any, Literal
 
 from acq.monitoring.catalogue import Catalogue, Entry
-from acq.monitoring.monitor_scope import split_by_monitor
+from acq.monitoring.monitor_scope import monitor_and_tags, split_by_monitor
 from acq.monitoring.trend import Trend, TrendPoint, compute_trend
 from acq.monitoring.trend_catalogue import catalogue_sources
-from acq.recording.tags import parse_tags, tags_match
+from acq.recording.tags import tags_match
 from acqcore.errors import ConfigError
 
 FleetState = Literal["alarm", "stale", "no baseline", "baseline", "ok"]
@@ -182,13 +182,13 @@ def load_fleet(folders: Sequence[Path], catalogues: Sequence[Path | str], tags: 
     """:func:`fleet_status` of the sessions tagged ``tags`` (``KEY=VALUE``) of each catalogue — every folder's
     ``FOLDER/catalogue.sqlite`` and every catalogue given (none: ``sessions/catalogue.sqlite``) — judged apart, worst
     first over all of them."""
-    wanted = parse_tags(tags)
+    monitor, wanted = monitor_and_tags(tags)
     sources = catalogue_sources(folders, catalogues)
     statuses: list[JointStatus] = []
     names = []
     for label, location in sources:
         with Catalogue(location) as catalogue:
-            entries = [e for e in catalogue.entries() if tags_match(e.tags, wanted)]
+            entries = [e for e in catalogue.entries(monitor=monitor) if tags_match(e.tags, wanted)]
             names.append(str(catalogue.path))
         statuses += fleet_status(entries, now=now, source=label if len(sources) > 1 else "", **options)
     if not statuses:

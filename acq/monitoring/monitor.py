@@ -27,9 +27,9 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from concurrent.futures import Future
-from contextlib import AbstractContextManager, suppress
+from contextlib import AbstractContextManager, contextmanager, suppress
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -37,12 +37,12 @@ from typing import Any
 from acq.monitoring.alarm_command import AlarmCommands
 from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules
 from acq.monitoring.analysis_pool import analysis_executor
-from acq.monitoring.catalogue import Catalogue, Entry, Outcome
+from acq.monitoring.catalogue import Entry, Outcome
 from acq.monitoring.catalogue_backends import is_url
 from acq.monitoring.folder_lock import folder_lock
-from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, check_catalogue, check_comparable
+from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, check_comparable, open_bound
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
-                                          check_user_tags, window_number, write_identity)
+                                          check_user_tags, own_windows, window_number)
 from acq.monitoring.monitor_status import SIZE_MARGIN, MonitorSettings, MonitorStatus, expected_window_bytes
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.monitoring.session_outcome import CATALOGUE_NAME, session_meta
@@ -132,10 +132,9 @@ class Monitor:
         return 3 if self._in_alarm else 0
 
     def _run(self) -> None:
-        with folder_lock(self.s.out_dir), Catalogue(self._catalogue_location) as catalogue, \
-                analysis_executor(self.s.jobs, None) as pool, self._signals():
-            self.catalogue = catalogue
-            first = self._resume(pool, self._identify())
+        with folder_lock(self.s.out_dir), self._identified() as windows, analysis_executor(self.s.jobs, None) as pool, \
+                self._signals():
+            first = self._resume(pool, windows)
             wall0 = time.monotonic()
             n = first
             while self._stop is None and (self.s.for_s is None or (n - first) * self.s.every_s < self.s.for_s):
@@ -242,11 +241,8 @@ class Monitor:
         self._show()
 
     def _own_windows(self, joint: str | None) -> list[Entry]:
-        """This monitor's windows in the catalogue (of ``joint``; None: any), oldest first — never another monitor's
-        of a joint of the same name in a shared catalogue (its windows without an identity only in the catalogue of
-        its own folder): a query on the catalogue's monitor_id column."""
-        return [e for e in self.catalogue.entries(joint, monitor=self._id, unowned=self._legacy)
-                if WINDOW_TAG in e.tags]
+        """This monitor's windows in the catalogue (of ``joint``; None: any), oldest first (:func:`own_windows`)."""
+        return own_windows(self.catalogue, self._id, joint, unowned=self._legacy)
 
     def _trend(self) -> Trend:
         entries = self._own_windows(self.s.bench.joint)
@@ -316,29 +312,31 @@ class Monitor:
             for w in victims:
                 delete(w)
                 del self._windows[w.key]
+            self.status.copied_deleted += sum(w.copied for w in victims)
         self.status.disk_bytes = folder_bytes(self.s.out_dir)
         return fits
 
     # ---- resume after a crash --------------------------------------------------------------------------
-    def _identify(self) -> list[Entry]:
+    @contextmanager
+    def _identified(self) -> Iterator[list[Entry]]:
         """This folder's identity (a copied folder refused), bound to its catalogue (its windows filed elsewhere
-        refused, or moved here with ``move_catalogue``) and written; returns its windows in the catalogue."""
+        refused, or moved here with ``move_catalogue``; windows not comparable refused) and written; the catalogue
+        open as :attr:`catalogue` inside; yields its windows in the catalogue. A refusal makes and writes nothing."""
         s = self.s
         identity: Identity = bound_identity(s.out_dir, new_identity=s.new_identity, moved=s.moved)
         self._id = identity.monitor_id
-        self.catalogue.fill_monitor_ids()  # its windows an earlier acq filed after another one migrated the catalogue
-        windows = self._own_windows(None)
-        bound = check_catalogue(s.out_dir, identity, self.catalogue, self._catalogue_location, bool(windows),
-                                move=s.move_catalogue, own_catalogue=s.out_dir / CATALOGUE_NAME)
-        write_identity(s.out_dir, bound)
-        return self._own_windows(None) if s.move_catalogue and not windows else windows  # moved here: read anew
+        self.catalogue, windows = open_bound(
+            s.out_dir, identity, self._catalogue_location, move=s.move_catalogue,
+            own_catalogue=s.out_dir / CATALOGUE_NAME, legacy=self._legacy,
+            check=lambda ws: check_comparable(s.out_dir, ws, s.bench, s.window_s, self._rules))
+        with self.catalogue:
+            yield windows
 
     def _resume(self, pool: Any, windows: list[Entry]) -> int:
         """Mark or analyse the windows a previous run left (``windows``: its windows in the catalogue); return the
         next window's number."""
         windows = sorted(windows, key=lambda e: int(e.tags[WINDOW_TAG]))
         known = {e.session_id: e for e in windows if e.joint == self.s.bench.joint}  # the same read, this joint's
-        check_comparable(self.s.out_dir, windows, self.s.bench, self.s.window_s, self._rules)
         self._clock = MachineClock.resumed(windows, self.s.every_s)
         numbers = [int(e.tags[WINDOW_TAG]) for e in known.values()]
         self._resumed(numbers)
@@ -350,9 +348,12 @@ class Monitor:
                 session = load(path)
             except Exception:  # noqa: BLE001 - not a readable session: not ours to judge
                 continue
-            if WINDOW_TAG not in session.tags or session.tags.get(MONITOR_TAG, self._id) != self._id:
-                continue  # not a window, or another monitor's (copied here): not ours to file
+            if WINDOW_TAG not in session.tags:
+                continue  # not a window: not ours to file or delete
             n, key = int(session.tags[WINDOW_TAG]), str(session.meta.session_id)
+            if session.tags.get(MONITOR_TAG, self._id) != self._id:  # another monitor's, copied here: not ours to file
+                self._windows[key] = WindowFiles(n, path, True, False, key, copied=True)  # (retention's docstring)
+                continue
             numbers.append(n)
             self._windows[key] = WindowFiles(n, path, key in known, False, key)
             if key in known:

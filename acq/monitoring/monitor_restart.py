@@ -18,14 +18,15 @@ instead of being the window's number × ``--every``, which jumped when ``--every
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from contextlib import nullcontext
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 from acq.monitoring.alarm_rules import AlarmRules, filed_rules
 from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.catalogue_backends import is_url, redacted, without_masked_password
-from acq.monitoring.monitor_scope import IDENTITY_FILE, WINDOW_TAG, Identity
+from acq.monitoring.monitor_scope import IDENTITY_FILE, WINDOW_TAG, Identity, own_windows, write_identity
 from acq.monitoring.trend import ELAPSED_TAG
 from acq.monitoring.window_bench import differences
 from acqcore.errors import ConfigError
@@ -58,35 +59,70 @@ def check_comparable(out_dir: Path, windows: Sequence[Entry], bench: Bench, wind
                           f"{filed.ewma_lambda:g}: resume with the same, or start a new --out")
 
 
-def check_catalogue(out_dir: Path, identity: Identity, catalogue: Catalogue, location: Path | str, holds_own: bool,
-                    *, move: bool, own_catalogue: Path) -> Identity:
-    """The identity bound to ``catalogue`` (at ``location``), or a refusal when its windows are filed elsewhere.
+def open_bound(out_dir: Path, identity: Identity, location: Path | str, *, move: bool, own_catalogue: Path,
+               legacy: bool, check: Callable[[list[Entry]], None]) -> tuple[Catalogue, list[Entry]]:
+    """The catalogue at ``location`` opened, ``identity`` bound to it and written, and the monitor's windows there
+    (oldest first; with ``legacy`` its windows from before monitors had an identity too) — or a refusal: its windows
+    filed in another catalogue (:func:`catalogue_source`), that catalogue out of reach, ``check`` of the windows.
 
-    ``holds_own``: the catalogue already holds windows of this monitor (the same database, or its windows moved
-    there). ``move`` (``--move-catalogue``): copy the monitor's windows from the catalogue it filed into to this one
-    first. ``own_catalogue``: the folder's own catalogue file; a recorded SQLite catalogue that no longer exists was
-    the folder's own when the folder was moved (``mv``) with it: the windows are copied from the one it carried, with
-    its windows from before monitors had an identity (a folder's own catalogue holds no other monitor's).
+    ``move`` (``--move-catalogue``): the windows are copied from the catalogue they are filed in first. Every refusal
+    comes before anything is made or written: a SQLite file that does not exist yet is made only once the start is
+    accepted (a refused ``--catalogue new.sqlite`` left an empty file and its folder behind — the last closing note),
+    and ``check`` judges the windows where they are filed, before they are copied. The caller closes the catalogue.
+    """
+    catalogue = Catalogue(location) if is_url(location) or Path(location).is_file() else None
+    try:
+        windows: list[Entry] = []
+        if catalogue is not None:
+            catalogue.fill_monitor_ids()  # its windows an earlier acq filed after another one migrated the catalogue
+            windows = own_windows(catalogue, identity.monitor_id, unowned=legacy)
+        source = catalogue_source(out_dir, identity, location, bool(windows), move=move, own_catalogue=own_catalogue)
+        unowned = source == catalogue_text(own_catalogue)
+        with _open_source(out_dir, source) if source is not None else nullcontext() as old:
+            if old is not None:
+                windows = own_windows(old, identity.monitor_id, unowned=unowned)
+            check(sorted(windows, key=lambda e: int(e.tags[WINDOW_TAG])))
+            catalogue = catalogue or Catalogue(location)
+            if old is not None:
+                catalogue.copy_windows(old, identity.monitor_id, unowned=unowned)
+                windows = own_windows(catalogue, identity.monitor_id, unowned=legacy)
+        write_identity(out_dir, replace(identity, catalogue=catalogue_text(location)))
+    except BaseException:
+        if catalogue is not None:
+            catalogue.close()
+        raise
+    return catalogue, windows
+
+
+def catalogue_source(out_dir: Path, identity: Identity, location: Path | str, holds_own: bool, *, move: bool,
+                     own_catalogue: Path) -> str | None:
+    """The catalogue to copy the monitor's windows from before it files into the one at ``location`` (None: none,
+    they are there or there are none), or a refusal when its windows are filed elsewhere and ``move`` is not given.
+
+    ``holds_own``: the catalogue at ``location`` already holds windows of this monitor (the same database, or its
+    windows moved there). ``own_catalogue``: the folder's own catalogue file; a recorded SQLite catalogue that no
+    longer exists was the folder's own when the folder was moved (``mv``) with it: the windows are copied from the one
+    it carried, with its windows from before monitors had an identity (a folder's own catalogue holds no other
+    monitor's).
     """
     here = catalogue_text(location)
     if identity.catalogue is None or identity.catalogue == here or holds_own:
-        return replace(identity, catalogue=here)
+        return None
     source = identity.catalogue
     if not is_url(source) and not Path(source).is_file():
-        if Path(source).name != own_catalogue.name or not own_catalogue.is_file():
+        carried = Path(source).name == own_catalogue.name  # the folder moved with its own catalogue
+        if carried and here == catalogue_text(own_catalogue):
+            return None  # which it files into and holds none of its windows (emptied, deleted): as in place, start over
+        if not carried or not own_catalogue.is_file():
             # opening it would make an empty catalogue (and its folder) where it was, and copy nothing from it
             raise ConfigError(f"{out_dir}: its windows are filed in {source}, which no longer exists: resume once "
                               "with --catalogue set to where that file is now, then move them with --move-catalogue")
-        source = catalogue_text(own_catalogue)  # the folder moved with its own catalogue
-        if source == here:  # which holds none of its windows (emptied): as a catalogue emptied in place, start over
-            return replace(identity, catalogue=here)
+        source = catalogue_text(own_catalogue)
     if not move:
         raise ConfigError(f"{out_dir}: its windows are filed in {source}, not in {here} (--catalogue): "
                           f"resume with --catalogue {source}, or add --move-catalogue to copy them into "
                           f"{here} and file there from now on")
-    with _open_source(out_dir, source) as old:
-        catalogue.copy_windows(old, identity.monitor_id, unowned=source == catalogue_text(own_catalogue))
-    return replace(identity, catalogue=here)
+    return source
 
 
 def _open_source(out_dir: Path, source: str) -> Catalogue:

@@ -66,6 +66,7 @@ class MonitorStatus:
     # worker died or the analysis raised; interrupted — the capture was cut)
     filed: dict[str, int] = field(default_factory=lambda: dict.fromkeys(FILED_KINDS, 0))
     not_captured: int = 0  # not captured: the disk budget would have been exceeded (not filed)
+    copied_deleted: int = 0  # raw windows of other monitors copied into the folder, deleted for the disk budget
     alarms: int = 0
     alarm_command_failure: str | None = None  # the last --on-alarm command's problem: "alarm command failed: exit 1"
     machine_time_s: float = 0.0  # the start of the window being captured; its end once it is captured

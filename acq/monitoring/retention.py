@@ -6,6 +6,14 @@ windows, the window that raised each alarm and the last ``keep`` windows. A disk
 a window is captured the folder's size plus the window's expected size must fit, else the oldest
 unprotected raw files go first, then the oldest of the last ``keep``; when even that is not enough
 the window is not captured (and the monitor says so).
+
+Windows of another monitor in the folder (a folder copied, then started with ``--new-identity``: the copied windows
+stay the monitor's that captured them) are no window of this one: no baseline or alarm of its history depends on
+them, their K is in the catalogue of the monitor that captured them and that monitor's folder keeps their raw files
+by its own rules. ``--keep`` does not count them and without a budget they are left alone (another monitor's files
+are not ours to delete without need). Under a budget they go first, before any of this monitor's windows: kept, they
+counted against ``--max-disk`` for ever, so the monitor's own latest windows went instead, and once they with the
+baseline filled the budget no window was captured again.
 """
 
 from __future__ import annotations
@@ -26,6 +34,7 @@ class WindowFiles:
     done : analysed or marked (its catalogue row is written).
     protected : a baseline window or the window that raised an alarm (never deleted).
     key : what the caller knows the window by (e.g. its session id).
+    copied : another monitor's window, copied into this folder (deleted first for the budget, never for ``keep``).
     """
 
     index: int
@@ -33,6 +42,7 @@ class WindowFiles:
     done: bool
     protected: bool
     key: str = ""
+    copied: bool = False
 
 
 def raw_files(session_path: Path) -> list[Path]:
@@ -57,8 +67,9 @@ def folder_bytes(folder: Path) -> int:
 
 
 def to_delete(windows: Iterable[WindowFiles], keep: int) -> list[WindowFiles]:
-    """Windows whose raw files go now: done, not protected, not among the last ``keep`` (oldest first)."""
-    ordered = sorted(windows, key=lambda w: w.index)
+    """This monitor's windows whose raw files go now: done, not protected, not among its last ``keep`` (oldest first);
+    never another monitor's copied here."""
+    ordered = sorted((w for w in windows if not w.copied), key=lambda w: w.index)
     last = {w.index for w in ordered[-keep:]} if keep > 0 else set()
     return [w for w in ordered if w.done and not w.protected and w.index not in last]
 
@@ -67,12 +78,12 @@ def make_room(windows: Iterable[WindowFiles], folder: Path, need_bytes: int, bud
         list[WindowFiles], bool]:
     """Windows to delete so that ``need_bytes`` more fit in ``budget_bytes``, and whether they then fit.
 
-    Unprotected done windows go oldest first, the last ``keep`` included (the budget outranks ``keep``);
-    baseline and alarming windows and windows not yet done are never chosen.
+    Other monitors' windows copied here go first, then unprotected done windows oldest first, the last ``keep``
+    included (the budget outranks ``keep``); baseline and alarming windows and windows not yet done are never chosen.
     """
     used = folder_bytes(folder)
     chosen: list[WindowFiles] = []
-    for w in sorted(windows, key=lambda w: w.index):
+    for w in sorted(windows, key=lambda w: (not w.copied, w.index)):
         if used + need_bytes <= budget_bytes:
             break
         if w.done and not w.protected:

@@ -10,11 +10,11 @@ from typing import Any
 
 from acq.monitoring.catalogue import Catalogue
 from acq.monitoring.catalogue_backends import is_url, redacted
-from acq.monitoring.monitor_scope import MONITOR_TAG, monitors_of, split_by_monitor
+from acq.monitoring.monitor_scope import MONITOR_TAG, monitor_and_tags, monitors_of, split_by_monitor
 from acq.monitoring.session_outcome import CATALOGUE_NAME
 from acq.monitoring.trend import Trend, compute_trend
 from acq.recording.storage import refused_write
-from acq.recording.tags import parse_tags, tags_match
+from acq.recording.tags import tags_match
 from acqcore.errors import ConfigError
 
 
@@ -58,9 +58,9 @@ def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: st
                **options: Any) -> Trend:
     """The trend of ``joint`` from a catalogue (``folder``/catalogue.sqlite or ``catalogue_path``), sessions
     filtered on ``tags`` (``KEY=VALUE``); ``options`` go to :func:`compute_trend`."""
-    wanted = parse_tags(tags)
+    monitor, wanted = monitor_and_tags(tags)
     with Catalogue(catalogue_location(folder, catalogue_path)) as catalogue:
-        entries = [e for e in catalogue.entries(joint) if tags_match(e.tags, wanted)]
+        entries = [e for e in catalogue.entries(joint, monitor=monitor) if tags_match(e.tags, wanted)]
         tagged = f" tagged {' '.join(tags)}" if tags else ""
         if not entries:
             joints = catalogue.joints()

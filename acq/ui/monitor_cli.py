@@ -50,6 +50,7 @@ def status_table(st: MonitorStatus) -> Table:
         ("windows filed (this run)", filed_text(st)),
         *([("windows in the folder (earlier runs too)", str(st.in_folder))] if st.resumed else []),
         *([("not captured: the disk budget (--max-disk) was full", str(st.not_captured))] if st.not_captured else []),
+        *([("copies of other monitors' windows deleted", str(st.copied_deleted))] if st.copied_deleted else []),
         ("last K N·m/rad (95 %) · its window", k_text),
         ("ΔK against the baseline", format_value(st.change_pct, "+.1f") + " %"),
         ("baseline K N·m/rad", format_value(st.baseline_K, ".1f")),
