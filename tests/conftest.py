@@ -4,12 +4,25 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import signal
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 
 from tests.pg_server import new_database, server_binaries, throwaway_server
+
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Ctrl-C in this process raises KeyboardInterrupt, as in a run started at a terminal, also where the run was
+    started with SIGINT ignored (a shell's ``&`` without job control, some CI runners): Python then installs no
+    handler, and the tests that send themselves a SIGINT (a Ctrl-C as click makes a context, as a monitor shuts a
+    window down) saw it vanish — acq keeps an ignored signal ignored — and one then waited for ever on a window (seen:
+    a run started with ``( pytest … & )`` hung in test_view). Children started by tests inherit the default from it."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
 
 #: The password of ``postgres_server_with_password``'s user.
 PG_PASSWORD = "s3cret"
