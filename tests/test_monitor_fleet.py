@@ -240,7 +240,7 @@ def test_windows_copied_from_another_monitor_go_first_when_the_disk_budget_needs
     assert run.code == 0, run.err
     summary = {" ".join(cells.split("│")[1].split()): cells.split("│")[2].strip()
                for cells in run.err.splitlines() if cells.count("│") == 3}
-    assert summary["windows captured / excited / analysed"].startswith("4 / ")
+    assert summary["windows filed (this run)"].startswith("4 = ")
     assert "not captured: the disk budget (--max-disk) was full" not in summary
     assert summary["copies of other monitors' windows deleted"] == "2"
     assert not [name for name in copied if (copy / name).exists()]
