@@ -240,9 +240,8 @@ def summary_table(summary: SessionSummary) -> FittedTable:
                       narrow=Column("rate fit\nHz", [format_value(x.fitted_rate_hz, ".2f") for x in s])),
                Column("gaps", [f"{x.gaps}" for x in s]), Column("missing", [f"{x.missing}" for x in s]),
                Column("first–last\nHz", [format_value(x.effective_rate_hz, ".2f") for x in s], drop=1)]
-    caption = ["rate, line fit: samples per second of the host clock, a robust (Theil–Sen) line through each "
-               "sample's host stamp against its index — a late first sample or a burst does not move it; first–last: "
-               "the samples between the first and the last host stamp over the time between them, which they do"]
+    caption = ["rate fit: samples per host-clock second, a robust (Theil–Sen) line through the host stamps; a late "
+               "first sample or a burst moves first–last, not it"]
     return FittedTable(title, columns, caption)
 
 
