@@ -190,7 +190,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual), misfit_band_hz=quality.misfit_band_hz,
-                                      third_mode_hz=quality.third_mode_hz, misfit_windows=quality.misfit_windows),
+                                      third_mode_hz=quality.third_mode_hz, misfit_windows=quality.misfit_windows,
+                                      misfit_bins=quality.misfit_bins),
                   request=request, chain=chain, notes=(*sig.notes, *_unknown_torque_note(frf, sig.t_s)), moves=moves)
 
 

@@ -128,6 +128,10 @@ class Quality:
         its mean ln|H_model| − ln|H| and the most that may be before the window is called missed (the bound taken
         off plus the critical t × √(noise² + systematic²)); empty when the test was not made. For the report's
         picture: the misfit and the allowance the verdict weighed.
+    misfit_bins : tuple of (float, float)
+        Each bin the misfit test judged: its frequency (Hz) and ln|H_model| − ln|H| there, the model as the Welch
+        estimator sees it and as the test judges it (the windows' means are of these); empty when the test was not
+        made. For the report's picture: the per-bin misfit that agrees with the verdict.
     """
 
     verdict: Verdict
@@ -144,6 +148,7 @@ class Quality:
     misfit_band_hz: tuple[float, float] | None = None
     third_mode_hz: float | None = None
     misfit_windows: tuple[tuple[float, float, float, float], ...] = ()
+    misfit_bins: tuple[tuple[float, float], ...] = ()
 
 
 def assess(
@@ -239,9 +244,9 @@ def assess(
     # without the encoder's resolution the share of |H|'s misfit that its quantisation repeats with every
     # motion period is unknown (±8 % at 200–250 Hz on a healthy 2^17 counts/rev bench): no misfit test then
     known_resolution = encoder_jitter is not None and encoder_jitter.lsb_rad > 0.0
-    missed, mode, judged = (_missed_band(frf, fit, encoder_jitter, kernel_error,
-                                         phase_is_meaningful(clock_residual_s, th))
-                            if fit.status != "failed" and known_resolution else (None, None, ()))
+    missed, mode, judged, bins = (_missed_band(frf, fit, encoder_jitter, kernel_error,
+                                               phase_is_meaningful(clock_residual_s, th))
+                                  if fit.status != "failed" and known_resolution else (None, None, (), ()))
     named_mode = mode if missed is None and mode is not None and mode.found else None
     if named_mode is not None:
         findings.append(("poor", f"the two-mass model misses a third mode near {mode.f_hz:.0f} Hz ({mode.t:.1f} σ "
@@ -311,6 +316,7 @@ def assess(
         misfit_band_hz=None if missed is None else missed[:2],
         third_mode_hz=None if named_mode is None else float(named_mode.f_hz),
         misfit_windows=judged,
+        misfit_bins=bins,
     )
 
 
@@ -381,11 +387,12 @@ def _joint_cause(worst: BandMisfit, fit: FitResult) -> str:
 
 def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, kernel_error: np.ndarray | None,
                  use_phase: bool) -> tuple[tuple[float, float, BandMisfit] | None, ThirdMode | None,
-                                           tuple[tuple[float, float, float, float], ...]]:
+                                           tuple[tuple[float, float, float, float], ...],
+                                           tuple[tuple[float, float], ...]]:
     """Where the model misses |H| beyond noise and the encoder's quantisation (:mod:`analysis.adequacy`): the worst
     stretch of the band (low Hz, high Hz, worst window) or None, the most evident third mode
-    (:mod:`analysis.third_mode`, judging the phase too when ``use_phase``) or None, and the windows judged
-    (:attr:`Quality.misfit_windows`).
+    (:mod:`analysis.third_mode`, judging the phase too when ``use_phase``) or None, the windows judged
+    (:attr:`Quality.misfit_windows`) and the bins judged (:attr:`Quality.misfit_bins`).
 
     The fitted model is judged up to the default band's top even where the fit's band ends below it
     (:func:`analysis.fit.judged_fit`; ``kernel_error`` at those bins), against the measurement as the Welch estimator
@@ -424,7 +431,8 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, 
                           fit.fitted.index("K_Nm_per_rad"), _rel_halfwidth(fit, "K_Nm_per_rad"),
                           candidate_frequencies(fit.f_a, seen.band), fitted=fitted, use_phase=use_phase,
                           systematic_cov=carried, blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound)
-    return (spans[0] if spans else None), mode, judged
+    bins = tuple((float(fb), float(m)) for fb, m in zip(f, misfit.real))
+    return (spans[0] if spans else None), mode, judged, bins
 
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,

@@ -56,9 +56,10 @@ class FigureData:
         The third mode the verdict names (:attr:`analysis.quality.Quality.third_mode_hz`), Hz; NaN when none.
     misfit_pct : ndarray
         How far the fitted model misses the measured |H| at ``f_hz``: 100 · (|H_model| / |H| − 1), %, the sign of
-        the verdict's "misses by +5.9 %" (the quality check's ln|H_model| − ln|H|, :func:`analysis.fit.model_misfits`)
-        — a misfit a log axis hides (6 % is 0.025 decades); NaN outside the fit band and where the fit failed.
-        Empty: not computed (figure data made before it was).
+        the verdict's "misses by +5.9 %" — the misfit test's own per-bin misfit (:attr:`analysis.quality.Quality.
+        misfit_bins`: the model as the Welch estimator sees it, so a sharp resonance blurred by the window is no
+        misfit), a misfit a log axis hides (6 % is 0.025 decades); NaN where the test judged no bin (outside its
+        band, a failed fit, no test made). Empty: not computed (figure data made before it was).
     misfit_windows : ndarray, shape (n, 4)
         The windows the verdict's misfit test judged (:attr:`analysis.quality.Quality.misfit_windows`): first and
         last bin (Hz), mean ln|H_model| − ln|H| and the most it may be before the window is missed (ln); no rows
@@ -127,7 +128,8 @@ def model_band(fit: FitResult, f_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray
 def figure_data(
     t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: np.ndarray, frf: FrequencyResponse, fit: FitResult,
     *, phase_valid: bool = False, misfit_band_hz: tuple[float, float] | None = None, third_mode_hz: float | None = None,
-    misfit_windows: Sequence[tuple[float, float, float, float]] = ()
+    misfit_windows: Sequence[tuple[float, float, float, float]] = (),
+    misfit_bins: Sequence[tuple[float, float]] = ()
 ) -> FigureData:
     """Assemble the report's figure data.
 
@@ -147,6 +149,8 @@ def figure_data(
         The third mode the verdict names, Hz (None: none).
     misfit_windows : sequence of (float, float, float, float), optional
         The windows the verdict's misfit test judged (:attr:`analysis.quality.Quality.misfit_windows`).
+    misfit_bins : sequence of (float, float), optional
+        The bins it judged, (Hz, ln|H_model| − ln|H|) (:attr:`analysis.quality.Quality.misfit_bins`).
 
     Returns
     -------
@@ -155,11 +159,9 @@ def figure_data(
     keep = decimate_trace(len(t_s))
     f_model = np.geomspace(fit.band[0], fit.band[1], MODEL_POINTS)
     abs_h, low, high = model_band(fit, f_model)
-    in_band = (frf.f_hz >= fit.band[0]) & (frf.f_hz <= fit.band[1])
     misfit = np.full(frf.f_hz.shape, np.nan)
-    with np.errstate(divide="ignore", invalid="ignore"):  # a failed fit's model is NaN: so is its misfit
-        misfit[in_band] = 100.0 * (np.abs(frequency_response(fit.values, frf.f_hz[in_band])) / np.abs(frf.H[in_band])
-                                   - 1.0)
+    judged = np.asarray(misfit_bins, dtype=float).reshape(-1, 2)
+    misfit[np.isin(frf.f_hz, judged[:, 0])] = 100.0 * np.expm1(judged[np.isin(judged[:, 0], frf.f_hz), 1])
     return FigureData(
         t_s=np.asarray(t_s)[keep], torque_Nm=np.asarray(torque_Nm)[keep], speed_rad_s=np.asarray(speed_rad_s)[keep],
         f_hz=frf.f_hz, H_abs=np.abs(frf.H), coherence=frf.coherence,
