@@ -131,7 +131,8 @@ class FitResult:
         Names of the fitted parameters, the order of ``covariance``.
     covariance : ndarray, shape (p, p)
         Covariance of the natural logarithms of the fitted parameters (the jackknife's scaled by
-        (t/1.96)², so that ±1.96 σ is the 95 % interval in either case).
+        (t/1.96)², so that ±1.96 σ is the 95 % interval in either case), with the misfit's or the systematic pull's
+        share and the input-noise bound d dᵀ/3 (:mod:`analysis.input_noise`) added.
     cost : float
         Final cost ½ Σ r² of the weighted residuals.
     residual_rms : float

@@ -270,7 +270,8 @@ def unknown_torque_segments(torque_Nm: np.ndarray, torque_std_Nm: np.ndarray, np
     spread, no level set on a simulator. Segments outside ``keep`` are never flagged. With fewer than 4 segments
     considered, or if fewer than two would remain (or a quarter of them carry no information), none is flagged. A
     segment whose error is exactly zero (a noise-free phase current, σ = 0) is never flagged and does not count in the
-    spread; without 4 others, only the segments that carry no information at all (R = ∞) are flagged.
+    spread; without 4 segments of finite R, only the segments that carry no information at all (R = ∞, or an error
+    not known) are flagged.
     """
     segs = np.lib.stride_tricks.sliding_window_view(torque_Nm, nperseg)[::step]
     errs = np.lib.stride_tricks.sliding_window_view(torque_std_Nm, nperseg)[::step]
@@ -285,13 +286,16 @@ def unknown_torque_segments(torque_Nm: np.ndarray, torque_std_Nm: np.ndarray, np
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # no information at all: R = ∞, flagged
         weighted = w2 > 0  # the window's zero ends: an infinite error there does not count
         error = errs[:, weighted] ** 2 @ w2[weighted]
-        log_r = np.where(error > 0.0, np.nan_to_num(np.log(error / (detrended**2 @ w2)), nan=np.inf, posinf=np.inf),
+        # an error not known (NaN) is no information (∞), as before the σ = 0 case; only an error of exactly 0 is −∞
+        log_r = np.where(~(error <= 0.0), np.nan_to_num(np.log(error / (detrended**2 @ w2)), nan=np.inf, posinf=np.inf),
                          -np.inf)
     # an error of exactly zero (σ = 0: a noise-free phase current) gives R = 0: known exactly, never outlying, and no
-    # part of the spread (log 0 has none); with fewer than 4 others there is no spread to judge by, and only a segment
-    # that carries no information at all (R = ∞) is unknown — unless a quarter or more do, as with the fence (q3 = ∞)
+    # part of the spread (log 0 has none); with fewer than 4 finite ratios there is no spread to judge by, and only a
+    # segment that carries no information at all (R = ∞) is unknown — unless a quarter or more do, as with the fence
+    # (q3 = ∞). Counting the finite ones, not all judged: five blind segments among noise-free ones had made q1 = q3 = ∞
+    # and flagged none, where four were flagged (the second read)
     judged = pool & (log_r > -np.inf)
-    if judged.sum() >= 4:
+    if (judged & np.isfinite(log_r)).sum() >= 4:
         with np.errstate(invalid="ignore"):  # q1 = q3 = ∞: no fence (nan), none flagged
             q1, q3 = np.percentile(log_r[judged], [25.0, 75.0])
             out = judged & (log_r > q3 + 1.5 * (q3 - q1))

@@ -61,6 +61,19 @@ def test_a_noise_free_phase_flags_only_the_segments_without_information_and_warn
     assert not unknown_torque_segments(x, std, NPERSEG, STEP).any()
 
 
+def test_more_blind_segments_of_a_noise_free_phase_are_flagged_as_with_a_noisy_one_and_an_unknown_error_is_blind() -> None:
+    # the second read: 600 samples without information at σ = 0 (five segments) had flagged none where 80 flagged three
+    x = _torque(NPERSEG + 40 * STEP, 4)
+    theta = np.full(x.size, 0.7)
+    theta[20 * STEP + NPERSEG // 2 - 300:20 * STEP + NPERSEG // 2 + 300] = 0.0
+    for noise_a in (0.0, 0.01):
+        std = angle_information_std(theta, 0.0, 25600.0, 3.0, noise_a, 1.25e-3)
+        assert np.flatnonzero(unknown_torque_segments(x, std, NPERSEG, STEP)).tolist() == [18, 19, 20, 21, 22], noise_a
+    std = np.full(x.size, 0.01)
+    std[10 * STEP + NPERSEG // 2] = np.nan  # an error not known there: no information, as ∞ (it was taken as exact)
+    assert np.flatnonzero(unknown_torque_segments(x, std, NPERSEG, STEP)).tolist() == [10]
+
+
 def test_the_frf_averages_without_the_left_out_segment() -> None:
     x = _torque(NPERSEG + 20 * STEP, 1)
     y = np.cumsum(x) * 1e-3
