@@ -140,6 +140,7 @@ def test_a_commanding_bench_without_profile_names_both_ways_out_and_a_passive_on
     (lambda d: d.pop("session_id"), "session_id: missing"),
     (lambda d: d["files"]["encoder"].pop("sha256"), "files.encoder.sha256: missing"),
     (lambda d: d["tags"].update(robot=[1, 2]), "tags.robot = [1, 2]: a tag's value must be a text or a number"),
+    (lambda d: d["tags"].update(x=float("nan")), "tags.x = NaN: a tag's number must be finite"),
     (lambda d: d.update(created_utc="yesterday"),
      'created_utc = "yesterday": not an ISO 8601 time (e.g. 2026-11-20T10:15:03+00:00)'),
     (lambda d: d.update(damage="abc"), 'damage = "abc": must be a valid list'),

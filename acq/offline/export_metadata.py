@@ -11,6 +11,7 @@ not that pair, and its metadata is not used (the import says so).
 from __future__ import annotations
 
 import json
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, fields
 from datetime import datetime
@@ -151,9 +152,12 @@ def read_metadata(current_path: Path, encoder_path: Path, digest: Callable[[Path
 
 
 def _tag_value(value: Any) -> Any:
-    """A tag's value as the session stores it: a text or a number (an int stays int: ``monitor_window``)."""
+    """A tag's value as the session stores it: a text or a finite number (an int stays int: ``monitor_window``;
+    NaN or Infinity, which Python's JSON reader takes, would be written back as invalid JSON, as ``--tag`` refuses)."""
     if isinstance(value, bool) or not isinstance(value, str | int | float):
         raise ValueError("a tag's value must be a text or a number")
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ValueError("a tag's number must be finite")
     return value
 
 

@@ -27,8 +27,8 @@ def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
     (``payload_kg=2.5`` → 2.5), any other stays text (``serial=007`` → "007").
 
     Raises :class:`ConfigError` naming the tag for a text without ``=``, a key with other than letters, digits,
-    ``_ . -``, an empty value, a number that is not finite (nan, inf: a tag that could never be matched, and not
-    JSON) and a key given twice.
+    ``_ . -``, an empty value, a number's spelling beyond a float's range (1e999: inf, a tag that could never be
+    matched, and not JSON) and a key given twice.
     """
     tags: dict[str, str | float] = {}
     given: dict[str, str] = {}
@@ -48,14 +48,14 @@ def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
 
 
 def _value(text: str, value: str) -> str | float:
-    """A tag's value: a float when spelt as a number, else the text; a non-finite number is refused."""
-    try:
-        number = float(value)
-    except ValueError:
+    """A tag's value: a float when spelt as a number, else the text (``nan``, ``Inf`` too: words, as ``operator=Nan``
+    may be); a number's spelling that does not fit a float (1e999) is refused."""
+    if not _NUMBER.fullmatch(value):
         return value
+    number = float(value)
     if not math.isfinite(number):
         raise ConfigError(f"--tag {text}: {value} is not a finite number (a tag's number must be finite)")
-    return number if _NUMBER.fullmatch(value) else value
+    return number
 
 
 def tags_match(tags: dict[str, Any], wanted: dict[str, str | float]) -> bool:
