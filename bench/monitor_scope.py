@@ -11,7 +11,7 @@ monitor files. Printed, each the median of ``--repeat`` reads after one unmeasur
 
 * **index** — ``Catalogue.entries("joint1", monitor=ID)``: a monitor reading back its own windows;
 * **Python filter** — ``Catalogue.entries("joint1")`` and the monitor's kept in Python;
-* **acq trend --tag monitor_id=ID** — :func:`acq.monitoring.trend.load_trend`, the reading and the trend judged;
+* **acq trend --tag monitor_id=ID** — :func:`acq.monitoring.trend_catalogue.load_trend`, the reading and the trend judged;
 * **acq fleet --tag monitor_id=ID** — :func:`acq.monitoring.fleet.load_fleet`, the same for the fleet's row;
 
 and, for SQLite, the query plan of the index read (the index named there is the proof it is used).

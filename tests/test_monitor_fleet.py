@@ -182,7 +182,7 @@ def test_a_container_restart_with_a_new_host_name_is_the_same_monitor_and_anothe
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
     """The host name changes at every container start (Docker's container id, a pod's name): every restart there
     was refused as another host until --moved, which then switched the host check off (the last closing note). The
-    folder's own filesystem object (st_dev, st_ino), which a container's volume keeps and a copy does not, tells it is
+    folder's own filesystem object (statvfs f_fsid and the inode), which a container's volume keeps and a copy does not, tells it is
     the same folder; a machine-id other than the one recorded tells another machine, even under the same host name
     and path. The machine-id files are the test's own (the machine's is the machine's)."""
     ids = tmp_path / "machine-id"

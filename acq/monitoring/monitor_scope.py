@@ -259,16 +259,17 @@ def own_windows(catalogue: Catalogue, monitor: str, joint: str | None = None, *,
 
 
 def monitor_and_tags(texts: Sequence[str]) -> tuple[str | None, dict[str, str | float]]:
-    """``acq trend`` / ``acq fleet``'s ``--tag KEY=VALUE`` texts as the monitor they name (``monitor_id=ID``, the last
-    one given, as :func:`parse_tags` takes it; None: none) — read by the catalogue's monitor_id column and its index —
-    and the other tags (matched in Python). The identity is its text as given: parsed as a number, an identity of
-    digits (a monitor.id not made by acq) matched none of its windows."""
+    """``acq trend`` / ``acq fleet``'s ``--tag KEY=VALUE`` texts as the monitor they name (``monitor_id=ID``, given at
+    most once: :func:`parse_tags` refuses a key given twice; None: none) — read by the catalogue's monitor_id column
+    and its index — and the other tags (matched in Python). The identity is its text as given: parsed as a number, an
+    identity of digits (a monitor.id not made by acq) matched none of its windows."""
+    tags = parse_tags(texts)  # first: a malformed or repeated tag is refused before anything is read
     monitor = None
     for text in texts:
         key, sep, value = text.partition("=")
         if sep and key.strip() == MONITOR_TAG:
             monitor = value.strip()
-    return monitor, {key: value for key, value in parse_tags(texts).items() if key != MONITOR_TAG}
+    return monitor, {key: value for key, value in tags.items() if key != MONITOR_TAG}
 
 
 def monitors_of(entries: Iterable[Entry]) -> list[str]:
