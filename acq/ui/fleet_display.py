@@ -169,8 +169,9 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
         legend.addItem(item, text)
     legend.addItem(legend_box(grey), f"grey: no ΔK (before the baseline, or no session for {stale_days:g} days)")
     widget.ci.layout.setRowFixedHeight(1, 20 * -(-len(legend.items) // 2) + 6)
-    labels = [(len(statuses) - 1 - i + 0.5, f"{s.robot}/{s.joint}{f' ({s.source})' if s.source else ''} · {_STATE_WORDS.get(s.state, s.state)}"
-               + ("" if s.change_pct is None else f" {s.change_pct:+.1f} %")) for i, s in enumerate(statuses)]
+    labels = [(len(statuses) - 1 - i + 0.5, f"{s.robot}/{s.joint}{f' ({s.source})' if s.source else ''} · "
+               f"{_STATE_WORDS.get(s.state, s.state)}" + ("" if s.change_pct is None else f" {s.change_pct:+.1f} %"))
+              for i, s in enumerate(statuses)]
     plot.getAxis("left").setTicks([labels])
     plot.getAxis("left").setWidth(12 + 8 * max((len(text) for _, text in labels), default=10))
     plot.setLabel("bottom", "session start (UTC)")
