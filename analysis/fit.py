@@ -412,16 +412,18 @@ def _input_noise_shift(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
     """How far the free log parameters move when the resonance is read from H2 instead of H1
     (:func:`analysis.input_noise.h2_at_resonance`, one Levenberg–Marquardt run from the optimum ``x``): the bias an
     error on the torque estimate may leave (zero when the band holds no resonance peak; infinite when the refit
-    diverges: the fit is not stable under it)."""
+    fails, stops without converging or ends off the finite numbers: the fit is not stable under it)."""
     h2 = h2_at_resonance(frf, problem.params(x), problem.band)
     if h2 is None:
         return np.zeros_like(x)
     try:
-        moved = optimize.least_squares(_Problem(h2, problem.band, options, problem.fixed).residuals, x, method="lm",
-                                       x_scale=1.0).x
+        refit = optimize.least_squares(_Problem(h2, problem.band, options, problem.fixed).residuals, x, method="lm",
+                                       x_scale=1.0)
     except (ValueError, FloatingPointError):
         return np.full_like(x, np.inf)
-    return moved - x
+    if refit.status <= 0 or not np.all(np.isfinite(refit.x)):  # 0: the evaluation budget ran out; < 0: failed
+        return np.full_like(x, np.inf)
+    return refit.x - x
 
 
 def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
