@@ -138,6 +138,14 @@ def test_tag_values_spelt_as_numbers_are_numbers_and_any_other_spelling_stays_te
     assert not tags_match({"serial": "007"}, parse_tags(["serial=7"]))
 
 
+def test_a_number_like_tag_given_today_still_finds_the_number_earlier_acq_stored_for_it() -> None:
+    """The second read: earlier acq stored --tag robot=007 as 7.0; today's "007" must still find those sessions."""
+    for text, stored in (("robot=007", 7.0), ("robot=+5", 5.0), ("robot=1_000", 1000.0), ("robot=.5", 0.5)):
+        assert tags_match({"robot": stored}, parse_tags([text])), text
+    assert not tags_match({"robot": 7.0}, parse_tags(["robot=008"]))
+    assert not tags_match({"robot": "7"}, parse_tags(["robot=007"]))  # a stored text matches only its own spelling
+
+
 @pytest.mark.parametrize(("texts", "message"), [
     (["pose=a", "pose=b"], "--tag pose=b: pose is given twice (pose=a, pose=b) — give each key once"),
     (["payload_kg=-1e400"], "--tag payload_kg=-1e400: -1e400 is not a finite number (a tag's number must be finite)"),

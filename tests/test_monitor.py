@@ -398,17 +398,21 @@ def test_disk_budget_frees_the_oldest_unprotected_windows_or_refuses(tmp_path: P
 
 def test_windows_of_another_monitor_copied_here_go_first_for_the_budget_and_never_for_keep(tmp_path: Path) -> None:
     """Retention's docstring: copies of another monitor's windows are none of this monitor's last --keep (and without
-    a budget are left alone), and go before any of its own windows when the budget needs room."""
+    a budget are left alone), and those that monitor does not keep go before any of its own windows when the budget
+    needs room; those it keeps (its baseline, its alarms) are never deleted."""
     windows = []
-    for i, copied in ((0, False), (1, False), (7, True), (8, True)):
+    for i, copied in ((0, False), (1, False), (6, True), (7, True), (8, True)):
         path = tmp_path / f"w{i}{'c' if copied else ''}.h5"
         path.write_bytes(b"x" * 1000)
-        windows.append(WindowFiles(i, path, done=True, protected=i == 0, key=path.stem, copied=copied))
+        # window 0 this monitor's baseline, the copy of window 6 the other's (the second read: it was deleted)
+        windows.append(WindowFiles(i, path, done=True, protected=i in (0, 6), key=path.stem, copied=copied))
     assert [w.key for w in to_delete(windows, keep=1)] == []  # window 1 is the last of its own, 0 protected
-    victims, fits = make_room(windows, tmp_path, need_bytes=1500, budget_bytes=4000)
+    victims, fits = make_room(windows, tmp_path, need_bytes=2000, budget_bytes=5000)
     assert fits and [w.key for w in victims] == ["w7c", "w8c"]
-    victims, fits = make_room(windows, tmp_path, need_bytes=2500, budget_bytes=4000)
+    victims, fits = make_room(windows, tmp_path, need_bytes=3000, budget_bytes=5000)
     assert fits and [w.key for w in victims] == ["w7c", "w8c", "w1"]
+    victims, fits = make_room(windows, tmp_path, need_bytes=3000, budget_bytes=4999)
+    assert not fits  # the protected copy stays, as this monitor's baseline does
 
 
 def test_a_disk_budget_that_cannot_hold_one_window_is_refused_before_anything_is_captured(

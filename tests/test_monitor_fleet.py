@@ -227,28 +227,34 @@ def test_windows_copied_from_another_monitor_go_first_when_the_disk_budget_needs
         tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A copied folder started with --new-identity: the windows copied along are the first monitor's, and were never
     deleted, yet counted against --max-disk — with the baseline they filled it, and no window was captured again (the
-    last closing note). They go first when the budget needs room (retention's docstring says why), and the summary
-    counts them; their catalogue rows stay."""
+    last closing note). Those the first monitor does not keep go first when the budget needs room (retention's
+    docstring says why), and the summary counts them; their catalogue rows stay. Its baseline and alarm windows are
+    never deleted (the second read: they were, and the folder copied away had the only raw files): when they leave no
+    room the window is not captured, and the status line says why."""
+    from acq.recording.reader import load
+
     bench, first, copy = _robot(tmp_path, "r1", 891.0), tmp_path / "first", tmp_path / "copy"
-    assert _start(capsys, bench, first, minutes=2).code == 0  # windows 0, 1 (the baseline): their raw files kept
+    assert _start(capsys, bench, first, minutes=3).code == 0  # windows 0, 1 (the baseline), 2 (ok, one of --keep)
     shutil.copytree(first, copy)
-    copied = sorted(p.name for p in copy.glob("*.h5"))
-    assert len(copied) == 2
-    # the budget of the 2 baseline windows and the next (3 × 3.9 MB expected, 2.6 MB each as written): once this
-    # monitor's baseline is kept, the copied windows must go for its next windows to fit
+    shutil.rmtree(first)  # the copy's are now the only raw files of the first monitor's windows
+    copied = {int(load(p).tags["monitor_window"]): p.name for p in copy.glob("*.h5")}
+    assert sorted(copied) == [0, 1, 2]
+    # the budget of the 2 baseline copies, this monitor's 2 baseline windows and the next (2.6 MB each as written,
+    # 3.9 MB expected): the copy of window 2 goes for this monitor's window 1; then no room is left
     run = _start(capsys, bench, copy, "--new-identity", "--max-disk", "12MB", minutes=4)
     assert run.code == 0, run.err
     summary = {" ".join(cells.split("│")[1].split()): cells.split("│")[2].strip()
                for cells in run.err.splitlines() if cells.count("│") == 3}
-    assert summary["windows filed (this run)"].startswith("4 = ")
-    assert "not captured: the disk budget (--max-disk) was full" not in summary
-    assert summary["copies of other monitors' windows deleted"] == "2"
-    assert not [name for name in copied if (copy / name).exists()]
+    assert summary["windows filed (this run)"].startswith("2 = ")
+    assert "2 filed = 2 ok, 2 not captured (disk budget)" in run.err
+    assert summary["copies of other monitors' windows deleted"] == "1"
+    assert ("not captured: the disk budget would be exceeded — 2 windows of another monitor copied here are its "
+            "baseline or alarms, never deleted (raise --max-disk or move them out)") in " ".join(run.err.split())
+    assert {n for n, name in copied.items() if (copy / name).exists()} == {0, 1}
     assert sum(f.stat().st_size for f in copy.iterdir() if f.is_file()) <= 12_000_000
-    first_id = _identity(first)["monitor_id"]
     with sqlite3.connect(copy / "catalogue.sqlite") as db:
-        counts = dict(db.execute("SELECT monitor_id, COUNT(*) FROM sessions GROUP BY monitor_id").fetchall())
-    assert counts == {first_id: 2, _identity(copy)["monitor_id"]: 4}
+        counts = sorted(n for (n,) in db.execute("SELECT COUNT(*) FROM sessions GROUP BY monitor_id").fetchall())
+    assert counts == [2, 3]
 
 
 def test_a_restart_into_another_catalogue_is_refused_unless_its_windows_move_there(

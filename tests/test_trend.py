@@ -560,6 +560,18 @@ def test_a_baseline_that_scatters_as_its_intervals_say_is_not_called_unstable() 
     assert compute_trend("j", no_intervals, baseline_sessions=5).baseline_warning is None
 
 
+def test_a_robot_tagged_007_before_and_after_the_upgrade_is_one_fleet_row() -> None:
+    """The second read: earlier acq stored --tag robot=007 as 7.0, today's as "007" — fleet showed two rows, the new
+    one learning a baseline of its own; one robot, one row, spelt as its latest session, judged on the old baseline."""
+    from acq.monitoring.fleet import fleet_status
+
+    old = [replace(_entry(i, 890.0 + (i % 2)), tags={"robot": 7.0}) for i in range(5)]
+    new = [replace(_entry(i, 700.0), tags={"robot": "007"}) for i in range(5, 7)]
+    (joint,) = fleet_status(old + new, now=datetime(2026, 1, 1, 1, tzinfo=UTC), baseline_sessions=5)
+    assert (joint.robot, joint.state, len(joint.trend.points)) == ("007", "alarm", 7)
+    assert joint.trend.baseline_K_Nm_per_rad == pytest.approx(890.4)
+
+
 def test_the_state_before_the_baseline_is_learning_baseline_in_trend_and_fleet() -> None:
     """Monitor "learning baseline", trend "before baseline", fleet "no baseline": one name now (the JSON's values stay)."""
     from acq.monitoring.fleet import fleet_status

@@ -32,7 +32,7 @@ from acq.monitoring.catalogue import Catalogue, Entry
 from acq.monitoring.monitor_scope import monitor_and_tags, split_by_monitor
 from acq.monitoring.trend import Trend, TrendPoint, compute_trend
 from acq.monitoring.trend_catalogue import catalogue_sources
-from acq.recording.tags import tags_match
+from acq.recording.tags import tag_group, tags_match
 from acqcore.errors import ConfigError
 
 FleetState = Literal["alarm", "stale", "no baseline", "baseline", "ok"]
@@ -114,12 +114,13 @@ def fleet_status(entries: Sequence[Entry], *, now: datetime, stale_days: float =
     **trend_options
         ``baseline_sessions``, ``threshold_pct``, ``ewma_lambda`` of :func:`acq.monitoring.trend.compute_trend`.
     """
-    groups: dict[tuple[str, str], list[Entry]] = {}
-    for e in entries:
+    groups: dict[tuple[str | float, str], list[Entry]] = {}
+    for e in entries:  # one robot however its tag was stored (7.0 by earlier acq, "007" today: tag_group)
         if e.joint is not None:
-            groups.setdefault((str(e.tags.get("robot", UNTAGGED_ROBOT)), e.joint), []).append(e)
+            groups.setdefault((tag_group(e.tags.get("robot", UNTAGGED_ROBOT)), e.joint), []).append(e)
     statuses = []
-    for (robot, joint), group in groups.items():
+    for (_, joint), group in groups.items():
+        robot = str(group[-1].tags.get("robot", UNTAGGED_ROBOT))  # as its latest session spells it
         by_monitor = split_by_monitor(group)
         for monitor, history in by_monitor.items():
             apart = ([source] if source else []) + ([f"monitor {monitor or '—'}"] if len(by_monitor) > 1 else [])

@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.alarm_command import AlarmCommands
-from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules
+from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules, rules_for
 from acq.monitoring.analysis_pool import analysis_executor
 from acq.monitoring.catalogue import Entry, Outcome
 from acq.monitoring.catalogue_backends import is_url
@@ -155,7 +155,10 @@ class Monitor:
         self.status.machine_time_s = self._clock.at(n)
         if not self._room_for_window():
             self.status.not_captured += 1
-            self.status.message = f"window {n + 1} not captured: the disk budget would be exceeded"
+            kept = [w for w in self._windows.values() if w.copied and w.protected]
+            why = (f" — {len(kept)} windows of another monitor copied here are its baseline or alarms, never deleted "
+                   "(raise --max-disk or move them out)") if kept else ""
+            self.status.message = f"window {n + 1} not captured: the disk budget would be exceeded{why}"
             self._show()
             return
         bench = self.s.bench
@@ -290,14 +293,9 @@ class Monitor:
 
     # ---- retention and disk ----------------------------------------------------------------------------
     def _retain(self, trend: Trend) -> None:
-        # "before baseline": good windows that will make the baseline once there are enough of them. Of an alarm only
-        # the window that raised it is kept: a joint that stays in alarm for a weekend grew the folder by every window
-        # (or, under --max-disk, stopped its capture once the budget was full); the catalogue keeps every K, and --keep
-        # the latest raw windows
-        protected = alarm_onsets(trend) | {p.entry.session_id for p in trend.points
-                                           if p.state in ("baseline", "before baseline")}
+        protected = kept_windows(trend)
         for key, w in self._windows.items():
-            if (key in protected) != w.protected:
+            if not w.copied and (key in protected) != w.protected:
                 self._windows[key] = replace(w, protected=key in protected)
         for w in to_delete(self._windows.values(), self.s.keep):
             delete(w)
@@ -343,6 +341,7 @@ class Monitor:
         # an alarm raised before the restart goes on: its command is not run again for the same episode (a power cut
         # in alarm announced it once more and counted it twice — the third trial)
         self._in_alarm = bool(known) and self._trend().alarm
+        copies: dict[str, set[str]] = {}  # another monitor's windows copied here that it would delete, by monitor
         for path in sorted(self.s.out_dir.glob("*.h5")):
             try:
                 session = load(path)
@@ -352,7 +351,11 @@ class Monitor:
                 continue  # not a window: not ours to file or delete
             n, key = int(session.tags[WINDOW_TAG]), str(session.meta.session_id)
             if session.tags.get(MONITOR_TAG, self._id) != self._id:  # another monitor's, copied here: not ours to file
-                self._windows[key] = WindowFiles(n, path, True, False, key, copied=True)  # (retention's docstring)
+                owner = str(session.tags[MONITOR_TAG])
+                if owner not in copies:
+                    copies[owner] = self._copies_deletable(owner)
+                deletable = copies[owner]
+                self._windows[key] = WindowFiles(n, path, True, key not in deletable, key, copied=True)  # (retention's)
                 continue
             numbers.append(n)
             self._windows[key] = WindowFiles(n, path, key in known, False, key)
@@ -373,6 +376,20 @@ class Monitor:
             self._judge(self._trend(), "")
             self._show()
         return max(numbers, default=-1) + 1
+
+    def _copies_deletable(self, monitor: str) -> set[str]:
+        """The windows of another ``monitor`` (copied here) that it does not keep (:func:`kept_windows`), judged from
+        its catalogue rows here by the rules it filed them with: only these may go for the budget. A copied window
+        without a row here is not among them: nothing says it is not that monitor's baseline or alarm."""
+        entries = own_windows(self.catalogue, monitor, unowned=False)
+        deletable: set[str] = set()
+        for joint in {e.joint for e in entries}:
+            of_joint = [e for e in entries if e.joint == joint]
+            rules = rules_for(of_joint)
+            kept = kept_windows(compute_trend(str(joint), of_joint, baseline_sessions=rules.baseline_sessions,
+                                              threshold_pct=rules.threshold_pct, ewma_lambda=rules.ewma_lambda))
+            deletable |= {e.session_id for e in of_joint} - kept
+        return deletable
 
     def _resumed(self, numbers: list[int]) -> None:
         """The folder's windows (``numbers``) in the status: their count, and machine time from the end of the last
@@ -395,6 +412,17 @@ class Monitor:
     def _show(self) -> None:
         if self.on_status is not None:
             self.on_status(self.status)
+
+
+def kept_windows(trend: Trend) -> set[str]:
+    """The session ids of a monitor's windows whose raw files retention never deletes: the baseline's, and the window
+    that raised each alarm.
+
+    "before baseline": good windows that will make the baseline once there are enough of them. Of an alarm only the
+    window that raised it is kept: a joint that stays in alarm for a weekend grew the folder by every window (or, under
+    --max-disk, stopped its capture once the budget was full); the catalogue keeps every K, and --keep the latest raw
+    windows."""
+    return alarm_onsets(trend) | {p.entry.session_id for p in trend.points if p.state in ("baseline", "before baseline")}
 
 
 def _alarm_message(entry: Entry) -> str:

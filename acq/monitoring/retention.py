@@ -11,9 +11,11 @@ Windows of another monitor in the folder (a folder copied, then started with ``-
 stay the monitor's that captured them) are no window of this one: no baseline or alarm of its history depends on
 them, their K is in the catalogue of the monitor that captured them and that monitor's folder keeps their raw files
 by its own rules. ``--keep`` does not count them and without a budget they are left alone (another monitor's files
-are not ours to delete without need). Under a budget they go first, before any of this monitor's windows: kept, they
-counted against ``--max-disk`` for ever, so the monitor's own latest windows went instead, and once they with the
-baseline filled the budget no window was captured again.
+are not ours to delete without need). Under a budget those that monitor does not keep go first, before any of this
+monitor's windows: kept, they counted against ``--max-disk`` for ever, so the monitor's own latest windows went
+instead, and once they with the baseline filled the budget no window was captured again. Its baseline and alarm windows
+(``protected``, as that monitor's catalogue rows say) are never deleted: the folder copied from may be gone, and these
+the only raw files of that monitor's history; when they leave no room the window is not captured.
 """
 
 from __future__ import annotations
@@ -34,7 +36,8 @@ class WindowFiles:
     done : analysed or marked (its catalogue row is written).
     protected : a baseline window or the window that raised an alarm (never deleted).
     key : what the caller knows the window by (e.g. its session id).
-    copied : another monitor's window, copied into this folder (deleted first for the budget, never for ``keep``).
+    copied : another monitor's window, copied into this folder (unless protected by that monitor, deleted first for
+        the budget; never for ``keep``).
     """
 
     index: int
@@ -78,8 +81,9 @@ def make_room(windows: Iterable[WindowFiles], folder: Path, need_bytes: int, bud
         list[WindowFiles], bool]:
     """Windows to delete so that ``need_bytes`` more fit in ``budget_bytes``, and whether they then fit.
 
-    Other monitors' windows copied here go first, then unprotected done windows oldest first, the last ``keep``
-    included (the budget outranks ``keep``); baseline and alarming windows and windows not yet done are never chosen.
+    Other monitors' unprotected windows copied here go first, then unprotected done windows oldest first, the last
+    ``keep`` included (the budget outranks ``keep``); baseline and alarming windows (of this monitor or of the one a
+    copy is of) and windows not yet done are never chosen.
     """
     used = folder_bytes(folder)
     chosen: list[WindowFiles] = []

@@ -58,11 +58,37 @@ def _value(text: str, value: str) -> str | float:
     return number
 
 
+def tag_number(value: Any) -> float | None:
+    """The number a tag value stands for, None for a text that is no number.
+
+    A stored number, or a text any spelling of a finite number (``007``, ``+5``, ``1_000``): acq before session 11
+    stored every such spelling as the number (``robot=007`` → 7.0), so the text given today and the number stored
+    then are one tag — the one rule :func:`tags_match` and :func:`tag_group` keep.
+    """
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return float(value)
+    try:
+        number = float(str(value))
+    except ValueError:
+        return None
+    return number if math.isfinite(number) else None
+
+
+def tag_group(value: Any) -> str | float:
+    """A key under which a tag's values that are one tag (:func:`tag_number`: 7.0 stored by earlier acq, "007"
+    today) group together; any other value groups by its text."""
+    number = tag_number(value)
+    return str(value) if number is None else number
+
+
 def tags_match(tags: dict[str, Any], wanted: dict[str, str | float]) -> bool:
-    """True when ``tags`` has every wanted key with an equal value (numbers compared as numbers)."""
+    """True when ``tags`` has every wanted key with an equal value: numbers compared as numbers, and a stored number
+    also matched by a text spelling its value another way (``007`` finds the 7.0 earlier acq stored for it,
+    :func:`tag_number`); a stored text matches only its own spelling."""
     def same(have: Any, want: str | float) -> bool:
-        if isinstance(want, float) and isinstance(have, int | float):
-            return math.isclose(have, want, rel_tol=1e-9)
+        number = tag_number(want)
+        if number is not None and isinstance(have, int | float) and not isinstance(have, bool):
+            return math.isclose(have, number, rel_tol=1e-9)
         return str(have) == str(want)
 
     return all(key in tags and same(tags[key], want) for key, want in wanted.items())
