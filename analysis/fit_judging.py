@@ -15,6 +15,7 @@ from analysis.fit_problem import (FitKind, FitResult, _central_differences, _Pro
                                   wrapped)
 from analysis.frf import KERNEL_PER_BIN, FrequencyResponse
 
+
 def judged_fit(frf: FrequencyResponse, fit: FitResult) -> FitResult:
     """``fit`` with its band widened up to the default band's top (:func:`default_band_hz`) where it ends below:
     the fitted model is judged against all of the FRF the encoder resolves. A band chosen to end below a mode does
