@@ -1,0 +1,236 @@
+"""The fit's terms and its residuals: the options and the result of a two-mass fit, its band and bins, and the model
+as the Welch estimate sees it (:class:`_Problem`: window kernel, torque-noise gain, fold-over terms) with the log
+ratio and weighted residuals that :mod:`analysis.fit` minimises and :mod:`analysis.fit_judging` judges."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Literal
+
+import numpy as np
+from scipy import sparse
+
+from analysis.frf import KERNEL_PER_BIN, FrequencyResponse, window_kernel
+from analysis.model import TwoMassParams, frequency_response
+
+FitKind = Literal["amplitude", "complex"]
+FitParams = Literal["K", "K,Jm,Jl"]
+FitStatus = Literal["converged", "max_evaluations", "failed"]
+FitWeighting = Literal["coherence", "uniform"]
+
+PARAM_NAMES: tuple[str, ...] = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")
+BAND_LOW_HZ = 10.0
+BAND_HIGH_MAX_HZ = 500.0
+BAND_HIGH_FRACTION_OF_FENC = 0.4
+COHERENCE_CLIP = 0.99
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """How to fit.
+
+    Attributes
+    ----------
+    params : {"K,Jm,Jl", "K"}
+        Free parameters besides C: all three (default) or K only, with J_m, J_l fixed to the
+        nominal values given to :func:`fit_two_mass`.
+    kind : {"amplitude", "complex"}
+        Fit |H| only (immune to a clock offset) or the complex H.
+    band_hz : tuple of float or None
+        Fit band (low, high), Hz; None for 10 Hz … min(0.4·f_enc, 500 Hz).
+    weighting : {"coherence", "uniform"}
+        Bin weights γ²/(1−γ²) (ours) or all 1 (the paper's).
+    speed_lsb_rad : float or None
+        The encoder's resolution, rad (2π/counts per rev): the intervals then allow for the quantisation's pull
+        on the parameters (:func:`analysis.adequacy.quantisation_pull`) instead of :data:`CHAIN_REL_STD`.
+    quantisation_repeating_share : float
+        Share (0…1) of the quantisation error that repeats with the motion
+        (:func:`analysis.quantisation_lock.locked_share`): only that share is a bias the jackknife cannot see; the
+        rest scatters from period to period and is in the jackknife's spread. 1 (all of it) when not measured.
+    """
+
+    params: FitParams = "K,Jm,Jl"
+    kind: FitKind = "amplitude"
+    band_hz: tuple[float, float] | None = None
+    weighting: FitWeighting = "coherence"
+    speed_lsb_rad: float | None = None
+    quantisation_repeating_share: float = 1.0
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """The fitted two-mass model with its uncertainty.
+
+    Attributes
+    ----------
+    values : TwoMassParams
+        Best-fit parameters (b_m = b_l = 0).
+    ci95 : dict of str to (float, float)
+        95 % confidence interval (low, high) per parameter name of :data:`PARAM_NAMES`, SI units;
+        a fixed parameter has a zero-width interval.
+    fitted : tuple of str
+        Names of the fitted parameters, the order of ``covariance``.
+    covariance : ndarray, shape (p, p)
+        Covariance of the natural logarithms of the fitted parameters (the jackknife's scaled by
+        (t/1.96)², so that ±1.96 σ is the 95 % interval in either case), with the misfit's or the systematic pull's
+        share and the input-noise bound d dᵀ/3 (:mod:`analysis.input_noise`) added.
+    cost : float
+        Final cost ½ Σ r² of the weighted residuals.
+    residual_rms : float
+        Weighted RMS of the log-amplitude residual, ≈ relative misfit of |H| (0.01 = 1 %).
+    status : {"converged", "max_evaluations", "failed"}
+        Outcome of the best start.
+    message : str
+        The optimiser's message for the best start.
+    band : tuple of float
+        Band actually used (low, high), Hz.
+    options : FitOptions
+        Options as given.
+    f_a, f_r : float
+        Anti-resonance and resonance of the fitted model, Hz.
+    n_points : int
+        FRF bins in the band.
+    """
+
+    values: TwoMassParams
+    ci95: dict[str, tuple[float, float]]
+    fitted: tuple[str, ...]
+    covariance: np.ndarray
+    cost: float
+    residual_rms: float
+    status: FitStatus
+    message: str
+    band: tuple[float, float]
+    options: FitOptions
+    f_a: float
+    f_r: float
+    n_points: int
+
+
+def default_band_hz(period_s: float) -> tuple[float, float]:
+    """Default fit band (10 Hz, min(0.4·f_enc, 500 Hz)) for an encoder period ``period_s`` (s)."""
+    return BAND_LOW_HZ, min(BAND_HIGH_FRACTION_OF_FENC / period_s, BAND_HIGH_MAX_HZ)
+
+
+def band_mask(f_hz: np.ndarray, band: tuple[float, float]) -> np.ndarray:
+    """Boolean mask of the frequencies ``f_hz`` (Hz) inside the closed band (low, high) Hz."""
+    return (f_hz >= band[0]) & (f_hz <= band[1])
+
+
+def fitted_bins(frf: FrequencyResponse, band: tuple[float, float]) -> np.ndarray:
+    """Boolean mask of the bins a fit in ``band`` (Hz) uses: inside it, with a finite, non-zero H."""
+    return band_mask(frf.f_hz, band) & np.isfinite(frf.H) & (np.abs(frf.H) > 0)
+
+
+def _free_params(options: FitOptions) -> tuple[str, ...]:
+    """Names of the parameters a fit with ``options`` adjusts."""
+    return ("K_Nm_per_rad", "C_Nms_per_rad") if options.params == "K" else PARAM_NAMES
+
+
+class _Problem:
+    """Residuals of one fit: which parameters are free, the data, the weights."""
+
+    def __init__(self, frf: FrequencyResponse, band: tuple[float, float], options: FitOptions,
+                 fixed: TwoMassParams) -> None:
+        sel = fitted_bins(frf, band)
+        self.f = frf.f_hz[sel]
+        self.log_h = np.log(frf.H[sel])
+        g2 = np.clip(frf.coherence[sel], 0.0, COHERENCE_CLIP)
+        self.w = g2 / (1.0 - g2) if options.weighting == "coherence" else np.ones_like(g2)
+        self.sqrt_w = np.sqrt(self.w)
+        self.kind = options.kind
+        self.free = _free_params(options)
+        self.fixed = fixed
+        self.band = band
+        self.replicates = frf.replicates or ()
+        offsets, kernel = window_kernel(frf)
+        f_fine, self.smooth = _kernel_operator(self.f, offsets, kernel[sel], frf.segment_s)
+        self.gain = 1.0 - (frf.noise_ratio[sel] if frf.noise_ratio is not None else 0.0)
+        self.fold = []  # (factor·A_k, factor·B_k) of the fold-over terms, H at f + k/T and k/T − f
+        fold_f = []
+        if frf.alias is not None:
+            for k, (a, b) in enumerate(frf.alias[:, :, sel], start=1):
+                up, down = k / frf.period_s + self.f, k / frf.period_s - self.f
+                self.fold.append((self.f / up * a, -self.f / down * b))
+                fold_f += [up, down]
+        # every frequency the model is evaluated at, in one array (one call instead of 1 + 2 per order): the fine
+        # ones, then per order f + k/T and k/T − f
+        self.f_eval = np.concatenate((f_fine, *fold_f))
+        self.n_fine = f_fine.size
+        self.load_factor: Callable[[np.ndarray], np.ndarray] | None = None  # the fit's model: a rigid load
+
+    def params(self, x: np.ndarray) -> TwoMassParams:
+        """Model parameters from the log vector ``x`` of the free ones."""
+        return replace(self.fixed, **dict(zip(self.free, np.exp(x).tolist())))
+
+    def x0(self, p: TwoMassParams) -> np.ndarray:
+        """Log vector of the free parameters of ``p``."""
+        return np.log([getattr(p, n) for n in self.free])
+
+    def response(self, x: np.ndarray, f_hz: np.ndarray) -> np.ndarray:
+        """The model's torque → motor speed response, (rad/s)/(N·m), at ``f_hz`` (Hz) for the log vector ``x``
+        (with the load inertia's factor :attr:`load_factor` of f_hz when one is set)."""
+        factor = None if self.load_factor is None else self.load_factor(f_hz)
+        return frequency_response(self.params(x), f_hz, factor)
+
+    def log_ratio(self, x: np.ndarray) -> np.ndarray:
+        """ln(H_model/H_meas) at the band's bins (complex).
+
+        The model as H1 sees it: the plant's H through the Welch window kernel, scaled by the torque
+        noise's 1 − G_nn/G_xx, plus the encoder's fold-over terms (:mod:`analysis.frf`).
+        """
+        h_all = self.response(x, self.f_eval)
+        h = self.gain * (self.smooth @ h_all[:self.n_fine])
+        n = self.f.size
+        for k, (a, b) in enumerate(self.fold):
+            up = self.n_fine + 2 * k * n
+            h = h + h_all[up:up + n] * a + np.conj(h_all[up + n:up + 2 * n]) * b
+        return np.log(h) - self.log_h
+
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """Weighted residual vector for ``least_squares``."""
+        z = self.log_ratio(x)
+        if self.kind == "amplitude":
+            return self.sqrt_w * z.real
+        return np.concatenate([self.sqrt_w * z.real, self.sqrt_w * wrapped(z).imag])
+
+
+def wrapped(log_h: np.ndarray) -> np.ndarray:
+    """A complex ln H (or a ratio of two) with its phase wrapped to ±π."""
+    return log_h.real + 1j * np.angle(np.exp(1j * log_h.imag))
+
+
+def _kernel_operator(f_hz: np.ndarray, offsets_hz: np.ndarray, kernel: np.ndarray,
+                     segment_s: float) -> tuple[np.ndarray, sparse.csr_array]:
+    """The distinct fine frequencies f + ν, Hz, of all bins and the sparse matrix that applies each bin's
+    kernel to the model's H there: Σ_ν H(f+ν)·kernel(f, ν) = (matrix @ H(fine))[bin].
+
+    The bins and the kernel's offsets lie on one grid of spacing 1/(``KERNEL_PER_BIN``·segment), so neighbouring
+    bins share most of their fine frequencies: ~1 600 distinct ones instead of bins × offsets (~12 700), and the
+    fit evaluates the model ~300 times. When every sum f + ν is within 1e-9 of a grid point (a rounding difference
+    of a few ulp) the grid points are taken; an FRF off that grid keeps its exact distinct sums.
+    """
+    fine = f_hz[:, None] + offsets_hz[None, :]
+    step = 1.0 / (KERNEL_PER_BIN * segment_s)
+    grid = np.round(fine / step)
+    if np.all(np.abs(fine - grid * step) <= 1e-9 * np.maximum(np.abs(grid * step), step)):
+        first = grid.min()
+        values, where = np.arange(first, grid.max() + 1.0) * step, (grid - first).astype(np.intp)
+    else:
+        values, where = np.unique(fine, return_inverse=True)
+    # each row's offsets are distinct and increasing, so are its columns: the CSR arrays directly
+    indptr = np.arange(f_hz.size + 1) * offsets_hz.size
+    return values, sparse.csr_array((kernel.ravel(), where.ravel(), indptr), shape=(f_hz.size, values.size))
+
+
+def _jacobian(problem: _Problem, x: np.ndarray) -> np.ndarray:
+    """Jacobian of ``problem``'s weighted residuals at the log parameters ``x`` by central differences."""
+    return _central_differences(problem.residuals, x)
+
+
+def _central_differences(func: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarray:
+    """d func/d x at the log parameters ``x``, one column per parameter."""
+    step = 1e-6  # in ln(parameter): a 1 ppm change, far above rounding (the residuals are ~1e-3…1) and far below
+    # the curvature's scale (the cost changes by ≪ 1 % of its value over it); central differences, error O(step²)
+    return np.stack([(func(x + step * e) - func(x - step * e)) / (2.0 * step) for e in np.eye(x.size)], axis=1)
