@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.alarm_command import AlarmCommands
-from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules, rules_for
+from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules
 from acq.monitoring.analysis_pool import analysis_executor
 from acq.monitoring.catalogue import Entry, Outcome
 from acq.monitoring.catalogue_backends import is_url
@@ -385,10 +385,8 @@ class Monitor:
         deletable: set[str] = set()
         for joint in {e.joint for e in entries}:
             of_joint = [e for e in entries if e.joint == joint]
-            rules = rules_for(of_joint)
-            kept = kept_windows(compute_trend(str(joint), of_joint, baseline_sessions=rules.baseline_sessions,
-                                              threshold_pct=rules.threshold_pct, ewma_lambda=rules.ewma_lambda))
-            deletable |= {e.session_id for e in of_joint} - kept
+            # no rule given: compute_trend judges by the rules the windows were filed with (alarm_rules.rules_for)
+            deletable |= {e.session_id for e in of_joint} - kept_windows(compute_trend(str(joint), of_joint))
         return deletable
 
     def _resumed(self, numbers: list[int]) -> None:
