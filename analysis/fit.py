@@ -211,14 +211,21 @@ def _input_noise_shift(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
     h2 = h2_at_resonance(frf, problem.params(x), problem.band)
     if h2 is None:
         return np.zeros_like(x)
-    try:
-        refit = optimize.least_squares(_Problem(h2, problem.band, options, problem.fixed).residuals, x, method="lm",
-                                       x_scale=1.0)
-    except (ValueError, FloatingPointError):
-        return np.full_like(x, np.inf)
-    if refit.status <= 0 or not np.all(np.isfinite(refit.x)):  # 0: the evaluation budget ran out; < 0: failed
+    refit = _refit_from(h2, problem, x, options)
+    if refit is None or refit.status <= 0 or not np.all(np.isfinite(refit.x)):  # 0: the evaluation budget ran out
         return np.full_like(x, np.inf)
     return refit.x - x
+
+
+def _refit_from(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
+                options: FitOptions) -> optimize.OptimizeResult | None:
+    """The fit of ``problem`` made again on another estimate ``frf`` of the same band (a jackknife replicate, H2 at the
+    resonance): one Levenberg–Marquardt run from the optimum ``x``, which lies close; None when the run raises."""
+    try:
+        return optimize.least_squares(_Problem(frf, problem.band, options, problem.fixed).residuals, x, method="lm",
+                                      x_scale=1.0)
+    except (ValueError, FloatingPointError):
+        return None
 
 
 def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
@@ -302,13 +309,8 @@ def _jackknife(problem: _Problem, x_best: np.ndarray, options: FitOptions) -> tu
     Each replicate FRF is refitted by one Levenberg–Marquardt run from the full fit's optimum
     (the replicates differ from the full record by one block, so the optimum is close).
     """
-    xs = []
-    for rep in problem.replicates:
-        sub = _Problem(rep, problem.band, options, problem.fixed)
-        try:
-            xs.append(optimize.least_squares(sub.residuals, x_best, method="lm", x_scale=1.0).x)
-        except (ValueError, FloatingPointError):
-            continue
+    xs = [refit.x for refit in (_refit_from(rep, problem, x_best, options) for rep in problem.replicates)
+          if refit is not None]
     b = len(xs)
     if b < 2 or not np.all(np.isfinite(xs)):  # a replicate that diverged: the fit is not stable under the data
         return np.full((x_best.size, x_best.size), np.inf), Z95
