@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import signal
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -32,14 +31,6 @@ def run_cli(capsys: pytest.CaptureFixture[str], *args: str) -> CliRun:
 
 
 PROFILES = Path(__file__).resolve().parents[1] / "configs" / "profiles"
-
-
-def ctrl_c_as_at_a_terminal() -> None:
-    """``preexec_fn`` of a child a test will stop with SIGINT: SIGINT back to its default, as for a command started at
-    a terminal. A test run started in the background (a shell's ``&``, a CI job runner) has SIGINT ignored, a child
-    inherits that across exec, and Python then installs no KeyboardInterrupt handler: the Ctrl-C a test sends is lost
-    (three full-suite runs started with ``&`` failed so, the batch running to its end)."""
-    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def seeded_profile(folder: Path, dither_seed: int = 0, name: str = "triangle_0.2s") -> Path:

@@ -20,7 +20,7 @@ import h5py
 import pytest
 
 from analysis import AnalysisRequest
-from tests.helpers import ctrl_c_as_at_a_terminal, run_cli, seeded_profile
+from tests.helpers import run_cli, seeded_profile
 
 
 @pytest.fixture(scope="module")
@@ -87,8 +87,7 @@ def test_ctrl_c_stops_a_batch_and_every_result_written_is_catalogued(recorded: P
     for i in range(n):
         copy_session(recorded, folder / f"s{i}.h5")
     proc = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(folder), "--jobs", "2", "--no-report"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                            preexec_fn=ctrl_c_as_at_a_terminal)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + 120
     while not list(folder.glob("*.result.json")) and time.monotonic() < deadline:  # at least one result done
         time.sleep(0.05)
@@ -151,8 +150,7 @@ def test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line(recorded: Path, tmp_pa
         copy_session(recorded, folder / f"s{i}.h5")
     catalogue = folder / "catalogue.sqlite"
     proc = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(folder), "--jobs", "2"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=ctrl_c_as_at_a_terminal)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
 
     def forkserver_running() -> bool:
         children = Path(f"/proc/{proc.pid}/task/{proc.pid}/children").read_text().split()
@@ -275,8 +273,7 @@ def test_ctrl_c_leaves_no_result_of_a_request_spelling_out_the_default_without_i
         copy_session(recorded, folder / f"s{i}.h5")
     catalogue = folder / "catalogue.sqlite"
     proc = subprocess.Popen([sys.executable, "-m", "acq", "analyze", str(folder), "--band", "10,400", "--jobs", "2"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=ctrl_c_as_at_a_terminal)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     _wait_for(lambda: bool(list(folder.glob("*.result.json"))), proc)  # its worker now draws the report (Qt)
     assert proc.poll() is None, proc.communicate()
     os.killpg(proc.pid, signal.SIGINT)

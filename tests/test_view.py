@@ -24,7 +24,7 @@ from acq.ui.report_png import draw_report
 from acq.recording.recorder import Recorder
 from analysis import AnalysisRequest
 from drivers.registry import open_bench
-from tests.helpers import ctrl_c_as_at_a_terminal, run_cli
+from tests.helpers import run_cli
 
 RATE_HZ = 25600
 
@@ -326,7 +326,7 @@ def test_the_trend_window_waiting_for_a_monitors_first_window_says_so_once_and_c
     where, and the Ctrl-C of a terminal ends it with exit 130 and one line."""
     proc = subprocess.Popen([sys.executable, "-m", "acq", "view", "--trend", "joint1", str(tmp_path)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
-                            preexec_fn=ctrl_c_as_at_a_terminal, env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
+                            env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
     assert proc.stdout is not None
     line = proc.stdout.readline()  # said once the window is shown
     assert line == "acq trend — joint1: close the window or press Ctrl-C to end\n", (line, proc.communicate())
@@ -357,7 +357,7 @@ def test_a_ctrl_c_inside_qt_s_import_is_exit_130_and_one_line(tmp_path: Path) ->
     """Before: "Fatal Python error: libshiboken/signature: could not initialize part 2", exit 134 (9 of 30 Ctrl-Cs
     1.3…2.4 s after start), or the Ctrl-C lost and the window open (2 of 30). Now the Ctrl-C waits for the import."""
     done = subprocess.run([sys.executable, "-c", _CTRL_C_INSIDE_QT_IMPORT, "view", "--trend", "joint1", str(tmp_path)],
-                          capture_output=True, text=True, timeout=60, preexec_fn=ctrl_c_as_at_a_terminal,
+                          capture_output=True, text=True, timeout=60,
                           env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
     assert (done.returncode, done.stderr, done.stdout) == (130, "acq: interrupted\n", "")
 
