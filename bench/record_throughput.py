@@ -62,6 +62,15 @@ the current's chunk length (1×, 2×, 5× 0.1 s) changes nothing (per-byte costs
 this file format: floor + the writing alone + the handoff ≈ 290 + 18 + 4 ms, 0.93 per CPU second with no interplay at
 all; the interplay of three threads on two cores costs 15–25 ms more, and nothing tried removes it.
 
+Session 12 (2026-11-30): durable commits (each commit fdatasyncs the file after its samples and after its ``/flushes``
+row; the layout, the folder and the footer synced once): a 10 s ``--fast`` session makes 17 syncs, ≈ 200 ms of wall
+waiting on this machine's virtio disk (157–276 ms over 7 sessions) but 4–6 ms of CPU in them; the recording thread
+overlaps that wait with the readers. Eight pairs of ``--repeat 7 --realtime-seconds 1`` interleaved with main at load
+10–15, new / old per pair, medians: recorder / sim alone per wall second 1.02 (0.90–1.13, the load's spread: no
+measurable loss), per CPU second 0.99 / 0.98 (one thread / a thread per stream); the recording thread's own rate 0.85
+(40.5 → 34.6 M samples/s), the writing alone 0.74 (67.9 → 51.6 M samples/s: the syncs' writeback is charged to it,
+work the kernel's flusher would do later otherwise); real time 0.098 → 0.096 CPU s per recorded second (unchanged).
+
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
 (7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it
