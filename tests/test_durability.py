@@ -135,6 +135,27 @@ def test_a_failed_sync_fails_the_recording_keeping_the_last_durable_commit(
     _assert_replaced_durably(synced, [path])
 
 
+def test_a_failed_sync_of_the_footer_is_a_failed_write(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                        monkeypatch: pytest.MonkeyPatch) -> None:
+    """EIO from the fsync after the footer: every commit was synced, the footer is not known to be on the disk."""
+    real_fsync = os.fsync
+
+    def failing_disk(fd: int) -> None:
+        if _path_of(fd).suffix == ".h5":
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", failing_disk)
+    out = tmp_path / "out"
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--duration", "2", "--no-analyze", "--out",
+                  str(out))
+    monkeypatch.undo()
+    (path,) = out.glob("*.h5")
+    lines = run.err.strip().splitlines()
+    assert run.code == 1 and [ln for ln in lines if ln.startswith("acq:")] == lines[-1:] == [
+        f"acq: error: I/O error: {path} (footer not written; the samples are stored, acq check repairs the file)"]
+
+
 # ------------------------------------------------------------------------------------------ atomic outputs
 
 
