@@ -18,8 +18,8 @@ the new ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
 ``interrupted`` (not counted); what a restart must agree with (bench, ``--window``, alarm rules, catalogue) is in
 :mod:`acq.monitoring.monitor_restart`, the monitor's identity (a copied folder is refused) in
-:mod:`acq.monitoring.monitor_scope`, the alarm command in :mod:`acq.monitoring.alarm_command`, which raw windows it keeps and deletes (retention, the disk
-budget) in :mod:`acq.monitoring.monitor_windows`. In ``fast`` mode
+:mod:`acq.monitoring.monitor_scope`, the alarm command in :mod:`acq.monitoring.alarm_command`, which raw windows
+it keeps and deletes (retention, the disk budget) in :mod:`acq.monitoring.monitor_windows`. In ``fast`` mode
 (simulated benches) machine time is simulated: the loop does not sleep, and waits for the analysis instead of skipping
 (no real time passes meanwhile).
 """
