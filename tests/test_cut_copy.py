@@ -5,10 +5,12 @@ into a new session beside it. A file of an older acq (its root attributes past t
 from __future__ import annotations
 
 import hashlib
+import io
 import json
 import re
 import shutil
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -47,14 +49,35 @@ def intact(recorded: Path) -> Session:
     return load(recorded)
 
 
-def _rows_before(ds: h5py.Dataset, cut: int) -> int:
-    """Rows of ``ds`` up to its first chunk not wholly before byte ``cut``."""
-    rows = 0
-    for start in range(0, ds.shape[0], ds.chunks[0]):
-        info = ds.id.get_chunk_info_by_coord((start,))
-        if info.byte_offset + info.size > cut:
-            break
-        rows = min(start + ds.chunks[0], ds.shape[0])
+class _ReadsFile(io.FileIO):
+    """A file opened for reading that remembers the furthest byte HDF5 read from it (``end``)."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(path, "r")
+        self.end = 0
+
+    def readinto(self, buffer: Any) -> int | None:
+        start = self.tell()
+        self.end = max(self.end, start + len(buffer))
+        return super().readinto(buffer)
+
+
+def _rows_before(path: Path, cut: int) -> dict[str, int]:
+    """Rows of each dataset of ``path`` up to its first chunk that does not lie wholly before byte ``cut``, or whose
+    place HDF5 finds only past it (its chunk-index entry: measured as the furthest byte HDF5 reads to find the chunk,
+    and every chunk before it)."""
+    fh = _ReadsFile(path)
+    rows: dict[str, int] = {}
+    with h5py.File(fh, "r", rdcc_nbytes=0) as f:
+        names: list[str] = []
+        f.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) else None)
+        for name in names:
+            fh.end, ds, rows[name] = 0, f[name], 0
+            for start in range(0, ds.shape[0], ds.chunks[0]):
+                info = ds.id.get_chunk_info_by_coord((start,))
+                if max(fh.end, info.byte_offset + info.size) > cut:
+                    break
+                rows[name] = min(start + ds.chunks[0], ds.shape[0])
     return rows
 
 
@@ -62,12 +85,13 @@ def _kept_before(path: Path, cut: int) -> tuple[int, int]:
     """(current, encoder) samples of the intact file ``path`` a copy cut at byte ``cut`` holds whole: a current
     sample needs its chunk in every phase and its DAQ read's row in each block-table column; an encoder sample its
     chunk in every column."""
+    rows = _rows_before(path, cut)
     with h5py.File(path, "r") as f:
-        phases = min(_rows_before(f["current"][name], cut) for name in f["current"] if name.endswith("_A"))
-        reads = min(_rows_before(f["current/blocks"][name], cut) for name in ("count", "first_index", "host_ns"))
+        phases = min(rows[f"current/{name}"] for name in f["current"] if name.endswith("_A"))
+        reads = min(rows[f"current/blocks/{name}"] for name in ("count", "first_index", "host_ns"))
         ends = np.cumsum(f["current/blocks/count"][:reads])
-        current = int(ends[ends <= phases][-1]) if np.any(ends <= phases) else 0
-        encoder = min(_rows_before(f["encoder"][name], cut) for name in f["encoder"])
+        encoder = min(rows[f"encoder/{name}"] for name in f["encoder"])
+    current = int(ends[ends <= phases][-1]) if np.any(ends <= phases) else 0
     return current, encoder
 
 
