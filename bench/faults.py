@@ -267,7 +267,7 @@ def vanished_folder(lab: Lab) -> Row:
 def cut_file(lab: Lab, percent: int) -> Row:
     case = f"file cut to {percent} %: check, check --repair, analyze"
     path = lab.folder() / "s.h5"
-    shutil.copyfile(lab.session, path)  # not Lab.copy: a new attribute value rewritten after the fact can lie past the cut
+    shutil.copyfile(lab.session, path)  # not Lab.copy: the session_id it writes afterwards can lie past the cut
     size = path.stat().st_size
     with path.open("r+b") as f:
         f.truncate(size * percent // 100)

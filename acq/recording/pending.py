@@ -103,6 +103,7 @@ class PendingColumns:
         self.nbytes = 0
 
     def _bytes_of(self, name: str) -> int:
+        """Bytes held for dataset ``name``."""
         parts = self._parts.get(name, [])
         used = self._used.get(name, 0)
         return sum(part.nbytes for part in parts) + (used * self._buffers[name].itemsize if used else 0)

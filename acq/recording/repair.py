@@ -42,7 +42,7 @@ def recover(path: Path | str) -> Session:
     status ``interrupted``, the loss in its stop reason; return the copy as read. ``path`` itself is not written.
 
     The stop reason says what was lost and what is kept, e.g. "recovered from a file cut at 1 279 293 of 2 558 587
-    bytes: 4.8 s of current, 5.5 s of encoder kept (was complete: profile finished)".
+    bytes: 4.8 s of current, 5.5 s of encoder kept (was complete: recorded 10 s)".
     """
     p = Path(path)
     session = load(p)

@@ -497,7 +497,8 @@ def _integrity_warning(session: Session) -> str | None:
 @click.argument("session_path", type=click.Path(path_type=Path))
 @click.option("--repair", "write_intact", is_flag=True,
               help="Copy the intact part of a damaged session (a cut copy, a chunk that fails its checksum) into a "
-                   "new session beside it, NAME.recovered.h5 (status interrupted, the loss in its stop reason).")
+                   "new session beside it, NAME.recovered.h5 (status interrupted, the loss in its stop reason; an "
+                   "earlier copy is replaced). The damaged file is not written.")
 def check(session_path: Path, write_intact: bool) -> int:
     """Verify a session's checksums and committed counts; repair one left by a killed recorder.
 
