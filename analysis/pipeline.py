@@ -27,7 +27,7 @@ from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.recording import Recording
 from analysis.report import FigureData, figure_data
 from analysis.request import AnalysisRequest
-from analysis.segments import Move, SegmentSelection, describe_moves, excitation_summary
+from analysis.segments import MIN_SEGMENTS, Move, SegmentSelection, describe_moves, excitation_summary
 from analysis.signals import prepare_signals
 
 # blocks of the delete-one-block jackknife behind the intervals: 10 gives 9 degrees of freedom
@@ -100,11 +100,14 @@ class Result:
 
 def _excitation(sel: SegmentSelection, moves: tuple[Move, ...], unknown_torque: np.ndarray | None) -> dict[str, Any]:
     """Segment selection's figures: the excited share of the record (``segments_used``: the segments that excite),
-    the segments averaged (those less the ones whose torque is not known, ``unknown_torque``) and which moves
-    excite."""
+    the segments averaged (those less the ones whose torque is not known, ``unknown_torque``), which moves
+    excite, and why the selection applied or not (``segments_excited`` of ``segments`` with S/N above ``snr_limit``,
+    the largest ``snr_max``; ``segments_needed`` for it to apply)."""
     averaged = sel.keep if unknown_torque is None else sel.keep & ~unknown_torque
     return {"excited_fraction": sel.excited_fraction, "segments_used": int(sel.keep.sum()),
             "segments_averaged": int(averaged.sum()), "segments": int(sel.keep.size), "selection_applied": sel.applied,
+            "segments_excited": sel.excited, "segments_needed": MIN_SEGMENTS, "snr_limit": sel.snr_limit,
+            "snr_max": float(sel.snr.max()) if sel.snr.size else None,
             "moves": [{"index": m.index, "start_s": round(m.start_s, 4), "duration_s": round(m.duration_s, 4),
                        "peak_rad_s": round(m.peak_rad_s, 3), "excited": m.excited} for m in moves]}
 

@@ -39,6 +39,9 @@ MIDDLE_HALF = (0.25, 0.75)
 MIN_RUN_PERIODS = 5
 #: Confidence with which a kept segment's S/N is above what a segment without excitation shows.
 SIGNIFICANCE = 0.99
+#: Segments that must excite for the selection to apply: the H1 estimate and coherence of a single segment are exact
+#: by construction (|γ|² = 1 whatever the data), so one segment alone says nothing; below this every segment is used.
+MIN_SEGMENTS = 2
 #: Rest threshold in robust standard deviations of the speed noise (a Gaussian exceeds 5 σ in 6e-7 of samples).
 REST_SIGMAS = 5.0
 #: ... and never below this many encoder counts per drive period (quantisation: the speed's resolution).
@@ -60,7 +63,7 @@ class SegmentSelection:
     nperseg, step : int
         Segment length and hop, samples.
     applied : bool
-        False when fewer than two segments pass (then every segment is used and the verdict judges).
+        False when fewer than :data:`MIN_SEGMENTS` segments pass (then every segment is used and the verdict judges).
     """
 
     keep: np.ndarray
@@ -71,9 +74,14 @@ class SegmentSelection:
     applied: bool
 
     @property
+    def excited(self) -> int:
+        """How many segments excite (S/N above :attr:`snr_limit`), whether or not the selection applies."""
+        return int(np.sum(self.snr > self.snr_limit))
+
+    @property
     def excited_fraction(self) -> float:
         """Share of the segments that excite (= share of the record's time, see :data:`MIDDLE_HALF`)."""
-        return float(np.mean(self.snr > self.snr_limit)) if self.snr.size else 0.0
+        return self.excited / self.snr.size if self.snr.size else 0.0
 
     def runs(self) -> list[tuple[int, int]]:
         """Contiguous runs of kept segments as (first, last + 1) segment indices."""
@@ -95,6 +103,15 @@ def excitation_summary(excited_moves: int, moves: int, band_hz: tuple[float, flo
     segments (:attr:`SegmentSelection.excited_fraction`), which can excite outside every move."""
     return (f"{excited_moves} of the {span}'s {moves} moves put torque into {band_hz[0]:g}…{band_hz[1]:g} Hz beyond "
             f"chance; time that does: {100 * excited_fraction:.0f} % of the {span}")
+
+
+def segments_summary(excited: int, segments: int, needed: int, snr_limit: float, snr_max: float | None) -> str:
+    """Why a record's segment selection did not apply, in words (the figures of :class:`SegmentSelection`): "0 of 19
+    Welch segments excite — in-band S/N above 2.31, chance's 99 % point, the largest 1.42; the selection needs 2" (the
+    largest S/N said only when none excite: how far the best segment fell short)."""
+    largest = f", the largest {snr_max:.2f}" if excited == 0 and snr_max is not None else ""
+    return (f"{excited} of {segments} Welch segments excite{'s' * (excited == 1)} — in-band S/N above "
+            f"{snr_limit:.2f}, chance's {100 * SIGNIFICANCE:g} % point{largest}; the selection needs {needed}")
 
 
 def select_segments(X: np.ndarray, Y: np.ndarray, in_band: np.ndarray, nperseg: int, step: int) -> SegmentSelection:
@@ -124,7 +141,7 @@ def select_segments(X: np.ndarray, Y: np.ndarray, in_band: np.ndarray, nperseg: 
     dof = 2.0 * int(in_band.sum()) / enbw_bins
     limit = float(stats.f.ppf(SIGNIFICANCE, dof, dof))
     keep = snr > limit
-    applied = int(keep.sum()) >= 2
+    applied = int(keep.sum()) >= MIN_SEGMENTS
     return SegmentSelection(keep if applied else np.ones_like(keep), snr, limit, nperseg, step, applied)
 
 

@@ -35,6 +35,7 @@ from rich.table import Table
 
 from acq.config import DEFAULT_BENCH, resolve_profile_path
 from acq.recording.reader import load
+from acq.recording.session import Session
 
 RATE_HZ = 25600
 _PROGRESS = re.compile(r"━|^\s*(recording|analysing|identifying)\b")
@@ -264,19 +265,54 @@ def vanished_folder(lab: Lab) -> Row:
 
 
 def cut_file(lab: Lab, percent: int) -> Row:
-    case = f"file cut to {percent} %: check, then analyze"
-    path = lab.copy()
+    case = f"file cut to {percent} %: check, check --repair, analyze"
+    path = lab.folder() / "s.h5"
+    shutil.copyfile(lab.session, path)  # not Lab.copy: the session_id it writes afterwards can lie past the cut
     size = path.stat().st_size
     with path.open("r+b") as f:
         f.truncate(size * percent // 100)
     detect_s = detection_seconds(path)
     check = acq("check", str(path), timeout=60)
-    problem = clean(check, (1, 2)) or (None if detect_s <= 5 else f"detection took {detect_s:.1f} s")
-    if check.code == 1 and problem is None:
-        problem = None if "unreadable" in check.out else "no span reported"
+    problem = clean(check, (1,)) or (None if detect_s <= 5 else f"detection took {detect_s:.1f} s")
+    if problem is None and f"{path}: file cut: " not in check.out:
+        problem = "the cut not reported"
+    kept = stored = ""
+    if problem is None:
+        cut, whole = load(path), load(lab.session)
+        kept = f"{cut.current.sample_count} / {cut.encoder.index.size}"
+        stored = f"{whole.current.sample_count} / {whole.encoder.index.size}"
+        problem = invented(cut, whole)
+        if problem is None and (cut.current.sample_count or cut.encoder.index.size):
+            problem = recovered_copy(path, cut, whole)
     analyze = acq("analyze", str(path), "--no-report", timeout=60)
     problem = problem or clean(analyze, (2,))
-    return row(case, check, problem, note=f"detected in {detect_s:.2f} s (acq check {check.seconds:.1f} s wall)")
+    return row(case, check, problem, kept, stored,
+               note=f"detected in {detect_s:.2f} s (acq check {check.seconds:.1f} s wall)")
+
+
+def invented(part: Session, whole: Session) -> str | None:
+    """What ``part`` holds that is not the start of ``whole`` (None when every sample it holds is)."""
+    n, m = part.current.sample_count, part.encoder.index.size
+    same = all(np.array_equal(v, whole.current.phases_a[ch][:n]) for ch, v in part.current.phases_a.items())
+    same = same and np.array_equal(part.encoder.position_counts, whole.encoder.position_counts[:m])
+    return None if same else "samples kept that the intact file does not hold there"
+
+
+def recovered_copy(path: Path, cut: Session, whole: Session) -> str | None:
+    """Why ``acq check --repair`` of the cut ``path`` did not write its intact part beside it (None when it did)."""
+    run = acq("check", "--repair", str(path), timeout=60)
+    target = path.with_name(f"{path.stem}.recovered{path.suffix}")
+    problem = clean(run, (0,))
+    if problem is None:
+        copy = load(target)
+        if copy.damage or copy.status != "interrupted" or "recovered from a file cut at" not in copy.meta.stop_reason:
+            problem = f"recovered copy: damage {copy.damage}, status {copy.status}, reason {copy.meta.stop_reason!r}"
+        elif (copy.current.sample_count, copy.encoder.index.size) != (cut.current.sample_count,
+                                                                        cut.encoder.index.size):
+            problem = "recovered copy holds other counts than the cut file's intact part"
+        else:
+            problem = invented(copy, whole)
+    return problem or (None if not temp_files(path.parent) else f"temp files left: {temp_files(path.parent)}")
 
 
 def detection_seconds(path: Path) -> float:

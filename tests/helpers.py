@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import os
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -69,3 +70,26 @@ def read_only_view(folder: Path) -> Iterator[Path]:
         yield view
     finally:
         subprocess.run(["umount", "-l", str(view)], check=False)
+
+
+@contextlib.contextmanager
+def tiny_read_only_folder(folder: Path) -> Iterator[tuple[Path, str]]:
+    """A folder this process may not write into, and the cause acq should name: as root a read-only tmpfs of 1 MiB
+    mounted on ``folder`` (its few free bytes once read "disk full"; chmod does not stop root) — "read-only file
+    system"; otherwise ``folder`` made read-only with chmod — "permission denied". Skips where root may not mount."""
+    folder.mkdir()
+    if os.geteuid() != 0:
+        folder.chmod(0o555)
+        try:
+            yield folder, "permission denied"
+        finally:
+            folder.chmod(0o755)
+        return
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(folder)], capture_output=True,
+                             text=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"needs a read-only tmpfs mount as root: {mounted.stderr.strip()}")
+    try:
+        yield folder, "read-only file system"
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], check=False)

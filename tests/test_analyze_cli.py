@@ -11,7 +11,7 @@ import pytest
 
 from acq.recording.reader import load
 from acq.ui.values import format_value
-from tests.helpers import read_only_view, run_cli, seeded_profile
+from tests.helpers import read_only_view, run_cli, seeded_profile, tiny_read_only_folder
 
 KEYS = {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "ci95", "antiresonance_hz", "resonance_hz",
         "clock", "quality", "options"}
@@ -468,6 +468,18 @@ def test_a_read_only_session_folder_shows_the_result_fails_the_write_and_result_
         assert [d["outcome"] for d in json.loads(batch.out)] == ["analysed", "analysed"]
         assert sorted(p.name for p in (tmp_path / "batch_results").iterdir()) == ["a.result.json", "b.result.json"]
         assert sorted(p.name for p in ro.iterdir()) == ["a.h5", "b.h5"]
+
+
+def test_a_result_dir_on_a_tiny_read_only_mount_is_read_only_not_full(
+        session_10s: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """It said "disk full: <dir>/<session>.report.png": the room for the report (4 MiB) was checked before whether the
+    folder may be written at all, and a 1 MiB read-only mount has no room either. Now the cause, naming the file."""
+    with tiny_read_only_folder(tmp_path / "ro") as (ro, cause):
+        for json_flag in ((), ("--json",)):
+            run = run_cli(capsys, "analyze", str(session_10s), "--result-dir", str(ro), *json_flag)
+            assert (run.code, run.err) == (1, f"acq: error: {cause}: {ro / session_10s.stem}.result.json — the result "
+                                              "above is not saved (--result-dir DIR writes it elsewhere)\n")
+        assert list(ro.iterdir()) == []
 
 
 def test_a_result_dir_that_cannot_be_made_is_bad_input(session_10s: Path, capsys: pytest.CaptureFixture[str]) -> None:

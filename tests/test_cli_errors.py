@@ -50,6 +50,17 @@ def test_a_png_into_a_read_only_folder_is_a_failed_write_naming_the_cause(
         assert not png.exists() and not list(ro.iterdir())  # no temp file left behind either
 
 
+@pytest.mark.parametrize("command", [("trend", "{folder}", "--joint", "joint1", "--png"),
+                                     ("fleet", "{folder}", "--png")])
+def test_a_png_in_a_folder_that_takes_no_new_file_says_it_cannot_write_there(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], command: tuple[str, ...]) -> None:
+    """/proc exists but takes no new file (ENOENT): it said "folder vanished: /proc/x.png"."""
+    os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+    folder = _catalogue(tmp_path / "sessions")
+    run = run_cli(capsys, *(part.format(folder=folder) for part in command), "/proc/acq-test.png")
+    assert (run.code, run.err) == (1, "acq: error: cannot write a file there: /proc/acq-test.png\n")
+
+
 @pytest.mark.parametrize(("name", "message"), [
     ("out.jpg", "--png {png}: acq writes PNG only — name the file *.png, e.g. {stem}.png"),
     ("out", "--png {png}: acq writes PNG only — name the file *.png, e.g. {stem}.png"),

@@ -109,7 +109,7 @@ def test_a_middle_chunk_of_the_block_table_costs_its_reads_only(recorded: Path, 
     assert f"{path}: {span}\n" in run.out
     assert run.err == (f"acq: damaged: {path} ({span}) — the intact part holds 675840 current and 52000 encoder "
                        "samples, 20480 and 52000 of them after the first damaged span (acq analyze --partial uses "
-                       "it)\n")
+                       f"it; acq check --repair copies it into {tmp_path / 'damaged.recovered.h5'})\n")
 
 
 def test_a_middle_chunk_of_the_encoder_position_costs_those_rows_in_every_column(recorded: Path, intact: Session,

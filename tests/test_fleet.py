@@ -95,6 +95,35 @@ def test_fleet_table_shows_every_value_at_80_columns(catalogue_location: Path | 
     assert run.out.count("threshold") == 2  # "ALARM threshold + EWMA" wrapped at spaces, in both alarm rows
 
 
+def test_fleet_narrower_than_its_narrowest_table_prints_one_block_of_lines_per_joint(
+        catalogue_location: Path | str, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """At 40 columns it squeezed its table until names and numbers folded inside themselves ("robo" over "join",
+    "1001." over "0"); below the narrowest layout (60 columns here) each joint is now a block of "header: value"
+    lines, every value whole, nothing left out."""
+    _fill(catalogue_location)
+    statuses = load_fleet((), [catalogue_location], now=datetime.now(UTC), stale_days=7.0)
+    times = {f"{s.robot}/{s.joint}": s.last_session_utc.strftime("%m-%d %H:%M") for s in statuses
+             if s.last_session_utc is not None}
+    monkeypatch.setenv("COLUMNS", "40")
+    run = run_cli(capsys, "fleet", "--catalogue", str(catalogue_location))
+    assert run.code == 3, run.err
+    lines = run.out.splitlines()
+    assert "│" not in run.out and "not shown at this width" not in run.out and max(map(len, lines)) <= 40
+    assert lines[:3] == ["fleet — 4 joints  2 in ALARM", "", "r3/j1"]
+    year = {s.last_session_utc.year for s in statuses if s.last_session_utc is not None}.pop()
+    assert [line.split(": ", 1)[0] for line in lines[3:10]] == [  # the time in the narrow form: its wide one wraps
+        "  K N·m/rad", "  95 % interval N·m/rad", "  ΔK %", "  baseline N·m/rad", f"  last (UTC {year})",
+        "  24 h ok/all", "  state"]
+    blocks = {lines[i - 1]: [line.split(": ", 1)[1] for line in lines[i:i + 7]]
+              for i, line in enumerate(lines) if line.startswith("  K N·m/rad: ")}
+    assert blocks == {"r3/j1": ["500.0", "495.0–505.0", "-28.6", "700.0", times["r3/j1"], "1/1", "ALARM threshold + EWMA"],
+                      "r1/j1": ["760.0", "755.0–765.0", "-15.6", "900.0", times["r1/j1"], "1/1", "ALARM threshold + EWMA"],
+                      "r1/j2": ["498.0", "493.0–503.0", "-0.4", "500.0", times["r1/j2"], "0/0", "stale"],
+                      "r2/j1": ["1001.0", "996.0–1006.0", "+0.1", "1000.0", times["r2/j1"], "3/4", "ok"]}
+    monkeypatch.setenv("COLUMNS", "60")  # the narrowest table still fits: a table
+    assert "┃" in run_cli(capsys, "fleet", "--catalogue", str(catalogue_location)).out
+
+
 def test_fleet_of_several_sources_at_80_columns_leaves_the_baseline_out_and_breaks_no_header(
         catalogue_location: Path | str) -> None:
     """acq fleet DIR sessions at 80 columns broke its headers inside words: "sour|ce", "sta|te", "bas|eli|ne"."""

@@ -155,7 +155,7 @@ def test_flipped_byte_in_a_chunk_is_reported_with_its_span(recorded: Path, tmp_p
     assert f"{path}: {span}" in run.out.replace("\n", "")
     assert run.err == (f"acq: damaged: {path} ({span}) — the intact part holds 253440 current and 10000 encoder "
                        "samples, 151040 and 10000 of them after the first damaged span (acq analyze --partial uses "
-                       "it)\n")
+                       f"it; acq check --repair copies it into {tmp_path / 'flip.recovered.h5'})\n")
     analyze = run_cli(capsys, "analyze", str(path), "--no-report")
     assert analyze.code == 2
     assert analyze.err.strip() == (f"acq: error: {path}: damaged ({span}) — run acq check, or use --partial to "

@@ -110,7 +110,9 @@ def test_a_listening_bench_is_checked_on_the_machines_own_motion_without_command
         assert by["torque constant"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
     else:
         assert (ident["status"], ident["figure"]) == ("warn", "not excited: 0 of the window's 12 moves put torque into "
-                                                              "10…400 Hz beyond chance; time that does: 3 % of the window")
+                                                              "10…400 Hz beyond chance; time that does: 3 % of the window; "
+                                                              "1 of 38 Welch segments excites — in-band S/N above 1.33, "
+                                                              "chance's 99 % point; the selection needs 2")
         assert ident["fix"] == ("run acq selftest again while the machine runs a program with fast moves of this joint "
                                 "(acq commands no motion on a bench with [drive] motion = \"external\")")
     refused = run_cli(capsys, "selftest", "--fast", "--bench", str(bench), "--profile", "triangle_0.2s")
@@ -153,6 +155,25 @@ def test_a_jittering_sync_is_a_warning_with_its_figure_against_half_a_cycle(caps
     assert check["fix"].startswith(f"{1e6 * values['sigma_s']:.0f} µs RMS reaches ≈ "
                                    f"{1e6 * values['expected_largest_s']:.0f} µs in the 10 s identification, half a "
                                    "cycle or more, where the analysis refuses the drive's time stamps")
+    assert check["affects"] == "the analysis may refuse a recording's drive time stamps, and TPDOs may miss their SYNC"
+
+
+def test_the_last_line_of_a_run_with_a_warning_names_it_and_what_it_leaves_in_doubt(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """On a loaded host "⚠ SYNC jitter" was followed by "the bench is ready" alone, which read as a contradiction: the
+    last line now says the bench is ready with that warning and what it affects, as it would name any other."""
+    monkeypatch.setenv("COLUMNS", "300")
+    bench = bench_file(tmp_path, "sync_jitter_s = 0.0002")
+    run = run_cli(capsys, "selftest", "--fast", "--bench", str(bench))
+    assert run.code == 0, run.out + run.err
+    assert [line.split("  ")[0] for line in run.out.splitlines() if line.startswith("⚠")] == ["⚠ streams · SYNC jitter"]
+    assert run.out.splitlines()[-1] == (
+        "the bench is ready, with 1 warning (SYNC jitter: the analysis may refuse a recording's drive time stamps, and "
+        f"TPDOs may miss their SYNC): acq record --profile triangle_0.2s --bench {bench}")
+    two = [Check("devices", "DAQ", "pass", "ok"), Check("motion", "phase order", "warn", "x", "y", affects="z"),
+           Check("identification", "torque constant", "warn", "x", "y", affects="k_t unchecked")]
+    assert next_step(two, None, None) == ("the bench is ready, with 2 warnings (phase order: z; torque constant: k_t "
+                                          "unchecked): acq monitor, or acq record --duration 10")
 
 
 def test_sync_jitter_check_fails_on_a_stamp_half_a_cycle_off_and_only_warns_from_host_stamps() -> None:

@@ -117,7 +117,8 @@ def _listed(bench: Bench) -> Iterator[Check]:
         if drive.channel not in channels:  # python-can's detection is best effort: the open decides
             yield Check("devices", "acq devices", "warn", f"python-can detects {sorted(channels) or 'no interface'}",
                         f"[drive] channel = {_toml(drive.channel)} not detected; bring it up "
-                        f"(ip link set {drive.channel} up type can bitrate {drive.bitrate})")
+                        f"(ip link set {drive.channel} up type can bitrate {drive.bitrate})",
+                        affects="none once the drive opens (python-can's detection is best effort)")
             return
     yield Check("devices", "acq devices", "pass", "the configured devices are listed")
 
@@ -190,7 +191,8 @@ def _daq_check(bench: Bench, recorder: Recorder) -> Check:
                      f"delivers {_toml(info.channels)}", values)
     if abs(info.rate_hz / bench.daq.rate_hz - 1.0) > 0.01:
         return Check("devices", "DAQ", "warn", f"{figure} (coerced from {bench.daq.rate_hz:g} Hz)",
-                     f"[daq] rate_hz = {bench.daq.rate_hz:g}: the card runs {info.rate_hz:g} Hz — state that rate", values)
+                     f"[daq] rate_hz = {bench.daq.rate_hz:g}: the card runs {info.rate_hz:g} Hz — state that rate",
+                     values, f"[daq] rate_hz is not the {info.rate_hz:g} Hz the card runs")
     return Check("devices", "DAQ", "pass", figure, values=values)
 
 
@@ -206,7 +208,7 @@ def _drive_check(bench: Bench, recorder: Recorder) -> Check:
         if isinstance(identity, str):  # 0x1018 is mandatory (vendor ID) in CiA 301: say so, but it blocks nothing
             return Check("devices", "drive", "warn", f"{figure}; identity 0x1018: {identity}",
                          f"the node at [drive] node_id = {drive.node_id} does not give its identity: check it is "
-                         "the drive you mean", values)
+                         "the drive you mean", values, "the drive's identity is unconfirmed")
         values["identity"] = identity
         figure += "; identity 0x1018 " + ", ".join(f"{k} 0x{v:08X}" for k, v in identity.items())
         if not bench.listens():  # acq sets its travel window in 0x6064's frame (a home offset was refused at start)
@@ -281,7 +283,8 @@ def _serial_check(stats: Any, bench: Bench) -> Check:
     if stats.crc_errors:
         return Check("streams", "serial link", "warn" if rate < 0.01 else "fail", figure,
                      f"CRC errors on a standing link: check the cable and its shield, [drive] baud = {bench.drive.baud}"
-                     f" and parity = {_toml(bench.drive.parity)}", values)
+                     f" and parity = {_toml(bench.drive.parity)}", values,
+                     "frames with CRC errors are lost samples")
     return Check("streams", "serial link", "pass", figure, values=values)
 
 
@@ -331,7 +334,7 @@ def _passive_motion_and_identification(bench: Bench, profile: Profile | None, wo
     if travel < need:
         yield Check("motion", "machine's motion", "warn", f"the joint travelled {travel:.0f} counts in "
                     f"{IDENTIFICATION_S:g} s, less than half an electrical revolution ({need:.0f} counts)",
-                    _WHILE_IT_RUNS, {"travel_counts": travel})
+                    _WHILE_IT_RUNS, {"travel_counts": travel}, "the motion checks and K are unchecked")
         return
     revolutions = travel / bench.encoder.counts_per_rev
     yield Check("motion", "machine's motion", "pass", f"the joint travelled {revolutions:.1f} motor revolutions in "
@@ -344,7 +347,8 @@ def _passive_motion_and_identification(bench: Bench, profile: Profile | None, wo
         yield Check("motion", "electrical speed", "warn", "the machine's motion gives no steady ratio of the current's "
                     "electrical frequency to pole_pairs·ω (its half-periods scatter, or its moves are too short)",
                     "pole_pairs, counts_per_rev and the phase order stay unchecked on a listening bench: take them "
-                    "from the motor's and the encoder's data sheets")
+                    "from the motor's and the encoder's data sheets",
+                    affects="pole_pairs, counts_per_rev and the phase order are unchecked")
     else:
         yield speed_ratio_check(ratio, bench)
         yield phase_order_check(session, ratio.lag_s)
@@ -364,7 +368,7 @@ def _identified(bench: Bench, path: Path) -> Iterator[Check]:
     if "excitation" in doc and not_excited(doc):  # the machine's motion, not the bench, fell short
         yield Check("identification", f"identification ({IDENTIFICATION_S:g} s)", "warn",
                     "not excited: " + "; ".join(not_excited_reasons(doc)), _WHILE_IT_RUNS,
-                    {"verdict": "not excited"})
+                    {"verdict": "not excited"}, "K is unchecked (the machine did not excite the joint)")
         return
     quality = doc["quality"]
     reasons = [r for r in quality["reasons"] if not r.startswith("note: ")]
@@ -376,7 +380,7 @@ def _identified(bench: Bench, path: Path) -> Iterator[Check]:
               f"verdict {quality['verdict']}")
     status = {"ok": "pass", "poor": "warn", "failed": "fail"}[quality["verdict"]]
     yield Check("identification", f"identification ({IDENTIFICATION_S:g} s)", status, figure,  # type: ignore[arg-type]
-                "; ".join(reasons), values)
+                "; ".join(reasons), values, "K of this profile's recordings may be poor" if status == "warn" else "")
     if status == "fail":
         return
     session = done.session

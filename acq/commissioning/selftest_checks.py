@@ -33,7 +33,9 @@ INERTIA_TOLERANCE = 0.15
 @dataclass(frozen=True)
 class Check:
     """One selftest line: ``stage`` · ``name``, ✓ pass / ⚠ warn / ✗ fail, the measured ``figure`` in words,
-    ``fix`` (what to change where) unless it passed, and the numbers behind it (``values``, SI units)."""
+    ``fix`` (what to change where) unless it passed, and the numbers behind it (``values``, SI units); a warning says
+    in ``affects`` what it leaves in doubt for the recordings on this bench (the last line of ``acq selftest`` names
+    it beside "the bench is ready")."""
 
     stage: str
     name: str
@@ -41,6 +43,7 @@ class Check:
     figure: str
     fix: str = ""
     values: dict[str, Any] = field(default_factory=dict)
+    affects: str = ""
 
     def to_json_dict(self) -> dict[str, Any]:
         """The check as JSON-ready values (NaN → None)."""
@@ -100,7 +103,8 @@ def daq_blocks_check(session: Session) -> Check:
     daq = session.bench.daq
     if isinstance(daq, DaqNidaqmx) and longest > 0.5 * daq.buffer_s:
         return Check("streams", "DAQ blocks", "warn", figure,
-                     f"a read waited over half the card's buffer: raise [daq] buffer_s = {daq.buffer_s:g}", values)
+                     f"a read waited over half the card's buffer: raise [daq] buffer_s = {daq.buffer_s:g}", values,
+                     "a busier host may overrun the card's buffer and lose samples")
     return Check("streams", "DAQ blocks", "pass", figure, values=values)
 
 
@@ -138,7 +142,7 @@ def standstill_current_check(session: Session) -> Check:
     if worst > 3.0:  # white noise alone gives RMS = white; more is hum, drift or a moving joint
         return Check("streams", "current at standstill", "warn", f"{figure} (RMS {worst:.1f}× the white noise)",
                      "interference at standstill (mains hum, ground loop): check the sensor's shield and ground",
-                     values)
+                     values, "the interference adds to the current's noise, and so to K's uncertainty")
     return Check("streams", "current at standstill", "pass", figure, values=values)
 
 
@@ -177,7 +181,8 @@ def blf_check(blf_path: Path, settings: DriveCanopen) -> Check:
               f"{1e6 * values['sync_to_tpdo_p99_s']:.0f} µs), heartbeat every {1e3 * hb_period:.0f} ms")
     if values["sync_to_tpdo_p99_s"] > settings.period_s:
         return Check("streams", "CAN frames", "warn", figure,
-                     f"TPDOs arrive later than one SYNC period: raise [drive] period_s = {settings.period_s:g}", values)
+                     f"TPDOs arrive later than one SYNC period: raise [drive] period_s = {settings.period_s:g}", values,
+                     "TPDOs that miss their SYNC's window are lost samples")
     return Check("streams", "CAN frames", "pass", figure, values=values)
 
 
@@ -220,7 +225,8 @@ def sync_jitter_check(index: np.ndarray, times_s: np.ndarray, period_s: float, s
     dev = cycle_deviation_s(index, times_s, period_s)
     if dev is None:
         return Check("streams", "SYNC jitter", "warn", f"{source}: too few cycles to measure",
-                     "record the standstill again (acq selftest) and check that the drive streams")
+                     "record the standstill again (acq selftest) and check that the drive streams",
+                     affects="the drive cycle's timing is unmeasured")
     sigma = 1.4826 * float(np.median(np.abs(dev - np.median(dev))))
     largest = float(np.max(np.abs(dev)))
     cycles = max(identification_s / period_s, 2.0)
@@ -240,7 +246,8 @@ def sync_jitter_check(index: np.ndarray, times_s: np.ndarray, period_s: float, s
         seen = (f"a cycle {1e6 * largest:.0f} µs off its grid" if largest >= bound_s else
                 f"{1e6 * sigma:.0f} µs RMS reaches ≈ {1e6 * expected:.0f} µs in the {identification_s:g} s "
                 "identification")
-        return Check("streams", "SYNC jitter", "warn", figure, f"{seen}, {why}", values)
+        return Check("streams", "SYNC jitter", "warn", figure, f"{seen}, {why}", values,
+                     "the analysis may refuse a recording's drive time stamps, and TPDOs may miss their SYNC")
     return Check("streams", "SYNC jitter", "pass", figure, values=values)
 
 
@@ -283,7 +290,8 @@ def speed_ratio_check(ratio: SpeedRatio | None, bench: Bench) -> Check:
     if doubt is not None:
         return Check("motion", "electrical speed", "warn", doubt,
                      "pole_pairs and counts_per_rev stay unchecked: check that the motor turns freely through the slow "
-                     "move and that the current sensor reads a phase current", values)
+                     "move and that the current sensor reads a phase current", values,
+                     "pole_pairs and counts_per_rev are unchecked")
     fault = ratio_fault(ratio, p, cpr)
     if fault is not None:
         figure, what = fault.split(": check ", 1)
@@ -318,7 +326,8 @@ def phase_order_check(session: Session, lag_s: float) -> Check:
     if agree > 0.5:
         return Check("motion", "phase order", "pass", figure, values=values)
     return Check("motion", "phase order", "warn", figure,
-                 "the sequence is unclear (little motion?): repeat with a longer move", values)
+                 "the sequence is unclear (little motion?): repeat with a longer move", values,
+                 "the phase order is unchecked")
 
 
 def torque_constant_check(t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: np.ndarray, bench: Bench) -> Check:
@@ -331,7 +340,8 @@ def torque_constant_check(t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: n
     if not bench.nominal.inertia_known:
         return Check("identification", "torque constant", "warn", figure,
                      "k_t and the current sensor's scale are not checked (a wrong one scales K, J_m, J_l and C alike): "
-                     "set [nominal] Jm_kgm2 and Jl_kgm2 from the datasheet or CAD and inertia_known = true", values)
+                     "set [nominal] Jm_kgm2 and Jl_kgm2 from the datasheet or CAD and inertia_known = true", values,
+                     "k_t and the current sensor's scale are unchecked (a wrong one scales K alike)")
     if abs(q - 1.0) > max(INERTIA_TOLERANCE, 4.0 * fit.J_std_kgm2 / nominal):
         kt = bench.motor.torque_constant_Nm_per_A
         daq = bench.daq

@@ -18,19 +18,18 @@ the new ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
 ``interrupted`` (not counted); what a restart must agree with (bench, ``--window``, alarm rules, catalogue) is in
 :mod:`acq.monitoring.monitor_restart`, the monitor's identity (a copied folder is refused) in
-:mod:`acq.monitoring.monitor_scope`, the alarm command in :mod:`acq.monitoring.alarm_command`. In ``fast`` mode
+:mod:`acq.monitoring.monitor_scope`, the alarm command in :mod:`acq.monitoring.alarm_command`, which raw windows
+it keeps and deletes (retention, the disk budget) in :mod:`acq.monitoring.monitor_windows`. In ``fast`` mode
 (simulated benches) machine time is simulated: the loop does not sleep, and waits for the analysis instead of skipping
 (no real time passes meanwhile).
 """
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from contextlib import AbstractContextManager, contextmanager, suppress
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -44,9 +43,10 @@ from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, check_compar
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
                                           check_user_tags, own_windows, window_number)
 from acq.monitoring.monitor_status import SIZE_MARGIN, MonitorSettings, MonitorStatus, expected_window_bytes
-from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
+from acq.monitoring.monitor_windows import FolderWindows, check_budget, copies_deletable
+from acq.monitoring.retention import WindowFiles
 from acq.monitoring.session_outcome import CATALOGUE_NAME, session_meta
-from acq.monitoring.trend import ELAPSED_TAG, Trend, alarm_onsets, compute_trend
+from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
 from acq.monitoring.window_bench import FACT_TAGS, window_facts
 from acq.monitoring.window_judge import analyse_window, marked
 from acq.offline.analyze import sha256_of
@@ -67,7 +67,7 @@ class Monitor:
         self.on_status = on_status
         self._stop: str | None = None
         self._recorder: Recorder | None = None
-        self._windows: dict[str, WindowFiles] = {}  # by session id (a moved folder is still the same monitor)
+        self._windows = FolderWindows(settings.out_dir, settings.keep)  # their raw files, retention
         self._pending: dict[Future[Outcome], str] = {}
         self._alarms = AlarmCommands(settings.on_alarm, self._alarm_problem)
         self._in_alarm = False
@@ -82,17 +82,7 @@ class Monitor:
             Path(self._catalogue_location).resolve() == (settings.out_dir / CATALOGUE_NAME).resolve()
         self._id = ""  # the monitor's identity (monitor_scope), read or made in its folder when it runs
         self._clock = MachineClock(settings.every_s)  # a restart goes on from its last window (monitor_restart)
-        # the baseline's windows are kept whatever the budget (retention protects them), and the next window must fit
-        # beside them: a budget of fewer skipped every window after the first ones, the alarm unseen (the second trial)
-        need = (settings.baseline_windows + 1) * self._size
-        if settings.max_disk_bytes is not None and settings.max_disk_bytes < need:
-            daq, drive = settings.bench.daq, settings.bench.drive
-            raise ConfigError(f"--max-disk {settings.max_disk_bytes / 1e6:g} MB: the {settings.baseline_windows} "
-                              f"baseline windows acq keeps and the next one, {settings.window_s:g} s each, need "
-                              f"{math.ceil(need / 1e5) / 10:g} MB ({math.ceil(self._size / 1e5) / 10:g} MB a window: "
-                              f"current {daq.rate_hz:g} Hz × {len(daq.channels)} channel(s), encoder "
-                              f"{1 / drive.period_s:g} Hz, with the files' overhead) — raise --max-disk, shorten "
-                              "--window or lower --baseline-windows")
+        check_budget(settings, self._size)
 
     @property
     def stopped_by(self) -> str | None:
@@ -155,8 +145,8 @@ class Monitor:
         self.status.machine_time_s = self._clock.at(n)
         if not self._room_for_window():
             self.status.not_captured += 1
-            kept = [w for w in self._windows.values() if w.copied and w.protected]
-            why = (f" — {len(kept)} windows of another monitor copied here are its baseline or alarms, never deleted "
+            kept = self._windows.kept_copies()
+            why = (f" — {kept} windows of another monitor copied here are its baseline or alarms, never deleted "
                    "(raise --max-disk or move them out)") if kept else ""
             self.status.message = f"window {n + 1} not captured: the disk budget would be exceeded{why}"
             self._show()
@@ -181,7 +171,7 @@ class Monitor:
         # the monitor ends all the same (it went on capturing, the Ctrl-C lost: 1 of 30 runs, SIGINT 0.1…10 s in)
         self._stop = self._stop or recorder.stop_request
         key = str(load(result.path).meta.session_id)
-        self._windows[key] = WindowFiles(n, result.path, False, False, key)
+        self._windows.add(WindowFiles(n, result.path, False, False, key))
         self.status.in_folder += 1
         self._size = max(self._size, int(SIZE_MARGIN * result.path.stat().st_size))
         if result.status != "complete":
@@ -200,7 +190,7 @@ class Monitor:
         self._show()
 
     def _submit(self, pool: Any, key: str) -> None:
-        path = self._windows[key].path
+        path = self._windows.path(key)
         self._pending[pool.submit(analyse_window, str(path.resolve()), sha256_of(path), self.s.request)] = key
 
     def _collect(self, at_most: int | None) -> None:
@@ -222,7 +212,7 @@ class Monitor:
                 self._record(key, outcome)
 
     def _mark(self, key: str, verdict: str, reason: str, skipped: bool = False) -> None:
-        path = self._windows[key].path
+        path = self._windows.path(key)
         try:
             meta = session_meta(load(path))
         except Exception:  # noqa: BLE001 - a window too broken to read is still marked
@@ -236,7 +226,7 @@ class Monitor:
         self.catalogue.record(outcome)
         self._filed += 1
         self.status.count(outcome, skipped)
-        self._windows[key] = replace(self._windows[key], done=True)
+        self._windows.done(key)
         trend = self._trend()
         self._judge(trend, key)
         self._alarms.reap(wait=False)  # an alarm command of an earlier window that ended meanwhile (--fast: no waits)
@@ -293,25 +283,15 @@ class Monitor:
 
     # ---- retention and disk ----------------------------------------------------------------------------
     def _retain(self, trend: Trend) -> None:
-        protected = kept_windows(trend)
-        for key, w in self._windows.items():
-            if not w.copied and (key in protected) != w.protected:
-                self._windows[key] = replace(w, protected=key in protected)
-        for w in to_delete(self._windows.values(), self.s.keep):
-            delete(w)
-            del self._windows[w.key]
-        self.status.disk_bytes = folder_bytes(self.s.out_dir)
+        self._windows.retain(trend)
+        self.status.disk_bytes = self._windows.disk_bytes()
 
     def _room_for_window(self) -> bool:
         if self.s.max_disk_bytes is None:
             return True
-        victims, fits = make_room(self._windows.values(), self.s.out_dir, self._size, self.s.max_disk_bytes)
-        if fits:
-            for w in victims:
-                delete(w)
-                del self._windows[w.key]
-            self.status.copied_deleted += sum(w.copied for w in victims)
-        self.status.disk_bytes = folder_bytes(self.s.out_dir)
+        fits, copied_deleted = self._windows.make_room(self._size, self.s.max_disk_bytes)
+        self.status.copied_deleted += copied_deleted
+        self.status.disk_bytes = self._windows.disk_bytes()
         return fits
 
     # ---- resume after a crash --------------------------------------------------------------------------
@@ -353,12 +333,12 @@ class Monitor:
             if session.tags.get(MONITOR_TAG, self._id) != self._id:  # another monitor's, copied here: not ours to file
                 owner = str(session.tags[MONITOR_TAG])
                 if owner not in copies:
-                    copies[owner] = self._copies_deletable(owner)
+                    copies[owner] = copies_deletable(self.catalogue, owner)
                 deletable = copies[owner]
-                self._windows[key] = WindowFiles(n, path, True, key not in deletable, key, copied=True)  # (retention's)
+                self._windows.add(WindowFiles(n, path, True, key not in deletable, key, copied=True))  # (retention's)
                 continue
             numbers.append(n)
-            self._windows[key] = WindowFiles(n, path, key in known, False, key)
+            self._windows.add(WindowFiles(n, path, key in known, False, key))
             if key in known:
                 continue
             if session.status == "recording":
@@ -376,18 +356,6 @@ class Monitor:
             self._judge(self._trend(), "")
             self._show()
         return max(numbers, default=-1) + 1
-
-    def _copies_deletable(self, monitor: str) -> set[str]:
-        """The windows of another ``monitor`` (copied here) that it does not keep (:func:`kept_windows`), judged from
-        its catalogue rows here by the rules it filed them with: only these may go for the budget. A copied window
-        without a row here is not among them: nothing says it is not that monitor's baseline or alarm."""
-        entries = own_windows(self.catalogue, monitor, unowned=False)
-        deletable: set[str] = set()
-        for joint in {e.joint for e in entries}:
-            of_joint = [e for e in entries if e.joint == joint]
-            # no rule given: compute_trend judges by the rules the windows were filed with (alarm_rules.rules_for)
-            deletable |= {e.session_id for e in of_joint} - kept_windows(compute_trend(str(joint), of_joint))
-        return deletable
 
     def _resumed(self, numbers: list[int]) -> None:
         """The folder's windows (``numbers``) in the status: their count, and machine time from the end of the last
@@ -410,17 +378,6 @@ class Monitor:
     def _show(self) -> None:
         if self.on_status is not None:
             self.on_status(self.status)
-
-
-def kept_windows(trend: Trend) -> set[str]:
-    """The session ids of a monitor's windows whose raw files retention never deletes: the baseline's, and the window
-    that raised each alarm.
-
-    "before baseline": good windows that will make the baseline once there are enough of them. Of an alarm only the
-    window that raised it is kept: a joint that stays in alarm for a weekend grew the folder by every window (or, under
-    --max-disk, stopped its capture once the budget was full); the catalogue keeps every K, and --keep the latest raw
-    windows."""
-    return alarm_onsets(trend) | {p.entry.session_id for p in trend.points if p.state in ("baseline", "before baseline")}
 
 
 def _alarm_message(entry: Entry) -> str:

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.catalogue import Outcome
+from acq.monitoring.window_judge import selection_reason
 from analysis import AnalysisRequest
 from drivers.config import Bench
 
@@ -81,6 +82,8 @@ class MonitorStatus:
     message: str = ""
     last_excited_fraction: float | None = None  # share of the last analysed window that excites the joint
     last_moves: tuple[dict[str, Any], ...] = ()  # its moves: index, start_s, duration_s, peak_rad_s, excited
+    # of a last window whose segment selection did not apply: how many Welch segments it examined, why too few excite
+    last_segments: str | None = None
     excited_fraction_sum: float = 0.0  # over the windows judged for excitation (for the share of the program)
     excitation_judged: int = 0
 
@@ -113,6 +116,7 @@ class MonitorStatus:
             return
         self.last_excited_fraction = excitation["excited_fraction"] if excitation else 0.0
         self.last_moves = tuple(excitation["moves"]) if excitation else ()
+        self.last_segments = selection_reason(excitation) if excitation and not excitation["selection_applied"] else None
         self.excited_fraction_sum += self.last_excited_fraction
         self.excitation_judged += 1
 

@@ -21,7 +21,7 @@ from acq.monitoring.session_outcome import analyze_one, session_meta
 from acq.offline.analyze import idle_reason, output_paths, write_json
 from acq.recording.reader import load
 from acqcore.errors import StorageError
-from analysis import AnalysisRequest, Thresholds, against_limit, excitation_summary
+from analysis import AnalysisRequest, Thresholds, against_limit, excitation_summary, segments_summary
 
 
 def _weak_coherence(quality: dict[str, Any]) -> str | None:
@@ -98,9 +98,10 @@ def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
 
 
 def not_excited_reasons(doc: dict[str, Any]) -> list[str]:
-    """Why a window does not excite: the moves that excite and the coherence that fell short, then the clock's
-    finding (a fact, not advice). The analysis' other reasons are left out: their advice (interference on the
-    phase current, play in the gear, the intervals of a K not shown) judges a fit of data without excitation."""
+    """Why a window does not excite: the moves that excite and the coherence that fell short, or how many Welch
+    segments the selection examined and why too few excite (the analysis' figures: :func:`segments_summary`), then
+    the clock's finding (a fact, not advice). The analysis' other reasons are left out: their advice (interference on
+    the phase current, play in the gear, the intervals of a K not shown) judges a fit of data without excitation."""
     clock = [r for r in doc["quality"]["reasons"] if r.startswith("clock")]
     excitation = doc.get("excitation")
     if excitation is None:  # no segment selection asked for: the coherence checks' own words
@@ -109,8 +110,16 @@ def not_excited_reasons(doc: dict[str, Any]) -> list[str]:
     moves = excitation["moves"]
     lo, hi = doc["options"]["band_hz"]
     excited = sum(m["excited"] for m in moves)
+    segments = [] if excitation["selection_applied"] else [selection_reason(excitation)]
     return [excitation_summary(excited, len(moves), (lo, hi), excitation["excited_fraction"], "window")
-            + _but(doc, excited), *clock]
+            + _but(doc, excited), *segments, *clock]
+
+
+def selection_reason(excitation: dict[str, Any]) -> str:
+    """How many Welch segments the analysis' segment selection examined and why too few excite, in its words
+    (:func:`analysis.segments_summary`), from the figures of a result's ``excitation``."""
+    return segments_summary(excitation["segments_excited"], excitation["segments"], excitation["segments_needed"],
+                            excitation["snr_limit"], excitation["snr_max"])
 
 
 def _write_result(path: Path, request: AnalysisRequest, outcome: Outcome) -> Outcome:

@@ -27,7 +27,7 @@ from acq import __version__
 from acq.recording.layout import utc_now_iso
 from acq.recording.reader import load
 from acq.recording.session import Session
-from acq.recording.storage import free_bytes, storage_error, write_text_atomically
+from acq.recording.storage import free_bytes, refused_write, storage_error, write_text_atomically
 from analysis import AnalysisRequest, CommandedProfile, Recording, Result, TwoMassParams, analyze, code_fingerprint
 from acqcore.errors import ConfigError, StorageError
 from drivers.base import limit_span_ns
@@ -216,6 +216,9 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     report_path = png_path if report and write and result is not None else None  # nothing to draw when not excited
     if write:
         try:
+            refused = refused_write(json_path.parent)
+            if refused is not None:  # before the room: a tiny read-only mount has none either, and read "disk full"
+                raise StorageError(f"{refused}: {json_path}")
             if report_path is not None and free_bytes(report_path.parent) < REPORT_ROOM_BYTES:
                 # before anything is written (no result without its report) and before Qt's PNG writer, whose libpng
                 # prints its own line on stderr when the disk fills under it

@@ -6,6 +6,7 @@ Layout (``format = "acq-session"``, ``format_version = 1``)::
 
     /                   attrs: format, format_version, session_id, created_utc, stopped_utc,
                                host_monotonic_ns_at_start, acq_version, status, stop_reason,
+                               current_samples, encoder_samples (-1 until the footer; absent in older files),
                                bench_json, profile_json, joint, operator, tags_json, origin_json,
                                host_clock_shared (both streams' host_ns on one host clock; absent in
                                older files: true for recordings, false for imports)
@@ -29,6 +30,12 @@ Layout (``format = "acq-session"``, ``format_version = 1``)::
                         the totals committed by each flush, written after the samples they count
 
 Integrity: every dataset carries HDF5 Fletcher32 checksums per chunk.
+
+A cut copy (a partial copy, a truncated download) keeps what lies before the cut. The writer creates every root
+attribute when it creates the file, so the footer (:func:`write_footer`, written by reopening the finished file)
+overwrites values in place instead of adding attributes: HDF5 keeps more than 8 in dense storage, whose index a
+new attribute rewrites at the end of the file (older files: a cut copy loses every root attribute). Only a
+footer string's new value may land at the end (:data:`FOOTER_TEXT`); the counts are numbers stored in place.
 """
 
 from __future__ import annotations
@@ -48,6 +55,10 @@ Status = Literal["recording", "complete", "interrupted", "failed"]
 EVENT_DTYPE = np.dtype([("host_ns", "<i8"), ("stream", "S16"), ("kind", "S16"), ("detail", "S240")])
 FLUSH_DTYPE = np.dtype([("host_ns", "<i8"), ("current_samples", "<i8"), ("current_blocks", "<i8"),
                         ("encoder_samples", "<i8"), ("events", "<i8")])
+#: The footer's counts before the footer is written: no count at all (0 would be one).
+NO_COUNT = -1
+#: Root attributes of the footer whose new value (a string: HDF5 stores it in a heap) may lie at the end of the file.
+FOOTER_TEXT = ("status", "stop_reason", "stopped_utc")
 #: The encoder columns a drive may not give (see the layout above).
 OPTIONAL_ENCODER = ("drive_time_s", "velocity_counts_per_s", "velocity_demand_counts_per_s")
 
@@ -83,8 +94,10 @@ def write_footer(f: h5py.File, status: Status, stop_reason: str, filled_optional
     for name in OPTIONAL_ENCODER:
         if name in f["encoder"] and name not in filled_optional:
             del f["encoder"][name]
-    f.attrs["status"] = status
-    f.attrs["stop_reason"] = stop_reason
-    f.attrs["stopped_utc"] = utc_now_iso()
-    f.attrs["current_samples"] = np.int64(f["current/blocks/count"][...].sum())
-    f.attrs["encoder_samples"] = np.int64(f["encoder/index"].shape[0])
+    # modify: the value overwritten where it is (assignment would add an attribute and delete the old one); the
+    # counts before the status, which tells a reader they are written
+    f.attrs.modify("current_samples", np.int64(f["current/blocks/count"][...].sum()))
+    f.attrs.modify("encoder_samples", np.int64(f["encoder/index"].shape[0]))
+    f.attrs.modify("stop_reason", stop_reason)
+    f.attrs.modify("stopped_utc", utc_now_iso())
+    f.attrs.modify("status", status)

@@ -102,9 +102,19 @@ class PendingColumns:
         self._used.clear()
         self.nbytes = 0
 
+    def _bytes_of(self, name: str) -> int:
+        """Bytes held for dataset ``name``."""
+        parts = self._parts.get(name, [])
+        used = self._used.get(name, 0)
+        return sum(part.nbytes for part in parts) + (used * self._buffers[name].itemsize if used else 0)
+
     def write_to(self, columns: dict[str, Column]) -> None:
+        """Append every held row to its dataset, the smallest first: a copy of the file cut short (a partial copy)
+        then still holds the block table and the encoder of the last commit before the cut, and its phase currents up
+        to the cut, where the order of the appends put the phases first and lost those with them."""
         self.nbytes = 0
-        for name in [*self._used, *(n for n in self._parts if n not in self._used)]:
+        names = [*self._used, *(n for n in self._parts if n not in self._used)]
+        for name in sorted(names, key=self._bytes_of):
             parts = self._parts.pop(name, [])
             used = self._used.pop(name, 0)  # taken before writing: an interrupted flush never repeats a part
             if used:

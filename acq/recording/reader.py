@@ -20,7 +20,7 @@ from pydantic import ValidationError
 
 from acq.recording.h5safe import open_read, superblock_eof
 from acq.recording.holes import Column, Span, current_rows, lost_spans, readable
-from acq.recording.layout import FLUSH_DTYPE, FORMAT, FORMAT_VERSION, OPTIONAL_ENCODER
+from acq.recording.layout import FLUSH_DTYPE, FOOTER_TEXT, FORMAT, FORMAT_VERSION, NO_COUNT, OPTIONAL_ENCODER
 from acq.recording.paths import require_session_file
 from acq.recording.session import CurrentData, EncoderData, Session
 from acq.recording.storage import cause_of
@@ -148,9 +148,9 @@ class _Reader:
 
 def _committed(f: h5py.File, reader: _Reader) -> dict[str, int] | None:
     """What the writer committed: the footer's counts, else the last ``/flushes`` row; None if neither exists."""
-    status = _attr(f.attrs.get("status"))
-    if status != "recording" and "current_samples" in f.attrs and "encoder_samples" in f.attrs:
-        return {"current_samples": int(f.attrs["current_samples"]), "encoder_samples": int(f.attrs["encoder_samples"])}
+    counts = [int(f.attrs.get(name, NO_COUNT)) for name in ("current_samples", "encoder_samples")]
+    if _attr(f.attrs.get("status")) != "recording" and min(counts) > NO_COUNT:
+        return {"current_samples": counts[0], "encoder_samples": counts[1]}
     if "flushes" not in f:
         return None
     flushes = reader.column("flushes", None)
@@ -297,13 +297,30 @@ def load(path: Path | str) -> Session:
         raise ConfigError(f"{p}: damaged, cannot be read ({why})") from None
 
 
-def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
+def _root_attrs(p: Path, f: h5py.File, notes: list[str]) -> dict[str, Any]:
+    """The root attributes; of a cut file, the footer's strings HDF5 put past the cut are left out and named in
+    ``notes`` ("file cut: … bytes, stop_reason lost"). Any other attribute unreadable: not a session to read."""
+    why = f"{notes[0]}, root attributes lost" if notes else "root attributes unreadable"
+    attrs: dict[str, Any] = {}
+    lost: list[str] = []
     try:
-        raw = dict(f.attrs.items())
+        names = list(f.attrs)
     except (OSError, RuntimeError, KeyError):
-        why = f"{notes[0]}, root attributes lost" if notes else "root attributes unreadable"
         raise ConfigError(f"{p}: not a readable HDF5 session file ({why})") from None
-    attrs = {k: _attr(v) for k, v in raw.items()}
+    for name in names:
+        try:
+            attrs[name] = _attr(f.attrs[name])
+        except (OSError, RuntimeError, KeyError):
+            if not notes or name not in FOOTER_TEXT:
+                raise ConfigError(f"{p}: not a readable HDF5 session file ({why})") from None
+            lost.append(name)
+    if lost:
+        notes[0] += f", {' and '.join(lost)} lost"
+    return attrs
+
+
+def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
+    attrs = _root_attrs(p, f, notes)
     if attrs.get("format") != FORMAT:
         raise ConfigError(f"{p}: not an acq session (format attribute is {attrs.get('format')!r})")
     try:
@@ -324,6 +341,6 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
     current = _read_current(reader, committed, damage)
     encoder = _read_encoder(reader, committed, damage)
     events = _read_events(reader, committed, damage)
-    lines = tuple(_span(*span) for span in damage) if damage else tuple(notes)
+    lines = (*notes, *(_span(*span) for span in damage))
     return Session(path=p, attrs=attrs, bench=bench, profile=profile, current=current, encoder=encoder,
                    events=events, damage=lines, damage_spans=tuple(span[:3] for span in damage))

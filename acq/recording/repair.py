@@ -1,4 +1,5 @@
-"""Rewrite a session its recorder left unfinished (killed, status ``recording``) into a clean file."""
+"""Rewrite a session its recorder left unfinished (killed, status ``recording``) into a clean file; copy the intact
+part of a damaged one (a cut copy, a chunk that fails its checksum) into a new session beside it."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ from typing import Any
 import h5py
 import numpy as np
 
-from acq.recording.h5safe import open_read
+from acq.recording.h5safe import open_read, superblock_eof
 from acq.recording.layout import EVENT_DTYPE, LIBVER, OPTIONAL_ENCODER, write_footer
 from acq.recording.reader import load
 from acq.recording.session import Session
@@ -27,17 +28,50 @@ def repair(path: Path | str, stop_reason: str) -> Session:
     session = load(p)
     if session.damage:
         stop_reason = f"{stop_reason}; kept the intact part ({'; '.join(session.damage)})"
-    with open_read(p) as src:
+    return _copy(p, session, p, stop_reason)
+
+
+def recovered_path(path: Path | str) -> Path:
+    """Where :func:`recover` writes the intact part of ``path``: ``<name>.recovered.h5`` beside it."""
+    p = Path(path)
+    return p.with_name(f"{p.stem}.recovered{p.suffix}")
+
+
+def recover(path: Path | str) -> Session:
+    """Copy the intact part of the damaged session ``path`` into :func:`recovered_path` (replaced if it exists),
+    status ``interrupted``, the loss in its stop reason; return the copy as read. ``path`` itself is not written.
+
+    The stop reason says what was lost and what is kept, e.g. "recovered from a file cut at 1 279 293 of 2 558 587
+    bytes: 4.8 s of current, 5.5 s of encoder kept (was complete: recorded 10 s)".
+    """
+    p = Path(path)
+    session = load(p)
+    c, e = session.current, session.encoder
+    kept = f"{c.sample_count / c.rate_hz:.1f} s of current, {e.index.size * e.period_s:.1f} s of encoder kept"
+    size, eof = p.stat().st_size, superblock_eof(p)
+    if eof is not None and size < eof:
+        what = f"a file cut at {size:,} of {eof:,} bytes".replace(",", " ")
+    else:
+        what = f"a damaged file ({'; '.join(session.damage)})"
+    was = f"{session.status}: {session.meta.stop_reason}" if session.meta.stop_reason else session.status
+    reason = f"recovered from {what}: {kept}" + (f" (was {was})" if was else "")
+    return _copy(p, session, recovered_path(p), reason)
+
+
+def _copy(source: Path, session: Session, target: Path, stop_reason: str) -> Session:
+    """Write ``session`` (read from ``source``) into ``target`` through a temp file, status ``interrupted``; read it
+    back. A write failure leaves ``target`` as it was and no temp file."""
+    with open_read(source) as src:
         group_attrs = {name: dict(src[name].attrs) for name in ("current", "encoder")}
-    with atomic_path(p) as tmp:
+    with atomic_path(target) as tmp:
         try:
             with h5py.File(tmp, "w", libver=LIBVER) as dst:
                 _write_copy(dst, session, stop_reason, group_attrs)
         except OSError:
             raise
         except Exception as e:  # noqa: BLE001 - h5py reports write errors as RuntimeError too
-            raise storage_error(e, p) from None
-    return load(p)
+            raise storage_error(e, target) from None
+    return load(target)
 
 
 def _write_copy(dst: h5py.File, session: Session, stop_reason: str, group_attrs: dict[str, dict[str, Any]]) -> None:

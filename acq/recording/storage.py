@@ -127,13 +127,16 @@ def atomic_path(path: Path | str) -> Iterator[Path]:
     what the block wrote is on the disk before the rename, the rename is on it when this returns).
 
     On any exception the temp file is removed; an :class:`OSError` becomes a :class:`StorageError`
-    naming ``path``. The temp name is unique per writer (two writers never share one).
+    naming ``path``. The temp name is unique per writer (two writers never share one). A folder that exists but
+    takes no new file (``/proc``: ENOENT, which elsewhere means the folder vanished) is "cannot write a file there".
     """
     target = Path(path)
     try:
         fd, name = tempfile.mkstemp(dir=target.parent, prefix=f".{target.name}.",
                                    suffix=f".tmp{target.suffix}")  # the suffix kept: writers infer the format
     except OSError as e:
+        if isinstance(e, FileNotFoundError) and target.parent.is_dir():
+            raise StorageError(f"cannot write a file there: {target}") from None
         raise storage_error(e, target) from None
     os.close(fd)
     tmp = Path(name)
@@ -143,7 +146,12 @@ def atomic_path(path: Path | str) -> Iterator[Path]:
         replace_durably(tmp, target)
     except OSError as e:
         tmp.unlink(missing_ok=True)
-        if e.errno is None:  # a library's own "could not write" (e.g. Qt's image writer): say why if the disk is full
+        if e.errno is None:  # a library's own "could not write" (e.g. Qt's image writer): say why — a folder that
+            # turned read-only (a file system remounted ro on an error) before a full one: a tiny read-only mount has
+            # next to no free bytes too, and was called "disk full"
+            refused = refused_write(target.parent)
+            if refused is not None:
+                raise StorageError(f"{refused}: {target}") from None
             e = OSError(errno.ENOSPC, "") if _nearly_full(target.parent) else OSError(errno.EIO, "write failed")
         raise storage_error(e, target) from None
     except BaseException:

@@ -32,8 +32,8 @@ import numpy as np
 
 from acq import __version__
 from acq.recording.h5safe import abandon
-from acq.recording.layout import (EVENT_DTYPE, FLUSH_DTYPE, FORMAT, FORMAT_VERSION, LIBVER, OPTIONAL_ENCODER, Status,
-                                  committed_rows, utc_now_iso, write_footer)
+from acq.recording.layout import (EVENT_DTYPE, FLUSH_DTYPE, FORMAT, FORMAT_VERSION, LIBVER, NO_COUNT, OPTIONAL_ENCODER,
+                                  Status, committed_rows, utc_now_iso, write_footer)
 from acq.recording.pending import Column, PendingColumns
 from acq.recording.storage import cause_of, free_bytes, storage_error, sync_file, sync_folder
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
@@ -157,6 +157,8 @@ class SessionWriter:
                 "tags_json": json.dumps(tags or {}),
                 "origin_json": json.dumps(origin or {"kind": "recorded"}),
                 "host_clock_shared": bool(host_clock_shared),
+                "current_samples": np.int64(NO_COUNT),  # every attribute now: the footer overwrites them in place
+                "encoder_samples": np.int64(NO_COUNT),
             }
         )
         cur = f.create_group("current")

@@ -19,7 +19,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
-from rich.console import Console, ConsoleOptions, RenderResult
+from rich.console import Console, ConsoleOptions, RenderableType, RenderResult
 from rich.cells import cell_len
 from rich.markup import escape
 from rich.measure import Measurement
@@ -140,12 +140,13 @@ class FittedTable:
                           style=self.row_styles[i] if self.row_styles else None, end_section=i in self.section_ends)
         return table
 
-    def fitted(self, width: int) -> Table:
-        """The widest layout whose table fits ``width`` columns (the narrowest if none does)."""
-        for columns in self.layouts():
-            if needed_width(columns) <= width:
-                break
-        return self.build(columns)
+    def fitting_layout(self, width: int) -> list[Column] | None:
+        """The widest layout whose table fits ``width`` columns, None if none does."""
+        return next((columns for columns in self.layouts() if needed_width(columns) <= width), None)
+
+    def fitted(self, width: int) -> RenderableType:
+        """The table of the widest layout that fits ``width`` columns (the narrowest if none does)."""
+        return self.build(self.fitting_layout(width) or list(self.layouts())[-1])
 
     def __rich_console__(self, console: Console, options: ConsoleOptions) -> RenderResult:
         yield self.fitted(options.max_width)

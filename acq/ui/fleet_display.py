@@ -18,8 +18,9 @@ import click
 from rich.console import Console
 
 from acq.monitoring.catalogue import Entry
-from acq.ui.display import Column, FittedTable, start_times
+from acq.ui.display import Column, start_times
 from acq.ui.options import CatalogueLocation, PngPath, alarm_rule_options
+from acq.ui.records import RecordTable
 from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet, session_start
 from acq.monitoring.trend import EXIT_ALARM
 from acq.ui.values import alarm_rules_line, format_value
@@ -38,13 +39,14 @@ _SESSION_MARKS = {"judged": ("o", "#202020", None, "session judged (its ΔK colo
                   "not judged": ("o", None, "#202020", "session not judged (not excited, failed, before the baseline)")}
 
 
-def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> FittedTable:
+def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> RecordTable:
     """One row per joint, worst first: robot/joint, latest K and its 95 % interval, ΔK, baseline, last session,
     sessions excited / analysed in the last day, state.
 
     At 80 columns the interval is relative (± %) and the time short (month-day hour:minute), the state wraps at
     spaces; where that is not enough (a source column) the baseline (ΔK says how far K is from it), then the 24 h
-    counts are left out, and the caption names them.
+    counts are left out, and the caption names them. Narrower than that (about 60 columns) each joint is a block of
+    "header: value" lines (:class:`RecordTable`).
     """
     alarms = sum(s.state == "alarm" for s in statuses)
     title = (f"fleet — {len(statuses)} joint{'s' if len(statuses) != 1 else ''}"
@@ -76,7 +78,7 @@ def fleet_table(statuses: Sequence[JointStatus], stale_days: float) -> FittedTab
     if statuses:
         caption.append(alarm_rules_line([(s.trend.joint, s.trend.rules_source) for s in statuses]))
     caption += [f"{s.trend.joint}: {s.trend.baseline_warning}" for s in statuses if s.trend.baseline_warning]
-    return FittedTable(title, columns, caption, row_styles=[_STYLES[s.state] for s in statuses])
+    return RecordTable(title, columns, caption, row_styles=[_STYLES[s.state] for s in statuses])
 
 
 def _relative_half_width(entry: Entry | None) -> str:

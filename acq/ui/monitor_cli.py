@@ -56,6 +56,7 @@ def status_table(st: MonitorStatus) -> Table:
         ("baseline K N·m/rad", format_value(st.baseline_K, ".1f")),
         ("excited share: last window · all windows", f"{_pct(st.last_excited_fraction)} · "
                                                      f"{_pct(st.program_excited_fraction)}"),
+        *([("segment selection of the last window", escape(st.last_segments))] if st.last_segments else []),
         ("trend state", f"[bold red]{st.state}[/]" if st.state == "alarm" else st.state),
         ("alarms raised", str(st.alarms) + (f" · [bold red]{escape(st.alarm_command_failure)}[/]"
                                             if st.alarm_command_failure else "")),
@@ -180,7 +181,8 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
                 + (f" in this run ({st.in_folder} in the folder)" if st.resumed else "")
                 + (f" = {filed_parts(st)}" if st.filed_total else "")
                 + (f", {st.not_captured} not captured (disk budget)" if st.not_captured else "")
-                + f", excited {_pct(st.last_excited_fraction)} of the last window, last K {last_k}, "
+                + f", excited {_pct(st.last_excited_fraction)} of the last window"
+                + (f" ({st.last_segments})" if st.last_segments else "") + f", last K {last_k}, "
                 f"ΔK {format_value(st.change_pct, '+.1f')} %, {st.state}"
                 + (" (baseline unstable)" if st.baseline_warning else "") + f", {st.disk_bytes / 1e6:.1f} MB"
                 + (f" — {st.message}" if st.message else ""))

@@ -45,16 +45,21 @@ def summary_table(checks: list[Check]) -> Table:
 
 
 def next_step(checks: list[Check], bench_path: Path | None, profile_name: str | None) -> str:
-    """What to do next, plain text: the first failed check's fix, or the command that records on this bench (printed
-    under the summary at the terminal's width: as the table's caption it wrapped to the table's); ``profile_name``
-    None: a bench that listens, recorded passively."""
+    """What to do next, plain text: the first failed check's fix, or the command that records on this bench, with the
+    warnings named and what each leaves in doubt (:attr:`Check.affects`: a ⚠ does not stop the bench, and "ready"
+    alone under a ⚠ read as a contradiction). Printed under the summary at the terminal's width (as the table's
+    caption it wrapped to the table's); ``profile_name`` None: a bench that listens, recorded passively."""
     failed = next((c for c in checks if c.status == "fail"), None)
     if failed is not None:
         return f"stopped at {failed.stage} · {failed.name}: {failed.fix}"
+    warned = [c for c in checks if c.status == "warn"]
+    ready = "the bench is ready" if not warned else (
+        f"the bench is ready, with {len(warned)} warning{'s' * (len(warned) > 1)} ("
+        + "; ".join(f"{c.name}: {c.affects}" if c.affects else c.name for c in warned) + ")")
     bench = "" if bench_path is None else f" --bench {bench_path}"
     if profile_name is None:
-        return f"the bench is ready: acq monitor{bench}, or acq record{bench} --duration 10"
-    return f"the bench is ready: acq record --profile {profile_name}{bench}"
+        return f"{ready}: acq monitor{bench}, or acq record{bench} --duration 10"
+    return f"{ready}: acq record --profile {profile_name}{bench}"
 
 
 def selftest_json(checks: list[Check], bench_path: str) -> dict[str, object]:

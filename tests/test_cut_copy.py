@@ -1,0 +1,212 @@
+"""A finished session file cut short (a partial copy, a truncated download): the samples whose chunks lie wholly
+before the cut are kept, the loss is stated, nothing after the cut is invented; ``acq check --repair`` copies them
+into a new session beside it. A file of an older acq (its root attributes past the cut) stays refused in one line."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import re
+import shutil
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import pytest
+
+import acq.recording.recorder
+from acq.config import load_bench, load_profile
+from acq.recording.reader import load
+from acq.recording.recorder import Recorder
+from acq.recording.session import Session
+from drivers.registry import open_bench
+from tests.helpers import run_cli
+
+RATE_HZ = 25600
+ENCODER_HZ = 1000
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A 10 s session of the simulated bench (--fast) committed 64 KiB at a time instead of 2 MiB: a --fast bench
+    delivers 10 s in about 1 s of wall time, so at 2 MiB it commits 2–3 times; in real time the recorder commits every
+    0.5 s (20 times), and these ~40 small commits interleave the columns' chunks through the file as that does."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(acq.recording.recorder, "FLUSH_BYTES", 1 << 16)
+        bench = load_bench()
+        current, drive = open_bench(bench, fast=True)
+        result = Recorder(bench, load_profile("triangle_0.2s"), current, drive,
+                          tmp_path_factory.mktemp("rec"), 10.0).run()
+    with h5py.File(result.path, "r") as f:
+        assert f["flushes"].shape[0] >= 20
+    return result.path
+
+
+@pytest.fixture(scope="module")
+def intact(recorded: Path) -> Session:
+    return load(recorded)
+
+
+class _ReadsFile(io.FileIO):
+    """A file opened for reading that remembers the furthest byte HDF5 read from it (``end``)."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(path, "r")
+        self.end = 0
+
+    def readinto(self, buffer: Any) -> int | None:
+        start = self.tell()
+        self.end = max(self.end, start + len(buffer))
+        return super().readinto(buffer)
+
+
+def _rows_before(path: Path, cut: int) -> dict[str, int]:
+    """Rows of each dataset of ``path`` up to its first chunk that does not lie wholly before byte ``cut``, or whose
+    place HDF5 finds only past it (its chunk-index entry: measured as the furthest byte HDF5 reads to find the chunk,
+    and every chunk before it)."""
+    fh = _ReadsFile(path)
+    rows: dict[str, int] = {}
+    with h5py.File(fh, "r", rdcc_nbytes=0) as f:
+        names: list[str] = []
+        f.visititems(lambda name, obj: names.append(name) if isinstance(obj, h5py.Dataset) else None)
+        for name in names:
+            fh.end, ds, rows[name] = 0, f[name], 0
+            for start in range(0, ds.shape[0], ds.chunks[0]):
+                info = ds.id.get_chunk_info_by_coord((start,))
+                if max(fh.end, info.byte_offset + info.size) > cut:
+                    break
+                rows[name] = min(start + ds.chunks[0], ds.shape[0])
+    return rows
+
+
+def _kept_before(path: Path, cut: int) -> tuple[int, int]:
+    """(current, encoder) samples of the intact file ``path`` a copy cut at byte ``cut`` holds whole: a current
+    sample needs its chunk in every phase and its DAQ read's row in each block-table column; an encoder sample its
+    chunk in every column."""
+    rows = _rows_before(path, cut)
+    with h5py.File(path, "r") as f:
+        phases = min(rows[f"current/{name}"] for name in f["current"] if name.endswith("_A"))
+        reads = min(rows[f"current/blocks/{name}"] for name in ("count", "first_index", "host_ns"))
+        ends = np.cumsum(f["current/blocks/count"][:reads])
+        encoder = min(rows[f"encoder/{name}"] for name in f["encoder"])
+    current = int(ends[ends <= phases][-1]) if np.any(ends <= phases) else 0
+    return current, encoder
+
+
+def _cut_copy(src: Path, dst: Path, percent: int) -> tuple[int, int]:
+    """Copy ``src`` to ``dst`` cut to ``percent`` % of its bytes; (bytes kept, bytes of the whole)."""
+    shutil.copyfile(src, dst)
+    size = dst.stat().st_size
+    with dst.open("r+b") as fh:
+        fh.truncate(size * percent // 100)
+    return size * percent // 100, size
+
+
+def _bytes(n: int) -> str:
+    return f"{n:,}".replace(",", " ")
+
+
+def _assert_prefix_of(s: Session, intact: Session, current: int, encoder: int) -> None:
+    """``s`` holds exactly the first ``current`` / ``encoder`` samples of ``intact``, value for value."""
+    assert (s.current.sample_count, s.encoder.index.size) == (current, encoder)
+    for ch, values in s.current.phases_a.items():
+        assert np.array_equal(values, intact.current.phases_a[ch][:current])
+    reads = s.current.block_count.size
+    assert int(s.current.block_count.sum()) == current
+    for name in ("block_first_index", "block_count", "block_host_ns"):
+        assert np.array_equal(getattr(s.current, name), getattr(intact.current, name)[:reads])
+    for name in ("position_counts", "index", "host_ns", "drive_time_s", "velocity_demand_counts_per_s"):
+        assert np.array_equal(getattr(s.encoder, name), getattr(intact.encoder, name)[:encoder])
+
+
+@pytest.mark.parametrize("percent", [10, 30, 50, 90])
+def test_a_cut_copy_keeps_the_samples_before_the_cut_and_says_what_is_lost(
+        recorded: Path, intact: Session, tmp_path: Path, percent: int, capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: every cut was refused whole, 'not a readable HDF5 session file (file cut: …, root attributes lost)'."""
+    path = tmp_path / "cut.h5"
+    cut, size = _cut_copy(recorded, path, percent)
+    current, encoder = _kept_before(recorded, cut)
+    assert current < 10 * RATE_HZ and encoder < 10 * ENCODER_HZ
+    if percent >= 30:  # what the test is about: a real part of both streams kept
+        assert current >= (percent - 20) / 100 * 10 * RATE_HZ and encoder >= (percent - 20) / 100 * 10 * ENCODER_HZ
+    s = load(path)
+    _assert_prefix_of(s, intact, current, encoder)
+    assert re.fullmatch(rf"file cut: {_bytes(cut)} of {_bytes(size)} bytes"
+                        r"(, (status|stop_reason|stopped_utc)( and (status|stop_reason|stopped_utc))* lost)?",
+                        s.damage[0])
+    assert s.damage[1:] == (f"current: samples {_bytes(current)}–{_bytes(10 * RATE_HZ - 1)} unreadable",
+                            f"encoder: samples {_bytes(encoder)}–{_bytes(10 * ENCODER_HZ - 1)} unreadable")
+    run = run_cli(capsys, "check", str(path))
+    assert run.code == 1
+    assert "".join(f"{path}: {line}\n" for line in s.damage) in run.out
+    assert run.err == (f"acq: damaged: {path} ({'; '.join(s.damage)}) — the intact part holds {current} current and "
+                       f"{encoder} encoder samples (acq analyze --partial uses it; acq check --repair copies it into "
+                       f"{tmp_path / 'cut.recovered.h5'})\n")
+
+
+@pytest.mark.parametrize("percent", [30, 90])
+def test_check_repair_copies_the_samples_before_the_cut_into_a_new_session_and_leaves_the_cut_file_alone(
+        recorded: Path, intact: Session, tmp_path: Path, percent: int, capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "cut.h5"
+    cut, size = _cut_copy(recorded, path, percent)
+    before = hashlib.sha256(path.read_bytes()).hexdigest()
+    current, encoder = _kept_before(recorded, cut)
+    run = run_cli(capsys, "check", "--repair", str(path))
+    assert run.code == 0, run.err
+    copy_path = tmp_path / "cut.recovered.h5"
+    copy = load(copy_path)
+    was = load(path).meta
+    reason = (f"recovered from a file cut at {_bytes(cut)} of {_bytes(size)} bytes: {current / RATE_HZ:.1f} s of "
+              f"current, {encoder / ENCODER_HZ:.1f} s of encoder kept (was complete"
+              + (f": {was.stop_reason})" if was.stop_reason else ")"))
+    assert run.out.endswith(f"{path}: intact part copied into {copy_path}: {current} current and {encoder} encoder "
+                            f"samples, status interrupted, stop reason: {reason}\n")
+    assert copy.damage == () and copy.status == "interrupted" and copy.meta.stop_reason == reason
+    assert copy.meta.session_id == intact.meta.session_id
+    _assert_prefix_of(copy, intact, current, encoder)
+    assert hashlib.sha256(path.read_bytes()).hexdigest() == before  # the cut file is not written
+    again = run_cli(capsys, "check", str(copy_path))
+    assert again.code == 0 and "nothing to repair" in again.out
+
+
+def test_a_cut_copy_is_analysed_with_partial_only(recorded: Path, tmp_path: Path,
+                                                 capsys: pytest.CaptureFixture[str]) -> None:
+    path = tmp_path / "cut.h5"
+    _cut_copy(recorded, path, 90)
+    refused = run_cli(capsys, "analyze", str(path), "--no-report")
+    assert refused.code == 2
+    assert refused.err.startswith(f"acq: error: {path}: damaged (file cut: ")
+    assert refused.err.endswith(" — run acq check, or use --partial to analyse the intact part\n")
+    run = run_cli(capsys, "analyze", str(path), "--partial", "--no-report", "--json")
+    assert run.code in (0, 1), run.err
+    assert json.loads(run.out)["partial"] is True
+
+
+def _older_footer(path: Path) -> None:
+    """Rewrite ``path``'s footer as acq wrote it before the counts were created with the file: the counts added
+    as new attributes and every footer attribute assigned (HDF5 then rewrites the dense-attribute index at the end)."""
+    with h5py.File(path, "r+", libver=("v110", "latest")) as f:
+        counts = {name: f.attrs[name] for name in ("current_samples", "encoder_samples")}
+        for name in counts:
+            del f.attrs[name]
+        for name in ("status", "stop_reason", "stopped_utc"):
+            f.attrs[name] = f.attrs[name]
+        f.attrs.update(counts)
+
+
+@pytest.mark.parametrize("percent", [50, 90])
+def test_a_cut_copy_of_an_older_file_is_refused_in_one_line(recorded: Path, tmp_path: Path, percent: int,
+                                                            capsys: pytest.CaptureFixture[str]) -> None:
+    older = tmp_path / "older.h5"
+    shutil.copyfile(recorded, older)
+    _older_footer(older)
+    assert load(older).damage == ()
+    path = tmp_path / "cut.h5"
+    cut, size = _cut_copy(older, path, percent)
+    for command in ("check", "info"):
+        run = run_cli(capsys, command, str(path))
+        assert run.code == 2
+        assert run.err == (f"acq: error: {path}: not a readable HDF5 session file (file cut: {_bytes(cut)} of "
+                           f"{_bytes(size)} bytes, root attributes lost)\n")
