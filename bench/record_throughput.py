@@ -62,6 +62,20 @@ the current's chunk length (1×, 2×, 5× 0.1 s) changes nothing (per-byte costs
 this file format: floor + the writing alone + the handoff ≈ 290 + 18 + 4 ms, 0.93 per CPU second with no interplay at
 all; the interplay of three threads on two cores costs 15–25 ms more, and nothing tried removes it.
 
+Session 12 (2026-11-30): durable commits (each commit fdatasyncs the file after its samples and after its ``/flushes``
+row; the layout, the folder and the footer synced once): a 10 s ``--fast`` session makes 17 syncs, ≈ 200 ms of wall
+waiting on this machine's virtio disk (157–276 ms over 7 sessions) but 4–6 ms of CPU in them; the recording thread
+overlaps that wait with the readers, all but the last commit's two syncs and the footer's (≈ 35 ms after the readers
+are done). Five pairs of ``--repeat 7 --realtime-seconds 1`` interleaved with main frozen at 4dd6af4 (this branch is
+that plus the syncs), load 8.6–9.7, new / old per pair, medians (ranges): the recorder's ``--fast`` rate per wall
+second 0.97 (0.92–1.42: ≈ 3 % slower, inside the load's spread), per CPU second 0.98 (0.97–1.02); recorder / sim
+alone per CPU second 1.00 / 0.99 (one thread / a thread per stream); the recording thread's own rate 0.90 (39.6 →
+34.3 M samples/s), the writing alone 0.78 (67.2 → 52.2 M samples/s: the writeback the syncs start is charged to it,
+work the kernel's flusher thread would do later otherwise); real time 0.090 → 0.097 CPU s per recorded second (1.09,
+1.03–1.12, higher in all five pairs; a 1 s session carries the once-per-session syncs). An earlier eight pairs
+against a main that moved during the runs (load 10–15) gave per wall 1.02, per CPU 0.99 / 0.98, the thread 0.85, the
+writing alone 0.74, real time 0.098 → 0.096.
+
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
 (7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it

@@ -23,7 +23,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.install import install_hint
-from acq.recording.storage import refused_write
+from acq.recording.storage import make_folders, refused_write
 from acqcore.errors import ConfigError, StorageError
 
 #: Seconds a writer waits for another process's lock (SQLite's busy timeout, PostgreSQL's lock_timeout).
@@ -83,7 +83,7 @@ class SQLiteDialect:
     def connect(self, path: Path) -> sqlite3.Connection:
         """Open (create) the file; raises :class:`ConfigError` naming it when that fails."""
         try:
-            path.parent.mkdir(parents=True, exist_ok=True)
+            make_folders(path.parent)
             db = sqlite3.connect(path, timeout=BUSY_TIMEOUT_S, isolation_level=None)
         except (OSError, sqlite3.Error) as e:
             raise open_error(path, e, "cannot open the catalogue") from None

@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from acq.recording.storage import make_folders
 from acqcore.errors import ConfigError
 
 #: The file whose flock makes a folder one monitor's (:func:`folder_lock`).
@@ -25,7 +26,7 @@ def folder_lock(folder: Path) -> Iterator[None]:
     a file no longer in the folder, so it lets it go and takes the path's file anew — then two monitors can never
     each hold a lock on a different file of the same folder.
     """
-    folder.mkdir(parents=True, exist_ok=True)
+    make_folders(folder)
     path = folder / LOCK_NAME
     while True:
         fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)

@@ -36,7 +36,7 @@ from acq.offline.analyze import sha256_of
 from acq.offline.export_metadata import metadata_path, metadata_text
 from acq.recording.reader import load
 from acq.recording.session import Session
-from acq.recording.storage import WRITE_FAILURES, atomic_path, storage_error, write_text_synced
+from acq.recording.storage import WRITE_FAILURES, atomic_path, make_folders, storage_error
 from acqcore.errors import ConfigError
 
 PHASE_COLUMNS = ("i_a", "i_b", "i_c")
@@ -53,7 +53,7 @@ def _exact(values: np.ndarray) -> list[str]:
 def _write_columns(path: Path, columns: dict[str, list[str]]) -> None:
     """Write ``name -> formatted cells`` as a CSV."""
     body = "\n".join(map(",".join, zip(*columns.values())))
-    write_text_synced(path, ",".join(columns) + "\n" + body + "\n")
+    path.write_text(",".join(columns) + "\n" + body + "\n", encoding="utf-8")
 
 
 @contextmanager
@@ -111,7 +111,7 @@ def export_csv(session_path: Path, out_dir: Path, *, force: bool = False, partia
     if existing and not force:
         raise ConfigError(f"{existing[0]}: exists (not overwritten; --force replaces it)")
     try:
-        out_dir.mkdir(parents=True, exist_ok=True)
+        make_folders(out_dir)
     except OSError as e:
         if e.errno in WRITE_FAILURES:  # read-only, full, no permission: a failed write named by the folder asked for
             raise storage_error(e, out_dir) from None
@@ -133,8 +133,8 @@ def export_csv(session_path: Path, out_dir: Path, *, force: bool = False, partia
         with _failure_named(encoder_path):
             _write_columns(tmp_encoder, columns)
         with _failure_named(meta_path):
-            write_text_synced(tmp_meta, metadata_text(session, (current_path.name, sha256_of(tmp_current)),
-                                                      (encoder_path.name, sha256_of(tmp_encoder))))
+            tmp_meta.write_text(metadata_text(session, (current_path.name, sha256_of(tmp_current)),
+                                              (encoder_path.name, sha256_of(tmp_encoder))), encoding="utf-8")
     left_out = tuple(name for name in NOT_EXPORTED if getattr(enc, name, None) is not None)
     return targets, left_out, _missing_text(session, meta_path)
 

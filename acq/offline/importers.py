@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import os
 import uuid
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
@@ -38,7 +37,7 @@ from acq.offline.export_metadata import ExportMetadata, read_metadata
 from acq.offline.import_files import (CurrentTable, EncoderTable, host_ns, read_current_csv, read_current_tdms,
                                       read_encoder_csv)
 from acq.recording.writer import SessionWriter
-from acq.recording.storage import WRITE_FAILURES, storage_error
+from acq.recording.storage import WRITE_FAILURES, make_folders, replace_durably, storage_error
 from drivers.base import CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from acqcore.errors import ConfigError, StorageError
@@ -229,7 +228,7 @@ def _make_folder(out: Path) -> None:
     """Make the folder of the session file ``out`` (and those above it) if missing, as ``acq record --out`` and
     ``acq export --csv`` do; a folder the storage refuses is a failed write, any other failure bad input."""
     try:
-        out.parent.mkdir(parents=True, exist_ok=True)
+        make_folders(out.parent)
     except OSError as e:
         if e.errno in WRITE_FAILURES:  # read-only, full, no permission
             raise storage_error(e, out.parent) from None
@@ -302,7 +301,7 @@ def _import(current_path: Path, encoder_path: Path, bench: Bench, profile: Profi
                       + (f"; {incomplete}" if incomplete else ""))
         if writer.failure is not None:
             raise writer.failure
-        os.replace(tmp, out)
+        replace_durably(tmp, out)
     except StorageError as e:  # named by the file asked for; the half-written temp file is removed below
         raise StorageError(str(e).split(" — ")[0].replace(str(tmp), str(out))) from None
     except OSError as e:

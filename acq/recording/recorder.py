@@ -31,7 +31,7 @@ from drivers.base import CurrentSource, CurrentSourceInfo, Drive, DriveInfo, Enc
 from drivers.config import Bench, Profile
 from drivers.limits import refuse_beyond_limits
 from drivers.motion import with_dither_seed
-from acq.recording.storage import WRITE_FAILURES, storage_error
+from acq.recording.storage import WRITE_FAILURES, make_folders, storage_error
 from acqcore.errors import AcqError, ConfigError, DeviceError
 
 FLUSH_INTERVAL_S = 0.5
@@ -191,7 +191,7 @@ class Recorder:
         if self._writer is not None:
             return self._writer
         try:
-            self.out_dir.mkdir(parents=True, exist_ok=True)
+            make_folders(self.out_dir)
             for _ in range(100):  # another recorder may take the name between the check and the create
                 path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
                 try:

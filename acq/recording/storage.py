@@ -1,9 +1,15 @@
-"""Writing files so that a failed write is a failure: named, one line, no temp file left behind.
+"""Writing files so that a failed write is a failure: named, one line, no temp file left behind, and durable.
 
 Every output of acq (result JSON, report PNG, CSV export, imported session) is written to a temp
 file in the destination folder and renamed over the destination only when complete, so a reader
 never sees half a file; on any error the temp file is removed and a :class:`StorageError` names
 the destination and the cause ("disk full: /data/x.result.json").
+
+Durable means on the disk, not only in the kernel's page cache: a power cut or a kernel crash loses what a closed
+file or a rename left there, in any order. So the temp file's data is synced before the rename and its folder after
+it (a new name is durable only once the folder holding it is synced), and a folder acq makes has its parent synced
+(:func:`make_folders`). A failed sync is a failed write ("I/O error: <file>"): on Linux the pages it could not write
+may already be dropped from the cache, so retrying it proves nothing.
 """
 
 from __future__ import annotations
@@ -78,9 +84,47 @@ def _nearly_full(folder: Path) -> bool:
         return False
 
 
+def sync_file(path: Path | str) -> None:
+    """Make the data and size of the file at ``path`` durable (fsync through a descriptor of its own: Linux syncs
+    the inode's pages whichever descriptor wrote them)."""
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def sync_folder(folder: Path | str) -> None:
+    """Make the names created, renamed or removed in ``folder`` durable (fsync of the folder)."""
+    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+def make_folders(folder: Path | str) -> None:
+    """``mkdir -p folder`` whose new folders are durable: each one made has the folder holding it synced.
+    Raises the :class:`OSError` of ``mkdir`` or of a sync as it is (callers name the folder)."""
+    target = Path(folder)
+    missing = [p for p in (target, *target.parents) if not p.exists()][::-1]  # outermost first
+    target.mkdir(parents=True, exist_ok=True)
+    for made in missing:
+        sync_folder(made.parent)
+
+
+def replace_durably(tmp: Path | str, target: Path | str) -> None:
+    """Rename the complete file ``tmp`` over ``target`` so that a power cut leaves either the old ``target`` or the
+    whole new one: ``tmp``'s data synced before the rename, the folder after it. Raises the :class:`OSError` as is."""
+    sync_file(tmp)
+    os.replace(tmp, target)
+    sync_folder(Path(target).parent)
+
+
 @contextmanager
 def atomic_path(path: Path | str) -> Iterator[Path]:
-    """Yield a temp path beside ``path``; rename it to ``path`` when the block succeeds.
+    """Yield a temp path beside ``path``; rename it to ``path`` when the block succeeds (:func:`replace_durably`:
+    what the block wrote is on the disk before the rename, the rename is on it when this returns).
 
     On any exception the temp file is removed; an :class:`OSError` becomes a :class:`StorageError`
     naming ``path``. The temp name is unique per writer (two writers never share one). A folder that exists but
@@ -99,7 +143,7 @@ def atomic_path(path: Path | str) -> Iterator[Path]:
     try:
         yield tmp
         os.chmod(tmp, 0o644)
-        os.replace(tmp, target)
+        replace_durably(tmp, target)
     except OSError as e:
         tmp.unlink(missing_ok=True)
         if e.errno is None:  # a library's own "could not write" (e.g. Qt's image writer): say why — a folder that
@@ -122,15 +166,7 @@ def remove_temp_files(path: Path | str) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def write_text_synced(path: Path | str, text: str) -> None:
-    """Write ``text`` (UTF-8) to ``path`` and flush it to the disk (what an :func:`atomic_path` block writes)."""
-    with Path(path).open("w", encoding="utf-8") as f:
-        f.write(text)
-        f.flush()
-        os.fsync(f.fileno())
-
-
 def write_text_atomically(path: Path | str, text: str) -> None:
     """Write ``text`` (UTF-8) to ``path`` through a temp file; see :func:`atomic_path`."""
     with atomic_path(path) as tmp:
-        write_text_synced(tmp, text)
+        tmp.write_text(text, encoding="utf-8")

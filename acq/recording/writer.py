@@ -5,6 +5,13 @@ flushes regularly, so a killed recorder leaves a file that opens (``swmr=True``)
 flushed sample. ``status`` is ``recording`` until :meth:`SessionWriter.finish` reopens the file
 and writes the footer. :func:`acq.recording.repair.repair` rewrites a killed session into a clean file.
 
+Durability (a power cut, a kernel crash): HDF5's flush only hands the file to the kernel's page cache, which writes
+it back in any order. Each commit is therefore made durable in order — the samples written and flushed, the file's
+data synced (fdatasync), only then the ``/flushes`` row counting them, flushed and synced again — so a row on the
+disk never counts samples that are not, and whatever the writer reports as committed is on the disk. The file's
+layout is synced and its folder too when it is created (its name is durable from then on), and the footer when it
+is written. A failed sync is a failed write (on Linux the pages it could not write may be dropped already).
+
 A failed write (disk full, I/O error, the file vanished) stops the writer at once: nothing after it is written or
 counted (:attr:`SessionWriter.failure`).
 """
@@ -28,7 +35,7 @@ from acq.recording.h5safe import abandon
 from acq.recording.layout import (EVENT_DTYPE, FLUSH_DTYPE, FORMAT, FORMAT_VERSION, LIBVER, NO_COUNT, OPTIONAL_ENCODER,
                                   Status, committed_rows, utc_now_iso, write_footer)
 from acq.recording.pending import Column, PendingColumns
-from acq.recording.storage import cause_of, free_bytes, storage_error
+from acq.recording.storage import cause_of, free_bytes, storage_error, sync_file, sync_folder
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from acqcore.errors import ConfigError, StorageError
@@ -112,7 +119,9 @@ class SessionWriter:
         try:
             datasets = self._create_layout(f, bench, profile, current_info, drive_info, host_ns_at_start, operator,
                                            tags, origin, host_clock_shared, session_id, created_utc, bulk)
-        except Exception as e:  # the disk filled while the layout was created: no session at all
+            self._sync()
+            sync_folder(self.path.parent)  # the new name durable: once per session
+        except Exception as e:  # the disk filled (or a sync failed) while the layout was created: no session at all
             abandon(f)
             self.path.unlink(missing_ok=True)
             raise storage_error(e, self.path) from None
@@ -263,10 +272,11 @@ class SessionWriter:
         self._pending.add("events", row, EVENT_DTYPE)
 
     def flush(self) -> None:
-        """Write everything appended so far, then a ``/flushes`` row committing it; make it durable and visible.
+        """Write everything appended so far, then a ``/flushes`` row committing it; make it durable and visible, in
+        that order (the samples on the disk before the row that counts them, the row before this returns).
 
         Raises :class:`StorageError` ("disk full: <file>") when the disk lacks room for it (checked first,
-        nothing written), the file vanished, or HDF5 reports a write error; the writer is then stopped
+        nothing written), the file vanished, HDF5 reports a write error or a sync fails; the writer is then stopped
         (:attr:`failure`) and only what earlier flushes committed counts. Does nothing after a failure.
         """
         if self.failure is not None:
@@ -282,11 +292,18 @@ class SessionWriter:
         try:
             pending.write_to(self._columns)
             self._file.flush()
+            self._sync()
             self._columns["flushes"].append(row)  # only after the samples it counts are on disk
             self._file.flush()
+            self._sync()
         except Exception as e:  # noqa: BLE001 - h5py reports write errors as OSError or RuntimeError
             self._stop(storage_error(e, self.path), abandon_file=True)
         self.committed = totals
+
+    def _sync(self) -> None:
+        """fdatasync the open file through HDF5's own descriptor (the sec2 driver's,
+        :meth:`h5py.h5f.FileID.get_vfd_handle`): what HDF5 flushed is on the disk when this returns."""
+        os.fdatasync(self._file.id.get_vfd_handle())
 
     def _check_room(self, payload_bytes: int) -> None:
         try:
@@ -318,7 +335,8 @@ class SessionWriter:
         raise error
 
     def finish(self, status: Status, stop_reason: str) -> None:
-        """Close the SWMR file and write the footer: status, reason, stop time, committed sample counts.
+        """Close the SWMR file and write the footer: status, reason, stop time, committed sample counts; the footer is
+        on the disk when this returns.
 
         After a write failure the status is ``failed`` with the failure and the seconds kept as reason
         ("disk full: /data/x.h5 — 3.2 s kept"); the footer is written when the disk has room for it and
@@ -345,7 +363,8 @@ class SessionWriter:
             longer = [name for name, n in counted.items() if n is not None and self._columns[name].length > n]
             write_footer(f, status, stop_reason, self._filled_optional, self.committed, longer)
             f.close()
-        except Exception as e:  # noqa: BLE001 - the footer could not be written: the flush rows still hold
+            sync_file(self.path)  # after the close: closing rewrites the superblock (no longer open for writing)
+        except Exception as e:  # noqa: BLE001 - the footer could not be written (or synced): the flush rows still hold
             abandon(f)
             self.failure = storage_error(e, self.path)
             raise StorageError(f"{self.failure} (footer not written; the samples are stored, acq check repairs "

@@ -420,11 +420,11 @@ def _result_folder(result_dir: Path) -> Path:
     """``--result-dir``: the folder, made if missing, as an absolute path (the batch's workers are handed it)."""
     if result_dir.exists() and not result_dir.is_dir():
         raise ConfigError(f"--result-dir {result_dir}: is a file, not a folder")
-    try:
-        result_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        from acq.recording.storage import storage_error
+    from acq.recording.storage import make_folders, storage_error
 
+    try:
+        make_folders(result_dir)
+    except OSError as e:
         if isinstance(e, FileNotFoundError):  # a folder that cannot be made there (e.g. under /proc): bad input
             raise ConfigError(f"--result-dir {result_dir}: cannot make a folder there "
                               f"({(e.strerror or 'no such file or directory').lower()})") from None

@@ -40,7 +40,7 @@ import pyqtgraph as pg
 import shiboken6
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
-from acq.recording.storage import atomic_path, storage_error
+from acq.recording.storage import atomic_path, make_folders, storage_error
 from acq.ui.values import PARAMS, format_value, interval_text, options_text
 from analysis import FigureData, Thresholds
 
@@ -501,7 +501,7 @@ def grab_png(widget: QtWidgets.QWidget, path: Path | str, size: tuple[int, int] 
     path = Path(path)
     image = _widget_image(widget, size)
     try:
-        path.parent.mkdir(parents=True, exist_ok=True)
+        make_folders(path.parent)
     except OSError as e:
         raise storage_error(e, path) from None
     with atomic_path(path) as tmp:
