@@ -156,6 +156,30 @@ def test_a_failed_sync_of_the_footer_is_a_failed_write(tmp_path: Path, capsys: p
         f"acq: error: I/O error: {path} (footer not written; the samples are stored, acq check repairs the file)"]
 
 
+@pytest.mark.parametrize("answer", [errno.EINVAL, errno.EIO])
+def test_a_folder_the_file_system_cannot_sync_records_and_a_folder_that_fails_to_sync_fails(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, answer: int) -> None:
+    """A directory fsync refused with EINVAL (SMB/CIFS, some FUSE) leaves the names as that file system keeps them: the
+    recording completes; EIO from the same sync is a failed write like any other."""
+    real_fsync = os.fsync
+
+    def folder_sync(fd: int) -> None:
+        if _path_of(fd).is_dir():
+            raise OSError(answer, os.strerror(answer))
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", folder_sync)
+    out = tmp_path / "out"
+    run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--duration", "2", "--no-analyze", "--out",
+                  str(out))
+    monkeypatch.undo()
+    if answer == errno.EINVAL:
+        (path,) = out.glob("*.h5")
+        assert run.code == 0 and load(path).status == "complete", run.err
+    else:
+        assert run.code == 1 and run.err.strip().splitlines()[-1].startswith("acq: error: I/O error: "), run.err
+
+
 # ------------------------------------------------------------------------------------------ atomic outputs
 
 

@@ -94,11 +94,27 @@ def sync_file(path: Path | str) -> None:
         os.close(fd)
 
 
+#: What a folder's sync may answer where the file system or the folder's permissions do not let a folder be synced
+#: (SMB/CIFS and some FUSE file systems refuse fsync of a directory with EINVAL; a folder writable but not readable
+#: cannot be opened for it): its names are then as durable as that file system makes them, as SQLite treats the same
+#: answers (os_unix.c ignores a directory it cannot open or sync). An I/O error (EIO, ENOSPC) is never among them.
+FOLDER_SYNC_UNSUPPORTED = frozenset({errno.EINVAL, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EACCES, errno.EPERM})
+
+
 def sync_folder(folder: Path | str) -> None:
-    """Make the names created, renamed or removed in ``folder`` durable (fsync of the folder)."""
-    fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    """Make the names created, renamed or removed in ``folder`` durable (fsync of the folder); a file system or
+    folder that does not allow it (:data:`FOLDER_SYNC_UNSUPPORTED`) is left as it is, any other error raised."""
+    try:
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError as e:
+        if e.errno in FOLDER_SYNC_UNSUPPORTED:
+            return
+        raise
     try:
         os.fsync(fd)
+    except OSError as e:
+        if e.errno not in FOLDER_SYNC_UNSUPPORTED:
+            raise
     finally:
         os.close(fd)
 
