@@ -360,9 +360,10 @@ def _one_phase_doubt(clock_residual_s: float | None, th: Thresholds) -> str:
     the trial's poor windows, residuals 107–315 µs): fed the true clock the estimate still read |H| at f_r 47 % low
     (the true torque: 0.6 %), the fit doubled C and missed f_a by +15…24 %; the same windows recorded with two
     phases (Park, no angle) were ok with the same clock errors. A second phase tells the estimate from the joint.
-    The residual is evidence, not a bound: a window of seed 2 (at 420 s) with the same cause had 45 µs and keeps the
-    joint's advice alone; naming the estimate from the data themselves (torque held at standstill where |sin| is
-    small) needs the electrical angle at the standstills, which the verdict is not given."""
+    The residual is evidence, not a bound: a window of seed 2 (at 420 s) with the same cause had 45 µs. Where the
+    session's own coherence at the resonance says the estimate's error explains the whole misfit (:func:`_missed_band`,
+    :func:`_estimate_explains`; that window among them) the reason names the estimate instead, without the joint's
+    advice; this weaker doubt serves where it does not explain all of it."""
     if clock_residual_s is None or phase_is_meaningful(clock_residual_s, th):
         return ""
     return (f"the torque estimate from one phase current may bend |H| alike: the clock alignment's residual of "
