@@ -337,8 +337,39 @@ def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.n
         Covariance of the amplitude residual ln|H_model| − ln|H_measured| (then of the phase residual). A bin without
         weight or a finite bound adds no error and is given none: the caller must not judge it.
     """
-    n = quant_rel.size
     judged = np.isfinite(quant_rel) & np.isfinite(lines) & (lines > 0) & (sqrt_w > 0)
+    rest = residual_of_errors(jac, sqrt_w, kind, fitted, phase, judged)
+    s2 = np.tile(np.where(judged, line_variance(quant_rel, lines), 0.0), 2)  # amplitude, then phase errors
+    return (rest * s2[None, :]) @ rest.T
+
+
+def residual_of_errors(jac: np.ndarray, sqrt_w: np.ndarray, kind: str = "amplitude", fitted: np.ndarray | None = None,
+                       phase: bool = False, judged: np.ndarray | None = None) -> np.ndarray:
+    """How errors of the measured ln H show in a fit's residual ln(H_model/H_meas) once the fit has absorbed what it
+    could of them into its parameters: the matrix A = P − J_rows·G of :func:`quantisation_through_fit` (G: the log
+    parameters' move per error of each row the fit matched, J the fit's weighted Jacobian), columns the errors of
+    ln|H| at the n bins then of the phase, rows the amplitude residual then (with ``phase``) the phase residual.
+
+    Parameters
+    ----------
+    jac : ndarray of complex, shape (n, p)
+        d ln(H_model/H_meas)/d(log parameters) at the bins (:func:`analysis.fit.log_ratio_jacobian`).
+    sqrt_w : ndarray, shape (n,)
+        The fit's bin weights' square roots.
+    kind : {"amplitude", "complex"}
+        What the fit matched.
+    fitted : ndarray of bool, shape (n,), optional
+        The bins the fit matched (default all).
+    phase : bool, optional
+        Also the phase residual's rows.
+    judged : ndarray of bool, shape (n,), optional
+        The bins whose residual rows carry the parameters' move (default all): elsewhere the row is the error alone.
+
+    Returns
+    -------
+    ndarray, shape (n, 2n) or (2n, 2n)
+    """
+    n = sqrt_w.size
     fit = np.flatnonzero(np.ones(n, bool) if fitted is None else fitted)
     matched = [fit, n + fit] if kind == "complex" else [fit]
     fit_jac = np.concatenate([sqrt_w[fit, None] * part for part in (jac[fit].real, jac[fit].imag)[:len(matched)]])
@@ -346,10 +377,9 @@ def quantisation_through_fit(quant_rel: np.ndarray, lines: np.ndarray, jac: np.n
     moves[:, np.concatenate(matched)] = (np.linalg.pinv(fit_jac.T @ fit_jac) @ fit_jac.T
                                          * np.tile(sqrt_w[fit], len(matched))[None, :])
     observed = [jac.real, jac.imag] if phase else [jac.real]
-    derivative = np.concatenate([np.where(judged[:, None], part, 0.0) for part in observed])
-    rest = np.eye(derivative.shape[0], 2 * n) - derivative @ moves
-    s2 = np.tile(np.where(judged, line_variance(quant_rel, lines), 0.0), 2)  # amplitude, then phase errors
-    return (rest * s2[None, :]) @ rest.T
+    rows = np.ones(n, bool) if judged is None else judged
+    derivative = np.concatenate([np.where(rows[:, None], part, 0.0) for part in observed])
+    return np.eye(derivative.shape[0], 2 * n) - derivative @ moves
 
 
 def spread_beyond_fit(jac: np.ndarray, covariance: np.ndarray, fitted: np.ndarray, phase: bool = False) -> np.ndarray:

@@ -27,8 +27,10 @@ from analysis.frf import FrequencyResponse, estimate_frf
 from analysis.model import frequency_response
 
 
-def kernel_model_error(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.ndarray) -> np.ndarray:
-    """ln(H1 of the model's own speed) − ln(the fit's kernel model of it) at the fit's bins (complex).
+def model_estimate(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.ndarray) -> FrequencyResponse:
+    """What the Welch estimator makes of the fitted model: H1 and coherence of the model's own speed for the recorded
+    torque, through the same segments, window, detrend and selection as the measurement (noise-free: its coherence is
+    what the window alone leaves, lowest at a sharp resonance peak).
 
     Parameters
     ----------
@@ -38,12 +40,6 @@ def kernel_model_error(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.nda
         A fit of ``frf`` that did not fail.
     torque_Nm : ndarray
         The torque the FRF was estimated from, N·m, on the encoder's grid (``frf.period_s``).
-
-    Returns
-    -------
-    ndarray of complex, shape (n,)
-        At ``frf.f_hz[fitted_bins(frf, fit.band)]``; add its real part to the kernel model's ln|H| and its imaginary
-        part to its phase to get what the estimator makes of the model.
     """
     x = np.asarray(torque_Nm, dtype=float)
     x = x - x.mean()
@@ -51,8 +47,28 @@ def kernel_model_error(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.nda
     h = np.zeros(f.size, dtype=complex)
     h[1:] = frequency_response(fit.values, f[1:]) * difference_response(f[1:], frf.period_s)  # no mean speed
     speed = np.fft.irfft(np.fft.rfft(x) * h, x.size)
-    model_frf = estimate_frf(x, speed, frf.period_s, segment_s=frf.segment_s, reuse_selection=frf.selection,
-                             leave_out=frf.unknown_torque)
+    return estimate_frf(x, speed, frf.period_s, segment_s=frf.segment_s, reuse_selection=frf.selection,
+                        leave_out=frf.unknown_torque)
+
+
+def kernel_model_error(frf: FrequencyResponse, fit: FitResult, model_frf: FrequencyResponse) -> np.ndarray:
+    """ln(H1 of the model's own speed) − ln(the fit's kernel model of it) at the fit's bins (complex).
+
+    Parameters
+    ----------
+    frf : FrequencyResponse
+        The measured response the fit was made to.
+    fit : FitResult
+        A fit of ``frf`` that did not fail.
+    model_frf : FrequencyResponse
+        What the estimator makes of ``fit``'s model for the recorded torque (:func:`model_estimate`).
+
+    Returns
+    -------
+    ndarray of complex, shape (n,)
+        At ``frf.f_hz[fitted_bins(frf, fit.band)]``; add its real part to the kernel model's ln|H| and its imaginary
+        part to its phase to get what the estimator makes of the model.
+    """
     sel = fitted_bins(frf, fit.band)
     if not np.array_equal(fitted_bins(model_frf, fit.band), sel):
         return np.zeros(int(np.count_nonzero(sel)), dtype=complex)  # a bin empty in one estimate: no correction

@@ -281,15 +281,13 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
     floor = (quantisation_floor if quantisation_floor is not None
              else np.full(n_free, np.log1p(CHAIN_REL_STD) ** 2))
     cov += misfit + np.diag(np.clip(floor - np.diag(misfit), 0.0, None))
+    without = _intervals(values, problem.free, res.x, cov)
     if input_noise_shift is not None:
         # the truth lies between the H1 and the H2 reading of the resonance (analysis.input_noise): a bias bounded by
         # the shift d, of unknown size within it, carried as a rectangular distribution of half-width |d| (GUM:
         # variance d²/3, so the 95 % interval holds the whole bracket, 1.96/√3 = 1.13 |d|), along d (a joint shift)
         cov += np.outer(input_noise_shift, input_noise_shift) / 3.0
-    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    ci = {n: (getattr(values, n), getattr(values, n)) for n in PARAM_NAMES}
-    for name, x, s in zip(problem.free, res.x, sigma):
-        ci[name] = (float(np.exp(x - Z95 * s)), float(np.exp(x + Z95 * s)))
+    ci = _intervals(values, problem.free, res.x, cov)
     amp = problem.log_ratio(res.x).real
     rms = float(np.sqrt(np.sum(problem.w * amp**2) / np.sum(problem.w)))
     status: FitStatus = "converged" if res.status > 0 else ("max_evaluations" if res.status == 0 else "failed")
@@ -300,7 +298,20 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
         f_a=antiresonance_hz(values.K_Nm_per_rad, values.Jl_kgm2),
         f_r=resonance_hz(values.K_Nm_per_rad, values.Jm_kgm2, values.Jl_kgm2),
         n_points=int(problem.f.size),
+        input_noise_shift={} if input_noise_shift is None else dict(zip(problem.free, map(float, input_noise_shift))),
+        ci95_without_input_noise=without if input_noise_shift is not None else {},
     )
+
+
+def _intervals(values: TwoMassParams, free: tuple[str, ...], x: np.ndarray,
+               cov: np.ndarray) -> dict[str, tuple[float, float]]:
+    """The 95 % interval exp(ln θ ± 1.96 σ) of each free parameter from the log parameters' covariance ``cov``; a fixed
+    parameter's is its value."""
+    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    ci = {n: (getattr(values, n), getattr(values, n)) for n in PARAM_NAMES}
+    for name, xi, s in zip(free, x, sigma):
+        ci[name] = (float(np.exp(xi - Z95 * s)), float(np.exp(xi + Z95 * s)))
+    return ci
 
 
 def _jackknife(problem: _Problem, x_best: np.ndarray, options: FitOptions) -> tuple[np.ndarray, float]:

@@ -5,7 +5,7 @@ ratio and weighted residuals that :mod:`analysis.fit` minimises and :mod:`analys
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Literal
 
 import numpy as np
@@ -91,6 +91,11 @@ class FitResult:
         Anti-resonance and resonance of the fitted model, Hz.
     n_points : int
         FRF bins in the band.
+    input_noise_shift : dict of str to float
+        How far each free log parameter moves when the resonance is read from H2 instead of H1
+        (:mod:`analysis.input_noise`; empty when not computed): the bias an error on the torque estimate may leave.
+    ci95_without_input_noise : dict of str to (float, float)
+        The 95 % intervals without the allowance for that bias (empty when none was made): what it widened.
     """
 
     values: TwoMassParams
@@ -106,6 +111,8 @@ class FitResult:
     f_a: float
     f_r: float
     n_points: int
+    input_noise_shift: dict[str, float] = field(default_factory=dict)
+    ci95_without_input_noise: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def default_band_hz(period_s: float) -> tuple[float, float]:

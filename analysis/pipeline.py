@@ -20,8 +20,9 @@ from analysis.drive_limits import drive_limit_reason
 from analysis.diagnose import nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
 from analysis.fit import FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit
 from analysis.encoder import longest_gap_free_span
-from analysis.estimator_check import kernel_model_error
+from analysis.estimator_check import kernel_model_error, model_estimate
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments, segment_layout
+from analysis.input_noise import widened_c_note
 from analysis.limits import band_problem
 from analysis.quality import Quality, assess, phase_is_meaningful
 from analysis.recording import Recording
@@ -173,7 +174,9 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
                        nominal=request.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
-    kernel_error = None if fit.status == "failed" else kernel_model_error(frf, judged_fit(frf, fit), sig.torque_Nm)
+    judged = None if fit.status == "failed" else judged_fit(frf, fit)
+    model_frf = None if judged is None else model_estimate(frf, judged, sig.torque_Nm)
+    kernel_error = None if judged is None else kernel_model_error(frf, judged, model_frf)
     quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
                      encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None, profile=rec.profile,
                      interference=sig.interference, kernel_error=kernel_error,
@@ -195,7 +198,9 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
                                       phase_valid=phase_is_meaningful(residual), misfit_band_hz=quality.misfit_band_hz,
                                       third_mode_hz=quality.third_mode_hz, misfit_windows=quality.misfit_windows,
                                       misfit_bins=quality.misfit_bins),
-                  request=request, chain=chain, notes=(*sig.notes, *_unknown_torque_note(frf, sig.t_s)), moves=moves)
+                  request=request, chain=chain,
+                  notes=(*sig.notes, *_unknown_torque_note(frf, sig.t_s), *filter(None, [widened_c_note(fit, frf, model_frf)])),
+                  moves=moves)
 
 
 def _unknown_torque_note(frf: FrequencyResponse, t_s: np.ndarray) -> tuple[str, ...]:

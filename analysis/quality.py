@@ -20,7 +20,9 @@ from analysis.encoder import difference_response
 from analysis.excitation import RESOLUTION_NAMED, against_limit, weak_coherence_cause
 from analysis.fit import (COHERENCE_CLIP, FitResult, band_mask, judged_fit, log_ratio_jacobian, model_log_ratios,
                           model_misfits, quantisation_terms)
+from analysis.fit_problem import fitted_bins
 from analysis.frf import FrequencyResponse
+from analysis.input_noise import EstimateError, estimate_error_misfit
 from analysis.model import PARAM_LABELS
 from analysis.recording import CommandedProfile
 from analysis.sample_instants import EncoderJitter
@@ -244,9 +246,10 @@ def assess(
     # without the encoder's resolution the share of |H|'s misfit that its quantisation repeats with every
     # motion period is unknown (±8 % at 200–250 Hz on a healthy 2^17 counts/rev bench): no misfit test then
     known_resolution = encoder_jitter is not None and encoder_jitter.lsb_rad > 0.0
-    missed, mode, judged, bins = (_missed_band(frf, fit, encoder_jitter, kernel_error,
-                                               phase_is_meaningful(clock_residual_s, th))
-                                  if fit.status != "failed" and known_resolution else (None, None, (), ()))
+    missed, mode, judged, bins, estimate = (_missed_band(frf, fit, encoder_jitter, kernel_error,
+                                                         phase_is_meaningful(clock_residual_s, th), torque_from_angle)
+                                            if fit.status != "failed" and known_resolution
+                                            else (None, None, (), (), None))
     named_mode = mode if missed is None and mode is not None and mode.found else None
     if named_mode is not None:
         findings.append(("poor", f"the two-mass model misses a third mode near {mode.f_hz:.0f} Hz ({mode.t:.1f} σ "
@@ -255,7 +258,13 @@ def assess(
                                  f"{_first_order_pull(mode)}){_beyond_band(mode.f_hz, fit, True)} — a "
                                  f"compliant or loose part (the coupling, the arm, the tool or their mountings): check "
                                  f"them; until then K, J_m, J_l are the two-mass model's compromise, not the joint's"))
-    if missed is not None:
+    if missed is not None and estimate is not None:
+        low, high, worst = missed
+        findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
+                                 f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
+                                 f"{worst.t:.0f} σ beyond what noise, the chain and the encoder's quantisation explain "
+                                 f"— {_estimate_explains(estimate, worst, bins)}"))
+    elif missed is not None:
         low, high, worst = missed
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
                                  f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
@@ -351,9 +360,10 @@ def _one_phase_doubt(clock_residual_s: float | None, th: Thresholds) -> str:
     the trial's poor windows, residuals 107–315 µs): fed the true clock the estimate still read |H| at f_r 47 % low
     (the true torque: 0.6 %), the fit doubled C and missed f_a by +15…24 %; the same windows recorded with two
     phases (Park, no angle) were ok with the same clock errors. A second phase tells the estimate from the joint.
-    The residual is evidence, not a bound: a window of seed 2 (at 420 s) with the same cause had 45 µs and keeps the
-    joint's advice alone; naming the estimate from the data themselves (torque held at standstill where |sin| is
-    small) needs the electrical angle at the standstills, which the verdict is not given."""
+    The residual is evidence, not a bound: a window of seed 2 (at 420 s) with the same cause had 45 µs. Where the
+    session's own coherence at the resonance says the estimate's error explains the whole misfit (:func:`_missed_band`,
+    :func:`_estimate_explains`; that window among them) the reason names the estimate instead, without the joint's
+    advice; this weaker doubt serves where it does not explain all of it."""
     if clock_residual_s is None or phase_is_meaningful(clock_residual_s, th):
         return ""
     return (f"the torque estimate from one phase current may bend |H| alike: the clock alignment's residual of "
@@ -361,6 +371,20 @@ def _one_phase_doubt(clock_residual_s: float | None, th: Thresholds) -> str:
             "follows the encoder's electrical angle only loosely, and where the motor holds torque at an angle at "
             "which the phase carries little of it the estimate errs — record a second phase current ([daq] channels; "
             "Park needs no angle); if the misfit stays with two phases: ")
+
+
+def _estimate_explains(estimate: EstimateError, worst: BandMisfit, bins: tuple[tuple[float, float], ...]) -> str:
+    """The one-phase torque estimate's own error named as what the misfit is (:func:`_missed_band`), with its share
+    of the torque at the resonance and what it leaves in the worst window, and the advice: a second phase."""
+    f = np.array([b[0] for b in bins])
+    there = float(np.mean(estimate.misfit[(f >= worst.low_hz) & (f <= worst.high_hz)]))
+    return (f"the one-phase torque estimate's own error explains it: at the resonance it is "
+            f"{100 * estimate.resonance_share:.0f} % of the torque's power (the coherence lost there, "
+            f"{estimate.scale:.0f}× what white noise on i_a gives), which flattens |H|'s peak, and the fit bent to it "
+            f"misses by {100 * there:+.1f} % there; less that, the model fits within noise — the motor holds or steps "
+            f"its torque at electrical angles where i_a shows little of it: record a second phase current (i_b, [daq] "
+            f"channels) for a Park torque, which needs no angle; until then K, J_m, J_l are the two-mass model's "
+            f"compromise, not the joint's, and C reads high")
 
 
 def _misfit_cause(worst: BandMisfit, fit: FitResult) -> str:
@@ -386,13 +410,17 @@ def _joint_cause(worst: BandMisfit, fit: FitResult) -> str:
 
 
 def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, kernel_error: np.ndarray | None,
-                 use_phase: bool) -> tuple[tuple[float, float, BandMisfit] | None, ThirdMode | None,
-                                           tuple[tuple[float, float, float, float], ...],
-                                           tuple[tuple[float, float], ...]]:
+                 use_phase: bool, torque_from_angle: bool = False
+                 ) -> tuple[tuple[float, float, BandMisfit] | None, ThirdMode | None,
+                            tuple[tuple[float, float, float, float], ...], tuple[tuple[float, float], ...],
+                            EstimateError | None]:
     """Where the model misses |H| beyond noise and the encoder's quantisation (:mod:`analysis.adequacy`): the worst
     stretch of the band (low Hz, high Hz, worst window) or None, the most evident third mode
     (:mod:`analysis.third_mode`, judging the phase too when ``use_phase``) or None, the windows judged
-    (:attr:`Quality.misfit_windows`) and the bins judged (:attr:`Quality.misfit_bins`).
+    (:attr:`Quality.misfit_windows`), the bins judged (:attr:`Quality.misfit_bins`) and — for a torque read from one
+    phase through the angle (``torque_from_angle``) whose misfit is all the estimate's own error, as the session's
+    coherence at the resonance sizes it (:func:`analysis.input_noise.estimate_error_misfit`: no window is missed once
+    its pattern is taken off) — that error; else None.
 
     The fitted model is judged up to the default band's top even where the fit's band ends below it
     (:func:`analysis.fit.judged_fit`; ``kernel_error`` at those bins), against the measurement as the Welch estimator
@@ -432,7 +460,15 @@ def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, 
                           candidate_frequencies(fit.f_a, seen.band), fitted=fitted, use_phase=use_phase,
                           systematic_cov=carried, blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound)
     bins = tuple((float(fb), float(m)) for fb, m in zip(f, misfit.real))
-    return (spans[0] if spans else None), mode, judged, bins
+    estimate = None
+    if spans and torque_from_angle:
+        estimate = estimate_error_misfit(frf, fit.values, fit.band, fitted_bins(frf, seen.band), jac, sqrt_w,
+                                         fit.options.kind, fitted)
+        if estimate is not None and missed_spans(band_misfits(
+                f, misfit.real - estimate.misfit, reps.real - estimate.misfit[None, :], carried[:f.size, :f.size],
+                blind, CHAIN_WINDOW_STD, bound), t_crit):
+            estimate = None  # the estimate's error does not explain all of the misfit: the joint's advice stands
+    return (spans[0] if spans else None), mode, judged, bins, estimate
 
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,
