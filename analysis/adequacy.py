@@ -102,7 +102,8 @@ class BandMisfit:
         it is unbounded).
     bound : float
         The most a bias of known sign-less size can move the window's mean (the speed loop's feedback of the
-        quantisation noise, :func:`analysis.systematic_errors.loop_feedback_bound`): taken off |misfit| before it is compared.
+        quantisation noise, :func:`analysis.systematic_errors.loop_feedback_bound`): taken off |misfit| before it is
+        compared.
     t : float
         max(|misfit| − bound, 0) / √(noise² + systematic²).
     """
@@ -133,17 +134,17 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
         The same for each delete-one-block replicate (the model held at the full record's fit).
     systematic_cov : ndarray, shape (n, n), optional
         Covariance of the misfit's bias that the replicates cannot show but the test allows for (the encoder's
-        quantisation carried through the fit, :func:`analysis.systematic_errors.quantisation_through_fit`); a window allows the variance of
-        its mean.
+        quantisation carried through the fit, :func:`analysis.systematic_errors.quantisation_through_fit`); a window
+        allows the variance of its mean.
     blind : ndarray of bool, shape (n,), optional
         Bins whose bias is unbounded (no signal to compare the quantisation with): a window holding one is not
         judged.
     chain_std : float, optional
-        Standard deviation of every window's mean that the chain's smooth errors allow (:data:`analysis.systematic_errors.CHAIN_WINDOW_STD`);
-        0: none.
+        Standard deviation of every window's mean that the chain's smooth errors allow
+        (:data:`analysis.systematic_errors.CHAIN_WINDOW_STD`); 0: none.
     bias_bound : ndarray, shape (n,), optional
-        The most a bias may move each bin (:func:`analysis.systematic_errors.loop_feedback_bound`): a window takes its mean off |misfit|;
-        None: none.
+        The most a bias may move each bin (:func:`analysis.systematic_errors.loop_feedback_bound`): a window takes its
+        mean off |misfit|; None: none.
 
     Returns
     -------

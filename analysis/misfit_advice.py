@@ -41,7 +41,8 @@ def beyond_band(f_hz: float, fit: FitResult, mode: bool) -> str:
 
 def one_phase_doubt(clock_residual_s: float | None, th: Thresholds) -> str:
     """The one-phase torque estimate named as a cause of a misfit band before the joint, when the clock alignment's
-    residual exceeds the limit below which a phase is shown (:func:`analysis.verdict_limits.phase_is_meaningful`); "" otherwise.
+    residual exceeds the limit below which a phase is shown (:func:`analysis.verdict_limits.phase_is_meaningful`);
+    "" otherwise.
 
     One phase current i_a gives the torque only through the electrical angle, i_q ∝ i_a / sin(θ_e + θ_0), so an error
     δ in that angle moves the estimate by δ·cot(θ_e + θ_0) — without bound where the motor holds torque at an angle
@@ -51,9 +52,9 @@ def one_phase_doubt(clock_residual_s: float | None, th: Thresholds) -> str:
     (the true torque: 0.6 %), the fit doubled C and missed f_a by +15…24 %; the same windows recorded with two
     phases (Park, no angle) were ok with the same clock errors. A second phase tells the estimate from the joint.
     The residual is evidence, not a bound: a window of seed 2 (at 420 s) with the same cause had 45 µs. Where the
-    session's own coherence at the resonance says the estimate's error explains the whole misfit (:func:`analysis.misfit_band.missed_band`,
-    :func:`estimate_explains`; that window among them) the reason names the estimate instead, without the joint's
-    advice; this weaker doubt serves where it does not explain all of it."""
+    session's own coherence at the resonance says the estimate's error explains the whole misfit
+    (:func:`analysis.misfit_band.missed_band`, :func:`estimate_explains`; that window among them) the reason names
+    the estimate instead, without the joint's advice; this weaker doubt serves where it does not explain all of it."""
     if clock_residual_s is None or phase_is_meaningful(clock_residual_s, th):
         return ""
     return (f"the torque estimate from one phase current may bend |H| alike: the clock alignment's residual of "
@@ -64,8 +65,9 @@ def one_phase_doubt(clock_residual_s: float | None, th: Thresholds) -> str:
 
 
 def estimate_explains(estimate: EstimateError, worst: BandMisfit, bins: tuple[tuple[float, float], ...]) -> str:
-    """The one-phase torque estimate's own error named as what the misfit is (:func:`analysis.misfit_band.missed_band`), with its share
-    of the torque at the resonance and what it leaves in the worst window, and the advice: a second phase."""
+    """The one-phase torque estimate's own error named as what the misfit is (:func:`analysis.misfit_band.missed_band`),
+    with its share of the torque at the resonance and what it leaves in the worst window, and the advice: a second
+    phase."""
     f = np.array([b[0] for b in bins])
     there = float(np.mean(estimate.misfit[(f >= worst.low_hz) & (f <= worst.high_hz)]))
     return (f"the one-phase torque estimate's own error explains it: at the resonance it is "

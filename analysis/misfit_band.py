@@ -29,21 +29,22 @@ def missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, k
     """Where the model misses |H| beyond noise and the encoder's quantisation (:mod:`analysis.adequacy`): the worst
     stretch of the band (low Hz, high Hz, worst window) or None, the most evident third mode
     (:mod:`analysis.third_mode`, judging the phase too when ``use_phase``) or None, the windows judged
-    (:attr:`analysis.quality.Quality.misfit_windows`), the bins judged (:attr:`analysis.quality.Quality.misfit_bins`) and — for a torque read from one
-    phase through the angle (``torque_from_angle``) whose misfit is all the estimate's own error, as the session's
-    coherence at the resonance sizes it (:func:`analysis.input_noise.estimate_error_misfit`: no window is missed once
-    its pattern is taken off) — that error; else None.
+    (:attr:`analysis.quality.Quality.misfit_windows`), the bins judged (:attr:`analysis.quality.Quality.misfit_bins`)
+    and — for a torque read from one phase through the angle (``torque_from_angle``) whose misfit is all the
+    estimate's own error, as the session's coherence at the resonance sizes it
+    (:func:`analysis.input_noise.estimate_error_misfit`: no window is missed once its pattern is taken off) — that
+    error; else None.
 
     The fitted model is judged up to the default band's top even where the fit's band ends below it
     (:func:`analysis.fit.judged_fit`; ``kernel_error`` at those bins), against the measurement as the Welch estimator
     really sees it (the fit's kernel model corrected by ``kernel_error``, :mod:`analysis.estimator_check`). The
-    allowance: the jackknife's scatter; the share
-    of the encoder's quantisation error that repeats with every motion period (``jitter.repeating_share``; the scatter
-    cannot show it) — a random-phase error of the white-quantisation bound √(N_q/|H·D|²G_xx) at each line of the
-    motion, carried through the fit (:func:`analysis.systematic_errors.quantisation_through_fit`); beyond the fitted band the
-    model's own spread from its parameters' covariance (:func:`analysis.systematic_errors.spread_beyond_fit`); the chain's smooth errors
-    (:data:`analysis.systematic_errors.CHAIN_WINDOW_STD`); and, taken off the misfit as the bound it is, the speed loop's
-    feedback of the rest of the quantisation (:func:`analysis.systematic_errors.loop_feedback_bound`).
+    allowance: the jackknife's scatter; the share of the encoder's quantisation error that repeats with every motion
+    period (``jitter.repeating_share``; the scatter cannot show it) — a random-phase error of the white-quantisation
+    bound √(N_q/|H·D|²G_xx) at each line of the motion, carried through the fit
+    (:func:`analysis.systematic_errors.quantisation_through_fit`); beyond the fitted band the model's own spread from
+    its parameters' covariance (:func:`analysis.systematic_errors.spread_beyond_fit`); the chain's smooth errors
+    (:data:`analysis.systematic_errors.CHAIN_WINDOW_STD`); and, taken off the misfit as the bound it is, the speed
+    loop's feedback of the rest of the quantisation (:func:`analysis.systematic_errors.loop_feedback_bound`).
     """
     seen = judged_fit(frf, fit)
     f, misfit, reps = model_misfits(frf, seen)

@@ -124,9 +124,9 @@ def systematic_std(quant_rel: np.ndarray, repeating_share: float) -> np.ndarray:
 
 def chain_pull(jac: np.ndarray, sqrt_w: np.ndarray, std: np.ndarray) -> np.ndarray:
     """Covariance of the fitted log parameters that the smooth systematic errors of :func:`systematic_std` may
-    cause: an error of ``std`` in ln H shared by the bins of each window of :data:`analysis.adequacy.WINDOW_BINS` (it varies smoothly
-    along frequency) and independent between windows, in amplitude and (for a complex fit) in phase, carried to the
-    parameters as :func:`quantisation_pull` carries the quantisation's.
+    cause: an error of ``std`` in ln H shared by the bins of each window of :data:`analysis.adequacy.WINDOW_BINS` (it
+    varies smoothly along frequency) and independent between windows, in amplitude and (for a complex fit) in phase,
+    carried to the parameters as :func:`quantisation_pull` carries the quantisation's.
 
     Returns
     -------
