@@ -30,7 +30,6 @@ from analysis.frf import min_duration_s
 from analysis.limits import encoder_period_problem, min_current_rate_hz, min_record_s
 from analysis.model import PARAM_LABELS, TwoMassParams
 from analysis.pipeline import Result, analyze
-from analysis.quality import Thresholds
 from analysis.recording import CommandedProfile, Recording
 from analysis.report import FigureData
 from analysis.request import AnalysisRequest, code_fingerprint
@@ -39,6 +38,7 @@ from analysis.segments import excitation_summary, segments_summary
 from analysis.signals import PreparedSignals, prepare_signals
 from analysis.speed_ratio import SpeedRatio, electrical_speed_ratio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from analysis.phase_offset import PHASE_WINDOW_S, min_speed_rpm
+from analysis.verdict_limits import Thresholds
 
 __all__ = [
     "MAX_STAMP_DEVIATION", "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",

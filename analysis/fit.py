@@ -27,9 +27,9 @@ frequency (:func:`analysis.adequacy.misfit_covariance`, a HAC sandwich) — the 
 blocks shows because every period repeats it (the chain's small errors, a mode or a nonlinearity the
 two-mass model lacks). Where that share is below the pull of the systematic errors no scatter shows, the latter is
 taken instead: the share of the encoder's quantisation error that repeats with the motion
-(:func:`analysis.adequacy.quantisation_pull` times :attr:`FitOptions.quantisation_repeating_share`: the part the fit
+(:func:`analysis.systematic_errors.quantisation_pull` times :attr:`FitOptions.quantisation_repeating_share`: the part the fit
 absorbed leaves no residual) and the smooth errors of the chain and of the speed loop's feedback of the rest of the
-quantisation (:func:`analysis.adequacy.chain_pull`) — computed from the session's own spectra and the encoder's
+quantisation (:func:`analysis.systematic_errors.chain_pull`) — computed from the session's own spectra and the encoder's
 resolution (:attr:`FitOptions.speed_lsb_rad`); without the resolution, the constant :data:`CHAIN_REL_STD`. Last, the
 bias an error on the torque estimate may leave (noise on the FRF's input flattens the resonance peak of H1, and C
 reads high): the shift of the parameters when the resonance is read from H2 instead (:mod:`analysis.input_noise`),
@@ -49,7 +49,8 @@ import numpy as np
 from scipy import optimize, stats
 from scipy.ndimage import median_filter
 
-from analysis.adequacy import chain_pull, misfit_covariance, quantisation_pull, systematic_std
+from analysis.adequacy import misfit_covariance
+from analysis.systematic_errors import chain_pull, quantisation_pull, systematic_std
 from analysis.fit_judging import (judged_fit, kernel_model_log_ratio, log_ratio_jacobian, model_log_ratios,
                                   model_misfits, quantisation_terms, weighted_jacobian)
 from analysis.fit_problem import (BAND_HIGH_FRACTION_OF_FENC, BAND_HIGH_MAX_HZ, BAND_LOW_HZ, COHERENCE_CLIP, PARAM_NAMES,
@@ -74,7 +75,7 @@ Z95 = 1.959963984540054
 # resolution (a direct call of fit_two_mass; the pipeline always gives it). Where it comes from: on the simulated
 # bench (8 plants with K, J_m, J_l scaled 0.5…2, 10 seeds each, 10 s sessions) every seed of a plant shares an
 # error, −0.6…+0.6 % — which session 5 traced to the 2^17 counts/rev encoder's quantisation pulling the fit
-# (bench/chain_bias.py; with 2^20 counts the shared error is ≤ 0.1 %): what analysis.adequacy.quantisation_pull
+# (bench/chain_bias.py; with 2^20 counts the shared error is ≤ 0.1 %): what analysis.systematic_errors.quantisation_pull
 # now computes from each session's own spectra (0.35…0.71 % on those plants, 0.17…0.20 % at 2^20 counts). A
 # torque scale error (k_t, a sensor gain) multiplies K, J_m, J_l, C alike and no session can show it: it is a bench
 # constant (acq selftest checks k_t against a known inertia), not part of these intervals.
@@ -231,9 +232,9 @@ def _refit_from(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
 def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
                         options: FitOptions) -> np.ndarray | None:
     """Variance of each free log parameter that the systematic errors no scatter shows may pull it by: the encoder's
-    quantisation (:func:`analysis.adequacy.quantisation_pull`, times the share of the error that repeats with the
+    quantisation (:func:`analysis.systematic_errors.quantisation_pull`, times the share of the error that repeats with the
     motion) and the smooth systematic errors of the chain and of the loop's feedback of the rest of the quantisation
-    (:func:`analysis.adequacy.chain_pull`); None without the encoder's resolution.
+    (:func:`analysis.systematic_errors.chain_pull`); None without the encoder's resolution.
 
     Always with K, J_m, J_l and C free: with the inertias held at nominal values (``params="K"``) the pull on K alone
     would be a fraction of what the data can tell K to, and the interval would lean on inertias known exactly.

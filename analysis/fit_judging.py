@@ -9,7 +9,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from analysis.adequacy import lines_per_bin
+from analysis.systematic_errors import lines_per_bin
 from analysis.encoder import quantisation_bound
 from analysis.fit_problem import (FitKind, FitResult, _central_differences, _Problem, default_band_hz, fitted_bins,
                                   wrapped)
@@ -29,7 +29,7 @@ def quantisation_terms(frf: FrequencyResponse, band: tuple[float, float],
                        lsb_rad: float) -> tuple[np.ndarray, np.ndarray]:
     """At a fit's bins in ``band`` (Hz): the white-quantisation bound of |H| for the encoder's resolution ``lsb_rad``
     (:func:`analysis.encoder.quantisation_bound`; inf where there is no signal) and the motion's lines per bin
-    (:func:`analysis.adequacy.lines_per_bin`) — what the intervals' floor and the misfit test carry through the fit."""
+    (:func:`analysis.systematic_errors.lines_per_bin`) — what the intervals' floor and the misfit test carry through the fit."""
     sel = fitted_bins(frf, band)
     f = frf.f_hz[sel]
     bound = quantisation_bound(f, frf.H[sel], frf.torque_psd[sel], frf.period_s, lsb_rad)

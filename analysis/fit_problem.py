@@ -43,7 +43,7 @@ class FitOptions:
         Bin weights γ²/(1−γ²) (ours) or all 1 (the paper's).
     speed_lsb_rad : float or None
         The encoder's resolution, rad (2π/counts per rev): the intervals then allow for the quantisation's pull
-        on the parameters (:func:`analysis.adequacy.quantisation_pull`) instead of :data:`CHAIN_REL_STD`.
+        on the parameters (:func:`analysis.systematic_errors.quantisation_pull`) instead of :data:`CHAIN_REL_STD`.
     quantisation_repeating_share : float
         Share (0…1) of the quantisation error that repeats with the motion
         (:func:`analysis.quantisation_lock.locked_share`): only that share is a bias the jackknife cannot see; the
@@ -113,6 +113,12 @@ class FitResult:
     n_points: int
     input_noise_shift: dict[str, float] = field(default_factory=dict)
     ci95_without_input_noise: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+
+def rel_halfwidth(fit: FitResult, name: str) -> float:
+    """Half-width of the 95 % interval of ``name`` relative to its value (NaN if unknown)."""
+    low, high = fit.ci95[name]
+    return float(0.5 * (high - low) / getattr(fit.values, name))
 
 
 def default_band_hz(period_s: float) -> tuple[float, float]:

@@ -36,7 +36,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from analysis.adequacy import residual_of_errors
+from analysis.systematic_errors import residual_of_errors
 from analysis.fit_problem import FitResult
 from analysis.frf import KERNEL_HALF_WIDTH_BINS, FrequencyResponse
 from analysis.model import TwoMassParams, frequency_response
@@ -124,7 +124,7 @@ def estimate_error_misfit(frf: FrequencyResponse, params: TwoMassParams, band: t
     resonance, scale s = Σ(1 − γ²)/Σν over :func:`resonance_bins`. Elsewhere the error's share is taken as s·ν (the
     estimator's response has ν's shape: on the window of seed 2 at 420 s the true share over s·ν was 0.6–2.0 from 20 to 130 Hz, s = 12.9), never
     above 1 − γ², the most an input noise can take of a bin's coherence. Its bias ln(1 − s·ν) − ln(1 − ν) of ln|H| is
-    carried through the fit (:func:`analysis.adequacy.residual_of_errors`): the fit bends to the flattened peak (C up)
+    carried through the fit (:func:`analysis.systematic_errors.residual_of_errors`): the fit bends to the flattened peak (C up)
     and misses by it elsewhere — at the anti-resonance, where friction's misfit has the other sign.
 
     Parameters
@@ -139,7 +139,7 @@ def estimate_error_misfit(frf: FrequencyResponse, params: TwoMassParams, band: t
         The judged bins (:func:`analysis.fit_problem.fitted_bins` of the judged band), n of them.
     jac, sqrt_w, kind, fitted
         The fit's log-ratio Jacobian and weights' square roots at those bins, what it matched and which of them
-        (:func:`analysis.adequacy.residual_of_errors`).
+        (:func:`analysis.systematic_errors.residual_of_errors`).
 
     Returns
     -------

@@ -24,7 +24,8 @@ from analysis.estimator_check import kernel_model_error, model_estimate
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments, segment_layout
 from analysis.input_noise import widened_c_note
 from analysis.limits import band_problem
-from analysis.quality import Quality, assess, phase_is_meaningful
+from analysis.quality import Quality, assess
+from analysis.verdict_limits import phase_is_meaningful
 from analysis.recording import Recording
 from analysis.report import FigureData, figure_data
 from analysis.request import AnalysisRequest

@@ -10,83 +10,21 @@ it instead of handing out a stiffness.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
-from analysis.adequacy import (CHAIN_WINDOW_STD, BandMisfit, band_misfits, critical_t, loop_feedback_bound,
-                               missed_spans, quantisation_through_fit, spread_beyond_fit)
 from analysis.encoder import difference_response
 from analysis.excitation import RESOLUTION_NAMED, against_limit, weak_coherence_cause
-from analysis.fit import (COHERENCE_CLIP, FitResult, band_mask, judged_fit, log_ratio_jacobian, model_log_ratios,
-                          model_misfits, quantisation_terms)
-from analysis.fit_problem import fitted_bins
+from analysis.fit import COHERENCE_CLIP, FitResult, band_mask
+from analysis.fit_problem import rel_halfwidth
 from analysis.frf import FrequencyResponse
-from analysis.input_noise import EstimateError, estimate_error_misfit
+from analysis.misfit_advice import beyond_band, estimate_explains, first_order_pull, misfit_cause, one_phase_doubt
+from analysis.misfit_band import missed_band
 from analysis.model import PARAM_LABELS
 from analysis.recording import CommandedProfile
 from analysis.sample_instants import EncoderJitter
-from analysis.third_mode import ThirdMode, candidate_frequencies, third_mode
 from analysis.torque import Interference
-
-Verdict = Literal["ok", "poor", "failed"]
-_RANK: dict[Verdict, int] = {"ok": 0, "poor": 1, "failed": 2}
-#: J_3/J_l up to which a third mode's first-order pull on K is given as a figure (:func:`_first_order_pull`).
-FIRST_ORDER_MASS_RATIO = 0.3
-
-
-@dataclass(frozen=True)
-class Thresholds:
-    """Limits of the verdict; a value past ``*_poor`` makes it poor, past ``*_failed`` failed.
-
-    Attributes
-    ----------
-    excitation_poor, excitation_failed : float
-        Mean coherence γ² between f_a and f_r below which the joint counts as weakly / not excited.
-    coherence_poor, coherence_failed : float
-        Mean coherence in the whole fit band. On 10 s simulated sessions the paper's 0.5 s profile
-        gives 0.63…0.66, the 0.2 s triangle 0.78…0.96 over plants scaled 0.5…2; the limit is midway.
-    misfit_ratio_poor : float
-        Ratio of the fit's residual to the residual the coherence explains, above which the model
-        counts as missing the data. Noise alone is judged by the coherence checks, not here.
-    residual_poor, residual_failed : float
-        Weighted RMS misfit of ln|H| (≈ relative misfit of |H|) that makes such a misfit poor /
-        failed.
-    ci_K_poor, ci_K_failed : float
-        Relative half-width of the 95 % interval of K. The interval comes from the session's own
-        scatter (jackknife over blocks of Welch segments), the fit's misfit (HAC) and the encoder
-        quantisation's pull on the fit (:func:`analysis.adequacy.quantisation_pull`), so its width is the
-        precision; 10 s simulated
-        sessions of plants scaled 0.5…2 give ±0.5…1.7 % on K, J_m, J_l. These limits remain
-        constants: what precision is "ok" is the user's requirement (K to a few % to see wear), not
-        something the data can tell.
-    ci_J_poor, ci_J_failed : float
-        Relative half-width of the 95 % intervals of J_m and J_l (when fitted).
-    clock_residual_amplitude_s, clock_residual_complex_s : float
-        Clock-alignment residual, s, above which the result is poor, for an amplitude fit (a delay
-        of a small fraction of a Welch segment does not bias |H|) and for a complex fit (a delay
-        τ turns the phase by 2π f τ).
-    """
-
-    excitation_poor: float = 0.7
-    excitation_failed: float = 0.4
-    coherence_poor: float = 0.72
-    coherence_failed: float = 0.3
-    misfit_ratio_poor: float = 3.0
-    residual_poor: float = 0.08
-    residual_failed: float = 0.30
-    ci_K_poor: float = 0.05
-    ci_K_failed: float = 0.20
-    ci_J_poor: float = 0.08
-    ci_J_failed: float = 0.30
-    clock_residual_amplitude_s: float = 1e-3
-    clock_residual_complex_s: float = 1e-4
-
-
-def phase_is_meaningful(clock_residual_s: float | None, thresholds: Thresholds = Thresholds()) -> bool:
-    """True when the clocks were aligned to within the residual a complex fit accepts, so a measured phase is
-    the plant's and not the clock offset's (None: not aligned)."""
-    return clock_residual_s is not None and clock_residual_s <= thresholds.clock_residual_complex_s
+from analysis.verdict_limits import RANK, Thresholds, Verdict, grade, phase_is_meaningful
 
 
 @dataclass(frozen=True)
@@ -121,7 +59,7 @@ class Quality:
         True when the drive's own time stamps moved the samples to their nominal instants.
     misfit_band_hz : tuple of float or None
         The stretch of the band where the two-mass model misses |H| by more than noise and the encoder's
-        quantisation explain (:mod:`analysis.adequacy`); None when it fits.
+        quantisation explain (:mod:`analysis.misfit_band`); None when it fits.
     third_mode_hz : float or None
         The frequency of the third mode a reason names (:mod:`analysis.third_mode`), Hz; None when none is named
         (none found, or the misfit band is named instead).
@@ -200,7 +138,7 @@ def assess(
     torque_from_angle : bool, optional
         The torque was read from one phase current through the electrical angle (the encoder method): a misfit
         band's reason then names that estimate first when the clock alignment's residual says the phase follows the
-        angle only loosely (:func:`_one_phase_doubt`).
+        angle only loosely (:func:`analysis.misfit_advice.one_phase_doubt`).
 
     Returns
     -------
@@ -231,13 +169,13 @@ def assess(
         if np.any(sel):
             exc_coh = float(np.mean(frf.coherence[sel]))
             exc_db = float(10.0 * np.log10(np.mean(frf.torque_psd[sel])))
-            level = _grade(exc_coh, th.excitation_poor, th.excitation_failed)
+            level = grade(exc_coh, th.excitation_poor, th.excitation_failed)
             if level != "ok":
                 findings.append((level, f"coherence {against_limit(exc_coh, th.excitation_poor)} between f_a {fit.f_a:.0f} Hz and f_r "
                                         f"{fit.f_r:.0f} Hz (torque {exc_db:.0f} dB re 1 N²m²/Hz there), "
                                         f"{cause(sel, th.excitation_poor)}"))
 
-    level = _grade(mean_coh, th.coherence_poor, th.coherence_failed)
+    level = grade(mean_coh, th.coherence_poor, th.coherence_failed)
     if level != "ok":
         findings.append((level, f"mean coherence {against_limit(mean_coh, th.coherence_poor)} in {lo:g}…{hi:g} Hz (in closed loop that biases |H|, "
                                 f"not only scatters it), {cause(in_band, th.coherence_poor)}"))
@@ -246,7 +184,7 @@ def assess(
     # without the encoder's resolution the share of |H|'s misfit that its quantisation repeats with every
     # motion period is unknown (±8 % at 200–250 Hz on a healthy 2^17 counts/rev bench): no misfit test then
     known_resolution = encoder_jitter is not None and encoder_jitter.lsb_rad > 0.0
-    missed, mode, judged, bins, estimate = (_missed_band(frf, fit, encoder_jitter, kernel_error,
+    missed, mode, judged, bins, estimate = (missed_band(frf, fit, encoder_jitter, kernel_error,
                                                          phase_is_meaningful(clock_residual_s, th), torque_from_angle)
                                             if fit.status != "failed" and known_resolution
                                             else (None, None, (), (), None))
@@ -255,7 +193,7 @@ def assess(
         findings.append(("poor", f"the two-mass model misses a third mode near {mode.f_hz:.0f} Hz ({mode.t:.1f} σ "
                                  f"beyond what noise, the chain and the encoder's quantisation explain): a third mass "
                                  f"there moves the fitted K beyond its interval (±{100 * mode.k_halfwidth:.1f} %"
-                                 f"{_first_order_pull(mode)}){_beyond_band(mode.f_hz, fit, True)} — a "
+                                 f"{first_order_pull(mode)}){beyond_band(mode.f_hz, fit, True)} — a "
                                  f"compliant or loose part (the coupling, the arm, the tool or their mountings): check "
                                  f"them; until then K, J_m, J_l are the two-mass model's compromise, not the joint's"))
     if missed is not None and estimate is not None:
@@ -263,32 +201,32 @@ def assess(
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
                                  f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
                                  f"{worst.t:.0f} σ beyond what noise, the chain and the encoder's quantisation explain "
-                                 f"— {_estimate_explains(estimate, worst, bins)}"))
+                                 f"— {estimate_explains(estimate, worst, bins)}"))
     elif missed is not None:
         low, high, worst = missed
         findings.append(("poor", f"the two-mass model does not fit |H| between {low:.0f} and {high:.0f} Hz: it misses "
                                  f"by {100 * worst.misfit:+.1f} % at {worst.low_hz:.0f}…{worst.high_hz:.0f} Hz, "
                                  f"{worst.t:.0f} σ beyond what noise, the chain and the encoder's quantisation explain"
-                                 f"{_beyond_band(worst.low_hz, fit, False)} — "
-                                 f"{_one_phase_doubt(clock_residual_s, th) if torque_from_angle else ''}"
-                                 f"{_misfit_cause(worst, fit)}; until then K, J_m, J_l are the two-mass model's "
+                                 f"{beyond_band(worst.low_hz, fit, False)} — "
+                                 f"{one_phase_doubt(clock_residual_s, th) if torque_from_angle else ''}"
+                                 f"{misfit_cause(worst, fit)}; until then K, J_m, J_l are the two-mass model's "
                                  f"compromise, not the joint's"))
     elif np.isfinite(fit.residual_rms):
         # the RMS misfit against the coherence's noise alone: where the window test ran (it allows for the
         # quantisation that repeats with the motion, which this ratio does not — 8 % RMS on a healthy 2^17 counts/rev
         # session whose trajectory repeats to a fraction of a count) only a gross misfit still fails here
-        level = _grade(-fit.residual_rms, -th.residual_poor, -th.residual_failed)
+        level = grade(-fit.residual_rms, -th.residual_poor, -th.residual_failed)
         if level != "ok" and ratio > th.misfit_ratio_poor and (not known_resolution or level == "failed"):
             findings.append((level, f"the two-mass model misses |H| by {100 * fit.residual_rms:.0f} % RMS, "
                                     f"{ratio:.1f}× what noise explains — another mode or a nonlinearity "
                                     f"in the band; try --band"))
 
-    ci_rel = {name: _rel_halfwidth(fit, name) for name in fit.fitted}
+    ci_rel = {name: rel_halfwidth(fit, name) for name in fit.fitted}
     for name, (poor, failed) in {"K_Nm_per_rad": (th.ci_K_poor, th.ci_K_failed),
                                  "Jm_kgm2": (th.ci_J_poor, th.ci_J_failed),
                                  "Jl_kgm2": (th.ci_J_poor, th.ci_J_failed)}.items():
         if name in ci_rel and fit.status != "failed":
-            level = _grade(-ci_rel[name], -poor, -failed)
+            level = grade(-ci_rel[name], -poor, -failed)
             if level != "ok":
                 findings.append((level, f"{PARAM_LABELS[name][0]} is known only to ±{100 * ci_rel[name]:.1f} % (95 %)"))
 
@@ -314,7 +252,7 @@ def assess(
                                  f"(the motor turns at that electrical frequency for long): remove it at its source "
                                  f"(mains hum: grounding and shielding; PWM ripple: the DAQ's anti-alias filter)"))
 
-    findings.sort(key=lambda fv: -_RANK[fv[0]])
+    findings.sort(key=lambda fv: -RANK[fv[0]])
     verdict: Verdict = findings[0][0] if findings else "ok"
     return Quality(
         verdict=verdict, mean_coherence=mean_coh, excitation_coherence=exc_coh, excitation_torque_db=exc_db,
@@ -327,148 +265,6 @@ def assess(
         misfit_windows=judged,
         misfit_bins=bins,
     )
-
-
-def _first_order_pull(mode: ThirdMode) -> str:
-    """The mode's pull on K as a figure, where its first-order estimate holds: the pull's second-order term is ~â
-    relative, so up to â = :data:`FIRST_ORDER_MASS_RATIO` the figure is within ~30 %; a larger mass (0.6–1.2 for
-    the simulated third mass, whose first-order figure read 1.1–1.8× the real error) is named without one."""
-    if mode.mass_ratio > FIRST_ORDER_MASS_RATIO:
-        return ""
-    return f"; by roughly {100 * mode.k_shift:+.1f} %"
-
-
-def _beyond_band(f_hz: float, fit: FitResult, mode: bool) -> str:
-    """Said of a misfit at ``f_hz`` beyond the band the fit matched (the tests judge up to the default band's top,
-    :func:`analysis.fit.judged_fit`): a mode there still moves K; a window there is not described by the model
-    fitted below it."""
-    if f_hz <= fit.band[1]:
-        return ""
-    if mode:
-        return f", beyond the band fitted (up to {fit.band[1]:g} Hz): narrowing --band does not remove its effect on K"
-    return f", beyond the band fitted (up to {fit.band[1]:g} Hz), which the model fitted below it does not describe"
-
-
-def _one_phase_doubt(clock_residual_s: float | None, th: Thresholds) -> str:
-    """The one-phase torque estimate named as a cause of a misfit band before the joint, when the clock alignment's
-    residual exceeds the limit below which a phase is shown (:func:`phase_is_meaningful`); "" otherwise.
-
-    One phase current i_a gives the torque only through the electrical angle, i_q ∝ i_a / sin(θ_e + θ_0), so an error
-    δ in that angle moves the estimate by δ·cot(θ_e + θ_0) — without bound where the motor holds torque at an angle
-    at which i_a carries little of it, as a robot's pauses do. The angle stage's residual is how loosely the current's
-    phase follows the encoder's angle. Measured on the simulated robot (configs/benches/sim_robot.toml, seeds 0 and 5,
-    the trial's poor windows, residuals 107–315 µs): fed the true clock the estimate still read |H| at f_r 47 % low
-    (the true torque: 0.6 %), the fit doubled C and missed f_a by +15…24 %; the same windows recorded with two
-    phases (Park, no angle) were ok with the same clock errors. A second phase tells the estimate from the joint.
-    The residual is evidence, not a bound: a window of seed 2 (at 420 s) with the same cause had 45 µs. Where the
-    session's own coherence at the resonance says the estimate's error explains the whole misfit (:func:`_missed_band`,
-    :func:`_estimate_explains`; that window among them) the reason names the estimate instead, without the joint's
-    advice; this weaker doubt serves where it does not explain all of it."""
-    if clock_residual_s is None or phase_is_meaningful(clock_residual_s, th):
-        return ""
-    return (f"the torque estimate from one phase current may bend |H| alike: the clock alignment's residual of "
-            f"{1e6 * clock_residual_s:.0f} µs (above {1e6 * th.clock_residual_complex_s:.0f} µs) says that phase "
-            "follows the encoder's electrical angle only loosely, and where the motor holds torque at an angle at "
-            "which the phase carries little of it the estimate errs — record a second phase current ([daq] channels; "
-            "Park needs no angle); if the misfit stays with two phases: ")
-
-
-def _estimate_explains(estimate: EstimateError, worst: BandMisfit, bins: tuple[tuple[float, float], ...]) -> str:
-    """The one-phase torque estimate's own error named as what the misfit is (:func:`_missed_band`), with its share
-    of the torque at the resonance and what it leaves in the worst window, and the advice: a second phase."""
-    f = np.array([b[0] for b in bins])
-    there = float(np.mean(estimate.misfit[(f >= worst.low_hz) & (f <= worst.high_hz)]))
-    return (f"the one-phase torque estimate's own error explains it: at the resonance it is "
-            f"{100 * estimate.resonance_share:.0f} % of the torque's power (the coherence lost there, "
-            f"{estimate.scale:.0f}× what white noise on i_a gives), which flattens |H|'s peak, and the fit bent to it "
-            f"misses by {100 * there:+.1f} % there; less that, the model fits within noise — the motor holds or steps "
-            f"its torque at electrical angles where i_a shows little of it: record a second phase current (i_b, [daq] "
-            f"channels) for a Park torque, which needs no angle; until then K, J_m, J_l are the two-mass model's "
-            f"compromise, not the joint's, and C reads high")
-
-
-def _misfit_cause(worst: BandMisfit, fit: FitResult) -> str:
-    """What the worst window's misfit points to, by where it lies against the fit's anti-resonance and resonance:
-    friction and backlash on the load side damp and bend the anti-resonance; a compliant or loose part adds a mode
-    above the resonance; elsewhere any of them — or, with the inertias held at their nominal values, those values."""
-    if not {"Jm_kgm2", "Jl_kgm2"} <= set(fit.fitted):
-        return ("the inertias held at their nominal values may not be the joint's (fit them too: --params "
-                "K,Jm,Jl), or " + _joint_cause(worst, fit))
-    return _joint_cause(worst, fit)
-
-
-def _joint_cause(worst: BandMisfit, fit: FitResult) -> str:
-    """What in the joint a misfit points to, by where it lies (:func:`_misfit_cause`)."""
-    if worst.low_hz <= fit.f_a <= worst.high_hz:
-        return (f"at the anti-resonance (f_a = {fit.f_a:.0f} Hz), which friction and backlash on the load side damp "
-                "and bend: check the load side for friction and the gear and the coupling for play")
-    if worst.low_hz > fit.f_r:
-        return (f"above the resonance (f_r = {fit.f_r:.0f} Hz): a third mode — a compliant or loose part (the "
-                "coupling, the arm, the tool or their mountings): check them")
-    return ("a third mode, backlash or friction in the joint: check the gear and the coupling for play and for a loose "
-            "part and the load side for friction")
-
-
-def _missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, kernel_error: np.ndarray | None,
-                 use_phase: bool, torque_from_angle: bool = False
-                 ) -> tuple[tuple[float, float, BandMisfit] | None, ThirdMode | None,
-                            tuple[tuple[float, float, float, float], ...], tuple[tuple[float, float], ...],
-                            EstimateError | None]:
-    """Where the model misses |H| beyond noise and the encoder's quantisation (:mod:`analysis.adequacy`): the worst
-    stretch of the band (low Hz, high Hz, worst window) or None, the most evident third mode
-    (:mod:`analysis.third_mode`, judging the phase too when ``use_phase``) or None, the windows judged
-    (:attr:`Quality.misfit_windows`), the bins judged (:attr:`Quality.misfit_bins`) and — for a torque read from one
-    phase through the angle (``torque_from_angle``) whose misfit is all the estimate's own error, as the session's
-    coherence at the resonance sizes it (:func:`analysis.input_noise.estimate_error_misfit`: no window is missed once
-    its pattern is taken off) — that error; else None.
-
-    The fitted model is judged up to the default band's top even where the fit's band ends below it
-    (:func:`analysis.fit.judged_fit`; ``kernel_error`` at those bins), against the measurement as the Welch estimator
-    really sees it (the fit's kernel model corrected by ``kernel_error``, :mod:`analysis.estimator_check`). The
-    allowance: the jackknife's scatter; the share
-    of the encoder's quantisation error that repeats with every motion period (``jitter.repeating_share``; the scatter
-    cannot show it) — a random-phase error of the white-quantisation bound √(N_q/|H·D|²G_xx) at each line of the
-    motion, carried through the fit (:func:`analysis.adequacy.quantisation_through_fit`); beyond the fitted band the
-    model's own spread from its parameters' covariance (:func:`analysis.adequacy.spread_beyond_fit`); the chain's smooth errors
-    (:data:`analysis.adequacy.CHAIN_WINDOW_STD`); and, taken off the misfit as the bound it is, the speed loop's
-    feedback of the rest of the quantisation (:func:`analysis.adequacy.loop_feedback_bound`).
-    """
-    seen = judged_fit(frf, fit)
-    f, misfit, reps = model_misfits(frf, seen)
-    if kernel_error is not None and kernel_error.shape == misfit.shape:
-        misfit, reps = misfit + kernel_error, reps + kernel_error[None, :]
-    quant, lines = quantisation_terms(frf, seen.band, jitter.lsb_rad)
-    jac, sqrt_w = log_ratio_jacobian(frf, seen)
-    fitted = band_mask(f, fit.band)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        carried = jitter.repeating_share * quantisation_through_fit(quant, lines, jac, sqrt_w, fit.options.kind,
-                                                                    fitted, phase=use_phase)
-    beyond = spread_beyond_fit(jac, fit.covariance, fitted, phase=use_phase)
-    unknown = ~np.all(np.isfinite(beyond)) & ~fitted  # the parameters' spread unknown: no judging beyond the fit
-    carried = carried + np.where(np.isfinite(beyond), beyond, 0.0)
-    blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0) | unknown
-    bound = loop_feedback_bound(quant, jitter.repeating_share)
-    windows = band_misfits(f, misfit.real, reps.real, carried[:f.size, :f.size], blind, CHAIN_WINDOW_STD, bound)
-    t_crit = critical_t(len(windows), reps.shape[0])
-    spans = missed_spans(windows, t_crit)
-    judged = tuple((w.low_hz, w.high_hz, w.misfit, w.bound + t_crit * float(np.hypot(w.noise, w.systematic)))
-                   for w in windows if np.isfinite(w.misfit))
-    mode = None
-    if "K_Nm_per_rad" in fit.fitted:
-        mode = third_mode(f, misfit, reps, model_log_ratios(frf, seen), jac, sqrt_w, fit.options.kind,
-                          fit.fitted.index("K_Nm_per_rad"), _rel_halfwidth(fit, "K_Nm_per_rad"),
-                          candidate_frequencies(fit.f_a, seen.band), fitted=fitted, use_phase=use_phase,
-                          systematic_cov=carried, blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound)
-    bins = tuple((float(fb), float(m)) for fb, m in zip(f, misfit.real))
-    estimate = None
-    if spans and torque_from_angle:
-        estimate = estimate_error_misfit(frf, fit.values, fit.band, fitted_bins(frf, seen.band), jac, sqrt_w,
-                                         fit.options.kind, fitted)
-        if estimate is not None and missed_spans(band_misfits(
-                f, misfit.real - estimate.misfit, reps.real - estimate.misfit[None, :], carried[:f.size, :f.size],
-                blind, CHAIN_WINDOW_STD, bound), t_crit):
-            estimate = None  # the estimate's error does not explain all of the misfit: the joint's advice stands
-    return (spans[0] if spans else None), mode, judged, bins, estimate
 
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,
@@ -494,9 +290,9 @@ def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray
     level: Verdict = "ok"
     for sel, poor, failed in checks:
         if np.any(sel):
-            now = _grade(float(np.mean(g2[sel])), poor, failed)
-            if _RANK[now] > _RANK[_grade(float(np.mean(without[sel])), poor, failed)]:
-                level = max(level, now, key=_RANK.__getitem__)
+            now = grade(float(np.mean(g2[sel])), poor, failed)
+            if RANK[now] > RANK[grade(float(np.mean(without[sel])), poor, failed)]:
+                level = max(level, now, key=RANK.__getitem__)
     if level == "ok":
         return [], False
     sigma_us, lo, hi = 1e6 * jitter.sigma_s, *fit.band
@@ -516,13 +312,6 @@ def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray
                     "SYNC or map the drive's time stamp (0x1013, [drive] map_timestamp = true)")], True
 
 
-def _grade(value: float, poor_below: float, failed_below: float) -> Verdict:
-    """ok / poor / failed for a value that is good when high (NaN counts as failed)."""
-    if not value >= failed_below:
-        return "failed"
-    return "poor" if value < poor_below else "ok"
-
-
 def _noise_rms(frf: FrequencyResponse, in_band: np.ndarray) -> float:
     """Weighted RMS of ln|H1| that noise alone leaves, from the coherence.
 
@@ -532,9 +321,3 @@ def _noise_rms(frf: FrequencyResponse, in_band: np.ndarray) -> float:
     g2 = np.clip(frf.coherence[in_band], 0.0, COHERENCE_CLIP)
     sum_w = float(np.sum(g2 / (1.0 - g2)))
     return float(np.sqrt(g2.size / (2.0 * frf.n_segments * sum_w))) if sum_w > 0 else float("nan")
-
-
-def _rel_halfwidth(fit: FitResult, name: str) -> float:
-    """Half-width of the 95 % interval of ``name`` relative to its value (NaN if unknown)."""
-    low, high = fit.ci95[name]
-    return float(0.5 * (high - low) / getattr(fit.values, name))

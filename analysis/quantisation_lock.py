@@ -4,7 +4,7 @@ A drive runs its profile on its own cycle and samples the encoder on the same cy
 from one motion period to the next to a small fraction of a count — a quiet loop, a simulated plant — every period
 reads the same quantisation errors, and at the motion's lines they add a fixed error that no number of periods
 averages away and no scatter between blocks of the record shows: the misfit test and the intervals allow for it
-(:func:`analysis.adequacy.quantisation_through_fit`, :func:`analysis.adequacy.quantisation_pull`). When the
+(:func:`analysis.systematic_errors.quantisation_through_fit`, :func:`analysis.systematic_errors.quantisation_pull`). When the
 trajectory differs by more than a count between periods — the disturbances of a real loop, a dithered profile
 (``speed_dither``) — the errors are independent from period to period and scatter like any noise, which the
 jackknife sees; allowing for them again would only blind the misfit test (a third mode at 150 Hz hides behind a

@@ -139,12 +139,12 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
         The bins the fit matched (default all): the fit absorbs a mode's trace there; beyond them (a band judged
         wider than the one fitted) the trace stays whole.
     use_phase : bool, optional
-        Judge the phase too (only when the clocks were aligned, :func:`analysis.quality.phase_is_meaningful`): a
+        Judge the phase too (only when the clocks were aligned, :func:`analysis.verdict_limits.phase_is_meaningful`): a
         delay common to all bins (what is left of the clock offset) is estimated beside each mode and taken out, and
         |H| alone must confirm the mode (:attr:`ThirdMode.t_confirm`).
     systematic_cov, blind, chain_std, bias_bound
         As :func:`analysis.adequacy.band_misfits` takes them (the quantisation's carried covariance of the residual,
-        amplitude rows then, with ``use_phase``, phase rows: :func:`analysis.adequacy.quantisation_through_fit`;
+        amplitude rows then, with ``use_phase``, phase rows: :func:`analysis.systematic_errors.quantisation_through_fit`;
         bins not to judge; the chain's window error; the loop's bias bound per bin). The phase is given the same
         chain error and bound as |H| (both bound ln H, a complex number).
 

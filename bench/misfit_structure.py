@@ -73,7 +73,7 @@ if str(ROOT) not in sys.path:  # this checkout's bench package
 from analysis.fit import (CHAIN_REL_STD, COHERENCE_CLIP, FitResult, _Problem, band_mask, fit_two_mass, fitted_bins,
                           quantisation_terms)
 from analysis.frf import KERNEL_PER_BIN, FrequencyResponse
-from analysis.adequacy import motion_lines
+from analysis.systematic_errors import motion_lines
 from bench.scenarios import SCENARIOS, analyse, clock_for, errors_pct, record
 
 # Bands of the residual table, as multiples of the fitted resonance f_r (the last one runs to the band's top).
@@ -133,7 +133,7 @@ def refit_three_mass(frf: FrequencyResponse, fit: FitResult,
 
 
 def lines_in(frf: FrequencyResponse, low_hz: float, high_hz: float) -> float:
-    """How many lines of the motion's spectrum the bins low…high Hz hold (:func:`analysis.adequacy.motion_lines`)."""
+    """How many lines of the motion's spectrum the bins low…high Hz hold (:func:`analysis.systematic_errors.motion_lines`)."""
     df = frf.f_hz[1]
     return motion_lines(frf.torque_psd_fine, df / KERNEL_PER_BIN, low_hz - df / 2, high_hz + df / 2)
 

@@ -8,9 +8,9 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from analysis.adequacy import (CHAIN_WINDOW_STD, WINDOW_BINS, band_misfits, bandwidth_bins, chain_pull, critical_t,
-                               line_variance, misfit_covariance, motion_lines, quantisation_through_fit,
-                               spread_beyond_fit, systematic_std)
+from analysis.adequacy import WINDOW_BINS, band_misfits, bandwidth_bins, critical_t, misfit_covariance
+from analysis.systematic_errors import (CHAIN_WINDOW_STD, chain_pull, line_variance, motion_lines,
+                                        quantisation_through_fit, spread_beyond_fit, systematic_std)
 from analysis.fit import FitOptions, fit_two_mass, model_misfits
 from analysis.frf import estimate_frf
 from analysis.quality import assess

@@ -3,7 +3,7 @@
 Before the analysis the joint's travel decides (less than half an electrical revolution cannot be analysed
 at all); after it the analysis' segment selection (fewer than two Welch segments whose torque explains their
 speed beyond chance: :mod:`analysis.segments`) and the verdict's own excitation checks (coherence between f_a
-and f_r, and in the band, against :class:`analysis.quality.Thresholds`). A window that does not excite gets a
+and f_r, and in the band, against :class:`analysis.verdict_limits.Thresholds`). A window that does not excite gets a
 catalogue record with verdict ``not excited`` and why, without K, J or C: never a number, and without the
 analysis' advice on the hardware (interference, play: it judged a fit of data that carries no excitation).
 """
@@ -25,7 +25,7 @@ from analysis import AnalysisRequest, Thresholds, against_limit, excitation_summ
 
 
 def _weak_coherence(quality: dict[str, Any]) -> str | None:
-    """Which excitation check of the verdict's own "poor" limits (:class:`analysis.quality.Thresholds`) fails:
+    """Which excitation check of the verdict's own "poor" limits (:class:`analysis.verdict_limits.Thresholds`) fails:
     coherence between f_a and f_r, else in the whole band — its words, "" when no coherence was measured at all,
     None when both hold."""
     th = Thresholds()

@@ -14,7 +14,7 @@
   the verdict's "misses by +5.9 %"), with the model's 95 % band about 0 and the verdict's marks: a misfit the
   verdict names, which a log axis hides (6 % is 0.025 decades);
 * ``phase``: measured and model phase, when the clocks were aligned well enough for a phase to be the
-  plant's (the residual a complex fit accepts, :func:`analysis.quality.phase_is_meaningful`);
+  plant's (the residual a complex fit accepts, :func:`analysis.verdict_limits.phase_is_meaningful`);
 * ``coherence``: γ²; FRF, phase and coherence share their x axis and show the fit band shaded;
 * a side panel with the identified values, their 95 % intervals, the clock relation, the verdict and
   the options the result came from.
