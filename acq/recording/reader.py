@@ -109,32 +109,33 @@ class _Reader:
         want = stored if n is None else n
         have = min(want, stored)
         out = np.empty(have, dtype=ds.dtype)
-        step = ds.chunks[0] if ds.chunks else max(have, 1)
+        chunked = ds.chunks is not None
+        step = ds.chunks[0] if chunked else max(have, 1)
         short = have if have < want else None
-        if have and ds.chunks and self._all_on_disk(ds, have, step):
+        if have and chunked and self._all_on_disk(ds, have, step):
             try:  # the usual case, an intact file: one read (checksums verified), 4× faster than chunk by chunk
                 ds.read_direct(out, np.s_[0:have], np.s_[0:have])
-                return _checked_for_zeros(name, ds, out, short, ())
+                return _checked_for_zeros(name, ds, step if chunked else 0, out, short, ())
             except (OSError, RuntimeError, ValueError):
                 pass  # a checksum fails somewhere: find where, chunk by chunk
         holes: list[Span] = []
         for start in range(0, have, step):
             stop = min(start + step, have)
             try:
-                if ds.chunks and not self._on_disk(ds.id.get_chunk_info_by_coord((start,))):
-                    return _checked_for_zeros(name, ds, out[:start], start, tuple(holes))
+                if chunked and not self._on_disk(ds.id.get_chunk_info_by_coord((start,))):
+                    return _checked_for_zeros(name, ds, step if chunked else 0, out[:start], start, tuple(holes))
             except (OSError, RuntimeError, ValueError):
-                return _checked_for_zeros(name, ds, out[:start], start, tuple(holes))
+                return _checked_for_zeros(name, ds, step if chunked else 0, out[:start], start, tuple(holes))
             try:
                 out[start:stop] = ds[start:stop]
             except (OSError, RuntimeError, ValueError):
-                if not ds.chunks:  # no checksums to fail: the data cannot be read at all
+                if not chunked:  # no checksums to fail: the data cannot be read at all
                     return Column(out[:start], start, tuple(holes))
                 if holes and holes[-1][1] == start:
                     holes[-1] = (holes[-1][0], stop)
                 else:
                     holes.append((start, stop))
-        return _checked_for_zeros(name, ds, out, short, tuple(holes))
+        return _checked_for_zeros(name, ds, step if chunked else 0, out, short, tuple(holes))
 
     def _on_disk(self, info: Any) -> bool:
         """A chunk (HDF5's chunk info) was written and lies inside the file (a never-written one reads as zeros)."""
@@ -158,10 +159,11 @@ class _Reader:
         return len(inside) == -(-rows // step) and all(inside)
 
 
-def _checked_for_zeros(name: str, ds: h5py.Dataset, values: np.ndarray, lost_from: int | None,
+def _checked_for_zeros(name: str, ds: h5py.Dataset, step: int, values: np.ndarray, lost_from: int | None,
                        holes: tuple[Span, ...]) -> Column:
-    """The column read, with the chunks the storage zeroed whose rows cannot be real (:mod:`acq.recording.zeroed`)."""
-    chunks = zero_chunks(ds, values, holes) if ds.chunks else []
+    """The column read (of chunks of ``step`` rows; 0: not chunked, no checksums), with the chunks the storage zeroed
+    whose rows cannot be real (:mod:`acq.recording.zeroed`)."""
+    chunks = zero_chunks(ds, step, values, holes) if step else []
     return Column(values, lost_from, holes, invented(name, values, chunks, holes) if chunks else ())
 
 

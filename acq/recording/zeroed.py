@@ -44,11 +44,10 @@ def _words(values: np.ndarray) -> np.ndarray:
     return values.view(np.uint8).reshape(values.size, -1)
 
 
-def zero_chunks(ds: Any, values: np.ndarray, holes: tuple[Span, ...]) -> list[Span]:
-    """The chunks of dataset ``ds`` (h5py, chunked) whose rows in ``values`` (its first rows as read) are all 0 and
-    whose stored bytes, checksum included, are all 0: ``[start, stop)`` clipped to ``values``, in order. Chunks in
-    ``holes`` (their rows were not read) are left out."""
-    step = ds.chunks[0]
+def zero_chunks(ds: Any, step: int, values: np.ndarray, holes: tuple[Span, ...]) -> list[Span]:
+    """The chunks (``step`` rows each) of dataset ``ds`` (h5py) whose rows in ``values`` (its first rows as read) are
+    all 0 and whose stored bytes, checksum included, are all 0: ``[start, stop)`` clipped to ``values``, in order.
+    Chunks in ``holes`` (their rows were not read) are left out."""
     if values.size == 0:
         return []
     words = _words(values)
