@@ -258,3 +258,37 @@ def test_real_zeros_are_kept_and_zeroed_chunks_next_to_them_are_not(tmp_path: Pa
     assert np.array_equal(damaged.current.phases_a["i_a"], phases["i_a"][keep])
     assert np.array_equal(damaged.current.phases_a["i_c"], phases["i_c"][keep])
     assert np.array_equal(damaged.encoder.position_counts, encoder["position_counts"][_keep(3000, (2500, 3000))])
+
+
+@pytest.mark.parametrize("percent", [10, 50])
+def test_a_cut_copy_pre_allocated_to_full_size_keeps_what_a_cut_copy_keeps(
+        recorded: Path, tmp_path: Path, percent: int, capsys: pytest.CaptureFixture[str]) -> None:
+    """A copier or downloader that pre-allocates the whole file and is cut leaves the rest zero: the footer's strings
+    at the end are unreadable, as in a cut copy. Before: refused whole, 'not a readable HDF5 session file (root
+    attributes unreadable)'. Now the file's data ends where its zeros begin: the same samples as the copy cut there."""
+    size = recorded.stat().st_size
+    cut_at = size * percent // 100
+    zeroed, cut = tmp_path / "zeroed.h5", tmp_path / "cut.h5"
+    for path in (zeroed, cut):
+        shutil.copyfile(recorded, path)
+    with zeroed.open("r+b") as fh:
+        fh.seek(cut_at)
+        fh.write(bytes(size - cut_at))
+    with cut.open("r+b") as fh:
+        fh.truncate(cut_at)
+    z, c = load(zeroed), load(cut)
+    tail = len((recorded.read_bytes()[:cut_at]).rstrip(b"\0"))  # the zeros begin where the kept bytes' zeros do
+    lost = c.damage[0].split(" bytes", 1)[1]  # ", stop_reason and stopped_utc lost": the strings past the cut
+    assert lost.endswith(" lost")
+    assert z.damage == (f"file zeroed from byte {tail:,} to its end ({size:,} bytes)".replace(",", " ") + lost,
+                        *c.damage[1:])
+    assert (z.current.sample_count, z.encoder.index.size) == (c.current.sample_count, c.encoder.index.size)
+    assert c.current.sample_count >= (percent - 10) / 100 * TOTAL and c.encoder.index.size >= 3000  # a real part
+    for phase in ("i_a", "i_b", "i_c"):
+        assert np.array_equal(z.current.phases_a[phase], c.current.phases_a[phase])
+    assert np.array_equal(z.encoder.position_counts, c.encoder.position_counts)
+    run = run_cli(capsys, "check", "--repair", str(zeroed))
+    assert run.code == 0, run.err
+    copy = load(tmp_path / "zeroed.recovered.h5")
+    assert copy.damage == () and (copy.current.sample_count, copy.encoder.index.size) == (c.current.sample_count,
+                                                                                          c.encoder.index.size)

@@ -18,7 +18,7 @@ import h5py
 import numpy as np
 from pydantic import ValidationError
 
-from acq.recording.h5safe import open_read, superblock_eof
+from acq.recording.h5safe import open_read, superblock_eof, zero_tail_start
 from acq.recording.holes import Column, Span, current_rows, lost_spans, only_zeroed, readable
 from acq.recording.layout import FLUSH_DTYPE, FOOTER_TEXT, FORMAT, FORMAT_VERSION, NO_COUNT, OPTIONAL_ENCODER
 from acq.recording.paths import require_session_file
@@ -82,9 +82,9 @@ def _lost(stream: str, keep: np.ndarray, zeroed: np.ndarray, total: int) -> list
 class _Reader:
     """Reads datasets of one open file chunk by chunk, up to the committed length; never past the file's end."""
 
-    def __init__(self, f: h5py.File, path: Path, notes: list[str]) -> None:
+    def __init__(self, f: h5py.File, path: Path, notes: list[str], end: int) -> None:
         self.f, self.path, self.notes = f, path, notes
-        self.size = path.stat().st_size
+        self.size = end  # where its data ends: the file's size, or where a tail of zeros begins
 
     def node(self, name: str) -> Any:
         try:
@@ -319,12 +319,15 @@ def load(path: Path | str) -> Session:
         raise ConfigError(f"{p}: damaged, cannot be read ({why})") from None
 
 
-def _root_attrs(p: Path, f: h5py.File, notes: list[str]) -> dict[str, Any]:
-    """The root attributes; of a cut file, the footer's strings HDF5 put past the cut are left out and named in
-    ``notes`` ("file cut: … bytes, stop_reason lost"). Any other attribute unreadable: not a session to read."""
+def _root_attrs(p: Path, f: h5py.File, notes: list[str]) -> tuple[dict[str, Any], int]:
+    """The root attributes and where the file's data ends, in bytes. Of a cut file, the footer's strings HDF5 put past
+    the cut are left out and named in ``notes`` ("file cut: … bytes, stop_reason lost"); so are they when the file
+    ends in zeros from before them (a cut copy pre-allocated to its full size: "file zeroed from byte … to its end"),
+    and its data ends there. Any other attribute unreadable: not a session to read."""
     why = f"{notes[0]}, root attributes lost" if notes else "root attributes unreadable"
     attrs: dict[str, Any] = {}
     lost: list[str] = []
+    end = p.stat().st_size
     try:
         names = list(f.attrs)
     except (OSError, RuntimeError, KeyError):
@@ -333,16 +336,19 @@ def _root_attrs(p: Path, f: h5py.File, notes: list[str]) -> dict[str, Any]:
         try:
             attrs[name] = _attr(f.attrs[name])
         except (OSError, RuntimeError, KeyError):
+            if not notes and name in FOOTER_TEXT and (zeros := zero_tail_start(p)) < end:
+                notes.append(f"file zeroed from byte {zeros:,} to its end ({end:,} bytes)".replace(",", " "))
+                end = zeros
             if not notes or name not in FOOTER_TEXT:
                 raise ConfigError(f"{p}: not a readable HDF5 session file ({why})") from None
             lost.append(name)
     if lost:
         notes[0] += f", {' and '.join(lost)} lost"
-    return attrs
+    return attrs, end
 
 
 def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
-    attrs = _root_attrs(p, f, notes)
+    attrs, end = _root_attrs(p, f, notes)
     if attrs.get("format") != FORMAT:
         raise ConfigError(f"{p}: not an acq session (format attribute is {attrs.get('format')!r})")
     try:
@@ -357,7 +363,7 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
         raise ConfigError(f"{p}: malformed session: attribute tags_json is not JSON") from None
     bench = _config_attr(p, attrs, "bench_json", Bench)
     profile = None if attrs.get("profile_json") == "null" else _config_attr(p, attrs, "profile_json", Profile)
-    reader = _Reader(f, p, notes)
+    reader = _Reader(f, p, notes, end)
     committed = _committed(f, reader)
     damage: list[Damage] = []
     current = _read_current(reader, committed, damage)
