@@ -350,15 +350,19 @@ def flipped_byte(lab: Lab, where: str) -> Row:
 
 def zeroed(lab: Lab, where: str) -> Row:
     """Bytes replaced by zeros, as storage that lost them leaves them (a cut pre-allocated download, blocks a file
-    system zero-fills after a crash): a chunk's samples and checksum (Fletcher32 of zeros is 0: it passes), or a
-    4 KiB-aligned region of 64 KiB around the middle of the file, whatever lies there. Handled: ``acq check`` names a
-    span "zeroed on disk" (exit 1), every sample kept is the intact file's, none is a row of the zeroed bytes."""
+    system zero-fills after a crash): a chunk's samples and checksum (Fletcher32 of zeros is 0: it passes), a
+    4 KiB-aligned region of 64 KiB around the middle of the file, whatever lies there, or the file's second half (a cut
+    copy pre-allocated to full size). Handled: ``acq check`` names a span "zeroed on disk" or the zeroed end (exit 1),
+    every sample kept is the intact file's, none is a row of the zeroed bytes."""
     case = f"zeroed {where}: check, analyze, analyze --partial"
-    path = lab.copy()
+    path = lab.folder() / "s.h5"
+    shutil.copyfile(lab.session, path)  # not Lab.copy: the session_id it writes lies at the end, in the zeroed half
     with h5py.File(path, "r") as f:
+        size = path.stat().st_size
         if where == "region":
-            start = path.stat().st_size // 2 // 4096 * 4096
-            span = (start, start + (64 << 10))
+            span = (size // 2 // 4096 * 4096, size // 2 // 4096 * 4096 + (64 << 10))
+        elif where == "second half":
+            span = (size // 2, size)
         else:
             info = f[where].id.get_chunk_info(8)
             span = (info.byte_offset, info.byte_offset + info.size)
@@ -366,7 +370,8 @@ def zeroed(lab: Lab, where: str) -> Row:
         fh.seek(span[0])
         fh.write(bytes(span[1] - span[0]))
     check = acq("check", str(path), timeout=60)
-    problem = clean(check, (1,)) or (None if " zeroed on disk\n" in check.out else "no span named zeroed on disk")
+    named = " zeroed on disk\n" in check.out or f"{path}: file zeroed from byte " in check.out
+    problem = clean(check, (1,)) or (None if named else "no span named zeroed on disk")
     kept = stored = ""
     if problem is None:
         part, whole = load(path), load(lab.session)
@@ -592,7 +597,8 @@ def cases(lab: Lab, quick: bool) -> list[tuple[str, Callable[[], Row]]]:
         *[(f"cut{p}", lambda p=p: cut_file(lab, p)) for p in (10, 30, 50, 90)],
         ("flip data", lambda: flipped_byte(lab, "current data chunk")),
         ("flip meta", lambda: flipped_byte(lab, "metadata")),
-        *[(f"zeroed {w}", lambda w=w: zeroed(lab, w)) for w in ("current/i_a_A", "encoder/index", "region")],
+        *[(f"zeroed {w}", lambda w=w: zeroed(lab, w)) for w in ("current/i_a_A", "encoder/index", "region",
+                                                                          "second half")],
         ("no encoder", lambda: malformed(lab, "no /encoder group", lambda f: f.__delitem__("encoder"))),
         ("no blocks", lambda: malformed(lab, "no /current/blocks", lambda f: f.__delitem__("current/blocks"))),
         ("bad bench_json", lambda: malformed(lab, "corrupt bench_json",
