@@ -29,7 +29,8 @@ TOTAL = SECONDS * RATE_HZ
 
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A --fast simulated session of the three phases (dither seed 0), written by the real recorder in a child process."""
+    """A --fast simulated session of the three phases (dither seed 0), written by the real recorder in a child
+    process."""
     folder = tmp_path_factory.mktemp("rec3")
     bench = (Path(__file__).parents[1] / "configs/benches/sim.toml").read_text()
     assert 'channels = ["i_a"]' in bench

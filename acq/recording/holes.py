@@ -173,9 +173,9 @@ def _zeroed_samples(placed: np.ndarray, offset: np.ndarray, block_ok: np.ndarray
     return zeroed
 
 
-def _split_blocks(sample_keep: np.ndarray, zeroed: np.ndarray, offset: np.ndarray, count: np.ndarray, first_index: np.ndarray,
-                  host_ns: np.ndarray) -> CurrentRows:
-    """The block table of the kept samples: each block cut into its runs of kept samples."""
+def _split_blocks(sample_keep: np.ndarray, zeroed: np.ndarray, offset: np.ndarray, count: np.ndarray,
+                  first_index: np.ndarray, host_ns: np.ndarray) -> CurrentRows:
+    """The block table of the kept samples: each block cut into its runs of kept samples (``zeroed`` passed on)."""
     size = sample_keep.size
     block_start = np.zeros(size + 1, dtype=bool)
     block_start[offset[offset < size]] = True
@@ -184,5 +184,6 @@ def _split_blocks(sample_keep: np.ndarray, zeroed: np.ndarray, offset: np.ndarra
     starts = np.flatnonzero(sample_keep & (block_start[:-1] | ~before[:-1]))
     stops = np.flatnonzero(sample_keep & (block_start[1:] | ~after)) + 1
     block = np.searchsorted(offset, starts, side="right") - 1
-    return CurrentRows(sample_keep=sample_keep, zeroed=zeroed, first_index=first_index[block] + (starts - offset[block]),
+    return CurrentRows(sample_keep=sample_keep, zeroed=zeroed,
+                       first_index=first_index[block] + (starts - offset[block]),
                        count=(stops - starts).astype(np.int64), host_ns=host_ns[block])

@@ -111,11 +111,12 @@ class _Reader:
         out = np.empty(have, dtype=ds.dtype)
         chunked = ds.chunks is not None
         step = ds.chunks[0] if chunked else max(have, 1)
+        zero_step = step if chunked else 0  # chunks to look for zeroed ones in (none without checksums)
         short = have if have < want else None
         if have and chunked and self._all_on_disk(ds, have, step):
             try:  # the usual case, an intact file: one read (checksums verified), 4× faster than chunk by chunk
                 ds.read_direct(out, np.s_[0:have], np.s_[0:have])
-                return _checked_for_zeros(name, ds, step if chunked else 0, out, short, ())
+                return _checked_for_zeros(name, ds, zero_step, out, short, ())
             except (OSError, RuntimeError, ValueError):
                 pass  # a checksum fails somewhere: find where, chunk by chunk
         holes: list[Span] = []
@@ -123,9 +124,9 @@ class _Reader:
             stop = min(start + step, have)
             try:
                 if chunked and not self._on_disk(ds.id.get_chunk_info_by_coord((start,))):
-                    return _checked_for_zeros(name, ds, step if chunked else 0, out[:start], start, tuple(holes))
+                    return _checked_for_zeros(name, ds, zero_step, out[:start], start, tuple(holes))
             except (OSError, RuntimeError, ValueError):
-                return _checked_for_zeros(name, ds, step if chunked else 0, out[:start], start, tuple(holes))
+                return _checked_for_zeros(name, ds, zero_step, out[:start], start, tuple(holes))
             try:
                 out[start:stop] = ds[start:stop]
             except (OSError, RuntimeError, ValueError):
@@ -135,7 +136,7 @@ class _Reader:
                     holes[-1] = (holes[-1][0], stop)
                 else:
                     holes.append((start, stop))
-        return _checked_for_zeros(name, ds, step if chunked else 0, out, short, tuple(holes))
+        return _checked_for_zeros(name, ds, zero_step, out, short, tuple(holes))
 
     def _on_disk(self, info: Any) -> bool:
         """A chunk (HDF5's chunk info) was written and lies inside the file (a never-written one reads as zeros)."""

@@ -15,10 +15,11 @@ the two apart; the rows can, by what the column holds:
 * **Values** (the phase currents, the position, the drive's time and speeds) can be 0, but a run of exact zeros is
   bounded by its cause: a channel reading exactly 0.0 (a real card's reading carries noise and its calibration
   offset, so that is a noise-free simulation or a disconnected simulated channel) or a joint resting exactly at
-  count 0 reads 0 also next to the chunk, unless the run began and ended exactly at the chunk's edges (1 in 500 for
-  the encoder's chunk, 1 in 2 560 for the current's, on each side). So a run of zeroed chunks of a value column is
-  invented when the nearest readable row on either side of it is not 0, and real when one is 0 or there is none
-  (the whole column zero: nothing in the file says otherwise).
+  count 0 reads 0 also next to the chunk, unless the zeros began exactly at the chunk's first row and ended exactly
+  at its last (about 1 in 500² for the encoder's chunk of 500 rows, 1 in 2 560² for the current's). So a run of
+  zeroed chunks of a value column is invented when the nearest readable row before it and the one after it (where
+  there is one) are both not 0, and real when either is 0 or there is none (the whole column zero: nothing in the
+  file says otherwise).
 
 Finding a zeroed chunk costs an intact file nearly nothing: only a chunk whose first row is 0 in every byte is
 looked at whole, and only a chunk whose rows are all 0 has its stored bytes read (``read_direct_chunk``).
@@ -30,11 +31,11 @@ from typing import Any
 
 import numpy as np
 
+from acq.recording.holes import Span
+
 #: Datasets (paths without the leading /) whose rows are never zero twice; every other one holds values.
 STAMPS = frozenset({"current/blocks/count", "current/blocks/first_index", "current/blocks/host_ns", "encoder/index",
                     "encoder/host_ns", "events", "flushes"})
-#: A span of rows ``[start, stop)``.
-Span = tuple[int, int]
 
 
 def _words(values: np.ndarray) -> np.ndarray:
