@@ -16,10 +16,11 @@ the two apart; the rows can, by what the column holds:
   bounded by its cause: a channel reading exactly 0.0 (a real card's reading carries noise and its calibration
   offset, so that is a noise-free simulation or a disconnected simulated channel) or a joint resting exactly at
   count 0 reads 0 also next to the chunk, unless the zeros began exactly at the chunk's first row and ended exactly
-  at its last (about 1 in 500² for the encoder's chunk of 500 rows, 1 in 2 560² for the current's). So a run of
-  zeroed chunks of a value column is invented when the nearest readable row before it and the one after it (where
-  there is one) are both not 0, and real when either is 0 or there is none (the whole column zero: nothing in the
-  file says otherwise).
+  at its last (about 1 in 500² for the encoder's chunk of 500 rows, 1 in 2 560² for the current's; 1 in 500 for a
+  joint resting at count 0 from the start of the recording, whose first chunk has no row before it: the simulated
+  joint rests there 0.2 s, 201 rows). So a run of zeroed chunks of a value column is invented when the nearest
+  readable row before it and the one after it (where there is one) are both not 0, and real when either is 0 or
+  there is none (the whole column zero: nothing in the file says otherwise).
 
 Finding a zeroed chunk costs an intact file nearly nothing: only a chunk whose first row is 0 in every byte is
 looked at whole, and only a chunk whose rows are all 0 has its stored bytes read (``read_direct_chunk``).
