@@ -348,6 +348,46 @@ def flipped_byte(lab: Lab, where: str) -> Row:
     return row(case, check, problem, note=f"check {check.seconds:.1f} s")
 
 
+def zeroed(lab: Lab, where: str) -> Row:
+    """Bytes replaced by zeros, as storage that lost them leaves them (a cut pre-allocated download, blocks a file
+    system zero-fills after a crash): a chunk's samples and checksum (Fletcher32 of zeros is 0: it passes), a
+    4 KiB-aligned region of 64 KiB around the middle of the file, whatever lies there, or the file's second half (a cut
+    copy pre-allocated to full size). Handled: ``acq check`` names a span "zeroed on disk" or the zeroed end (exit 1),
+    every sample kept is the intact file's, none is a row of the zeroed bytes."""
+    case = f"zeroed {where}: check, analyze, analyze --partial"
+    path = lab.folder() / "s.h5"
+    shutil.copyfile(lab.session, path)  # not Lab.copy: the session_id it writes lies at the end, in the zeroed half
+    with h5py.File(path, "r") as f:
+        size = path.stat().st_size
+        if where == "region":
+            span = (size // 2 // 4096 * 4096, size // 2 // 4096 * 4096 + (64 << 10))
+        elif where == "second half":
+            span = (size // 2, size)
+        else:
+            info = f[where].id.get_chunk_info(8)
+            span = (info.byte_offset, info.byte_offset + info.size)
+    with path.open("r+b") as fh:
+        fh.seek(span[0])
+        fh.write(bytes(span[1] - span[0]))
+    check = acq("check", str(path), timeout=60)
+    named = " zeroed on disk\n" in check.out or f"{path}: file zeroed from byte " in check.out
+    problem = clean(check, (1,)) or (None if named else "no span named zeroed on disk")
+    kept = stored = ""
+    if problem is None:
+        part, whole = load(path), load(lab.session)
+        kept = f"{part.current.sample_count} / {part.encoder.index.size}"
+        stored = f"{whole.current.sample_count} / {whole.encoder.index.size}"
+        same = all(np.array_equal(v, whole.current.phases_a[ch][part.current.sample_index()])
+                   for ch, v in part.current.phases_a.items())
+        same = same and np.array_equal(part.encoder.position_counts,
+                                       whole.encoder.position_counts[np.isin(whole.encoder.index, part.encoder.index)])
+        problem = None if same else "samples kept that the intact file does not hold there"
+    problem = problem or clean(acq("analyze", str(path), "--no-report", timeout=60), (2,))
+    partial = acq("analyze", str(path), "--no-report", "--partial", timeout=120)
+    problem = problem or clean(partial, (0, 1))
+    return row(case, check, problem, kept, stored, note=f"check {check.seconds:.1f} s")
+
+
 def malformed(lab: Lab, what: str, spoil: Callable[[h5py.File], None]) -> Row:
     path = lab.copy()
     with h5py.File(path, "r+") as f:
@@ -557,6 +597,8 @@ def cases(lab: Lab, quick: bool) -> list[tuple[str, Callable[[], Row]]]:
         *[(f"cut{p}", lambda p=p: cut_file(lab, p)) for p in (10, 30, 50, 90)],
         ("flip data", lambda: flipped_byte(lab, "current data chunk")),
         ("flip meta", lambda: flipped_byte(lab, "metadata")),
+        *[(f"zeroed {w}", lambda w=w: zeroed(lab, w)) for w in ("current/i_a_A", "encoder/index", "region",
+                                                                          "second half")],
         ("no encoder", lambda: malformed(lab, "no /encoder group", lambda f: f.__delitem__("encoder"))),
         ("no blocks", lambda: malformed(lab, "no /current/blocks", lambda f: f.__delitem__("current/blocks"))),
         ("bad bench_json", lambda: malformed(lab, "corrupt bench_json",

@@ -10,7 +10,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
 import faults  # noqa: E402 - bench/ is not a package
 
-FAST = ("cut50", "flip data", "flip meta", "bad bench_json", "name 'x/../../../escaped'")
+FAST = ("cut50", "flip data", "flip meta", "zeroed region", "bad bench_json", "name 'x/../../../escaped'")
 
 
 @pytest.fixture(scope="module")

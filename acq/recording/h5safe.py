@@ -5,6 +5,8 @@ guards it needs, each written by hand because h5py has no binding for it:
 
 * **Truncation before opening.** The superblock records the file's end-of-file address; a file
   shorter than that was cut. :func:`superblock_eof` reads it (HDF5 file format spec, "Superblock").
+* **A tail of zeros.** :func:`zero_tail_start` finds where the zero bytes that end a file begin (a cut copy that
+  was pre-allocated to its full size).
 * **Bounded metadata reads.** A reader opened with ``swmr=True`` retries every metadata block whose
   checksum fails up to 100 times with growing sleeps (HDF5 ``H5Pset_metadata_read_attempts``,
   default 100 for SWMR) — on a file cut to 10 % that is minutes inside one h5py call, which Ctrl-C
@@ -64,6 +66,23 @@ def superblock_eof(path: Path) -> int | None:
     base = struct.unpack_from(fmt, head, fields)[0]
     eof = struct.unpack_from(fmt, head, fields + 2 * o)[0]
     return base + eof
+
+
+def zero_tail_start(path: Path, block: int = 1 << 20) -> int:
+    """Where the run of zero bytes that ends the file begins (its size when the last byte is not 0): a copier or
+    downloader that pre-allocates the whole file and is cut leaves the rest zero; read backwards ``block`` bytes at a
+    time, so a file that does not end in zeros costs one read."""
+    with path.open("rb") as f:
+        end = f.seek(0, os.SEEK_END)
+        while end > 0:
+            start = max(0, end - block)
+            f.seek(start)
+            data = f.read(end - start)
+            last = len(data.rstrip(b"\0"))
+            if last:
+                return start + last
+            end = start
+    return 0
 
 
 @functools.cache

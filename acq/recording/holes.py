@@ -1,4 +1,5 @@
-"""Rows lost inside a stream of a damaged session file (a chunk whose checksum fails, with intact chunks after it).
+"""Rows lost inside a stream of a damaged session file (a chunk whose checksum fails, or that the storage zeroed,
+with intact chunks after it).
 
 The reader (:mod:`acq.recording.reader`) reads each dataset chunk by chunk into a :class:`Column`: the rows read, the
 spans whose chunk failed its checksum (holes), and where the readable rows end (the tail: a chunk never written or
@@ -10,7 +11,7 @@ sample index of the current's block table, a jump in the drive cycle index of th
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -31,24 +32,43 @@ class Column:
         wanted row was read (holes aside).
     holes : tuple of (int, int)
         Spans ``[start, stop)`` of rows inside ``values`` whose chunk failed its checksum, in order.
+    zeroed : tuple of (int, int)
+        Spans of rows inside ``values`` whose chunks the storage replaced by zeros (:mod:`acq.recording.zeroed`):
+        holes too, named apart.
     """
 
     values: np.ndarray
     lost_from: int | None
     holes: tuple[Span, ...] = ()
+    zeroed: tuple[Span, ...] = ()
 
     @property
     def damaged(self) -> bool:
-        return self.lost_from is not None or bool(self.holes)
+        return self.lost_from is not None or bool(self.holes) or bool(self.zeroed)
+
+    @property
+    def lost(self) -> tuple[Span, ...]:
+        """Every span of rows inside ``values`` not to use: the checksum failures and the zeroed chunks."""
+        return (*self.holes, *self.zeroed)
+
+    def trusting_zeros(self) -> Column:
+        """The column with its zeroed chunks taken as read (to tell the rows lost to them from the others)."""
+        return replace(self, zeroed=())
 
 
 def readable(columns: Sequence[Column], rows: int) -> np.ndarray:
     """Mask of the first ``rows`` rows that no column holds in a hole (a row lost in one column is lost in all)."""
     keep = np.ones(rows, dtype=bool)
     for column in columns:
-        for start, stop in column.holes:
+        for start, stop in column.lost:
             keep[start:min(stop, rows)] = False
     return keep
+
+
+def only_zeroed(columns: Sequence[Column], rows: int) -> np.ndarray:
+    """Mask of the first ``rows`` rows lost to a zeroed chunk of some column and to no checksum failure."""
+    return ~readable([replace(c, holes=()) for c in columns], rows) & readable([c.trusting_zeros() for c in columns],
+                                                                               rows)
 
 
 def lost_spans(keep: np.ndarray, total: int) -> list[Span]:
@@ -69,6 +89,7 @@ class CurrentRows:
     """The current's samples kept and its block table made true for them (see :func:`current_rows`)."""
 
     sample_keep: np.ndarray
+    zeroed: np.ndarray
     first_index: np.ndarray
     count: np.ndarray
     host_ns: np.ndarray
@@ -91,7 +112,8 @@ def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Se
     Returns
     -------
     CurrentRows
-        ``sample_keep`` (mask over the samples stored in every phase) and the block table of the kept samples.
+        ``sample_keep`` (mask over the samples stored in every phase), ``zeroed`` (the samples lost to zeroed chunks
+        only: of the phases, or of the block table rows that place them) and the block table of the kept samples.
 
     Notes
     -----
@@ -110,7 +132,7 @@ def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Se
     block_ok = readable((count, first_index, host_ns), rows)
     n = count.values.astype(np.int64)
     n_known = n.copy()
-    for start, stop in count.holes:
+    for start, stop in count.lost:
         n_known[start:stop] = 0
     unknown = ~readable((count,), len(n))
     offset = np.concatenate(([0], np.cumsum(n_known)[:-1])) if len(n) else np.zeros(0, dtype=np.int64)
@@ -123,17 +145,37 @@ def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Se
     block_ok &= known[:rows]
     offset, n = offset[:rows], n[:rows]
     block_ok &= offset + n <= samples_stored  # samples of a read not all stored (a kill between the two writes)
-    sample_keep = np.zeros(samples_stored, dtype=bool)
+    placed = np.zeros(samples_stored, dtype=bool)
     for a, b in zip(offset[block_ok], offset[block_ok] + n[block_ok]):
-        sample_keep[a:b] = True
-    sample_keep &= readable(phases, samples_stored)
-    return _split_blocks(sample_keep, offset[block_ok], n[block_ok], first_index.values[:rows][block_ok],
-                         host_ns.values[:rows][block_ok])
+        placed[a:b] = True
+    sample_keep = placed & readable(phases, samples_stored)
+    zeroed = _zeroed_samples(placed, offset, block_ok, only_zeroed((count, first_index, host_ns), rows), phases)
+    return _split_blocks(sample_keep, zeroed & ~sample_keep, offset[block_ok], n[block_ok],
+                         first_index.values[:rows][block_ok], host_ns.values[:rows][block_ok])
 
 
-def _split_blocks(sample_keep: np.ndarray, offset: np.ndarray, count: np.ndarray, first_index: np.ndarray,
-                  host_ns: np.ndarray) -> CurrentRows:
-    """The block table of the kept samples: each block cut into its runs of kept samples."""
+def _zeroed_samples(placed: np.ndarray, offset: np.ndarray, block_ok: np.ndarray, table_zeroed: np.ndarray,
+                    phases: Sequence[Column]) -> np.ndarray:
+    """Samples lost to zeroed chunks only: those of a phase's zeroed chunk that a block places, and those no block
+    places where every block-table row between the placed blocks around them was zeroed (a checksum failure or a
+    tail among them: unreadable)."""
+    size = placed.size
+    zeroed = only_zeroed(phases, size) & placed
+    if table_zeroed.any():
+        phases_ok = readable([c.trusting_zeros() for c in phases], size)
+        ok = np.flatnonzero(block_ok)
+        for a, b in lost_spans(placed, size):
+            before = int(np.searchsorted(offset[ok], a)) - 1  # the last placed block before the span
+            first = int(ok[before]) + 1 if before >= 0 else 0
+            stop = int(ok[before + 1]) if before + 1 < ok.size else table_zeroed.size
+            if first < stop and table_zeroed[first:stop].all():
+                zeroed[a:b] |= phases_ok[a:b]
+    return zeroed
+
+
+def _split_blocks(sample_keep: np.ndarray, zeroed: np.ndarray, offset: np.ndarray, count: np.ndarray,
+                  first_index: np.ndarray, host_ns: np.ndarray) -> CurrentRows:
+    """The block table of the kept samples: each block cut into its runs of kept samples (``zeroed`` passed on)."""
     size = sample_keep.size
     block_start = np.zeros(size + 1, dtype=bool)
     block_start[offset[offset < size]] = True
@@ -142,5 +184,6 @@ def _split_blocks(sample_keep: np.ndarray, offset: np.ndarray, count: np.ndarray
     starts = np.flatnonzero(sample_keep & (block_start[:-1] | ~before[:-1]))
     stops = np.flatnonzero(sample_keep & (block_start[1:] | ~after)) + 1
     block = np.searchsorted(offset, starts, side="right") - 1
-    return CurrentRows(sample_keep=sample_keep, first_index=first_index[block] + (starts - offset[block]),
+    return CurrentRows(sample_keep=sample_keep, zeroed=zeroed,
+                       first_index=first_index[block] + (starts - offset[block]),
                        count=(stops - starts).astype(np.int64), host_ns=host_ns[block])

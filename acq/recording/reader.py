@@ -18,11 +18,12 @@ import h5py
 import numpy as np
 from pydantic import ValidationError
 
-from acq.recording.h5safe import open_read, superblock_eof
-from acq.recording.holes import Column, Span, current_rows, lost_spans, readable
+from acq.recording.h5safe import open_read, superblock_eof, zero_tail_start
+from acq.recording.holes import Column, Span, current_rows, lost_spans, only_zeroed, readable
 from acq.recording.layout import FLUSH_DTYPE, FOOTER_TEXT, FORMAT, FORMAT_VERSION, NO_COUNT, OPTIONAL_ENCODER
 from acq.recording.paths import require_session_file
 from acq.recording.session import CurrentData, EncoderData, Session
+from acq.recording.zeroed import invented, zero_chunks
 from acq.recording.storage import cause_of
 from drivers.base import StreamEvent
 from drivers.config import Bench, Profile
@@ -66,14 +67,24 @@ def _span(stream: str, first: int, end: int, what: str = "unreadable") -> str:
 
 #: A damaged span found while reading: (stream, first row, end row, what), the words of :func:`_span`.
 Damage = tuple[str, int, int, str]
+#: What a span lost to chunks the storage zeroed is called (a checksum failure or a tail: "unreadable").
+ZEROED = "zeroed on disk"
+
+
+def _lost(stream: str, keep: np.ndarray, zeroed: np.ndarray, total: int) -> list[Damage]:
+    """The spans of rows ``[0, total)`` of ``stream`` not in ``keep``, in order: :data:`ZEROED` those in ``zeroed``
+    (lost to zeroed chunks only), "unreadable" the others."""
+    spans = [(stream, a, b, "unreadable") for a, b in lost_spans(keep | zeroed, total)]
+    spans += [(stream, a, b, ZEROED) for a, b in lost_spans(~zeroed, zeroed.size)]
+    return sorted(spans, key=lambda span: span[1])
 
 
 class _Reader:
     """Reads datasets of one open file chunk by chunk, up to the committed length; never past the file's end."""
 
-    def __init__(self, f: h5py.File, path: Path, notes: list[str]) -> None:
+    def __init__(self, f: h5py.File, path: Path, notes: list[str], end: int) -> None:
         self.f, self.path, self.notes = f, path, notes
-        self.size = path.stat().st_size
+        self.size = end  # where its data ends: the file's size, or where a tail of zeros begins
 
     def node(self, name: str) -> Any:
         try:
@@ -88,7 +99,8 @@ class _Reader:
 
         Rows are read one chunk at a time when a single read fails: a chunk whose checksum fails is a hole (its rows
         are marked, the next chunks read on); a chunk beyond the end of the file, never written (its rows would read
-        as zeros) or whose place HDF5 cannot tell ends the readable rows.
+        as zeros) or whose place HDF5 cannot tell ends the readable rows. A chunk the storage zeroed (it passes its
+        checksum) is a hole when its rows cannot be real (:mod:`acq.recording.zeroed`).
         """
         ds = self.node(name)
         if not isinstance(ds, h5py.Dataset) or ds.ndim != 1:
@@ -97,32 +109,34 @@ class _Reader:
         want = stored if n is None else n
         have = min(want, stored)
         out = np.empty(have, dtype=ds.dtype)
-        step = ds.chunks[0] if ds.chunks else max(have, 1)
+        chunked = ds.chunks is not None
+        step = ds.chunks[0] if chunked else max(have, 1)
+        zero_step = step if chunked else 0  # chunks to look for zeroed ones in (none without checksums)
         short = have if have < want else None
-        if have and ds.chunks and self._all_on_disk(ds, have, step):
+        if have and chunked and self._all_on_disk(ds, have, step):
             try:  # the usual case, an intact file: one read (checksums verified), 4× faster than chunk by chunk
                 ds.read_direct(out, np.s_[0:have], np.s_[0:have])
-                return Column(out, short)
+                return _checked_for_zeros(name, ds, zero_step, out, short, ())
             except (OSError, RuntimeError, ValueError):
                 pass  # a checksum fails somewhere: find where, chunk by chunk
         holes: list[Span] = []
         for start in range(0, have, step):
             stop = min(start + step, have)
             try:
-                if ds.chunks and not self._on_disk(ds.id.get_chunk_info_by_coord((start,))):
-                    return Column(out[:start], start, tuple(holes))
+                if chunked and not self._on_disk(ds.id.get_chunk_info_by_coord((start,))):
+                    return _checked_for_zeros(name, ds, zero_step, out[:start], start, tuple(holes))
             except (OSError, RuntimeError, ValueError):
-                return Column(out[:start], start, tuple(holes))
+                return _checked_for_zeros(name, ds, zero_step, out[:start], start, tuple(holes))
             try:
                 out[start:stop] = ds[start:stop]
             except (OSError, RuntimeError, ValueError):
-                if not ds.chunks:  # no checksums to fail: the data cannot be read at all
+                if not chunked:  # no checksums to fail: the data cannot be read at all
                     return Column(out[:start], start, tuple(holes))
                 if holes and holes[-1][1] == start:
                     holes[-1] = (holes[-1][0], stop)
                 else:
                     holes.append((start, stop))
-        return Column(out, short, tuple(holes))
+        return _checked_for_zeros(name, ds, zero_step, out, short, tuple(holes))
 
     def _on_disk(self, info: Any) -> bool:
         """A chunk (HDF5's chunk info) was written and lies inside the file (a never-written one reads as zeros)."""
@@ -144,6 +158,14 @@ class _Reader:
         except (OSError, RuntimeError, ValueError):
             return False
         return len(inside) == -(-rows // step) and all(inside)
+
+
+def _checked_for_zeros(name: str, ds: h5py.Dataset, step: int, values: np.ndarray, lost_from: int | None,
+                       holes: tuple[Span, ...]) -> Column:
+    """The column read (of chunks of ``step`` rows; 0: not chunked, no checksums), with the chunks the storage zeroed
+    whose rows cannot be real (:mod:`acq.recording.zeroed`)."""
+    chunks = zero_chunks(ds, step, values, holes) if step else []
+    return Column(values, lost_from, holes, invented(name, values, chunks, holes) if chunks else ())
 
 
 def _committed(f: h5py.File, reader: _Reader) -> dict[str, int] | None:
@@ -174,7 +196,7 @@ def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: lis
         raise ConfigError(f"{reader.path}: malformed session: /current names no channels")
     want = None if committed is None else committed["current_samples"]
     columns = {ch: reader.column(f"current/{ch}_A", want) for ch in channels}
-    if any(c.holes for c in [*table, *columns.values()]):
+    if any(c.lost for c in [*table, *columns.values()]):
         return _current_with_holes(rate_hz, device, table, columns, want, damage)
     counts, first, host = (c.values for c in table)
     phases = {ch: c.values for ch, c in columns.items()}
@@ -199,7 +221,7 @@ def _current_with_holes(rate_hz: float, device: str, table: list[Column], column
     rows = current_rows(*table, list(columns.values()), want)
     keep = rows.sample_keep
     total = want if want is not None else max(len(c.values) for c in columns.values())
-    damage.extend(("current", a, b, "unreadable") for a, b in lost_spans(keep, total))
+    damage.extend(_lost("current", keep, rows.zeroed, total))
     return CurrentData(rate_hz=rate_hz, device=device,
                        phases_a={ch: c.values[:keep.size][keep] for ch, c in columns.items()},
                        block_first_index=rows.first_index, block_count=rows.count, block_host_ns=rows.host_ns)
@@ -216,7 +238,7 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
     total = want if want is not None else max(len(c.values) for c in columns.values())
     keep = readable(list(columns.values()), n)  # a row lost in one column is lost in all: a jump in the cycle index
     if any(c.damaged for c in columns.values()):
-        damage.extend(("encoder", a, b, "unreadable") for a, b in lost_spans(keep, total))
+        damage.extend(_lost("encoder", keep, only_zeroed(list(columns.values()), n), total))
     kept = {name: c.values[:n] if keep.all() else c.values[:n][keep] for name, c in columns.items()}
 
     def optional(name: str) -> np.ndarray | None:
@@ -243,7 +265,8 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
 def _read_events(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage]) -> list[StreamEvent]:
     events = reader.column("events", None if committed is None else committed.get("events"))
     rows, bad = events.values[readable((events,), len(events.values))], events.lost_from
-    damage.extend(("events", a, b, "lost") for a, b in events.holes)
+    damage.extend(sorted([*(("events", a, b, "lost") for a, b in events.holes),
+                          *(("events", a, b, ZEROED) for a, b in events.zeroed)], key=lambda span: span[1]))
     if bad is not None:
         n = len(events.values)
         damage.append(("events", n, bad + 1 if bad >= n else n + 1, "lost"))
@@ -297,12 +320,15 @@ def load(path: Path | str) -> Session:
         raise ConfigError(f"{p}: damaged, cannot be read ({why})") from None
 
 
-def _root_attrs(p: Path, f: h5py.File, notes: list[str]) -> dict[str, Any]:
-    """The root attributes; of a cut file, the footer's strings HDF5 put past the cut are left out and named in
-    ``notes`` ("file cut: … bytes, stop_reason lost"). Any other attribute unreadable: not a session to read."""
+def _root_attrs(p: Path, f: h5py.File, notes: list[str]) -> tuple[dict[str, Any], int]:
+    """The root attributes and where the file's data ends, in bytes. Of a cut file, the footer's strings HDF5 put past
+    the cut are left out and named in ``notes`` ("file cut: … bytes, stop_reason lost"); so are they when the file
+    ends in zeros from before them (a cut copy pre-allocated to its full size: "file zeroed from byte … to its end"),
+    and its data ends there. Any other attribute unreadable: not a session to read."""
     why = f"{notes[0]}, root attributes lost" if notes else "root attributes unreadable"
     attrs: dict[str, Any] = {}
     lost: list[str] = []
+    end = p.stat().st_size
     try:
         names = list(f.attrs)
     except (OSError, RuntimeError, KeyError):
@@ -311,16 +337,19 @@ def _root_attrs(p: Path, f: h5py.File, notes: list[str]) -> dict[str, Any]:
         try:
             attrs[name] = _attr(f.attrs[name])
         except (OSError, RuntimeError, KeyError):
+            if not notes and name in FOOTER_TEXT and (zeros := zero_tail_start(p)) < end:
+                notes.append(f"file zeroed from byte {zeros:,} to its end ({end:,} bytes)".replace(",", " "))
+                end = zeros
             if not notes or name not in FOOTER_TEXT:
                 raise ConfigError(f"{p}: not a readable HDF5 session file ({why})") from None
             lost.append(name)
     if lost:
         notes[0] += f", {' and '.join(lost)} lost"
-    return attrs
+    return attrs, end
 
 
 def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
-    attrs = _root_attrs(p, f, notes)
+    attrs, end = _root_attrs(p, f, notes)
     if attrs.get("format") != FORMAT:
         raise ConfigError(f"{p}: not an acq session (format attribute is {attrs.get('format')!r})")
     try:
@@ -335,7 +364,7 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
         raise ConfigError(f"{p}: malformed session: attribute tags_json is not JSON") from None
     bench = _config_attr(p, attrs, "bench_json", Bench)
     profile = None if attrs.get("profile_json") == "null" else _config_attr(p, attrs, "profile_json", Profile)
-    reader = _Reader(f, p, notes)
+    reader = _Reader(f, p, notes, end)
     committed = _committed(f, reader)
     damage: list[Damage] = []
     current = _read_current(reader, committed, damage)
