@@ -70,3 +70,23 @@ def test_slow_moves_are_not_excited(capsys: pytest.CaptureFixture[str], tmp_path
     assert json.loads(run.out)["quality"] == {"verdict": "not excited", "reasons": [slow]}
 
 
+
+
+def test_a_window_too_short_for_the_bands_welch_averages_says_so_instead_of_try_band(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """The trial's --window 1: a failed fit (K 822.5, truth 891) advised "another mode or a nonlinearity in the band;
+    try --band" where 2 Welch segments of 0.5 s cannot tell a misfit from noise."""
+    rows = _monitor(capsys, tmp_path / "m", "--window", "1", "--every", "1", "--for", "5s")
+    assert (rows[4]["verdict"], round(rows[4]["K"], 1)) == ("failed", 822.5)
+    assert rows[4]["reasons"][0] == (
+        "the two-mass model misses |H| by 38 % RMS, but only 2 Welch segments of 0.5 s (the band's 2 Hz resolution) "
+        "are averaged: with fewer than 4 the coherence cannot tell the band's limit 0.72 from chance (its 95 % point "
+        "with 2: 0.95), so what noise explains is not known — the record is short for the band: it holds 2, and 4 "
+        "need 1.25 s where both streams have data (a longer record: acq monitor --window, acq record's duration)")
+
+
+def test_the_coherence_of_unrelated_signals_and_the_segments_a_limit_needs() -> None:
+    from analysis.averages import chance_coherence, segments_to_tell
+
+    assert [round(chance_coherence(n), 3) for n in (1, 2, 3, 4, 10)] == [1.0, 0.95, 0.776, 0.632, 0.283]
+    assert (segments_to_tell(0.72), segments_to_tell(0.3), segments_to_tell(0.95)) == (4, 10, 3)
