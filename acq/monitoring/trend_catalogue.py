@@ -59,7 +59,7 @@ def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: st
     """The trend of ``joint`` from a catalogue (``folder``/catalogue.sqlite or ``catalogue_path``), sessions
     filtered on ``tags`` (``KEY=VALUE``); ``options`` go to :func:`compute_trend`."""
     monitor, wanted = monitor_and_tags(tags)
-    with Catalogue(catalogue_location(folder, catalogue_path)) as catalogue:
+    with Catalogue(catalogue_location(folder, catalogue_path), read_only=True) as catalogue:
         entries = [e for e in catalogue.entries(joint, monitor=monitor) if tags_match(e.tags, wanted)]
         tagged = f" tagged {' '.join(tags)}" if tags else ""
         if not entries:
