@@ -226,3 +226,12 @@ def test_a_result_without_numbers_reads_as_such() -> None:
     assert options_text(doc) == "torque default · params K,Jm,Jl · fit amplitude"
     doc = {"K_Nm_per_rad": 890.0, "ci95": {"K_Nm_per_rad": [886.0, 894.0]}, "options": {"torque_method": "encoder"}}
     assert interval_text(doc, "K_Nm_per_rad") == "886 – 894" and options_text(doc).startswith("torque encoder ·")
+
+
+def test_a_catalogue_url_of_another_scheme_names_it_and_the_ones_acq_reads(capsys: pytest.CaptureFixture[str]) -> None:
+    """The trial: --catalogue mysql://x/y read as a path, "mysql:/x/y: no catalogue …"."""
+    for command in (["trend", "--joint", "joint1"], ["fleet"], ["monitor", "--bench", "sim_robot", "--for", "1s"]):
+        run = run_cli(capsys, *command, "--catalogue", "mysql://u:secret@x/y")
+        assert (run.code, run.err) == (2, "acq: error: --catalogue mysql://u:***@x/y: mysql:// is not a catalogue acq "
+                                          "can use — give a SQLite file's path or a postgresql:// URL (or "
+                                          "postgres://)\n"), command

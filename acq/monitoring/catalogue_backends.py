@@ -31,12 +31,13 @@ BUSY_TIMEOUT_S = 60.0
 #: Key of PostgreSQL's advisory lock around migrations: any 64-bit number no other application on the
 #: server uses (a signed 64-bit number); these are the bytes of "acqcatal".
 MIGRATION_LOCK_KEY = 0x61637163_6174616C
-_URL_SCHEMES = ("postgresql://", "postgres://")
+#: The URL schemes of a PostgreSQL catalogue; anything else is a SQLite file's path.
+URL_SCHEMES = ("postgresql://", "postgres://")
 
 
 def is_url(location: Path | str) -> bool:
     """True when ``location`` is a PostgreSQL URL rather than a SQLite file."""
-    return isinstance(location, str) and location.startswith(_URL_SCHEMES)
+    return isinstance(location, str) and location.startswith(URL_SCHEMES)
 
 
 def open_error(path: Path | str, e: BaseException, what: str) -> ConfigError | StorageError:
