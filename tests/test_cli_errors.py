@@ -208,6 +208,12 @@ def test_no_catalogue_is_the_same_error_and_exit_code_for_trend_and_view(tmp_pat
     trend = run_cli(capsys, "trend", str(tmp_path), "--joint", "joint1")
     view = run_cli(capsys, "view", "--trend", "joint1", str(tmp_path), "--screenshot", str(tmp_path / "t.png"))
     assert (trend.code, trend.err) == (view.code, view.err) == (2, message)
+    # the trial: acq trend nosuchfolder advised filling a catalogue in a folder that is not there
+    missing = tmp_path / "nosuchfolder"
+    for command in (["trend", str(missing), "--joint", "joint1"], ["fleet", str(missing)]):
+        run = run_cli(capsys, *command)
+        assert (run.code, run.err) == (2, f"acq: error: {missing / 'catalogue.sqlite'}: no catalogue — the folder "
+                                          f"{missing} does not exist\n"), command
 
 
 def test_view_refuses_a_tag_without_a_trend(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

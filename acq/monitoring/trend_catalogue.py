@@ -35,6 +35,8 @@ def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Pat
         sessions = folder or Path("sessions")
         refused = None if catalogue else refused_write(sessions)  # acq analyze can make no catalogue there
         fill = (f"fill it with acq analyze FOLDER/ --catalogue {path}" if catalogue else
+                f"the folder {sessions} does not exist"
+                if not sessions.exists() else
                 f"{sessions} is not writable ({refused}): fill one with acq analyze {sessions}/ --result-dir DIR, "
                 "then acq trend DIR" if refused else f"fill one with acq analyze {sessions}/ first")
         raise NoSessions(f"{path}: no catalogue — {fill}", path)
