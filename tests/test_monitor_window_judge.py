@@ -53,6 +53,8 @@ def test_acq_analyze_of_a_window_the_monitor_filed_not_excited_gives_the_same_an
     assert _rows(tmp_path / "m") == rows  # the row re-filed as it was; the other window's untouched
     table = run_cli(capsys, "analyze", str(first["path"]), "--no-report")
     assert table.code == 0 and "verdict not excited" in table.out and "1.039e+04" not in table.out
+    view = run_cli(capsys, "view", str(first["path"]), "--screenshot", str(tmp_path / "v.png"))
+    assert (view.code, view.err) == (2, f"acq: error: {first['path']}: not excited: {'; '.join(reasons)}\n")
 
 
 def test_slow_moves_are_not_excited(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:

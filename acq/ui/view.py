@@ -57,8 +57,9 @@ def session_figure(path: Path) -> SessionFigure:
     from acq.ui.plots import SessionFigure
 
     done = analyze_session(path, stored_request(Path(path)), write=False)
-    if done.result is None:  # the joint never moved: nothing to draw, the verdict says why
-        raise ConfigError(f"{path}: not excited: {done.json_dict['quality']['reasons'][-1]}")
+    if done.result is None:  # the machine did not excite the joint: nothing to draw, the verdict says why
+        reasons = [r for r in done.json_dict["quality"]["reasons"] if not r.startswith("note: ")]
+        raise ConfigError(f"{path}: not excited: {'; '.join(reasons)}")
     return SessionFigure(Path(path).stem, done.result.figures, done.json_dict)
 
 
