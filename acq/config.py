@@ -190,9 +190,31 @@ def bench_label(path: Path | str | None) -> str:
     return str(path) if path is not None else str(DEFAULT_BENCH.relative_to(CONFIG_DIR.parent))
 
 
+def resolve_bench_path(name_or_path: Path | str) -> Path:
+    """A bench given as a path, or as a name under ``configs/benches/`` (``sim_robot``, ``sim_robot.toml``), as a
+    profile's name is (:func:`resolve_profile_path`); a relative ``configs/…`` path that is not there (a README
+    example run outside the repository) is acq's own ``configs/`` file of that name. A name no file answers:
+    :class:`ConfigError` listing the shipped benches."""
+    p = Path(name_or_path)
+    if p.exists() or p.is_absolute():
+        return p
+    if len(p.parts) == 1:  # a name
+        shipped = CONFIG_DIR / "benches" / p.with_suffix(".toml").name
+    elif p.parts[0] == CONFIG_DIR.name:  # configs/benches/x.toml
+        shipped = CONFIG_DIR.parent / p
+    else:
+        return p  # a path of the person's own: read_toml names it
+    if shipped.is_file():
+        return shipped
+    known = sorted(q.stem for q in (CONFIG_DIR / "benches").glob("*.toml"))
+    raise ConfigError(f"--bench {name_or_path}: no such file, nor a bench in {CONFIG_DIR / 'benches'} (known: "
+                      f"{', '.join(known)})")
+
+
 def load_bench(path: Path | str | None = None) -> Bench:
-    """Load a bench config; ``None`` is the built-in simulated bench."""
-    p = Path(path) if path is not None else DEFAULT_BENCH
+    """Load a bench config (a path or a shipped bench's name: :func:`resolve_bench_path`); ``None`` is the built-in
+    simulated bench."""
+    p = resolve_bench_path(path) if path is not None else DEFAULT_BENCH
     data = read_toml(p)
     if "kind" in data and not _BENCH_SECTIONS & data.keys():
         raise ConfigError(f"{p}: a motion profile (kind = {json.dumps(data['kind'])}), not a bench config: give it as "

@@ -12,7 +12,7 @@ Everything outside ``analysis/`` (the application ``acq``) imports from here onl
 - :class:`Result`, :class:`FigureData`, :class:`TwoMassParams`, :data:`PARAM_NAMES`,
   :data:`PARAM_LABELS`, :data:`Z95`, :class:`Thresholds` — what a result holds and how it is judged.
 - :func:`encoder_period_problem`, :func:`min_current_rate_hz`, :func:`min_duration_s`, :func:`min_record_s`,
-  :func:`min_speed_rpm` (within :data:`PHASE_WINDOW_S`) — what a bench, a record and a profile must offer
+  :func:`min_speed_rpm` (within :data:`PHASE_WINDOW_S`; :class:`TooSlowError` when a record's motion never reaches it) — what a bench, a record and a profile must offer
   before it records.
 - The bench checks of ``acq selftest`` (:mod:`analysis.speed_ratio`, :mod:`analysis.bench_checks`,
   :mod:`analysis.encoder`; the cycle grid of :mod:`analysis.sample_instants`: :func:`cycle_deviation_s`,
@@ -37,12 +37,12 @@ from analysis.sample_instants import MAX_STAMP_DEVIATION, cycle_deviation_s
 from analysis.segments import excitation_summary, segments_summary
 from analysis.signals import PreparedSignals, prepare_signals
 from analysis.speed_ratio import SpeedRatio, electrical_speed_ratio, likely_counts_per_rev, ratio_doubt, ratio_fault
-from analysis.phase_offset import PHASE_WINDOW_S, min_speed_rpm
+from analysis.phase_offset import PHASE_WINDOW_S, TooSlowError, min_speed_rpm
 from analysis.verdict_limits import Thresholds
 
 __all__ = [
     "MAX_STAMP_DEVIATION", "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",
-    "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TorqueMethod", "TwoMassParams", "Z95",
+    "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TooSlowError", "TorqueMethod", "TwoMassParams", "Z95",
     "against_limit", "analyze", "code_fingerprint", "cycle_deviation_s", "electrical_speed_ratio", "encoder_period_problem", "excitation_summary", "segments_summary",
     "min_current_rate_hz",
     "min_duration_s", "min_record_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",

@@ -78,8 +78,10 @@ def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: 
                   ci95: dict[str, tuple[float, float]] | None = None) -> str | None:
     """The words for fitted K, J_m, J_l :data:`NOMINAL_FACTOR` or more off the bench's ``nominal`` (None if none is).
 
-    With ``ci95`` (the fit's 95 % intervals) a parameter counts only when its whole interval lies that far off: a
-    value the data hardly determine is no evidence of a scale mistake.
+    With ``ci95`` (the fit's 95 % intervals) a parameter counts only when its whole interval also lies beyond
+    the square root of :data:`NOMINAL_FACTOR` (half a decade, the midway on a log scale between the nominal and the factor): a value
+    the data hardly determine is no evidence of a scale mistake, while one they pin down 10.05× off (K 8950, interval
+    8722…9184, on a nominal of 891) is one, though its interval reaches below 10×.
 
     When every fitted one of them is off by about the same factor (within 2×), the torque is scaled — the
     current's unit or sensor scale, or k_t — because H = speed/torque scales K, J_m and J_l alike; otherwise the
@@ -90,7 +92,8 @@ def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: 
     names = [n for n in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2") if n in fitted]
     factors = {n: getattr(values, n) / getattr(nominal, n) for n in names}
     off = [n for n, f in factors.items() if _side(f) != 0
-           and all(_side(b / getattr(nominal, n)) == _side(f) for b in (ci95 or {}).get(n, ()) if math.isfinite(b))]
+           and all(_side(b / getattr(nominal, n), math.sqrt(NOMINAL_FACTOR)) == _side(f)
+                   for b in (ci95 or {}).get(n, ()) if math.isfinite(b))]
     if not off:
         return None
     first, rest = off[0], off[1:]
@@ -106,11 +109,11 @@ def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: 
             "and that the bench file is this joint's")
 
 
-def _side(factor: float) -> int:
-    """+1 for a factor ≥ :data:`NOMINAL_FACTOR`, −1 for ≤ its inverse, 0 between (or not a positive number)."""
+def _side(factor: float, limit: float = NOMINAL_FACTOR) -> int:
+    """+1 for a factor ≥ ``limit``, −1 for ≤ its inverse, 0 between (or not a positive number)."""
     if not (math.isfinite(factor) and factor > 0):
         return 0
-    return 1 if factor >= NOMINAL_FACTOR else -1 if factor <= 1.0 / NOMINAL_FACTOR else 0
+    return 1 if factor >= limit else -1 if factor <= 1.0 / limit else 0
 
 
 def _times(factor: float) -> str:

@@ -98,6 +98,12 @@ def window_phasors(current_a: np.ndarray, theta_e_rad: np.ndarray, window_len: i
     return WindowPhasors(centre, sol[:, 0] + 1j * sol[:, 1], sol[:, 2], valid)
 
 
+class TooSlowError(ValueError):
+    """The motor never turns half an electrical revolution within :data:`PHASE_WINDOW_S`: one phase current's angle
+    (θ_0) cannot be estimated. A property of the motion, not of the bench or the software: on a machine's own motion
+    (no profile) the record did not excite the joint enough for the one-phase torque."""
+
+
 #: Window of :func:`phase_offset`, s: the motor must turn half an electrical revolution within it.
 PHASE_WINDOW_S = 0.02
 
@@ -137,7 +143,7 @@ def phase_offset(current_a: np.ndarray, theta_e_rad: np.ndarray, rate_hz: float,
             f"at a time ({pole_pairs} pole pairs) — " + (
                 "raise the profile's top_speed_rpm, and lengthen accel_time_s and decel_time_s if the drive cannot "
                 "follow them" if commanded else "record while the machine runs fast moves of this joint"))
-        raise ValueError(f"the motor never turns half an electrical revolution within {1e3 * window_s:.0f} ms, so the "
+        raise TooSlowError(f"the motor never turns half an electrical revolution within {1e3 * window_s:.0f} ms, so the "
                          f"current's phase (θ_0) and DC cannot be estimated{need}")
     z = np.sum(w.phasor_a[w.valid] ** 2)
     return PhaseOffset(float(np.angle(z) / 2.0), float(np.median(w.dc_a[w.valid])), int(w.valid.sum()))

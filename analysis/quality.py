@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.averages import few_averages
 from analysis.encoder import difference_response
 from analysis.excitation import RESOLUTION_NAMED, against_limit, weak_coherence_cause
 from analysis.fit import COHERENCE_CLIP, FitResult, band_mask
@@ -217,9 +218,10 @@ def assess(
         # session whose trajectory repeats to a fraction of a count) only a gross misfit still fails here
         level = grade(-fit.residual_rms, -th.residual_poor, -th.residual_failed)
         if level != "ok" and ratio > th.misfit_ratio_poor and (not known_resolution or level == "failed"):
-            findings.append((level, f"the two-mass model misses |H| by {100 * fit.residual_rms:.0f} % RMS, "
-                                    f"{ratio:.1f}× what noise explains — another mode or a nonlinearity "
-                                    f"in the band; try --band"))
+            few = few_averages(frf, th.coherence_poor)  # then the noise itself is unknown, not the model wrong
+            findings.append((level, f"the two-mass model misses |H| by {100 * fit.residual_rms:.0f} % RMS, " + (
+                f"{ratio:.1f}× what noise explains — another mode or a nonlinearity in the band; try --band"
+                if few is None else f"but {few}")))
 
     ci_rel = {name: rel_halfwidth(fit, name) for name in fit.fitted}
     for name, (poor, failed) in {"K_Nm_per_rad": (th.ci_K_poor, th.ci_K_failed),

@@ -478,7 +478,12 @@ def test_a_result_dir_on_a_tiny_read_only_mount_is_read_only_not_full(
         for json_flag in ((), ("--json",)):
             run = run_cli(capsys, "analyze", str(session_10s), "--result-dir", str(ro), *json_flag)
             assert (run.code, run.err) == (1, f"acq: error: {cause}: {ro / session_10s.stem}.result.json — the result "
-                                              "above is not saved (--result-dir DIR writes it elsewhere)\n")
+                                              "above is not saved (give --result-dir a folder acq may write)\n")
+        # a batch: the catalogue that goes with the results cannot be made there either (the trial: it suggested
+        # the --result-dir already given)
+        run = run_cli(capsys, "analyze", str(session_10s.parent), "--result-dir", str(ro), "--no-report")
+        assert (run.code, run.err) == (1, f"acq: error: {cause}: {ro / 'catalogue.sqlite'} (no catalogue can be made "
+                                          "there) — give --result-dir a folder acq may write\n")
         assert list(ro.iterdir()) == []
 
 

@@ -15,7 +15,7 @@ import pytest
 
 import acq.monitoring.catalogue
 from acq.monitoring.catalogue import MIGRATIONS, SCHEMA_VERSION, Catalogue, Outcome
-from tests.helpers import run_cli
+from tests.helpers import read_only_view, run_cli
 from tests.pg_server import new_database
 
 
@@ -253,3 +253,31 @@ def test_a_failed_upgrade_of_a_postgresql_catalogue_is_one_line_with_its_detail(
     assert (run.code, run.out, run.err) == (
         2, "", f"acq: error: {url}: not a usable catalogue (could not create unique index \"one_session_per_joint\": "
                "Key (joint)=(j1) is duplicated.)\n")
+
+
+@pytest.mark.parametrize("writer_open", [False, True], ids=["immutable", "wal"])
+def test_trend_and_fleet_read_a_catalogue_in_a_read_only_folder(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                               writer_open: bool) -> None:
+    """The trial: acq trend ro/mon1 --joint joint1 on a read-only mount said "read-only file system: …
+    (SQLite writes beside a catalogue, also to read it)", exit 1. Without -wal/-shm beside it the file is read
+    immutable=1; with a writer's -wal/-shm there (a writer still has it open) mode=ro."""
+    folder = tmp_path / "mon1"
+    folder.mkdir()
+    writer = Catalogue(folder / "catalogue.sqlite")
+    for i, k in enumerate((890.0, 891.0, 892.0)):
+        writer.record(_outcome(f"s-0{i}", k))
+    if not writer_open:
+        writer.close()
+    assert (folder / "catalogue.sqlite-wal").exists() == writer_open
+    try:
+        with read_only_view(folder) as ro:
+            trend = run_cli(capsys, "trend", str(ro), "--joint", "j1", "--json")
+            assert trend.code == 0, trend.err
+            assert [s["K_Nm_per_rad"] for s in json.loads(trend.out)["points"]] == [890.0, 891.0, 892.0]
+            fleet = run_cli(capsys, "fleet", str(ro), "--json")
+            assert fleet.code == 0, fleet.err
+            assert [(j["joint"], j["K_Nm_per_rad"]) for j in json.loads(fleet.out)] == [("j1", 892.0)]
+            assert sorted(p.name for p in ro.iterdir()) == sorted(p.name for p in folder.iterdir())
+    finally:
+        if writer_open:
+            writer.close()

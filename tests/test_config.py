@@ -146,6 +146,26 @@ def test_missing_bench_file(tmp_path: Path, capsys: pytest.CaptureFixture[str]) 
     assert run.err.strip() == f"acq: error: {tmp_path / 'nope.toml'}: no such file"
 
 
+def test_a_bench_is_found_by_its_name_as_a_profile_is(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """The trial: --bench sim_robot said "sim_robot: no such file", and README's --bench
+    configs/benches/sim_robot.toml failed outside the repository."""
+    from acq.config import CONFIG_DIR, resolve_bench_path
+
+    monkeypatch.chdir(tmp_path)  # outside the repository
+    shipped = CONFIG_DIR / "benches" / "sim_robot.toml"
+    assert [resolve_bench_path(n) for n in ("sim_robot", "sim_robot.toml", "configs/benches/sim_robot.toml")] == \
+        [shipped] * 3
+    (tmp_path / "sim_robot.toml").write_text("x = 1\n")  # a file of the person's own is theirs
+    assert resolve_bench_path("sim_robot.toml") == Path("sim_robot.toml")
+    known = ", ".join(sorted(q.stem for q in (CONFIG_DIR / "benches").glob("*.toml")))
+    run = run_cli(capsys, "monitor", "--bench", "sim_robt", "--for", "1s", "--window", "1", "--every", "1", "--fast")
+    assert (run.code, run.err) == (2, f"acq: error: --bench sim_robt: no such file, nor a bench in "
+                                      f"{CONFIG_DIR / 'benches'} (known: {known})\n")
+    run = run_cli(capsys, "selftest", "--bench", "sim", "--fast", "--json")
+    assert run.code == 0, run.err
+
+
 def test_a_binary_file_given_as_bench_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     path = tmp_path / "session.h5"
     path.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(range(256)))

@@ -58,6 +58,27 @@ def test_result_table_shows_every_value_whole_at_80_columns() -> None:
         assert value in text, value
 
 
+def test_an_interval_that_does_not_determine_its_value_reads_so() -> None:
+    """The trial's report: "C 0.237 ± 3.6e+02 %", "1.765 – 2.187e+06": an interval as wide as its value or wider
+    says so, its ends to 2 digits in plain decimals (acq.ui.values.readable_number)."""
+    from acq.ui.values import interval_text, readable_number
+
+    doc = _doc(C_Nms_per_rad=0.237, ci95={**_doc()["ci95"], "C_Nms_per_rad": [0.0325, 1.728]})
+    assert interval_text(doc, "C_Nms_per_rad") == "0.033 – 1.7: not determined"
+    assert interval_text(doc, "C_Nms_per_rad", relative=True) == "not determined"
+    assert interval_text(_doc(C_Nms_per_rad=10.0, ci95={"C_Nms_per_rad": [1.765, 2.187e6]}), "C_Nms_per_rad") == \
+        "1.8 – 2.2e+06: not determined"
+    # at the limit: a half-width of 99 % of the value is a number, 100 % is not
+    assert interval_text(_doc(C_Nms_per_rad=1.0, ci95={"C_Nms_per_rad": [0.01, 1.99]}), "C_Nms_per_rad",
+                         relative=True) == "± 99 %"
+    assert interval_text(_doc(C_Nms_per_rad=1.0, ci95={"C_Nms_per_rad": [0.0, 2.0]}), "C_Nms_per_rad",
+                         relative=True) == "not determined"
+    assert [readable_number(x) for x in (0.000485, 4.63, 358.2, 99.96, 2.187e6, 1.2e-5)] == \
+        ["0.00049", "4.6", "360", "100", "2.2e+06", "1.2e-05"]
+    wide, narrow = render(result_table(doc), width=120), render(result_table(doc), width=60)
+    assert "0.033 – 1.7: not determined" in wide and "not determined" in narrow and "e+02" not in wide + narrow
+
+
 def test_params_K_shows_the_inertias_as_fixed_nominal() -> None:
     doc = _doc(K_Nm_per_rad=890.7, Jm_kgm2=0.003027, Jl_kgm2=0.00748,
                ci95={"K_Nm_per_rad": [881.8, 899.6], "Jm_kgm2": [0.003027, 0.003027],

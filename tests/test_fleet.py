@@ -297,3 +297,11 @@ def test_a_monitors_windows_are_not_judged_with_a_benchs_sessions_of_the_same_jo
     own = run_cli(capsys, "trend", "--catalogue", str(catalogue), "--joint", "j1", "--tag", "monitor_id=host:/m:1",
                   "--json")
     assert own.code == 0 and [p["K_Nm_per_rad"] for p in json.loads(own.out)["points"]] == [900.0, 902.0, 899.0]
+    # the trial: the bench's sessions had no selector (--tag monitor_id= is refused as empty): --no-monitor
+    assert trend.err == (f"acq: error: {catalogue}: joint j1 has the windows of 1 monitor (host:/m:1) and 3 session(s) "
+                         "of no monitor — trend one: --tag monitor_id=ID or --no-monitor (those of no monitor)\n")
+    bench = run_cli(capsys, "trend", "--catalogue", str(catalogue), "--joint", "j1", "--no-monitor", "--json")
+    assert bench.code == 0 and [p["K_Nm_per_rad"] for p in json.loads(bench.out)["points"]] == [600.0, 601.0, 599.0]
+    both = run_cli(capsys, "trend", "--catalogue", str(catalogue), "--joint", "j1", "--no-monitor", "--tag",
+                   "monitor_id=host:/m:1")
+    assert (both.code, both.err) == (2, "acq: error: --no-monitor and --tag monitor_id=host:/m:1: give one of them\n")

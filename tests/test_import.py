@@ -638,6 +638,30 @@ def test_a_current_in_milliamperes_is_named_as_a_scale_mistake_not_an_ok_stiffne
         "an imported current column in A) and the torque constant ([motor] torque_constant_Nm_per_A)")
 
 
+def test_nominal_fault_at_the_tenfold_boundary_with_the_intervals_of_a_well_determined_K() -> None:
+    """The trial's [sim] K 8910 on a nominal of 891: K 8950 (10.05×), interval 8722…9184 (9.79…10.31×), was left ok
+    because its interval reached below 10×; the interval now only has to lie beyond √10."""
+    from analysis.diagnose import nominal_fault
+    from analysis.model import TwoMassParams
+    nominal = TwoMassParams(891.0, 0.003027, 0.00748, 0.0)
+    free = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2")
+
+    def fault(factor: float) -> str | None:
+        K = factor * 891.0
+        return nominal_fault(TwoMassParams(K, 0.003027, 0.00748, 0.1), nominal, free,
+                             {"K_Nm_per_rad": (0.9745 * K, 1.0262 * K), "Jm_kgm2": (0.0029, 0.0031),
+                              "Jl_kgm2": (0.0072, 0.0077)})
+
+    assert fault(9.9) is None
+    assert fault(8950.156628293918 / 891.0) == (
+        "K is 10× the bench's nominal 891 N·m/rad: check the [nominal] values (motor-side, SI units: a load-side "
+        "value is [gear] ratio² larger) and that the bench file is this joint's")
+    assert fault(11.0) == (
+        "K is 11× the bench's nominal 891 N·m/rad: check the [nominal] values (motor-side, SI units: a load-side "
+        "value is [gear] ratio² larger) and that the bench file is this joint's")
+    assert fault(1 / 10.05) is not None and fault(1 / 9.9) is None
+
+
 def test_nominal_fault_names_an_order_of_magnitude_and_not_the_scenario_familys_factor_two() -> None:
     from analysis.diagnose import nominal_fault
     from analysis.model import TwoMassParams
@@ -650,8 +674,8 @@ def test_nominal_fault_names_an_order_of_magnitude_and_not_the_scenario_familys_
         "load-side value is [gear] ratio² larger) and that the bench file is this joint's")
     assert nominal_fault(TwoMassParams(0.1 * 891.0, 0.003027, 0.00748, 0.1), nominal, ("K_Nm_per_rad",)).startswith(
         "K is 1/10 of the bench's nominal 891 N·m/rad: the torque is scaled")
-    # a value the data hardly determine (its interval reaches within 10× of nominal) is no evidence of a mistake
+    # a value the data hardly determine (its interval reaches within √10 = 3.16× of nominal) is no evidence of a mistake
     assert nominal_fault(TwoMassParams(891.0, 0.003027, 0.00748 / 100.0, 0.1), nominal, free,
-                         {"Jl_kgm2": (0.00748 / 300.0, 0.00748 / 5.0)}) is None
+                         {"Jl_kgm2": (0.00748 / 300.0, 0.00748 / 3.0)}) is None
     assert nominal_fault(TwoMassParams(891.0, 0.003027, 0.00748 / 100.0, 0.1), nominal, free,
                          {"Jl_kgm2": (0.00748 / 120.0, 0.00748 / 80.0)}) is not None

@@ -603,7 +603,7 @@ def _rows_or_none(folder: Path) -> list[dict[str, object]] | None:
 
 
 def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None:
-    from acq.monitoring.window_judge import not_excited
+    from acq.offline.excitation_judge import not_excited
 
     weak = {"verdict": "failed", "mean_coherence": 0.2, "excitation_coherence": 0.1}
     assert not_excited({"quality": weak, "clock": {"residual_s": 20e-6}})
@@ -616,7 +616,7 @@ def test_low_coherence_is_not_excited_only_when_the_clocks_are_aligned() -> None
 
 def test_a_window_whose_segments_do_not_excite_is_not_excited_whatever_its_clock_residual() -> None:
     """The analysis' segment selection decides first: fewer than two segments that excite (selection not applied)."""
-    from acq.monitoring.window_judge import not_excited
+    from acq.offline.excitation_judge import not_excited
 
     strong = {"verdict": "failed", "mean_coherence": 0.9, "excitation_coherence": 0.95}
     still = {"excited_fraction": 0.0, "selection_applied": False}
@@ -696,7 +696,7 @@ def test_without_shared_host_stamps_the_window_fails_on_its_clock_and_is_not_cal
         repeating_window: Path) -> None:
     from dataclasses import replace
 
-    from acq.monitoring.window_judge import not_excited
+    from acq.offline.excitation_judge import not_excited
     from acq.offline.analyze import recording_from_session
     from analysis import AnalysisRequest, analyze
 
@@ -837,7 +837,7 @@ def test_the_payload_tag_is_catalogued_and_changes_the_truth_only_with_robot_pay
 
 
 def test_a_window_whose_moves_excite_the_band_says_which_coherence_was_too_low() -> None:
-    from acq.monitoring.window_judge import _but
+    from acq.offline.excitation_judge import _but
 
     between = {"quality": {"excitation_coherence": 0.61, "mean_coherence": 0.9}}
     band = {"quality": {"excitation_coherence": 0.95, "mean_coherence": 0.5}}
@@ -880,18 +880,20 @@ def test_a_window_judged_not_excited_after_its_analysis_keeps_no_K_beside_it(tmp
 
 def test_a_passive_record_of_a_joint_at_rest_is_not_excited_in_acq_analyze_too(tmp_path: Path) -> None:
     """The second trial: acq record / acq analyze of a robot's first 10 s (seed 0: the joint barely moves) read K
-    +468 % with "interference on the phase current … PWM ripple" where the monitor said "not excited". The analysis
-    itself now fails it for the lack of excitation, with no hardware advice."""
+    +468 % with "interference on the phase current … PWM ripple" where the monitor said "not excited". acq analyze
+    now judges it as the monitor judges a window (acq.offline.excitation_judge): not excited, no K, no hardware advice."""
     from acq.offline.analyze import analyze_session
 
     bench = _bench()
     current, drive = open_bench(bench, fast=True)
     path = Recorder(bench, None, current, drive, tmp_path, 10.0).run().path
-    quality = analyze_session(path, write=False, report=False).json_dict["quality"]
-    assert quality["verdict"] == "failed"
-    assert re.fullmatch(r"not excited: 0 of the record's 12 moves put torque into 10…400 Hz beyond chance; time that "
-                        r"does: \d+ % of the record — record while the machine runs fast moves of this joint",
-                        quality["reasons"][0])
+    done = analyze_session(path, write=False, report=False)
+    quality = done.json_dict["quality"]
+    assert quality["verdict"] == "not excited" and done.result is None and "K_Nm_per_rad" not in done.json_dict
+    assert re.fullmatch(r"0 of the record's 12 moves put torque into 10…400 Hz beyond chance; time that "
+                        r"does: \d+ % of the record", quality["reasons"][0])
+    assert quality["reasons"][1] == ("1 of 38 Welch segments excites — in-band S/N above 1.33, chance's 99 % point; "
+                                     "the selection needs 2")
     assert not any("interference" in r or "ripple" in r or "play" in r for r in quality["reasons"])
 
 

@@ -109,8 +109,8 @@ def test_a_listening_bench_is_checked_on_the_machines_own_motion_without_command
         assert ident["status"] == "pass" and ident["values"]["K_Nm_per_rad"] == pytest.approx(891.0, rel=0.02)
         assert by["torque constant"]["values"]["ratio"] == pytest.approx(1.0, abs=0.05)
     else:
-        assert (ident["status"], ident["figure"]) == ("warn", "not excited: 0 of the window's 12 moves put torque into "
-                                                              "10…400 Hz beyond chance; time that does: 3 % of the window; "
+        assert (ident["status"], ident["figure"]) == ("warn", "not excited: 0 of the record's 12 moves put torque into "
+                                                              "10…400 Hz beyond chance; time that does: 3 % of the record; "
                                                               "1 of 38 Welch segments excites — in-band S/N above 1.33, "
                                                               "chance's 99 % point; the selection needs 2")
         assert ident["fix"] == ("run acq selftest again while the machine runs a program with fast moves of this joint "

@@ -339,8 +339,8 @@ def test_the_trend_window_started_before_the_first_window_waits_for_it(tmp_path:
     # a screenshot (a script) of a trend with no window yet is an error, not a picture of "waiting" (the second read);
     # bad input (exit 2), as acq trend says it
     assert run.code == 2 and not png.exists()
-    assert run.err == (f"acq: error: {folder / 'catalogue.sqlite'}: no catalogue — fill one with acq analyze "
-                       f"{folder}/ first\n")
+    assert run.err == (f"acq: error: {folder / 'catalogue.sqlite'}: no catalogue — the folder {folder} does not "
+                       "exist\n")
 
     def write(joint: str, n: int, k: float) -> None:
         doc = {"options": {}, "K_Nm_per_rad": k, "ci95": {"K_Nm_per_rad": [k - 4, k + 4]},

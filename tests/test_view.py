@@ -415,6 +415,24 @@ def test_the_side_panel_says_the_values_are_motor_side() -> None:
     assert html.startswith("<h3>Identified two-mass model (motor side)</h3>") and "891" in html
 
 
+def test_the_side_panel_gives_the_ends_of_an_interval_that_does_not_determine_its_value() -> None:
+    """The trial's report read "C 0.237 ± 3.6e+02 %" and its legend "95 % band ± 4.6–3.6e+02 %"."""
+    from types import SimpleNamespace
+
+    from acq.ui.plots import SessionFigure, band_width_text, values_html
+
+    figures = SimpleNamespace(phase_valid=True)
+    doc = {"K_Nm_per_rad": 923.1, "C_Nms_per_rad": 0.2370008321746361,
+           "ci95": {"K_Nm_per_rad": [847.3, 1006.0], "C_Nms_per_rad": [0.03250387560890928, 1.728082987004604]},
+           "clock": {"residual_s": 6.8e-5}}
+    html = values_html([SessionFigure("s", figures, doc)])  # type: ignore[arg-type]
+    assert "<td align='right' nowrap>not determined</td>" in html and "± 8.6 %" in html
+    assert "<p>C 0.237 N·m·s/rad: its 95 % interval 0.033 – 1.7 does not determine it</p>" in html
+    band = SimpleNamespace(model_abs=np.array([1.0, 1.0]), model_low=np.array([0.954, 0.0]),
+                           model_high=np.array([1.046, 7.164]))  # half-widths 4.6 % and 358 %
+    assert band_width_text(band) == "± 4.6–360 %"  # type: ignore[arg-type]
+
+
 @pytest.mark.parametrize(("dither", "kind"), [(0.02, "misfit"), (0.0, "third mode")], ids=["misfit", "third-mode"])
 def test_the_report_marks_where_a_poor_verdict_says_the_model_misses(tmp_path: Path, dither: float, kind: str) -> None:
     """The third mass at 150 Hz: the verdict named a misfit band (shipped dithered profile) or a third mode

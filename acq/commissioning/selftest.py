@@ -31,7 +31,6 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from acq.commissioning.devices import can_section, ni_section, serial_section
-from acq.monitoring.window_judge import not_excited, not_excited_reasons
 from acq.commissioning.selftest_checks import (Check, blf_check, daq_blocks_check, direction_check, drive_period_check,
                                                encoder_speed_check, phase_order_check, samples_check, speed_ratio_check,
                                                standstill_current_check, sync_jitter_check, sync_times,
@@ -365,9 +364,9 @@ def _identified(bench: Bench, path: Path) -> Iterator[Check]:
     excite, that does not excite: a ⚠ saying so) and the torque constant against a known inertia."""
     done = analyze_session(path, report=False)
     doc = done.json_dict
-    if "excitation" in doc and not_excited(doc):  # the machine's motion, not the bench, fell short
+    if doc["quality"]["verdict"] == "not excited":  # the machine's motion, not the bench, fell short
         yield Check("identification", f"identification ({IDENTIFICATION_S:g} s)", "warn",
-                    "not excited: " + "; ".join(not_excited_reasons(doc)), _WHILE_IT_RUNS,
+                    "not excited: " + "; ".join(doc["quality"]["reasons"]), _WHILE_IT_RUNS,
                     {"verdict": "not excited"}, "K is unchecked (the machine did not excite the joint)")
         return
     quality = doc["quality"]

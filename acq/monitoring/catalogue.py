@@ -146,6 +146,10 @@ class Catalogue:
     ----------
     path : Path or str
         The SQLite file (created with its folder if missing), or a ``postgresql://`` URL.
+    read_only : bool, optional
+        Only read it (``acq trend``, ``acq fleet``, ``acq view --trend``): a SQLite file in a folder this process may
+        not write into (a read-only mount) is then opened read-only and not migrated (one of an older schema is
+        refused, naming what migrates it).
 
     Attributes
     ----------
@@ -153,11 +157,14 @@ class Catalogue:
         The SQLite file, or the URL without its password (for messages).
     """
 
-    def __init__(self, path: Path | str):
+    def __init__(self, path: Path | str, *, read_only: bool = False):
         self.path: Path | str
-        self._dialect, self._db, self.path = open_catalogue_db(path)
+        self._dialect, self._db, self.path = open_catalogue_db(path, read_only)
         try:
-            self._migrate()
+            if self._dialect.read_only:
+                self._require_current_schema()
+            else:
+                self._migrate()
         except self._dialect.errors as e:
             self._db.close()
             raise open_error(self.path, e, "not a usable catalogue") from None
@@ -196,6 +203,17 @@ class Catalogue:
     def schema_version(self) -> int:
         """The database's schema version."""
         return self._dialect.schema_version(self._db)
+
+    def _require_current_schema(self) -> None:
+        """A catalogue opened read-only is read as it is: one of another schema version is refused."""
+        version = self.schema_version
+        if version > SCHEMA_VERSION:
+            raise ConfigError(f"{self.path}: catalogue schema version {version} is newer than this acq knows "
+                              f"({SCHEMA_VERSION}) — update acq")
+        if version < SCHEMA_VERSION:
+            raise ConfigError(f"{self.path}: catalogue schema version {version} is older than this acq's "
+                              f"({SCHEMA_VERSION}) and its folder may not be written to migrate it — run acq trend "
+                              "once where it may be written (a copy of the folder)")
 
     def _migrate(self) -> None:
         while True:

@@ -188,7 +188,7 @@ def load_fleet(folders: Sequence[Path], catalogues: Sequence[Path | str], tags: 
     statuses: list[JointStatus] = []
     names = []
     for label, location in sources:
-        with Catalogue(location) as catalogue:
+        with Catalogue(location, read_only=True) as catalogue:
             entries = [e for e in catalogue.entries(monitor=monitor) if tags_match(e.tags, wanted)]
             names.append(str(catalogue.path))
         statuses += fleet_status(entries, now=now, source=label if len(sources) > 1 else "", **options)

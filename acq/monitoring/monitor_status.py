@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.catalogue import Outcome
-from acq.monitoring.window_judge import selection_reason
+from acq.offline.excitation_judge import selection_reason
 from analysis import AnalysisRequest
 from drivers.config import Bench
 

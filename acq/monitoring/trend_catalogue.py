@@ -35,6 +35,8 @@ def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Pat
         sessions = folder or Path("sessions")
         refused = None if catalogue else refused_write(sessions)  # acq analyze can make no catalogue there
         fill = (f"fill it with acq analyze FOLDER/ --catalogue {path}" if catalogue else
+                f"the folder {sessions} does not exist"
+                if not sessions.exists() else
                 f"{sessions} is not writable ({refused}): fill one with acq analyze {sessions}/ --result-dir DIR, "
                 "then acq trend DIR" if refused else f"fill one with acq analyze {sessions}/ first")
         raise NoSessions(f"{path}: no catalogue — {fill}", path)
@@ -55,13 +57,19 @@ def catalogue_sources(folders: Sequence[Path], catalogues: Sequence[Path | str])
 
 
 def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: str, tags: Sequence[str] = (),
-               **options: Any) -> Trend:
+               no_monitor: bool = False, **options: Any) -> Trend:
     """The trend of ``joint`` from a catalogue (``folder``/catalogue.sqlite or ``catalogue_path``), sessions
-    filtered on ``tags`` (``KEY=VALUE``); ``options`` go to :func:`compute_trend`."""
+    filtered on ``tags`` (``KEY=VALUE``) — with ``no_monitor`` (``--no-monitor``) only the sessions of no monitor (a
+    bench's recordings, imports: :func:`split_by_monitor`'s None); ``options`` go to :func:`compute_trend`."""
     monitor, wanted = monitor_and_tags(tags)
-    with Catalogue(catalogue_location(folder, catalogue_path)) as catalogue:
+    if no_monitor and monitor is not None:
+        raise ConfigError(f"--no-monitor and --tag {MONITOR_TAG}={monitor}: give one of them")
+    with Catalogue(catalogue_location(folder, catalogue_path), read_only=True) as catalogue:
         entries = [e for e in catalogue.entries(joint, monitor=monitor) if tags_match(e.tags, wanted)]
+        if no_monitor:
+            entries = split_by_monitor(entries).get(None, [])
         tagged = f" tagged {' '.join(tags)}" if tags else ""
+        tagged += " of no monitor" if no_monitor else ""
         if not entries:
             joints = catalogue.joints()
             raise NoSessions(f"{catalogue.path}: no sessions of joint {joint}{tagged} "
@@ -73,6 +81,8 @@ def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: st
             others = len(histories.get(None, []))
             what = (f"the windows of {len(monitors)} monitor{'s' if len(monitors) > 1 else ''} "
                     f"({', '.join(monitors)})" + (f" and {others} session(s) of no monitor" if others else ""))
-            raise ConfigError(f"{catalogue.path}: joint {joint}{tagged} has {what} — trend one: --tag {MONITOR_TAG}=ID"
-                              + (f" or --tag robot=R ({', '.join(robots)})" if robots else ""))
+            ways = [f"--tag {MONITOR_TAG}=ID", *(["--no-monitor (those of no monitor)"] if others else []),
+                    *([f"--tag robot=R ({', '.join(robots)})"] if robots else [])]
+            raise ConfigError(f"{catalogue.path}: joint {joint}{tagged} has {what} — trend one: "
+                              + (", ".join(ways[:-1]) + " or " + ways[-1] if len(ways) > 1 else ways[0]))
     return compute_trend(joint, entries, **options)

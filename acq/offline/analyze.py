@@ -28,7 +28,9 @@ from acq.recording.layout import utc_now_iso
 from acq.recording.reader import load
 from acq.recording.session import Session
 from acq.recording.storage import free_bytes, refused_write, storage_error, write_text_atomically
-from analysis import AnalysisRequest, CommandedProfile, Recording, Result, TwoMassParams, analyze, code_fingerprint
+from acq.offline.excitation_judge import judged
+from analysis import (AnalysisRequest, CommandedProfile, Recording, Result, TooSlowError, TwoMassParams, analyze,
+                      code_fingerprint)
 from acqcore.errors import ConfigError, StorageError
 from drivers.base import limit_span_ns
 
@@ -41,7 +43,7 @@ class SessionResult:
     """A session's identification with where its outputs went."""
 
     session: Session
-    result: Result | None  # None: a record acq did not command in which the joint never moved (:func:`idle_reason`)
+    result: Result | None  # None: a record acq did not command that did not excite the joint (verdict not excited)
     json_dict: dict[str, Any]
     json_path: Path
     report_path: Path | None
@@ -152,8 +154,8 @@ def idle_reason(session: Session) -> str | None:
 
 
 def not_excited_json(session: Session, request: AnalysisRequest, reason: str) -> dict[str, Any]:
-    """The ``.result.json`` document of a record whose joint never moved (:func:`idle_reason`): verdict
-    ``not excited`` with the reason, no numbers — as the monitor catalogues such a window."""
+    """The ``.result.json`` document of a record whose joint never moved (:func:`idle_reason`) or never turned fast
+    enough for the one-phase angle: verdict ``not excited`` with the reason, no numbers."""
     doc: dict[str, Any] = {"options": request.to_json_dict(),
                            "quality": {"verdict": "not excited", "reasons": [reason]}}
     return _identified(doc, session)
@@ -190,6 +192,12 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     write ``<session>.result.json`` (:func:`output_paths`: beside the session, or in ``result_dir``; a request other
     than the default writes ``<session>.<label>.result.json`` beside it).
 
+    A record acq did not command (no profile: a monitor's window, a passive recording, an import) that did not excite
+    the joint — it never moved (:func:`idle_reason`), never turned fast enough for the one-phase angle
+    (:class:`analysis.TooSlowError`), or its analysis found too little excitation
+    (:func:`acq.offline.excitation_judge.judged`) — gets verdict ``not excited`` and why, without numbers or report:
+    the monitor files its windows through here, so both give one judgement.
+
     The report PNG is not drawn here: with ``report`` its path is set, and :func:`acq.ui.report_png.draw_report`
     draws it once the result (and the catalogue entry) stand. Bad or unusable input (too short, bad band, …) raises
     :class:`ConfigError` naming the session; so does a session still ``recording`` or damaged unless ``request.partial``
@@ -205,10 +213,17 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
         request = request_for(session, asked)
         idle = idle_reason(session)
         result = analyze(rec, request) if idle is None else None
+    except TooSlowError as e:
+        if session.profile is not None:  # acq commanded too slow a motion: the profile's fault, the error says how
+            raise ConfigError(f"{session.path}: {e}") from None
+        idle, result = str(e), None  # the machine's own motion never ran fast enough for the one-phase angle
     except ValueError as e:  # on part of a session, the error may come of what is missing: the note says what
         why = f" ({notes[0].removeprefix('note: ')})" if notes else ""
         raise ConfigError(f"{session.path}: {e}{why}") from None
     doc = result_json(session, result) if result is not None else not_excited_json(session, request, str(idle))
+    if session.profile is None and result is not None:  # the machine's motion: did it excite the joint at all?
+        doc = judged(doc)
+        result = result if doc["quality"]["verdict"] != "not excited" else None  # nothing to draw, no numbers
     doc["quality"]["reasons"][:0] = notes
     doc["partial"] = bool(notes)  # the note says why
     doc["session"]["damage"] = list(session.damage)

@@ -68,9 +68,10 @@ def analyze_many(specs: Sequence[Path], request: AnalysisRequest, *, jobs: int |
     try:
         catalogue = Catalogue(location)
     except StorageError as e:  # e.g. a read-only folder of sessions: the way out, as for one session
-        raise StorageError(f"{e} — " + ("--result-dir DIR writes the results and the catalogue elsewhere"
-                                         if catalogue_path is None else "give --catalogue a file acq may write")
-                           ) from None
+        way_out = ("give --catalogue a file acq may write" if catalogue_path is not None else
+                   "--result-dir DIR writes the results and the catalogue elsewhere" if result_dir is None else
+                   "give --result-dir a folder acq may write")
+        raise StorageError(f"{e} — {way_out}") from None
     with catalogue:
         try:
             with batch_progress() as on_progress:

@@ -413,7 +413,9 @@ def analyze_command(session_paths: tuple[Path, ...], torque: str | None, params:
             from acq.ui.display import result_table
 
             out.print(result_table(e.done.json_dict))
-        raise StorageError(f"{e} — the result above is not saved (--result-dir DIR writes it elsewhere)") from None
+        elsewhere = ("--result-dir DIR writes it elsewhere" if result_dir is None
+                     else "give --result-dir a folder acq may write")  # not the option already given
+        raise StorageError(f"{e} — the result above is not saved ({elsewhere})") from None
 
 
 def _result_folder(result_dir: Path) -> Path:

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, TypeVar
 
 import click
 
-from acq.monitoring.catalogue_backends import is_url
+from acq.monitoring.catalogue_backends import URL_SCHEMES, is_url, redacted
 from acqcore.errors import ConfigError
 
 
@@ -18,8 +19,16 @@ class CatalogueLocation(click.ParamType):
     name = "PATH|URL"
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Path | str:
-        """The URL as given, anything else as a path."""
-        return value if is_url(value) or isinstance(value, Path) else Path(value)
+        """The URL as given, anything else as a path; a URL of another scheme (``mysql://…``, which as a path read
+        ``mysql:/…``) is refused naming its scheme and the ones acq reads."""
+        if is_url(value) or isinstance(value, Path):
+            return value
+        scheme = re.match(r"([A-Za-z][A-Za-z0-9+.-]*)://", value)
+        if scheme:
+            option = param.opts[0] if param is not None else "--catalogue"
+            raise ConfigError(f"{option} {redacted(value)}: {scheme.group(1)}:// is not a catalogue acq can use — "
+                              f"give a SQLite file's path or a {URL_SCHEMES[0]} URL (or {', '.join(URL_SCHEMES[1:])})")
+        return Path(value)
 
 
 class PngPath(click.ParamType):

@@ -41,7 +41,7 @@ import shiboken6
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
 from acq.recording.storage import atomic_path, make_folders, storage_error
-from acq.ui.values import PARAMS, format_value, interval_text, options_text
+from acq.ui.values import PARAMS, format_value, interval_text, not_determined, options_text, readable_number
 from analysis import FigureData, Thresholds
 
 pg.setConfigOptions(background="w", foreground="k", antialias=True)
@@ -137,8 +137,8 @@ def band_width_text(fd: FigureData) -> str:
     half = half[np.isfinite(half)]
     if half.size == 0:
         return "—"
-    lo, hi = float(np.min(half)), float(np.max(half))
-    return f"± {lo:.2g} %" if f"{lo:.2g}" == f"{hi:.2g}" else f"± {lo:.2g}–{hi:.2g} %"
+    lo, hi = readable_number(float(np.min(half))), readable_number(float(np.max(half)))
+    return f"± {lo} %" if lo == hi else f"± {lo}–{hi} %"
 
 
 class ReportView(QtWidgets.QWidget):
@@ -468,10 +468,16 @@ def values_html(sessions: Sequence[SessionFigure]) -> str:
                  ("clock drift", format_value(clock.get("drift_ppm")), "", "ppm"),
                  ("clock residual", format_value(clock.get("residual_s"), scale=1e6), "", "µs")]
         quality = v.get("quality", {})
-        table = "".join(f"<tr><td>{escape(n)}</td><td align='right'><b>{val}</b></td>"
-                        f"<td align='right'>{ci}</td><td>{escape(u)}</td></tr>" for n, val, ci, u in rows)
+        table = "".join(f"<tr><td nowrap>{escape(n)}</td><td align='right'><b>{val}</b></td>"
+                        f"<td align='right' nowrap>{ci}</td><td nowrap>{escape(u)}</td></tr>" for n, val, ci, u in rows)
         parts.append("<table cellspacing='0' cellpadding='2'><tr><th></th><th>value</th><th>95 % CI</th><th></th></tr>"
                      f"{table}</table>")
+        # a value the data do not determine: its interval, whose ends the relative "± 360 %" hid
+        wide = [f"{name} {format_value(v.get(key))} {escape(unit)}: its 95 % interval "
+                f"{' – '.join(readable_number(b) for b in v['ci95'][key])} does not determine it"
+                for key, name, unit in PARAMS if not_determined(v, key)]
+        if wide:
+            parts.append(f"<p>{'<br>'.join(wide)}</p>")
         parts.append(f"<p>verdict <b>{escape(str(quality.get('verdict', '—')))}</b>, mean γ² in band "
                      f"{format_value(quality.get('mean_coherence'), '.3g')}</p>")
         parts.append(f"<p>{escape(phase_text(s))}</p><p><i>{escape(options_text(v))}</i></p>")

@@ -28,12 +28,16 @@ from acqcore.errors import ConfigError
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
               help="Only sessions with this tag (repeatable; read as acq record --tag reads it: 2.5 a number, 007 "
                    "text).")
+@click.option("--no-monitor", "no_monitor", is_flag=True,
+              help="Only the sessions of no monitor (a bench's recordings, imports) where a monitor's windows share "
+                   "the joint's name.")
 @click.option("--png", "png_path", type=PngPath(), default=None,
               help="Also draw the trend into this PNG.")
 @click.option("--json", "as_json", is_flag=True, help="Print the trend as JSON.")
 def trend_command(folders: tuple[Path, ...], catalogues: tuple[Path | str, ...], joint: str,
                   baseline_sessions: int | None, baseline_id: str | None, threshold_pct: float | None,
-                  ewma_lambda: float | None, tags: tuple[str, ...], png_path: Path | None, as_json: bool) -> int:
+                  ewma_lambda: float | None, tags: tuple[str, ...], no_monitor: bool, png_path: Path | None,
+                  as_json: bool) -> int:
     """K of a joint over time (± 95 %), f_a, f_r, baseline and alarms; exit code 3 while in alarm.
 
     Several FOLDERs / catalogues: the joint's trend in each, judged apart (a table each, --json a list); exit code 3
@@ -46,7 +50,7 @@ def trend_command(folders: tuple[Path, ...], catalogues: tuple[Path | str, ...],
                           "--catalogue")
     trends = []
     for label, location in sources:
-        trend = load_trend(None, location, joint, tags, baseline_sessions=baseline_sessions,
+        trend = load_trend(None, location, joint, tags, no_monitor, baseline_sessions=baseline_sessions,
                            baseline_id=baseline_id, threshold_pct=threshold_pct, ewma_lambda=ewma_lambda)
         trends.append(replace(trend, joint=f"{joint} ({label})") if len(sources) > 1 else trend)
     out = Console()

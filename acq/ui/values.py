@@ -45,14 +45,46 @@ def format_value(x: float | None, spec: str = ".4g", scale: float = 1.0) -> str:
     return "—" if x is None or not math.isfinite(x) else format(x * scale, spec)
 
 
+#: A 95 % interval whose half-width is this share of its value or more leaves the value not determined: it reaches
+#: from about zero (or below) to twice the value or beyond, so the data do not tell even its magnitude (the trial's
+#: C 0.237, interval 0.0325…1.728: "± 3.6e+02 %").
+NOT_DETERMINED_SHARE = 1.0
+
+
+def readable_number(x: float) -> str:
+    """``x`` to 2 significant digits, in plain decimals from 0.0001 to below 10⁶ ("0.00049", "120", "360"), else
+    in powers of ten ("2.2e+06"): the two ends of a wide interval, read at a glance."""
+    if not math.isfinite(x):
+        return "—"
+    if x == 0.0:
+        return "0"
+    rounded = float(f"{x:.2g}")
+    exponent = math.floor(math.log10(abs(rounded)))
+    if not -4 <= exponent < 6:
+        return f"{x:.2g}"
+    return f"{rounded:.{max(0, 1 - exponent)}f}"
+
+
+def not_determined(doc: dict[str, Any], key: str) -> bool:
+    """True when the 95 % interval of parameter ``key`` is :data:`NOT_DETERMINED_SHARE` of its value or wider."""
+    value = doc.get(key)
+    lo, hi = (doc.get("ci95", {}).get(key) or (None, None))
+    return (value is not None and lo is not None and hi is not None and value != 0
+            and 0.5 * (hi - lo) >= NOT_DETERMINED_SHARE * abs(value))
+
+
 def interval_text(doc: dict[str, Any], key: str, *, relative: bool = False) -> str:
     """The 95 % interval of parameter ``key`` of a result document: "lo – hi", or "± x %" with ``relative``;
-    "fixed (nominal)" for a parameter the fit held at the bench's nominal value (a zero-width interval)."""
+    "fixed (nominal)" for a parameter the fit held at the bench's nominal value (a zero-width interval). One that
+    does not determine the value (:func:`not_determined`) reads "0.033 – 1.7: not determined" (with ``relative``:
+    "not determined"), its ends in :func:`readable_number`."""
     value = doc.get(key)
     lo, hi = (doc.get("ci95", {}).get(key) or (None, None))
     if lo is not None and lo == hi:
         nominal = (doc.get("options", {}).get("nominal") or {}).get(key)
         return "fixed (nominal)" if nominal == value else "fixed"
+    if not_determined(doc, key):
+        return "not determined" if relative else f"{readable_number(lo)} – {readable_number(hi)}: not determined"
     if not relative:
         return "—" if lo is None and hi is None else f"{format_value(lo)} – {format_value(hi)}"
     if value is None or lo is None or hi is None or value == 0:

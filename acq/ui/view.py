@@ -57,8 +57,9 @@ def session_figure(path: Path) -> SessionFigure:
     from acq.ui.plots import SessionFigure
 
     done = analyze_session(path, stored_request(Path(path)), write=False)
-    if done.result is None:  # the joint never moved: nothing to draw, the verdict says why
-        raise ConfigError(f"{path}: not excited: {done.json_dict['quality']['reasons'][-1]}")
+    if done.result is None:  # the machine did not excite the joint: nothing to draw, the verdict says why
+        reasons = [r for r in done.json_dict["quality"]["reasons"] if not r.startswith("note: ")]
+        raise ConfigError(f"{path}: not excited: {'; '.join(reasons)}")
     return SessionFigure(Path(path).stem, done.result.figures, done.json_dict)
 
 
@@ -87,17 +88,21 @@ def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[
 @click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",
               help="With --trend: only sessions with this tag (repeatable), e.g. --tag robot=r1 in a catalogue that "
                    "several monitors share.")
+@click.option("--no-monitor", "no_monitor", is_flag=True,
+              help="With --trend: only the sessions of no monitor (a bench's recordings, imports) where a monitor's "
+                   "windows share the joint's name.")
 def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tuple[int, int],
                  trend_joint: str | None, catalogue_path: Path | str | None, refresh_s: float,
-                 tags: tuple[str, ...]) -> int:
+                 tags: tuple[str, ...], no_monitor: bool) -> int:
     """Show traces, FRF with the fitted model, coherence and identified values of SESSION(s);
     or, with --trend JOINT [FOLDER], the joint's stiffness over time."""
     if trend_joint is None and not sessions:
         raise click.UsageError("give one or more SESSION files, or --trend JOINT [FOLDER]")
     if trend_joint is not None and len(sessions) > 1:
         raise click.UsageError("--trend takes one FOLDER (or none for sessions/)")
-    if tags and trend_joint is None:  # a session is shown whatever its tags: the filter would be silently ignored
-        raise ConfigError(f"--tag {tags[0]}: only with --trend JOINT (it selects the trend's sessions)")
+    if (tags or no_monitor) and trend_joint is None:  # a session is shown whatever its tags: the filter would be lost
+        raise ConfigError(f"{f'--tag {tags[0]}' if tags else '--no-monitor'}: only with --trend JOINT (it selects the "
+                          "trend's sessions)")
     if screenshot is None and not has_display():
         form = "SESSION" if trend_joint is None else f"--trend {trend_joint} {sessions[0] if sessions else ''}".rstrip()
         raise ConfigError(NO_DISPLAY_MESSAGE.format(form=form))
@@ -111,7 +116,7 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         from acq.monitoring.trend_catalogue import NoSessions, load_trend
 
         folder = sessions[0] if sessions else None
-        load = functools.partial(load_trend, folder, catalogue_path, trend_joint, tags)
+        load = functools.partial(load_trend, folder, catalogue_path, trend_joint, tags, no_monitor)
         try:
             first: Trend | NoSessions = load()  # any other error (a bad URL, mixed monitors) is one line, no window
         except NoSessions as e:  # started before the monitor has filed its first window: the window waits for it
