@@ -6,6 +6,7 @@ import errno
 import hashlib
 import json
 from dataclasses import fields
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 
 import numpy as np
@@ -584,6 +585,12 @@ def test_started_dates_an_import_so_the_catalogue_sorts_by_recording_time(
     bad = run_import(capsys, cur, enc, tmp_path / "x.h5", "--started", "yesterday")
     assert (bad.code, bad.err) == (2, "acq: error: --started yesterday: not an ISO 8601 time (e.g. "
                                       "2026-11-20T10:15:03Z)\n")
+    ahead = run_import(capsys, cur, enc, tmp_path / "y.h5", "--started", "2030-01-01T00:00:00Z")
+    assert ahead.code == 2 and ahead.err.startswith("acq: error: --started 2030-01-01T00:00:00Z: after now (")
+    assert ahead.err.endswith("): a recording cannot start in the future — a typo in the year, or a local time "
+                              "with the wrong zone?\n") and not (tmp_path / "y.h5").exists()
+    local_east = (datetime.now(UTC) + timedelta(hours=13)).replace(tzinfo=None).isoformat(timespec="seconds")
+    assert run_import(capsys, cur, enc, tmp_path / "z.h5", "--started", local_east).code == 0  # UTC+13 without zone
 
 
 def test_a_tdms_wf_start_time_dates_the_import(capsys: pytest.CaptureFixture[str], tmp_path: Path,

@@ -22,7 +22,7 @@ import hashlib
 import uuid
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -85,6 +85,11 @@ def _file_entry(role: str, path: Path, extra: dict[str, Any], sha256: Future[str
     return {"role": role, "name": path.name, "path": str(path.resolve()), "sha256": digest, **extra}
 
 
+#: How far ``--started`` may lie ahead of this host's clock: a local time given without its zone is read as UTC, so
+#: one east of Greenwich reads up to 14 h ahead (UTC+14, the largest offset in use).
+STARTED_AHEAD_ALLOWED = timedelta(hours=14)
+
+
 def parse_started(text: str) -> str:
     """``--started``: an ISO 8601 time (UTC when it names no zone) as the sessions' ``created_utc`` form."""
     try:
@@ -93,6 +98,10 @@ def parse_started(text: str) -> str:
         raise ConfigError(f"--started {text}: not an ISO 8601 time (e.g. 2026-11-20T10:15:03Z)") from None
     if when.tzinfo is None:
         when = when.replace(tzinfo=UTC)
+    now = datetime.now(UTC)
+    if when - now > STARTED_AHEAD_ALLOWED:
+        raise ConfigError(f"--started {text}: after now ({now.isoformat(timespec='seconds')}): a recording cannot "
+                          "start in the future — a typo in the year, or a local time with the wrong zone?")
     return when.astimezone(UTC).isoformat(timespec="seconds")
 
 
