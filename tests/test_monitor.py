@@ -348,6 +348,7 @@ def test_a_joint_that_stays_in_alarm_keeps_the_raw_window_that_raised_it_not_eve
     assert [r["window"] for r in rows] == [0, 1, 2, 3, 4, 5]
     trend = json.loads(run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1", "--json").out)
     states = [p["state"] for p in trend["points"]]
+    assert [p["window"] for p in trend["points"]] == [1, 2, 3, 4, 5, 6]  # as the table and the alarm line number them
     first_alarm = states.index("alarm")
     # a window the robot's program leaves unexcited is skipped (no K): it neither ends nor restarts the alarm
     assert states[:2] == ["baseline", "baseline"] and set(states[first_alarm:]) <= {"alarm", "skipped"}

@@ -35,6 +35,7 @@ from scipy.stats import chi2
 
 from acq.monitoring.alarm_rules import AlarmRules, rules_for
 from acq.monitoring.catalogue import Entry
+from acq.monitoring.monitor_scope import window_number
 from acqcore.errors import ConfigError
 from analysis import AnalysisRequest, Z95
 
@@ -295,11 +296,12 @@ def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: in
 
 
 def trend_json(trend: Trend) -> dict[str, Any]:
-    """The ``--json`` document: settings, baseline, alarm and every point."""
+    """The ``--json`` document: settings, baseline, alarm and every point (a monitor's window with the number its
+    table, status and alarm lines give it, ``window``; null for a session of no monitor)."""
     return {"joint": trend.joint, "alarm": trend.alarm, "baseline_K_Nm_per_rad": trend.baseline_K_Nm_per_rad,
             "baseline": trend.baseline_note, "sigma_K_Nm_per_rad": trend.sigma_K_Nm_per_rad,
             "threshold_pct": trend.threshold_pct, "ewma_lambda": trend.ewma_lambda, "ewma_L": EWMA_L,
             "rules": trend.rules_source, "baseline_warning": trend.baseline_warning,
-            "points": [{**asdict(p.entry), "state": p.state, "reason": p.reason, "change_pct": p.change_pct,
+            "points": [{**asdict(p.entry), "window": window_number(p.entry.tags), "state": p.state, "reason": p.reason, "change_pct": p.change_pct,
                         "ewma_change_pct": p.ewma_change_pct, "ewma_limit_pct": p.ewma_limit_pct}
                        for p in trend.points]}
