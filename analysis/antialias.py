@@ -15,7 +15,7 @@ ALIAS_ORDERS = 2  # torque near k·f_enc, k = 1 … ALIAS_ORDERS, folded by the 
 
 
 def alias_terms(torque_Nm: np.ndarray, rate_hz: float, t0_s: float, t_drive0_s: float, step_s: float,
-                 t_s: np.ndarray, period_s: float, f_pass_hz: float, f_stop_hz: float) -> np.ndarray:
+                t_s: np.ndarray, period_s: float, f_pass_hz: float, f_stop_hz: float) -> np.ndarray:
     """The torque shifted down by k/T (k = 1 … ``ALIAS_ORDERS``), anti-aliased and read at the DAQ times ``t_s``, N·m,
     shape (``ALIAS_ORDERS``, len(t_s)), complex.
 

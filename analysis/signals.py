@@ -159,7 +159,7 @@ def torque_on_instants(rec: Recording, spans: Spans, chain: SignalChain = Signal
                     noise[sel] = moved[1]
                 step_s = (1.0 + clock.drift_ppm * 1e-6) / rec.rate_hz  # drive time per DAQ sample
                 alias[:, sel] = alias_terms(tq[0], rec.rate_hz, t0, t_drive[0], step_s, t_daq[sel], rec.period_s,
-                                             f_pass, f_stop)
+                                            f_pass, f_stop)
                 continue
         else:
             k = np.clip(np.searchsorted(t_daq, t_piece), 0, t_daq.size - 1)

@@ -314,7 +314,7 @@ def run(spec: str, seed: int) -> tuple[dict[str, np.ndarray], dict[str, float], 
     tau = resample.to_instants(tau_daq, rec.rate_hz, t_daq0, spans.t_daq_s, f_pass, f_stop)
     step_s = (1.0 + true_clock.drift_ppm * 1e-6) / rec.rate_hz
     alias = alias_terms(tau_daq, rec.rate_hz, t_daq0, float(true_clock.drive_time_s(t_daq0)), step_s, spans.t_daq_s,
-                         T, f_pass, f_stop)
+                        T, f_pass, f_stop)
     frfs["torque"] = frf(tau, sig.speed_rad_s, None, alias)
     # (speed) … and the true angle's backward difference
     theta = truth_at(sim, np.concatenate(([spans.t_s[0] - T], spans.t_s)), "theta_m_rad")
