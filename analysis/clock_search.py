@@ -4,7 +4,7 @@ The current's electrical frequency (zero-crossing rate of i_a) and the encoder's
 same function of time seen through two clocks. Their Pearson correlation over the overlap, for every
 lag, is one FFT cross-correlation plus running sums on a coarse grid (10 ms), so the whole range —
 ±2 s, or as far as the records still overlap by half the shorter one — costs about a millisecond for a
-minute of data. The best lag is good to a few ms; :func:`analysis.clocks.frequency_alignment` and the
+minute of data. The best lag is good to a few ms; :func:`analysis.clock_frequency.frequency_alignment` and the
 angle stage refine it.
 
 |ω| of a periodic motion repeats every half motion period (for the triangle 0 → +top → 0 → −top → 0
@@ -38,7 +38,7 @@ EQUALLY_GOOD = 1.5
 #: (the frequency stage's own limit for "the motor turns fast").
 MISMATCH_FRACTION = 0.25
 #: A spike of the frequency track — an extra zero crossing where i_q changes sign — lasts at most the
-#: 15 ms median filter of :func:`analysis.clocks.crossing_frequency_hz` plus one 10 ms block: three
+#: 15 ms median filter of :func:`analysis.zero_crossings.crossing_frequency_hz` plus one 10 ms block: three
 #: samples of the coarse grid. A longer stretch of mismatch is the motion itself not matching.
 SPIKE_SAMPLES = 3
 MIN_OVERLAP_FRACTION = 0.5  # of the shorter record: lags leaving less overlap are not plausible

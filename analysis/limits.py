@@ -3,7 +3,7 @@
 * The encoder must sample fast enough that the fit band (:func:`analysis.fit.default_band_hz`: 10 Hz up to
   0.4 × its rate) is not empty.
 * The current must be sampled fast enough for the chain's anti-alias filter, which stops at 0.6 × the encoder
-  rate before the torque is moved onto the encoder's instants (:mod:`analysis.signals`): that edge must lie
+  rate before the torque is moved onto the encoder's instants (:mod:`analysis.antialias`): that edge must lie
   below the DAQ's Nyquist frequency.
 * A recording must last long enough that two Welch segments remain after what the analysis trims
   (:func:`min_record_s`).
@@ -12,10 +12,10 @@
 
 from __future__ import annotations
 
+from analysis.antialias import PASS_FRACTION, STOP_FRACTION
 from analysis.chain import our_chain
 from analysis.fit import default_band_hz
 from analysis.frf import KERNEL_HALF_WIDTH_BINS, min_duration_s
-from analysis.signals import _PASS_FRACTION, _STOP_FRACTION
 
 # relative allowance on the band's top: a limit typed back as printed (6 significant digits, :g) is at most 5e-6
 # above the exact one (0.4/0.0015 s = 266.6666… Hz printed 266.667); not a tolerance of the analysis
@@ -35,7 +35,7 @@ def band_problem(band_hz: tuple[float, float], period_s: float, segment_s: float
     """Why a fit band asked for cannot be judged on a recording whose encoder samples every ``period_s`` (s) with
     Welch segments of ``segment_s`` (s), or None when it can. One line, naming the band and the limit it crosses.
 
-    * Its top must not lie above the anti-alias filter's pass edge, 0.4 × the encoder rate (:mod:`analysis.signals`),
+    * Its top must not lie above the anti-alias filter's pass edge, 0.4 × the encoder rate (:mod:`analysis.antialias`),
       where the default band ends: above it the filter's transition attenuates the torque (to half at the encoder's
       Nyquist frequency) and the encoder's sampling folds what is left, so the measured FRF there is the chain's, not
       the joint's; a two-mass fit reads it as a misfit (a 500 Hz encoder with a band to 250 Hz: "misses by −101 % at
@@ -52,10 +52,10 @@ def band_problem(band_hz: tuple[float, float], period_s: float, segment_s: float
         return (f"fit band {low:g}…{high:g} Hz starts at or below {floor_hz:g} Hz: with {segment_s:g} s Welch "
                 f"segments the fit takes each FRF bin as the joint averaged over ±{floor_hz:g} Hz, which must stay "
                 f"above 0 Hz; start the band above {floor_hz:g} Hz")
-    top_hz = _PASS_FRACTION / period_s
+    top_hz = PASS_FRACTION / period_s
     if high > top_hz * (1.0 + _TYPED_LIMIT_REL):
         return (f"fit band {low:g}…{high:g} Hz ends above {top_hz:g} Hz, the highest frequency the analysis can "
-                f"judge with this recording's {1.0 / period_s:g} Hz encoder ({_PASS_FRACTION:g} × its rate, the "
+                f"judge with this recording's {1.0 / period_s:g} Hz encoder ({PASS_FRACTION:g} × its rate, the "
                 f"anti-alias filter's pass edge: above it the filter and the encoder's sampling, not the joint, shape "
                 f"the FRF); end the band at {top_hz:g} Hz or below")
     return None
@@ -64,15 +64,15 @@ def band_problem(band_hz: tuple[float, float], period_s: float, segment_s: float
 def min_current_rate_hz(period_s: float) -> float:
     """The lowest DAQ rate, Hz, whose Nyquist frequency lies above the chain's anti-alias stop edge for an
     encoder sampled every ``period_s`` (s)."""
-    return 2.0 * _STOP_FRACTION / period_s
+    return 2.0 * STOP_FRACTION / period_s
 
 
 
 def min_record_s(rate_hz: float, period_s: float, segment_s: float, start_offset_s: float) -> float:
     """Shortest recording, s of each stream, that leaves two Welch segments of ``segment_s`` after what the analysis
-    trims (:func:`analysis.signals.spans_and_clock`): the current outside the encoder's span (the streams' start
+    trims (:func:`analysis.stream_spans.spans_and_clock`): the current outside the encoder's span (the streams' start
     offset ``start_offset_s``, s), the anti-alias filter's transient at both ends of the current (our chain's
     :meth:`~analysis.chain.SignalChain.edge_s` for a DAQ at ``rate_hz`` and an encoder every ``period_s``), and two
     encoder samples (the speed's difference and the rounding of the span onto the encoder's instants)."""
-    edge_s = our_chain().edge_s(rate_hz, _PASS_FRACTION / period_s, _STOP_FRACTION / period_s)
+    edge_s = our_chain().edge_s(rate_hz, PASS_FRACTION / period_s, STOP_FRACTION / period_s)
     return min_duration_s(segment_s) + abs(start_offset_s) + 2.0 * edge_s + 2.0 * period_s

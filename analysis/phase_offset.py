@@ -1,7 +1,7 @@
 """The motor's electrical offset θ_0 and a phase's sensor DC, by least squares against the encoder's angle.
 
 i = −i_q·sin(θ_e + θ_0) + dc is fitted as a·sin θ_e + b·cos θ_e + c over short windows (:func:`window_phasors`,
-also the phase measure of the clock alignment, :mod:`analysis.clocks`). θ_0 is known from one phase only modulo π
+also the phase measure of the clock alignment, :mod:`analysis.clock_angle`). θ_0 is known from one phase only modulo π
 (the sign of i_q and θ_0 + π give the same current): :func:`phase_offset` returns θ_0 in (−π/2, π/2] and the
 caller fixes the sign (one bit) from the motion; :func:`min_speed_rpm` is the slowest motor speed at which it can
 be estimated.

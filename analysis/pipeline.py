@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from analysis.chain import SignalChain, chain_caveat
-from analysis.clocks import ClockFit
+from analysis.clock_model import ClockFit
 from analysis.drive_limits import drive_limit_reason
 from analysis.diagnose import nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
 from analysis.fit import FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit

@@ -128,7 +128,7 @@ def assess(
         band's bins (:func:`analysis.fit.judged_fit`, :func:`analysis.estimator_check.kernel_model_error`): the
         misfit tests judge the measurement against the model so corrected; None: uncorrected.
     clock_failure : str or None, optional
-        Why the clock alignment failed (:attr:`analysis.clocks.ClockFit.failure`): the verdict is then failed
+        Why the clock alignment failed (:attr:`analysis.clock_model.ClockFit.failure`): the verdict is then failed
         with it as the first reason — low coherence and wide intervals follow from it, not from the motion.
     profile : CommandedProfile or None, optional
         The profile acq commanded: a weak coherence's advice names its keys only when known

@@ -17,8 +17,8 @@ import numpy as np
 from scipy import signal
 from scipy.ndimage import median_filter
 
-from analysis.clocks import crossing_frequency_hz, current_crossings_s
 from analysis.encoder import longest_gap_free_span, speed_from_counts
+from analysis.zero_crossings import crossing_frequency_hz, current_crossings_s
 
 GRID_HZ = 200.0  # grid of the lag search, Hz: the speed's shape (≤ 20 Hz for a triangle) is well inside
 MAX_LAG_S = 2.0  # clock offsets searched, s: the design's plausible range of DAQ vs drive start (§4)
@@ -153,10 +153,11 @@ def electrical_speed_ratio(current_a: np.ndarray, rate_hz: float, encoder_index:
     """Measure f_e against p·|ω|/2π over a record; None when it holds too little motion to tell.
 
     The lag between the clocks comes from the shapes of the two electrical frequencies (same shape up
-    to the ratio, :func:`analysis.clocks.current_crossings_s` and :func:`~analysis.clocks.crossing_frequency_hz`
-    as in the clock alignment); then each half-period of the current, between two zero crossings, is set
-    against the encoder's travel over the same interval (moving intervals only: faster than 20 % of the
-    peak). A lag error of a few ms shifts both ends of an interval alike, so it barely matters.
+    to the ratio, :func:`analysis.zero_crossings.current_crossings_s` and
+    :func:`~analysis.zero_crossings.crossing_frequency_hz` as in the clock alignment); then each half-period of the
+    current, between two zero crossings, is set against the encoder's travel over the same interval (moving
+    intervals only: faster than 20 % of the peak). A lag error of a few ms shifts both ends of an interval alike,
+    so it barely matters.
 
     Parameters
     ----------

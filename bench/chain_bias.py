@@ -94,11 +94,13 @@ if str(ROOT) not in sys.path:  # this checkout's bench package
     sys.path.insert(0, str(ROOT))
 
 from analysis import resample
-from analysis.clocks import ClockFit
+from analysis.antialias import alias_terms, band_edges_hz
+from analysis.clock_model import ClockFit
 from analysis.fit import CHAIN_REL_STD, FitOptions, _jacobian, _Problem, fit_two_mass, quantisation_terms
 from analysis.frf import FrequencyResponse, estimate_frf
 from analysis.model import TwoMassParams
-from analysis.signals import _alias_terms, _band_edges_hz, spans_and_clock, torque_on_instants
+from analysis.signals import torque_on_instants
+from analysis.stream_spans import spans_and_clock
 from bench.misfit_structure import lines_in
 from bench.scenarios import SCENARIOS, clock_for, scenario_bench
 
@@ -294,7 +296,7 @@ def run(spec: str, seed: int) -> tuple[dict[str, np.ndarray], dict[str, float], 
     lsb = 2.0 * np.pi / rec.counts_per_rev
     frfs = {"chain": res.frf}
     T = rec.period_s
-    f_pass, f_stop = _band_edges_hz(rec)
+    f_pass, f_stop = band_edges_hz(rec)
 
     def frf(tq: np.ndarray, speed: np.ndarray, noise: np.ndarray | None, alias: np.ndarray) -> FrequencyResponse:
         return estimate_frf(tq, speed, T, torque_noise_Nm=noise, torque_alias_Nm=alias)
@@ -311,8 +313,8 @@ def run(spec: str, seed: int) -> tuple[dict[str, np.ndarray], dict[str, float], 
     tau_daq = truth_at(sim, sim.daq_time_s(spans.n0 + np.arange(n_daq)), "torque_Nm")
     tau = resample.to_instants(tau_daq, rec.rate_hz, t_daq0, spans.t_daq_s, f_pass, f_stop)
     step_s = (1.0 + true_clock.drift_ppm * 1e-6) / rec.rate_hz
-    alias = _alias_terms(tau_daq, rec.rate_hz, t_daq0, float(true_clock.drive_time_s(t_daq0)), step_s, spans.t_daq_s,
-                         T, f_pass, f_stop)
+    alias = alias_terms(tau_daq, rec.rate_hz, t_daq0, float(true_clock.drive_time_s(t_daq0)), step_s, spans.t_daq_s,
+                        T, f_pass, f_stop)
     frfs["torque"] = frf(tau, sig.speed_rad_s, None, alias)
     # (speed) … and the true angle's backward difference
     theta = truth_at(sim, np.concatenate(([spans.t_s[0] - T], spans.t_s)), "theta_m_rad")

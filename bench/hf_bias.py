@@ -37,11 +37,12 @@ if str(ROOT) not in sys.path:  # this checkout's bench package
     sys.path.insert(0, str(ROOT))
 
 from analysis import resample
+from analysis.antialias import ALIAS_ORDERS, PASS_FRACTION, STOP_FRACTION
 from analysis.fit import FitOptions, _Problem
 from analysis.frf import FrequencyResponse, estimate_frf
 from analysis.welch import Segments
 from analysis.model import TwoMassParams
-from analysis.signals import ALIAS_ORDERS, _PASS_FRACTION, _STOP_FRACTION, prepare_signals
+from analysis.signals import prepare_signals
 from bench.scenarios import SCENARIOS, clock_for, scenario_bench
 
 BANDS_HZ = ((100, 150), (150, 200), (200, 250), (250, 300), (300, 350), (350, 400), (400, 450))
@@ -86,7 +87,7 @@ def main() -> None:
         truth = TwoMassParams(t["K_Nm_per_rad"], t["Jm_kgm2"], t["Jl_kgm2"], t["C_Nms_per_rad"])
         sig = prepare_signals(rec)
         T = sig.period_s
-        f_pass, f_stop = _PASS_FRACTION / T, _STOP_FRACTION / T
+        f_pass, f_stop = PASS_FRACTION / T, STOP_FRACTION / T
         # the true torque on a fine drive-time grid, through the chain's own anti-alias filter and read
         t0 = sig.t_s[0] - 0.5
         fine_t = t0 + np.arange(int((sig.t_s[-1] - t0 + 0.5) * FINE_HZ)) / FINE_HZ

@@ -13,7 +13,7 @@ from analysis import encoder, resample, torque
 from analysis.phase_offset import PhaseOffset, phase_offset
 from analysis.torque_hilbert import apex_sign, torque_hilbert
 from analysis.torque_park import phase_gains, torque_park
-from analysis.clocks import ClockFit
+from analysis.clock_model import ClockFit
 from analysis.chain import PAPER_CHAIN, our_chain
 from analysis.recording import Recording
 from analysis.signals import prepare_signals

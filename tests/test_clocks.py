@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from analysis.clock_search import overlap_correlation
-from analysis.clocks import percentile_without_copy
+from analysis.zero_crossings import percentile_without_copy
 from analysis.recording import Recording
 from analysis.signals import prepare_signals
 from drivers.config import Bench, Profile
@@ -148,7 +148,8 @@ def test_a_mismatch_every_lag_shares_does_not_drop_the_true_lag_from_the_wide_se
 
 
 def test_the_frequency_stage_fits_only_the_offset_where_its_slope_would_need_an_implausible_drift() -> None:
-    from analysis.clocks import MAX_DRIFT_PPM, frequency_alignment, plausible_drift
+    from analysis.clock_frequency import frequency_alignment
+    from analysis.clock_model import MAX_DRIFT_PPM, plausible_drift
 
     t = np.arange(0.0, 10.0, 1e-3)
     moves = lambda x: 200.0 * np.clip(np.sin(2 * np.pi * 3.1 * x) + np.sin(2 * np.pi * 1.3 * x), 0, None)  # noqa: E731

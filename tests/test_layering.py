@@ -150,8 +150,8 @@ def test_the_checker_finds_a_cycle_and_a_reverse_import() -> None:
     graph = {"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}
     assert _cycles(graph) == [["a", "b", "c"]]
     assert "drivers.sim.bench" in _imports(ROOT / "tests" / "test_canopen.py")
-    signals = _imports(ROOT / "analysis" / "signals.py")  # from analysis import encoder: the module, not the face
-    assert "analysis.encoder" in signals and "analysis" not in signals
+    spans = _imports(ROOT / "analysis" / "stream_spans.py")  # from analysis import encoder: the module, not the face
+    assert "analysis.encoder" in spans and "analysis" not in spans
     assert "acq.monitoring.batch" in _imports(ROOT / "acq" / "ui" / "display.py")  # under if TYPE_CHECKING
 
 

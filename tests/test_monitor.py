@@ -677,7 +677,7 @@ def test_a_clock_fit_of_implausible_drift_is_rejected_and_the_host_stamps_align_
         repeating_window: Path) -> None:
     from acq.offline.analyze import recording_from_session
     from analysis.fit import Z95
-    from analysis.signals import spans_and_clock
+    from analysis.stream_spans import spans_and_clock
 
     (row,) = _rows(repeating_window)
     clock = spans_and_clock(recording_from_session(load(row["path"]))).clock

@@ -121,7 +121,7 @@ def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Se
     length or its arrival is unknown. A block partly in a hole of the phases is split around it: each piece's
     ``first_index`` and ``count`` are exact, and each keeps the block's ``host_ns``. ``host_ns`` is when the read
     that returned the samples came back, and the analysis and the exporter pair it with the block's last sample
-    (:func:`analysis.clocks.host_relation`, :func:`acq.offline.exporters.current_t0_s`): for the piece before the
+    (:func:`analysis.clock_host.host_relation`, :func:`acq.offline.exporters.current_t0_s`): for the piece before the
     hole this is later than its own last sample by the samples cut off, i.e. an arrival delay overstated by at most
     one chunk (0.1 s). Both use only the least-delayed arrivals (a lower envelope, a minimum), on which a late
     stamp has no effect; the stamp stays true as "these samples had arrived by then". Dropping the piece whole
