@@ -82,7 +82,7 @@ class Nominal(Strict):
 
 class Limits(Strict):
     """``[limits]``: what the joint may see while acq commands its motion (checked by :mod:`drivers.limits` before any
-    motion against the profile as executed; a CANopen drive is also told them, :mod:`drivers.canopen_drive`).
+    motion against the profile as executed; a CANopen drive is also told them, :mod:`drivers.canopen_setup`).
 
     Attributes
     ----------
