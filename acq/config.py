@@ -19,7 +19,8 @@ from typing import Any, TypeVar, get_args
 
 from pydantic import BaseModel, ValidationError
 
-from drivers.config import MAX_DURATION_S, Bench, Profile, check_joint_name
+from drivers.config import Bench, Profile, check_joint_name
+from drivers.profile import MAX_DURATION_S
 from drivers.registry import CURRENT_SOURCES, DRIVES
 from acqcore.errors import ConfigError
 

@@ -1,18 +1,16 @@
 """A CiA 402 servo drive over CANopen (canopen ``BaseNode402`` on python-can), as a :class:`Drive`.
 
 Imported only when a bench names ``[drive] driver = "canopen"`` (the registry's lazy import), so
-canopen and python-can are needed only then. :meth:`CanopenDrive.start` (drive disabled throughout):
-open the bus (own frames echoed, to pair TPDOs with SYNC), check the node is a CiA 402 device, NMT
-PRE-OPERATIONAL, producer heartbeat (0x1017), SYNC counter (0x1019 = 240, or plain SYNC if the drive
-has no 0x1019), TPDO ``tpdo`` mapped to 0x6064 position actual (+ 0x606C velocity actual) with
-transmission type 1 and **read back** (a differing mapping refuses to record) — with ``map_timestamp``
-also 0x1013, the high-resolution time stamp of the sample (µs, refused if the drive lacks it), mode of operation
-Profile Position **verified** on 0x6061 (canopen's own setter only logs a refusal), the bench's ``[limits]`` written
-to 0x607F max profile velocity and 0x6072 max torque and **read back** (0x607D software position limits follow
-around the start position when the motion starts), then NMT
-OPERATIONAL and the SYNC producer. Motion (enable, the triangle by Profile Position, quick stop and
-disable) is :mod:`drivers.canopen_motion`; the encoder stream (SYNC counter, notifier-side capture,
-decoding, raw ``.blf`` log) is :mod:`drivers.canopen_stream`.
+canopen and python-can are needed only then. This module runs the drive's life cycle (start, read, stop) and
+watches its stream's health. :meth:`CanopenDrive.start` (drive disabled throughout): open the bus (own frames
+echoed, to pair TPDOs with SYNC), check the node is a CiA 402 device, NMT PRE-OPERATIONAL, producer heartbeat
+(0x1017), then the SDO steps of :mod:`drivers.canopen_setup`, each verified on the drive (SYNC counter 0x1019 = 240
+or plain SYNC, TPDO ``tpdo`` mapping read back — with ``map_timestamp`` also 0x1013 —, Profile Position, the bench's
+``[limits]`` read back, the position frame; 0x607D software position limits follow around the start position when
+the motion starts), then NMT OPERATIONAL and the SYNC producer. A bus load above ``max_bus_load`` is refused before
+(:mod:`drivers.canopen_bus_load`). Motion (enable, the triangle by Profile Position, quick stop and disable) is
+:mod:`drivers.canopen_motion`; the encoder stream (SYNC counter, notifier-side capture, decoding, raw ``.blf`` log)
+is :mod:`drivers.canopen_stream`.
 
 Safety: every stop — end of recording, any exception, Ctrl-C (through the recorder's
 :meth:`stop_motion`), heartbeat loss, NMT state change, motion-thread failure — is a quick stop on
@@ -33,19 +31,19 @@ encoder's), velocities ``velocity_units_per_rpm``, accelerations ``acceleration_
 """
 from __future__ import annotations
 
-import math
 import queue
 import threading
 import time
-from collections.abc import Sequence
 from pathlib import Path
 import canopen
-from canopen.sdo import SdoAbortedError
 
 from drivers import canopen_od as od
+from drivers.canopen_bus_load import check_bus_load
 from drivers.canopen_eds import PassiveTpdo, passive_tpdo
 from drivers.base import DriveInfo, EncoderBlock, EventKind, StreamEvent, StreamName, limit_event
-from drivers.canopen_motion import STATUS_POLL_S, ProfilePositionMotion, device_step, node402
+from drivers.canopen_motion import ProfilePositionMotion, device_step, node402
+from drivers.canopen_setup import (check_position_frame, enable_sync_counter, map_tpdo, set_profile_position,
+                                   write_limits)
 from drivers.canopen_stream import (SYNC_COB_ID, SYNC_COUNTER_OVERFLOW, FrameCapture, RawFrameLog, SyncProducer,
                                     SyncUnwrapper, TpdoDecoder, TpdoLayout)
 from drivers.config import Bench, DriveCanopen, Limits, Profile
@@ -55,34 +53,6 @@ from acqcore.errors import AcqError, ConfigError, DeviceError
 QUEUE_FRAMES = 20_000
 BATCH_S = 0.05
 NMT_OPERATIONAL = 5
-
-
-def frame_bits(data_bytes: int) -> int:
-    """Worst-case length of a CAN 2.0A data frame on the wire, bits: 47 + 8·n plus stuff bits
-    (one per 4 of the 34 + 8·n stuffed bits), interframe space included."""
-    return 47 + 8 * data_bytes + (34 + 8 * data_bytes - 1) // 4
-
-
-def bus_load(bitrate: float, period_s: float, tpdo_bytes: Sequence[int], *, sync_bytes: int = 1,
-             heartbeat_period_s: float = 0.1, sdo_poll_s: float = STATUS_POLL_S) -> float:
-    """Worst-case bus load (fraction of ``bitrate``, bit/s) of SYNC every ``period_s`` (s) with the
-    TPDOs of ``tpdo_bytes`` answering each, a heartbeat and the motion thread's SDO status poll."""
-    bits_per_s = ((frame_bits(sync_bytes) + sum(frame_bits(n) for n in tpdo_bytes)) / period_s
-                  + frame_bits(1) / heartbeat_period_s + 2 * frame_bits(8) / sdo_poll_s)
-    return bits_per_s / bitrate
-
-
-def check_bus_load(s: DriveCanopen) -> float:
-    """The load ``[drive]`` asks for; :class:`ConfigError` naming the figure if above ``max_bus_load`` (the
-    TPDO's size within a CAN frame is a validator of :class:`DriveCanopen`)."""
-    tpdo = [s.tpdo_bytes]
-    load = bus_load(s.bitrate, s.period_s, tpdo, heartbeat_period_s=s.heartbeat_period_s)
-    if load > s.max_bus_load:
-        raise ConfigError(
-            f"[drive] period_s = {s.period_s:g}, bitrate = {s.bitrate}: CAN bus load {load:.0%} > max_bus_load "
-            f"{s.max_bus_load:.0%} (SYNC at {1 / s.period_s:g} Hz and a TPDO of {tpdo[0]} bytes, worst-case bit "
-            "stuffing) — raise period_s or bitrate")
-    return load
 
 
 class CanopenDrive:
@@ -142,12 +112,12 @@ class CanopenDrive:
                 node.nmt.add_heartbeat_callback(self._on_heartbeat)
                 node.sdo[od.HEARTBEAT_TIME].raw = max(1, round(s.heartbeat_period_s * 1000))
                 node.nmt.wait_for_heartbeat(s.heartbeat_timeout_s)
-            overflow = self._enable_sync_counter(SYNC_COUNTER_OVERFLOW)
-            cob_id, _ = self._map_tpdo()
-            self._set_profile_position()
+            overflow = enable_sync_counter(node, self.name, SYNC_COUNTER_OVERFLOW, self._info)
+            cob_id, _ = map_tpdo(self._network, node, self.name, s)
+            set_profile_position(node, self.name, s.state_timeout_s)
             if self._limits is not None:
-                self._write_limits(self._limits)
-                self._check_position_frame()
+                write_limits(node, self.name, self._limits, s.velocity_units_per_rpm)
+                check_position_frame(node, self.name, self._info)
             self._capture = FrameCapture(with_counter=overflow > 0, max_frames=QUEUE_FRAMES)
             self._network.subscribe(SYNC_COB_ID, self._capture.on_sync)
             self._network.subscribe(cob_id, self._capture.on_tpdo)
@@ -186,7 +156,7 @@ class CanopenDrive:
                 self._network.add_node(node)  # subscribes to the drive's SDO answers; sends nothing by itself
                 self._node = node
                 node.sdo.RESPONSE_TIMEOUT = s.sdo_timeout_s
-                cob_id, entries = self._map_tpdo()
+                cob_id, entries = map_tpdo(self._network, node, self.name, s)
                 source = f"TPDO{s.tpdo} mapped by acq (SDO)"
             else:
                 assert self._passive is not None  # open_drive resolves it
@@ -207,7 +177,7 @@ class CanopenDrive:
         except BaseException:
             self.stop()
             raise
-        self._event("info", f"listen-only: COB-ID 0x{cob_id:X} mapping {_entries(entries)} ({source}), SYNC of the "
+        self._event("info", f"listen-only: COB-ID 0x{cob_id:X} mapping {od.entries_text(entries)} ({source}), SYNC of the "
                             "machine's master; no NMT, SYNC, SDO write or motion command sent"
                             + (" after the SDO mapping" if s.configure else ""))
         return DriveInfo(period_s=s.period_s, counts_per_rev=self._cpr, transport="canopen",
@@ -277,7 +247,7 @@ class CanopenDrive:
             out, self._events = self._events, []
         return out
 
-    # ---- configuration -----------------------------------------------------------------------------
+    # ---- start-up waits (the SDO steps: drivers.canopen_setup) -------------------------------------
     def _wait_operational_heartbeat(self) -> None:
         """Wait for a heartbeat reporting OPERATIONAL (one in flight may still say PRE-OPERATIONAL)."""
         deadline = time.monotonic() + self._s.heartbeat_timeout_s
@@ -295,118 +265,6 @@ class CanopenDrive:
             if time.monotonic() > deadline:
                 raise DeviceError(f"{self.name}: no SYNC within {timeout_s:g} s: {why}")
             time.sleep(self._s.period_s)
-
-    def _enable_sync_counter(self, overflow: int) -> int:
-        """0x1019 = ``overflow`` if the drive has it (then SYNC carries the counter), else 0."""
-        with device_step(self.name, "writing 0x1019 SYNC counter overflow failed"):
-            try:
-                self._node.sdo[od.SYNC_OVERFLOW].raw = overflow
-            except SdoAbortedError:
-                self._event("info", "drive has no SYNC counter (0x1019): plain SYNC, the host counts them")
-                return 0
-        return overflow
-
-    def _map_tpdo(self) -> tuple[int, list[int]]:
-        """Map the TPDO (CiA 301 sequence via canopen), read it back, refuse a difference; its COB-ID and entries."""
-        s, node = self._s, self._node
-        wanted = [od.map_entry(od.POSITION_ACTUAL, 32)] + ([od.map_entry(od.VELOCITY_ACTUAL, 32)] if s.map_velocity else [])
-        if s.map_timestamp:
-            self._require_timestamp()
-            wanted.append(od.map_entry(od.HIGH_RES_TIMESTAMP, 32))
-        cob_id = od.tpdo_cob_id(s.tpdo, s.node_id)
-        pdo = node.tpdo[s.tpdo]
-        with device_step(self.name, f"writing the TPDO{s.tpdo} mapping failed"):
-            pdo.clear()
-            for entry in wanted:
-                pdo.add_variable(entry >> 16, 0, entry & 0xFF)
-            pdo.cob_id, pdo.trans_type, pdo.enabled, pdo.rtr_allowed = cob_id, 1, True, False
-            pdo.save()
-            self._network.unsubscribe(cob_id, pdo.on_message)  # our capture reads this COB-ID, not canopen's map
-        with device_step(self.name, f"reading the TPDO{s.tpdo} mapping back failed"):
-            comm, mapping = node.sdo[od.TPDO_COMM + s.tpdo - 1], node.sdo[od.TPDO_MAP + s.tpdo - 1]
-            got_cob, got_type = int(comm[1].raw), int(comm[2].raw)
-            got = [int(mapping[i].raw) for i in range(1, int(mapping[0].raw) + 1)]
-        if got != wanted or got_type != 1 or got_cob & 0x7FF != cob_id or got_cob & od.PDO_INVALID:
-            raise DeviceError(
-                f"{self.name}: TPDO{s.tpdo} read back differs from what was written — wrote {_entries(wanted)} "
-                f"type 1 COB-ID 0x{cob_id:X}, read {_entries(got)} type {got_type} COB-ID 0x{got_cob:X}")
-        return cob_id, wanted
-
-    def _require_timestamp(self) -> None:
-        """0x1013 must exist on the drive (an SDO upload of it must succeed) before it is mapped."""
-        with device_step(self.name, "reading 0x1013 high-resolution time stamp failed"):
-            try:
-                self._node.sdo[od.HIGH_RES_TIMESTAMP].raw
-            except SdoAbortedError as e:
-                raise DeviceError(f"{self.name}: the drive has no 0x1013 high-resolution time stamp (SDO abort "
-                                  f"0x{e.code:08X}) — set [drive] map_timestamp = false") from None
-
-    def _set_profile_position(self) -> None:
-        """Mode of operation 1 (0x6060), verified on 0x6061 within ``state_timeout_s``."""
-        node, timeout = self._node, self._s.state_timeout_s
-        with device_step(self.name, "checking 0x6502 supported drive modes failed"):
-            supported = node.is_op_mode_supported("PROFILED POSITION")
-        if not supported:
-            raise DeviceError(f"{self.name}: the drive does not support Profile Position (0x6502)")
-        with device_step(self.name, "switching the mode of operation failed"):
-            node.sdo[od.MODE].raw = od.MODE_PROFILE_POSITION
-            deadline = time.monotonic() + timeout
-            while (shown := int(node.sdo[od.MODE_DISPLAY].raw)) != od.MODE_PROFILE_POSITION:
-                if time.monotonic() > deadline:
-                    raise DeviceError(f"{self.name}: the drive refused Profile Position: 0x6061 mode display "
-                                      f"is {shown}, not {od.MODE_PROFILE_POSITION}, {timeout:g} s after writing 0x6060")
-                time.sleep(STATUS_POLL_S)
-
-    def _write_limits(self, limits: Limits) -> None:
-        """[limits] into the drive, which then enforces them itself: 0x607F max profile velocity (velocity units) and
-        0x6072 max torque (per mille of the drive's 0x6076 motor rated torque, mN·m), both rounded down, written and
-        read back — a drive that keeps other values is refused, as a differing TPDO mapping is. The travel limit
-        (0x607D) is set around the start position when the motion starts (:mod:`drivers.canopen_motion`)."""
-        node = self._node
-        with device_step(self.name, "reading 0x6076 motor rated torque failed"):
-            rated_mNm = int(node.sdo[od.MOTOR_RATED_TORQUE].raw)
-        if rated_mNm <= 0:
-            raise DeviceError(f"{self.name}: 0x6076 motor rated torque reads {rated_mNm} mN·m: [limits] max_torque_Nm "
-                              "cannot be set as 0x6072 — enter the motor's data in the drive")
-        wanted = {od.MAX_PROFILE_VELOCITY: math.floor(limits.max_speed_rpm * self._s.velocity_units_per_rpm),
-                  od.MAX_TORQUE: min(math.floor(limits.max_torque_Nm * 1e6 / rated_mNm), 0xFFFF)}
-        with device_step(self.name, "writing [limits] to 0x607F / 0x6072 failed"):
-            for index, value in wanted.items():
-                node.sdo[index].raw = value
-            got = {index: int(node.sdo[index].raw) for index in wanted}
-        if got != wanted:
-            shown = ", ".join(f"0x{i:04X} = {v}" for i, v in wanted.items())
-            read = ", ".join(f"0x{i:04X} = {v}" for i, v in got.items())
-            raise DeviceError(f"{self.name}: [limits] read back differ from what was written — wrote {shown}, read {read}")
-
-    def _check_position_frame(self) -> None:
-        """Read 0x607C home offset and the 0x607D window the drive holds, say both in an info event, and refuse a home
-        offset other than 0.
-
-        acq takes its travel window in 0x6064's frame: the start position p0 it reads there ± [limits] max_travel_deg
-        (:mod:`drivers.canopen_motion`). 0x6064 (and 0x607A) already include the home offset — they count from the
-        application's zero — and so does acq's own check of the swing, which is relative to p0: for those the offset
-        changes nothing, and it is only reported. But CiA 402 takes 0x607D relative to the machine's home position:
-        the drive corrects the limits by the home offset before comparing a target with them (corrected limit = limit
-        − 0x607C, as drive manuals quote the profile), so with an offset the window the drive enforces is not the one
-        acq wrote, and no read-back shows it. acq does not write limits it would have to shift by a convention it
-        cannot check on the drive: it refuses to move such a drive, in one line, before anything is enabled."""
-        node = self._node
-        with device_step(self.name, "reading 0x607D software position limits failed"):
-            limits = node.sdo[od.SOFTWARE_POSITION_LIMIT]
-            window = f"0x607D software position limits {int(limits[1].raw)} … {int(limits[2].raw)}"
-        with device_step(self.name, "reading 0x607C home offset failed"):
-            try:
-                offset = int(node.sdo[od.HOME_OFFSET].raw)
-            except SdoAbortedError:  # an optional object: a drive without homing has none
-                self._event("info", f"{window}; the drive has no 0x607C home offset")
-                return
-        self._event("info", f"{window}; 0x607C home offset {offset} (position units)")
-        if offset != 0:
-            raise DeviceError(
-                f"{self.name}: 0x607C home offset = {offset}: the drive takes 0x607D software position limits relative "
-                "to its home position, shifted by the offset from 0x6064 position actual, in which acq sets the window of "
-                "[limits] max_travel_deg — set 0x607C to 0 in the drive before acq moves the joint")
 
     # ---- streaming health --------------------------------------------------------------------------
     def _on_heartbeat(self, nmt_state: int) -> None:
@@ -484,10 +342,6 @@ class CanopenDrive:
     def _add_event(self, event: StreamEvent) -> None:
         with self._events_lock:
             self._events.append(event)
-
-
-def _entries(entries: list[int]) -> str:
-    return "[" + ", ".join(f"0x{e >> 16:04X}:{(e >> 8) & 0xFF:02X}/{e & 0xFF}" for e in entries) + "]"
 
 
 def open_drive(bench: Bench, sim_bench: object, fast: bool) -> CanopenDrive:

@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from drivers.config import DriveCanopen, tpdo_mapping_problem
+from drivers.config_drive import DriveCanopen, tpdo_mapping_problem
 from acqcore.errors import ConfigError
 
 

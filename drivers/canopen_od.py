@@ -60,6 +60,11 @@ def map_entry(index: int, bits: int, subindex: int = 0) -> int:
     return (index << 16) | (subindex << 8) | bits
 
 
+def entries_text(entries: list[int]) -> str:
+    """PDO mapping ``entries`` as a person reads them: ``[0x6064:00/32, …]`` (index:subindex/bits)."""
+    return "[" + ", ".join(f"0x{e >> 16:04X}:{(e >> 8) & 0xFF:02X}/{e & 0xFF}" for e in entries) + "]"
+
+
 def _var(name: str, index: int, data_type: int, access: str, default: int | None = None,
          subindex: int = 0, mappable: bool = False) -> ODVariable:
     var = ODVariable(name, index, subindex)

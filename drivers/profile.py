@@ -1,8 +1,9 @@
 """The motion-profile model and the strict base of every config model.
 
-Apart from the bench models (:mod:`drivers.config`, which re-exports both) so that the serial codec
+Apart from the bench models (:mod:`drivers.config`, which re-exports the profile) so that the serial codec
 (:mod:`drivers.serial_codec`) can carry a profile in its ``start_triangle`` command while the bench's
-``[drive]`` model checks its baud rate against the codec's frame size — without an import circle.
+``[drive]`` model (:mod:`drivers.config_drive`) checks its baud rate against the codec's frame size — without an
+import circle.
 """
 
 from __future__ import annotations

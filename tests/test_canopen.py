@@ -20,7 +20,8 @@ from acq.offline.analyze import request_for, recording_from_session
 from acq.recording.recorder import Recorder
 from acq.recording.reader import load
 from acq.recording.summary import summarize
-from drivers.canopen_drive import CanopenDrive, bus_load, check_bus_load
+from drivers.canopen_bus_load import bus_load, check_bus_load
+from drivers.canopen_drive import CanopenDrive
 from drivers.sim.peers import open_canopen_with_sim_node as open_drive
 from analysis.pipeline import analyze
 from analysis.sample_instants import stamp_deviation_s

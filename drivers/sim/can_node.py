@@ -11,24 +11,13 @@ new-set-point handshake feeds :class:`drivers.sim.pp_generator.ProfileGenerator`
 :class:`~drivers.sim.bench.SimBench` speed reference (0x607A, 0x6081, 0x6083, 0x6084, 0x6085). A set-point
 latches 0x6081/0x6083/0x6084 as they are when it is accepted (as CiA 402 drives do): a change written while a
 move runs or is buffered acts from the next new set-point on — what a speed-dithered profile relies on
-(:mod:`drivers.canopen_motion`).
+(:mod:`drivers.canopen_motion`). A disable while moving ramps the reference to rest at the quick-stop deceleration
+(the bench's speed loop cannot let the motor coast).
 
-The drive's CAN controller answers SYNC "in hardware": :class:`_ControllerBus` queues the synchronous
-TPDOs on the virtual bus right behind the SYNC that triggers them, in the sender's thread, as a real
-controller does within microseconds — a Python thread could not keep the CiA 301 synchronous window
-(TPDO k before SYNC k+1) on a loaded host, and the host pairs each TPDO with the SYNC before it. SDO
-and NMT go through the LocalNode's own notifier thread as usual. The controller's queue stays the last
-one of the channel whichever bus joins first (:class:`_ControllerLastChannel`), so the SYNC reaches the
-host before the TPDO.
-
-Drive clock: one drive cycle per SYNC received (the first SYNC is the cycle the host clock says it
-is); a TPDO carries the bench's int32 position register (0x6064), velocity (0x606C) and velocity demand (0x606B,
-the speed reference its loop follows: :meth:`~drivers.sim.bench.SimBench.velocity_demand_rad_s`) at its cycle,
-and the high-resolution time stamp 0x1013 (µs of the drive clock, wrapping at 2³²) of the instant the
-position was latched: k·T, or the SYNC's arrival with ``[sim] sync_jitter_s`` (drawn from the bench's
-seed — the virtual bus's own timing is not reproducible, see :meth:`~drivers.sim.bench.SimBench.latch_times_s`).
-A disable while moving ramps the reference to rest at the quick-stop deceleration (the bench's speed
-loop cannot let the motor coast).
+The drive's CAN controller answers SYNC "in hardware" (:mod:`drivers.sim.can_controller`): the synchronous TPDOs
+follow the SYNC that triggers them on the virtual bus, sent in the sender's thread; SDO and NMT go through the
+LocalNode's own notifier thread as usual. The drive's clock (one cycle per SYNC) and what a TPDO or an SDO upload
+carries at a cycle (0x6064, 0x606C, 0x606B, 0x1013) are :mod:`drivers.sim.can_node_clock`.
 
 Cyclic synchronous velocity (mode 9, ``[drive] motion = "external"``: a master such as
 :class:`drivers.sim.robot_controller.SimRobotController` owns the drive): RPDO1 (0x1400/0x1600, remappable over SDO)
@@ -51,17 +40,11 @@ the statusword's bit 11 "internal limit active" is set (CiA 402), as read by SDO
 
 from __future__ import annotations
 
-import math
-import queue
 import threading
-import time
-from collections.abc import Callable
 from typing import Any
 
 import can
 import canopen
-import numpy as np
-from can.interfaces.virtual import VirtualBus, channels, channels_lock
 
 from drivers.canopen_od import (HIGH_RES_TIMESTAMP, HOME_OFFSET, MAX_PROFILE_VELOCITY, MAX_TORQUE,
                                  MODE_CYCLIC_SYNC_VELOCITY, MODE_PROFILE_POSITION, MOTOR_RATED_TORQUE, N_TPDO, PDO_INVALID,
@@ -71,58 +54,20 @@ from drivers.config import Bench, DriveCanopen
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
 from drivers.sim.bench import SimBench
+from drivers.sim.can_controller import ControllerBus
+from drivers.sim.can_node_clock import DriveClock
 from drivers.sim.csv_reference import SetpointReference
 from drivers.sim.pp_generator import ProfileGenerator
 
 SOD, RTSO, SO, OE, QSA = 0x40, 0x21, 0x23, 0x27, 0x07  # CiA 402 statusword state bits
 REMOTE, TARGET_REACHED, INTERNAL_LIMIT, SETPOINT_ACK = 1 << 9, 1 << 10, 1 << 11, 1 << 12
 HISTORY_EVERY = 64
-CACHE_CYCLES = 50
 #: A cyclic set-point acts this many cycles after the SYNC that applies it, a set-point buffer (a real drive
 #: delays by one or two cycles; here it only shifts the master's program in time). What the bench computed must
-#: not change: the drive computes its samples CACHE_CYCLES ahead, and the simulated DAQ reads the bench by the
-#: host clock, which a stalled SYNC master's cycles lag (catching up in bursts) — 250 ms covers the lags
-#: measured on a loaded 2-core host; a later set-point is dropped and counted (SetpointReference.late)
+#: not change: the drive computes its samples CACHE_CYCLES (drivers.sim.can_node_clock) ahead, and the simulated
+#: DAQ reads the bench by the host clock, which a stalled SYNC master's cycles lag (catching up in bursts) — 250 ms
+#: covers the lags measured on a loaded 2-core host; a later set-point is dropped and counted (SetpointReference.late)
 SETPOINT_DELAY_CYCLES = 250
-
-
-class _TriggerQueue(queue.Queue):
-    """A receive queue that hands every SYNC to ``on_sync`` and every RPDO (COB-ID 0x200…0x57F) to ``on_rpdo``
-    as it is delivered (in bus order: an RPDO sent before a SYNC is taken before that SYNC is answered)."""
-
-    def __init__(self, on_sync: Callable[[], None], on_rpdo: Callable[[can.Message], None]) -> None:
-        super().__init__()
-        self._on_sync, self._on_rpdo = on_sync, on_rpdo
-
-    def put(self, item: can.Message, block: bool = True, timeout: float | None = None) -> None:
-        super().put(item, block, timeout)
-        if item.is_extended_id:
-            return
-        if item.arbitration_id == 0x80:
-            self._on_sync()
-        elif 0x200 <= item.arbitration_id < 0x580:
-            self._on_rpdo(item)
-
-
-class _ControllerLastChannel(list):
-    """A virtual channel's receive queues, kept with the drive controller's queue last: a bus that joins
-    after the drive is inserted before it, so a SYNC is delivered to it before the TPDOs it triggers."""
-
-    def append(self, item: queue.Queue) -> None:
-        first_controller = next((i for i, q in enumerate(self) if isinstance(q, _TriggerQueue)), len(self))
-        self.insert(first_controller, item)
-
-
-class _ControllerBus(VirtualBus):
-    """The drive's end of a python-can ``virtual`` channel, answering SYNC at delivery (see module doc)."""
-
-    def __init__(self, channel: str, on_sync: Callable[[], None], on_rpdo: Callable[[can.Message], None]) -> None:
-        with channels_lock:  # python-can's lock is re-entrant; the channel list must be ours before it is used
-            channels.setdefault(channel, _ControllerLastChannel())
-            super().__init__(channel=channel)
-            self.channel.remove(self.queue)
-            self.queue = _TriggerQueue(on_sync, on_rpdo)
-            self.channel.append(self.queue)
 
 
 class SimCanNode:
@@ -135,8 +80,7 @@ class SimCanNode:
             raise ConfigError("[drive] counts_per_rev: the simulated node counts in [encoder] counts_per_rev")
         self._s, self._bench = s, sim_bench
         self._period_s = s.period_s
-        self._rad_per_count = 2 * math.pi / sim_bench.counts_per_rev
-        self._start_counts = sim_bench.sim.encoder_start_counts
+        self._clock = DriveClock(sim_bench, s.period_s)
         self.generator = ProfileGenerator()
         self.external = getattr(s, "motion", "commanded") == "external"
         self.setpoints = SetpointReference(s.period_s)
@@ -146,7 +90,6 @@ class SimCanNode:
         self.network: canopen.Network | None = None
         self.node: canopen.LocalNode | None = None
         self._consumer = f"can-node@{id(self):x}"
-        self._cycle: int | None = None
         self._syncs = 0
         self._state = SOD
         self._mode = 0
@@ -154,17 +97,11 @@ class SimCanNode:
         self._tpdos: list[tuple[int, int, list[tuple[int, int, int]]]] | None = None
         self._drop = 0
         self._lock = threading.RLock()  # the bus thread (SDO, NMT) and the SYNC sender's thread share the node
-        self._cache_first = 0
-        self._cache_counts = np.zeros(0, dtype=np.int32)
-        self._cache_omega = np.zeros(0)
-        self._cache_demand = np.zeros(0)
-        self._cache_stamp_us = np.zeros(0, dtype=np.int64)
         self.refuse_mode_change = False
         self.has_timestamp = True
         self.home_offset: int | None = 0  # power-on 0x607C (None: no such object); nothing is shifted by it
         self.reject_mapping = False
         self.reject_limits = False
-        self.first_cycle: int | None = None  # drive cycle of the first SYNC (SYNC index 0)
         sim_bench.hold_history(self._consumer, 0.0)
 
     # ---- fault switches ----------------------------------------------------------------------------
@@ -180,7 +117,7 @@ class SimCanNode:
     def start(self) -> None:
         """Join the virtual bus, boot (boot-up message) into NMT PRE-OPERATIONAL."""
         self._bench.use_reference(self.setpoints if self.external else self.generator)
-        self.network = canopen.Network(_ControllerBus(self._s.channel, self._on_sync, self._on_rpdo))
+        self.network = canopen.Network(ControllerBus(self._s.channel, self._on_sync, self._on_rpdo))
         self.network.connect()
         dictionary = drive_object_dictionary(self._s.node_id)
         if not self.has_timestamp:
@@ -212,40 +149,10 @@ class SimCanNode:
             self._settle()
             return self._state
 
-    # ---- clock and measurements --------------------------------------------------------------------
-    def _now_cycle(self) -> int:
-        if self._cycle is not None:
-            return self._cycle
-        t_s = (time.monotonic_ns() - self._bench.host_t0_ns) * 1e-9 - self._bench.sim.host_latency_s
-        return max(0, int(t_s / self._period_s))
-
-    def _now_s(self) -> float:
-        """The drive's own time, s: its SYNC cycle, running on by the host clock when SYNC stops."""
-        t_host_s = (time.monotonic_ns() - self._bench.host_t0_ns) * 1e-9 - self._bench.sim.host_latency_s
-        return max(self._now_cycle() * self._period_s, t_host_s)
-
-    def _sample(self) -> tuple[int, float, int, float]:
-        """Position register (counts), speed (rad/s), 0x1013 time stamp (µs) and velocity demand (rad/s) at the
-        present cycle, from a block computed ahead (one vectorised bench query per ``CACHE_CYCLES``: a query per
-        SYNC would cost the bus its timing)."""
-        cycle = self._now_cycle()
-        i = cycle - self._cache_first
-        if not 0 <= i < len(self._cache_counts):
-            self._cache_first, i = cycle, 0
-            self._cache_counts = self._bench.encoder_register(cycle, CACHE_CYCLES)
-            t_s = (cycle + np.arange(CACHE_CYCLES)) * self._period_s
-            self._cache_omega = self._bench.true_state_at(t_s)["omega_m_rad_s"]
-            self._cache_stamp_us = np.round(self._bench.latch_times_s(cycle, CACHE_CYCLES) * 1e6).astype(np.int64)
-            self._cache_demand = self._bench.velocity_demand_rad_s(cycle, CACHE_CYCLES)
-        return (int(self._cache_counts[i]), float(self._cache_omega[i]), int(self._cache_stamp_us[i]) % 2**32,
-                float(self._cache_demand[i]))
-
-    def _theta_rad(self) -> float:
-        return float(self._bench.true_state_at(self._now_s())["theta_m_rad"])
-
-    def _register(self, theta_rad: float) -> int:
-        counts = math.floor(theta_rad / self._rad_per_count) + self._start_counts
-        return (counts + 2**31) % 2**32 - 2**31
+    @property
+    def first_cycle(self) -> int | None:
+        """Drive cycle of the first SYNC (SYNC index 0); None before it."""
+        return self._clock.first_cycle
 
     # ---- SDO ---------------------------------------------------------------------------------------
     def _on_read(self, index: int, subindex: int, od: Any) -> int | None:
@@ -258,13 +165,13 @@ class SimCanNode:
         if index == 0x6061:
             return self._mode
         if index == 0x6064:
-            return self._sample()[0]
+            return self._clock.sample()[0]
         if index == 0x606C:
-            return round(self._sample()[1] / RPM_TO_RAD_S * self._s.velocity_units_per_rpm)
+            return round(self._clock.sample()[1] / RPM_TO_RAD_S * self._s.velocity_units_per_rpm)
         if index == 0x606B:
-            return round(self._sample()[3] / RPM_TO_RAD_S * self._s.velocity_units_per_rpm)
+            return round(self._clock.sample()[3] / RPM_TO_RAD_S * self._s.velocity_units_per_rpm)
         if index == HIGH_RES_TIMESTAMP:
-            return self._sample()[2]
+            return self._clock.sample()[2]
         if self.reject_mapping and TPDO_MAP <= index < TPDO_MAP + N_TPDO:
             return od.default
         if self.reject_limits and index in (MAX_PROFILE_VELOCITY, MAX_TORQUE, SOFTWARE_POSITION_LIMIT):
@@ -303,14 +210,14 @@ class SimCanNode:
     # ---- CiA 402 -----------------------------------------------------------------------------------
     def _settle(self) -> None:
         """Quick stop ends in SWITCH ON DISABLED once at rest (quick stop option code 2)."""
-        if self._state == QSA and self.generator.at_rest(self._now_s()):
+        if self._state == QSA and self.generator.at_rest(self._clock.now_s()):
             self._state = SOD
 
     def _statusword(self) -> int:
         self._settle()
         sw = self._state | REMOTE
         if self._state in (OE, QSA):
-            now = self._now_s()
+            now = self._clock.now_s()
             if self.generator.at_rest(now):
                 sw |= TARGET_REACHED
             if self._setpoint_latched or self.generator.pending(now):
@@ -324,7 +231,8 @@ class SimCanNode:
             self.setpoints.push(self._setpoint_time_s(), 0.0)
             return
         decel = self._param(0x6085) or self._param(0x6084)
-        self.generator.stop(self._now_s(), max(decel, 1) / self._s.acceleration_units_per_rpm_per_s * RPM_TO_RAD_S)
+        self.generator.stop(self._clock.now_s(),
+                            max(decel, 1) / self._s.acceleration_units_per_rpm_per_s * RPM_TO_RAD_S)
 
     def _controlword(self, cw: int) -> None:
         self._settle()
@@ -349,7 +257,7 @@ class SimCanNode:
             self._state = SO
         elif cw & 0x8F == 0x0F and state in (SO, QSA):       # enable operation
             if state == SO:
-                self.generator.hold_at(self._theta_rad())
+                self.generator.hold_at(self._clock.theta_rad())
             self._state = OE
         new_setpoint = bool(cw & 0x10)
         if self._state == OE and self._mode == MODE_PROFILE_POSITION and new_setpoint and not self._setpoint_latched:
@@ -359,15 +267,15 @@ class SimCanNode:
 
     def _accept_setpoint(self) -> bool:
         """Latch 0x607A into the generator unless a set-point is already buffered."""
-        now = self._now_s()
+        now = self._clock.now_s()
         if self.generator.pending(now):
             return False
         cmd = self.generator.commanded_rad
         limits = self.node.sdo[SOFTWARE_POSITION_LIMIT]  # the target clamped to them, the speed to 0x607F
         target = min(max(self._param(0x607A), int(limits[1].raw)), int(limits[2].raw))
-        steps = (target - self._register(cmd) + 2**31) % 2**32 - 2**31
+        steps = (target - self._clock.register(cmd) + 2**31) % 2**32 - 2**31
         v_units, a_units = self._s.velocity_units_per_rpm, self._s.acceleration_units_per_rpm_per_s
-        self.generator.move_to(cmd + steps * self._rad_per_count, now,
+        self.generator.move_to(cmd + steps * self._clock.rad_per_count, now,
                                min(self._param(0x6081), self._param(MAX_PROFILE_VELOCITY)) / v_units * RPM_TO_RAD_S,
                                max(self._param(0x6083), 1) / a_units * RPM_TO_RAD_S,
                                max(self._param(0x6084), 1) / a_units * RPM_TO_RAD_S)
@@ -394,7 +302,7 @@ class SimCanNode:
         """When a cyclic set-point applied at this SYNC takes effect, s of drive time: one cycle of interpolation
         plus SETPOINT_DELAY_CYCLES after the drive's present cycle (the master's program runs on the SYNC cycles,
         so set-points arrive one per cycle, evenly spaced whatever the host's timing)."""
-        return (self._now_cycle() + 1 + SETPOINT_DELAY_CYCLES) * self._period_s
+        return (self._clock.now_cycle() + 1 + SETPOINT_DELAY_CYCLES) * self._period_s
 
     def _on_rpdo(self, msg: can.Message) -> None:
         with self._lock:
@@ -418,13 +326,10 @@ class SimCanNode:
         self.rpdos += 1
 
     def _sync(self) -> None:
-        if self._cycle is None:
-            self._cycle = self.first_cycle = self._now_cycle()
-        else:
-            self._cycle += 1
+        cycle = self._clock.tick()
         self._syncs += 1
-        if self._cycle % HISTORY_EVERY == 0:
-            self._bench.hold_history(self._consumer, self._cycle * self._period_s)
+        if cycle % HISTORY_EVERY == 0:
+            self._bench.hold_history(self._consumer, cycle * self._period_s)
         if self.node.nmt.state != "OPERATIONAL":
             return
         if self._rpdo is not None and self._rpdo_layout is not None:

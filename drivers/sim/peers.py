@@ -16,7 +16,8 @@ from drivers import canopen_drive, serial_drive
 from drivers.base import Drive, DriveInfo
 from drivers.canopen_eds import passive_tpdo
 from drivers.canopen_od import STATUSWORD, tpdo_cob_id
-from drivers.config import POSITION_ACTUAL_ENTRY, Bench, DriveCanopen, DriveSerial
+from drivers.config import Bench, DriveCanopen, DriveSerial
+from drivers.config_drive import POSITION_ACTUAL_ENTRY
 from acqcore.errors import ConfigError
 from drivers.sim.bench import SimBench
 from drivers.sim.can_node import SimCanNode
