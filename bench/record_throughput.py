@@ -76,6 +76,33 @@ work the kernel's flusher thread would do later otherwise); real time 0.090 → 
 against a main that moved during the runs (load 10–15) gave per wall 1.02, per CPU 0.99 / 0.98, the thread 0.85, the
 writing alone 0.74, real time 0.098 → 0.096.
 
+Session 12, the recording thread's GIL releases (2026-11-30, load 6–14 from other work throughout, so every figure is paired: two persistent worker
+processes, main and the change, alternating recordings and floor runs in random order, 20–40 pairs a test). GIL
+hand-overs counted (perf uprobe on libpython's ``drop_gil``, 3 sessions): the recording thread lets go of the GIL
+≈ 1 490 times a session — numpy's copies into the write buffers ≈ 540 (numpy lets go for any copy of more than 500
+elements), h5py freeing an ID ≈ 460 (≈ 300 of them creating and finishing the file, no reader running), ``set_extent``
+and ``write`` 87 each, its sleeps 60–90, the encoder check's ufuncs ≈ 75 — against 12 600–19 800 of the two readers
+between themselves (the simulator's numpy). Tried together (branch wp/s12-rec6, not merged): :class:`acq.recording.pending.Column` reuses its two
+dataspaces (the low-level writes were there already; two fresh spaces an append were two more GIL releases when
+freed), the encoder blocks of a handoff are one run that a current block no longer breaks, the buffer copies keep
+the GIL: ≈ 820 releases. Recorder CPU, paired medians of five tests: −3.6, −8.3, −3.9, −1.5, −5.5 ms (its recording
+thread −0.2…−1.8 of it), while the two workers' floors (the same code) differed by −4.1…+6.5 ms, so the per CPU
+ratio moved +0.003, +0.022, +0.025, +0.019, −0.003. This script, two sets of 6 interleaved pairs (load 6–8, 9–12),
+floor a thread per stream: per CPU main/new medians 0.890/0.885 and 0.885/0.915, new/old per pair 1.022 1.011 0.967
+1.011 1.011 0.907 and 1.033 1.011 1.034 1.023 1.057 0.989 (median of the 12: 1.011); per wall 0.85/0.88 and
+0.945/0.96 — +0.01, the size of the noise here: not merged (it also let listeners see a handoff's current blocks before encoder blocks that came earlier). Each part alone: nothing (spaces and runs −0.3 ms, copies alone
++3.9 ms). The writing alone is unchanged by it (21.0/22.3 ms against 21.1/20.9, 15 replays).
+Tried and not taken: fewer wake-ups — a 100 ms handoff (not admissible, it bounds what waking on a commit's worth
+could give) lowered the recording thread by 5–10 ms in each of 6 pairs (sleeps 62 → 9 a session, ≈ 40 µs CPU each
+to take the GIL back, and longer encoder runs) but moved the readers by ±13 ms, the per CPU ratio per pair 0.98–1.06
+of main's; the real-time bound (a block waits ≤ 10 ms) keeps the tick. Page faults: recorder − floor ≈ +70 a
+session (``perf stat``), context switches ≈ +265: not where the readers' extra goes; their profile against the
+floor's (15 runs each) spreads it over the interpreter (+4 ms), numpy and malloc. The recording thread's profile
+(perf, DWARF call graphs): ``pwrite`` 20 % (≈ 6.6 ms: the page cache allocating pages and ext4's delayed allocation
+per 4 KiB; the copy is 6 % of it), Fletcher32 9 %, HDF5's copies 5.5 %. Direct chunk writes (Fletcher32 computed in
+numpy) were not built: more passes over the data than HDF5's own checksum. The recorder's figure includes creating
+the file (≈ 3.7 ms CPU, 0.011 of the per CPU ratio), which ``acq record`` does before its recording starts.
+
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
 (7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it
