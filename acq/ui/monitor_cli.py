@@ -18,7 +18,7 @@ from acq.monitoring.catalogue_backends import is_url, redacted
 from acq.monitoring.monitor import Monitor, MonitorSettings, MonitorStatus
 from acq.monitoring.retention import parse_size
 from acq.recording.tags import parse_tags
-from acq.ui.options import CatalogueLocation
+from acq.ui.options import CatalogueLocation, FiniteFloatRange
 from acq.ui.values import duration_text, format_value
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
@@ -111,7 +111,7 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
 @click.command(name="monitor")
 @click.option("--bench", "bench_path", type=click.Path(path_type=Path), required=True,
               help="Bench TOML with [drive] motion = \"external\" (e.g. configs/benches/sim_robot.toml).")
-@click.option("--window", "window_s", type=click.FloatRange(min=1.0), default=10.0, show_default=True,
+@click.option("--window", "window_s", type=FiniteFloatRange(min=1.0), default=10.0, show_default=True,
               help="Seconds per window.")
 @click.option("--every", "every", default="60", show_default=True, help="One window per this (600, 10m, 1h).")
 @click.option("--for", "for_text", default=None, help="Stop after this (8h); default: until Ctrl-C.")
@@ -140,7 +140,7 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
                    "(only acts on a folder bound elsewhere).")
 @click.option("--baseline-windows", type=click.IntRange(min=1), default=5, show_default=True,
               help="Baseline = mean K of the first N good windows.")
-@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=10.0, show_default=True,
+@click.option("--threshold-pct", type=FiniteFloatRange(0, 100, min_open=True), default=10.0, show_default=True,
               help="Alarm when K is this many % below the baseline (or by the EWMA rule).")
 @click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Analysis worker processes.")
 @click.option("--fast", is_flag=True, help="Simulated bench: machine time runs as fast as the analysis allows.")
