@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from acq.monitoring.retention import parse_size
+from acqcore.errors import ConfigError
 from tests.helpers import run_cli
 
 ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot.toml"
@@ -55,3 +56,38 @@ def test_a_size_of_nan_or_inf_is_not_a_size() -> None:
     for text in ("nanMB", "infGB", "-infB"):
         with pytest.raises(ValueError, match=f"'{text}' is not a size"):
             parse_size(text)
+
+
+def _parses(command: object, args: list[str]) -> None:
+    """``args`` parse with the real click ``command`` (an option it has not raises click's NoSuchOption)."""
+    import click
+
+    assert isinstance(command, click.Command)
+    command.make_context(command.name or "", args, resilient_parsing=False)
+
+
+def test_every_command_the_monitor_advises_exists(tmp_path: Path) -> None:
+    """The trial: the summary advised "re-baseline with --baseline on a session", the restart refusal "resume with the
+    same … --ewma-lambda 0.2": acq monitor had neither option. Each advice, parsed by the command it names."""
+    from acq.monitoring.alarm_rules import AlarmRules
+    from acq.monitoring.monitor_restart import check_comparable
+    from acq.monitoring.trend import REBASELINE
+    from acq.ui.monitor_cli import monitor_command
+    from acq.ui.trend_cli import trend_command
+    from tests.test_monitor import _bench
+
+    assert REBASELINE == ("re-baseline: acq trend --baseline SESSION_ID judges against a session of the joint in a "
+                          "known state; a monitor learns a new baseline in a new --out")
+    _parses(trend_command, ["--joint", "joint1", "--baseline", "abc123"])
+    _parses(monitor_command, ["--bench", str(ROBOT), "--out", str(tmp_path / "new")])
+
+    from acq.monitoring.catalogue import Entry
+    filed = AlarmRules(5, 10.0, 0.3)
+    entry = Entry("k", "s", "p", "joint1", None, {**filed.as_tags(), "monitor_window": 0}, "ok", [], None, 890.0,
+                  (880.0, 900.0), 55.0, 95.0, "r", "", None)
+    with pytest.raises(ConfigError) as refusal:
+        check_comparable(tmp_path, [entry], _bench(), 10.0, AlarmRules(5, 10.0, 0.2))
+    assert str(refusal.value) == (f"{tmp_path}: its windows were judged with --baseline-windows 5 --threshold-pct 10 "
+                                  "--ewma-lambda 0.3: resume with the same, or start a new --out")
+    _parses(monitor_command, ["--bench", str(ROBOT), "--baseline-windows", "5", "--threshold-pct", "10",
+                              "--ewma-lambda", "0.3"])

@@ -142,11 +142,13 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
               help="Baseline = mean K of the first N good windows.")
 @click.option("--threshold-pct", type=FiniteFloatRange(0, 100, min_open=True), default=10.0, show_default=True,
               help="Alarm when K is this many % below the baseline (or by the EWMA rule).")
+@click.option("--ewma-lambda", type=FiniteFloatRange(0, 1, min_open=True), default=0.2, show_default=True,
+              help="EWMA weight of the newest window; alarm when the EWMA is below the 3σ control limit.")
 @click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Analysis worker processes.")
 @click.option("--fast", is_flag=True, help="Simulated bench: machine time runs as fast as the analysis allows.")
 def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str | None, on_alarm: str | None,
                     keep: int, max_disk: str | None, out_dir: Path, baseline_windows: int, threshold_pct: float,
-                    jobs: int, fast: bool, catalogue_path: Path | str | None, tags: tuple[str, ...],
+                    ewma_lambda: float, jobs: int, fast: bool, catalogue_path: Path | str | None, tags: tuple[str, ...],
                     move_catalogue: bool, new_identity: bool, moved: bool) -> int:
     """Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in alarm."""
     if moved and new_identity:  # the same monitor and another one: taking either would be a guess
@@ -164,7 +166,7 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
                                for_s=None if for_text is None else parse_duration("--for", for_text), on_alarm=on_alarm,
                                keep=keep, max_disk_bytes=budget, fast=fast, jobs=jobs,
                                baseline_windows=baseline_windows, threshold_pct=threshold_pct,
-                               catalogue=catalogue_path, tags=parse_tags(tags), new_identity=new_identity,
+                               ewma_lambda=ewma_lambda, catalogue=catalogue_path, tags=parse_tags(tags), new_identity=new_identity,
                                moved=moved, move_catalogue=move_catalogue)
     console = Console(stderr=True)
     if console.is_terminal:
