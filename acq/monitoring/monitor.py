@@ -29,7 +29,8 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
-from contextlib import AbstractContextManager, contextmanager, suppress
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import AbstractContextManager, ExitStack, contextmanager, suppress
 from pathlib import Path
 from typing import Any
 
@@ -69,6 +70,9 @@ class Monitor:
         self._recorder: Recorder | None = None
         self._windows = FolderWindows(settings.out_dir, settings.keep)  # their raw files, retention
         self._pending: dict[Future[Outcome], str] = {}
+        self._pools: ExitStack | None = None  # the analysis pools of the run: a new one when a worker died
+        self._pool: Any = None
+        self._pool_broken = False
         self._alarms = AlarmCommands(settings.on_alarm, self._alarm_problem)
         self._in_alarm = False
         self._filed = 0  # catalogue rows written by this run
@@ -122,9 +126,10 @@ class Monitor:
         return 3 if self._in_alarm else 0
 
     def _run(self) -> None:
-        with folder_lock(self.s.out_dir), self._identified() as windows, analysis_executor(self.s.jobs, None) as pool, \
-                self._signals():
-            first = self._resume(pool, windows)
+        with folder_lock(self.s.out_dir), self._identified() as windows, ExitStack() as pools, self._signals():
+            self._pools = pools
+            self._pool = pools.enter_context(analysis_executor(self.s.jobs, None))
+            first = self._resume(windows)
             wall0 = time.monotonic()
             n = first
             while self._stop is None and (self.s.for_s is None or (n - first) * self.s.every_s < self.s.for_s):
@@ -132,7 +137,7 @@ class Monitor:
                     self._wait_until(wall0 + (n - first) * self.s.every_s)
                     if self._stop is not None:
                         break
-                self._window(n, pool)
+                self._window(n)
                 n += 1
             self._collect(at_most=0)
             self._alarms.reap(wait=True)
@@ -140,7 +145,7 @@ class Monitor:
             self.status.message = f"stopped: {self._stop}" if self._stop else "done"
             self._show()
 
-    def _window(self, n: int, pool: Any) -> None:
+    def _window(self, n: int) -> None:
         """Capture window ``n`` (if the disk budget allows) and hand it to the pool (if it keeps up)."""
         self.status.machine_time_s = self._clock.at(n)
         if not self._room_for_window():
@@ -186,12 +191,15 @@ class Monitor:
             self._mark(key, "not analysed", f"the analysis fell behind the capture ({len(self._pending)} windows "
                                             "waiting): this window was skipped", skipped=True)
             return
-        self._submit(pool, key)
+        self._submit(key)
         self._show()
 
-    def _submit(self, pool: Any, key: str) -> None:
+    def _submit(self, key: str) -> None:
+        if self._pool_broken:  # a worker died (killed, out of memory): the windows from now on go to a new pool
+            self._pool = self._pools.enter_context(analysis_executor(self.s.jobs, None))
+            self._pool_broken = False
         path = self._windows.path(key)
-        self._pending[pool.submit(analyse_window, str(path.resolve()), sha256_of(path), self.s.request)] = key
+        self._pending[self._pool.submit(analyse_window, str(path.resolve()), sha256_of(path), self.s.request)] = key
 
     def _collect(self, at_most: int | None) -> None:
         """Record the finished analyses; first wait until at most ``at_most`` are left (None: do not wait)."""
@@ -206,10 +214,21 @@ class Monitor:
                 key = self._pending.pop(future)
                 try:
                     outcome = future.result()
-                except Exception as e:  # noqa: BLE001 - the worker itself died: the window is marked, not lost
-                    self._mark(key, "not analysed", f"worker failed: {type(e).__name__}: {e}")
+                except Exception as e:  # noqa: BLE001 - the worker itself died (analyse_window never raises)
+                    self._unfinished(key, e)
                     continue
                 self._record(key, outcome)
+
+    def _unfinished(self, key: str, error: Exception) -> None:
+        """A window whose analysis did not complete (its worker died): left unfiled, so that a restart (or acq analyze
+        of the folder) analyses it; filed "not analysed", it was never analysed again (the trial: SIGTERM killed
+        the worker, "worker failed: BrokenProcessPool", and the window's K was lost for good)."""
+        self._pool_broken = self._pool_broken or isinstance(error, BrokenProcessPool)
+        self.status.unfinished += 1
+        number = self._windows.number(key) + 1
+        self.status.message = (f"window {number}: its analysis did not complete ({type(error).__name__}) — left "
+                               "unfiled: a restart analyses it")
+        self._show()
 
     def _mark(self, key: str, verdict: str, reason: str, skipped: bool = False) -> None:
         path = self._windows.path(key)
@@ -310,7 +329,7 @@ class Monitor:
         with self.catalogue:
             yield windows
 
-    def _resume(self, pool: Any, windows: list[Entry]) -> int:
+    def _resume(self, windows: list[Entry]) -> int:
         """Mark or analyse the windows a previous run left (``windows``: its windows in the catalogue); return the
         next window's number."""
         windows = sorted(windows, key=lambda e: int(e.tags[WINDOW_TAG]))
@@ -347,7 +366,7 @@ class Monitor:
             elif session.status != "complete":
                 self._mark(key, "interrupted", f"window capture {session.status}: {session.meta.stop_reason}")
             else:
-                self._submit(pool, key)
+                self._submit(key)
         trend = self._trend()
         self._retain(trend)
         self._collect(at_most=0)

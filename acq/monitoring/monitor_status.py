@@ -67,6 +67,7 @@ class MonitorStatus:
     # worker died or the analysis raised; interrupted — the capture was cut)
     filed: dict[str, int] = field(default_factory=lambda: dict.fromkeys(FILED_KINDS, 0))
     not_captured: int = 0  # not captured: the disk budget would have been exceeded (not filed)
+    unfinished: int = 0  # captured, but their analysis did not complete (a worker died): not filed, a restart does
     copied_deleted: int = 0  # raw windows of other monitors copied into the folder, deleted for the disk budget
     alarms: int = 0
     alarm_command_failure: str | None = None  # the last --on-alarm command's problem: "alarm command failed: exit 1"

@@ -55,6 +55,10 @@ class FolderWindows:
         """The session file of the window of session id ``key``."""
         return self._files[key].path
 
+    def number(self, key: str) -> int:
+        """The number of the window of session id ``key`` (from 0)."""
+        return self._files[key].index
+
     def done(self, key: str) -> None:
         """The window's catalogue row is written: retention may delete its raw files."""
         self._files[key] = replace(self._files[key], done=True)

@@ -50,6 +50,7 @@ def status_table(st: MonitorStatus) -> Table:
         ("windows filed (this run)", filed_text(st)),
         *([("windows in the folder (earlier runs too)", str(st.in_folder))] if st.resumed else []),
         *([("not captured: the disk budget (--max-disk) was full", str(st.not_captured))] if st.not_captured else []),
+        *([("not filed: analysis unfinished, a restart analyses them", str(st.unfinished))] if st.unfinished else []),
         *([("copies of other monitors' windows deleted", str(st.copied_deleted))] if st.copied_deleted else []),
         ("last K N·m/rad (95 %) · its window", k_text),
         ("ΔK against the baseline", format_value(st.change_pct, "+.1f") + " %"),
@@ -87,7 +88,9 @@ def _filed(st: MonitorStatus) -> str:
     text = f"{st.filed_total} window{'s' if st.filed_total != 1 else ''} filed"
     text += " in this run" if st.resumed else ""
     text += f" ({filed_parts(st)})" if st.filed_total else ""
-    return text + (f", {st.in_folder} in the folder" if st.resumed else "")
+    text += f", {st.in_folder} in the folder" if st.resumed else ""
+    return text + (f", {st.unfinished} not filed (analysis unfinished: the restart analyses "
+                   f"{'it' if st.unfinished == 1 else 'them'})" if st.unfinished else "")
 
 
 def _pct(fraction: float | None) -> str:
@@ -183,6 +186,7 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
                 + (f" in this run ({st.in_folder} in the folder)" if st.resumed else "")
                 + (f" = {filed_parts(st)}" if st.filed_total else "")
                 + (f", {st.not_captured} not captured (disk budget)" if st.not_captured else "")
+                + (f", {st.unfinished} not filed (analysis unfinished)" if st.unfinished else "")
                 + f", excited {_pct(st.last_excited_fraction)} of the last window"
                 + (f" ({st.last_segments})" if st.last_segments else "") + f", last K {last_k}, "
                 f"ΔK {format_value(st.change_pct, '+.1f')} %, {st.state}"
