@@ -5,15 +5,20 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 
+import pytest
 
 
+
+from tests.helpers import run_cli
 from tests.test_monitor import EXCITING_SEED, ROBOT, _bench, _rows
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -76,3 +81,91 @@ def test_a_window_whose_worker_died_is_left_for_the_restart_and_analysed_there(t
     again = Monitor(replace(settings, for_s=60.0))
     assert again.run() == 0
     assert [(r["window"], r["verdict"]) for r in _rows(tmp_path)] == [(0, "ok"), (1, "ok"), (2, "ok"), (3, "ok")]
+
+
+@pytest.fixture
+def six_mb_disk(tmp_path: Path) -> Iterator[Path]:
+    """A 6 MiB tmpfs (the trial's), mounted as root and unmounted after; skipped where this process may not mount."""
+    folder = tmp_path / "tiny"
+    folder.mkdir()
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        pytest.skip("needs a real 6 MiB file system: a tmpfs mounted as root")
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=6m", "tmpfs", str(folder)], capture_output=True,
+                             text=True)
+    if mounted.returncode != 0:
+        pytest.skip(f"needs a tmpfs mount as root: {mounted.stderr.strip()}")
+    try:
+        yield folder
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], check=False)
+
+
+def test_a_max_disk_the_file_system_cannot_hold_is_refused(capsys: pytest.CaptureFixture[str],
+                                                          six_mb_disk: Path) -> None:
+    """The trial's --max-disk 100MB on a 6 MB tmpfs ran on, losing windows to the full disk."""
+    out = six_mb_disk / "m2"
+    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--window", "4", "--every", "5", "--for", "60s", "--fast",
+                  "--out", str(out), "--max-disk", "100MB")
+    assert (run.code, run.err) == (2, f"acq: error: --max-disk 100 MB: the file system of {out} has 6.3 MB free — "
+                                      "the disk would be full before the budget: give --max-disk 6.2MB or less, or "
+                                      "free space there\n")
+    assert not out.exists()
+
+
+def test_a_full_disk_stops_the_monitor_after_the_second_window_it_cannot_store(capsys: pytest.CaptureFixture[str],
+                                                                              six_mb_disk: Path) -> None:
+    """The trial: "55 s: 12 filed = 3 ok + 1 not excited + 8 interrupted … — done", exit 0, "disk full" never shown,
+    the baseline learning for ever. Four 1.04 MB windows of the baseline (kept whatever the disk) leave 1.9 MB: the
+    next window needs 2.7 MB (1.7 MB expected and the writer's 1 MiB reserve); after retention could free nothing,
+    the window after it is tried, and the second failure stops the monitor, exit 1."""
+    out = six_mb_disk / "m2"
+    run = run_cli(capsys, "monitor", "--bench", str(ROBOT), "--window", "4", "--every", "5", "--for", "60s", "--fast",
+                  "--out", str(out))
+    lines = run.err.splitlines()
+    assert (run.code, lines[-1]) == (1, f"acq: error: disk full: {out} — monitor stopped after window 7 (5 windows "
+                                        "kept)")
+    assert (f"25 s: 4 filed = 3 ok + 1 not excited, 1 not captured (disk full), excited 93 % of the last window, last "
+            f"K 887.6 (window 4), ΔK — %, learning baseline, 4.4 MB — window 6 not captured: disk full: {out} has 1.9 "
+            "MB free, a window needs 2.7 MB — the next window is tried once room is made; a second failure stops"
+            ) in lines
+    assert [r["verdict"] for r in _rows(out)] == ["not excited", "ok", "ok", "ok", "ok"]
+
+
+def test_a_window_cut_by_a_full_disk_is_named_so_and_the_monitor_goes_on_once_there_is_room(
+        six_mb_disk: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Another program fills the disk while window 2 is captured and frees it after: window 2 counts "write failed"
+    (catalogued interrupted, with the cause), the status line names the disk, and window 3 is captured."""
+    from acq.monitoring.monitor import Monitor, MonitorSettings
+    from acq.recording.recorder import Recorder
+
+    out = six_mb_disk / "m"
+    filler = six_mb_disk / "other_program.bin"
+    capture = Recorder.run
+    filled: list[int] = []
+
+    def another_program_fills_the_disk(recorder: Recorder) -> object:
+        if monitor.status.captured == 1 and not filled:
+            filled.append(1)
+            free = os.statvfs(six_mb_disk).f_bavail * os.statvfs(six_mb_disk).f_frsize
+            filler.write_bytes(b"\0" * (free - 1_500_000))
+            try:
+                return capture(recorder)
+            finally:
+                filler.unlink()
+        return capture(recorder)
+
+    monkeypatch.setattr(Recorder, "run", another_program_fills_the_disk)
+    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=out, window_s=4.0, every_s=5.0, for_s=15.0,
+                               fast=True, baseline_windows=1, keep=0)
+    messages: list[str] = []
+    monitor = Monitor(settings, on_status=lambda st: messages.append(st.message))
+    assert monitor.run() == 0
+    rows = _rows(out)
+    assert [(r["window"], r["verdict"]) for r in rows] == [(0, "ok"), (1, "interrupted"), (2, "ok")]
+    reason = json.loads(rows[1]["reasons_json"])[0]
+    assert reason.startswith(f"window capture failed: disk full: {out}/") and reason.endswith(" s kept")
+    assert monitor.status.filed == {"ok": 2, "poor or failed": 0, "not excited": 0, "skipped": 0,
+                                    "analysis failed": 0, "interrupted": 0, "write failed": 1}
+    said = next(m for m in messages if m.startswith("window 2 capture failed"))
+    assert said == (f"window 2 capture failed: {reason.removeprefix('window capture failed: ')} — the next window is "
+                    "tried once room is made; a second failure stops")

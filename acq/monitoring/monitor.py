@@ -44,7 +44,7 @@ from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, check_compar
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
                                           check_user_tags, own_windows, window_number)
 from acq.monitoring.monitor_status import SIZE_MARGIN, MonitorSettings, MonitorStatus, expected_window_bytes
-from acq.monitoring.monitor_windows import FolderWindows, check_budget, copies_deletable
+from acq.monitoring.monitor_windows import FolderWindows, StorageFailures, check_budget, copies_deletable, write_cause
 from acq.monitoring.retention import WindowFiles
 from acq.monitoring.session_outcome import CATALOGUE_NAME, session_meta
 from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
@@ -73,6 +73,8 @@ class Monitor:
         self._pools: ExitStack | None = None  # the analysis pools of the run: a new one when a worker died
         self._pool: Any = None
         self._pool_broken = False
+        self._storage = StorageFailures(settings.out_dir)  # windows in a row the folder's storage refused
+        self._failure: int | None = None  # the window (from 1) after whose storage failure the monitor stops (exit 1)
         self._alarms = AlarmCommands(settings.on_alarm, self._alarm_problem)
         self._in_alarm = False
         self._filed = 0  # catalogue rows written by this run
@@ -132,7 +134,8 @@ class Monitor:
             first = self._resume(windows)
             wall0 = time.monotonic()
             n = first
-            while self._stop is None and (self.s.for_s is None or (n - first) * self.s.every_s < self.s.for_s):
+            while self._stop is None and self._failure is None and (
+                    self.s.for_s is None or (n - first) * self.s.every_s < self.s.for_s):
                 if not self.s.fast:
                     self._wait_until(wall0 + (n - first) * self.s.every_s)
                     if self._stop is not None:
@@ -142,8 +145,14 @@ class Monitor:
             self._collect(at_most=0)
             self._alarms.reap(wait=True)
             self.status.state = "alarm" if self._in_alarm else self.status.state
-            self.status.message = f"stopped: {self._stop}" if self._stop else "done"
+            # the windows of this monitor the catalogue holds, the analyses under way filed
+            failure = None if self._failure is None else self._storage.error(self._failure,
+                                                                            len(self._own_windows(None)))
+            self.status.message = (f"stopped: {failure}" if failure else
+                                   f"stopped: {self._stop}" if self._stop else "done")
             self._show()
+            if failure is not None:
+                raise failure
 
     def _window(self, n: int) -> None:
         """Capture window ``n`` (if the disk budget allows) and hand it to the pool (if it keeps up)."""
@@ -155,6 +164,12 @@ class Monitor:
                    "(raise --max-disk or move them out)") if kept else ""
             self.status.message = f"window {n + 1} not captured: the disk budget would be exceeded{why}"
             self._show()
+            return
+        fits, free, need = self._windows.room_on_disk(self._size)
+        if not fits:
+            self.status.no_room += 1
+            self._storage_failed(n, "disk full", f"window {n + 1} not captured: disk full: {self.s.out_dir} has "
+                                                 f"{free / 1e6:.1f} MB free, a window needs {need / 1e6:.1f} MB")
             return
         bench = self.s.bench
         if bench.sim is not None:  # a simulated machine runs on machine time (program phase, wear, noise)
@@ -179,17 +194,23 @@ class Monitor:
         self._windows.add(WindowFiles(n, result.path, False, False, key))
         self.status.in_folder += 1
         self._size = max(self._size, int(SIZE_MARGIN * result.path.stat().st_size))
+        if result.write_failed:  # the storage refused a write (disk full, I/O error): not one more "interrupted"
+            self._mark(key, "interrupted", f"window capture failed: {result.stop_reason}", kind="write failed")
+            self._storage_failed(n, write_cause(result.stop_reason),
+                                 f"window {n + 1} capture failed: {result.stop_reason}")
+            return
         if result.status != "complete":
             self._mark(key, "interrupted", f"window capture {result.status}: {result.stop_reason}")
             if result.status == "interrupted":  # Ctrl-C / SIGTERM reached the recorder's handler: the monitor ends
                 self._stop = self._stop or result.stop_reason
             return
+        self._storage.succeeded()
         self.status.captured += 1
         self.status.machine_time_s = self._clock.at(n) + self.s.window_s
         self._collect(at_most=self.s.jobs - 1 if self.s.fast else None)
         if len(self._pending) > self.s.jobs:  # jobs running and one waiting: no more (back-pressure)
             self._mark(key, "not analysed", f"the analysis fell behind the capture ({len(self._pending)} windows "
-                                            "waiting): this window was skipped", skipped=True)
+                                            "waiting): this window was skipped", kind="skipped")
             return
         self._submit(key)
         self._show()
@@ -230,21 +251,21 @@ class Monitor:
                                "unfiled: a restart analyses it")
         self._show()
 
-    def _mark(self, key: str, verdict: str, reason: str, skipped: bool = False) -> None:
+    def _mark(self, key: str, verdict: str, reason: str, kind: str | None = None) -> None:
         path = self._windows.path(key)
         try:
             meta = session_meta(load(path))
         except Exception:  # noqa: BLE001 - a window too broken to read is still marked
             meta = {}
         outcome = marked(str(path.resolve()), sha256_of(path), self.s.request, meta, verdict, [reason])
-        self._record(key, outcome, skipped)
+        self._record(key, outcome, kind)
 
-    def _record(self, key: str, outcome: Outcome, skipped: bool = False) -> None:
-        """Catalogue one window (``skipped``: not analysed, the analysis fell behind), update the trend, the alarm and
-        the figures, apply retention."""
+    def _record(self, key: str, outcome: Outcome, kind: str | None = None) -> None:
+        """Catalogue one window (``kind``: how it counts when not by its verdict, :meth:`MonitorStatus.count`), update
+        the trend, the alarm and the figures, apply retention."""
         self.catalogue.record(outcome)
         self._filed += 1
-        self.status.count(outcome, skipped)
+        self.status.count(outcome, kind)
         self._windows.done(key)
         trend = self._trend()
         self._judge(trend, key)
@@ -312,6 +333,16 @@ class Monitor:
         self.status.copied_deleted += copied_deleted
         self.status.disk_bytes = self._windows.disk_bytes()
         return fits
+
+    def _storage_failed(self, n: int, cause: str, what: str) -> None:
+        """Window ``n`` was lost to the storage (``what`` says how): the next window is tried once retention made room
+        (:meth:`FolderWindows.room_on_disk`); a second in a row stops the monitor (exit 1)."""
+        if self._storage.failed(cause):
+            self._failure = n + 1
+            self.status.message = f"{what} — the second in a row: the monitor stops"
+        else:
+            self.status.message = f"{what} — the next window is tried once room is made; a second failure stops"
+        self._show()
 
     # ---- resume after a crash --------------------------------------------------------------------------
     @contextmanager

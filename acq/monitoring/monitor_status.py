@@ -51,7 +51,7 @@ class MonitorSettings:
 
 #: How a window filed in the catalogue counts (:meth:`MonitorStatus.count`), in the order shown: every filed window is
 #: in exactly one, so the counts add up to the catalogue's rows of the run.
-FILED_KINDS = ("ok", "poor or failed", "not excited", "skipped", "analysis failed", "interrupted")
+FILED_KINDS = ("ok", "poor or failed", "not excited", "skipped", "analysis failed", "interrupted", "write failed")
 
 
 @dataclass
@@ -64,9 +64,11 @@ class MonitorStatus:
     resumed: int = 0  # of them, those of earlier runs
     # the windows this run filed in the catalogue, by how they count (FILED_KINDS: verdict ok; poor or failed — a K
     # the trend does not judge; not excited; skipped — the analysis fell behind the capture; analysis failed — a
-    # worker died or the analysis raised; interrupted — the capture was cut)
+    # worker died or the analysis raised; interrupted — the capture was cut; write failed — the capture was cut because
+    # the folder's storage refused a write: disk full, I/O error, read-only — catalogued as interrupted, with the cause)
     filed: dict[str, int] = field(default_factory=lambda: dict.fromkeys(FILED_KINDS, 0))
     not_captured: int = 0  # not captured: the disk budget would have been exceeded (not filed)
+    no_room: int = 0  # not captured: the file system had no room for a window, once retention made what it could
     unfinished: int = 0  # captured, but their analysis did not complete (a worker died): not filed, a restart does
     copied_deleted: int = 0  # raw windows of other monitors copied into the folder, deleted for the disk budget
     alarms: int = 0
@@ -103,14 +105,14 @@ class MonitorStatus:
         """Captured windows not analysed because the analysis fell behind (back-pressure)."""
         return self.filed["skipped"]
 
-    def count(self, outcome: Outcome, skipped: bool = False) -> None:
-        """Count a window just catalogued in one of :data:`FILED_KINDS` (``skipped``: not analysed because the
-        analysis fell behind), and which share of it and which moves excite (segment selection; a window the joint
-        did not travel in excites nowhere)."""
+    def count(self, outcome: Outcome, kind: str | None = None) -> None:
+        """Count a window just catalogued in one of :data:`FILED_KINDS` (``kind``: the caller's, "skipped" or "write
+        failed"; else the verdict's), and which share of it and which moves excite (segment selection; a window the
+        joint did not travel in excites nowhere)."""
         verdict = (outcome.doc or {}).get("quality", {}).get("verdict")
-        kind = ("ok" if verdict == "ok" else "poor or failed" if verdict in ("poor", "failed") else
-                "not excited" if verdict == "not excited" else "interrupted" if verdict == "interrupted" else
-                "skipped" if skipped else "analysis failed")  # "not analysed" of a dead worker, or no result at all
+        kind = kind or ("ok" if verdict == "ok" else "poor or failed" if verdict in ("poor", "failed") else
+                        "not excited" if verdict == "not excited" else "interrupted" if verdict == "interrupted" else
+                        "analysis failed")  # an analysis that raised: no result at all
         self.filed[kind] += 1
         excitation = (outcome.doc or {}).get("excitation")
         if excitation is None and verdict != "not excited":

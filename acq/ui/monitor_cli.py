@@ -50,6 +50,7 @@ def status_table(st: MonitorStatus) -> Table:
         ("windows filed (this run)", filed_text(st)),
         *([("windows in the folder (earlier runs too)", str(st.in_folder))] if st.resumed else []),
         *([("not captured: the disk budget (--max-disk) was full", str(st.not_captured))] if st.not_captured else []),
+        *([("not captured: the file system was full", str(st.no_room))] if st.no_room else []),
         *([("not filed: analysis unfinished, a restart analyses them", str(st.unfinished))] if st.unfinished else []),
         *([("copies of other monitors' windows deleted", str(st.copied_deleted))] if st.copied_deleted else []),
         ("last K N·m/rad (95 %) · its window", k_text),
@@ -186,6 +187,7 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
                 + (f" in this run ({st.in_folder} in the folder)" if st.resumed else "")
                 + (f" = {filed_parts(st)}" if st.filed_total else "")
                 + (f", {st.not_captured} not captured (disk budget)" if st.not_captured else "")
+                + (f", {st.no_room} not captured (disk full)" if st.no_room else "")
                 + (f", {st.unfinished} not filed (analysis unfinished)" if st.unfinished else "")
                 + f", excited {_pct(st.last_excited_fraction)} of the last window"
                 + (f" ({st.last_segments})" if st.last_segments else "") + f", last K {last_k}, "
