@@ -19,7 +19,7 @@ import pytest
 
 
 from tests.helpers import run_cli
-from tests.test_monitor import EXCITING_SEED, ROBOT, _bench, _rows
+from tests.test_monitor import EXCITING_SEED, ROBOT, _bench, _rows, four_windows  # noqa: F401 - a fixture
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -169,3 +169,35 @@ def test_a_window_cut_by_a_full_disk_is_named_so_and_the_monitor_goes_on_once_th
     said = next(m for m in messages if m.startswith("window 2 capture failed"))
     assert said == (f"window 2 capture failed: {reason.removeprefix('window capture failed: ')} — the next window is "
                     "tried once room is made; a second failure stops")
+
+
+def test_a_window_cut_in_an_earlier_run_is_filed_as_that_runs_and_the_counts_add_up(
+        four_windows: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The trial: after kill -9 the restart said "1 filed in this run (5 in the folder) = 1 interrupted" — the window
+    the kill cut, of the earlier run — and "N in the folder" counted a window at its capture, one ahead of those
+    filed. Here: 4 windows filed, a fifth cut by kill -9; the restart files it (the earlier run's) and captures one."""
+    from acq.recording.writer import SessionWriter
+    from drivers.base import CurrentSourceInfo, DriveInfo
+    from tests.test_monitor import _bench_file, _restarted_elsewhere
+
+    out = tmp_path / "resumed"
+    _restarted_elsewhere(four_windows, out)
+    identity = json.loads((out / "monitor.id").read_text())
+    writer = SessionWriter(out / "cut.h5", bench=_bench(seed=EXCITING_SEED), profile=None,
+                           current_info=CurrentSourceInfo(rate_hz=25600.0, channels=("i_a",), device="sim-daq"),
+                           drive_info=DriveInfo(period_s=0.001, counts_per_rev=131072, transport="sim",
+                                                timestamp_kind="drive_cycle", device="sim-drive"),
+                           host_ns_at_start=0, tags={"monitor_window": 4, "monitor_elapsed_s": 240.0,
+                                                     "monitor_id": identity["monitor_id"]})
+    writer._file.close()  # as a kill -9 leaves it
+    run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for",
+                  "1m", "--baseline-windows", "2", "--keep", "1", "--out", str(out))
+    assert run.code == 0, run.err
+    lines = [line.split(", excited")[0] for line in run.err.splitlines() if " filed" in line and line[0].isdigit()]
+    assert list(dict.fromkeys(lines)) == ["3.2 min: 0 filed in this run (5 in the folder)",
+                                          "4.2 min: 0 filed in this run (5 in the folder)",
+                                          "5.2 min: 0 filed in this run (5 in the folder)",
+                                          "5.2 min: 1 filed in this run (6 in the folder) = 1 ok"]
+    table = " ".join(run.err.split())
+    assert "windows filed (this run) │ 1 = 1 ok │" in table and "windows in the folder (earlier runs too) │ 6 │" in table
+    assert len(_rows(out)) == 6

@@ -74,6 +74,7 @@ class Monitor:
         self._pool: Any = None
         self._pool_broken = False
         self._storage = StorageFailures(settings.out_dir)  # windows in a row the folder's storage refused
+        self._earlier: set[str] = set()  # windows of earlier runs a restart files (cut, or not analysed)
         self._failure: int | None = None  # the window (from 1) after whose storage failure the monitor stops (exit 1)
         self._alarms = AlarmCommands(settings.on_alarm, self._alarm_problem)
         self._in_alarm = False
@@ -192,7 +193,6 @@ class Monitor:
         self._stop = self._stop or recorder.stop_request
         key = str(load(result.path).meta.session_id)
         self._windows.add(WindowFiles(n, result.path, False, False, key))
-        self.status.in_folder += 1
         self._size = max(self._size, int(SIZE_MARGIN * result.path.stat().st_size))
         if result.write_failed:  # the storage refused a write (disk full, I/O error): not one more "interrupted"
             self._mark(key, "interrupted", f"window capture failed: {result.stop_reason}", kind="write failed")
@@ -265,7 +265,7 @@ class Monitor:
         the trend, the alarm and the figures, apply retention."""
         self.catalogue.record(outcome)
         self._filed += 1
-        self.status.count(outcome, kind)
+        self.status.count(outcome, kind, earlier=key in self._earlier)
         self._windows.done(key)
         trend = self._trend()
         self._judge(trend, key)
@@ -367,6 +367,7 @@ class Monitor:
         known = {e.session_id: e for e in windows if e.joint == self.s.bench.joint}  # the same read, this joint's
         self._clock = MachineClock.resumed(windows, self.s.every_s)
         numbers = [int(e.tags[WINDOW_TAG]) for e in known.values()]
+        self.status.earlier_filed = len(known)
         self._resumed(numbers)
         # an alarm raised before the restart goes on: its command is not run again for the same episode (a power cut
         # in alarm announced it once more and counted it twice — the third trial)
@@ -391,6 +392,7 @@ class Monitor:
             self._windows.add(WindowFiles(n, path, key in known, False, key))
             if key in known:
                 continue
+            self._earlier.add(key)
             if session.status == "recording":
                 repair(path, "the monitor stopped during this window's capture (found on restart)")
                 self._mark(key, "interrupted", "the monitor stopped during this window's capture (found on restart)")
@@ -410,7 +412,7 @@ class Monitor:
     def _resumed(self, numbers: list[int]) -> None:
         """The folder's windows (``numbers``) in the status: their count, and machine time from the end of the last
         (the first status line of a restart said "0 s", then jumped)."""
-        self.status.in_folder = self.status.resumed = len(set(numbers))
+        self.status.resumed = len(set(numbers))
         if numbers:
             self.status.machine_time_s = self._clock.at(max(numbers)) + self.s.window_s
 
