@@ -19,9 +19,11 @@ import pytest
 
 
 from tests.helpers import run_cli
-from tests.test_monitor import EXCITING_SEED, ROBOT, _bench, _rows, four_windows  # noqa: F401 - a fixture
+from tests import test_monitor
+from tests.test_monitor import EXCITING_SEED, ROBOT, _bench, _rows
 
 ROOT = Path(__file__).resolve().parents[1]
+four_windows = test_monitor.four_windows  # the fixture: a monitor folder of 4 windows
 
 
 def _env() -> dict[str, str]:
