@@ -488,7 +488,7 @@ def test_the_status_counts_every_window_filed_once_and_they_add_up_to_the_catalo
     rows, st = _rows(tmp_path), monitor.status
     assert [r["verdict"] for r in rows] == ["ok", "ok", "interrupted"]
     assert st.filed == {"ok": 2, "poor or failed": 0, "not excited": 0, "skipped": 0, "analysis failed": 0,
-                        "interrupted": 1}
+                        "interrupted": 1, "write failed": 0}
     assert st.filed_total == sum(st.filed.values()) == len(rows) == 3
     assert (st.captured, st.analysed) == (2, 2)  # the interrupted one is filed, not captured whole nor analysed
     console = Console(width=120, record=True)
