@@ -18,8 +18,10 @@ the new ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
 ``interrupted`` (not counted); what a restart must agree with (bench, ``--window``, alarm rules, catalogue) is in
 :mod:`acq.monitoring.monitor_restart`, the monitor's identity (a copied folder is refused) in
-:mod:`acq.monitoring.monitor_scope`, the alarm command in :mod:`acq.monitoring.alarm_command`, which raw windows
-it keeps and deletes (retention, the disk budget) in :mod:`acq.monitoring.monitor_windows`. In ``fast`` mode
+:mod:`acq.monitoring.monitor_scope`, the alarm in :mod:`acq.monitoring.monitor_alarm` and its command in
+:mod:`acq.monitoring.alarm_command`, which raw windows it keeps and deletes (retention, the disk budget, the file
+system's room; two windows in a row the storage refuses stop it, exit 1) in :mod:`acq.monitoring.monitor_windows`,
+the windows waiting for a catalogue out of reach in :mod:`acq.monitoring.catalogue_spool`. In ``fast`` mode
 (simulated benches) machine time is simulated: the loop does not sleep, and waits for the analysis instead of skipping
 (no real time passes meanwhile).
 """
@@ -38,11 +40,13 @@ from acq.monitoring.alarm_command import AlarmCommands
 from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules
 from acq.monitoring.analysis_pool import analysis_executor
 from acq.monitoring.catalogue import Entry, Outcome
-from acq.monitoring.catalogue_backends import is_url
+from acq.monitoring.catalogue_backends import is_url, redacted
+from acq.monitoring.catalogue_spool import SPOOL_NAME, FilingQueue, Waiting
 from acq.monitoring.folder_lock import folder_lock
+from acq.monitoring.monitor_alarm import AlarmState
 from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, check_comparable, open_bound
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
-                                          check_user_tags, own_windows, window_number)
+                                          check_user_tags, own_windows)
 from acq.monitoring.monitor_status import SIZE_MARGIN, MonitorSettings, MonitorStatus, expected_window_bytes
 from acq.monitoring.monitor_windows import FolderWindows, StorageFailures, check_budget, copies_deletable, write_cause
 from acq.monitoring.retention import WindowFiles
@@ -54,7 +58,7 @@ from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
 from acq.recording.reader import load
 from acq.recording.repair import repair
-from acqcore.errors import EXIT_INTERRUPTED, ConfigError
+from acqcore.errors import EXIT_INTERRUPTED, ConfigError, StorageError
 from drivers.registry import open_bench
 
 class Monitor:
@@ -77,7 +81,7 @@ class Monitor:
         self._earlier: set[str] = set()  # windows of earlier runs a restart files (cut, or not analysed)
         self._failure: int | None = None  # the window (from 1) after whose storage failure the monitor stops (exit 1)
         self._alarms = AlarmCommands(settings.on_alarm, self._alarm_problem)
-        self._in_alarm = False
+        self._alarm = AlarmState(self.status, self._alarms)
         self._filed = 0  # catalogue rows written by this run
         self._size = expected_window_bytes(settings.bench, settings.window_s)
         # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
@@ -90,6 +94,11 @@ class Monitor:
         self._id = ""  # the monitor's identity (monitor_scope), read or made in its folder when it runs
         self._clock = MachineClock(settings.every_s)  # a restart goes on from its last window (monitor_restart)
         check_budget(settings, self._size)
+
+    @property
+    def spool(self) -> Path:
+        """The file that keeps the windows waiting for a catalogue out of reach (:mod:`acq.monitoring.catalogue_spool`)."""
+        return self.s.out_dir / SPOOL_NAME
 
     @property
     def stopped_by(self) -> str | None:
@@ -126,7 +135,7 @@ class Monitor:
                         folder.rmdir()
         if self._stop is not None:
             return EXIT_INTERRUPTED
-        return 3 if self._in_alarm else 0
+        return 3 if self._alarm.active else 0
 
     def _run(self) -> None:
         with folder_lock(self.s.out_dir), self._identified() as windows, ExitStack() as pools, self._signals():
@@ -144,11 +153,12 @@ class Monitor:
                 self._window(n)
                 n += 1
             self._collect(at_most=0)
+            self._flush(force=True)  # once more: what still waits stays in the spool file, filed by the next start
             self._alarms.reap(wait=True)
-            self.status.state = "alarm" if self._in_alarm else self.status.state
+            self.status.state = "alarm" if self._alarm.active else self.status.state
             # the windows of this monitor the catalogue holds, the analyses under way filed
-            failure = None if self._failure is None else self._storage.error(self._failure,
-                                                                            len(self._own_windows(None)))
+            failure = None if self._failure is None else self._storage.error(self._failure, sum(
+                e.verdict not in ("interrupted", "not analysed") for e in self._own_windows(None)))
             self.status.message = (f"stopped: {failure}" if failure else
                                    f"stopped: {self._stop}" if self._stop else "done")
             self._show()
@@ -158,6 +168,7 @@ class Monitor:
     def _window(self, n: int) -> None:
         """Capture window ``n`` (if the disk budget allows) and hand it to the pool (if it keeps up)."""
         self.status.machine_time_s = self._clock.at(n)
+        self._flush()
         if not self._room_for_window():
             self.status.not_captured += 1
             kept = self._windows.kept_copies()
@@ -261,17 +272,44 @@ class Monitor:
         self._record(key, outcome, kind)
 
     def _record(self, key: str, outcome: Outcome, kind: str | None = None) -> None:
-        """Catalogue one window (``kind``: how it counts when not by its verdict, :meth:`MonitorStatus.count`), update
-        the trend, the alarm and the figures, apply retention."""
-        self.catalogue.record(outcome)
+        """Catalogue one window (``kind``: how it counts when not by its verdict, :meth:`MonitorStatus.count`) — or,
+        while the catalogue is out of reach, keep it waiting (:class:`FilingQueue`) — and file those waiting."""
+        self._filed_now(self._filing.file(Waiting(key, outcome, kind)))
+
+    def _flush(self, force: bool = False) -> None:
+        """File the windows waiting for the catalogue, if it is back (``force``: without waiting for the backoff)."""
+        if self._filing.waiting:
+            self._filed_now(self._filing.flush(force))
+
+    def _filed_now(self, filed: list[Waiting]) -> None:
+        for window in filed:
+            self._filed_one(window)
+        st, filing = self.status, self._filing
+        if (st.catalogue_down_since, st.waiting) != (filing.down_since_utc, len(filing.waiting)):
+            st.catalogue_down_since, st.waiting = filing.down_since_utc, len(filing.waiting)
+            st.catalogue_problem = filing.problem
+            self._show()
+
+    def _filed_one(self, window: Waiting) -> None:
+        """A window just filed: count it, update the trend, the alarm and the figures, apply retention."""
+        key = window.key
         self._filed += 1
-        self.status.count(outcome, kind, earlier=key in self._earlier)
+        self.status.count(window.outcome, window.kind, earlier=key in self._earlier)
         self._windows.done(key)
-        trend = self._trend()
-        self._judge(trend, key)
+        try:
+            trend = self._trend()
+        except self.catalogue.errors as e:  # the server went away right after the write: judged when it is back
+            if not self._filing.lost_connection(e):
+                raise
+            return
+        self._alarm.judge(trend, key)
         self._alarms.reap(wait=False)  # an alarm command of an earlier window that ended meanwhile (--fast: no waits)
         self._retain(trend)
         self._show()
+
+    def _catalogue_location_text(self) -> str:
+        location = self._catalogue_location
+        return redacted(location) if is_url(location) else str(location)  # type: ignore[arg-type]
 
     def _own_windows(self, joint: str | None) -> list[Entry]:
         """This monitor's windows in the catalogue (of ``joint``; None: any), oldest first (:func:`own_windows`)."""
@@ -283,37 +321,6 @@ class Monitor:
             return Trend(self.s.bench.joint, [], None, "no windows yet", None, self.s.threshold_pct, self.s.ewma_lambda)
         return compute_trend(self.s.bench.joint, entries, baseline_sessions=self.s.baseline_windows,
                              threshold_pct=self.s.threshold_pct, ewma_lambda=self.s.ewma_lambda)
-
-    def _judge(self, trend: Trend, key: str) -> None:
-        st = self.status
-        st.baseline_K = trend.baseline_K_Nm_per_rad
-        with_k = [p for p in trend.points if p.state in ("before baseline", "baseline", "ok", "alarm")]
-        if with_k:  # while the baseline is learned too: a person watching wants to see K from the first good window
-            last = with_k[-1]
-            st.last_K, st.last_K_ci, st.change_pct = last.entry.K_Nm_per_rad, last.entry.K_ci95, last.change_pct
-            st.last_K_window = window_number(last.entry.tags)
-        st.baseline_warning = trend.baseline_warning
-        st.state = "alarm" if trend.alarm else ("ok" if trend.judged else
-                                                "baseline" if trend.baseline_K_Nm_per_rad else "learning baseline")
-        point = next((p for p in trend.points if p.entry.session_id == key), None)
-        if point is None or point.state not in ("ok", "alarm"):
-            return
-        if point.state == "alarm" and not self._in_alarm:
-            st.alarms += 1
-            self._run_on_alarm(point.entry, trend)
-        elif point.state == "alarm":  # still in alarm: the latest K (the one that raised it stays in the catalogue)
-            st.message = _alarm_message(point.entry)
-        self._in_alarm = point.state == "alarm"
-
-    def _run_on_alarm(self, entry: Entry, trend: Trend) -> None:
-        """Start ``on_alarm`` (:class:`AlarmCommands`: through ``sh -c``, in the background) with the alarm's figures
-        in its environment."""
-        self.status.message = _alarm_message(entry)
-        self._alarms.start({
-            "ACQ_JOINT": trend.joint, "ACQ_K": f"{entry.K_Nm_per_rad:.6g}",
-            "ACQ_BASELINE_K": f"{trend.baseline_K_Nm_per_rad:.6g}", "ACQ_SESSION": entry.path,
-            "ACQ_WINDOW": str(window_number(entry.tags) or ""),
-            "ACQ_CHANGE_PCT": f"{100 * (entry.K_Nm_per_rad / trend.baseline_K_Nm_per_rad - 1):.3g}"})  # type: ignore
 
     def _alarm_problem(self, what: str) -> None:
         """Report what went wrong with an --on-alarm command in the status line and the final summary."""
@@ -342,6 +349,7 @@ class Monitor:
             self.status.message = f"{what} — the second in a row: the monitor stops"
         else:
             self.status.message = f"{what} — the next window is tried once room is made; a second failure stops"
+            self._collect(at_most=0)  # the analyses under way filed: retention may delete their windows for the room
         self._show()
 
     # ---- resume after a crash --------------------------------------------------------------------------
@@ -358,6 +366,13 @@ class Monitor:
             own_catalogue=s.out_dir / CATALOGUE_NAME, legacy=self._legacy,
             check=lambda ws: check_comparable(s.out_dir, ws, s.bench, s.window_s, self._rules))
         with self.catalogue:
+            self._filing = FilingQueue(self.catalogue, self.spool)
+            if self._filing.waiting:  # windows a run stopped while its catalogue was out of reach: filed first
+                self._filing.flush(force=True)
+                if self._filing.waiting:
+                    raise StorageError(f"{self._catalogue_location_text()}: {self._filing.problem} — "
+                                       f"{len(self._filing.waiting)} windows wait in {self._filing.spool}")
+                windows = self._own_windows(None)
             yield windows
 
     def _resume(self, windows: list[Entry]) -> int:
@@ -371,7 +386,7 @@ class Monitor:
         self._resumed(numbers)
         # an alarm raised before the restart goes on: its command is not run again for the same episode (a power cut
         # in alarm announced it once more and counted it twice — the third trial)
-        self._in_alarm = bool(known) and self._trend().alarm
+        self._alarm.active = bool(known) and self._trend().alarm
         copies: dict[str, set[str]] = {}  # another monitor's windows copied here that it would delete, by monitor
         for path in sorted(self.s.out_dir.glob("*.h5")):
             try:
@@ -405,7 +420,7 @@ class Monitor:
         self._collect(at_most=0)
         self._resumed(numbers)
         if numbers:  # the resumed trend's figures (last K, baseline, state) from the first status line on
-            self._judge(self._trend(), "")
+            self._alarm.judge(self._trend(), "")
             self._show()
         return max(numbers, default=-1) + 1
 
@@ -420,6 +435,7 @@ class Monitor:
     def _wait_until(self, deadline: float) -> None:
         while self._stop is None and time.monotonic() < deadline:
             self._collect(at_most=None)
+            self._flush()
             self._alarms.reap(wait=False)
             time.sleep(min(0.2, max(deadline - time.monotonic(), 0.0)))
 
@@ -430,11 +446,4 @@ class Monitor:
     def _show(self) -> None:
         if self.on_status is not None:
             self.on_status(self.status)
-
-
-def _alarm_message(entry: Entry) -> str:
-    """The status line of a window in alarm: its K, its number and its file."""
-    number = window_number(entry.tags)
-    window = f" in window {number}" if number is not None else ""
-    return f"ALARM: K {entry.K_Nm_per_rad:.1f} N·m/rad{window} ({entry.path})"
 

@@ -74,6 +74,9 @@ class MonitorStatus:
     unfinished: int = 0  # captured, but their analysis did not complete (a worker died): not filed, a restart does
     copied_deleted: int = 0  # raw windows of other monitors copied into the folder, deleted for the disk budget
     alarms: int = 0
+    catalogue_down_since: str | None = None  # the catalogue out of reach since (HH:MM:SS UTC), None: it answers
+    catalogue_problem: str = ""  # why, in its driver's words
+    waiting: int = 0  # windows waiting for the catalogue (kept in the folder's spool file meanwhile; not yet filed)
     alarm_command_failure: str | None = None  # the last --on-alarm command's problem: "alarm command failed: exit 1"
     machine_time_s: float = 0.0  # the start of the window being captured; its end once it is captured
     disk_bytes: int = 0

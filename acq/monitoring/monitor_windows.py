@@ -13,6 +13,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+from acq.recording.recorder import FLUSH_BYTES
 from acq.recording.storage import free_bytes
 from acq.recording.writer import RESERVE_BYTES
 
@@ -86,7 +87,8 @@ class StorageFailures:
 
     def error(self, last_window: int, kept: int) -> StorageError:
         """The monitor's one line (exit 1): "disk full: <folder> — monitor stopped after window N (K windows kept)",
-        N the last window tried (from 1), K the windows of this monitor its catalogue holds."""
+        N the last window tried (from 1), K the windows of this monitor its catalogue holds analysed (not those it
+        holds as cut)."""
         return StorageError(f"{self.cause}: {self.out_dir} — monitor stopped after window {last_window} "
                             f"({kept} window{'s' if kept != 1 else ''} kept)")
 
@@ -141,11 +143,15 @@ class FolderWindows:
         return folder_bytes(self.out_dir)
 
     def room_on_disk(self, window_bytes: int) -> tuple[bool, int, int]:
-        """Whether a window of ``window_bytes`` fits on the folder's file system with the writer's reserve (the free
-        space it never writes into, :data:`acq.recording.writer.RESERVE_BYTES`), once windows are deleted as for the
-        budget (:meth:`make_room`: the disk outranks ``keep`` as the budget does); the file system's free bytes then,
-        and the bytes a window needs."""
-        need = window_bytes + RESERVE_BYTES
+        """Whether a window of ``window_bytes`` fits on the folder's file system as the writer judges room, once
+        windows are deleted as for the budget (:meth:`make_room`: the disk outranks ``keep`` as the budget does); the
+        file system's free bytes then, and the bytes a window needs.
+
+        The writer commits a flush only with twice its size free beyond its reserve
+        (:data:`acq.recording.writer.RESERVE_BYTES`): its last flush — up to
+        :data:`acq.recording.recorder.FLUSH_BYTES`, the whole window of a --fast bench — needs that room once the
+        rest of the window is written (window + reserve alone passed with 3.0 MB free, and the window failed at 0 s)."""
+        need = window_bytes + min(window_bytes, FLUSH_BYTES) + RESERVE_BYTES
         fits, _ = self.make_room(need, self.disk_bytes() + free_bytes(self.out_dir))
         return fits, free_bytes(self.out_dir), need
 

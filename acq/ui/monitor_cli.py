@@ -51,6 +51,7 @@ def status_table(st: MonitorStatus) -> Table:
         *([("windows in the folder (earlier runs too)", str(st.in_folder))] if st.resumed else []),
         *([("not captured: the disk budget (--max-disk) was full", str(st.not_captured))] if st.not_captured else []),
         *([("not captured: the file system was full", str(st.no_room))] if st.no_room else []),
+        *([("catalogue", catalogue_text(st))] if st.catalogue_down_since or st.waiting else []),
         *([("not filed: analysis unfinished, a restart analyses them", str(st.unfinished))] if st.unfinished else []),
         *([("copies of other monitors' windows deleted", str(st.copied_deleted))] if st.copied_deleted else []),
         ("last K N·m/rad (95 %) · its window", k_text),
@@ -92,6 +93,14 @@ def _filed(st: MonitorStatus) -> str:
     text += f", {st.in_folder} in the folder" if st.resumed else ""
     return text + (f", {st.unfinished} not filed (analysis unfinished: the restart analyses "
                    f"{'it' if st.unfinished == 1 else 'them'})" if st.unfinished else "")
+
+
+def catalogue_text(st: MonitorStatus) -> str:
+    """'catalogue unreachable since 21:30:05 UTC (2 windows waiting)', or '2 windows waiting for the catalogue'."""
+    waiting = f"{st.waiting} window{'s' if st.waiting != 1 else ''} waiting"
+    if st.catalogue_down_since is None:
+        return f"{waiting} for the catalogue"
+    return f"catalogue unreachable since {st.catalogue_down_since} UTC ({waiting})"
 
 
 def _pct(fraction: float | None) -> str:
@@ -188,6 +197,7 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
                 + (f" = {filed_parts(st)}" if st.filed_total else "")
                 + (f", {st.not_captured} not captured (disk budget)" if st.not_captured else "")
                 + (f", {st.no_room} not captured (disk full)" if st.no_room else "")
+                + (f", {catalogue_text(st)}" if st.catalogue_down_since or st.waiting else "")
                 + (f", {st.unfinished} not filed (analysis unfinished)" if st.unfinished else "")
                 + f", excited {_pct(st.last_excited_fraction)} of the last window"
                 + (f" ({st.last_segments})" if st.last_segments else "") + f", last K {last_k}, "
@@ -211,5 +221,7 @@ def _say_if_stopped(monitor: Monitor, catalogue: Path | str) -> None:
         return
     st = monitor.status
     catalogue = redacted(catalogue) if is_url(catalogue) else catalogue  # type: ignore[arg-type]
+    waiting = (f" — {st.waiting} more wait in {monitor.spool} for it ({catalogue_text(st)}), filed by the next start"
+               if st.waiting else "")
     click.echo(f"acq: {monitor.stopped_by}: {_filed(st)}, all kept in "
-               f"{catalogue} (trend state: {st.state}); the same command resumes", err=True)
+               f"{catalogue}{waiting} (trend state: {st.state}); the same command resumes", err=True)
