@@ -912,7 +912,7 @@ def test_alarm_commands_run_in_a_session_of_their_own_and_share_one_wait_at_the_
                   None, "{}", "2026-11-30T00:00:00+00:00", None)
     trend = Trend("joint1", [], 890.0, "first good session", 2.0, 10.0, 0.2)
     for _ in range(2):
-        m._run_on_alarm(entry, trend)
+        m._alarm.raise_alarm(entry, trend)
     started = list(m._alarms._running)
     try:
         deadline = time.monotonic() + 3.0

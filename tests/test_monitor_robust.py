@@ -67,7 +67,10 @@ def test_a_window_whose_worker_died_is_left_for_the_restart_and_analysed_there(t
 
     def kill_the_first_worker(status: object) -> None:
         if not killed and monitor._pending:  # the first window handed to a worker
-            time.sleep(0.5)  # the worker has taken it
+            deadline = time.monotonic() + 60
+            while not monitor._pool._processes and time.monotonic() < deadline:
+                time.sleep(0.05)  # the worker starts (forked from the forkserver: seconds on a loaded machine)
+            time.sleep(0.5)  # and takes the window
             pid = next(iter(monitor._pool._processes))
             os.kill(pid, signal.SIGKILL)
             killed.append(pid)

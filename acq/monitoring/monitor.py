@@ -32,7 +32,7 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
-from contextlib import AbstractContextManager, ExitStack, contextmanager, suppress
+from contextlib import AbstractContextManager, ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -40,11 +40,11 @@ from acq.monitoring.alarm_command import AlarmCommands
 from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules
 from acq.monitoring.analysis_pool import analysis_executor
 from acq.monitoring.catalogue import Entry, Outcome
-from acq.monitoring.catalogue_backends import is_url, redacted
+from acq.monitoring.catalogue_backends import is_url
 from acq.monitoring.catalogue_spool import SPOOL_NAME, FilingQueue, Waiting
-from acq.monitoring.folder_lock import folder_lock
+from acq.monitoring.folder_lock import folder_lock, removed_unless_used
 from acq.monitoring.monitor_alarm import AlarmState
-from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, check_comparable, open_bound
+from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, catalogue_text, check_comparable, open_bound
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
                                           check_user_tags, own_windows)
 from acq.monitoring.monitor_status import SIZE_MARGIN, MonitorSettings, MonitorStatus, expected_window_bytes
@@ -52,14 +52,13 @@ from acq.monitoring.monitor_windows import FolderWindows, StorageFailures, check
 from acq.monitoring.retention import WindowFiles
 from acq.monitoring.session_outcome import CATALOGUE_NAME, session_meta
 from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
-from acq.monitoring.window_bench import FACT_TAGS, window_facts
+from acq.monitoring.window_bench import FACT_TAGS, window_recorder
 from acq.monitoring.window_judge import analyse_window, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
 from acq.recording.reader import load
 from acq.recording.repair import repair
 from acqcore.errors import EXIT_INTERRUPTED, ConfigError, StorageError
-from drivers.registry import open_bench
 
 class Monitor:
     """The monitor loop; :meth:`run` returns the exit code (3 when the last state is alarm, else 0)."""
@@ -119,20 +118,9 @@ class Monitor:
         state is alarm, else 0."""
         # a catalogue file or identity this run made: only the folder's own catalogue (a --catalogue file other monitors
         # may be writing to — they start together — or a database of a URL is not ours to remove: the second read)
-        own = None if self.s.catalogue is not None else self.s.out_dir / CATALOGUE_NAME
-        made = [p for p in (own, self.s.out_dir / IDENTITY_FILE) if p is not None and not p.exists()]
-        folders = [f for f in (self.s.out_dir, *self.s.out_dir.parents) if not f.exists()]  # the deepest first
-        try:
+        own = [] if self.s.catalogue is not None else [self.s.out_dir / CATALOGUE_NAME]
+        with removed_unless_used([*own, self.s.out_dir / IDENTITY_FILE], self.s.out_dir, lambda: self._filed > 0):
             self._run()
-        finally:
-            if made and not self._filed:  # devices that failed to open: no empty catalogue left behind
-                for path in made:
-                    for left in (path, *(path.with_name(path.name + end) for end in ("-wal", "-shm", "-journal"))):
-                        left.unlink(missing_ok=True)
-            if not self._filed:  # nor the folders it made for it, if nothing else is in them
-                with suppress(OSError):
-                    for folder in folders:
-                        folder.rmdir()
         if self._stop is not None:
             return EXIT_INTERRUPTED
         return 3 if self._alarm.active else 0
@@ -183,15 +171,9 @@ class Monitor:
             self._storage_failed(n, "disk full", f"window {n + 1} not captured: disk full: {self.s.out_dir} has "
                                                  f"{free / 1e6:.1f} MB free, a window needs {need / 1e6:.1f} MB")
             return
-        bench = self.s.bench
-        if bench.sim is not None:  # a simulated machine runs on machine time (program phase, wear, noise)
-            bench = bench.model_copy(update={"sim": bench.sim.model_copy(update={"elapsed_s": self._clock.at(n)})})
-        current, drive = open_bench(bench, fast=self.s.fast)
-        machine = getattr(drive, "machine_tags", dict)()  # what the machine says of the window (a robot's payload)
-        recorder = Recorder(bench, None, current, drive, self.s.out_dir, self.s.window_s,
-                            tags={**self.s.tags, **machine, WINDOW_TAG: n, ELAPSED_TAG: self._clock.at(n),
-                                  EVERY_TAG: self.s.every_s, MONITOR_TAG: self._id, **self._rules.as_tags(),
-                                  **window_facts(self.s.bench, self.s.window_s)})
+        recorder = window_recorder(self.s.bench, self.s.out_dir, self.s.window_s, self._clock.at(n), fast=self.s.fast,
+                                   tags={**self.s.tags, WINDOW_TAG: n, ELAPSED_TAG: self._clock.at(n),
+                                         EVERY_TAG: self.s.every_s, MONITOR_TAG: self._id, **self._rules.as_tags()})
         self._recorder = recorder
         if self._stop is not None:
             recorder.request_stop(self._stop)
@@ -307,10 +289,6 @@ class Monitor:
         self._retain(trend)
         self._show()
 
-    def _catalogue_location_text(self) -> str:
-        location = self._catalogue_location
-        return redacted(location) if is_url(location) else str(location)  # type: ignore[arg-type]
-
     def _own_windows(self, joint: str | None) -> list[Entry]:
         """This monitor's windows in the catalogue (of ``joint``; None: any), oldest first (:func:`own_windows`)."""
         return own_windows(self.catalogue, self._id, joint, unowned=self._legacy)
@@ -370,7 +348,7 @@ class Monitor:
             if self._filing.waiting:  # windows a run stopped while its catalogue was out of reach: filed first
                 self._filing.flush(force=True)
                 if self._filing.waiting:
-                    raise StorageError(f"{self._catalogue_location_text()}: {self._filing.problem} — "
+                    raise StorageError(f"{catalogue_text(self._catalogue_location)}: {self._filing.problem} — "
                                        f"{len(self._filing.waiting)} windows wait in {self._filing.spool}")
                 windows = self._own_windows(None)
             yield windows

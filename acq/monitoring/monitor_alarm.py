@@ -36,12 +36,12 @@ class AlarmState:
             return
         if point.state == "alarm" and not self.active:
             st.alarms += 1
-            self._raise(point.entry, trend)
+            self.raise_alarm(point.entry, trend)
         elif point.state == "alarm":  # still in alarm: the latest K (the one that raised it stays in the catalogue)
             st.message = alarm_message(point.entry)
         self.active = point.state == "alarm"
 
-    def _raise(self, entry: Entry, trend: Trend) -> None:
+    def raise_alarm(self, entry: Entry, trend: Trend) -> None:
         """Start ``on_alarm`` (:class:`AlarmCommands`: through ``sh -c``, in the background) with the alarm's figures
         in its environment."""
         self.status.message = alarm_message(entry)
