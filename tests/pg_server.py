@@ -13,8 +13,9 @@ import socket
 import subprocess
 import tempfile
 import uuid
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+from dataclasses import dataclass
 from pathlib import Path
 
 
@@ -31,9 +32,40 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+@dataclass
+class Server:
+    """A running throw-away server: its URL (no database), and :meth:`stop` / :meth:`start` as an operator's
+    ``pg_ctl stop -m fast`` and ``pg_ctl start`` (the same data, port and settings)."""
+
+    url: str
+    _run: Callable[..., None]
+    _pg_ctl: list[str]
+    _start: list[str]
+    running: bool = True
+
+    def stop(self) -> None:
+        """``pg_ctl stop -m fast``: every connection is terminated ("terminating connection due to administrator
+        command"), and the server is down until :meth:`start`."""
+        self._run(*self._pg_ctl, "-m", "fast", "-w", "stop")
+        self.running = False
+
+    def start(self) -> None:
+        """Start the stopped server again."""
+        self._run(*self._pg_ctl, *self._start)
+        self.running = True
+
+
 @contextmanager
 def throwaway_server(binaries: Path, durable: bool = False, password: str | None = None) -> Iterator[str]:
     """Start a server, yield its URL without a database (``postgresql://acq@127.0.0.1:PORT``), then remove it.
+    (:func:`controllable_server` with its parameters.)"""
+    with controllable_server(binaries, durable, password) as server:
+        yield server.url
+
+
+@contextmanager
+def controllable_server(binaries: Path, durable: bool = False, password: str | None = None) -> Iterator[Server]:
+    """Start a server, yield it (:class:`Server`: its URL, stop and start), then remove it.
 
     Parameters
     ----------
@@ -71,11 +103,16 @@ def throwaway_server(binaries: Path, durable: bool = False, password: str | None
         auth = ["-A", "scram-sha-256", f"--pwfile={root / 'pwfile'}"]
     try:
         run(str(binaries / "initdb"), "-D", str(data), "-U", "acq", *auth, "-E", "UTF8", "--no-sync")
-        run(str(binaries / "pg_ctl"), "-D", str(data), "-l", str(root / "log"), "-w", "-o", settings, "start")
+        pg_ctl, start = [str(binaries / "pg_ctl"), "-D", str(data)], ["-l", str(root / "log"), "-w", "-o", settings,
+                                                                     "start"]
+        run(*pg_ctl, *start)
+        server = Server(f"postgresql://acq{'' if password is None else ':' + password}@127.0.0.1:{port}", run, pg_ctl,
+                        start)
         try:
-            yield f"postgresql://acq{'' if password is None else ':' + password}@127.0.0.1:{port}"
+            yield server
         finally:
-            run(str(binaries / "pg_ctl"), "-D", str(data), "-m", "immediate", "-w", "stop")
+            if server.running:
+                run(*pg_ctl, "-m", "immediate", "-w", "stop")
     finally:
         shutil.rmtree(root, ignore_errors=True)
 

@@ -489,7 +489,7 @@ def test_the_status_counts_every_window_filed_once_and_they_add_up_to_the_catalo
     rows, st = _rows(tmp_path), monitor.status
     assert [r["verdict"] for r in rows] == ["ok", "ok", "interrupted"]
     assert st.filed == {"ok": 2, "poor or failed": 0, "not excited": 0, "skipped": 0, "analysis failed": 0,
-                        "interrupted": 1}
+                        "interrupted": 1, "write failed": 0}
     assert st.filed_total == sum(st.filed.values()) == len(rows) == 3
     assert (st.captured, st.analysed) == (2, 2)  # the interrupted one is filed, not captured whole nor analysed
     console = Console(width=120, record=True)
@@ -915,7 +915,7 @@ def test_alarm_commands_run_in_a_session_of_their_own_and_share_one_wait_at_the_
                   None, "{}", "2026-11-30T00:00:00+00:00", None)
     trend = Trend("joint1", [], 890.0, "first good session", 2.0, 10.0, 0.2)
     for _ in range(2):
-        m._run_on_alarm(entry, trend)
+        m._alarm.raise_alarm(entry, trend)
     started = list(m._alarms._running)
     try:
         deadline = time.monotonic() + 3.0

@@ -534,8 +534,9 @@ def test_a_baseline_learned_on_a_changing_joint_is_called_unstable() -> None:
     entries = [_known_to(i, k, 0.6) for i, k in enumerate(_SOFTENING)]
     trend = compute_trend("j", entries, baseline_sessions=5)
     warning = ("baseline unstable: its 5 sessions scatter 12.6 % while each is known to within ±0.6 % — the joint "
-               "changed while the baseline was learned, and its alarm limits are too wide; re-baseline with --baseline on a "
-               "session of the joint in a known state")
+               "changed while the baseline was learned, and its alarm limits are too wide; re-baseline: acq trend --baseline "
+               "SESSION_ID judges against a session of the joint in a known state; a monitor learns a new baseline in "
+               "a new --out")
     assert trend.baseline_warning == warning and trend_json(trend)["baseline_warning"] == warning
     assert (round(trend.baseline_K_Nm_per_rad, 1), round(trend.sigma_K_Nm_per_rad, 1)) == (710.7, 89.6)
     assert warning in trend_table(trend).caption

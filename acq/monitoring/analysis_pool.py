@@ -1,5 +1,6 @@
 """Worker processes for analyses: a local forkserver pool or a Dask cluster (:func:`analysis_executor`), for the batch
-(:mod:`acq.monitoring.batch`) and ``acq monitor``; its workers ignore Ctrl-C and end when acq's process ends."""
+(:mod:`acq.monitoring.batch`) and ``acq monitor``; its workers ignore Ctrl-C and SIGTERM (acq's own process stops
+them) and end when acq's process ends."""
 
 from __future__ import annotations
 
@@ -25,9 +26,11 @@ def _start_forkserver_without_cwd() -> None:
     the variable (they run no program of the user's); acq's own process has it only while the server starts, so
     the commands it runs later (``--on-alarm``) see the user's environment.
 
-    The server (and the resource tracker it starts) begin with SIGINT ignored, which they and every worker forked
-    from them keep: a Ctrl-C at the terminal reaches the whole process group, and only acq's own process stops the
-    workers (a worker or the server's preload stopped mid-import printed tracebacks, Qt a fatal error)."""
+    The server (and the resource tracker it starts) begin with SIGINT and SIGTERM ignored, which they and every
+    worker forked from them keep: a Ctrl-C at the terminal reaches the whole process group, and so does the SIGTERM of
+    ``timeout -s TERM`` (it signals its group), and only acq's own process stops the workers (a worker or the server's
+    preload stopped mid-import printed tracebacks, Qt a fatal error; a worker killed by SIGTERM broke the pool, the
+    window it analysed was filed "worker failed: BrokenProcessPool" — the trial)."""
     from multiprocessing import forkserver, resource_tracker
 
     before = os.environ.get("PYTHONSAFEPATH")
@@ -38,7 +41,7 @@ def _start_forkserver_without_cwd() -> None:
         # 3 of 8 runs of test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line[catalogue opened]); it ignores SIGINT
         # on its own (CPython's resource_tracker.main)
         resource_tracker.ensure_running()
-        with _sigint_ignored_by_children():
+        with _signals_ignored_by_children():
             forkserver.ensure_running()
     finally:
         if before is None:
@@ -47,20 +50,26 @@ def _start_forkserver_without_cwd() -> None:
             os.environ["PYTHONSAFEPATH"] = before
 
 
+#: The signals a terminal or a service manager sends a whole process group, which acq's own process handles.
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
 @contextmanager
-def _sigint_ignored_by_children() -> Iterator[None]:
-    """Processes started inside the block begin with SIGINT ignored (the disposition survives exec; Python then
-    installs no KeyboardInterrupt handler). A Ctrl-C meanwhile is held (blocked) and reaches this process after it."""
+def _signals_ignored_by_children() -> Iterator[None]:
+    """Processes started inside the block begin with SIGINT and SIGTERM ignored (the disposition survives exec; Python
+    then installs no KeyboardInterrupt handler). A Ctrl-C or SIGTERM meanwhile is held (blocked) and reaches this
+    process after it."""
     if threading.current_thread() is not threading.main_thread():
         yield  # signal handlers can only change in the main thread (acq starts its pools there)
         return
-    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in _STOP_SIGNALS}
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
 def end_with_process(pid: int) -> None:
@@ -73,7 +82,12 @@ def end_with_process(pid: int) -> None:
     has ended; no polling, no pid reuse once open) and ends the worker; the forkserver then sees EOF on its pipe and
     exits, and the resource tracker exits when the last of its clients' pipes closes (measured: all three gone < 1 s
     after kill -9 of acq). Without pidfds (not Linux ≥ 5.3) the thread checks the pid once a second.
+
+    The worker ignores Ctrl-C and SIGTERM (again: a forkserver started by another program need not): acq's process
+    handles them and shuts the pool down once the analyses under way are filed.
     """
+    for s in _STOP_SIGNALS:
+        signal.signal(s, signal.SIG_IGN)
     try:
         pidfd: int | None = os.pidfd_open(pid)
     except ProcessLookupError:  # acq ended before this worker started

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -159,6 +159,7 @@ class Catalogue:
 
     def __init__(self, path: Path | str, *, read_only: bool = False):
         self.path: Path | str
+        self._location = path  # as given (a URL with its password): what reconnect() opens again
         self._dialect, self._db, self.path = open_catalogue_db(path, read_only)
         try:
             if self._dialect.read_only:
@@ -181,6 +182,23 @@ class Catalogue:
     def close(self) -> None:
         """Close the database."""
         self._db.close()
+
+    @property
+    def errors(self) -> tuple[type[Exception], ...]:
+        """The exceptions of its database driver (a read that fails raises one of them)."""
+        return self._dialect.errors
+
+    @property
+    def connection_lost(self) -> bool:
+        """True when the connection to a PostgreSQL server broke (the server stopped or restarted, the network
+        failed): :meth:`reconnect` may make it usable again. Never for a SQLite file."""
+        return bool(getattr(self._db, "broken", False) or getattr(self._db, "closed", False))
+
+    def reconnect(self) -> None:
+        """Open the connection again (:class:`ConfigError` naming the URL while the server does not answer)."""
+        with suppress(Exception):
+            self._db.close()
+        self._dialect, self._db, self.path = open_catalogue_db(self._location, self._dialect.read_only)
 
     def _execute(self, sql: str, params: Iterable[Any] = ()) -> Any:
         """Run one statement written with ``?`` placeholders; return the cursor. Booleans go in as 0/1, as SQLite

@@ -1,11 +1,12 @@
-"""One ``acq monitor`` per folder: an flock on ``<folder>/monitor.lock``, the file there only while a monitor runs."""
+"""One ``acq monitor`` per folder: an flock on ``<folder>/monitor.lock``, the file there only while a monitor runs; and
+a run that filed nothing leaves nothing of its own behind (:func:`removed_unless_used`)."""
 
 from __future__ import annotations
 
 import fcntl
 import os
-from collections.abc import Iterator
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 from acq.recording.storage import make_folders
@@ -53,3 +54,22 @@ def _is_file_at(fd: int, path: Path) -> bool:
         return False
     opened = os.fstat(fd)
     return (opened.st_dev, opened.st_ino) == (at_path.st_dev, at_path.st_ino)
+
+
+@contextmanager
+def removed_unless_used(files: Iterable[Path], folder: Path, used: Callable[[], bool]) -> Iterator[None]:
+    """Of ``files`` (a catalogue file with its SQLite companions, an identity) and ``folder`` with its parents, those
+    that do not exist before the block are removed after it unless ``used()`` (a monitor whose devices failed to open
+    left an empty catalogue and its folders behind); a folder only when empty."""
+    made = [p for p in files if not p.exists()]
+    folders = [f for f in (folder, *folder.parents) if not f.exists()]  # the deepest first
+    try:
+        yield
+    finally:
+        if not used():
+            for path in made:
+                for left in (path, *(path.with_name(path.name + end) for end in ("-wal", "-shm", "-journal"))):
+                    left.unlink(missing_ok=True)
+            with suppress(OSError):
+                for f in folders:
+                    f.rmdir()

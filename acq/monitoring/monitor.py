@@ -18,8 +18,10 @@ the new ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
 ``interrupted`` (not counted); what a restart must agree with (bench, ``--window``, alarm rules, catalogue) is in
 :mod:`acq.monitoring.monitor_restart`, the monitor's identity (a copied folder is refused) in
-:mod:`acq.monitoring.monitor_scope`, the alarm command in :mod:`acq.monitoring.alarm_command`, which raw windows
-it keeps and deletes (retention, the disk budget) in :mod:`acq.monitoring.monitor_windows`. In ``fast`` mode
+:mod:`acq.monitoring.monitor_scope`, the alarm in :mod:`acq.monitoring.monitor_alarm` and its command in
+:mod:`acq.monitoring.alarm_command`, which raw windows it keeps and deletes (retention, the disk budget, the file
+system's room; two windows in a row the storage refuses stop it, exit 1) in :mod:`acq.monitoring.monitor_windows`,
+the windows waiting for a catalogue out of reach in :mod:`acq.monitoring.catalogue_spool`. In ``fast`` mode
 (simulated benches) machine time is simulated: the loop does not sleep, and waits for the analysis instead of skipping
 (no real time passes meanwhile).
 """
@@ -29,7 +31,8 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
-from contextlib import AbstractContextManager, contextmanager, suppress
+from concurrent.futures.process import BrokenProcessPool
+from contextlib import AbstractContextManager, ExitStack, contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -38,23 +41,24 @@ from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules
 from acq.monitoring.analysis_pool import analysis_executor
 from acq.monitoring.catalogue import Entry, Outcome
 from acq.monitoring.catalogue_backends import is_url
-from acq.monitoring.folder_lock import folder_lock
-from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, check_comparable, open_bound
+from acq.monitoring.catalogue_spool import SPOOL_NAME, FilingQueue, Waiting
+from acq.monitoring.folder_lock import folder_lock, removed_unless_used
+from acq.monitoring.monitor_alarm import AlarmState
+from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, catalogue_text, check_comparable, open_bound
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
-                                          check_user_tags, own_windows, window_number)
+                                          check_user_tags, own_windows)
 from acq.monitoring.monitor_status import SIZE_MARGIN, MonitorSettings, MonitorStatus, expected_window_bytes
-from acq.monitoring.monitor_windows import FolderWindows, check_budget, copies_deletable
+from acq.monitoring.monitor_windows import FolderWindows, StorageFailures, check_budget, copies_deletable, write_cause
 from acq.monitoring.retention import WindowFiles
 from acq.monitoring.session_outcome import CATALOGUE_NAME, session_meta
 from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
-from acq.monitoring.window_bench import FACT_TAGS, window_facts
+from acq.monitoring.window_bench import FACT_TAGS, window_recorder
 from acq.monitoring.window_judge import analyse_window, marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
 from acq.recording.reader import load
 from acq.recording.repair import repair
-from acqcore.errors import EXIT_INTERRUPTED, ConfigError
-from drivers.registry import open_bench
+from acqcore.errors import EXIT_INTERRUPTED, ConfigError, StorageError
 
 class Monitor:
     """The monitor loop; :meth:`run` returns the exit code (3 when the last state is alarm, else 0)."""
@@ -69,8 +73,14 @@ class Monitor:
         self._recorder: Recorder | None = None
         self._windows = FolderWindows(settings.out_dir, settings.keep)  # their raw files, retention
         self._pending: dict[Future[Outcome], str] = {}
+        self._pools: ExitStack | None = None  # the analysis pools of the run: a new one when a worker died
+        self._pool: Any = None
+        self._pool_broken = False
+        self._storage = StorageFailures(settings.out_dir)  # windows in a row the folder's storage refused
+        self._earlier: set[str] = set()  # windows of earlier runs a restart files (cut, or not analysed)
+        self._failure: int | None = None  # the window (from 1) after whose storage failure the monitor stops (exit 1)
         self._alarms = AlarmCommands(settings.on_alarm, self._alarm_problem)
-        self._in_alarm = False
+        self._alarm = AlarmState(self.status, self._alarms)
         self._filed = 0  # catalogue rows written by this run
         self._size = expected_window_bytes(settings.bench, settings.window_s)
         # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
@@ -83,6 +93,11 @@ class Monitor:
         self._id = ""  # the monitor's identity (monitor_scope), read or made in its folder when it runs
         self._clock = MachineClock(settings.every_s)  # a restart goes on from its last window (monitor_restart)
         check_budget(settings, self._size)
+
+    @property
+    def spool(self) -> Path:
+        """The file that keeps the windows waiting for a catalogue out of reach (:mod:`acq.monitoring.catalogue_spool`)."""
+        return self.s.out_dir / SPOOL_NAME
 
     @property
     def stopped_by(self) -> str | None:
@@ -103,46 +118,45 @@ class Monitor:
         state is alarm, else 0."""
         # a catalogue file or identity this run made: only the folder's own catalogue (a --catalogue file other monitors
         # may be writing to — they start together — or a database of a URL is not ours to remove: the second read)
-        own = None if self.s.catalogue is not None else self.s.out_dir / CATALOGUE_NAME
-        made = [p for p in (own, self.s.out_dir / IDENTITY_FILE) if p is not None and not p.exists()]
-        folders = [f for f in (self.s.out_dir, *self.s.out_dir.parents) if not f.exists()]  # the deepest first
-        try:
+        own = [] if self.s.catalogue is not None else [self.s.out_dir / CATALOGUE_NAME]
+        with removed_unless_used([*own, self.s.out_dir / IDENTITY_FILE], self.s.out_dir, lambda: self._filed > 0):
             self._run()
-        finally:
-            if made and not self._filed:  # devices that failed to open: no empty catalogue left behind
-                for path in made:
-                    for left in (path, *(path.with_name(path.name + end) for end in ("-wal", "-shm", "-journal"))):
-                        left.unlink(missing_ok=True)
-            if not self._filed:  # nor the folders it made for it, if nothing else is in them
-                with suppress(OSError):
-                    for folder in folders:
-                        folder.rmdir()
         if self._stop is not None:
             return EXIT_INTERRUPTED
-        return 3 if self._in_alarm else 0
+        return 3 if self._alarm.active else 0
 
     def _run(self) -> None:
-        with folder_lock(self.s.out_dir), self._identified() as windows, analysis_executor(self.s.jobs, None) as pool, \
-                self._signals():
-            first = self._resume(pool, windows)
+        with folder_lock(self.s.out_dir), self._identified() as windows, ExitStack() as pools, self._signals():
+            self._pools = pools
+            self._pool = pools.enter_context(analysis_executor(self.s.jobs, None))
+            first = self._resume(windows)
             wall0 = time.monotonic()
             n = first
-            while self._stop is None and (self.s.for_s is None or (n - first) * self.s.every_s < self.s.for_s):
+            while self._stop is None and self._failure is None and (
+                    self.s.for_s is None or (n - first) * self.s.every_s < self.s.for_s):
                 if not self.s.fast:
                     self._wait_until(wall0 + (n - first) * self.s.every_s)
                     if self._stop is not None:
                         break
-                self._window(n, pool)
+                self._window(n)
                 n += 1
             self._collect(at_most=0)
+            self._flush(force=True)  # once more: what still waits stays in the spool file, filed by the next start
             self._alarms.reap(wait=True)
-            self.status.state = "alarm" if self._in_alarm else self.status.state
-            self.status.message = f"stopped: {self._stop}" if self._stop else "done"
+            self.status.state = "alarm" if self._alarm.active else self.status.state
+            # the windows of this monitor the catalogue holds, the analyses under way filed
+            failure = None if self._failure is None else self._storage.error(self._failure, sum(
+                e.verdict not in ("interrupted", "not analysed") for e in self._own_windows(None)))
+            self.status.message = (f"stopped: {failure}" if failure else
+                                   f"stopped: {self._stop}" if self._stop else "done")
             self._show()
+            if failure is not None:
+                raise failure
 
-    def _window(self, n: int, pool: Any) -> None:
+    def _window(self, n: int) -> None:
         """Capture window ``n`` (if the disk budget allows) and hand it to the pool (if it keeps up)."""
         self.status.machine_time_s = self._clock.at(n)
+        self._flush()
         if not self._room_for_window():
             self.status.not_captured += 1
             kept = self._windows.kept_copies()
@@ -151,15 +165,15 @@ class Monitor:
             self.status.message = f"window {n + 1} not captured: the disk budget would be exceeded{why}"
             self._show()
             return
-        bench = self.s.bench
-        if bench.sim is not None:  # a simulated machine runs on machine time (program phase, wear, noise)
-            bench = bench.model_copy(update={"sim": bench.sim.model_copy(update={"elapsed_s": self._clock.at(n)})})
-        current, drive = open_bench(bench, fast=self.s.fast)
-        machine = getattr(drive, "machine_tags", dict)()  # what the machine says of the window (a robot's payload)
-        recorder = Recorder(bench, None, current, drive, self.s.out_dir, self.s.window_s,
-                            tags={**self.s.tags, **machine, WINDOW_TAG: n, ELAPSED_TAG: self._clock.at(n),
-                                  EVERY_TAG: self.s.every_s, MONITOR_TAG: self._id, **self._rules.as_tags(),
-                                  **window_facts(self.s.bench, self.s.window_s)})
+        fits, free, need = self._windows.room_on_disk(self._size)
+        if not fits:
+            self.status.no_room += 1
+            self._storage_failed(n, "disk full", f"window {n + 1} not captured: disk full: {self.s.out_dir} has "
+                                                 f"{free / 1e6:.1f} MB free, a window needs {need / 1e6:.1f} MB")
+            return
+        recorder = window_recorder(self.s.bench, self.s.out_dir, self.s.window_s, self._clock.at(n), fast=self.s.fast,
+                                   tags={**self.s.tags, WINDOW_TAG: n, ELAPSED_TAG: self._clock.at(n),
+                                         EVERY_TAG: self.s.every_s, MONITOR_TAG: self._id, **self._rules.as_tags()})
         self._recorder = recorder
         if self._stop is not None:
             recorder.request_stop(self._stop)
@@ -172,26 +186,34 @@ class Monitor:
         self._stop = self._stop or recorder.stop_request
         key = str(load(result.path).meta.session_id)
         self._windows.add(WindowFiles(n, result.path, False, False, key))
-        self.status.in_folder += 1
         self._size = max(self._size, int(SIZE_MARGIN * result.path.stat().st_size))
+        if result.write_failed:  # the storage refused a write (disk full, I/O error): not one more "interrupted"
+            self._mark(key, "interrupted", f"window capture failed: {result.stop_reason}", kind="write failed")
+            self._storage_failed(n, write_cause(result.stop_reason),
+                                 f"window {n + 1} capture failed: {result.stop_reason}")
+            return
         if result.status != "complete":
             self._mark(key, "interrupted", f"window capture {result.status}: {result.stop_reason}")
             if result.status == "interrupted":  # Ctrl-C / SIGTERM reached the recorder's handler: the monitor ends
                 self._stop = self._stop or result.stop_reason
             return
+        self._storage.succeeded()
         self.status.captured += 1
         self.status.machine_time_s = self._clock.at(n) + self.s.window_s
         self._collect(at_most=self.s.jobs - 1 if self.s.fast else None)
         if len(self._pending) > self.s.jobs:  # jobs running and one waiting: no more (back-pressure)
             self._mark(key, "not analysed", f"the analysis fell behind the capture ({len(self._pending)} windows "
-                                            "waiting): this window was skipped", skipped=True)
+                                            "waiting): this window was skipped", kind="skipped")
             return
-        self._submit(pool, key)
+        self._submit(key)
         self._show()
 
-    def _submit(self, pool: Any, key: str) -> None:
+    def _submit(self, key: str) -> None:
+        if self._pool_broken:  # a worker died (killed, out of memory): the windows from now on go to a new pool
+            self._pool = self._pools.enter_context(analysis_executor(self.s.jobs, None))
+            self._pool_broken = False
         path = self._windows.path(key)
-        self._pending[pool.submit(analyse_window, str(path.resolve()), sha256_of(path), self.s.request)] = key
+        self._pending[self._pool.submit(analyse_window, str(path.resolve()), sha256_of(path), self.s.request)] = key
 
     def _collect(self, at_most: int | None) -> None:
         """Record the finished analyses; first wait until at most ``at_most`` are left (None: do not wait)."""
@@ -206,29 +228,63 @@ class Monitor:
                 key = self._pending.pop(future)
                 try:
                     outcome = future.result()
-                except Exception as e:  # noqa: BLE001 - the worker itself died: the window is marked, not lost
-                    self._mark(key, "not analysed", f"worker failed: {type(e).__name__}: {e}")
+                except Exception as e:  # noqa: BLE001 - the worker itself died (analyse_window never raises)
+                    self._unfinished(key, e)
                     continue
                 self._record(key, outcome)
 
-    def _mark(self, key: str, verdict: str, reason: str, skipped: bool = False) -> None:
+    def _unfinished(self, key: str, error: Exception) -> None:
+        """A window whose analysis did not complete (its worker died): left unfiled, so that a restart (or acq analyze
+        of the folder) analyses it; filed "not analysed", it was never analysed again (the trial: SIGTERM killed
+        the worker, "worker failed: BrokenProcessPool", and the window's K was lost for good)."""
+        self._pool_broken = self._pool_broken or isinstance(error, BrokenProcessPool)
+        self.status.unfinished += 1
+        number = self._windows.number(key) + 1
+        self.status.message = (f"window {number}: its analysis did not complete ({type(error).__name__}) — left "
+                               "unfiled: a restart analyses it")
+        self._show()
+
+    def _mark(self, key: str, verdict: str, reason: str, kind: str | None = None) -> None:
         path = self._windows.path(key)
         try:
             meta = session_meta(load(path))
         except Exception:  # noqa: BLE001 - a window too broken to read is still marked
             meta = {}
         outcome = marked(str(path.resolve()), sha256_of(path), self.s.request, meta, verdict, [reason])
-        self._record(key, outcome, skipped)
+        self._record(key, outcome, kind)
 
-    def _record(self, key: str, outcome: Outcome, skipped: bool = False) -> None:
-        """Catalogue one window (``skipped``: not analysed, the analysis fell behind), update the trend, the alarm and
-        the figures, apply retention."""
-        self.catalogue.record(outcome)
+    def _record(self, key: str, outcome: Outcome, kind: str | None = None) -> None:
+        """Catalogue one window (``kind``: how it counts when not by its verdict, :meth:`MonitorStatus.count`) — or,
+        while the catalogue is out of reach, keep it waiting (:class:`FilingQueue`) — and file those waiting."""
+        self._filed_now(self._filing.file(Waiting(key, outcome, kind)))
+
+    def _flush(self, force: bool = False) -> None:
+        """File the windows waiting for the catalogue, if it is back (``force``: without waiting for the backoff)."""
+        if self._filing.waiting:
+            self._filed_now(self._filing.flush(force))
+
+    def _filed_now(self, filed: list[Waiting]) -> None:
+        for window in filed:
+            self._filed_one(window)
+        st, filing = self.status, self._filing
+        if (st.catalogue_down_since, st.waiting) != (filing.down_since_utc, len(filing.waiting)):
+            st.catalogue_down_since, st.waiting = filing.down_since_utc, len(filing.waiting)
+            st.catalogue_problem = filing.problem
+            self._show()
+
+    def _filed_one(self, window: Waiting) -> None:
+        """A window just filed: count it, update the trend, the alarm and the figures, apply retention."""
+        key = window.key
         self._filed += 1
-        self.status.count(outcome, skipped)
+        self.status.count(window.outcome, window.kind, earlier=key in self._earlier)
         self._windows.done(key)
-        trend = self._trend()
-        self._judge(trend, key)
+        try:
+            trend = self._trend()
+        except self.catalogue.errors as e:  # the server went away right after the write: judged when it is back
+            if not self._filing.lost_connection(e):
+                raise
+            return
+        self._alarm.judge(trend, key)
         self._alarms.reap(wait=False)  # an alarm command of an earlier window that ended meanwhile (--fast: no waits)
         self._retain(trend)
         self._show()
@@ -243,37 +299,6 @@ class Monitor:
             return Trend(self.s.bench.joint, [], None, "no windows yet", None, self.s.threshold_pct, self.s.ewma_lambda)
         return compute_trend(self.s.bench.joint, entries, baseline_sessions=self.s.baseline_windows,
                              threshold_pct=self.s.threshold_pct, ewma_lambda=self.s.ewma_lambda)
-
-    def _judge(self, trend: Trend, key: str) -> None:
-        st = self.status
-        st.baseline_K = trend.baseline_K_Nm_per_rad
-        with_k = [p for p in trend.points if p.state in ("before baseline", "baseline", "ok", "alarm")]
-        if with_k:  # while the baseline is learned too: a person watching wants to see K from the first good window
-            last = with_k[-1]
-            st.last_K, st.last_K_ci, st.change_pct = last.entry.K_Nm_per_rad, last.entry.K_ci95, last.change_pct
-            st.last_K_window = window_number(last.entry.tags)
-        st.baseline_warning = trend.baseline_warning
-        st.state = "alarm" if trend.alarm else ("ok" if trend.judged else
-                                                "baseline" if trend.baseline_K_Nm_per_rad else "learning baseline")
-        point = next((p for p in trend.points if p.entry.session_id == key), None)
-        if point is None or point.state not in ("ok", "alarm"):
-            return
-        if point.state == "alarm" and not self._in_alarm:
-            st.alarms += 1
-            self._run_on_alarm(point.entry, trend)
-        elif point.state == "alarm":  # still in alarm: the latest K (the one that raised it stays in the catalogue)
-            st.message = _alarm_message(point.entry)
-        self._in_alarm = point.state == "alarm"
-
-    def _run_on_alarm(self, entry: Entry, trend: Trend) -> None:
-        """Start ``on_alarm`` (:class:`AlarmCommands`: through ``sh -c``, in the background) with the alarm's figures
-        in its environment."""
-        self.status.message = _alarm_message(entry)
-        self._alarms.start({
-            "ACQ_JOINT": trend.joint, "ACQ_K": f"{entry.K_Nm_per_rad:.6g}",
-            "ACQ_BASELINE_K": f"{trend.baseline_K_Nm_per_rad:.6g}", "ACQ_SESSION": entry.path,
-            "ACQ_WINDOW": str(window_number(entry.tags) or ""),
-            "ACQ_CHANGE_PCT": f"{100 * (entry.K_Nm_per_rad / trend.baseline_K_Nm_per_rad - 1):.3g}"})  # type: ignore
 
     def _alarm_problem(self, what: str) -> None:
         """Report what went wrong with an --on-alarm command in the status line and the final summary."""
@@ -294,6 +319,17 @@ class Monitor:
         self.status.disk_bytes = self._windows.disk_bytes()
         return fits
 
+    def _storage_failed(self, n: int, cause: str, what: str) -> None:
+        """Window ``n`` was lost to the storage (``what`` says how): the next window is tried once retention made room
+        (:meth:`FolderWindows.room_on_disk`); a second in a row stops the monitor (exit 1)."""
+        if self._storage.failed(cause):
+            self._failure = n + 1
+            self.status.message = f"{what} — the second in a row: the monitor stops"
+        else:
+            self.status.message = f"{what} — the next window is tried once room is made; a second failure stops"
+            self._collect(at_most=0)  # the analyses under way filed: retention may delete their windows for the room
+        self._show()
+
     # ---- resume after a crash --------------------------------------------------------------------------
     @contextmanager
     def _identified(self) -> Iterator[list[Entry]]:
@@ -308,19 +344,27 @@ class Monitor:
             own_catalogue=s.out_dir / CATALOGUE_NAME, legacy=self._legacy,
             check=lambda ws: check_comparable(s.out_dir, ws, s.bench, s.window_s, self._rules))
         with self.catalogue:
+            self._filing = FilingQueue(self.catalogue, self.spool)
+            if self._filing.waiting:  # windows a run stopped while its catalogue was out of reach: filed first
+                self._filing.flush(force=True)
+                if self._filing.waiting:
+                    raise StorageError(f"{catalogue_text(self._catalogue_location)}: {self._filing.problem} — "
+                                       f"{len(self._filing.waiting)} windows wait in {self._filing.spool}")
+                windows = self._own_windows(None)
             yield windows
 
-    def _resume(self, pool: Any, windows: list[Entry]) -> int:
+    def _resume(self, windows: list[Entry]) -> int:
         """Mark or analyse the windows a previous run left (``windows``: its windows in the catalogue); return the
         next window's number."""
         windows = sorted(windows, key=lambda e: int(e.tags[WINDOW_TAG]))
         known = {e.session_id: e for e in windows if e.joint == self.s.bench.joint}  # the same read, this joint's
         self._clock = MachineClock.resumed(windows, self.s.every_s)
         numbers = [int(e.tags[WINDOW_TAG]) for e in known.values()]
+        self.status.earlier_filed = len(known)
         self._resumed(numbers)
         # an alarm raised before the restart goes on: its command is not run again for the same episode (a power cut
         # in alarm announced it once more and counted it twice — the third trial)
-        self._in_alarm = bool(known) and self._trend().alarm
+        self._alarm.active = bool(known) and self._trend().alarm
         copies: dict[str, set[str]] = {}  # another monitor's windows copied here that it would delete, by monitor
         for path in sorted(self.s.out_dir.glob("*.h5")):
             try:
@@ -341,26 +385,27 @@ class Monitor:
             self._windows.add(WindowFiles(n, path, key in known, False, key))
             if key in known:
                 continue
+            self._earlier.add(key)
             if session.status == "recording":
                 repair(path, "the monitor stopped during this window's capture (found on restart)")
                 self._mark(key, "interrupted", "the monitor stopped during this window's capture (found on restart)")
             elif session.status != "complete":
                 self._mark(key, "interrupted", f"window capture {session.status}: {session.meta.stop_reason}")
             else:
-                self._submit(pool, key)
+                self._submit(key)
         trend = self._trend()
         self._retain(trend)
         self._collect(at_most=0)
         self._resumed(numbers)
         if numbers:  # the resumed trend's figures (last K, baseline, state) from the first status line on
-            self._judge(self._trend(), "")
+            self._alarm.judge(self._trend(), "")
             self._show()
         return max(numbers, default=-1) + 1
 
     def _resumed(self, numbers: list[int]) -> None:
         """The folder's windows (``numbers``) in the status: their count, and machine time from the end of the last
         (the first status line of a restart said "0 s", then jumped)."""
-        self.status.in_folder = self.status.resumed = len(set(numbers))
+        self.status.resumed = len(set(numbers))
         if numbers:
             self.status.machine_time_s = self._clock.at(max(numbers)) + self.s.window_s
 
@@ -368,6 +413,7 @@ class Monitor:
     def _wait_until(self, deadline: float) -> None:
         while self._stop is None and time.monotonic() < deadline:
             self._collect(at_most=None)
+            self._flush()
             self._alarms.reap(wait=False)
             time.sleep(min(0.2, max(deadline - time.monotonic(), 0.0)))
 
@@ -378,11 +424,4 @@ class Monitor:
     def _show(self) -> None:
         if self.on_status is not None:
             self.on_status(self.status)
-
-
-def _alarm_message(entry: Entry) -> str:
-    """The status line of a window in alarm: its K, its number and its file."""
-    number = window_number(entry.tags)
-    window = f" in window {number}" if number is not None else ""
-    return f"ALARM: K {entry.K_Nm_per_rad:.1f} N·m/rad{window} ({entry.path})"
 

@@ -51,7 +51,7 @@ class MonitorSettings:
 
 #: How a window filed in the catalogue counts (:meth:`MonitorStatus.count`), in the order shown: every filed window is
 #: in exactly one, so the counts add up to the catalogue's rows of the run.
-FILED_KINDS = ("ok", "poor or failed", "not excited", "skipped", "analysis failed", "interrupted")
+FILED_KINDS = ("ok", "poor or failed", "not excited", "skipped", "analysis failed", "interrupted", "write failed")
 
 
 @dataclass
@@ -60,15 +60,23 @@ class MonitorStatus:
 
     joint: str
     captured: int = 0  # in this run, captures that completed (an interrupted one is filed, not captured)
-    in_folder: int = 0  # windows the folder holds: those of earlier runs (a restart resumes them) and this run's
-    resumed: int = 0  # of them, those of earlier runs
+    resumed: int = 0  # windows of earlier runs in the folder (a restart resumes them)
+    # of them those the catalogue holds: filed by those runs, or by this one's restart (a capture they left cut, an
+    # analysis they left undone) — not this run's, which "filed in this run" counted before (the trial)
+    earlier_filed: int = 0
     # the windows this run filed in the catalogue, by how they count (FILED_KINDS: verdict ok; poor or failed — a K
     # the trend does not judge; not excited; skipped — the analysis fell behind the capture; analysis failed — a
-    # worker died or the analysis raised; interrupted — the capture was cut)
+    # worker died or the analysis raised; interrupted — the capture was cut; write failed — the capture was cut because
+    # the folder's storage refused a write: disk full, I/O error, read-only — catalogued as interrupted, with the cause)
     filed: dict[str, int] = field(default_factory=lambda: dict.fromkeys(FILED_KINDS, 0))
     not_captured: int = 0  # not captured: the disk budget would have been exceeded (not filed)
+    no_room: int = 0  # not captured: the file system had no room for a window, once retention made what it could
+    unfinished: int = 0  # captured, but their analysis did not complete (a worker died): not filed, a restart does
     copied_deleted: int = 0  # raw windows of other monitors copied into the folder, deleted for the disk budget
     alarms: int = 0
+    catalogue_down_since: str | None = None  # the catalogue out of reach since (HH:MM:SS UTC), None: it answers
+    catalogue_problem: str = ""  # why, in its driver's words
+    waiting: int = 0  # windows waiting for the catalogue (kept in the folder's spool file meanwhile; not yet filed)
     alarm_command_failure: str | None = None  # the last --on-alarm command's problem: "alarm command failed: exit 1"
     machine_time_s: float = 0.0  # the start of the window being captured; its end once it is captured
     disk_bytes: int = 0
@@ -88,6 +96,12 @@ class MonitorStatus:
     excitation_judged: int = 0
 
     @property
+    def in_folder(self) -> int:
+        """The monitor's windows filed in its catalogue, of earlier runs and this one (a window is counted once it is
+        filed: counted at its capture, the figure ran one ahead of the windows filed)."""
+        return self.earlier_filed + self.filed_total
+
+    @property
     def filed_total(self) -> int:
         """Windows this run filed in the catalogue (the sum of :attr:`filed`)."""
         return sum(self.filed.values())
@@ -102,15 +116,19 @@ class MonitorStatus:
         """Captured windows not analysed because the analysis fell behind (back-pressure)."""
         return self.filed["skipped"]
 
-    def count(self, outcome: Outcome, skipped: bool = False) -> None:
-        """Count a window just catalogued in one of :data:`FILED_KINDS` (``skipped``: not analysed because the
-        analysis fell behind), and which share of it and which moves excite (segment selection; a window the joint
-        did not travel in excites nowhere)."""
+    def count(self, outcome: Outcome, kind: str | None = None, earlier: bool = False) -> None:
+        """Count a window just catalogued in one of :data:`FILED_KINDS` (``kind``: the caller's, "skipped" or "write
+        failed"; else the verdict's) — or, ``earlier``, as a window of an earlier run (:attr:`earlier_filed`) — and
+        which share of it and which moves excite (segment selection; a window the joint did not travel in excites
+        nowhere)."""
         verdict = (outcome.doc or {}).get("quality", {}).get("verdict")
-        kind = ("ok" if verdict == "ok" else "poor or failed" if verdict in ("poor", "failed") else
-                "not excited" if verdict == "not excited" else "interrupted" if verdict == "interrupted" else
-                "skipped" if skipped else "analysis failed")  # "not analysed" of a dead worker, or no result at all
-        self.filed[kind] += 1
+        kind = kind or ("ok" if verdict == "ok" else "poor or failed" if verdict in ("poor", "failed") else
+                        "not excited" if verdict == "not excited" else "interrupted" if verdict == "interrupted" else
+                        "analysis failed")  # an analysis that raised: no result at all
+        if earlier:
+            self.earlier_filed += 1
+        else:
+            self.filed[kind] += 1
         excitation = (outcome.doc or {}).get("excitation")
         if excitation is None and verdict != "not excited":
             return

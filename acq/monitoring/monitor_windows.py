@@ -13,12 +13,21 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+from acq.recording.recorder import FLUSH_BYTES
+from acq.recording.storage import free_bytes
+from acq.recording.writer import RESERVE_BYTES
+
 from acq.monitoring.catalogue import Catalogue
 from acq.monitoring.monitor_scope import own_windows
 from acq.monitoring.monitor_status import MonitorSettings
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.monitoring.trend import Trend, alarm_onsets, compute_trend
-from acqcore.errors import ConfigError
+from acqcore.errors import ConfigError, StorageError
+
+#: Storage failures in a row after which a monitor stops (exit 1): after the first, retention makes room and the next
+#: window is tried; a second shows that the room is not there (the trial's monitor lost 8 windows of 12 on a full
+#: disk, exit 0, "disk full" never shown).
+STORAGE_FAILURES_TO_STOP = 2
 
 
 def check_budget(settings: MonitorSettings, window_bytes: int) -> None:
@@ -28,6 +37,8 @@ def check_budget(settings: MonitorSettings, window_bytes: int) -> None:
     The baseline's windows are kept whatever the budget (retention protects them), and the next window must fit beside
     them: a budget of fewer skipped every window after the first ones, the alarm unseen (the second trial)."""
     need = (settings.baseline_windows + 1) * window_bytes
+    if settings.max_disk_bytes is not None:
+        _check_disk_holds(settings.out_dir, settings.max_disk_bytes)
     if settings.max_disk_bytes is not None and settings.max_disk_bytes < need:
         daq, drive = settings.bench.daq, settings.bench.drive
         raise ConfigError(f"--max-disk {settings.max_disk_bytes / 1e6:g} MB: the {settings.baseline_windows} "
@@ -36,6 +47,56 @@ def check_budget(settings: MonitorSettings, window_bytes: int) -> None:
                           f"current {daq.rate_hz:g} Hz × {len(daq.channels)} channel(s), encoder "
                           f"{1 / drive.period_s:g} Hz, with the files' overhead) — raise --max-disk, shorten "
                           "--window or lower --baseline-windows")
+
+
+def _check_disk_holds(out_dir: Path, budget_bytes: int) -> None:
+    """Refuse a ``--max-disk`` the file system cannot hold: more than its free space and what ``out_dir`` holds.
+
+    Refused rather than warned of: the budget is the history the user asked to keep ("never exceeded"), and on a disk
+    that is full first the monitor deletes windows for the disk's sake and then stops, so the number given would be
+    a promise acq cannot keep (the trial: --max-disk 100MB on a 6 MB tmpfs)."""
+    existing = next(f for f in (out_dir, *out_dir.parents) if f.exists())
+    room = free_bytes(existing) + folder_bytes(out_dir)
+    if budget_bytes > room:
+        held = folder_bytes(out_dir)
+        raise ConfigError(f"--max-disk {budget_bytes / 1e6:g} MB: the file system of {out_dir} has "
+                          f"{free_bytes(existing) / 1e6:.1f} MB free" + (f" and the folder holds {held / 1e6:.1f} MB"
+                                                                        if held else "")
+                          + f" — the disk would be full before the budget: give --max-disk {math.floor(room / 1e5) / 10:g}MB "
+                          "or less, or free space there")
+
+
+class StorageFailures:
+    """The windows in a row whose capture the folder's storage refused (disk full, I/O error, read-only)."""
+
+    def __init__(self, out_dir: Path) -> None:
+        self.out_dir = out_dir
+        self.in_a_row = 0
+        self.cause = ""
+
+    def succeeded(self) -> None:
+        """A window was captured whole."""
+        self.in_a_row = 0
+
+    def failed(self, cause: str) -> bool:
+        """A window failed for ``cause`` ("disk full"); True when the monitor must stop
+        (:data:`STORAGE_FAILURES_TO_STOP` in a row)."""
+        self.in_a_row += 1
+        self.cause = cause
+        return self.in_a_row >= STORAGE_FAILURES_TO_STOP
+
+    def error(self, last_window: int, kept: int) -> StorageError:
+        """The monitor's one line (exit 1): "disk full: <folder> — monitor stopped after window N (K windows kept)",
+        N the last window tried (from 1), K the windows of this monitor its catalogue holds analysed (not those it
+        holds as cut)."""
+        return StorageError(f"{self.cause}: {self.out_dir} — monitor stopped after window {last_window} "
+                            f"({kept} window{'s' if kept != 1 else ''} kept)")
+
+
+def write_cause(stop_reason: str) -> str:
+    """The cause of a recording that failed because a write failed: its reason starts with the writer's
+    :class:`StorageError`, "<cause>: <file> — <s> s kept" (:func:`acq.recording.storage.storage_error`)."""
+    return stop_reason.split(": ", 1)[0]
 
 
 class FolderWindows:
@@ -54,6 +115,10 @@ class FolderWindows:
     def path(self, key: str) -> Path:
         """The session file of the window of session id ``key``."""
         return self._files[key].path
+
+    def number(self, key: str) -> int:
+        """The number of the window of session id ``key`` (from 0)."""
+        return self._files[key].index
 
     def done(self, key: str) -> None:
         """The window's catalogue row is written: retention may delete its raw files."""
@@ -76,6 +141,19 @@ class FolderWindows:
     def disk_bytes(self) -> int:
         """The size of the folder's files, bytes."""
         return folder_bytes(self.out_dir)
+
+    def room_on_disk(self, window_bytes: int) -> tuple[bool, int, int]:
+        """Whether a window of ``window_bytes`` fits on the folder's file system as the writer judges room, once
+        windows are deleted as for the budget (:meth:`make_room`: the disk outranks ``keep`` as the budget does); the
+        file system's free bytes then, and the bytes a window needs.
+
+        The writer commits a flush only with twice its size free beyond its reserve
+        (:data:`acq.recording.writer.RESERVE_BYTES`): its last flush — up to
+        :data:`acq.recording.recorder.FLUSH_BYTES`, the whole window of a --fast bench — needs that room once the
+        rest of the window is written (window + reserve alone passed with 3.0 MB free, and the window failed at 0 s)."""
+        need = window_bytes + min(window_bytes, FLUSH_BYTES) + RESERVE_BYTES
+        fits, _ = self.make_room(need, self.disk_bytes() + free_bytes(self.out_dir))
+        return fits, free_bytes(self.out_dir), need
 
     def make_room(self, need_bytes: int, budget_bytes: int) -> tuple[bool, int]:
         """Whether ``need_bytes`` more fit in the folder's ``budget_bytes``, once the windows the budget takes

@@ -20,6 +20,8 @@ the only raw files of that monitor's history; when they leave no room the window
 
 from __future__ import annotations
 
+import math
+
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -124,6 +126,6 @@ def parse_size(text: str) -> int:
         raise ValueError(f"{text!r} is not a size (e.g. 2GB, 500MB)") from None
     if not unit:
         raise ValueError(f"{text!r} has no unit — give one of B, kB, MB, GB, TB, KiB, MiB, GiB, TiB (e.g. {text}GB)")
-    if unit not in units or value <= 0:
+    if unit not in units or not 0 < value < math.inf:  # nan and inf too (int() of them raised: the trial)
         raise ValueError(f"{text!r} is not a size (e.g. 2GB, 500MB)")
     return int(value * units[unit])

@@ -189,6 +189,12 @@ def _sigma(baseline: Sequence[Entry]) -> float:
     return max(from_ci, scatter)
 
 
+#: The way on from an unstable baseline, in commands that exist wherever the warning is shown (the monitor, acq trend,
+#: acq fleet, acq view --trend): "re-baseline with --baseline" sent a monitor's user to an option acq monitor has not.
+REBASELINE = ("re-baseline: acq trend --baseline SESSION_ID judges against a session of the joint in a known state; "
+              "a monitor learns a new baseline in a new --out")
+
+
 def baseline_warning(baseline: Sequence[Entry]) -> str | None:
     """Why a baseline of several sessions cannot be trusted, or None: their K disagree far beyond their own intervals.
 
@@ -212,7 +218,7 @@ def baseline_warning(baseline: Sequence[Entry]) -> str | None:
     known_pct = 100 * max(Z95 * own / k for k, own in known)  # the 95 % half width
     return (f"baseline unstable: its {len(known)} sessions scatter {scatter_pct:.1f} % while each is known to within "
             f"±{known_pct:.1f} % — the joint changed while the baseline was learned, and its alarm limits are too "
-            "wide; re-baseline with --baseline on a session of the joint in a known state")
+            f"wide; {REBASELINE}")
 
 
 def compute_trend(joint: str, entries: Sequence[Entry], *, baseline_sessions: int | None = None,

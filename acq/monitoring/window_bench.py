@@ -28,10 +28,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 from acq.monitoring.catalogue import Entry
 from drivers.config import Bench
+
+if TYPE_CHECKING:
+    from acq.recording.recorder import Recorder
 
 #: tag → how the option or bench field is named in the refusal.
 FACT_TAGS = {
@@ -83,3 +87,19 @@ def differences(windows: Sequence[Entry], bench: Bench, window_s: float) -> list
         if tag in newest.tags and not _same(newest.tags[tag], value):
             found.append(f"{FACT_TAGS[tag]} {_text(newest.tags[tag])}, now {_text(value)}")
     return found
+
+
+def window_recorder(bench: Bench, out_dir: Path, window_s: float, elapsed_s: float, *, fast: bool,
+                    tags: dict[str, Any]) -> Recorder:
+    """The passive recorder of one window at machine time ``elapsed_s`` (s) into ``out_dir``, its devices open: the
+    window's ``tags``, what the machine says of it (a robot's payload) and :func:`window_facts`. A simulated machine
+    runs on machine time (program phase, wear, noise)."""
+    from acq.recording.recorder import Recorder  # here: acq trend reads FACT_TAGS without the recorder and drivers
+    from drivers.registry import open_bench
+
+    facts = window_facts(bench, window_s)
+    if bench.sim is not None:
+        bench = bench.model_copy(update={"sim": bench.sim.model_copy(update={"elapsed_s": elapsed_s})})
+    current, drive = open_bench(bench, fast=fast)
+    machine = getattr(drive, "machine_tags", dict)()
+    return Recorder(bench, None, current, drive, out_dir, window_s, tags={**tags, **machine, **facts})

@@ -18,7 +18,7 @@ from acq.monitoring.catalogue_backends import is_url, redacted
 from acq.monitoring.monitor import Monitor, MonitorSettings, MonitorStatus
 from acq.monitoring.retention import parse_size
 from acq.recording.tags import parse_tags
-from acq.ui.options import CatalogueLocation
+from acq.ui.options import CatalogueLocation, FiniteFloatRange
 from acq.ui.values import duration_text, format_value
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
@@ -50,6 +50,9 @@ def status_table(st: MonitorStatus) -> Table:
         ("windows filed (this run)", filed_text(st)),
         *([("windows in the folder (earlier runs too)", str(st.in_folder))] if st.resumed else []),
         *([("not captured: the disk budget (--max-disk) was full", str(st.not_captured))] if st.not_captured else []),
+        *([("not captured: the file system was full", str(st.no_room))] if st.no_room else []),
+        *([("catalogue", catalogue_text(st))] if st.catalogue_down_since or st.waiting else []),
+        *([("not filed: analysis unfinished, a restart analyses them", str(st.unfinished))] if st.unfinished else []),
         *([("copies of other monitors' windows deleted", str(st.copied_deleted))] if st.copied_deleted else []),
         ("last K N·m/rad (95 %) · its window", k_text),
         ("ΔK against the baseline", format_value(st.change_pct, "+.1f") + " %"),
@@ -87,7 +90,17 @@ def _filed(st: MonitorStatus) -> str:
     text = f"{st.filed_total} window{'s' if st.filed_total != 1 else ''} filed"
     text += " in this run" if st.resumed else ""
     text += f" ({filed_parts(st)})" if st.filed_total else ""
-    return text + (f", {st.in_folder} in the folder" if st.resumed else "")
+    text += f", {st.in_folder} in the folder" if st.resumed else ""
+    return text + (f", {st.unfinished} not filed (analysis unfinished: the restart analyses "
+                   f"{'it' if st.unfinished == 1 else 'them'})" if st.unfinished else "")
+
+
+def catalogue_text(st: MonitorStatus) -> str:
+    """'catalogue unreachable since 21:30:05 UTC (2 windows waiting)', or '2 windows waiting for the catalogue'."""
+    waiting = f"{st.waiting} window{'s' if st.waiting != 1 else ''} waiting"
+    if st.catalogue_down_since is None:
+        return f"{waiting} for the catalogue"
+    return f"catalogue unreachable since {st.catalogue_down_since} UTC ({waiting})"
 
 
 def _pct(fraction: float | None) -> str:
@@ -111,7 +124,7 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
 @click.command(name="monitor")
 @click.option("--bench", "bench_path", type=click.Path(path_type=Path), required=True,
               help="Bench TOML with [drive] motion = \"external\" (e.g. configs/benches/sim_robot.toml).")
-@click.option("--window", "window_s", type=click.FloatRange(min=1.0), default=10.0, show_default=True,
+@click.option("--window", "window_s", type=FiniteFloatRange(min=1.0), default=10.0, show_default=True,
               help="Seconds per window.")
 @click.option("--every", "every", default="60", show_default=True, help="One window per this (600, 10m, 1h).")
 @click.option("--for", "for_text", default=None, help="Stop after this (8h); default: until Ctrl-C.")
@@ -140,13 +153,15 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
                    "(only acts on a folder bound elsewhere).")
 @click.option("--baseline-windows", type=click.IntRange(min=1), default=5, show_default=True,
               help="Baseline = mean K of the first N good windows.")
-@click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=10.0, show_default=True,
+@click.option("--threshold-pct", type=FiniteFloatRange(0, 100, min_open=True), default=10.0, show_default=True,
               help="Alarm when K is this many % below the baseline (or by the EWMA rule).")
+@click.option("--ewma-lambda", type=FiniteFloatRange(0, 1, min_open=True), default=0.2, show_default=True,
+              help="EWMA weight of the newest window; alarm when the EWMA is below the 3σ control limit.")
 @click.option("--jobs", type=click.IntRange(min=1), default=1, show_default=True, help="Analysis worker processes.")
 @click.option("--fast", is_flag=True, help="Simulated bench: machine time runs as fast as the analysis allows.")
 def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str | None, on_alarm: str | None,
                     keep: int, max_disk: str | None, out_dir: Path, baseline_windows: int, threshold_pct: float,
-                    jobs: int, fast: bool, catalogue_path: Path | str | None, tags: tuple[str, ...],
+                    ewma_lambda: float, jobs: int, fast: bool, catalogue_path: Path | str | None, tags: tuple[str, ...],
                     move_catalogue: bool, new_identity: bool, moved: bool) -> int:
     """Listen to a running machine window by window, trend K, raise the alarm; exit code 3 if it ends in alarm."""
     if moved and new_identity:  # the same monitor and another one: taking either would be a guess
@@ -164,7 +179,7 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
                                for_s=None if for_text is None else parse_duration("--for", for_text), on_alarm=on_alarm,
                                keep=keep, max_disk_bytes=budget, fast=fast, jobs=jobs,
                                baseline_windows=baseline_windows, threshold_pct=threshold_pct,
-                               catalogue=catalogue_path, tags=parse_tags(tags), new_identity=new_identity,
+                               ewma_lambda=ewma_lambda, catalogue=catalogue_path, tags=parse_tags(tags), new_identity=new_identity,
                                moved=moved, move_catalogue=move_catalogue)
     console = Console(stderr=True)
     if console.is_terminal:
@@ -181,6 +196,9 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
                 + (f" in this run ({st.in_folder} in the folder)" if st.resumed else "")
                 + (f" = {filed_parts(st)}" if st.filed_total else "")
                 + (f", {st.not_captured} not captured (disk budget)" if st.not_captured else "")
+                + (f", {st.no_room} not captured (disk full)" if st.no_room else "")
+                + (f", {catalogue_text(st)}" if st.catalogue_down_since or st.waiting else "")
+                + (f", {st.unfinished} not filed (analysis unfinished)" if st.unfinished else "")
                 + f", excited {_pct(st.last_excited_fraction)} of the last window"
                 + (f" ({st.last_segments})" if st.last_segments else "") + f", last K {last_k}, "
                 f"ΔK {format_value(st.change_pct, '+.1f')} %, {st.state}"
@@ -203,5 +221,7 @@ def _say_if_stopped(monitor: Monitor, catalogue: Path | str) -> None:
         return
     st = monitor.status
     catalogue = redacted(catalogue) if is_url(catalogue) else catalogue  # type: ignore[arg-type]
+    waiting = (f" — {st.waiting} more wait in {monitor.spool} for it ({catalogue_text(st)}), filed by the next start"
+               if st.waiting else "")
     click.echo(f"acq: {monitor.stopped_by}: {_filed(st)}, all kept in "
-               f"{catalogue} (trend state: {st.state}); the same command resumes", err=True)
+               f"{catalogue}{waiting} (trend state: {st.state}); the same command resumes", err=True)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Callable
 from pathlib import Path
@@ -29,6 +30,19 @@ class CatalogueLocation(click.ParamType):
             raise ConfigError(f"{option} {redacted(value)}: {scheme.group(1)}:// is not a catalogue acq can use — "
                               f"give a SQLite file's path or a {URL_SCHEMES[0]} URL (or {', '.join(URL_SCHEMES[1:])})")
         return Path(value)
+
+
+class FiniteFloatRange(click.FloatRange):
+    """A :class:`click.FloatRange` that refuses ``nan`` and ``inf``: click's range lets both through (every comparison
+    with nan is false; inf is above any min) — ``acq monitor --window nan`` ended in a traceback, ``--window inf`` in a
+    refusal of --every, ``--threshold-pct nan`` ran a monitor that never alarms (the trial)."""
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Any:
+        """The float, or click's one-line "Invalid value for '--window': nan is not a finite number." (exit 2)."""
+        number = super().convert(value, param, ctx)
+        if not math.isfinite(number):
+            self.fail(f"{value} is not a finite number.", param, ctx)
+        return number
 
 
 class PngPath(click.ParamType):
@@ -70,9 +84,9 @@ def alarm_rule_options(whose: str) -> Callable[[F], F]:
         for option in reversed((
                 click.option("--baseline-sessions", type=click.IntRange(min=1), default=None,
                              help=f"Baseline = mean K of the first N good sessions ({default} 1)."),
-                click.option("--threshold-pct", type=click.FloatRange(0, 100, min_open=True), default=None,
+                click.option("--threshold-pct", type=FiniteFloatRange(0, 100, min_open=True), default=None,
                              help=f"Alarm when K is this many % below the baseline ({default} 10)."),
-                click.option("--ewma-lambda", type=click.FloatRange(0, 1, min_open=True), default=None,
+                click.option("--ewma-lambda", type=FiniteFloatRange(0, 1, min_open=True), default=None,
                              help=f"EWMA weight of the newest session, alarm at the 3σ control limit ({default} "
                                   "0.2)."))):
             command = option(command)
