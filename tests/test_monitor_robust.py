@@ -69,11 +69,10 @@ def test_a_window_whose_worker_died_is_left_for_the_restart_and_analysed_there(t
         if not killed and monitor._pending:  # the first window handed to a worker
             deadline = time.monotonic() + 60
             while not monitor._pool._processes and time.monotonic() < deadline:
-                time.sleep(0.05)  # the worker starts (forked from the forkserver: seconds on a loaded machine)
-            time.sleep(0.5)  # and takes the window
-            pid = next(iter(monitor._pool._processes))
-            os.kill(pid, signal.SIGKILL)
-            killed.append(pid)
+                time.sleep(0.01)  # the workers start (forked from the forkserver: seconds on a loaded machine)
+            for pid in list(monitor._pool._processes):  # at once, while they still import the analysis (≥ 1 s):
+                os.kill(pid, signal.SIGKILL)  # the window's worker dies before its analysis can complete
+                killed.append(pid)
 
     monitor = Monitor(settings, on_status=kill_the_first_worker)
     assert monitor.run() == 0

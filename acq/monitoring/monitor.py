@@ -75,7 +75,6 @@ class Monitor:
         self._pending: dict[Future[Outcome], str] = {}
         self._pools: ExitStack | None = None  # the analysis pools of the run: a new one when a worker died
         self._pool: Any = None
-        self._pool_broken = False
         self._storage = StorageFailures(settings.out_dir)  # windows in a row the folder's storage refused
         self._earlier: set[str] = set()  # windows of earlier runs a restart files (cut, or not analysed)
         self._failure: int | None = None  # the window (from 1) after whose storage failure the monitor stops (exit 1)
@@ -209,11 +208,15 @@ class Monitor:
         self._show()
 
     def _submit(self, key: str) -> None:
-        if self._pool_broken:  # a worker died (killed, out of memory): the windows from now on go to a new pool
-            self._pool = self._pools.enter_context(analysis_executor(self.s.jobs, None))
-            self._pool_broken = False
         path = self._windows.path(key)
-        self._pending[self._pool.submit(analyse_window, str(path.resolve()), sha256_of(path), self.s.request)] = key
+        job = (analyse_window, str(path.resolve()), sha256_of(path), self.s.request)
+        try:
+            future = self._pool.submit(*job)
+        except BrokenProcessPool:  # a worker died (killed, out of memory) — its window's future may not say so yet:
+            # this window and the next go to a new pool (the old one's futures are collected as unfinished)
+            self._pool = self._pools.enter_context(analysis_executor(self.s.jobs, None))
+            future = self._pool.submit(*job)
+        self._pending[future] = key
 
     def _collect(self, at_most: int | None) -> None:
         """Record the finished analyses; first wait until at most ``at_most`` are left (None: do not wait)."""
@@ -237,7 +240,6 @@ class Monitor:
         """A window whose analysis did not complete (its worker died): left unfiled, so that a restart (or acq analyze
         of the folder) analyses it; filed "not analysed", it was never analysed again (the trial: SIGTERM killed
         the worker, "worker failed: BrokenProcessPool", and the window's K was lost for good)."""
-        self._pool_broken = self._pool_broken or isinstance(error, BrokenProcessPool)
         self.status.unfinished += 1
         number = self._windows.number(key) + 1
         self.status.message = (f"window {number}: its analysis did not complete ({type(error).__name__}) — left "
