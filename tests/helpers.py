@@ -3,16 +3,20 @@
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import subprocess
 import sys
 from collections.abc import Iterator
 from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
+import h5py
 import numpy as np
 import pytest
 
+from acq.recording.layout import FOOTER_TEXT
 from acq.recording.reader import load
 from acq.recording.writer import SessionWriter
 from acq.ui.cli import main
@@ -144,3 +148,33 @@ def rewritten_in_real_time(src: Path, dst: Path) -> Path:
         w.flush()
     w.finish(meta.status, meta.stop_reason)  # type: ignore[arg-type]
     return dst
+
+
+class ReadsFile(io.FileIO):
+    """A file opened for reading that remembers the furthest byte HDF5 read from it (``end``)."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(path, "r")
+        self.end = 0
+
+    def readinto(self, buffer: Any) -> int | None:
+        start = self.tell()
+        self.end = max(self.end, start + len(buffer))
+        return super().readinto(buffer)
+
+
+def footer_strings_past(path: Path, cut: int) -> list[str]:
+    """The footer's strings (:data:`FOOTER_TEXT`, in the file's attribute order) of the intact file ``path`` that HDF5
+    reads from at or past byte ``cut``: a copy cut there loses them. Where HDF5 puts them depends on the file's
+    history (a freed block reused, or the file's end), so it is measured: the furthest byte read to read each, in a
+    file opened anew for each."""
+    with h5py.File(path, "r") as f:
+        names = [name for name in f.attrs if name in FOOTER_TEXT]
+    past = []
+    for name in names:
+        with ReadsFile(path) as fh, h5py.File(fh, "r") as f:
+            fh.end = 0
+            f.attrs[name]
+            if fh.end > cut:
+                past.append(name)
+    return past
