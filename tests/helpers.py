@@ -125,7 +125,7 @@ def rewritten_in_real_time(src: Path, dst: Path) -> Path:
                       created_utc=meta.created_utc)
     read_end = np.cumsum(c.block_count)
     cycle_s = (e.index - e.index[0]) * e.period_s
-    commits = int(np.ceil(max(read_end[-1] / c.rate_hz, cycle_s[-1] + e.period_s) / COMMIT_EVERY_S))
+    commits = int(np.ceil(round(max(read_end[-1] / c.rate_hz, cycle_s[-1] + e.period_s) / COMMIT_EVERY_S, 6)))
     reads = np.searchsorted(read_end, np.arange(commits + 1) * COMMIT_EVERY_S * c.rate_hz, side="right")
     rows = np.searchsorted(cycle_s, np.arange(commits + 1) * COMMIT_EVERY_S - e.period_s / 2, side="left")
     reads[-1], rows[-1] = read_end.size, e.index.size
