@@ -108,10 +108,10 @@ def tiny_read_only_folder(folder: Path) -> Iterator[tuple[Path, str]]:
 COMMIT_EVERY_S = 0.5
 
 
-def rewritten_in_real_time(src: Path, dst: Path) -> Path:
+def rewritten_in_real_time(src: Path, dst: Path, commit_every_s: float = COMMIT_EVERY_S) -> Path:
     """``src`` (a finished recording) written again into ``dst`` by the real :class:`SessionWriter`, committed every
-    :data:`COMMIT_EVERY_S` s of data as a real-time recording commits: the DAQ reads ending in each 0.5 s of samples,
-    the encoder rows of each 0.5 s of drive cycles and the events before the commit's last read. A --fast recording
+    ``commit_every_s`` s of data (by default as a real-time recording commits): the DAQ reads ending in each span of
+    samples, the encoder rows of each span of drive cycles and the events before the commit's last read. A --fast recording
     commits where the machine's load puts the 0.5 s clock, and so places its chunks, chunk indexes and footer strings
     differently in every run; this file's layout is the same in every run (the samples are: dither seed 0)."""
     s = load(src)
@@ -125,9 +125,9 @@ def rewritten_in_real_time(src: Path, dst: Path) -> Path:
                       created_utc=meta.created_utc)
     read_end = np.cumsum(c.block_count)
     cycle_s = (e.index - e.index[0]) * e.period_s
-    commits = int(np.ceil(round(max(read_end[-1] / c.rate_hz, cycle_s[-1] + e.period_s) / COMMIT_EVERY_S, 6)))
-    reads = np.searchsorted(read_end, np.arange(commits + 1) * COMMIT_EVERY_S * c.rate_hz, side="right")
-    rows = np.searchsorted(cycle_s, np.arange(commits + 1) * COMMIT_EVERY_S - e.period_s / 2, side="left")
+    commits = int(np.ceil(round(max(read_end[-1] / c.rate_hz, cycle_s[-1] + e.period_s) / commit_every_s, 6)))
+    reads = np.searchsorted(read_end, np.arange(commits + 1) * commit_every_s * c.rate_hz, side="right")
+    rows = np.searchsorted(cycle_s, np.arange(commits + 1) * commit_every_s - e.period_s / 2, side="left")
     reads[-1], rows[-1] = read_end.size, e.index.size
     events = iter(sorted(s.events, key=lambda ev: ev.host_ns))
     pending_event = next(events, None)
