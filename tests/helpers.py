@@ -3,16 +3,24 @@
 from __future__ import annotations
 
 import contextlib
+import io
 import os
 import subprocess
 import sys
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Any
 
+import h5py
+import numpy as np
 import pytest
 
+from acq.recording.layout import FOOTER_TEXT
+from acq.recording.reader import load
+from acq.recording.writer import SessionWriter
 from acq.ui.cli import main
+from drivers.base import CurrentSourceInfo, DriveInfo, EncoderBlock
 
 
 @dataclass(frozen=True)
@@ -93,3 +101,80 @@ def tiny_read_only_folder(folder: Path) -> Iterator[tuple[Path, str]]:
         yield folder, "read-only file system"
     finally:
         subprocess.run(["umount", "-l", str(folder)], check=False)
+
+
+#: A real-time recording commits every 0.5 s of wall time (acq.recording.recorder.FLUSH_INTERVAL_S), i.e. every 0.5 s
+#: of data; a --fast one commits whenever its load lets the 0.5 s or the 2 MiB come first.
+COMMIT_EVERY_S = 0.5
+
+
+def rewritten_in_real_time(src: Path, dst: Path, commit_every_s: float = COMMIT_EVERY_S) -> Path:
+    """``src`` (a finished recording) written again into ``dst`` by the real :class:`SessionWriter`, committed every
+    ``commit_every_s`` s of data (by default as a real-time recording commits): the DAQ reads ending in each span of
+    samples, the encoder rows of each span of drive cycles and the events before the commit's last read. A --fast recording
+    commits where the machine's load puts the 0.5 s clock, and so places its chunks, chunk indexes and footer strings
+    differently in every run; this file's layout is the same in every run (the samples are: dither seed 0)."""
+    s = load(src)
+    c, e, meta = s.current, s.encoder, s.meta
+    assert s.damage == () and meta.host_ns_at_start is not None
+    w = SessionWriter(dst, bench=s.bench, profile=s.profile,
+                      current_info=CurrentSourceInfo(c.rate_hz, tuple(c.phases_a), c.device),
+                      drive_info=DriveInfo(e.period_s, e.counts_per_rev, e.transport, e.timestamp_kind, e.device),
+                      host_ns_at_start=meta.host_ns_at_start, operator=meta.operator, tags=meta.tags,
+                      origin=meta.origin, host_clock_shared=meta.host_clock_shared, session_id=meta.session_id,
+                      created_utc=meta.created_utc)
+    read_end = np.cumsum(c.block_count)
+    cycle_s = (e.index - e.index[0]) * e.period_s
+    commits = int(np.ceil(round(max(read_end[-1] / c.rate_hz, cycle_s[-1] + e.period_s) / commit_every_s, 6)))
+    reads = np.searchsorted(read_end, np.arange(commits + 1) * commit_every_s * c.rate_hz, side="right")
+    rows = np.searchsorted(cycle_s, np.arange(commits + 1) * commit_every_s - e.period_s / 2, side="left")
+    reads[-1], rows[-1] = read_end.size, e.index.size
+    events = iter(sorted(s.events, key=lambda ev: ev.host_ns))
+    pending_event = next(events, None)
+    for k in range(commits):
+        r = slice(reads[k], reads[k + 1])
+        sample = [int(read_end[i - 1]) if i else 0 for i in (r.start, r.stop)]
+        if r.stop > r.start:
+            w.append_current_blocks([v[sample[0]:sample[1]] for v in c.phases_a.values()], c.block_first_index[r],
+                                    c.block_count[r], c.block_host_ns[r])
+        if rows[k + 1] > rows[k]:
+            columns = {f.name: getattr(e, f.name) for f in fields(EncoderBlock)}
+            w.append_encoder(EncoderBlock(**{name: None if values is None else values[rows[k]:rows[k + 1]]
+                                             for name, values in columns.items()}))
+        last_ns = c.block_host_ns[r.stop - 1] if r.stop else 0
+        while pending_event is not None and (pending_event.host_ns <= last_ns or k == commits - 1):
+            w.add_event(pending_event)
+            pending_event = next(events, None)
+        w.flush()
+    w.finish(meta.status, meta.stop_reason)  # type: ignore[arg-type]
+    return dst
+
+
+class ReadsFile(io.FileIO):
+    """A file opened for reading that remembers the furthest byte HDF5 read from it (``end``)."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(path, "r")
+        self.end = 0
+
+    def readinto(self, buffer: Any) -> int | None:
+        start = self.tell()
+        self.end = max(self.end, start + len(buffer))
+        return super().readinto(buffer)
+
+
+def footer_strings_past(path: Path, cut: int) -> list[str]:
+    """The footer's strings (:data:`FOOTER_TEXT`, in the file's attribute order) of the intact file ``path`` that HDF5
+    reads from at or past byte ``cut``: a copy cut there loses them. Where HDF5 puts them depends on the file's
+    history (a freed block reused, or the file's end), so it is measured: the furthest byte read to read each, in a
+    file opened anew for each."""
+    with h5py.File(path, "r") as f:
+        names = [name for name in f.attrs if name in FOOTER_TEXT]
+    past = []
+    for name in names:
+        with ReadsFile(path) as fh, h5py.File(fh, "r") as f:
+            fh.end = 0
+            f.attrs[name]
+            if fh.end > cut:
+                past.append(name)
+    return past
