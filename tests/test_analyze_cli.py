@@ -377,14 +377,13 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     import sys
 
     from acq.monitoring.session_outcome import analyze_one
-    from analysis import AnalysisRequest
     from acq.monitoring.catalogue import Catalogue
     from analysis import AnalysisRequest
     from acq.ui.report_png import draw_report
 
     copy = Path(shutil.copy2(session_10s, tmp_path / "s.h5"))
     expected = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report").out)
-    monkeypatch.delitem(sys.modules, "acq.ui.plots", raising=False)
+    monkeypatch.delitem(sys.modules, "acq.ui.report_view", raising=False)
     monkeypatch.setitem(sys.modules, "pyqtgraph", None)  # a headless worker without the Qt libraries
     run = run_cli(capsys, "analyze", str(copy))
     assert run.code == 0, run.err
