@@ -36,7 +36,7 @@ from acq.offline.analyze import analyze_session
 from acq.ui.report_png import _title
 done = analyze_session(sys.argv[1], write=False)
 t0 = time.process_time()
-from acq.ui.plots import render_report_png
+from acq.ui.report_view import render_report_png
 t1 = time.process_time()
 render_report_png(done.result.figures, sys.argv[2], values=done.json_dict, title=_title(done))
 t2 = time.process_time()

@@ -356,9 +356,9 @@ def test_a_broken_result_file_is_one_line_for_view(session_10s: Path, tmp_path: 
 
 def test_piped_result_tables_fit_80_columns(session_10s: Path, capsys: pytest.CaptureFixture[str],
                                             monkeypatch: pytest.MonkeyPatch) -> None:
-    import acq.ui.cli
+    import acq.ui.analyze_cli
 
-    monkeypatch.setattr(acq.ui.cli.out, "width", 80)  # what a pipe or an 80-column terminal gives
+    monkeypatch.setattr(acq.ui.analyze_cli.out, "width", 80)  # what a pipe or an 80-column terminal gives
     shown = {}
     for option in ("", "--params=K", "--paper"):
         run = run_cli(capsys, "analyze", str(session_10s), "--no-report", *([option] if option else []))
@@ -377,14 +377,13 @@ def test_a_report_that_cannot_be_drawn_is_a_note_not_a_failed_identification(
     import sys
 
     from acq.monitoring.session_outcome import analyze_one
-    from analysis import AnalysisRequest
     from acq.monitoring.catalogue import Catalogue
     from analysis import AnalysisRequest
     from acq.ui.report_png import draw_report
 
     copy = Path(shutil.copy2(session_10s, tmp_path / "s.h5"))
     expected = json.loads(run_cli(capsys, "analyze", str(session_10s), "--json", "--no-report").out)
-    monkeypatch.delitem(sys.modules, "acq.ui.plots", raising=False)
+    monkeypatch.delitem(sys.modules, "acq.ui.report_view", raising=False)
     monkeypatch.setitem(sys.modules, "pyqtgraph", None)  # a headless worker without the Qt libraries
     run = run_cli(capsys, "analyze", str(copy))
     assert run.code == 0, run.err
@@ -424,7 +423,8 @@ def test_help_and_a_mistyped_path_load_no_numerical_library() -> None:
     helped = subprocess.run([sys.executable, "-c", probe, "--help"], capture_output=True, text=True, timeout=60)
     assert helped.stderr.strip() == "loaded: [] exit: 0"
     listed = dict(re.findall(r"^  (\w+) +(\S.*)$", helped.stdout.split("Commands:")[1], re.M))
-    assert sorted(listed) == sorted([*LAZY_COMMANDS, "analyze", "check", "info", "record"])
+    assert sorted(listed) == sorted(LAZY_COMMANDS) == ["analyze", "check", "devices", "export", "fleet", "import", "info",
+                                                       "monitor", "record", "selftest", "trend", "view"]
     assert listed["devices"] == "List NI devices and AI channels, CAN interfaces, serial ports..."
     missing = subprocess.run([sys.executable, "-c", probe, "analyze", "missing.h5"], capture_output=True, text=True,
                              timeout=60)

@@ -147,7 +147,7 @@ def test_the_fleet_png_shows_each_session_and_says_what_grey_means(catalogue_loc
     from pyqtgraph.Qt import QtGui
 
     from acq.ui.fleet_display import NO_DELTA_K_GREY, fleet_widget, render_fleet_png
-    from acq.ui.plots import ensure_app
+    from acq.ui.qt_app import ensure_app
 
     _fill(catalogue_location)
     now = datetime.now(UTC)

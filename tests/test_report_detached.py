@@ -181,7 +181,7 @@ def test_a_picture_finished_after_a_newer_result_is_not_put_in_place(session: Pa
                                                                        monkeypatch: pytest.MonkeyPatch) -> None:
     """The result is checked again when the picture is ready (drawing takes ≈ 0.6 s): an analysis that came
     meanwhile (here `--no-report`, which also removes an earlier picture) keeps its result without a stale PNG."""
-    import acq.ui.plots as plots
+    import acq.ui.report_view as report_view
     from acq.offline.analyze import analyze_session
     from acq.ui.report_png import _draw_job, _read_job, _write_job
 
@@ -191,13 +191,13 @@ def test_a_picture_finished_after_a_newer_result_is_not_put_in_place(session: Pa
     job_file = _write_job(done, png)
     job = _read_job(job_file.read_bytes())
     job_file.unlink()  # as the drawer does when it has read it
-    draw = plots.render_report_png
+    draw = report_view.render_report_png
 
     def draw_while_a_newer_analysis_comes(*args: object, **kwargs: object) -> None:
         draw(*args, **kwargs)
         analyze_session(session, OTHER_START, report=False)
 
-    monkeypatch.setattr(plots, "render_report_png", draw_while_a_newer_analysis_comes)
+    monkeypatch.setattr(report_view, "render_report_png", draw_while_a_newer_analysis_comes)
     _draw_job(job)
     assert not png.exists()
     assert json.loads(result.read_text())["options"]["nominal"]["K_Nm_per_rad"] == 900.0

@@ -254,7 +254,7 @@ def test_two_processes_share_a_catalogue(wear: Path, tmp_path: Path) -> None:
 
 def test_view_shows_the_trend_window(wear: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
-    from acq.ui.plots import ensure_app
+    from acq.ui.qt_app import ensure_app
     from acq.monitoring.trend_catalogue import load_trend
     from acq.ui.trend_plot import trend_widget
 
@@ -295,7 +295,7 @@ def test_the_trend_window_redraws_when_a_writer_adds_sessions(tmp_path: Path) ->
     import functools
 
     from acq.monitoring.catalogue import Catalogue, Outcome
-    from acq.ui.plots import ensure_app
+    from acq.ui.qt_app import ensure_app
     from acq.monitoring.trend_catalogue import load_trend
     from acq.ui.view import LiveTrend
 
@@ -330,7 +330,7 @@ def test_the_trend_window_started_before_the_first_window_waits_for_it(tmp_path:
 
     from acq.monitoring.catalogue import Catalogue, Outcome
     from acq.monitoring.trend_catalogue import NoSessions, load_trend
-    from acq.ui.plots import ensure_app
+    from acq.ui.qt_app import ensure_app
     from acq.ui.view import LiveTrend
 
     folder = tmp_path / "monitor"
@@ -398,7 +398,7 @@ def test_a_skipped_outlier_does_not_squash_the_trend_plot(tmp_path: Path) -> Non
     import pyqtgraph as pg
 
     from acq.monitoring.catalogue import Catalogue, Outcome
-    from acq.ui.plots import ensure_app
+    from acq.ui.qt_app import ensure_app
     from acq.monitoring.trend_catalogue import load_trend
     from acq.ui.trend_plot import trend_widget
 
@@ -431,7 +431,7 @@ def _monitor_trend(tmp_path: Path, windows: list[tuple[float | None, str]], ever
 
     from acq.monitoring.catalogue import Catalogue, Outcome
     from acq.monitoring.trend_catalogue import load_trend
-    from acq.ui.plots import ensure_app
+    from acq.ui.qt_app import ensure_app
     from acq.ui.trend_plot import trend_widget
 
     path = tmp_path / "catalogue.sqlite"

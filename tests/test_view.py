@@ -73,7 +73,8 @@ def _assert_real_image(path: Path, size: tuple[int, int]) -> None:
 def test_window_holds_traces_frf_coherence_and_values(session: Path) -> None:
     import pyqtgraph as pg
 
-    from acq.ui.plots import ReportView, ensure_app
+    from acq.ui.qt_app import ensure_app
+    from acq.ui.report_view import ReportView
     from acq.ui.view import session_figure
 
     ensure_app()
@@ -116,7 +117,8 @@ def test_window_holds_traces_frf_coherence_and_values(session: Path) -> None:
 
 
 def test_several_sessions_overlay_their_frfs_with_a_legend(session: Path, tmp_path: Path) -> None:
-    from acq.ui.plots import ReportView, ensure_app
+    from acq.ui.qt_app import ensure_app
+    from acq.ui.report_view import ReportView
     from acq.ui.view import session_figure
 
     later = tmp_path / "later_joint1.h5"
@@ -133,7 +135,7 @@ def test_several_sessions_overlay_their_frfs_with_a_legend(session: Path, tmp_pa
 
 def _laid_out(view: Any, tmp_path: Path) -> None:
     """Show and render the view offscreen, so that its layout (and the f_a/f_r label rows) is final."""
-    from acq.ui.plots import grab_png
+    from acq.ui.qt_app import grab_png
 
     grab_png(view, tmp_path / "layout.png")
 
@@ -143,7 +145,8 @@ def _scene_box(item: Any) -> Any:
 
 
 def test_legend_and_frequency_labels_cover_no_curve_and_no_label_overlaps(session: Path, tmp_path: Path) -> None:
-    from acq.ui.plots import ReportView, ensure_app
+    from acq.ui.qt_app import ensure_app
+    from acq.ui.report_view import ReportView
     from acq.ui.view import session_figure
 
     ensure_app()
@@ -171,7 +174,9 @@ def test_legend_and_frequency_labels_cover_no_curve_and_no_label_overlaps(sessio
 
 
 def test_phase_panel_when_the_clocks_are_aligned_and_none_when_not(session: Path, tmp_path: Path) -> None:
-    from acq.ui.plots import ReportView, SessionFigure, ensure_app
+    from acq.ui.qt_app import ensure_app
+    from acq.ui.report_panel import SessionFigure
+    from acq.ui.report_view import ReportView
     from acq.ui.view import session_figure
 
     ensure_app()
@@ -407,7 +412,7 @@ def test_ctrl_c_or_sigterm_under_record_live_ends_the_recording_as_interrupted(t
 def test_the_side_panel_says_the_values_are_motor_side() -> None:
     from types import SimpleNamespace
 
-    from acq.ui.plots import SessionFigure, values_html
+    from acq.ui.report_panel import SessionFigure, values_html
 
     figures = SimpleNamespace(phase_valid=True)  # the panel reads only whether the phase is shown
     doc = {"K_Nm_per_rad": 891.0, "ci95": {}, "clock": {"residual_s": 1e-5}}
@@ -419,7 +424,8 @@ def test_the_side_panel_gives_the_ends_of_an_interval_that_does_not_determine_it
     """The trial's report read "C 0.237 ± 3.6e+02 %" and its legend "95 % band ± 4.6–3.6e+02 %"."""
     from types import SimpleNamespace
 
-    from acq.ui.plots import SessionFigure, band_width_text, values_html
+    from acq.ui.report_panel import SessionFigure, values_html
+    from acq.ui.report_view import band_width_text
 
     figures = SimpleNamespace(phase_valid=True)
     doc = {"K_Nm_per_rad": 923.1, "C_Nms_per_rad": 0.2370008321746361,
@@ -439,7 +445,10 @@ def test_the_report_marks_where_a_poor_verdict_says_the_model_misses(tmp_path: P
     (undithered) by its frequency, but the report drew nothing there."""
     import pyqtgraph as pg
 
-    from acq.ui.plots import VERDICT_MARK_COLOR, ReportView, SessionFigure, ensure_app
+    from acq.ui.qt_app import ensure_app
+    from acq.ui.report_marks import VERDICT_MARK_COLOR
+    from acq.ui.report_panel import SessionFigure
+    from acq.ui.report_view import ReportView
     from bench.scenarios import THIRD_INSIDE, Scenario, clock_for, record
 
     path, _ = record(Scenario("third mass 150 Hz", sim=THIRD_INSIDE, profile={"speed_dither": dither}), 0,
@@ -482,7 +491,7 @@ def test_the_report_marks_where_a_poor_verdict_says_the_model_misses(tmp_path: P
         return int(np.sum(np.abs(_pixels(png)[..., ::-1].astype(int) - mark).sum(axis=-1) < 40))
 
     assert draw_report(done).report_path == path.with_name(path.stem + ".report.png")
-    from acq.ui.plots import render_report_png
+    from acq.ui.report_view import render_report_png
 
     unmarked = tmp_path / "unmarked.png"
     render_report_png(replace(done.result.figures, misfit_band_hz=(np.nan, np.nan), third_mode_hz=np.nan), unmarked,

@@ -93,7 +93,7 @@ def render_fleet_png(statuses: Sequence[JointStatus], path: Path | str, *, now: 
     """Draw :func:`fleet_widget` offscreen into a PNG (default 1400 px wide, 40 px per joint and the legend)."""
     import shiboken6
 
-    from acq.ui.plots import ensure_app, grab_png
+    from acq.ui.qt_app import ensure_app, grab_png
 
     ensure_app(offscreen=True)
     frame = fleet_widget(statuses, now=now, threshold_pct=threshold_pct, stale_days=stale_days)
@@ -113,7 +113,7 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
     import pyqtgraph as pg
     from pyqtgraph.Qt import QtCore, QtWidgets
 
-    from acq.ui.plots import legend_box
+    from acq.ui.plot_style import legend_box
 
     frame = QtWidgets.QWidget()
     widget = pg.GraphicsLayoutWidget()

@@ -30,7 +30,7 @@ import pyqtgraph as pg
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
 from acq.recording.recorder import Recorder, RecordingResult
-from acq.ui.plots import ensure_app
+from acq.ui.qt_app import ensure_app
 from acq.ui.qt_signals import signals_in_qt_loop
 from acq.ui.view import has_display
 from drivers.base import CurrentBlock, EncoderBlock, StreamEvent

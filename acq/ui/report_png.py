@@ -1,6 +1,6 @@
 """The report PNG of an identification (``<session>.report.png``), drawn once its result and catalogue row stand.
 
-Two ways to draw it, one drawing (:func:`acq.ui.plots.render_report_png`, written atomically):
+Two ways to draw it, one drawing (:func:`acq.ui.report_view.render_report_png`, written atomically):
 
 * :func:`draw_report` in this process: ``acq analyze`` at a terminal, ``acq record``, the batch workers;
 * :func:`draw_report_detached` in a background process (``python -m acq.ui.report_png JOB``) started after
@@ -69,7 +69,7 @@ def _render(figures: FigureData, values: dict[str, Any], title: str, report_path
     drawn or superseded, else why not. A write that failed raises :class:`StorageError` (disk full, I/O error: a
     failure, named by the file)."""
     try:
-        from acq.ui.plots import render_report_png  # Qt only when a picture is drawn
+        from acq.ui.report_view import render_report_png  # Qt only when a picture is drawn
 
         with atomic_path(report_path) as tmp_png:
             render_report_png(figures, tmp_png, values=values, title=title)

@@ -15,7 +15,7 @@ def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (14
     """Draw :func:`trend_widget` offscreen into a PNG of ``size`` (width, height) px."""
     import shiboken6
 
-    from acq.ui.plots import ensure_app, grab_png
+    from acq.ui.qt_app import ensure_app, grab_png
 
     ensure_app(offscreen=True)
     frame = trend_widget(trend)

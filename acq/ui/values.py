@@ -1,6 +1,6 @@
 """How a result's numbers read: parameter labels, values, intervals and options as text.
 
-Shared by the terminal's tables (:mod:`acq.ui.display`) and the report picture (:mod:`acq.ui.plots`); it imports
+Shared by the terminal's tables (:mod:`acq.ui.display`) and the report picture (:mod:`acq.ui.report_panel`); it imports
 nothing of ``acq``, so both can use it without importing each other.
 """
 

@@ -26,7 +26,7 @@ from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 from analysis import AnalysisRequest
 
 if TYPE_CHECKING:
-    from acq.ui.plots import SessionFigure
+    from acq.ui.report_panel import SessionFigure
     from acq.monitoring.trend import Trend
     from acq.monitoring.trend_catalogue import NoSessions
 
@@ -54,7 +54,7 @@ def stored_request(path: Path) -> AnalysisRequest:
 
 def session_figure(path: Path) -> SessionFigure:
     """Identify one session (with its stored options, if any) and wrap what the figure needs."""
-    from acq.ui.plots import SessionFigure
+    from acq.ui.report_panel import SessionFigure
 
     done = analyze_session(path, stored_request(Path(path)), write=False)
     if done.result is None:  # the machine did not excite the joint: nothing to draw, the verdict says why
@@ -109,7 +109,8 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
     from acq.process_signals import signals_deferred
 
     with signals_deferred():  # a Ctrl-C inside Qt's import was a fatal error in shiboken's start-up (exit 134) or lost
-        from acq.ui.plots import ReportView, ensure_app, grab_png
+        from acq.ui.qt_app import ensure_app, grab_png
+        from acq.ui.report_view import ReportView
         from acq.ui.qt_signals import loop_ended_by_signals
 
     if trend_joint is not None:

@@ -1,0 +1,64 @@
+"""``acq check``: verify a session's checksums and committed counts, repair a session a killed recorder left, copy
+the intact part of a damaged one (``--repair``).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+from rich.console import Console
+
+from acq.recording.paths import require_session_file
+
+out = Console()
+
+
+@click.command(name="check")
+@click.argument("session_path", type=click.Path(path_type=Path))
+@click.option("--repair", "write_intact", is_flag=True,
+              help="Copy the intact part of a damaged session (a cut copy, a chunk that fails its checksum) into a "
+                   "new session beside it, NAME.recovered.h5 (status interrupted, the loss in its stop reason; an "
+                   "earlier copy is replaced). The damaged file is not written.")
+def check_command(session_path: Path, write_intact: bool) -> int:
+    """Verify a session's checksums and committed counts; repair one left by a killed recorder.
+
+    Exit 0 when the session is intact (or was repaired, or --repair copied its intact part), 1 when damage remains
+    (each damaged span is listed).
+    """
+    require_session_file(session_path)
+    from acq.ui.display import summary_table
+    from acq.recording.reader import load
+    from acq.recording.repair import recover, recovered_path, repair
+    from acq.recording.summary import summarize
+
+    session = load(session_path)
+    if session.status == "recording":
+        session = repair(session_path, "recorder stopped without finishing the file (found by acq check)")
+        out.print(summary_table(summarize(session)))
+        out.print(f"{session_path}: interrupted — the recorder stopped without finishing the file; repaired: "
+                  f"status = interrupted, {session.current.sample_count} current and {session.encoder.index.size} "
+                  "encoder samples kept")
+        return 0
+    out.print(summary_table(summarize(session)))
+    if session.damage:
+        for line in session.damage:
+            click.echo(f"{session_path}: {line}")  # plain lines (no wrapping): scripts grep them
+        intact = session.current.sample_count > 0 or session.encoder.index.size > 0
+        if write_intact and intact:
+            copy = recover(session_path)
+            click.echo(f"{session_path}: intact part copied into {copy.path}: {copy.current.sample_count} current and "
+                       f"{copy.encoder.index.size} encoder samples, status {copy.status}, stop reason: "
+                       f"{copy.meta.stop_reason}")
+            return 0
+        after = [session.kept_after_first_damage(stream) for stream in ("current", "encoder")]
+        use = (f" (acq analyze --partial uses it; acq check --repair copies it into {recovered_path(session_path)})"
+               if intact else "")
+        click.echo(f"acq: damaged: {session_path} ({'; '.join(session.damage)}) — the intact part holds "
+                   f"{session.current.sample_count} current and {session.encoder.index.size} encoder samples"
+                   + (f", {after[0]} and {after[1]} of them after the first damaged span" if any(after) else "")
+                   + use, err=True)
+        return 1
+    click.echo(f"{session_path}: {session.status}, checksums and counts verified ({session.current.sample_count} "
+               f"current, {session.encoder.index.size} encoder samples), nothing to repair")
+    return 0
