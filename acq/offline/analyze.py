@@ -207,6 +207,7 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
     session = load(path)
     session.require_usable(partial=request.partial)
     notes = partial_notes(session)
+    why = f" ({notes[0].removeprefix('note: ')})" if notes else ""  # on part of a session: what was left out
     try:
         asked = filed_request(session, request)  # spelled-out defaults: the session's own result, not a variant
         rec = recording_from_session(session)
@@ -215,10 +216,9 @@ def analyze_session(path: Path | str, request: AnalysisRequest = AnalysisRequest
         result = analyze(rec, request) if idle is None else None
     except TooSlowError as e:
         if session.profile is not None:  # acq commanded too slow a motion: the profile's fault, the error says how
-            raise ConfigError(f"{session.path}: {e}") from None
+            raise ConfigError(f"{session.path}: {e}{why}") from None
         idle, result = str(e), None  # the machine's own motion never ran fast enough for the one-phase angle
     except ValueError as e:  # on part of a session, the error may come of what is missing: the note says what
-        why = f" ({notes[0].removeprefix('note: ')})" if notes else ""
         raise ConfigError(f"{session.path}: {e}{why}") from None
     doc = result_json(session, result) if result is not None else not_excited_json(session, request, str(idle))
     if session.profile is None and result is not None:  # the machine's motion: did it excite the joint at all?

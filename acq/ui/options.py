@@ -48,7 +48,7 @@ class FiniteFloatRange(click.FloatRange):
 class PngPath(click.ParamType):
     """A PNG acq writes on request (``--png``, ``--screenshot``): a :class:`Path` named ``*.png`` that is not a folder,
     refused in one line (bad input, exit 2) before anything is drawn. A write that then fails is a failed write
-    (:func:`acq.ui.plots.grab_png`, exit 1)."""
+    (:func:`acq.ui.qt_app.grab_png`, exit 1)."""
 
     name = "PATH"
 
