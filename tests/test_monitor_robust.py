@@ -292,6 +292,39 @@ def test_windows_waiting_when_the_monitor_stops_are_filed_by_its_next_start(stop
     assert not (tmp_path / "catalogue-spool.jsonl").exists()
 
 
+def test_an_alarm_in_windows_filed_from_the_spool_is_raised_by_the_next_start(stoppable_postgres: object,
+                                                                             tmp_path: Path) -> None:
+    """K falls 5 % per simulated minute; the server stops once the 2-window baseline is filed, so the windows that
+    would alarm wait in the spool and the run ends without judging them. The next start files them and judges each:
+    the alarm is raised (counted once, --on-alarm run once) — before, the start took the trend's alarm for one
+    announced before the stop, and the episode was never announced."""
+    from acq.monitoring.monitor import Monitor, MonitorSettings
+    from tests.pg_server import new_database
+
+    server = stoppable_postgres
+    url = new_database(server.url)  # type: ignore[attr-defined]
+    ran = tmp_path / "alarm-ran"
+
+    def operator(st: object) -> None:
+        if monitor.status.filed_total == 2 and server.running:  # type: ignore[attr-defined]
+            server.stop()  # type: ignore[attr-defined]
+
+    out = tmp_path / "m"
+    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED, K_decay_pct_per_hour=300.0), out_dir=out,
+                               window_s=10.0, every_s=60.0, for_s=300.0, fast=True, baseline_windows=2,
+                               catalogue=url, on_alarm=f"echo $ACQ_WINDOW >> {ran}")
+    monitor = Monitor(settings, on_status=operator)
+    try:
+        assert monitor.run() == 0
+        assert (monitor.status.filed_total, monitor.status.waiting, monitor.status.alarms) == (2, 3, 0)
+    finally:
+        server.start()  # type: ignore[attr-defined]
+    again = Monitor(replace(settings, for_s=60.0))  # one more window, in the same episode
+    code = again.run()
+    assert (code, again.status.alarms) == (3, 1)
+    assert len(ran.read_text().split()) == 1 and int(ran.read_text()) >= 3  # once, for a spooled window (3…5)
+
+
 def test_the_status_line_says_since_when_the_catalogue_is_unreachable() -> None:
     from acq.monitoring.monitor_status import MonitorStatus
     from acq.ui.monitor_cli import catalogue_text

@@ -32,7 +32,7 @@ import time
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future
 from concurrent.futures.process import BrokenProcessPool
-from contextlib import AbstractContextManager, ExitStack, contextmanager
+from contextlib import AbstractContextManager, ExitStack, contextmanager, suppress
 from pathlib import Path
 from typing import Any
 
@@ -81,6 +81,10 @@ class Monitor:
         self._alarms = AlarmCommands(settings.on_alarm, self._alarm_problem)
         self._alarm = AlarmState(self.status, self._alarms)
         self._filed = 0  # catalogue rows written by this run
+        #: windows filed whose alarm was not judged yet (the trend could not be read after their write, or they were
+        #: filed from the spool at start), in filing order; and the alarm state before the spool's windows were filed
+        self._unjudged: list[str] = []
+        self._alarm_before_spool: bool | None = None
         self._size = expected_window_bytes(settings.bench, settings.window_s)
         # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
         self._rules = AlarmRules(settings.baseline_windows, settings.threshold_pct, settings.ewma_lambda)
@@ -274,19 +278,27 @@ class Monitor:
             st.catalogue_problem = filing.problem
             self._show()
 
+    def _judge_unjudged(self, trend: Trend) -> None:
+        """Judge the alarm after each window filed and not yet judged, in filing order (an alarm in any of them is
+        raised once, as if the trend had been read after each)."""
+        for key in self._unjudged:
+            self._alarm.judge(trend, key)
+        self._unjudged.clear()
+
     def _filed_one(self, window: Waiting) -> None:
         """A window just filed: count it, update the trend, the alarm and the figures, apply retention."""
         key = window.key
         self._filed += 1
         self.status.count(window.outcome, window.kind, earlier=key in self._earlier)
         self._windows.done(key)
+        self._unjudged.append(key)
         try:
             trend = self._trend()
         except self.catalogue.errors as e:  # the server went away right after the write: judged when it is back
             if not self._filing.lost_connection(e):
                 raise
             return
-        self._alarm.judge(trend, key)
+        self._judge_unjudged(trend)
         self._alarms.reap(wait=False)  # an alarm command of an earlier window that ended meanwhile (--fast: no waits)
         self._retain(trend)
         self._show()
@@ -348,7 +360,9 @@ class Monitor:
         with self.catalogue:
             self._filing = FilingQueue(self.catalogue, self.spool)
             if self._filing.waiting:  # windows a run stopped while its catalogue was out of reach: filed first
-                self._filing.flush(force=True)
+                with suppress(*self.catalogue.errors):  # still out of reach: the flush below says so
+                    self._alarm_before_spool = self._trend().alarm  # their alarm is judged in _resume, not assumed
+                self._unjudged += [w.key for w in self._filing.flush(force=True)]
                 if self._filing.waiting:
                     raise StorageError(f"{catalogue_text(self._catalogue_location)}: {self._filing.problem} — "
                                        f"{len(self._filing.waiting)} windows wait in {self._filing.spool}")
@@ -366,7 +380,11 @@ class Monitor:
         self._resumed(numbers)
         # an alarm raised before the restart goes on: its command is not run again for the same episode (a power cut
         # in alarm announced it once more and counted it twice — the third trial)
-        self._alarm.active = bool(known) and self._trend().alarm
+        trend = self._trend() if known else None
+        before = self._alarm_before_spool if self._alarm_before_spool is not None else trend is not None and trend.alarm
+        self._alarm.active = bool(known) and before
+        if trend is not None and self._unjudged:  # windows filed from the spool: an alarm in them was never raised
+            self._judge_unjudged(trend)
         copies: dict[str, set[str]] = {}  # another monitor's windows copied here that it would delete, by monitor
         for path in sorted(self.s.out_dir.glob("*.h5")):
             try:
