@@ -52,14 +52,19 @@ def seeded_profile(folder: Path, dither_seed: int = 0, name: str = "triangle_0.2
     return path
 
 
-def record_session_in_subprocess(out: Path, duration_s: float) -> Path:
+def record_session_in_subprocess(out: Path, duration_s: float, channels: tuple[str, ...] = ("i_a",)) -> Path:
     """``acq record --profile triangle_0.2s --fast`` (dither seed 0) of ``duration_s`` into ``out`` in a child process
-    (nothing of the recording stays in the test process); the one session file it wrote."""
+    (nothing of the recording stays in the test process), on the default simulated bench with the DAQ's ``channels``;
+    the one session file it wrote."""
     out.mkdir(parents=True, exist_ok=True)
     profile = seeded_profile(out.parent)
-    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", str(profile), "--fast", "--duration",
-                           f"{duration_s:g}", "--no-analyze", "--out", str(out)], capture_output=True, text=True,
-                          timeout=120)
+    bench = (Path(__file__).parents[1] / "configs/benches/sim.toml").read_text()
+    assert 'channels = ["i_a"]' in bench
+    bench_path = out.parent / "bench.toml"
+    bench_path.write_text(bench.replace('channels = ["i_a"]', f"channels = {list(channels)!r}".replace("'", '"')))
+    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", str(profile), "--bench",
+                           str(bench_path), "--fast", "--duration", f"{duration_s:g}", "--no-analyze", "--out",
+                           str(out)], capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     (path,) = out.glob("*.h5")
     return path

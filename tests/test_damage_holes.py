@@ -14,7 +14,7 @@ import pytest
 from acq.recording.holes import Column, current_rows
 from acq.recording.reader import load
 from acq.recording.session import Session
-from tests.helpers import run_cli
+from tests.helpers import record_session_in_subprocess, run_cli
 
 RATE_HZ = 25600
 SECONDS = 52  # 520 DAQ reads: three chunks of the block table (256 rows each), the middle one whole
@@ -24,16 +24,7 @@ TOTAL = SECONDS * RATE_HZ
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A --fast simulated session of the three phases, written by the real recorder in a child process."""
-    folder = tmp_path_factory.mktemp("rec3")
-    bench = (Path(__file__).parents[1] / "configs/benches/sim.toml").read_text()
-    assert 'channels = ["i_a"]' in bench
-    (folder / "sim3.toml").write_text(bench.replace('channels = ["i_a"]', 'channels = ["i_a", "i_b", "i_c"]'))
-    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.2s", "--bench",
-                           str(folder / "sim3.toml"), "--fast", "--duration", str(SECONDS), "--no-analyze", "--out",
-                           str(folder / "out")], capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    (path,) = (folder / "out").glob("*.h5")
-    return path
+    return record_session_in_subprocess(tmp_path_factory.mktemp("rec3") / "out", SECONDS, ("i_a", "i_b", "i_c"))
 
 
 @pytest.fixture(scope="module")

@@ -6,8 +6,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import subprocess
-import sys
 from pathlib import Path
 
 import h5py
@@ -19,7 +17,7 @@ from acq.recording.reader import load
 from acq.recording.session import Session
 from acq.recording.writer import SessionWriter
 from drivers.base import CurrentSourceInfo, DriveInfo, EncoderBlock
-from tests.helpers import footer_strings_past, rewritten_in_real_time, run_cli, seeded_profile
+from tests.helpers import footer_strings_past, record_session_in_subprocess, rewritten_in_real_time, run_cli
 
 RATE_HZ = 25600
 ENCODER_HZ = 1000
@@ -32,16 +30,7 @@ def fast(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A --fast simulated session of the three phases (dither seed 0), written by the real recorder in a child
     process. It commits at 2 MiB or at the 0.5 s clock, whichever the machine's load lets come first, so where its
     chunks, chunk indexes and footer strings lie differs from run to run."""
-    folder = tmp_path_factory.mktemp("rec3")
-    bench = (Path(__file__).parents[1] / "configs/benches/sim.toml").read_text()
-    assert 'channels = ["i_a"]' in bench
-    (folder / "sim3.toml").write_text(bench.replace('channels = ["i_a"]', 'channels = ["i_a", "i_b", "i_c"]'))
-    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", str(seeded_profile(folder)), "--bench",
-                           str(folder / "sim3.toml"), "--fast", "--duration", str(SECONDS), "--no-analyze", "--out",
-                           str(folder / "out")], capture_output=True, text=True, timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    (path,) = (folder / "out").glob("*.h5")
-    return path
+    return record_session_in_subprocess(tmp_path_factory.mktemp("rec3") / "out", SECONDS, ("i_a", "i_b", "i_c"))
 
 
 @pytest.fixture(scope="module")
