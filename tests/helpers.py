@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import io
 import os
+import shutil
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -86,6 +87,25 @@ def read_only_view(folder: Path) -> Iterator[Path]:
 
 
 @contextlib.contextmanager
+def tmpfs(folder: Path, options: str) -> Iterator[str | None]:
+    """A tmpfs mounted on ``folder`` with ``options`` (``size=6m``, ``ro,size=1m``) for the block, unmounted after
+    (lazily: a test's open file must not keep it); yields None when mounted, else why not (not root, no mount(8), the
+    mount refused) — the caller skips or falls back."""
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        yield "needs root and mount(8)"
+        return
+    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(folder)], capture_output=True,
+                             text=True)
+    if mounted.returncode != 0:
+        yield mounted.stderr.strip()
+        return
+    try:
+        yield None
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], check=False)
+
+
+@contextlib.contextmanager
 def tiny_read_only_folder(folder: Path) -> Iterator[tuple[Path, str]]:
     """A folder this process may not write into, and the cause acq should name: as root a read-only tmpfs of 1 MiB
     mounted on ``folder`` (its few free bytes once read "disk full"; chmod does not stop root) — "read-only file
@@ -98,14 +118,10 @@ def tiny_read_only_folder(folder: Path) -> Iterator[tuple[Path, str]]:
         finally:
             folder.chmod(0o755)
         return
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "ro,size=1m", "tmpfs", str(folder)], capture_output=True,
-                             text=True)
-    if mounted.returncode != 0:
-        pytest.skip(f"needs a read-only tmpfs mount as root: {mounted.stderr.strip()}")
-    try:
+    with tmpfs(folder, "ro,size=1m") as refused:
+        if refused is not None:
+            pytest.skip(f"needs a read-only tmpfs mount as root: {refused}")
         yield folder, "read-only file system"
-    finally:
-        subprocess.run(["umount", "-l", str(folder)], check=False)
 
 
 #: A real-time recording commits every 0.5 s of wall time (acq.recording.recorder.FLUSH_INTERVAL_S), i.e. every 0.5 s

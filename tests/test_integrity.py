@@ -6,7 +6,6 @@ import contextlib
 import json
 import re
 import shutil
-import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -17,7 +16,7 @@ import pytest
 
 import acq.recording.writer
 from acq.recording.reader import load
-from tests.helpers import read_only_view, record_session_in_subprocess, run_cli
+from tests.helpers import read_only_view, record_session_in_subprocess, run_cli, tmpfs
 
 RATE_HZ = 25600
 
@@ -33,21 +32,16 @@ def small_disk(folder: Path, size: str, monkeypatch: pytest.MonkeyPatch) -> Iter
     """A ``size`` tmpfs at ``folder`` when this process may mount one (root), else a disk whose free space,
     as the writer sees it, ends after a few flushes (ENOSPC injected at the storage layer). Yields which."""
     folder.mkdir(parents=True, exist_ok=True)
-    mounted = shutil.which("mount") is not None and subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(folder)], capture_output=True).returncode == 0
-    if not mounted:
-        calls = {"n": 0}
+    with tmpfs(folder, f"size={size}") as refused:
+        if refused is not None:
+            calls = {"n": 0}
 
-        def shrinking_free(_: object) -> int:
-            calls["n"] += 1
-            return 1 << 40 if calls["n"] <= 4 else 0
+            def shrinking_free(_: object) -> int:
+                calls["n"] += 1
+                return 1 << 40 if calls["n"] <= 4 else 0
 
-        monkeypatch.setattr(acq.recording.writer, "free_bytes", shrinking_free)
-    try:
-        yield "tmpfs" if mounted else "injected"
-    finally:
-        if mounted:
-            subprocess.run(["umount", "-l", str(folder)], check=False)
+            monkeypatch.setattr(acq.recording.writer, "free_bytes", shrinking_free)
+        yield "tmpfs" if refused is None else "injected"
 
 
 def _assert_counts_are_stored(path: Path, current: int, encoder: int) -> None:

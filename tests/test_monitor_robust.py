@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -18,7 +17,7 @@ import pytest
 
 
 
-from tests.helpers import run_cli
+from tests.helpers import run_cli, tmpfs
 from tests import test_monitor
 from tests.test_monitor import EXCITING_SEED, ROBOT, _bench, _rows
 
@@ -92,16 +91,10 @@ def six_mb_disk(tmp_path: Path) -> Iterator[Path]:
     """A 6 MiB tmpfs (the trial's), mounted as root and unmounted after; skipped where this process may not mount."""
     folder = tmp_path / "tiny"
     folder.mkdir()
-    if os.geteuid() != 0 or shutil.which("mount") is None:
-        pytest.skip("needs a real 6 MiB file system: a tmpfs mounted as root")
-    mounted = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=6m", "tmpfs", str(folder)], capture_output=True,
-                             text=True)
-    if mounted.returncode != 0:
-        pytest.skip(f"needs a tmpfs mount as root: {mounted.stderr.strip()}")
-    try:
+    with tmpfs(folder, "size=6m") as refused:
+        if refused is not None:
+            pytest.skip(f"needs a real 6 MiB file system, a tmpfs mounted as root: {refused}")
         yield folder
-    finally:
-        subprocess.run(["umount", "-l", str(folder)], check=False)
 
 
 def test_a_max_disk_the_file_system_cannot_hold_is_refused(capsys: pytest.CaptureFixture[str],
