@@ -270,6 +270,7 @@ class Recorder:
         last_flush = last_data = time.monotonic()
         while len(done) < len(readers):
             time.sleep(HANDOFF_S)
+            writer.poll()  # a failed sync of the last commit stops the recording now, not at the next commit
             now = time.monotonic()
             run: list[EncoderBlock] = []  # encoder blocks queued one after another: checked and stored as one
             while len(done) < len(readers):  # one item at a time: what an error leaves queued, _shut_down stores

@@ -35,7 +35,7 @@ from acq.recording.h5safe import abandon
 from acq.recording.layout import (EVENT_DTYPE, FLUSH_DTYPE, FORMAT, FORMAT_VERSION, LIBVER, NO_COUNT, OPTIONAL_ENCODER,
                                   Status, committed_rows, utc_now_iso, write_footer)
 from acq.recording.pending import Column, PendingColumns
-from acq.recording.storage import cause_of, free_bytes, storage_error, sync_file, sync_folder
+from acq.recording.storage import BackgroundSync, cause_of, free_bytes, storage_error, sync_file, sync_folder
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from acqcore.errors import ConfigError, StorageError
@@ -99,8 +99,15 @@ class SessionWriter:
         self._pending = PendingColumns()
         self._nans = np.zeros(0)
         self._rate_hz = float(current_info.rate_hz)
-        #: Totals on disk after the last successful flush: the only counts ever reported or written in the footer.
+        #: Totals whose ``/flushes`` row a returned sync covered (on the disk, and counted there): the only counts ever
+        #: reported or written in the footer.
         self.committed = {"current_samples": 0, "current_blocks": 0, "encoder_samples": 0, "events": 0}
+        self._written = dict(self.committed)  # totals of the samples written into the file
+        self._syncer = BackgroundSync()
+        #: What the running sync covers: the totals of the row written before it (None: none), and the totals and row
+        #: of the samples written before it (None: none), whose row is due once it returned.
+        self._in_flight: tuple[dict[str, int] | None, tuple[dict[str, int], np.ndarray] | None] = (None, None)
+        self._row_due: tuple[dict[str, int], np.ndarray] | None = None
         #: The write error that stopped this writer (None while writing works).
         self.failure: StorageError | None = None
         self._abandoned = False
@@ -272,40 +279,89 @@ class SessionWriter:
         self._pending.add("events", row, EVENT_DTYPE)
 
     def flush(self) -> None:
-        """Write everything appended so far, then a ``/flushes`` row committing it; make it durable and visible, in
-        that order (the samples on the disk before the row that counts them, the row before this returns).
+        """Commit everything appended so far, durably and in order: wait for the previous flush's sync; write the
+        pending rows and with them the ``/flushes`` row counting the previous flush's samples (on the disk since that
+        sync returned); ``H5Fflush``; fdatasync in the background (:class:`BackgroundSync`). The next flush writes the
+        row of these samples once this sync has returned; :attr:`committed` counts only rows a returned sync covered.
 
-        Raises :class:`StorageError` ("disk full: <file>") when the disk lacks room for it (checked first,
-        nothing written), the file vanished, HDF5 reports a write error or a sync fails; the writer is then stopped
-        (:attr:`failure`) and only what earlier flushes committed counts. Does nothing after a failure.
+        Raises :class:`StorageError` ("disk full: <file>") when the disk lacks room for it (checked first: only the
+        row due is written and synced), the file vanished, HDF5 reports a write error or a sync fails (this one's
+        or, found here, the previous one's); the writer is then stopped (:attr:`failure`) and only what
+        :attr:`committed` counts is kept. Does nothing after a failure.
         """
         if self.failure is not None:
             return
+        self._await_sync()
         pending = self._pending
+        if not pending.nbytes and self._row_due is None:
+            return
         added = {"current_samples": pending.count(f"current/{self._channels[0]}_A"),
                  "current_blocks": pending.count("current/blocks/count"),
                  "encoder_samples": pending.count("encoder/index"), "events": pending.count("events")}
-        self._check_room(pending.nbytes)
-        totals = {k: self.committed[k] + added[k] for k in self.committed}
-        row = np.array([(time.monotonic_ns(), totals["current_samples"], totals["current_blocks"],
-                         totals["encoder_samples"], totals["events"])], dtype=FLUSH_DTYPE)
+        if not self._has_room(pending.nbytes):
+            self._commit_row_due()  # the samples synced already are counted on the disk
+            self._stop(StorageError(f"disk full: {self.path}"), abandon_file=False)
+        totals = {k: self._written[k] + added[k] for k in self._written}
+        samples = (totals, self._flush_row(totals)) if pending.nbytes else None
+        due = self._row_due
         try:
+            if due is not None:
+                self._columns["flushes"].append(due[1])  # its samples were synced before (the previous flush's)
             pending.write_to(self._columns)
             self._file.flush()
-            self._sync()
-            self._columns["flushes"].append(row)  # only after the samples it counts are on disk
-            self._file.flush()
-            self._sync()
+            fd = self._file.id.get_vfd_handle()
         except Exception as e:  # noqa: BLE001 - h5py reports write errors as OSError or RuntimeError
             self._stop(storage_error(e, self.path), abandon_file=True)
-        self.committed = totals
+        self._written, self._row_due = totals, None
+        self._in_flight = (due[0] if due is not None else None, samples)
+        self._syncer.start(fd)
+
+    def poll(self) -> None:
+        """Take the outcome of a background sync that has returned, without waiting: the row it covered counts in
+        :attr:`committed`; a failed sync stops the writer and raises :class:`StorageError` as :meth:`flush` does."""
+        if self.failure is None and self._syncer.done():
+            self._await_sync()
+
+    def _await_sync(self) -> None:
+        """Wait for the running sync: its row (if it covered one) is committed, its samples' row is due."""
+        if not self._syncer.running:
+            return
+        counted, synced = self._in_flight
+        try:
+            self._syncer.wait()
+        except OSError as e:
+            self._stop(storage_error(e, self.path), abandon_file=True)
+        if counted is not None:
+            self.committed = counted
+        self._row_due = synced
+
+    def _commit_row_due(self) -> None:
+        """Write the row due, flush and sync it here (the writer stops after it)."""
+        if self._row_due is None:
+            return
+        totals, row = self._row_due
+        try:
+            self._columns["flushes"].append(row)
+            self._file.flush()
+            self._sync()
+        except Exception as e:  # noqa: BLE001 - as in flush
+            self._stop(storage_error(e, self.path), abandon_file=True)
+        self.committed, self._row_due = totals, None
+
+    @staticmethod
+    def _flush_row(totals: dict[str, int]) -> np.ndarray:
+        """The ``/flushes`` row of ``totals``, stamped now (when its samples are written)."""
+        return np.array([(time.monotonic_ns(), totals["current_samples"], totals["current_blocks"],
+                          totals["encoder_samples"], totals["events"])], dtype=FLUSH_DTYPE)
 
     def _sync(self) -> None:
         """fdatasync the open file through HDF5's own descriptor (the sec2 driver's,
-        :meth:`h5py.h5f.FileID.get_vfd_handle`): what HDF5 flushed is on the disk when this returns."""
+        :meth:`h5py.h5f.FileID.get_vfd_handle`), in this thread: what HDF5 flushed is on the disk when this returns."""
         os.fdatasync(self._file.id.get_vfd_handle())
 
-    def _check_room(self, payload_bytes: int) -> None:
+    def _has_room(self, payload_bytes: int) -> bool:
+        """Whether the disk keeps room for a flush of ``payload_bytes``; a vanished file or an unreadable file system
+        stops the writer."""
         try:
             inode = os.stat(self.path).st_ino
         except OSError:
@@ -316,8 +372,7 @@ class SessionWriter:
             free = free_bytes(self.path.parent)
         except OSError as e:
             self._stop(storage_error(e, self.path), abandon_file=True)
-        if free < 2 * payload_bytes + self._chunk_bytes + RESERVE_BYTES:
-            self._stop(StorageError(f"disk full: {self.path}"), abandon_file=False)
+        return free >= 2 * payload_bytes + self._chunk_bytes + RESERVE_BYTES
 
     def _stop(self, error: StorageError, *, abandon_file: bool) -> None:
         """Stop writing for good: drop what is pending, close the file, raise ``error``."""
@@ -344,7 +399,9 @@ class SessionWriter:
         tell readers (and ``acq check``) what is stored.
         """
         try:
-            self.flush()
+            self.flush()  # what is pending, with the row of the last flush's samples
+            self.flush()  # the row of those samples
+            self._await_sync()
         except StorageError:
             pass
         if self.failure is not None:
