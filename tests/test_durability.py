@@ -49,7 +49,7 @@ def test_every_commit_is_synced_after_its_samples_and_before_the_next(tmp_path: 
                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     """A --fast recording whose each sync copies the session file as it is then (what that sync makes durable):
     the samples a /flushes row counts are synced before the row is written (with the next commit's samples, one sync
-    for both), the last row by a sync of its own; the folder is synced once the file exists, the footer last."""
+    for both; the last row with the footer, synced last); the folder is synced once the file exists."""
     snaps = tmp_path / "snapshots"
     snaps.mkdir()
     syncs: list[tuple[str, Path, Path | None]] = []  # (call, what it synced, copy of a session file then)
@@ -79,24 +79,25 @@ def test_every_commit_is_synced_after_its_samples_and_before_the_next(tmp_path: 
     assert rows[-1][0] == result.current_samples >= 20 * RATE_HZ
     # the folder made (its parent synced), the file's layout, its name (the folder synced), then per commit r its
     # samples with the rows of the commits before (r - 1 rows: the samples row r - 1 counts were synced by the sync
-    # before), the last row alone; last the footer (fsync of the whole file)
+    # before); last the footer with the last row (fsync of the whole file)
     assert [(call, path) for call, path, _ in syncs] == (
         [("fsync", tmp_path), ("fdatasync", result.path), ("fsync", out)]
-        + [("fdatasync", result.path)] * (len(rows) + 1) + [("fsync", result.path)])
+        + [("fdatasync", result.path)] * len(rows) + [("fsync", result.path)])
     committed = [_state(copy) for _, _, copy in syncs if copy is not None]
     expected = [(0, 0, 0, 0, 0)] + [(r - 1, *totals) for r, totals in enumerate(rows, start=1)] + [(len(rows), *rows[-1])]
-    assert committed[:-1] == expected
+    assert committed == expected
     final = load(syncs[-1][2])  # type: ignore[arg-type]
     assert final.status == "complete" and final.current.sample_count == result.current_samples
 
 
-@pytest.mark.parametrize("failing", [4, 5], ids=["2nd-row-sync", "3rd-row-sync"])
+@pytest.mark.parametrize("failing", [4, 5], ids=["a-commit", "the-last-commit"])
 def test_a_failed_sync_fails_the_recording_keeping_the_last_durable_commit(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, failing: int) -> None:
     """EIO from the 4th fdatasync (1st the layout, 2nd the 1st commit's samples, 3rd the 1st row with the 2nd
-    commit's samples, 4th the 2nd row with the 3rd commit's) or the 5th (the 3rd row): ``acq record`` fails in one
-    line, exit 1, counting only the commits whose row a sync covered (the 1st; the 2nd) — the file holds those and the
-    row the failed sync covered, written after its samples were synced — and ``acq check`` repairs the file durably."""
+    commit's samples, 4th the 2nd row with the 3rd commit's, in the background) or the 5th (the 3rd row with the 4th,
+    last commit's samples, at the end): ``acq record`` fails in one line, exit 1, counting only the commits whose row a
+    sync that returned covered (the 1st; the 2nd) — the file holds those and the row the failed sync covered, written
+    after its samples were synced — and ``acq check`` repairs the file durably."""
     calls = {"n": 0}
     real_fdatasync = os.fdatasync
 
@@ -108,8 +109,8 @@ def test_a_failed_sync_fails_the_recording_keeping_the_last_durable_commit(
 
     monkeypatch.setattr(os, "fdatasync", failing_disk)
     out = tmp_path / "out"
-    run = run_cli(capsys, "record", "--profile", str(seeded_profile(tmp_path)), "--fast", "--duration", "20",
-                  "--no-analyze", "--out", str(out))  # ≥ 3 commits (see the test above)
+    run = run_cli(capsys, "record", "--profile", str(seeded_profile(tmp_path)), "--fast", "--duration", "30",
+                  "--no-analyze", "--out", str(out))  # 4 commits: 3 of 2 MiB (recorder.FLUSH_BYTES), one at the end
     monkeypatch.undo()
     (path,) = out.glob("*.h5")
     with open_read(path) as f:

@@ -299,7 +299,7 @@ class SessionWriter:
                  "current_blocks": pending.count("current/blocks/count"),
                  "encoder_samples": pending.count("encoder/index"), "events": pending.count("events")}
         if not self._has_room(pending.nbytes):
-            self._commit_row_due()  # the samples synced already are counted on the disk
+            self._write_row_due(sync=True)  # the samples synced already are counted on the disk
             self._stop(StorageError(f"disk full: {self.path}"), abandon_file=False)
         totals = {k: self._written[k] + added[k] for k in self._written}
         samples = (totals, self._flush_row(totals)) if pending.nbytes else None
@@ -335,18 +335,21 @@ class SessionWriter:
             self.committed = counted
         self._row_due = synced
 
-    def _commit_row_due(self) -> None:
-        """Write the row due, flush and sync it here (the writer stops after it)."""
+    def _write_row_due(self, sync: bool) -> None:
+        """Write the row due (its samples are on the disk); with ``sync`` flush and sync it here, committing it (the
+        writer stops after it), else the footer's sync makes it durable."""
         if self._row_due is None:
             return
         totals, row = self._row_due
         try:
             self._columns["flushes"].append(row)
-            self._file.flush()
-            self._sync()
+            if sync:
+                self._file.flush()
+                self._sync()
         except Exception as e:  # noqa: BLE001 - as in flush
             self._stop(storage_error(e, self.path), abandon_file=True)
-        self.committed, self._row_due = totals, None
+        if sync:
+            self.committed, self._row_due = totals, None
 
     @staticmethod
     def _flush_row(totals: dict[str, int]) -> np.ndarray:
@@ -400,32 +403,38 @@ class SessionWriter:
         """
         try:
             self.flush()  # what is pending, with the row of the last flush's samples
-            self.flush()  # the row of those samples
-            self._await_sync()
+            self._await_sync()  # those samples are on the disk: their row is due
         except StorageError:
             pass
+        room = True
+        with contextlib.suppress(OSError):
+            room = free_bytes(self.path.parent) >= RESERVE_BYTES // 4
+        counts = self.committed
+        if self.failure is None and self._row_due is not None:
+            counts = self._row_due[0]
+            with contextlib.suppress(StorageError):
+                self._write_row_due(sync=not room)  # no room for a footer: the /flushes rows say what is stored
         if self.failure is not None:
             status, stop_reason = "failed", f"{self.failure} — {self.seconds_kept:.1f} s kept"
+            counts = self.committed
         else:
             self._file.close()
-        if self._abandoned:
+        if self._abandoned or not room:
             return
-        with contextlib.suppress(OSError):
-            if free_bytes(self.path.parent) < RESERVE_BYTES // 4:
-                return  # no room for a footer: the /flushes rows say what is stored
         f = self._reopen()
         try:
-            # only a column longer than what was committed is opened to be cut (the writer knows each length)
-            counted = {name: committed_rows(name, self.committed) for name in self._columns}
+            # only a column longer than what was counted is opened to be cut (the writer knows each length)
+            counted = {name: committed_rows(name, counts) for name in self._columns}
             longer = [name for name, n in counted.items() if n is not None and self._columns[name].length > n]
-            write_footer(f, status, stop_reason, self._filled_optional, self.committed, longer)
+            write_footer(f, status, stop_reason, self._filled_optional, counts, longer)
             f.close()
-            sync_file(self.path)  # after the close: closing rewrites the superblock (no longer open for writing)
+            sync_file(self.path)  # after the close (it rewrites the superblock); the last /flushes row with the footer
         except Exception as e:  # noqa: BLE001 - the footer could not be written (or synced): the flush rows still hold
             abandon(f)
             self.failure = storage_error(e, self.path)
             raise StorageError(f"{self.failure} (footer not written; the samples are stored, acq check repairs "
                                "the file)") from None
+        self.committed = counts
 
     def _reopen(self) -> h5py.File:
         """The closed file opened for the footer; a reader holding it open briefly is waited for (2 s)."""
