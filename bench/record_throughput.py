@@ -217,7 +217,7 @@ def record(bench: Bench, seconds: float, fast: bool, out: Path) -> tuple[float, 
 def writer_alone(bench: Bench, seconds: float, out: Path) -> float:
     """CPU s of the session writer alone: the blocks of one ``--fast`` recording (as its listeners saw them, encoder
     batches joined) replayed into a new :class:`SessionWriter` with the recorder's flush rule by size
-    (``FLUSH_BYTES``; in ``--fast`` its 0.5 s rule commits at most once more), no simulator running beside it: what
+    (``FLUSH_BYTES``, :meth:`SessionWriter.commit`; in ``--fast`` its 0.5 s rule commits at most once more), no simulator running beside it: what
     the recording thread's writing costs by itself, file creation and footer included."""
     written: list[tuple[str, Any]] = []
     current, drive = open_bench(bench, fast=True)
@@ -230,8 +230,9 @@ def writer_alone(bench: Bench, seconds: float, out: Path) -> float:
                            drive_info=recorder.drive_info, host_ns_at_start=time.monotonic_ns())
     for kind, item in written:
         getattr(writer, append[kind])(item)
+        writer.poll()  # as the recorder's ticks: a commit's row written once its samples' sync has returned
         if writer.pending_bytes >= FLUSH_BYTES:
-            writer.flush()
+            writer.commit()
     writer.finish("complete", "replayed")
     cpu = time.thread_time() - cpu0
     (out / "replay.h5").unlink()

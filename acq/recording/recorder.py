@@ -294,14 +294,14 @@ class Recorder:
                     self._store(kind, item, writer, checker, counts)
                     last_data = now
                 if writer.pending_bytes >= FLUSH_BYTES:
-                    writer.flush()
+                    writer.commit()
                     last_flush = now
             self._store_run(run, writer, checker, counts)
             if now - last_data > STALL_TIMEOUT_S:
                 silent = [n for n, r in readers.items() if n not in done]
                 raise DeviceError(f"no data from {', '.join(silent)} for {STALL_TIMEOUT_S:g} s")
             if now - last_flush >= FLUSH_INTERVAL_S or writer.pending_bytes >= FLUSH_BYTES:
-                writer.flush()
+                writer.commit()
                 last_flush = now
 
     def _store_run(self, run: list[EncoderBlock], writer: SessionWriter, checker: StreamChecker,

@@ -107,7 +107,8 @@ class SessionWriter:
         #: What the running sync covers: the totals of the row written before it (None: none), and the totals and row
         #: of the samples written before it (None: none), whose row is due once it returned.
         self._in_flight: tuple[dict[str, int] | None, tuple[dict[str, int], np.ndarray] | None] = (None, None)
-        self._row_due: tuple[dict[str, int], np.ndarray] | None = None
+        self._row_due: tuple[dict[str, int], np.ndarray] | None = None  # its samples synced, not written yet
+        self._row_written: dict[str, int] | None = None  # the totals of a row written, no sync covering it started
         #: The write error that stopped this writer (None while writing works).
         self.failure: StorageError | None = None
         self._abandoned = False
@@ -279,48 +280,65 @@ class SessionWriter:
         self._pending.add("events", row, EVENT_DTYPE)
 
     def flush(self) -> None:
-        """Commit everything appended so far, durably and in order: wait for the previous flush's sync; write the
-        pending rows and with them the ``/flushes`` row counting the previous flush's samples (on the disk since that
-        sync returned); ``H5Fflush``; fdatasync in the background (:class:`BackgroundSync`). The next flush writes the
-        row of these samples once this sync has returned; :attr:`committed` counts only rows a returned sync covered.
+        """Commit everything appended so far and wait until it is committed: :meth:`commit`, its sync waited for, then
+        the ``/flushes`` row counting it written and synced here — durable and visible when this returns.
+        Raises as :meth:`commit` does."""
+        self.commit()
+        self._await_sync()
+        self._sync_rows()
+
+    def commit(self) -> None:
+        """Commit everything appended so far without waiting for the disk: wait for the previous commit's sync (if
+        still running); write the pending rows, and the ``/flushes`` row of the previous commit's samples if
+        :meth:`poll` has not; ``H5Fflush``; fdatasync in the background (:class:`BackgroundSync`). A row is written
+        only once the sync of the samples it counts has returned (by :meth:`poll` or the next commit), and counts in
+        :attr:`committed` only once a sync that covered the row itself returned.
 
         Raises :class:`StorageError` ("disk full: <file>") when the disk lacks room for it (checked first: only the
-        row due is written and synced), the file vanished, HDF5 reports a write error or a sync fails (this one's
-        or, found here, the previous one's); the writer is then stopped (:attr:`failure`) and only what
-        :attr:`committed` counts is kept. Does nothing after a failure.
+        rows already due are written and synced), the file vanished, HDF5 reports a write error or a sync fails (the
+        previous one's, found here, or this one's, found by the next call); the writer is then stopped
+        (:attr:`failure`) and only what :attr:`committed` counts is kept. Does nothing after a failure.
         """
         if self.failure is not None:
             return
         self._await_sync()
         pending = self._pending
-        if not pending.nbytes and self._row_due is None:
+        if not pending.nbytes and self._row_due is None and self._row_written is None:
             return
         added = {"current_samples": pending.count(f"current/{self._channels[0]}_A"),
                  "current_blocks": pending.count("current/blocks/count"),
                  "encoder_samples": pending.count("encoder/index"), "events": pending.count("events")}
         if not self._has_room(pending.nbytes):
-            self._write_row_due(sync=True)  # the samples synced already are counted on the disk
+            self._sync_rows()  # the samples synced already are counted on the disk
             self._stop(StorageError(f"disk full: {self.path}"), abandon_file=False)
         totals = {k: self._written[k] + added[k] for k in self._written}
         samples = (totals, self._flush_row(totals)) if pending.nbytes else None
-        due = self._row_due
+        fd, flushed = self._file.id.get_vfd_handle(), self._row_written
         try:
-            if due is not None:
-                self._columns["flushes"].append(due[1])  # its samples were synced before (the previous flush's)
+            self._append_row_due()
             pending.write_to(self._columns)
             self._file.flush()
-            fd = self._file.id.get_vfd_handle()
         except Exception as e:  # noqa: BLE001 - h5py reports write errors as OSError or RuntimeError
+            if flushed is not None:  # a row :meth:`poll` wrote is in the file: counted if a sync makes it durable
+                with contextlib.suppress(OSError):
+                    os.fdatasync(fd)
+                    self.committed = flushed
             self._stop(storage_error(e, self.path), abandon_file=True)
-        self._written, self._row_due = totals, None
-        self._in_flight = (due[0] if due is not None else None, samples)
+        self._written, self._in_flight, self._row_written = totals, (self._row_written, samples), None
         self._syncer.start(fd)
 
     def poll(self) -> None:
         """Take the outcome of a background sync that has returned, without waiting: the row it covered counts in
-        :attr:`committed`; a failed sync stops the writer and raises :class:`StorageError` as :meth:`flush` does."""
-        if self.failure is None and self._syncer.done():
+        :attr:`committed`, the row of the samples it covered is written (``H5Fflush``: visible, synced by the next
+        commit); a failed sync stops the writer and raises :class:`StorageError` as :meth:`commit` does."""
+        if self.failure is None and self._syncer.done() and self._syncer.running:
             self._await_sync()
+            if self._row_due is not None:
+                try:
+                    self._append_row_due()
+                    self._file.flush()
+                except Exception as e:  # noqa: BLE001 - as in commit
+                    self._stop(storage_error(e, self.path), abandon_file=True)
 
     def _await_sync(self) -> None:
         """Wait for the running sync: its row (if it covered one) is committed, its samples' row is due."""
@@ -335,21 +353,25 @@ class SessionWriter:
             self.committed = counted
         self._row_due = synced
 
-    def _write_row_due(self, sync: bool) -> None:
-        """Write the row due (its samples are on the disk); with ``sync`` flush and sync it here, committing it (the
-        writer stops after it), else the footer's sync makes it durable."""
-        if self._row_due is None:
-            return
-        totals, row = self._row_due
-        try:
+    def _append_row_due(self) -> None:
+        """Append the row due (the sync of its samples has returned) to ``/flushes``, not flushed yet."""
+        if self._row_due is not None:
+            totals, row = self._row_due
             self._columns["flushes"].append(row)
-            if sync:
-                self._file.flush()
-                self._sync()
-        except Exception as e:  # noqa: BLE001 - as in flush
+            self._row_written, self._row_due = totals, None
+
+    def _sync_rows(self) -> None:
+        """Write the row due, flush and sync here (no sync running): every row written is committed."""
+        if self.failure is not None or (self._row_due is None and self._row_written is None):
+            return
+        try:
+            self._append_row_due()
+            self._file.flush()
+            self._sync()
+        except Exception as e:  # noqa: BLE001 - as in commit
             self._stop(storage_error(e, self.path), abandon_file=True)
-        if sync:
-            self.committed, self._row_due = totals, None
+        assert self._row_written is not None
+        self.committed, self._row_written = self._row_written, None
 
     @staticmethod
     def _flush_row(totals: dict[str, int]) -> np.ndarray:
@@ -381,6 +403,7 @@ class SessionWriter:
         """Stop writing for good: drop what is pending, close the file, raise ``error``."""
         self.failure = error
         self._pending.clear()
+        self._row_due = self._row_written = None
         if abandon_file:
             self._abandoned = True
             abandon(self._file)
@@ -402,7 +425,7 @@ class SessionWriter:
         tell readers (and ``acq check``) what is stored.
         """
         try:
-            self.flush()  # what is pending, with the row of the last flush's samples
+            self.commit()  # what is pending, with the row of the last commit's samples
             self._await_sync()  # those samples are on the disk: their row is due
         except StorageError:
             pass
@@ -410,10 +433,16 @@ class SessionWriter:
         with contextlib.suppress(OSError):
             room = free_bytes(self.path.parent) >= RESERVE_BYTES // 4
         counts = self.committed
-        if self.failure is None and self._row_due is not None:
-            counts = self._row_due[0]
+        if self.failure is None and not room:
             with contextlib.suppress(StorageError):
-                self._write_row_due(sync=not room)  # no room for a footer: the /flushes rows say what is stored
+                self._sync_rows()  # no room for a footer: the /flushes rows say what is stored
+        elif self.failure is None:
+            try:
+                self._append_row_due()  # made durable by the footer's sync, with it
+            except Exception as e:  # noqa: BLE001 - as in commit
+                with contextlib.suppress(StorageError):
+                    self._stop(storage_error(e, self.path), abandon_file=True)
+            counts = self._row_written or self.committed
         if self.failure is not None:
             status, stop_reason = "failed", f"{self.failure} — {self.seconds_kept:.1f} s kept"
             counts = self.committed
