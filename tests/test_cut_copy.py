@@ -36,7 +36,7 @@ def recorded(tmp_path_factory: pytest.TempPathFactory) -> Path:
     result = Recorder(bench, load_profile("triangle_0.2s"), current, drive, folder, 10.0).run()
     path = rewritten_in_real_time(result.path, folder / "session.h5")
     with h5py.File(path, "r") as f:
-        assert f["flushes"].shape[0] == 20  # 20 commits (SessionWriter.finish finds nothing more to commit)
+        assert f["flushes"].shape[0] == 21  # 20 commits and the one SessionWriter.finish makes
     return path
 
 

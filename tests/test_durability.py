@@ -48,8 +48,8 @@ def _row_totals(row: np.void) -> tuple[int, ...]:
 def test_every_commit_is_synced_after_its_samples_and_before_the_next(tmp_path: Path,
                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     """A --fast recording whose each sync copies the session file as it is then (what that sync makes durable):
-    the samples a /flushes row counts are synced before the row is written (with the next commit's samples, one sync
-    for both; the last row with the footer, synced last); the folder is synced once the file exists."""
+    the samples a /flushes row counts are synced before the row is written, the row before anything of the next
+    commit is; the folder is synced once the file exists, the footer last."""
     snaps = tmp_path / "snapshots"
     snaps.mkdir()
     syncs: list[tuple[str, Path, Path | None]] = []  # (call, what it synced, copy of a session file then)
@@ -77,27 +77,26 @@ def test_every_commit_is_synced_after_its_samples_and_before_the_next(tmp_path: 
         rows = [_row_totals(r) for r in f["flushes"][...]]
     assert len(rows) >= 3  # 20 s of 25.6 kS/s and a 1 kHz encoder: a commit per 2 MiB (recorder.FLUSH_BYTES), one at the end
     assert rows[-1][0] == result.current_samples >= 20 * RATE_HZ
-    # the folder made (its parent synced), the file's layout, its name (the folder synced), then per commit r its
-    # samples with the rows of the commits before (r - 1 rows: the samples row r - 1 counts were synced by the sync
-    # before); last the footer with the last row (fsync of the whole file)
+    # the folder made (its parent synced), the file's layout, its name (the folder synced), then per commit r the
+    # samples it counts without its row (r - 1 rows), then with its row; last the footer (fsync of the whole file)
     assert [(call, path) for call, path, _ in syncs] == (
         [("fsync", tmp_path), ("fdatasync", result.path), ("fsync", out)]
-        + [("fdatasync", result.path)] * len(rows) + [("fsync", result.path)])
+        + [("fdatasync", result.path)] * (2 * len(rows)) + [("fsync", result.path)])
     committed = [_state(copy) for _, _, copy in syncs if copy is not None]
-    expected = [(0, 0, 0, 0, 0)] + [(r - 1, *totals) for r, totals in enumerate(rows, start=1)] + [(len(rows), *rows[-1])]
-    assert committed == expected
+    expected = [(0, 0, 0, 0, 0)]
+    for r, totals in enumerate(rows, start=1):
+        expected += [(r - 1, *totals), (r, *totals)]
+    assert committed[:-1] == expected
     final = load(syncs[-1][2])  # type: ignore[arg-type]
     assert final.status == "complete" and final.current.sample_count == result.current_samples
 
 
-@pytest.mark.parametrize("failing", [4, 5], ids=["a-commit", "the-last-commit"])
+@pytest.mark.parametrize("failing", [4, 5], ids=["samples-sync", "row-sync"])
 def test_a_failed_sync_fails_the_recording_keeping_the_last_durable_commit(
         tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch, failing: int) -> None:
-    """EIO from the 4th fdatasync (1st the layout, 2nd the 1st commit's samples, 3rd the 1st row with the 2nd
-    commit's samples, 4th the 2nd row with the 3rd commit's, in the background) or the 5th (the 3rd row with the 4th,
-    last commit's samples, at the end): ``acq record`` fails in one line, exit 1, counting only the commits whose row a
-    sync that returned covered (the 1st; the 2nd) — the file holds those and the row the failed sync covered, written
-    after its samples were synced — and ``acq check`` repairs the file durably."""
+    """EIO from the 4th fdatasync (the 2nd commit's samples: 1st the layout, 2nd and 3rd the 1st commit) or the 5th
+    (its row): ``acq record`` fails in one line, exit 1, counting only the 1st commit — the file holds that, and the
+    2nd commit's row if it was written before its sync failed — and ``acq check`` repairs the file durably."""
     calls = {"n": 0}
     real_fdatasync = os.fdatasync
 
@@ -109,15 +108,15 @@ def test_a_failed_sync_fails_the_recording_keeping_the_last_durable_commit(
 
     monkeypatch.setattr(os, "fdatasync", failing_disk)
     out = tmp_path / "out"
-    run = run_cli(capsys, "record", "--profile", str(seeded_profile(tmp_path)), "--fast", "--duration", "30",
-                  "--no-analyze", "--out", str(out))  # 4 commits: 3 of 2 MiB (recorder.FLUSH_BYTES), one at the end
+    run = run_cli(capsys, "record", "--profile", str(seeded_profile(tmp_path)), "--fast", "--duration", "10",
+                  "--no-analyze", "--out", str(out))
     monkeypatch.undo()
     (path,) = out.glob("*.h5")
     with open_read(path) as f:
-        durable = _row_totals(f["flushes"][failing - 4])  # the last row a sync that returned covered
+        first = _row_totals(f["flushes"][0])
         rows = f["flushes"].shape[0]
         last = _row_totals(f["flushes"][-1])
-    kept, encoder = durable[0], durable[2]
+    kept, encoder = first[0], first[2]
     lines = run.err.strip().splitlines()
     assert run.code == 1 and [ln for ln in lines if ln.startswith("acq:")] == lines[-1:] == [
         f"acq: failed: I/O error: {path} — {kept / RATE_HZ:.1f} s kept ({kept} current and {encoder} encoder samples "
@@ -125,7 +124,7 @@ def test_a_failed_sync_fails_the_recording_keeping_the_last_durable_commit(
     assert calls["n"] == failing  # nothing written or synced after the failure
     s = load(path)
     assert s.status == "recording"  # abandoned at the failure: no footer, the /flushes rows say what is stored
-    assert rows == failing - 2  # the row whose sync failed is in the page cache here (a real EIO may have lost it)
+    assert rows == failing - 3  # the row whose sync failed is in the page cache here (a real EIO may have lost it)
     assert (s.current.sample_count, s.encoder.index.size) == (last[0], last[2])
     np.testing.assert_array_equal(s.current.sample_index(), np.arange(s.current.sample_count))
 

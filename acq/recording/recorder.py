@@ -270,7 +270,6 @@ class Recorder:
         last_flush = last_data = time.monotonic()
         while len(done) < len(readers):
             time.sleep(HANDOFF_S)
-            writer.poll()  # a failed sync of the last commit stops the recording now, not at the next commit
             now = time.monotonic()
             run: list[EncoderBlock] = []  # encoder blocks queued one after another: checked and stored as one
             while len(done) < len(readers):  # one item at a time: what an error leaves queued, _shut_down stores
@@ -294,14 +293,14 @@ class Recorder:
                     self._store(kind, item, writer, checker, counts)
                     last_data = now
                 if writer.pending_bytes >= FLUSH_BYTES:
-                    writer.commit()
+                    writer.flush()
                     last_flush = now
             self._store_run(run, writer, checker, counts)
             if now - last_data > STALL_TIMEOUT_S:
                 silent = [n for n, r in readers.items() if n not in done]
                 raise DeviceError(f"no data from {', '.join(silent)} for {STALL_TIMEOUT_S:g} s")
             if now - last_flush >= FLUSH_INTERVAL_S or writer.pending_bytes >= FLUSH_BYTES:
-                writer.commit()
+                writer.flush()
                 last_flush = now
 
     def _store_run(self, run: list[EncoderBlock], writer: SessionWriter, checker: StreamChecker,

@@ -18,7 +18,6 @@ import errno
 import glob
 import os
 import tempfile
-import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -93,48 +92,6 @@ def sync_file(path: Path | str) -> None:
         os.fsync(fd)
     finally:
         os.close(fd)
-
-
-class BackgroundSync:
-    """``os.fdatasync`` of a descriptor in a thread of its own, one at a time: the caller goes on while the disk
-    writes (fdatasync lets go of the GIL) and takes the outcome later. Only the system call runs in that thread; the
-    caller must not write the file (nor call HDF5 on it) between :meth:`start` and :meth:`wait`, so the sync covers
-    exactly what was written before it started."""
-
-    def __init__(self) -> None:
-        self._thread: threading.Thread | None = None
-        self._error: OSError | None = None
-
-    def start(self, fd: int) -> None:
-        """Sync ``fd`` in a new thread (the previous sync must have been waited for)."""
-        assert self._thread is None, "a sync is running"
-        self._error = None
-        self._thread = threading.Thread(target=self._run, args=(fd,), name="fdatasync", daemon=True)
-        self._thread.start()
-
-    def _run(self, fd: int) -> None:
-        try:
-            os.fdatasync(fd)
-        except OSError as e:
-            self._error = e
-
-    @property
-    def running(self) -> bool:
-        """A sync was started and not waited for yet."""
-        return self._thread is not None
-
-    def done(self) -> bool:
-        """The sync started has returned (or none runs): :meth:`wait` will not block."""
-        return self._thread is None or not self._thread.is_alive()
-
-    def wait(self) -> None:
-        """Wait for the sync started (if any); raise its :class:`OSError` if it failed."""
-        if self._thread is None:
-            return
-        self._thread.join()
-        self._thread, error, self._error = None, self._error, None
-        if error is not None:
-            raise error
 
 
 #: What a folder's sync may answer where the file system or the folder's permissions do not let a folder be synced

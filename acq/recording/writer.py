@@ -35,7 +35,7 @@ from acq.recording.h5safe import abandon
 from acq.recording.layout import (EVENT_DTYPE, FLUSH_DTYPE, FORMAT, FORMAT_VERSION, LIBVER, NO_COUNT, OPTIONAL_ENCODER,
                                   Status, committed_rows, utc_now_iso, write_footer)
 from acq.recording.pending import Column, PendingColumns
-from acq.recording.storage import BackgroundSync, cause_of, free_bytes, storage_error, sync_file, sync_folder
+from acq.recording.storage import cause_of, free_bytes, storage_error, sync_file, sync_folder
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from acqcore.errors import ConfigError, StorageError
@@ -99,16 +99,8 @@ class SessionWriter:
         self._pending = PendingColumns()
         self._nans = np.zeros(0)
         self._rate_hz = float(current_info.rate_hz)
-        #: Totals whose ``/flushes`` row a returned sync covered (on the disk, and counted there): the only counts ever
-        #: reported or written in the footer.
+        #: Totals on disk after the last successful flush: the only counts ever reported or written in the footer.
         self.committed = {"current_samples": 0, "current_blocks": 0, "encoder_samples": 0, "events": 0}
-        self._written = dict(self.committed)  # totals of the samples written into the file
-        self._syncer = BackgroundSync()
-        #: What the running sync covers: the totals of the row written before it (None: none), and the totals and row
-        #: of the samples written before it (None: none), whose row is due once it returned.
-        self._in_flight: tuple[dict[str, int] | None, tuple[dict[str, int], np.ndarray] | None] = (None, None)
-        self._row_due: tuple[dict[str, int], np.ndarray] | None = None  # its samples synced, not written yet
-        self._row_written: dict[str, int] | None = None  # the totals of a row written, no sync covering it started
         #: The write error that stopped this writer (None while writing works).
         self.failure: StorageError | None = None
         self._abandoned = False
@@ -280,113 +272,40 @@ class SessionWriter:
         self._pending.add("events", row, EVENT_DTYPE)
 
     def flush(self) -> None:
-        """Commit everything appended so far and wait until it is committed: :meth:`commit`, its sync waited for, then
-        the ``/flushes`` row counting it written and synced here — durable and visible when this returns.
-        Raises as :meth:`commit` does."""
-        self.commit()
-        self._await_sync()
-        self._sync_rows()
+        """Write everything appended so far, then a ``/flushes`` row committing it; make it durable and visible, in
+        that order (the samples on the disk before the row that counts them, the row before this returns).
 
-    def commit(self) -> None:
-        """Commit everything appended so far without waiting for the disk: wait for the previous commit's sync (if
-        still running); write the pending rows, and the ``/flushes`` row of the previous commit's samples if
-        :meth:`poll` has not; ``H5Fflush``; fdatasync in the background (:class:`BackgroundSync`). A row is written
-        only once the sync of the samples it counts has returned (by :meth:`poll` or the next commit), and counts in
-        :attr:`committed` only once a sync that covered the row itself returned.
-
-        Raises :class:`StorageError` ("disk full: <file>") when the disk lacks room for it (checked first: only the
-        rows already due are written and synced), the file vanished, HDF5 reports a write error or a sync fails (the
-        previous one's, found here, or this one's, found by the next call); the writer is then stopped
-        (:attr:`failure`) and only what :attr:`committed` counts is kept. Does nothing after a failure.
+        Raises :class:`StorageError` ("disk full: <file>") when the disk lacks room for it (checked first,
+        nothing written), the file vanished, HDF5 reports a write error or a sync fails; the writer is then stopped
+        (:attr:`failure`) and only what earlier flushes committed counts. Does nothing after a failure.
         """
         if self.failure is not None:
             return
-        self._await_sync()
         pending = self._pending
-        if not pending.nbytes and self._row_due is None and self._row_written is None:
-            return
         added = {"current_samples": pending.count(f"current/{self._channels[0]}_A"),
                  "current_blocks": pending.count("current/blocks/count"),
                  "encoder_samples": pending.count("encoder/index"), "events": pending.count("events")}
-        if not self._has_room(pending.nbytes):
-            self._sync_rows()  # the samples synced already are counted on the disk
-            self._stop(StorageError(f"disk full: {self.path}"), abandon_file=False)
-        totals = {k: self._written[k] + added[k] for k in self._written}
-        samples = (totals, self._flush_row(totals)) if pending.nbytes else None
-        fd, flushed = self._file.id.get_vfd_handle(), self._row_written
+        self._check_room(pending.nbytes)
+        totals = {k: self.committed[k] + added[k] for k in self.committed}
+        row = np.array([(time.monotonic_ns(), totals["current_samples"], totals["current_blocks"],
+                         totals["encoder_samples"], totals["events"])], dtype=FLUSH_DTYPE)
         try:
-            self._append_row_due()
             pending.write_to(self._columns)
             self._file.flush()
-        except Exception as e:  # noqa: BLE001 - h5py reports write errors as OSError or RuntimeError
-            if flushed is not None:  # a row :meth:`poll` wrote is in the file: counted if a sync makes it durable
-                with contextlib.suppress(OSError):
-                    os.fdatasync(fd)
-                    self.committed = flushed
-            self._stop(storage_error(e, self.path), abandon_file=True)
-        self._written, self._in_flight, self._row_written = totals, (self._row_written, samples), None
-        self._syncer.start(fd)
-
-    def poll(self) -> None:
-        """Take the outcome of a background sync that has returned, without waiting: the row it covered counts in
-        :attr:`committed`, the row of the samples it covered is written (``H5Fflush``: visible, synced by the next
-        commit); a failed sync stops the writer and raises :class:`StorageError` as :meth:`commit` does."""
-        if self.failure is None and self._syncer.done() and self._syncer.running:
-            self._await_sync()
-            if self._row_due is not None:
-                try:
-                    self._append_row_due()
-                    self._file.flush()
-                except Exception as e:  # noqa: BLE001 - as in commit
-                    self._stop(storage_error(e, self.path), abandon_file=True)
-
-    def _await_sync(self) -> None:
-        """Wait for the running sync: its row (if it covered one) is committed, its samples' row is due."""
-        if not self._syncer.running:
-            return
-        counted, synced = self._in_flight
-        try:
-            self._syncer.wait()
-        except OSError as e:
-            self._stop(storage_error(e, self.path), abandon_file=True)
-        if counted is not None:
-            self.committed = counted
-        self._row_due = synced
-
-    def _append_row_due(self) -> None:
-        """Append the row due (the sync of its samples has returned) to ``/flushes``, not flushed yet."""
-        if self._row_due is not None:
-            totals, row = self._row_due
-            self._columns["flushes"].append(row)
-            self._row_written, self._row_due = totals, None
-
-    def _sync_rows(self) -> None:
-        """Write the row due, flush and sync here (no sync running): every row written is committed."""
-        if self.failure is not None or (self._row_due is None and self._row_written is None):
-            return
-        try:
-            self._append_row_due()
+            self._sync()
+            self._columns["flushes"].append(row)  # only after the samples it counts are on disk
             self._file.flush()
             self._sync()
-        except Exception as e:  # noqa: BLE001 - as in commit
+        except Exception as e:  # noqa: BLE001 - h5py reports write errors as OSError or RuntimeError
             self._stop(storage_error(e, self.path), abandon_file=True)
-        assert self._row_written is not None
-        self.committed, self._row_written = self._row_written, None
-
-    @staticmethod
-    def _flush_row(totals: dict[str, int]) -> np.ndarray:
-        """The ``/flushes`` row of ``totals``, stamped now (when its samples are written)."""
-        return np.array([(time.monotonic_ns(), totals["current_samples"], totals["current_blocks"],
-                          totals["encoder_samples"], totals["events"])], dtype=FLUSH_DTYPE)
+        self.committed = totals
 
     def _sync(self) -> None:
         """fdatasync the open file through HDF5's own descriptor (the sec2 driver's,
-        :meth:`h5py.h5f.FileID.get_vfd_handle`), in this thread: what HDF5 flushed is on the disk when this returns."""
+        :meth:`h5py.h5f.FileID.get_vfd_handle`): what HDF5 flushed is on the disk when this returns."""
         os.fdatasync(self._file.id.get_vfd_handle())
 
-    def _has_room(self, payload_bytes: int) -> bool:
-        """Whether the disk keeps room for a flush of ``payload_bytes``; a vanished file or an unreadable file system
-        stops the writer."""
+    def _check_room(self, payload_bytes: int) -> None:
         try:
             inode = os.stat(self.path).st_ino
         except OSError:
@@ -397,13 +316,13 @@ class SessionWriter:
             free = free_bytes(self.path.parent)
         except OSError as e:
             self._stop(storage_error(e, self.path), abandon_file=True)
-        return free >= 2 * payload_bytes + self._chunk_bytes + RESERVE_BYTES
+        if free < 2 * payload_bytes + self._chunk_bytes + RESERVE_BYTES:
+            self._stop(StorageError(f"disk full: {self.path}"), abandon_file=False)
 
     def _stop(self, error: StorageError, *, abandon_file: bool) -> None:
         """Stop writing for good: drop what is pending, close the file, raise ``error``."""
         self.failure = error
         self._pending.clear()
-        self._row_due = self._row_written = None
         if abandon_file:
             self._abandoned = True
             abandon(self._file)
@@ -425,45 +344,31 @@ class SessionWriter:
         tell readers (and ``acq check``) what is stored.
         """
         try:
-            self.commit()  # what is pending, with the row of the last commit's samples
-            self._await_sync()  # those samples are on the disk: their row is due
+            self.flush()
         except StorageError:
             pass
-        room = True
-        with contextlib.suppress(OSError):
-            room = free_bytes(self.path.parent) >= RESERVE_BYTES // 4
-        counts = self.committed
-        if self.failure is None and not room:
-            with contextlib.suppress(StorageError):
-                self._sync_rows()  # no room for a footer: the /flushes rows say what is stored
-        elif self.failure is None:
-            try:
-                self._append_row_due()  # made durable by the footer's sync, with it
-            except Exception as e:  # noqa: BLE001 - as in commit
-                with contextlib.suppress(StorageError):
-                    self._stop(storage_error(e, self.path), abandon_file=True)
-            counts = self._row_written or self.committed
         if self.failure is not None:
             status, stop_reason = "failed", f"{self.failure} — {self.seconds_kept:.1f} s kept"
-            counts = self.committed
         else:
             self._file.close()
-        if self._abandoned or not room:
+        if self._abandoned:
             return
+        with contextlib.suppress(OSError):
+            if free_bytes(self.path.parent) < RESERVE_BYTES // 4:
+                return  # no room for a footer: the /flushes rows say what is stored
         f = self._reopen()
         try:
-            # only a column longer than what was counted is opened to be cut (the writer knows each length)
-            counted = {name: committed_rows(name, counts) for name in self._columns}
+            # only a column longer than what was committed is opened to be cut (the writer knows each length)
+            counted = {name: committed_rows(name, self.committed) for name in self._columns}
             longer = [name for name, n in counted.items() if n is not None and self._columns[name].length > n]
-            write_footer(f, status, stop_reason, self._filled_optional, counts, longer)
+            write_footer(f, status, stop_reason, self._filled_optional, self.committed, longer)
             f.close()
-            sync_file(self.path)  # after the close (it rewrites the superblock); the last /flushes row with the footer
+            sync_file(self.path)  # after the close: closing rewrites the superblock (no longer open for writing)
         except Exception as e:  # noqa: BLE001 - the footer could not be written (or synced): the flush rows still hold
             abandon(f)
             self.failure = storage_error(e, self.path)
             raise StorageError(f"{self.failure} (footer not written; the samples are stored, acq check repairs "
                                "the file)") from None
-        self.committed = counts
 
     def _reopen(self) -> h5py.File:
         """The closed file opened for the footer; a reader holding it open briefly is waited for (2 s)."""
