@@ -103,6 +103,21 @@ per 4 KiB; the copy is 6 % of it), Fletcher32 9 %, HDF5's copies 5.5 %. Direct c
 numpy) were not built: more passes over the data than HDF5's own checksum. The recorder's figure includes creating
 the file (≈ 3.7 ms CPU, 0.011 of the per CPU ratio), which ``acq record`` does before its recording starts.
 
+Session 13, the commits' syncs off the recording thread (2026-11-30; built on branch wp/s13-sync and reverted there):
+each commit's fdatasync in a thread of its own (only the system call; HDF5 untouched until it returned) covering the
+commit's samples and the previous commit's ``/flushes`` row, written once its samples' sync had returned (with the next
+commit's samples, or at the recorder's next 10 ms tick), the last row synced with the footer: one sync per commit
+instead of two, two at a session's end instead of three; a row still never written before its samples were on the disk.
+Recorder alone, 60 rounds in persistent workers against main 3d6370f (load 11–12), medians of per-round ratios (row at
+the tick / with the next commit): wall 1.06 / 1.06 (quartiles 0.87–1.27, 23 and 25 of 60 faster than main), CPU 1.004 /
+1.009, the recording thread 0.94 / 0.91 (the syncs' writeback is charged to the other thread); an earlier 30 rounds of
+the latter (load 10): wall 0.96 (0.81–1.12), CPU 0.997. This script, ``--repeat 7 --realtime-seconds 1``, 16 pairs
+interleaved with main over the variants (load 5–14): recorder / sim alone a thread per stream, medians, per wall 0.86 →
+0.845, per CPU 0.86 → 0.87; the recorder's rate new/old per pair per wall 0.70–1.43 (median 1.05, 9 of 16 higher), per
+CPU 0.96–1.07 (median 1.00, 8 of 16). No gain: a blocked sync already lets go of the GIL and the readers run meanwhile,
+so only the session's end waits on the disk, and the change saved one short row sync there (0.1–8 ms measured). Not
+merged: it also let a power cut lose up to two commits instead of one.
+
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
 (7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it
