@@ -35,6 +35,18 @@ subset exists to fit apart. Tried, none kept:
   load angle, t from a 10-block jackknife): Coulomb 0.01–0.15 N·m at level 0 (t up to 6.4: 7 of 20 healthy
   windows beyond the t quantile), 0.11–0.32 at level 1, 0.26–0.50 at level 2 — a "poor: friction" from it would
   call a third of healthy windows poor.
+What does work, and what is missing: conditioning H1 on the simulator's own load friction torque (logged from
+``drivers.sim.physics`` during the recording, seed 5 at 300 s, level 1) removes the bias — J_l −1.13 → −0.07 %, K
+−0.34 → +0.14 %, C +19 → +9 % — and tanh(ω_l/0.5) of the true load speed does the same (−0.10 %): the reverse-path
+idea (a nonlinear function of the response as a second input) is right, the regressor is the problem. The load
+speed reconstructed from the motor's equation, ω_l = ω_m·(J_m s² + C s + K)/(C s + K) − T·s/(C s + K), even with the
+true K, J_m, C and low-passed at 100 Hz (0.06 rad/s rms from the truth), takes J_l only to −0.74 % (unfiltered:
+−0.38 %, but 0.63 rad/s off — its own noise pulls), and iterating the fit does not move it. The friction law read
+from the data (the load torque left by the model against that speed, in quantile bins) is not a function of speed
+where it matters: the load rests (|ω_l| < 0.1 rad/s) most of each window and there the friction holds whatever static
+torque there is (gravity). The partial coherence of the speed with tanh(ω̂_l/ε) given the torque, band-averaged, is
+0.05–0.15 without friction and 0.10–0.20 at level 1 (chance 0.03): the output's own share in ω̂_l keeps it from
+being a test.
 """
 
 from __future__ import annotations
