@@ -14,6 +14,39 @@ level not excited): level 0 (no friction): 18 ok, 0 confidently wrong; 0.5: 19 o
 10 wrong (J_l 7, C 3, K 1); 2: 15 ok, 7 wrong (C 6, J_l 1). The friction reads J_l ~1 % low (where the friction's
 torque, correlated with the motion, lifts |H| by 0.5–5 % at 10–52 Hz, bins the fit trusts) and C 20–50 % high,
 while the misfit test at f_a sees the dip's −4.8 % against its 12.6 % limit (seed 5 at 300 s).
+
+Session 13 (2026-12-01; the same 90 windows recorded once, seeds 0–5 × 60…540 s × levels 0/1/2, analysed in a scratch
+copy of main at 3d6370f; counts at level 1 unless said): what the friction does to H1 (seed 5 at 300 s, level 1 and
+2 against 0, same program): the dip at f_a filled (+7…+64 % at 48–56 Hz), the resonance flattened (−18…−28 % at
+104 Hz), +0.7…+2.4 % at 20–44 Hz, coherence down from 0.87 to 0.59/0.31 at 52 Hz. Every 0.5 s Welch segment of
+these windows holds a reversal (the low-passed speed is under 0.5 rad/s 45 % of the time), so no reversal-free
+subset exists to fit apart. Tried, none kept:
+- conditioning H1 on a regressor (Bendat & Piersol's conditioned spectra, bin by bin over the segments) — the
+  Coulomb term's expectation erf(ω_lp/√2σ_v) of the speed low-passed at 5 Hz: 8 wrong (from 10), J_l unchanged
+  (−1.07 against −1.13 %); sign(ω_lp): 9; the statistically linearised vibration term exp(−ω_lp²/2σ²)·v_l with
+  v_l the model's load speed from the torque: J_l −1.08 %; tanh(ω_20Hz/ε) of the speed low-passed at 20 Hz: with
+  ε = 0.5 rad/s (the simulator's own smoothing) 3 wrong, healthy windows J_l +0.1…+0.4 %, one ok → poor; with
+  ε = 0.1 or 2 rad/s: 10 and 8 wrong; 40/10 Hz low-pass at 0.5: 3/7. ε picked by the multiple coherence of the
+  speed with torque and regressor: the coherence differs by 0.002 across ε, seed 5 at 300 s still wrong (J_l
+  −0.83 ± 0.73 %) and the healthy window biased −0.25 %. The friction law's small-speed scale is what matters
+  and no data-derived choice found it;
+- a viscous load friction b_l freed in the fit: b_l 0.02–0.08 N·m·s/rad, J_l unchanged (−1.09 %), 6 wrong;
+- a detector (rigid-body balance of the torque low-passed at 5 Hz on α, erf(ω_lp/√2σ_v), ω, 1, sin/cos of the
+  load angle, t from a 10-block jackknife): Coulomb 0.01–0.15 N·m at level 0 (t up to 6.4: 7 of 20 healthy
+  windows beyond the t quantile), 0.11–0.32 at level 1, 0.26–0.50 at level 2 — a "poor: friction" from it would
+  call a third of healthy windows poor.
+What does work, and what is missing: conditioning H1 on the simulator's own load friction torque (logged from
+``drivers.sim.physics`` during the recording, seed 5 at 300 s, level 1) removes the bias — J_l −1.13 → −0.07 %, K
+−0.34 → +0.14 %, C +19 → +9 % — and tanh(ω_l/0.5) of the true load speed does the same (−0.10 %): the reverse-path
+idea (a nonlinear function of the response as a second input) is right, the regressor is the problem. The load
+speed reconstructed from the motor's equation, ω_l = ω_m·(J_m s² + C s + K)/(C s + K) − T·s/(C s + K), even with the
+true K, J_m, C and low-passed at 100 Hz (0.06 rad/s rms from the truth), takes J_l only to −0.74 % (unfiltered:
+−0.38 %, but 0.63 rad/s off — its own noise pulls), and iterating the fit does not move it. The friction law read
+from the data (the load torque left by the model against that speed, in quantile bins) is not a function of speed
+where it matters: the load rests (|ω_l| < 0.1 rad/s) most of each window and there the friction holds whatever static
+torque there is (gravity). The partial coherence of the speed with tanh(ω̂_l/ε) given the torque, band-averaged, is
+0.05–0.15 without friction and 0.10–0.20 at level 1 (chance 0.03): the output's own share in ω̂_l keeps it from
+being a test.
 """
 
 from __future__ import annotations
