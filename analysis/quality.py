@@ -73,6 +73,11 @@ class Quality:
         Each bin the misfit test judged: its frequency (Hz) and ln|H_model| − ln|H| there, the model as the Welch
         estimator sees it and as the test judges it (the windows' means are of these); empty when the test was not
         made. For the report's picture: the per-bin misfit that agrees with the verdict.
+    faults : tuple of str
+        Those of ``reasons`` that name a fault found in the data — a wrong bench constant or phase sequence, a value
+        an order of magnitude off the nominal (:mod:`analysis.diagnose`), the drive holding a limit
+        (:mod:`analysis.drive_limits`) — whatever the coherence: a record with one is never called not excited
+        (:mod:`acq.offline.excitation_judge`); empty when none was found.
     """
 
     verdict: Verdict
@@ -90,6 +95,7 @@ class Quality:
     third_mode_hz: float | None = None
     misfit_windows: tuple[tuple[float, float, float, float], ...] = ()
     misfit_bins: tuple[tuple[float, float], ...] = ()
+    faults: tuple[str, ...] = ()
 
 
 def assess(
