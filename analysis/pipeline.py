@@ -119,8 +119,9 @@ def _not_excited(quality: Quality, moves: tuple[Move, ...], excited_fraction: fl
                  band_hz: tuple[float, float]) -> Quality:
     """The verdict of a record whose segment selection found fewer than two segments that excite: failed, because
     the joint was not excited — with the clock's findings (facts), without the other reasons, whose advice
-    (interference on the phase current, play in the gear, a wrong constant) judges a fit of data that carry no
-    excitation (a passive 10 s record of a robot at rest read K +468 % and "PWM ripple": the trial)."""
+    (interference on the phase current, play in the gear) judges a fit of data that carry no excitation (a passive
+    10 s record of a robot at rest read K +468 % and "PWM ripple": the trial). Not applied to a record with a fault
+    found in the data (:attr:`analysis.quality.Quality.faults`), which garbles the torque whatever the motion."""
     summary = excitation_summary(sum(m.excited for m in moves), len(moves), band_hz, excited_fraction)
     clock = tuple(r for r in quality.reasons if r.startswith("clock"))
     notes = tuple(r for r in quality.reasons if r.startswith("note: "))
