@@ -68,7 +68,7 @@ def with_fault(quality: Quality, diagnosis: Callable[[], tuple[str | None, str |
         return quality
     fault, doubt = diagnosis()
     if fault is not None:
-        return replace(quality, verdict="failed", reasons=(fault,))
+        return replace(quality, verdict="failed", reasons=(fault,), faults=(fault,))
     if doubt is not None:
         return replace(quality, reasons=(doubt, *quality.reasons))
     return quality
@@ -128,4 +128,4 @@ def with_nominal_fault(quality: Quality, fault: str | None) -> Quality:
     J_m 1/14 of nominal)."""
     if fault is None or quality.verdict == "failed":
         return quality
-    return replace(quality, verdict="poor", reasons=(fault, *quality.reasons))
+    return replace(quality, verdict="poor", reasons=(fault, *quality.reasons), faults=(fault, *quality.faults))

@@ -66,8 +66,8 @@ def unwrap_int32(raw_counts: np.ndarray) -> np.ndarray:
     return raw + np.concatenate(([0], np.cumsum(wraps) * _INT32_SPAN))
 
 
-def longest_gap_free_span(index: np.ndarray) -> Span:
-    """The longest run of consecutive drive cycles in ``index`` (a step of exactly 1 is no gap).
+def gap_free_spans(index: np.ndarray) -> list[Span]:
+    """Every run of consecutive drive cycles in ``index`` (a step of exactly 1 is no gap), in order.
 
     Parameters
     ----------
@@ -79,9 +79,13 @@ def longest_gap_free_span(index: np.ndarray) -> Span:
         raise ValueError("index must be a non-empty 1-D array")
     breaks = np.flatnonzero(np.diff(idx) != 1) + 1
     edges = np.concatenate(([0], breaks, [idx.size]))
-    longest = int(np.argmax(np.diff(edges)))
     gaps = tuple((int(idx[b - 1]), int(idx[b])) for b in breaks)
-    return Span(int(edges[longest]), int(edges[longest + 1]), gaps)
+    return [Span(int(a), int(b), gaps) for a, b in zip(edges[:-1], edges[1:])]
+
+
+def longest_gap_free_span(index: np.ndarray) -> Span:
+    """The longest run of consecutive drive cycles in ``index`` (the first of equals; :func:`gap_free_spans`)."""
+    return max(gap_free_spans(index), key=lambda s: s.count)
 
 
 def speed_from_counts(position_counts: np.ndarray, counts_per_rev: int, period_s: float) -> np.ndarray:

@@ -91,6 +91,7 @@ class Result:
             "quality": {"verdict": self.quality.verdict, "mean_coherence": _num(self.quality.mean_coherence),
                         "excitation_coherence": _num(self.quality.excitation_coherence),
                         "reasons": [*self.quality.reasons, *(f"note: {n}" for n in self.notes)],
+                        "faults": list(self.quality.faults),
                         "encoder_jitter_us": None if self.quality.encoder_jitter_s is None
                         else _num(1e6 * self.quality.encoder_jitter_s),
                         "encoder_time_stamps": self.quality.encoder_time_stamps},
@@ -118,8 +119,9 @@ def _not_excited(quality: Quality, moves: tuple[Move, ...], excited_fraction: fl
                  band_hz: tuple[float, float]) -> Quality:
     """The verdict of a record whose segment selection found fewer than two segments that excite: failed, because
     the joint was not excited — with the clock's findings (facts), without the other reasons, whose advice
-    (interference on the phase current, play in the gear, a wrong constant) judges a fit of data that carry no
-    excitation (a passive 10 s record of a robot at rest read K +468 % and "PWM ripple": the trial)."""
+    (interference on the phase current, play in the gear) judges a fit of data that carry no excitation (a passive
+    10 s record of a robot at rest read K +468 % and "PWM ripple": the trial). Not applied to a record with a fault
+    found in the data (:attr:`analysis.quality.Quality.faults`), which garbles the torque whatever the motion."""
     summary = excitation_summary(sum(m.excited for m in moves), len(moves), band_hz, excited_fraction)
     clock = tuple(r for r in quality.reasons if r.startswith("clock"))
     notes = tuple(r for r in quality.reasons if r.startswith("note: "))
@@ -188,12 +190,14 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     scale_fault = nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95)  # a unit or scale mistake
     quality = with_nominal_fault(quality, scale_fault)
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
-    if frf.selection is not None and not frf.selection.applied and not sig.clock.failure:  # a failed clock: its own
+    if frf.selection is not None and not frf.selection.applied and not sig.clock.failure and not quality.faults:
+        # a failed clock keeps its own reasons; so does a fault found in the data (a wrong constant garbles the
+        # torque, and no segment then excites: the fault, not the motion, is why — pole_pairs 8 stated 4, seed 5)
         quality = _not_excited(quality, moves, frf.selection.excited_fraction, select)  # type: ignore[arg-type]
     limited = drive_limit_reason(rec)  # the drive held a limit: at best poor, whatever else was found
     if limited is not None:
         quality = replace(quality, verdict="failed" if quality.verdict == "failed" else "poor",
-                          reasons=(limited, *quality.reasons))
+                          reasons=(limited, *quality.reasons), faults=(limited, *quality.faults))
     return Result(fit=fit, quality=quality, clock=sig.clock, frf=frf,
                   figures=figure_data(sig.t_s, sig.torque_Nm, sig.speed_rad_s, frf, fit,
                                       phase_valid=phase_is_meaningful(residual), misfit_band_hz=quality.misfit_band_hz,

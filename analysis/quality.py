@@ -73,6 +73,11 @@ class Quality:
         Each bin the misfit test judged: its frequency (Hz) and ln|H_model| − ln|H| there, the model as the Welch
         estimator sees it and as the test judges it (the windows' means are of these); empty when the test was not
         made. For the report's picture: the per-bin misfit that agrees with the verdict.
+    faults : tuple of str
+        Those of ``reasons`` that name a fault found in the data — a wrong bench constant or phase sequence, a value
+        an order of magnitude off the nominal (:mod:`analysis.diagnose`), the drive holding a limit
+        (:mod:`analysis.drive_limits`) — whatever the coherence: a record with one is never called not excited
+        (:mod:`acq.offline.excitation_judge`); empty when none was found.
     """
 
     verdict: Verdict
@@ -90,6 +95,7 @@ class Quality:
     third_mode_hz: float | None = None
     misfit_windows: tuple[tuple[float, float, float, float], ...] = ()
     misfit_bins: tuple[tuple[float, float], ...] = ()
+    faults: tuple[str, ...] = ()
 
 
 def assess(
@@ -224,10 +230,13 @@ def assess(
                 if few is None else f"but {few}")))
 
     ci_rel = {name: rel_halfwidth(fit, name) for name in fit.fitted}
+    undetermined = _undetermined(fit) if fit.status != "failed" else None
+    if undetermined is not None:
+        findings.append(("failed", undetermined))
     for name, (poor, failed) in {"K_Nm_per_rad": (th.ci_K_poor, th.ci_K_failed),
                                  "Jm_kgm2": (th.ci_J_poor, th.ci_J_failed),
                                  "Jl_kgm2": (th.ci_J_poor, th.ci_J_failed)}.items():
-        if name in ci_rel and fit.status != "failed":
+        if name in ci_rel and fit.status != "failed" and np.isfinite(ci_rel[name]):  # else: undetermined, said
             level = grade(-ci_rel[name], -poor, -failed)
             if level != "ok":
                 findings.append((level, f"{PARAM_LABELS[name][0]} is known only to ±{100 * ci_rel[name]:.1f} % (95 %)"))
@@ -267,6 +276,18 @@ def assess(
         misfit_windows=judged,
         misfit_bins=bins,
     )
+
+
+def _undetermined(fit: FitResult) -> str | None:
+    """Why the fitted parameters whose 95 % interval is not finite are not determined (None when every one is): the
+    fit's covariance is infinite when a refit on part of the data diverged (:func:`analysis.fit.fit_two_mass`)."""
+    names = [PARAM_LABELS[n][0] for n in fit.fitted if not all(np.isfinite(b) for b in fit.ci95[n])]
+    if not names:
+        return None
+    listed = names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+    return (f"{listed} {'is' if len(names) == 1 else 'are'} not determined (95 % interval up to infinity): a refit on "
+            "part of the data — the record less one block (the jackknife behind the intervals) or the resonance read "
+            "from H2 — diverged, so the fit is not stable under the data")
 
 
 def _jitter_findings(frf: FrequencyResponse, fit: FitResult, in_band: np.ndarray, jitter: EncoderJitter,

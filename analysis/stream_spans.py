@@ -1,7 +1,8 @@
 """Stage one of the signal chain: the gap-free spans of both streams, the clock relating them, and the speed on the
 encoder's instants (design §4, §5.1).
 
-The longest gap-free runs of the encoder and of the DAQ, the motor angle at k·T (moved there with the drive's time
+The gap-free runs of the encoder and of the DAQ in which both streams have data the longest
+(:mod:`analysis.shared_runs`), the motor angle at k·T (moved there with the drive's time
 stamps when they help, :mod:`analysis.sample_instants`), the clock fit (:mod:`analysis.clocks`) and the speed by
 backward difference (:mod:`analysis.encoder`), on the instants where the current covers them.
 """
@@ -22,6 +23,7 @@ from analysis.clocks import fit_clock
 from analysis.quantisation_lock import NOTED_LOCKED_SHARE, locked_share
 from analysis.recording import CommandedProfile, Recording
 from analysis.sample_instants import EncoderJitter
+from analysis.shared_runs import daq_runs, shared_runs
 
 
 @dataclass(frozen=True)
@@ -37,7 +39,8 @@ class Spans:
     speed_rad_s : ndarray
         Motor speed at ``t_s``, rad/s (backward difference).
     current_a : dict of str → ndarray
-        The phase currents of the longest gap-free DAQ run within the encoder span, A.
+        The phase currents of the gap-free DAQ run used (:func:`analysis.shared_runs.shared_runs`), within the encoder
+        span, A.
     n0 : int
         DAQ sample index of the first sample of ``current_a``.
     angle : callable
@@ -61,7 +64,8 @@ class Spans:
     notes: list[str]
 
 def spans_and_clock(rec: Recording, chain: SignalChain = SignalChain()) -> Spans:
-    """The longest gap-free spans of both streams, the clock relating them (fitted from the data when
+    """The gap-free spans of both streams that share the most time (:func:`analysis.shared_runs.shared_runs`), the
+    clock relating them (fitted from the data when
     ``chain.align``, else both streams taken as started together), and the speed on the encoder instants
     where the current covers them (away from the ends by what ``chain``'s resampling needs).
 
@@ -72,16 +76,22 @@ def spans_and_clock(rec: Recording, chain: SignalChain = SignalChain()) -> Spans
     """
     _validate(rec, chain.torque_method)
     notes: list[str] = []
-    span = encoder.longest_gap_free_span(rec.encoder_index)
+    host = _host(rec)
+    span, run = shared_runs(rec, host)
     cycles = rec.encoder_index[span.start:span.stop]
     if span.gaps:
-        notes.append(f"encoder: {len(span.gaps)} gap(s), first after cycle {span.gaps[0][0]}: using the longest "
-                     f"gap-free span {cycles[0] * rec.period_s:.3f}–{cycles[-1] * rec.period_s:.3f} s")
+        longest = span.count == encoder.longest_gap_free_span(rec.encoder_index).count
+        notes.append(f"encoder: {len(span.gaps)} gap(s), first after cycle {span.gaps[0][0]}: using the "
+                     f"{'longest ' * longest}gap-free span {cycles[0] * rec.period_s:.3f}–"
+                     f"{cycles[-1] * rec.period_s:.3f} s{_shared(longest, 'current')}")
     if cycles.size < 8:
         raise ValueError(f"only {cycles.size} gap-free encoder samples")
-    n0, lo, hi, daq_note = _daq_run(rec)
-    if daq_note:
-        notes.append(daq_note)
+    n0, lo, hi = run.first_index, run.start, run.stop
+    runs = daq_runs(rec)
+    if len(runs) > 1:
+        longest = run.count == max(r.count for r in runs)
+        notes.append(f"current: {len(runs) - 1} gap(s) in the DAQ sample count; using the {'longest ' * longest}"
+                     f"gap-free run, samples {n0}–{n0 + run.count - 1}{_shared(longest, 'encoder')}")
     current = {name: a[lo:hi] for name, a in rec.current_a.items()}
     theta, jitter = _angle_on_grid(rec, span, notes)
     jitter = replace(jitter, locked_share=locked_share(rec.position_counts[span.start:span.stop]))
@@ -89,7 +99,7 @@ def spans_and_clock(rec: Recording, chain: SignalChain = SignalChain()) -> Spans
         notes.append(_repeating_quantisation_note(jitter.locked_share, rec.profile))
     angle = encoder.angle_spline(int(cycles[0]), rec.period_s, theta)
     if chain.align:
-        clock = fit_clock(current["i_a"], rec.rate_hz, n0, angle, rec.pole_pairs, _host(rec))
+        clock = fit_clock(current["i_a"], rec.rate_hz, n0, angle, rec.pole_pairs, host)
         if not rec.host_clock_shared:
             notes.append("clock: the streams' time stamps are not on one host clock; aligned from the data alone")
         notes.extend(clock.notes)
@@ -184,24 +194,10 @@ def _angle_on_grid(rec: Recording, span: encoder.Span, notes: list[str]) -> tupl
     return moved, jitter
 
 
-def _daq_run(rec: Recording) -> tuple[int, int, int, str]:
-    """Longest gap-free run of DAQ blocks: (sample index of its first sample, array start, stop, note)."""
-    n = rec.current_a["i_a"].size
-    if rec.block_first_index is None or rec.block_count is None or rec.block_first_index.size == 0:
-        return 0, 0, n, ""
-    first = np.asarray(rec.block_first_index, dtype=np.int64)
-    count = np.asarray(rec.block_count, dtype=np.int64)
-    starts = np.concatenate(([0], np.cumsum(count)[:-1]))
-    breaks = np.flatnonzero(first[1:] != first[:-1] + count[:-1]) + 1
-    if breaks.size == 0:
-        return int(first[0]), 0, n, ""
-    edges = np.concatenate(([0], breaks, [first.size]))
-    sizes = [int(count[a:b].sum()) for a, b in zip(edges[:-1], edges[1:])]
-    best = int(np.argmax(sizes))
-    a = int(edges[best])
-    note = (f"current: {breaks.size} gap(s) in the DAQ sample count; using the longest gap-free run, "
-            f"samples {first[a]}–{first[a] + sizes[best] - 1}")
-    return int(first[a]), int(starts[a]), int(starts[a]) + sizes[best], note
+def _shared(longest: bool, other: str) -> str:
+    """What a note adds when the run used of a stream with gaps is not its longest: the longest the ``other`` stream
+    shares (:func:`analysis.shared_runs.shared_runs`)."""
+    return "" if longest else f", the longest that the {other}'s data share"
 
 
 def _host(rec: Recording) -> tuple[float, float] | None:

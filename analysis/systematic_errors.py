@@ -250,8 +250,12 @@ def spread_beyond_fit(jac: np.ndarray, covariance: np.ndarray, fitted: np.ndarra
     Returns
     -------
     ndarray, shape (n, n) or (2n, 2n)
-        Not finite where the covariance is not (those bins cannot be judged).
+        NaN between the bins beyond the fit when the covariance is not finite (a refit diverged, the intervals are
+        undetermined: those bins cannot be judged), 0 in every row and column of a fitted bin.
     """
-    rows = np.concatenate([np.where(fitted[:, None], 0.0, part) for part in ([jac.real, jac.imag] if phase
-                                                                              else [jac.real])])
-    return rows @ covariance @ rows.T
+    beyond = np.tile(~np.asarray(fitted, dtype=bool), 2 if phase else 1)
+    rows = np.concatenate([jac.real, jac.imag] if phase else [jac.real])[beyond]
+    spread = np.zeros((beyond.size, beyond.size))
+    # not rows·Σ·rowsᵀ with an infinite Σ: its 0·∞ would spread NaN over the fitted bins too, and warn
+    spread[np.ix_(beyond, beyond)] = rows @ covariance @ rows.T if np.all(np.isfinite(covariance)) else np.nan
+    return spread

@@ -106,8 +106,8 @@ def test_json_has_exactly_the_documented_keys_and_is_valid_json(paper_session):
     assert set(d) == {*NAMES, "ci95", "antiresonance_hz", "resonance_hz", "clock", "quality", "options"}
     assert set(d["ci95"]) == set(NAMES) and all(len(v) == 2 for v in d["ci95"].values())
     assert set(d["clock"]) == {"offset_s", "drift_ppm", "residual_s", "ambiguous_by_s", "failure"}
-    assert set(d["quality"]) == {"verdict", "mean_coherence", "excitation_coherence", "reasons", "encoder_jitter_us",
-                                 "encoder_time_stamps"}
+    assert set(d["quality"]) == {"verdict", "mean_coherence", "excitation_coherence", "reasons", "faults",
+                                 "encoder_jitter_us", "encoder_time_stamps"}
     assert d["options"]["params"] == "K" and d["options"]["band_hz"] == [10.0, 400.0]
     assert d["Jm_kgm2"] == nominal.Jm_kgm2
     json.loads(json.dumps(d, allow_nan=False))

@@ -246,14 +246,36 @@ def test_a_partial_analysis_says_so_on_screen_and_in_its_reasons_naming_the_span
     assert partial_notes(replace(session, damage=())) == []
 
 
-def test_holes_that_leave_too_little_of_both_streams_together_fail_naming_the_damage(
+def test_holes_in_both_streams_use_the_longest_stretch_they_share_not_each_ones_longest(
         recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """The longest gap-free runs, current 4.9–10 s and encoder 0–5.0 s, barely overlap: no number, and the error
-    (here the analysis's own: too little motion in what is left) says what was left out."""
+    """Each stream's longest gap-free run, current 4.9–10 s and encoder 0–5.0 s, lies across the other's hole: they
+    share 0.1 s, and the analysis (taking each longest apart) failed with too little motion in what was left. The
+    current before its hole and the encoder before its hole share 0–4.8 s: that stretch is analysed."""
     path = _copy(recorded, tmp_path / "holes.h5")
     _flip_a_byte_in_chunk(path, 48)
     _flip_a_byte_in_chunk(path, 10, "encoder/index")
     spans = "current: samples 122 880–125 439 unreadable; encoder: samples 5 000–5 499 unreadable"
+    run = run_cli(capsys, "analyze", str(path), "--partial", "--no-report")
+    assert run.code == 0, run.err
+    doc = json.loads((tmp_path / "holes.result.json").read_text())
+    reasons = doc["quality"]["reasons"]
+    assert reasons[0] == f"note: partial: only the readable part of a damaged session was analysed; left out: {spans}"
+    assert "note: encoder: 1 gap(s), first after cycle 4999: using the longest gap-free span 0.000–4.999 s" in reasons
+    assert ("note: current: 1 gap(s) in the DAQ sample count; using the gap-free run, samples 0–122879, the longest "
+            "that the encoder's data share") in reasons
+    truth, (low, high) = doc["simulated_truth"]["K_Nm_per_rad"], doc["ci95"]["K_Nm_per_rad"]
+    assert doc["quality"]["verdict"] == "ok" and low < truth < high and abs(doc["K_Nm_per_rad"] / truth - 1) < 0.01
+
+
+def test_holes_that_leave_too_little_of_both_streams_together_fail_naming_the_damage(
+        recorded: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Every other 0.5 s chunk of the encoder's cycle index lost: no gap-free 0.5 s stretch of it is long enough for two
+    Welch segments — no number, and the error (the analysis's own) says what was left out."""
+    path = _copy(recorded, tmp_path / "holes.h5")
+    for chunk in range(1, 20, 2):
+        _flip_a_byte_in_chunk(path, chunk, "encoder/index")
+    spans = "; ".join(f"encoder: samples {500 * c:,}–{500 * c + 499:,} unreadable".replace(",", " ")
+                      for c in range(1, 20, 2))
     run = run_cli(capsys, "analyze", str(path), "--partial", "--no-report")
     assert run.code == 2 and not (tmp_path / "holes.result.json").exists()
     assert run.err.startswith(f"acq: error: {path}: ") and run.err.count("\n") == 1

@@ -39,9 +39,14 @@ def test_acq_analyze_of_a_window_the_monitor_filed_not_excited_gives_the_same_an
         capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
     rows = _monitor(capsys, tmp_path / "m", "--window", "4", "--every", "5", "--for", "10s")
     first = rows[0]
-    reasons = ["0 of the window's 5 moves put torque into 10…400 Hz beyond chance; time that does: 0 % of the window",
-               "0 of 14 Welch segments excite — in-band S/N above 1.33, chance's 99 % point, the largest 1.00; the "
-               "selection needs 2"]
+    why = ["0 of the window's 5 moves put torque into 10…400 Hz beyond chance; time that does: 0 % of the window",
+           "0 of 14 Welch segments excite — in-band S/N above 1.33, chance's 99 % point, the largest 1.00; the "
+           "selection needs 2"]
+    # the analysis' notes follow (the judgement dropped them: what the chain did is a fact, not advice on a fit)
+    reasons = [*why, "note: clock: the angle stage failed (too little motion); using the frequency stage",
+               "note: using 0.062–3.972 s, where both streams have data",
+               "note: current: slow offset removed, moving by 962 mA (a drifting sensor offset, or torque held while "
+               "the motor stood still: one phase cannot tell them apart)"]
     assert (first["verdict"], first["K"], first["reasons"], first["error"]) == ("not excited", None, reasons, None)
     run = run_cli(capsys, "analyze", str(first["path"]), "--json", "--no-report")
     assert run.code == 0, run.err
@@ -54,7 +59,7 @@ def test_acq_analyze_of_a_window_the_monitor_filed_not_excited_gives_the_same_an
     table = run_cli(capsys, "analyze", str(first["path"]), "--no-report")
     assert table.code == 0 and "verdict not excited" in table.out and "1.039e+04" not in table.out
     view = run_cli(capsys, "view", str(first["path"]), "--screenshot", str(tmp_path / "v.png"))
-    assert (view.code, view.err) == (2, f"acq: error: {first['path']}: not excited: {'; '.join(reasons)}\n")
+    assert (view.code, view.err) == (2, f"acq: error: {first['path']}: not excited: {'; '.join(why)}\n")
 
 
 def test_slow_moves_are_not_excited(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
@@ -92,3 +97,28 @@ def test_the_coherence_of_unrelated_signals_and_the_segments_a_limit_needs() -> 
 
     assert [round(chance_coherence(n), 3) for n in (1, 2, 3, 4, 10)] == [1.0, 0.95, 0.776, 0.632, 0.283]
     assert (segments_to_tell(0.72), segments_to_tell(0.3), segments_to_tell(0.95)) == (4, 10, 3)
+
+
+def test_a_passive_record_with_a_wrong_bench_constant_fails_on_it_and_is_not_called_not_excited(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """The robot of seed 5 excites the joint (``ok``, K within 2 % on a right bench: tests/test_monitor.py), but the
+    motor has 8 pole pairs where the bench says 4: the torque read through the wrong electrical angle explains none
+    of the speed (0 of 38 Welch segments excite, mean coherence 0.08). The analysis named the constant, and then both
+    the segment selection and the judgement of a record without a profile filed it ``not excited`` with "record while
+    the machine runs fast moves" — sending the technician to the robot program instead of the bench file."""
+    bench = tmp_path / "bench.toml"
+    bench.write_text(ROBOT.read_text().replace("seed = 0 ", "seed = 5 ") + "\npole_pairs = 8\n")  # [sim] is last
+    run = run_cli(capsys, "record", "--bench", str(bench), "--duration", "10", "--fast", "--out", str(tmp_path / "s"))
+    assert run.code == 0, run.err
+    (result,) = (tmp_path / "s").glob("*.result.json")
+    quality = json.loads(result.read_text())["quality"]
+    fault = ("the current turns 2.03× faster than pole_pairs·ω (pole_pairs = 4, counts_per_rev = 131072): check "
+             "[encoder] counts_per_rev = 65536")
+    assert (quality["verdict"], quality["reasons"][0]) == ("failed", fault)  # was: not excited, "0 of the record's
+    assert quality["faults"] == [fault]  # 13 moves put torque into 10…400 Hz beyond chance …", the fault left out
+    assert quality["mean_coherence"] < 0.1  # weak: the judgement alone would call it not excited
+    assert [r for r in quality["reasons"][1:] if not r.startswith("note: ")] == []  # the fault alone, then the notes
+    assert "note: using 0.039–9.972 s, where both streams have data" in quality["reasons"]
+    (session,) = (tmp_path / "s").glob("*.h5")
+    again = run_cli(capsys, "analyze", str(session), "--json", "--no-report")
+    assert again.code == 0 and json.loads(again.out)["quality"]["reasons"] == quality["reasons"]

@@ -143,23 +143,46 @@ def test_a_mapped_statusword_is_watched_for_internal_limit_spans() -> None:
     assert decoder.take_limit_spans(final=True) == []
 
 
-def test_a_listening_drive_held_at_its_torque_limit_gives_events_from_the_masters_tpdo(tmp_path: Path) -> None:
-    """The robot's drive told 0x6072 = 300 ‰ of 7.3 N·m (2.19 N·m) once recording runs: its statusword in the master's
-    TPDO sets bit 11 while the moves ask more, and acq (sending nothing) records each span as an event."""
+def _recorded_at_torque_limit(folder: Path, duration_s: float) -> Path:
+    """A listening record of the robot (seed :data:`EXCITING_SEED`) whose drive is told 0x6072 = 300 ‰ of 7.3 N·m
+    (2.19 N·m) once recording runs: its statusword in the master's TPDO sets bit 11 while the moves ask more."""
     bench = _drive(ROBOT_CANOPEN)
     current, drive = open_bench(bench)
 
-    def limit_torque(kind: str, block: object, done: list[bool] = []) -> None:  # noqa: B006 - once per test
+    def limit_torque(kind: str, block: object, done: list[bool] = []) -> None:  # noqa: B006 - once per record
         if kind == "encoder" and not done:
             drive.sim_node.node.sdo[od.MAX_TORQUE].raw = 300
             done.append(True)
 
-    result = Recorder(bench, None, current, drive, tmp_path, 2.5, listeners=[limit_torque]).run()
+    result = Recorder(bench, None, current, drive, folder, duration_s, listeners=[limit_torque]).run()
     assert result.status == "complete", result.stop_reason
-    events = [e for e in load(result.path).events if limit_span_ns(e) is not None]
+    return result.path
+
+
+def test_a_listening_drive_held_at_its_torque_limit_gives_events_from_the_masters_tpdo(tmp_path: Path) -> None:
+    """The drive held at its torque limit (:func:`_recorded_at_torque_limit`): acq (sending nothing) records each span
+    of bit 11 as an event."""
+    events = [e for e in load(_recorded_at_torque_limit(tmp_path, 2.5)).events if limit_span_ns(e) is not None]
     assert events and all(e.detail.startswith("internal limit active (0x6041 bit 11) from ") and
                           " s after the first SYNC: " in e.detail for e in events)
     assert all(0 < end - start < 2.5e9 for start, end in map(limit_span_ns, events))
+
+
+def test_a_listening_record_at_the_drives_torque_limit_fails_on_it_and_is_not_called_not_excited(
+        tmp_path: Path) -> None:
+    """4 s at the torque limit (:func:`_recorded_at_torque_limit`): the clamped torque explains little of the speed
+    (coherence 0.16…0.55 between f_a and f_r in six runs, 0.11…0.19 in the band) while the robot's moves do put
+    torque into the band (4 of 4, 64 % of the record). The judgement of a record without a profile filed it ``not
+    excited`` ("… but too little between f_a and f_r"), dropping the drive's limit the analysis had named first."""
+    from acq.offline.analyze import analyze_session
+    from acq.offline.excitation_judge import weak_coherence
+
+    quality = analyze_session(_recorded_at_torque_limit(tmp_path, 4.0), write=False).json_dict["quality"]
+    limit = "drive: internal limit active (CiA 402 0x6041 bit 11) in "
+    assert quality["verdict"] in ("poor", "failed") and quality["reasons"][0].startswith(limit), quality["reasons"]
+    assert quality["faults"] == quality["reasons"][:1]
+    assert weak_coherence(quality) is not None  # weak: the judgement alone would call it not excited
+    assert any(r.startswith("note: using ") for r in quality["reasons"])
 
 
 def test_a_stalled_host_reading_bunched_frames_invents_no_lost_wrap() -> None:

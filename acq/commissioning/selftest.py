@@ -364,13 +364,13 @@ def _identified(bench: Bench, path: Path) -> Iterator[Check]:
     excite, that does not excite: a ⚠ saying so) and the torque constant against a known inertia."""
     done = analyze_session(path, report=False)
     doc = done.json_dict
+    reasons = [r for r in doc["quality"]["reasons"] if not r.startswith("note: ")]
     if doc["quality"]["verdict"] == "not excited":  # the machine's motion, not the bench, fell short
         yield Check("identification", f"identification ({IDENTIFICATION_S:g} s)", "warn",
-                    "not excited: " + "; ".join(doc["quality"]["reasons"]), _WHILE_IT_RUNS,
+                    "not excited: " + "; ".join(reasons), _WHILE_IT_RUNS,
                     {"verdict": "not excited"}, "K is unchecked (the machine did not excite the joint)")
         return
     quality = doc["quality"]
-    reasons = [r for r in quality["reasons"] if not r.startswith("note: ")]
     values = {k: doc[k] for k in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")}
     values["verdict"] = quality["verdict"]
     k, (lo, hi) = doc["K_Nm_per_rad"], doc["ci95"]["K_Nm_per_rad"]

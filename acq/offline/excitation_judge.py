@@ -5,7 +5,9 @@ analysis the segment selection (fewer than two Welch segments whose torque expla
 :mod:`analysis.segments`) and the verdict's own excitation checks (coherence between f_a and f_r, and in the band,
 against :class:`analysis.verdict_limits.Thresholds`) decide whether it excited the joint at all; one that did not gets the
 verdict ``not excited`` and why, without K, J or C (never a number) and without the analysis' advice on the hardware
-(interference, play: it judged a fit of data that carries no excitation). :func:`acq.offline.analyze.analyze_session`
+(interference, play: it judged a fit of data that carries no excitation), with its notes. A fault the analysis found
+in the data (``quality.faults``: a wrong bench constant, a swapped phase, the drive at its limit) keeps the analysis'
+verdict: the fault, not the motion, may be why the coherence is weak. :func:`acq.offline.analyze.analyze_session`
 applies it, so the monitor (:mod:`acq.monitoring.window_judge`) and a later ``acq analyze`` of the same window file
 the same verdict, reasons and (absent) K.
 """
@@ -46,7 +48,10 @@ def _unselected(doc: dict[str, Any]) -> bool:
 
 
 def not_excited(doc: dict[str, Any]) -> bool:
-    """True when a verdict that is not ok comes from a lack of excitation, with clocks that were aligned at all.
+    """True when a verdict that is not ok comes from a lack of excitation, with clocks that were aligned at all, and
+    the analysis found no fault in the data (``quality.faults``: a wrong bench constant or phase sequence, a value an
+    order of magnitude off the nominal, the drive holding a limit — each garbles the torque, so the coherence is weak
+    whatever the motion: the verdict stays the analysis', the fault and its advice its reason).
 
     Either the segment selection found fewer than two segments that excite (:func:`_unselected`: the motion itself
     says so, whatever the clock residual — a residual above the limit is then what little motion there was to align
@@ -54,7 +59,7 @@ def not_excited(doc: dict[str, Any]) -> bool:
     A failed alignment keeps the analysis' own verdict and reasons, the clock's first: it makes the coherence low
     too, but says nothing about the motion; so does a high residual on a window whose segments do excite."""
     quality, clock = doc["quality"], doc.get("clock", {})
-    if quality.get("verdict") in ("ok", "not excited") or clock.get("failure"):
+    if quality.get("verdict") in ("ok", "not excited") or clock.get("failure") or quality.get("faults"):
         return False
     residual = clock.get("residual_s")
     aligned = residual is None or residual <= Thresholds().clock_residual_amplitude_s
@@ -103,7 +108,9 @@ def without_numbers(doc: dict[str, Any], options: dict[str, Any], verdict: str, 
 
 def judged(doc: dict[str, Any]) -> dict[str, Any]:
     """``doc``, an analysis' result document of a record acq did not command, as it is filed: unchanged when the
-    joint was excited; else without numbers, verdict ``not excited`` with :func:`not_excited_reasons`."""
+    joint was excited; else without numbers, verdict ``not excited`` with :func:`not_excited_reasons` and then the
+    analysis' notes (``note: …``: what the signal chain did — the span used, an offset removed — facts, not advice)."""
     if not not_excited(doc):
         return doc
-    return without_numbers(doc, doc["options"], "not excited", not_excited_reasons(doc))
+    notes = [r for r in doc["quality"]["reasons"] if r.startswith("note: ")]
+    return without_numbers(doc, doc["options"], "not excited", [*not_excited_reasons(doc), *notes])
