@@ -106,6 +106,8 @@ class Outcome:
         One line saying why the analysis failed.
     seconds : float
         Wall time of the analysis, s.
+    analyzed_utc : str or None
+        When it was analysed (ISO 8601, UTC); None: the document's ``analyzed_utc``, else the time it is filed.
     """
 
     path: str
@@ -115,6 +117,7 @@ class Outcome:
     doc: dict[str, Any] | None
     error: str | None
     seconds: float
+    analyzed_utc: str | None = None
 
 
 @dataclass(frozen=True)
@@ -255,12 +258,16 @@ class Catalogue:
         rows = self._execute("SELECT sha256 FROM analyses WHERE request_key = ? AND error IS NULL", (request_key,))
         return {r[0] for r in rows}
 
-    def record(self, outcome: Outcome) -> None:
+    def record(self, outcome: Outcome, *, keep_newer: bool = False) -> str | None:
         """Store one analysis (replacing that session's earlier one with the same request) — but a failure, or a
         ``--partial`` analysis, of another file of the same session (a copy, damaged) does not replace the analysis of
         a file that succeeded whole:
         copies share the session id, and the last one written had hidden an intact copy's result (the trial). A
-        failure of the same file (damaged in place) does replace it."""
+        failure of the same file (damaged in place) does replace it. With ``keep_newer`` an analysis made later than
+        this one (its ``analyzed_utc``) is not replaced either: a window that waited for the catalogue
+        (:mod:`acq.monitoring.catalogue_spool`) while ``acq analyze`` filed a new analysis of it.
+
+        Returns None when stored, else the ``analyzed_utc`` of the analysis the catalogue kept."""
         from acq.recording.layout import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
 
         meta, doc = outcome.session, outcome.doc or {}
@@ -269,7 +276,8 @@ class Catalogue:
             "session_key": key, "sha256": outcome.sha256, "request_key": outcome.request_key,
             "file_path": str(Path(outcome.path).resolve()),
             "options_json": json.dumps(doc["options"]) if doc else None,
-            "analyzed_utc": doc.get("analyzed_utc") or utc_now_iso(), "acq_version": doc.get("acq_version"),
+            "analyzed_utc": outcome.analyzed_utc or doc.get("analyzed_utc") or utc_now_iso(),
+            "acq_version": doc.get("acq_version"),
             "seconds": outcome.seconds, "verdict": doc.get("quality", {}).get("verdict"),
             "reasons_json": json.dumps(doc.get("quality", {}).get("reasons", [])), "error": outcome.error,
             "f_a_hz": doc.get("antiresonance_hz"), "f_r_hz": doc.get("resonance_hz"),
@@ -285,11 +293,11 @@ class Catalogue:
             lo, hi = doc.get("ci95", {}).get(name, (None, None))
             values |= {name: doc.get(name), f"{short}_lo": lo, f"{short}_hi": hi}
         try:
-            self._write_outcome(key, meta, outcome, values)
+            return self._write_outcome(key, meta, values, keep_newer)
         except self._dialect.errors as e:  # e.g. "database or disk is full": the row is not there, say which catalogue
             raise self._write_error(e) from None
 
-    def _write_outcome(self, key: str, meta: dict[str, Any], outcome: Outcome, values: dict[str, Any]) -> None:
+    def _write_outcome(self, key: str, meta: dict[str, Any], values: dict[str, Any], keep_newer: bool) -> str | None:
         columns = ", ".join(values)
         updates = ", ".join(f"{c} = excluded.{c}" for c in values if c not in ("session_key", "request_key"))
         path = values["file_path"]
@@ -306,16 +314,22 @@ class Catalogue:
             # replace an analysis of a whole file
             # (a row filed before schema 5 has no file path: its file hash tells the same file; rowcount, not RETURNING:
             # SQLite before 3.35 has none — both back ends count 0 rows when the WHERE skips the update)
+            # (ISO 8601 times of one form, UTC: their order as text is their order in time)
+            newer = " AND analyses.analyzed_utc <= excluded.analyzed_utc" if keep_newer else ""
             stored = self._execute(
                 f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"
                 f" ON CONFLICT (session_key, request_key) DO UPDATE SET {updates}"
-                " WHERE analyses.error IS NOT NULL OR analyses.file_path = excluded.file_path"
+                " WHERE (analyses.error IS NOT NULL OR analyses.file_path = excluded.file_path"
                 " OR (analyses.file_path IS NULL AND analyses.sha256 = excluded.sha256)"
-                " OR (excluded.error IS NULL AND (excluded.partial = 0 OR analyses.partial = 1))",
+                f" OR (excluded.error IS NULL AND (excluded.partial = 0 OR analyses.partial = 1))){newer}",
                 tuple(values.values())).rowcount
-            if stored:  # the session row follows the analysis that stands
-                self._execute("UPDATE sessions SET path = ?, status = ?, tags_json = ?, monitor_id = ?"
-                              " WHERE session_key = ?", (path, meta.get("status"), json.dumps(tags), monitor, key))
+            if not stored:
+                return str(self._execute("SELECT analyzed_utc FROM analyses WHERE session_key = ? AND request_key = ?",
+                                         (key, values["request_key"])).fetchone()[0])
+            # the session row follows the analysis that stands
+            self._execute("UPDATE sessions SET path = ?, status = ?, tags_json = ?, monitor_id = ?"
+                          " WHERE session_key = ?", (path, meta.get("status"), json.dumps(tags), monitor, key))
+            return None
 
     def entries(self, joint: str | None = None, *, monitor: str | None = None,
                 unowned: bool = False) -> list[Entry]:

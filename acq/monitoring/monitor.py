@@ -273,6 +273,10 @@ class Monitor:
         for window in filed:
             self._filed_one(window)
         st, filing = self.status, self._filing
+        if filing.notes:  # a window that waited, kept out by a later analysis of it
+            st.message = "; ".join(filing.notes)
+            filing.notes.clear()
+            self._show()
         if (st.catalogue_down_since, st.waiting) != (filing.down_since_utc, len(filing.waiting)):
             st.catalogue_down_since, st.waiting = filing.down_since_utc, len(filing.waiting)
             st.catalogue_problem = filing.problem
