@@ -7,7 +7,7 @@ reasons, clock figures, software version — or the error when the analysis fail
 
 The database is a SQLite file (the default) or, for several hosts sharing one history, a
 PostgreSQL server (``--catalogue postgresql://user@host/db``); the few things that differ between
-the two are in :mod:`acq.monitoring.catalogue_backends`. :data:`MIGRATIONS` brings an older database up to
+the two are in :mod:`acq.monitoring.catalogue_backends`. :data:`~acq.monitoring.catalogue_schema.MIGRATIONS` brings an older database up to
 :data:`SCHEMA_VERSION` step by step, each step in its own transaction, serialised between processes
 (SQLite's write lock, PostgreSQL's advisory lock). Every write is one transaction per session, an
 upsert, so several processes on one host (SQLite, WAL mode, busy timeout) or on many (PostgreSQL)
@@ -24,61 +24,10 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.catalogue_backends import one_line, open_catalogue_db, open_error
+from acq.monitoring.catalogue_schema import MIGRATIONS, MONITOR_COLUMN_VERSION, SCHEMA_VERSION
 from acq.recording.storage import cause_of
 from acqcore.errors import ConfigError, StorageError
 
-#: Step i brings a database from version i to i + 1.
-MIGRATIONS: tuple[str, ...] = (
-    # 0 → 1: sessions and their analyses
-    """
-    CREATE TABLE sessions (
-        session_key TEXT PRIMARY KEY,          -- session_id, or 'path:<path>' when the file is unreadable
-        session_id TEXT, path TEXT NOT NULL, joint TEXT, created_utc TEXT, start_monotonic_ns INTEGER,
-        status TEXT
-    );
-    CREATE TABLE analyses (
-        id INTEGER PRIMARY KEY AUTOINCREMENT,
-        session_key TEXT NOT NULL REFERENCES sessions(session_key),
-        sha256 TEXT NOT NULL, request_key TEXT NOT NULL, options_json TEXT,
-        analyzed_utc TEXT NOT NULL, acq_version TEXT, seconds REAL,
-        verdict TEXT, reasons_json TEXT, error TEXT,
-        K_Nm_per_rad REAL, K_lo REAL, K_hi REAL, Jm_kgm2 REAL, Jm_lo REAL, Jm_hi REAL,
-        Jl_kgm2 REAL, Jl_lo REAL, Jl_hi REAL, C_Nms_per_rad REAL, C_lo REAL, C_hi REAL,
-        f_a_hz REAL, f_r_hz REAL, clock_offset_s REAL, clock_drift_ppm REAL, clock_residual_s REAL,
-        mean_coherence REAL, truth_json TEXT,
-        UNIQUE (session_key, request_key)
-    );
-    """,
-    # 1 → 2: session tags (pose, payload_kg, temperature_C, …) and a joint index for the trend
-    """
-    ALTER TABLE sessions ADD COLUMN tags_json TEXT NOT NULL DEFAULT '{}';
-    CREATE INDEX sessions_joint ON sessions (joint, created_utc);
-    """,
-    # 2 → 3: results of a session's intact part only (damaged, or still recording; acq analyze --partial)
-    """
-    ALTER TABLE analyses ADD COLUMN partial INTEGER NOT NULL DEFAULT 0;
-    """,
-    # 3 → 4: which share of a window and which moves excite the joint (segment selection, acq monitor)
-    """
-    ALTER TABLE analyses ADD COLUMN excitation_json TEXT;
-    """,
-    # 4 → 5: the file each analysis was made of (copies of a session share its key: a damaged copy's failure must
-    # not replace an intact copy's analysis)
-    """
-    ALTER TABLE analyses ADD COLUMN file_path TEXT;
-    """,
-    # 5 → 6: the monitor that captured a window (its tag MONITOR_TAG, as a column): a monitor reads back its own
-    # windows of a catalogue every robot's joint1 shares by an index, not by reading every row of the joint's name.
-    # Filled from the tags by Catalogue._fill_monitor_ids in the same transaction — in Python: tags_json is Python's
-    # JSON, NaN included (--tag operator=Nan), which SQLite's json_extract and PostgreSQL's jsonb refuse
-    """
-    ALTER TABLE sessions ADD COLUMN monitor_id TEXT;
-    CREATE INDEX sessions_monitor ON sessions (monitor_id, joint);
-    """,
-)
-SCHEMA_VERSION = len(MIGRATIONS)
-#: The schema version that has the column ``monitor_id`` (filled from the tags by the migration to it).
-_MONITOR_COLUMN_VERSION = 6
 #: Session tag of a monitor's window: the identity of the monitor that captured it (also the column ``monitor_id``).
 MONITOR_TAG = "monitor_id"
 
@@ -249,7 +198,7 @@ class Catalogue:
                 for statement in MIGRATIONS[version].split(";"):
                     if statement.strip():
                         db.execute(self._dialect.ddl(statement))
-                if version + 1 == _MONITOR_COLUMN_VERSION:
+                if version + 1 == MONITOR_COLUMN_VERSION:
                     self._fill_monitor_ids()
                 self._dialect.set_schema_version(db, version + 1)
 
