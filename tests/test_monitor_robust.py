@@ -65,11 +65,12 @@ def test_a_window_whose_worker_died_is_left_for_the_restart_and_analysed_there(t
     killed: list[int] = []
 
     def kill_the_first_worker(status: object) -> None:
-        if not killed and monitor._pending:  # the first window handed to a worker
+        analyses = monitor._analyses
+        if not killed and analyses is not None and len(analyses):  # the first window handed to a worker
             deadline = time.monotonic() + 60
-            while not monitor._pool._processes and time.monotonic() < deadline:
+            while not analyses._pool._processes and time.monotonic() < deadline:
                 time.sleep(0.01)  # the workers start (forked from the forkserver: seconds on a loaded machine)
-            for pid in list(monitor._pool._processes):  # at once, while they still import the analysis (≥ 1 s):
+            for pid in list(analyses._pool._processes):  # at once, while they still import the analysis (≥ 1 s):
                 os.kill(pid, signal.SIGKILL)  # the window's worker dies before its analysis can complete
                 killed.append(pid)
 
