@@ -226,8 +226,8 @@ def test_a_cut_copy_whose_status_is_lost_keeps_the_samples_the_footer_counts(
 def test_a_cut_copy_of_a_recovered_copy_keeps_its_attributes_and_the_samples_before_the_cut(
         recorded: Path, intact: Session, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The recovered copy is created as the writer creates a file (every attribute, group and dataset before the
-    data, the counts overwritten in place), so a cut copy of it is read as one of a recording is. Before: refused,
-    'not a readable HDF5 session file (file cut: …, root attributes lost)'."""
+    data, the counts overwritten in place) and written in slices of both streams, so a cut copy of it is read as one
+    of a recording is. Before: refused, 'not a readable HDF5 session file (file cut: …, root attributes lost)'."""
     path = tmp_path / "cut.h5"
     _cut_copy(recorded, path, 90)
     assert run_cli(capsys, "check", "--repair", str(path)).code == 0
@@ -236,11 +236,11 @@ def test_a_cut_copy_of_a_recovered_copy_keeps_its_attributes_and_the_samples_bef
     again = tmp_path / "again.h5"
     cut, size = _cut_copy(recovered, again, 90)
     current, encoder = _kept_before(recovered, cut)
-    assert current == copy.current.sample_count > 0.7 * 10 * RATE_HZ  # the current's chunk indexes lie before the cut
+    total_current, total_encoder = copy.current.sample_count, copy.encoder.index.size
+    assert total_current > current >= 0.85 * total_current and total_encoder > encoder >= 0.85 * total_encoder
     s = load(again)
     assert s.status == "interrupted" and s.meta.stop_reason == copy.meta.stop_reason
-    assert (s.current.sample_count, s.encoder.index.size) == (current, encoder)
-    assert np.array_equal(s.current.phases_a["i_a"], intact.current.phases_a["i_a"][:current])
-    assert np.array_equal(s.encoder.position_counts, intact.encoder.position_counts[:encoder])
+    _assert_prefix_of(s, intact, current, encoder)
     assert s.damage == (f"file cut: {_bytes(cut)} of {_bytes(size)} bytes",
-                        f"encoder: samples {_bytes(encoder)}–{_bytes(copy.encoder.index.size - 1)} unreadable")
+                        f"current: samples {_bytes(current)}–{_bytes(total_current - 1)} unreadable",
+                        f"encoder: samples {_bytes(encoder)}–{_bytes(total_encoder - 1)} unreadable")

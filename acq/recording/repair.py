@@ -16,6 +16,13 @@ from acq.recording.session import Session
 from acq.recording.storage import atomic_path, storage_error
 
 
+#: A copy is written in this many slices of each column, each flushed: a cut copy of it keeps the slices of both
+#: streams before the cut, as one of a recording keeps its commits (columns written whole put the encoder, written
+#: last, past a 90 % cut). 20: a cut then costs about 1/20 of each stream beyond its share of the bytes (measured on a
+#: 9 s copy: a 90 % cut keeps 89 % of the current and 87.5 % of the encoder; 50 %: 48 % and 50 %).
+SLICES = 20
+
+
 def repair(path: Path | str, stop_reason: str) -> Session:
     """Rewrite a session left with status ``recording`` (writer killed) as ``interrupted``; return it as read.
 
@@ -78,7 +85,8 @@ def _copy(source: Path, session: Session, target: Path, stop_reason: str) -> Ses
 def _write_copy(dst: h5py.File, session: Session, group_attrs: dict[str, dict[str, Any]]) -> None:
     """The attributes and data of ``session``, status ``recording`` and no counts until the footer. Every attribute,
     group and dataset is created before any data is written, as the writer does: what locates the root attributes
-    then lies before the data, so a cut copy of this file keeps them (the footer overwrites them in place)."""
+    then lies before the data, so a cut copy of this file keeps them (the footer overwrites them in place); the data
+    follows in :data:`SLICES` slices."""
     c, e = session.current, session.encoder
     events = np.array([(ev.host_ns, ev.stream.encode(), ev.kind.encode(), ev.detail.encode()[:240])
                        for ev in session.events], dtype=EVENT_DTYPE)
@@ -94,5 +102,8 @@ def _write_copy(dst: h5py.File, session: Session, group_attrs: dict[str, dict[st
     made = {name: dst.create_dataset(name, shape=values.shape, dtype=values.dtype, maxshape=(None,), chunks=True,
                                      fletcher32=True) for name, values in columns.items()}
     dst.flush()  # the layout's metadata placed now (HDF5 places what is not flushed at the end of the file)
-    for name, values in columns.items():
-        made[name][...] = values
+    for k in range(1, SLICES + 1):  # both streams in time order, as a recording commits them
+        for name, values in columns.items():
+            rows = np.s_[(k - 1) * values.size // SLICES:k * values.size // SLICES]
+            made[name][rows] = values[rows]
+        dst.flush()
