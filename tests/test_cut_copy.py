@@ -193,3 +193,54 @@ def test_a_cut_copy_of_an_older_file_is_refused_in_one_line(recorded: Path, tmp_
         assert run.code == 2
         assert run.err == (f"acq: error: {path}: not a readable HDF5 session file (file cut: {_bytes(cut)} of "
                            f"{_bytes(size)} bytes, root attributes lost)\n")
+
+
+def test_a_cut_copy_whose_status_is_lost_keeps_the_samples_the_footer_counts(
+        recorded: Path, intact: Session, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The committed counts are the footer's numbers, stored in place: a cut that loses the status string loses no
+    sample. HDF5 puts acq's statuses where "recording" was (measured), so the test moves the status string to the
+    file's end: a value larger than the free room of HDF5's string heap (≈ 4 KiB, measured) goes into a new heap
+    there, as a footer string of another writer may. Before: refused, 'damaged, cannot be read (file cut: …)'."""
+    moved = tmp_path / "moved.h5"
+    shutil.copyfile(recorded, moved)
+    with h5py.File(moved, "r+", libver=("v110", "latest")) as f:
+        f.attrs.modify("status", "complete" + " " * 5000)
+    path = tmp_path / "cut.h5"
+    cut, size = _cut_copy(moved, path, 90)
+    assert footer_strings_past(moved, cut) == ["status", "stop_reason", "stopped_utc"]
+    current, encoder = _kept_before(moved, cut)
+    assert current >= 0.7 * 10 * RATE_HZ and encoder >= 0.7 * 10 * ENCODER_HZ
+    s = load(path)
+    assert s.status == ""
+    _assert_prefix_of(s, intact, current, encoder)
+    assert s.damage == (f"file cut: {_bytes(cut)} of {_bytes(size)} bytes, status and stop_reason and stopped_utc lost",
+                        f"current: samples {_bytes(current)}–{_bytes(10 * RATE_HZ - 1)} unreadable",
+                        f"encoder: samples {_bytes(encoder)}–{_bytes(10 * ENCODER_HZ - 1)} unreadable")
+    run = run_cli(capsys, "check", "--repair", str(path))
+    assert run.code == 0, run.err
+    copy = load(tmp_path / "cut.recovered.h5")
+    assert copy.damage == () and copy.status == "interrupted"
+    _assert_prefix_of(copy, intact, current, encoder)
+
+
+def test_a_cut_copy_of_a_recovered_copy_keeps_its_attributes_and_the_samples_before_the_cut(
+        recorded: Path, intact: Session, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The recovered copy is created as the writer creates a file (every attribute, group and dataset before the
+    data, the counts overwritten in place) and written in slices of both streams, so a cut copy of it is read as one
+    of a recording is. Before: refused, 'not a readable HDF5 session file (file cut: …, root attributes lost)'."""
+    path = tmp_path / "cut.h5"
+    _cut_copy(recorded, path, 90)
+    assert run_cli(capsys, "check", "--repair", str(path)).code == 0
+    recovered = tmp_path / "cut.recovered.h5"
+    copy = load(recovered)
+    again = tmp_path / "again.h5"
+    cut, size = _cut_copy(recovered, again, 90)
+    current, encoder = _kept_before(recovered, cut)
+    total_current, total_encoder = copy.current.sample_count, copy.encoder.index.size
+    assert total_current > current >= 0.85 * total_current and total_encoder > encoder >= 0.85 * total_encoder
+    s = load(again)
+    assert s.status == "interrupted" and s.meta.stop_reason == copy.meta.stop_reason
+    _assert_prefix_of(s, intact, current, encoder)
+    assert s.damage == (f"file cut: {_bytes(cut)} of {_bytes(size)} bytes",
+                        f"current: samples {_bytes(current)}–{_bytes(total_current - 1)} unreadable",
+                        f"encoder: samples {_bytes(encoder)}–{_bytes(total_encoder - 1)} unreadable")

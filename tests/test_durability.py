@@ -255,3 +255,30 @@ def test_export_and_import_sync_each_file_before_its_rename_and_its_folder_after
     assert run.code == 0, run.err
     _assert_replaced_durably(log, [imported])
     assert load(imported).current.sample_count == load(session).current.sample_count
+
+
+def test_a_folder_that_fails_to_sync_after_the_rename_says_the_file_is_written_but_its_name_may_not_survive(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The output is complete under its name when its folder's sync fails: the error says so and exits 1 (what acq
+    reports as written survives a power cut, this name may not). Before: 'acq: error: I/O error: <file>', as if the
+    file had not been written."""
+    session = record_session_in_subprocess(tmp_path / "s", 3.0)
+    expected = tmp_path / "expected"
+    assert run_cli(capsys, "export", str(session), "--csv", str(expected)).code == 0
+    pair = tmp_path / "pair"
+    pair.mkdir()
+    real_fsync = os.fsync
+
+    def folder_sync(fd: int) -> None:
+        if _path_of(fd) == pair:
+            raise OSError(errno.EIO, os.strerror(errno.EIO))
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", folder_sync)
+    run = run_cli(capsys, "export", str(session), "--csv", str(pair))
+    monkeypatch.undo()
+    first = pair / f"{session.stem}.current.csv"
+    assert run.code == 1 and run.err == (f"acq: error: {first}: written, but its name may not survive a power cut "
+                                         "(I/O error when syncing its folder)\n")
+    assert [p.name for p in pair.iterdir()] == [first.name]  # no temp file; the export stopped at its first file
+    assert first.read_bytes() == (expected / first.name).read_bytes()

@@ -65,11 +65,12 @@ def test_a_window_whose_worker_died_is_left_for_the_restart_and_analysed_there(t
     killed: list[int] = []
 
     def kill_the_first_worker(status: object) -> None:
-        if not killed and monitor._pending:  # the first window handed to a worker
+        analyses = monitor._analyses
+        if not killed and analyses is not None and len(analyses):  # the first window handed to a worker
             deadline = time.monotonic() + 60
-            while not monitor._pool._processes and time.monotonic() < deadline:
+            while not analyses._pool._processes and time.monotonic() < deadline:
                 time.sleep(0.01)  # the workers start (forked from the forkserver: seconds on a loaded machine)
-            for pid in list(monitor._pool._processes):  # at once, while they still import the analysis (≥ 1 s):
+            for pid in list(analyses._pool._processes):  # at once, while they still import the analysis (≥ 1 s):
                 os.kill(pid, signal.SIGKILL)  # the window's worker dies before its analysis can complete
                 killed.append(pid)
 
@@ -282,6 +283,54 @@ def test_windows_waiting_when_the_monitor_stops_are_filed_by_its_next_start(stop
     assert again.run() == 0
     assert _pg_windows(url) == [(n, 1) for n in range(4)]
     assert again.status.filed_total == 1 and again.status.earlier_filed == 3
+    assert not (tmp_path / "catalogue-spool.jsonl").exists()
+
+
+def test_a_window_from_the_spool_does_not_replace_a_later_analysis_of_it(stoppable_postgres: object,
+                                                                         tmp_path: Path) -> None:
+    """While the monitor could not reach the server, window 1 was analysed again elsewhere and filed (as
+    ``acq analyze --catalogue`` of its file does, one second after the monitor's analysis; K 2 % higher). The next
+    start files the spool: window 1 keeps the later analysis and the status says why; window 2 is filed. Before: the
+    spooled analysis replaced the later one."""
+    from datetime import datetime, timedelta
+
+    from acq.monitoring.catalogue import Catalogue, Outcome
+    from acq.monitoring.monitor import Monitor, MonitorSettings
+    from tests.pg_server import new_database
+
+    server = stoppable_postgres
+    url = new_database(server.url)  # type: ignore[attr-defined]
+
+    def operator(st: object) -> None:
+        if monitor.status.filed_total == 1 and server.running:  # type: ignore[attr-defined]
+            server.stop()  # type: ignore[attr-defined]
+
+    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=tmp_path, window_s=10.0, every_s=60.0,
+                               for_s=180.0, fast=True, baseline_windows=2, catalogue=url)
+    monitor = Monitor(settings, on_status=operator)
+    try:
+        assert monitor.run() == 0
+        assert (monitor.status.filed_total, monitor.status.waiting) == (1, 2)
+    finally:
+        server.start()  # type: ignore[attr-defined]
+    spooled = Outcome(**json.loads((tmp_path / "catalogue-spool.jsonl").read_text().splitlines()[0])["outcome"])
+    assert spooled.session["tags"]["monitor_window"] == 1 and spooled.doc is not None
+    assert spooled.analyzed_utc == spooled.doc["analyzed_utc"]
+    later = (datetime.fromisoformat(spooled.doc["analyzed_utc"]) + timedelta(seconds=1)).isoformat()
+    K = 1.02 * spooled.doc["K_Nm_per_rad"]
+    with Catalogue(url) as catalogue:
+        assert catalogue.record(replace(spooled, doc={**spooled.doc, "K_Nm_per_rad": K, "analyzed_utc": later},
+                                        analyzed_utc=None)) is None
+    messages: list[str] = []
+    again = Monitor(replace(settings, for_s=60.0), on_status=lambda st: messages.append(st.message))
+    assert again.run() == 0
+    assert _pg_windows(url) == [(n, 1) for n in range(4)]
+    with Catalogue(url) as catalogue:
+        (entry,) = [e for e in catalogue.entries() if e.tags["monitor_window"] == 1]
+    assert (entry.K_Nm_per_rad, entry.analyzed_utc) == (K, later)
+    name = Path(spooled.path).name
+    assert (f"{name}: not filed — the catalogue holds a later analysis of it ({later}; this one "
+            f"{spooled.doc['analyzed_utc']})") in messages
     assert not (tmp_path / "catalogue-spool.jsonl").exists()
 
 

@@ -7,7 +7,7 @@ reasons, clock figures, software version — or the error when the analysis fail
 
 The database is a SQLite file (the default) or, for several hosts sharing one history, a
 PostgreSQL server (``--catalogue postgresql://user@host/db``); the few things that differ between
-the two are in :mod:`acq.monitoring.catalogue_backends`. :data:`MIGRATIONS` brings an older database up to
+the two are in :mod:`acq.monitoring.catalogue_backends`. :data:`~acq.monitoring.catalogue_schema.MIGRATIONS` brings an older database up to
 :data:`SCHEMA_VERSION` step by step, each step in its own transaction, serialised between processes
 (SQLite's write lock, PostgreSQL's advisory lock). Every write is one transaction per session, an
 upsert, so several processes on one host (SQLite, WAL mode, busy timeout) or on many (PostgreSQL)
@@ -24,61 +24,10 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.catalogue_backends import one_line, open_catalogue_db, open_error
+from acq.monitoring.catalogue_schema import MIGRATIONS, MONITOR_COLUMN_VERSION, SCHEMA_VERSION
 from acq.recording.storage import cause_of
 from acqcore.errors import ConfigError, StorageError
 
-#: Step i brings a database from version i to i + 1.
-MIGRATIONS: tuple[str, ...] = (
-    # 0 → 1: sessions and their analyses
-    """
-    CREATE TABLE sessions (
-        session_key TEXT PRIMARY KEY,          -- session_id, or 'path:<path>' when the file is unreadable
-        session_id TEXT, path TEXT NOT NULL, joint TEXT, created_utc TEXT, start_monotonic_ns INTEGER,
-        status TEXT
-    );
-    CREATE TABLE analyses (
-        id INTEGER PRIMARY KEY AUTOINCREMENT,
-        session_key TEXT NOT NULL REFERENCES sessions(session_key),
-        sha256 TEXT NOT NULL, request_key TEXT NOT NULL, options_json TEXT,
-        analyzed_utc TEXT NOT NULL, acq_version TEXT, seconds REAL,
-        verdict TEXT, reasons_json TEXT, error TEXT,
-        K_Nm_per_rad REAL, K_lo REAL, K_hi REAL, Jm_kgm2 REAL, Jm_lo REAL, Jm_hi REAL,
-        Jl_kgm2 REAL, Jl_lo REAL, Jl_hi REAL, C_Nms_per_rad REAL, C_lo REAL, C_hi REAL,
-        f_a_hz REAL, f_r_hz REAL, clock_offset_s REAL, clock_drift_ppm REAL, clock_residual_s REAL,
-        mean_coherence REAL, truth_json TEXT,
-        UNIQUE (session_key, request_key)
-    );
-    """,
-    # 1 → 2: session tags (pose, payload_kg, temperature_C, …) and a joint index for the trend
-    """
-    ALTER TABLE sessions ADD COLUMN tags_json TEXT NOT NULL DEFAULT '{}';
-    CREATE INDEX sessions_joint ON sessions (joint, created_utc);
-    """,
-    # 2 → 3: results of a session's intact part only (damaged, or still recording; acq analyze --partial)
-    """
-    ALTER TABLE analyses ADD COLUMN partial INTEGER NOT NULL DEFAULT 0;
-    """,
-    # 3 → 4: which share of a window and which moves excite the joint (segment selection, acq monitor)
-    """
-    ALTER TABLE analyses ADD COLUMN excitation_json TEXT;
-    """,
-    # 4 → 5: the file each analysis was made of (copies of a session share its key: a damaged copy's failure must
-    # not replace an intact copy's analysis)
-    """
-    ALTER TABLE analyses ADD COLUMN file_path TEXT;
-    """,
-    # 5 → 6: the monitor that captured a window (its tag MONITOR_TAG, as a column): a monitor reads back its own
-    # windows of a catalogue every robot's joint1 shares by an index, not by reading every row of the joint's name.
-    # Filled from the tags by Catalogue._fill_monitor_ids in the same transaction — in Python: tags_json is Python's
-    # JSON, NaN included (--tag operator=Nan), which SQLite's json_extract and PostgreSQL's jsonb refuse
-    """
-    ALTER TABLE sessions ADD COLUMN monitor_id TEXT;
-    CREATE INDEX sessions_monitor ON sessions (monitor_id, joint);
-    """,
-)
-SCHEMA_VERSION = len(MIGRATIONS)
-#: The schema version that has the column ``monitor_id`` (filled from the tags by the migration to it).
-_MONITOR_COLUMN_VERSION = 6
 #: Session tag of a monitor's window: the identity of the monitor that captured it (also the column ``monitor_id``).
 MONITOR_TAG = "monitor_id"
 
@@ -106,6 +55,8 @@ class Outcome:
         One line saying why the analysis failed.
     seconds : float
         Wall time of the analysis, s.
+    analyzed_utc : str or None
+        When it was analysed (ISO 8601, UTC); None: the document's ``analyzed_utc``, else the time it is filed.
     """
 
     path: str
@@ -115,6 +66,7 @@ class Outcome:
     doc: dict[str, Any] | None
     error: str | None
     seconds: float
+    analyzed_utc: str | None = None
 
 
 @dataclass(frozen=True)
@@ -246,7 +198,7 @@ class Catalogue:
                 for statement in MIGRATIONS[version].split(";"):
                     if statement.strip():
                         db.execute(self._dialect.ddl(statement))
-                if version + 1 == _MONITOR_COLUMN_VERSION:
+                if version + 1 == MONITOR_COLUMN_VERSION:
                     self._fill_monitor_ids()
                 self._dialect.set_schema_version(db, version + 1)
 
@@ -255,12 +207,16 @@ class Catalogue:
         rows = self._execute("SELECT sha256 FROM analyses WHERE request_key = ? AND error IS NULL", (request_key,))
         return {r[0] for r in rows}
 
-    def record(self, outcome: Outcome) -> None:
+    def record(self, outcome: Outcome, *, keep_newer: bool = False) -> str | None:
         """Store one analysis (replacing that session's earlier one with the same request) — but a failure, or a
         ``--partial`` analysis, of another file of the same session (a copy, damaged) does not replace the analysis of
         a file that succeeded whole:
         copies share the session id, and the last one written had hidden an intact copy's result (the trial). A
-        failure of the same file (damaged in place) does replace it."""
+        failure of the same file (damaged in place) does replace it. With ``keep_newer`` an analysis made later than
+        this one (its ``analyzed_utc``) is not replaced either: a window that waited for the catalogue
+        (:mod:`acq.monitoring.catalogue_spool`) while ``acq analyze`` filed a new analysis of it.
+
+        Returns None when stored, else the ``analyzed_utc`` of the analysis the catalogue kept."""
         from acq.recording.layout import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
 
         meta, doc = outcome.session, outcome.doc or {}
@@ -269,7 +225,8 @@ class Catalogue:
             "session_key": key, "sha256": outcome.sha256, "request_key": outcome.request_key,
             "file_path": str(Path(outcome.path).resolve()),
             "options_json": json.dumps(doc["options"]) if doc else None,
-            "analyzed_utc": doc.get("analyzed_utc") or utc_now_iso(), "acq_version": doc.get("acq_version"),
+            "analyzed_utc": outcome.analyzed_utc or doc.get("analyzed_utc") or utc_now_iso(),
+            "acq_version": doc.get("acq_version"),
             "seconds": outcome.seconds, "verdict": doc.get("quality", {}).get("verdict"),
             "reasons_json": json.dumps(doc.get("quality", {}).get("reasons", [])), "error": outcome.error,
             "f_a_hz": doc.get("antiresonance_hz"), "f_r_hz": doc.get("resonance_hz"),
@@ -285,11 +242,11 @@ class Catalogue:
             lo, hi = doc.get("ci95", {}).get(name, (None, None))
             values |= {name: doc.get(name), f"{short}_lo": lo, f"{short}_hi": hi}
         try:
-            self._write_outcome(key, meta, outcome, values)
+            return self._write_outcome(key, meta, values, keep_newer)
         except self._dialect.errors as e:  # e.g. "database or disk is full": the row is not there, say which catalogue
             raise self._write_error(e) from None
 
-    def _write_outcome(self, key: str, meta: dict[str, Any], outcome: Outcome, values: dict[str, Any]) -> None:
+    def _write_outcome(self, key: str, meta: dict[str, Any], values: dict[str, Any], keep_newer: bool) -> str | None:
         columns = ", ".join(values)
         updates = ", ".join(f"{c} = excluded.{c}" for c in values if c not in ("session_key", "request_key"))
         path = values["file_path"]
@@ -306,16 +263,22 @@ class Catalogue:
             # replace an analysis of a whole file
             # (a row filed before schema 5 has no file path: its file hash tells the same file; rowcount, not RETURNING:
             # SQLite before 3.35 has none — both back ends count 0 rows when the WHERE skips the update)
+            # (ISO 8601 times of one form, UTC: their order as text is their order in time)
+            newer = " AND analyses.analyzed_utc <= excluded.analyzed_utc" if keep_newer else ""
             stored = self._execute(
                 f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"
                 f" ON CONFLICT (session_key, request_key) DO UPDATE SET {updates}"
-                " WHERE analyses.error IS NOT NULL OR analyses.file_path = excluded.file_path"
+                " WHERE (analyses.error IS NOT NULL OR analyses.file_path = excluded.file_path"
                 " OR (analyses.file_path IS NULL AND analyses.sha256 = excluded.sha256)"
-                " OR (excluded.error IS NULL AND (excluded.partial = 0 OR analyses.partial = 1))",
+                f" OR (excluded.error IS NULL AND (excluded.partial = 0 OR analyses.partial = 1))){newer}",
                 tuple(values.values())).rowcount
-            if stored:  # the session row follows the analysis that stands
-                self._execute("UPDATE sessions SET path = ?, status = ?, tags_json = ?, monitor_id = ?"
-                              " WHERE session_key = ?", (path, meta.get("status"), json.dumps(tags), monitor, key))
+            if not stored:
+                return str(self._execute("SELECT analyzed_utc FROM analyses WHERE session_key = ? AND request_key = ?",
+                                         (key, values["request_key"])).fetchone()[0])
+            # the session row follows the analysis that stands
+            self._execute("UPDATE sessions SET path = ?, status = ?, tags_json = ?, monitor_id = ?"
+                          " WHERE session_key = ?", (path, meta.get("status"), json.dumps(tags), monitor, key))
+            return None
 
     def entries(self, joint: str | None = None, *, monitor: str | None = None,
                 unowned: bool = False) -> list[Entry]:

@@ -5,7 +5,9 @@ in the monitor's folder, so that a monitor stopped during the outage loses none 
 The trial: ``pg_ctl stop -m fast`` under a running ``acq monitor --catalogue postgresql://…`` ended the monitor with
 "acq: error: terminating connection due to administrator command", exit 1. A window is filed exactly once: a write
 whose COMMIT reached the server before the connection broke is filed again on the next try, which the catalogue's
-upsert (one row per session and request) makes the same row.
+upsert (one row per session and request) makes the same row. A window that waited is not filed over an analysis of it
+made later (``acq analyze`` of its file filed meanwhile, by a host that reached the catalogue): the later one is
+kept and a note (:attr:`FilingQueue.notes`) says so.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from acq.monitoring.catalogue import Catalogue, Outcome
@@ -54,6 +56,9 @@ class FilingQueue:
         self.problem = ""  # the driver's one line of why
         self._next_try = 0.0
         self._backoff_s = FIRST_BACKOFF_S
+        #: one line per window not filed because the catalogue holds a later analysis of it (read and cleared by the
+        #: caller): "<file>: not filed — the catalogue holds a later analysis of it (<time>; this one <time>)"
+        self.notes: list[str] = []
 
     @property
     def down(self) -> bool:
@@ -61,7 +66,15 @@ class FilingQueue:
         return self.down_since_utc is not None
 
     def file(self, window: Waiting) -> list[Waiting]:
-        """Queue ``window`` and file what may be filed now (:meth:`flush`); return the windows filed."""
+        """Queue ``window`` and file what may be filed now (:meth:`flush`); return the windows filed (or kept out by a
+        later analysis: :attr:`notes`). Its analysis time is fixed now (an outcome without one would be stamped when
+        filed, and one that waited would look newer than an analysis made meanwhile)."""
+        from acq.recording.layout import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
+
+        outcome = window.outcome
+        if outcome.analyzed_utc is None:
+            window = replace(window, outcome=replace(
+                outcome, analyzed_utc=(outcome.doc or {}).get("analyzed_utc") or utc_now_iso()))
         self.waiting.append(window)
         filed = self.flush()
         if self.waiting:
@@ -79,7 +92,11 @@ class FilingQueue:
             if self.down:
                 self.catalogue.reconnect()
             while self.waiting:
-                self.catalogue.record(self.waiting[0].outcome)
+                outcome = self.waiting[0].outcome
+                kept = self.catalogue.record(outcome, keep_newer=True)
+                if kept is not None and outcome.analyzed_utc is not None and kept > outcome.analyzed_utc:
+                    self.notes.append(f"{Path(outcome.path).name}: not filed — the catalogue holds a later analysis "
+                                      f"of it ({kept}; this one {outcome.analyzed_utc})")
                 filed.append(self.waiting.pop(0))
         except (StorageError, ConfigError, *self.catalogue.errors) as e:
             if not (self.down or self.catalogue.connection_lost):

@@ -30,15 +30,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Iterator
-from concurrent.futures import Future
-from concurrent.futures.process import BrokenProcessPool
 from contextlib import AbstractContextManager, ExitStack, contextmanager, suppress
 from pathlib import Path
-from typing import Any
 
 from acq.monitoring.alarm_command import AlarmCommands
 from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules
-from acq.monitoring.analysis_pool import analysis_executor
 from acq.monitoring.catalogue import Entry, Outcome
 from acq.monitoring.catalogue_backends import is_url
 from acq.monitoring.catalogue_spool import SPOOL_NAME, FilingQueue, Waiting
@@ -52,8 +48,9 @@ from acq.monitoring.monitor_windows import FolderWindows, StorageFailures, check
 from acq.monitoring.retention import WindowFiles
 from acq.monitoring.session_outcome import CATALOGUE_NAME, session_meta
 from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
+from acq.monitoring.window_analyses import WindowAnalyses
 from acq.monitoring.window_bench import FACT_TAGS, window_recorder
-from acq.monitoring.window_judge import analyse_window, marked
+from acq.monitoring.window_judge import marked
 from acq.offline.analyze import sha256_of
 from acq.recording.recorder import Recorder, stop_on_signals
 from acq.recording.reader import load
@@ -72,9 +69,7 @@ class Monitor:
         self._stop: str | None = None
         self._recorder: Recorder | None = None
         self._windows = FolderWindows(settings.out_dir, settings.keep)  # their raw files, retention
-        self._pending: dict[Future[Outcome], str] = {}
-        self._pools: ExitStack | None = None  # the analysis pools of the run: a new one when a worker died
-        self._pool: Any = None
+        self._analyses: WindowAnalyses | None = None  # the analyses under way, in the run's pools
         self._storage = StorageFailures(settings.out_dir)  # windows in a row the folder's storage refused
         self._earlier: set[str] = set()  # windows of earlier runs a restart files (cut, or not analysed)
         self._failure: int | None = None  # the window (from 1) after whose storage failure the monitor stops (exit 1)
@@ -130,8 +125,7 @@ class Monitor:
 
     def _run(self) -> None:
         with folder_lock(self.s.out_dir), self._identified() as windows, ExitStack() as pools, self._signals():
-            self._pools = pools
-            self._pool = pools.enter_context(analysis_executor(self.s.jobs, None))
+            self._analyses = WindowAnalyses(pools, self.s.jobs)
             first = self._resume(windows)
             wall0 = time.monotonic()
             n = first
@@ -204,40 +198,24 @@ class Monitor:
         self.status.captured += 1
         self.status.machine_time_s = self._clock.at(n) + self.s.window_s
         self._collect(at_most=self.s.jobs - 1 if self.s.fast else None)
-        if len(self._pending) > self.s.jobs:  # jobs running and one waiting: no more (back-pressure)
-            self._mark(key, "not analysed", f"the analysis fell behind the capture ({len(self._pending)} windows "
+        waiting = len(self._analyses or ())
+        if waiting > self.s.jobs:  # jobs running and one waiting: no more (back-pressure)
+            self._mark(key, "not analysed", f"the analysis fell behind the capture ({waiting} windows "
                                             "waiting): this window was skipped", kind="skipped")
             return
         self._submit(key)
         self._show()
 
     def _submit(self, key: str) -> None:
-        path = self._windows.path(key)
-        job = (analyse_window, str(path.resolve()), sha256_of(path), self.s.request)
-        try:
-            future = self._pool.submit(*job)
-        except BrokenProcessPool:  # a worker died (killed, out of memory) — its window's future may not say so yet:
-            # this window and the next go to a new pool (the old one's futures are collected as unfinished)
-            self._pool = self._pools.enter_context(analysis_executor(self.s.jobs, None))
-            future = self._pool.submit(*job)
-        self._pending[future] = key
+        assert self._analyses is not None  # _run made them before any window
+        self._analyses.submit(key, self._windows.path(key), self.s.request)
 
     def _collect(self, at_most: int | None) -> None:
         """Record the finished analyses; first wait until at most ``at_most`` are left (None: do not wait)."""
-        while self._pending:
-            done = [f for f in self._pending if f.done()]
-            if not done and at_most is not None and len(self._pending) > at_most:
-                next(iter(self._pending)).exception()  # wait for the oldest
-                continue
-            if not done:
-                break
-            for future in done:
-                key = self._pending.pop(future)
-                try:
-                    outcome = future.result()
-                except Exception as e:  # noqa: BLE001 - the worker itself died (analyse_window never raises)
-                    self._unfinished(key, e)
-                    continue
+        for key, outcome in self._analyses.finished(at_most) if self._analyses is not None else ():
+            if isinstance(outcome, Exception):
+                self._unfinished(key, outcome)
+            else:
                 self._record(key, outcome)
 
     def _unfinished(self, key: str, error: Exception) -> None:
@@ -273,6 +251,10 @@ class Monitor:
         for window in filed:
             self._filed_one(window)
         st, filing = self.status, self._filing
+        if filing.notes:  # a window that waited, kept out by a later analysis of it
+            st.message = "; ".join(filing.notes)
+            filing.notes.clear()
+            self._show()
         if (st.catalogue_down_since, st.waiting) != (filing.down_since_utc, len(filing.waiting)):
             st.catalogue_down_since, st.waiting = filing.down_since_utc, len(filing.waiting)
             st.catalogue_problem = filing.problem

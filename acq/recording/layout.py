@@ -63,6 +63,13 @@ FOOTER_TEXT = ("status", "stop_reason", "stopped_utc")
 OPTIONAL_ENCODER = ("drive_time_s", "velocity_counts_per_s", "velocity_demand_counts_per_s")
 
 
+def footer_unwritten() -> dict[str, str | np.int64]:
+    """The footer's root attributes as a file is created with them (status ``recording``, no counts): created with
+    the file's other attributes, before any data, so that :func:`write_footer` overwrites them in place."""
+    return {"stopped_utc": "", "status": "recording", "stop_reason": "", "current_samples": np.int64(NO_COUNT),
+            "encoder_samples": np.int64(NO_COUNT)}
+
+
 def utc_now_iso() -> str:
     """The current UTC time as ISO 8601 with seconds."""
     return datetime.now(UTC).isoformat(timespec="seconds")

@@ -168,10 +168,15 @@ def _checked_for_zeros(name: str, ds: h5py.Dataset, step: int, values: np.ndarra
     return Column(values, lost_from, holes, invented(name, values, chunks, holes) if chunks else ())
 
 
-def _committed(f: h5py.File, reader: _Reader) -> dict[str, int] | None:
-    """What the writer committed: the footer's counts, else the last ``/flushes`` row; None if neither exists."""
-    counts = [int(f.attrs.get(name, NO_COUNT)) for name in ("current_samples", "encoder_samples")]
-    if _attr(f.attrs.get("status")) != "recording" and min(counts) > NO_COUNT:
+def _committed(f: h5py.File, attrs: dict[str, Any], reader: _Reader) -> dict[str, int] | None:
+    """What the writer committed: the footer's counts (``attrs``, the root attributes read), else the last
+    ``/flushes`` row; None if neither exists.
+
+    The counts are numbers overwritten in place, and :func:`~acq.recording.layout.write_footer` writes them before
+    the status: a count other than :data:`NO_COUNT` is a footer's whatever the status says, or if a cut lost the
+    status string."""
+    counts = [int(attrs.get(name, NO_COUNT)) for name in ("current_samples", "encoder_samples")]
+    if min(counts) > NO_COUNT:
         return {"current_samples": counts[0], "encoder_samples": counts[1]}
     if "flushes" not in f:
         return None
@@ -365,7 +370,7 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
     bench = _config_attr(p, attrs, "bench_json", Bench)
     profile = None if attrs.get("profile_json") == "null" else _config_attr(p, attrs, "profile_json", Profile)
     reader = _Reader(f, p, notes, end)
-    committed = _committed(f, reader)
+    committed = _committed(f, attrs, reader)
     damage: list[Damage] = []
     current = _read_current(reader, committed, damage)
     encoder = _read_encoder(reader, committed, damage)

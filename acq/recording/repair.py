@@ -10,10 +10,17 @@ import h5py
 import numpy as np
 
 from acq.recording.h5safe import open_read, superblock_eof
-from acq.recording.layout import EVENT_DTYPE, LIBVER, OPTIONAL_ENCODER, write_footer
+from acq.recording.layout import EVENT_DTYPE, LIBVER, OPTIONAL_ENCODER, footer_unwritten, write_footer
 from acq.recording.reader import load
 from acq.recording.session import Session
 from acq.recording.storage import atomic_path, storage_error
+
+
+#: A copy is written in this many slices of each column, each flushed: a cut copy of it keeps the slices of both
+#: streams before the cut, as one of a recording keeps its commits (columns written whole put the encoder, written
+#: last, past a 90 % cut). 20: a cut then costs about 1/20 of each stream beyond its share of the bytes (measured on a
+#: 9 s copy: a 90 % cut keeps 89 % of the current and 87.5 % of the encoder; 50 %: 48 % and 50 %).
+SLICES = 20
 
 
 def repair(path: Path | str, stop_reason: str) -> Session:
@@ -66,7 +73,8 @@ def _copy(source: Path, session: Session, target: Path, stop_reason: str) -> Ses
     with atomic_path(target) as tmp:
         try:
             with h5py.File(tmp, "w", libver=LIBVER) as dst:
-                _write_copy(dst, session, stop_reason, group_attrs)
+                _write_copy(dst, session, group_attrs)
+                write_footer(dst, "interrupted", stop_reason, {n for n in OPTIONAL_ENCODER if n in dst["encoder"]})
         except OSError:
             raise
         except Exception as e:  # noqa: BLE001 - h5py reports write errors as RuntimeError too
@@ -74,29 +82,28 @@ def _copy(source: Path, session: Session, target: Path, stop_reason: str) -> Ses
     return load(target)
 
 
-def _write_copy(dst: h5py.File, session: Session, stop_reason: str, group_attrs: dict[str, dict[str, Any]]) -> None:
-    def column(group: h5py.Group, name: str, values: np.ndarray) -> None:
-        group.create_dataset(name, data=values, maxshape=(None,), chunks=True, fletcher32=True)
-
-    attrs = {k: v for k, v in session.attrs.items() if k not in ("current_samples", "encoder_samples")}
-    dst.attrs.update(attrs)
-    cur = dst.create_group("current")
-    c = session.current
-    cur.attrs.update(group_attrs["current"])
-    for ch, values in c.phases_a.items():
-        column(cur, f"{ch}_A", values)
-    blocks = cur.create_group("blocks")
-    for name, values in (("first_index", c.block_first_index), ("count", c.block_count),
-                         ("host_ns", c.block_host_ns)):
-        column(blocks, name, values)
-    enc = dst.create_group("encoder")
-    e = session.encoder
-    enc.attrs.update(group_attrs["encoder"])
-    for name in ("position_counts", "index", "host_ns", *OPTIONAL_ENCODER):
-        values = getattr(e, name)
-        if values is not None:
-            column(enc, name, values)
-    rows = np.array([(ev.host_ns, ev.stream.encode(), ev.kind.encode(), ev.detail.encode()[:240])
-                     for ev in session.events], dtype=EVENT_DTYPE)
-    column(dst, "events", rows)
-    write_footer(dst, "interrupted", stop_reason, {n for n in OPTIONAL_ENCODER if n in enc})
+def _write_copy(dst: h5py.File, session: Session, group_attrs: dict[str, dict[str, Any]]) -> None:
+    """The attributes and data of ``session``, status ``recording`` and no counts until the footer. Every attribute,
+    group and dataset is created before any data is written, as the writer does: what locates the root attributes
+    then lies before the data, so a cut copy of this file keeps them (the footer overwrites them in place); the data
+    follows in :data:`SLICES` slices."""
+    c, e = session.current, session.encoder
+    events = np.array([(ev.host_ns, ev.stream.encode(), ev.kind.encode(), ev.detail.encode()[:240])
+                       for ev in session.events], dtype=EVENT_DTYPE)
+    columns = {**{f"current/{ch}_A": values for ch, values in c.phases_a.items()},
+               "current/blocks/first_index": c.block_first_index, "current/blocks/count": c.block_count,
+               "current/blocks/host_ns": c.block_host_ns,
+               **{f"encoder/{name}": getattr(e, name) for name in ("position_counts", "index", "host_ns",
+                                                                  *OPTIONAL_ENCODER) if getattr(e, name) is not None},
+               "events": events}
+    dst.attrs.update({**session.attrs, **footer_unwritten()})
+    for name in ("current", "encoder"):
+        dst.create_group(name).attrs.update(group_attrs[name])
+    made = {name: dst.create_dataset(name, shape=values.shape, dtype=values.dtype, maxshape=(None,), chunks=True,
+                                     fletcher32=True) for name, values in columns.items()}
+    dst.flush()  # the layout's metadata placed now (HDF5 places what is not flushed at the end of the file)
+    for k in range(1, SLICES + 1):  # both streams in time order, as a recording commits them
+        for name, values in columns.items():
+            rows = np.s_[(k - 1) * values.size // SLICES:k * values.size // SLICES]
+            made[name][rows] = values[rows]
+        dst.flush()

@@ -9,7 +9,8 @@ Durable means on the disk, not only in the kernel's page cache: a power cut or a
 file or a rename left there, in any order. So the temp file's data is synced before the rename and its folder after
 it (a new name is durable only once the folder holding it is synced), and a folder acq makes has its parent synced
 (:func:`make_folders`). A failed sync is a failed write ("I/O error: <file>"): on Linux the pages it could not write
-may already be dropped from the cache, so retrying it proves nothing.
+may already be dropped from the cache, so retrying it proves nothing. A failed sync of the folder after the rename is
+one too (exit 1), but the file is complete under its name and the message says so (:func:`replace_durably`).
 """
 
 from __future__ import annotations
@@ -131,10 +132,17 @@ def make_folders(folder: Path | str) -> None:
 
 def replace_durably(tmp: Path | str, target: Path | str) -> None:
     """Rename the complete file ``tmp`` over ``target`` so that a power cut leaves either the old ``target`` or the
-    whole new one: ``tmp``'s data synced before the rename, the folder after it. Raises the :class:`OSError` as is."""
+    whole new one: ``tmp``'s data synced before the rename, the folder after it. Raises the :class:`OSError` of the
+    file's sync or the rename as is; a failed sync of the folder, after the rename, raises a :class:`StorageError`
+    that says what is true: "<target>: written, but its name may not survive a power cut (I/O error when syncing its
+    folder)" — still a failed write (exit 1): what acq reports as written survives a power cut, and this may not."""
     sync_file(tmp)
     os.replace(tmp, target)
-    sync_folder(Path(target).parent)
+    try:
+        sync_folder(Path(target).parent)
+    except OSError as e:
+        raise StorageError(f"{target}: written, but its name may not survive a power cut ({cause_of(e)} when syncing "
+                           "its folder)") from None
 
 
 @contextmanager

@@ -32,8 +32,8 @@ import numpy as np
 
 from acq import __version__
 from acq.recording.h5safe import abandon
-from acq.recording.layout import (EVENT_DTYPE, FLUSH_DTYPE, FORMAT, FORMAT_VERSION, LIBVER, NO_COUNT, OPTIONAL_ENCODER,
-                                  Status, committed_rows, utc_now_iso, write_footer)
+from acq.recording.layout import (EVENT_DTYPE, FLUSH_DTYPE, FORMAT, FORMAT_VERSION, LIBVER, OPTIONAL_ENCODER, Status,
+                                  committed_rows, footer_unwritten, utc_now_iso, write_footer)
 from acq.recording.pending import Column, PendingColumns
 from acq.recording.storage import cause_of, free_bytes, storage_error, sync_file, sync_folder
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
@@ -145,11 +145,8 @@ class SessionWriter:
                 "format_version": FORMAT_VERSION,
                 "session_id": session_id or str(uuid.uuid4()),
                 "created_utc": created,
-                "stopped_utc": "",
                 "host_monotonic_ns_at_start": np.int64(host_ns_at_start),
                 "acq_version": __version__,
-                "status": "recording",
-                "stop_reason": "",
                 "bench_json": bench.model_dump_json(),
                 "profile_json": profile.model_dump_json() if profile is not None else "null",
                 "joint": bench.joint,
@@ -157,8 +154,7 @@ class SessionWriter:
                 "tags_json": json.dumps(tags or {}),
                 "origin_json": json.dumps(origin or {"kind": "recorded"}),
                 "host_clock_shared": bool(host_clock_shared),
-                "current_samples": np.int64(NO_COUNT),  # every attribute now: the footer overwrites them in place
-                "encoder_samples": np.int64(NO_COUNT),
+                **footer_unwritten(),  # every attribute now: the footer overwrites them in place
             }
         )
         cur = f.create_group("current")
