@@ -50,12 +50,14 @@ def test_every_effect_is_off_by_default_and_the_measured_path_reproduces_the_ide
 
 # ---- plant ---------------------------------------------------------------------------------------------
 
+@pytest.mark.parametrize("side", ["load", "motor"])
 @pytest.mark.parametrize("rpm", [10.0, 1000.0])
-def test_load_friction_adds_the_coulomb_stribeck_torque_at_constant_speed(rpm: float) -> None:
-    """In a long cruise the motor torque carries gravity and the friction law F(ω_l) exactly."""
+def test_friction_adds_the_coulomb_stribeck_torque_at_constant_speed(rpm: float, side: str) -> None:
+    """In a long cruise the motor torque carries gravity and the friction law F(ω) exactly, of the load's
+    or of the motor's speed (the two are equal in a cruise)."""
     profile = Profile(kind="triangle", top_speed_rpm=rpm, accel_time_s=0.2, decel_time_s=0.2, cruise_s=2.0,
                       duration_s=10.0)
-    law = dict(load_coulomb_Nm=0.3, load_stribeck_Nm=0.2, load_stribeck_speed_rad_s=2.0)
+    law = {f"{side}_coulomb_Nm": 0.3, f"{side}_stribeck_Nm": 0.2, f"{side}_stribeck_speed_rad_s": 2.0}
     with_f, without = make_sim(**law), make_sim()
     t = np.arange(1.2, 2.2, 1e-3)                      # cruise: 0.2 s ramp + 1 s settling
     torque = {}
@@ -66,9 +68,31 @@ def test_load_friction_adds_the_coulomb_stribeck_torque_at_constant_speed(rpm: f
         g = Gravity(s.arm_mass_kg, s.arm_com_distance_m, np.radians(s.arm_start_deg), sim.bench.gear.ratio)
         torque[name] = st["torque_Nm"] - np.array([g.torque_Nm(x) for x in st["theta_l_rad"]])
         omega_l = st["omega_l_rad_s"]
-    expected = with_f.effects.friction.torque_Nm(omega_l)
+    friction = with_f.effects.friction if side == "load" else with_f.effects.motor_friction
+    expected = friction.torque_Nm(omega_l)
     assert np.mean(expected) == pytest.approx(0.3 + 0.2 * np.exp(-(rpm * RPM_TO_RAD_S / 2.0) ** 2), rel=0.05)
     assert np.mean(torque["with"] - torque["without"]) == pytest.approx(np.mean(expected), rel=0.02)
+
+
+def test_cogging_is_the_motor_torque_the_current_does_not_carry_with_its_periods_per_revolution() -> None:
+    """The motor's equation of motion, J_m·α_m = k_t·i_q − K·δ − C·δ̇ − b_m·ω_m − T_c, leaves T_c over the
+    triangle's swing: A·sin(24·θ_m) at the last control instant (the torque is held over the 250 µs period) to
+    2 % of A r.m.s. (measured 1.1 %; against A·sin(24·θ_m) of the same instant 15 %: the hold's lag at speed);
+    without cogging the same residual is below 0.1 % of A (measured 0.07 %: the interpolated states' derivative)."""
+    residual = {}
+    for amplitude in (0.2, 0.0):
+        sim = make_sim(cogging_Nm=amplitude, cogging_per_rev=24)
+        sim.start_motion(PROFILE, 0.0)
+        t = np.arange(0.5, 2.5, 2e-6)
+        st = sim.true_state_at(t)
+        p = sim.plant
+        held = sim.true_state_at(np.floor(t * sim.sim.speed_loop_hz) / sim.sim.speed_loop_hz)["theta_m_rad"]
+        twist, twist_rate = st["theta_m_rad"] - st["theta_l_rad"], st["omega_m_rad_s"] - st["omega_l_rad_s"]
+        cogging = (st["torque_Nm"] - p.Jm_kgm2 * np.gradient(st["omega_m_rad_s"], t) - p.K_Nm_per_rad * twist
+                   - p.C_Nms_per_rad * twist_rate - p.bm_Nms_per_rad * st["omega_m_rad_s"])
+        residual[amplitude] = np.sqrt(np.mean((cogging - amplitude * np.sin(24 * held)) ** 2))
+    assert residual[0.2] < 0.2 * 0.02
+    assert residual[0.0] < 0.2 * 0.001
 
 
 @pytest.mark.parametrize("backlash_mrad", [0.05, 0.2])

@@ -90,9 +90,10 @@ class JointSimulation:
     counts_per_rev : encoder resolution the speed loop sees, counts/rev.
     schedule : the speed reference.
     n_sub : fine-grid points per control period.
-    effects : optional load friction, backlash, third mass (:mod:`drivers.sim.joint_effects`); the friction
-        adds to the held load torque input, the backlash correction is a third held input, the third
-        mass's states follow the plant's five.
+    effects : optional load friction, backlash, third mass, motor friction and cogging
+        (:mod:`drivers.sim.joint_effects`); the load friction adds to the held load torque input, the backlash
+        correction is a third held input, the motor's friction and cogging the last one, the third mass's states
+        follow the plant's five.
     """
 
     def __init__(self, plant: TwoMass, pi: SpeedPI, gravity: Gravity, counts_per_rev: int,
@@ -172,6 +173,8 @@ class JointSimulation:
         AB = self._psi[-1]
         z = np.empty(ns + self.n_inputs)
         friction, backlash = self.effects.friction, self.effects.backlash
+        motor = self.effects if self.effects.motor_torque else None
+        motor_col = ns + self.n_inputs - 1
         x, counts_prev, integral = self._x, self._counts_prev, self._integral_Nm
         rad_per_count, q_per_T = self._rad_per_count, self._rad_per_count / T
         g = self.gravity
@@ -195,6 +198,8 @@ class JointSimulation:
                 z[ns + 1] += friction.torque_Nm(x[3])               # load friction, held like T_g
             if backlash is not None:
                 z[ns + 2] = backlash.correction_Nm(x[0] - x[2])     # dead-zone torque pair
+            if motor is not None:
+                z[motor_col] = motor.motor_torque_Nm(x[0], x[1])    # motor friction + cogging, held like T_g
             xs[j] = z
             x = AB @ z
         self._x, self._counts_prev, self._integral_Nm, self._iq_ref_A = x, counts_prev, integral, iq_ref
