@@ -95,6 +95,25 @@ def test_cogging_is_the_motor_torque_the_current_does_not_carry_with_its_periods
     assert residual[0.0] < 0.2 * 0.001
 
 
+def test_an_eccentric_encoder_reads_its_once_per_revolution_error_and_the_loop_follows_it() -> None:
+    """With e = 1 mrad the streamed position is θ_m + e·sin(θ_m) (its once-per-revolution line 1 mrad to 2 %), and in a
+    100 rpm cruise (1.7 Hz per revolution, far inside the 15 Hz speed loop) the loop holds the *read* speed: the true
+    speed ripples by e·ω = 10.5 mrad/s (to 10 %) at once per revolution."""
+    profile = Profile(kind="triangle", top_speed_rpm=100.0, accel_time_s=0.2, decel_time_s=0.2, cruise_s=4.0,
+                      duration_s=10.0)
+    sim = make_sim(encoder_eccentricity_rad=1e-3, current_noise_A=0.0)
+    sim.start_motion(profile, 0.0)
+    cycles = np.arange(1200, 4200)                                 # 1.2 … 4.2 s: the cruise, settled; 5 revolutions
+    t = sim.latch_times_s(int(cycles[0]), cycles.size)
+    st = sim.true_state_at(t)
+    read = (sim.encoder_counts(int(cycles[0]), cycles.size) - sim.sim.encoder_start_counts) * 2 * np.pi / 131072
+    theta = st["theta_m_rad"]
+    assert 2 * abs(np.mean((read - theta) * np.exp(-1j * theta))) == pytest.approx(1e-3, rel=0.02)
+    omega = 100.0 * RPM_TO_RAD_S
+    ripple = 2 * abs(np.mean((st["omega_m_rad_s"] - np.mean(st["omega_m_rad_s"])) * np.exp(-1j * theta)))
+    assert ripple == pytest.approx(1e-3 * omega, rel=0.1)
+
+
 @pytest.mark.parametrize("backlash_mrad", [0.05, 0.2])
 def test_backlash_is_a_dead_zone_of_the_stated_width_in_the_shaft(backlash_mrad: float) -> None:
     """The shaft torque from the load's equation of motion against the twist: two branches of slope K

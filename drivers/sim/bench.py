@@ -308,9 +308,11 @@ class SimBench:
 
     def encoder_counts(self, first_cycle: int, count: int) -> np.ndarray:
         """Unwrapped position (int64 counts) latched at drive cycles ``first_cycle …`` (at
-        :meth:`latch_times_s`): floor(θ_m/2π·cpr) + start."""
+        :meth:`latch_times_s`): floor(θ_m/2π·cpr) + start (θ_m as the encoder reads it: with its eccentricity)."""
         t = self.latch_times_s(first_cycle, count)
         theta_m = self._states(t)[:, 0]
+        if self.effects.eccentricity is not None:  # the disc's once-per-revolution error
+            theta_m = self.effects.eccentricity.read_rad(theta_m)
         theta_enc = self.sim.encoder_direction * theta_m  # the encoder's true counting direction and resolution
         return np.floor(theta_enc / (2 * np.pi) * self._encoder_cpr).astype(np.int64) + self.sim.encoder_start_counts
 
