@@ -96,9 +96,9 @@ def test_cogging_is_the_motor_torque_the_current_does_not_carry_with_its_periods
 
 
 def test_an_eccentric_encoder_reads_its_once_per_revolution_error_and_the_loop_follows_it() -> None:
-    """With e = 1 mrad the streamed position is θ_m + e·sin(θ_m) (its once-per-revolution line 1 mrad to 2 %), and in a
+    """With e = 1 mrad the streamed position is θ_m + e·sin(θ_m) (its once-per-revolution line 1 mrad to 2 %), in a
     100 rpm cruise (1.7 Hz per revolution, far inside the 15 Hz speed loop) the loop holds the *read* speed: the true
-    speed ripples by e·ω = 10.5 mrad/s (to 10 %) at once per revolution."""
+    speed ripples by e·ω = 10.5 mrad/s (to 10 %) at once per revolution; and the phase current follows the read angle."""
     profile = Profile(kind="triangle", top_speed_rpm=100.0, accel_time_s=0.2, decel_time_s=0.2, cruise_s=4.0,
                       duration_s=10.0)
     sim = make_sim(encoder_eccentricity_rad=1e-3, current_noise_A=0.0)
@@ -112,6 +112,16 @@ def test_an_eccentric_encoder_reads_its_once_per_revolution_error_and_the_loop_f
     omega = 100.0 * RPM_TO_RAD_S
     ripple = 2 * abs(np.mean((st["omega_m_rad_s"] - np.mean(st["omega_m_rad_s"])) * np.exp(-1j * theta)))
     assert ripple == pytest.approx(1e-3 * omega, rel=0.1)
+    # the drive commutates on what it reads: the phase current's angle is p·(θ_m + e·sin θ_m) + θ0
+    n = np.arange(40000, 60000)                                    # DAQ samples in the cruise
+    st = sim.true_state_at(sim.daq_time_s(n))
+    i_a = sim.current_samples(int(n[0]), n.size)[0] - sim.dc_offset_A[0]
+    for angle, error_A in ((st["theta_m_rad"] + 1e-3 * np.sin(st["theta_m_rad"]), 1e-9), (st["theta_m_rad"], None)):
+        ideal = -st["iq_A"] * np.sin(4 * angle + sim.sim.theta0_rad)
+        if error_A is not None:
+            assert np.max(np.abs(i_a - ideal)) < error_A
+        else:  # on the true angle it would differ by up to i_q·p·e
+            assert np.max(np.abs(i_a - ideal)) > 0.5 * np.max(np.abs(st["iq_A"])) * 4e-3
 
 
 @pytest.mark.parametrize("backlash_mrad", [0.05, 0.2])

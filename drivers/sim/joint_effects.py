@@ -13,8 +13,8 @@ All motor side (rad, rad/s, N·m), like :mod:`drivers.sim.plant`:
   over a control period; its stiffness A·n (4.8 N·m/rad at 0.2 N·m) is far below K. Motor friction and cogging
   enter as one more held input (the last column of B), a torque on the motor alone.
 * :class:`Eccentricity` — the encoder's once-per-revolution error: it reads θ_m + e·sin(θ_m + φ) (a disc off-centre by
-  r·e on radius r). The drive's speed loop and the streamed position read it; the drive's commutation is left on the
-  true angle (its error p·e, 1.2 mrad at e = 0.3 mrad, changes the torque by cos(p·e) − 1 < 1e-6).
+  r·e on radius r). The drive's speed loop, its commutation (so the phase currents' angle) and the streamed position
+  read it; the torque stays k_t·i_q (the commutation's error p·e changes it by cos(p·e) − 1: −7e-5 at e = 3 mrad).
 * :class:`Backlash` — a dead zone of full width b (load side; N·b motor side) in the shaft: the shaft
   torque is K·dz(δ) with dz(δ) = δ − clip(δ, −N·b/2, N·b/2), δ = θ_m − θ_l. The linear plant carries
   K·δ; the correction K·clip(δ, ±N·b/2) enters as a torque pair (+ on the motor, − on the load) held
