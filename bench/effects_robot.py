@@ -46,14 +46,12 @@ Measured at 4818a25 (analysis/ as on main 3d6370f), the defaults (robot: seeds 0
   a 95 % interval's 5 %.
   (×4, ×8: ``--effects gravity --levels 2,4,8``.)
 * eccentricity ×0.5, ×1, ×2, ×10 (0.15, 0.3, 0.6, 3 mrad; ``--effects eccentricity --levels 0.5,1,2,10``, at
-  02c4682): robot 18 / 0, 18 / 0, 18 / **1** (K 898.6 [891.7, 905.6], seed 3 at 540 s), 11 / **5** (J_m 5, C 2, K 1;
-  poor 9); paper 5 / 0 at ×0.5…×2, poor 5 at ×10. At 3 mrad (a magnetic or kit encoder's error) seed 1 at 540 s reads
-  K 905.06 [894.56, 915.69], J_m +2.0 %, J_l +1.3 % (without: K 888.24 [882.70, 893.82]): |H| ~1 % lower below f_a,
-  2–4 % above, 12 % lower at f_r (98–106 Hz, coherence 0.955 → 0.838), the misfit's worst window at 0.66 of its
-  allowance. Through the streamed position, not the motion: the error in the stream alone gives K 907.5, J_m +2.5 %; in
-  the drive's loop alone K 890.5, every interval holding. A ±e (0.3 %) speed modulation alone is too small for 1–3 %
-  of |H|; what amplifies it (p·e = 1.2 % is the electrical angle's error) is not traced. tests/test_robot_eccentricity.py
-  pins that window.
+  87a3b30): robot 18 / 0 at every level; paper 5 / 0 at ×0.5…×2, poor 5 at ×10 (seed 0: K +0.7 %, the model misses
+  |H| by +4.0 % at 10–24 Hz against 1.7 %, worded as a third mode, backlash or friction). Before 87a3b30 the simulated
+  drive commutated on the true angle while it streamed the eccentric one: that 12 mrad (p·e) mismatch between the
+  current's angle and the encoder's alone made 5 of 11 ok windows at 3 mrad confidently wrong (J_m +1.5…6.6 %; seed 1
+  at 540 s K 905.06 [894.56, 915.69] against 891) — a drive that commutates on another sensor than the one it streams
+  would meet it.
 """
 
 from __future__ import annotations
