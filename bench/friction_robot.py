@@ -54,49 +54,26 @@ from __future__ import annotations
 import argparse
 import multiprocessing as mp
 import sys
-import tempfile
-from collections import Counter
 from pathlib import Path
 
 from rich.console import Console
-from rich.table import Table
 
 ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:  # this checkout's packages
     sys.path.insert(0, str(ROOT))
 
-from acq.config import load_bench  # noqa: E402
-from acq.offline.analyze import analyze_session  # noqa: E402
-from acq.recording.recorder import Recorder  # noqa: E402
-from drivers.registry import open_bench  # noqa: E402
+from bench.robot_windows import WINDOW_S, count_table, is_wrong, robot_window, wrong_line  # noqa: E402
 
-ROBOT = ROOT / "configs" / "benches" / "sim_robot.toml"
-WINDOW_S = 10.0  # the monitor's window
 # the accuracy family's friction scenario (bench/scenarios.py), scaled by --levels
 COULOMB_NM, STRIBECK_NM = 0.3, 0.2
-PARAMS = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")
 
 
 def run_window(job: tuple[int, float, float]) -> dict:
     """Record and analyse one window (seed, elapsed s, friction level); the verdict and the parameters whose interval
     misses the truth (``outside``), or the error's text as the verdict."""
     seed, elapsed_s, level = job
-    bench = load_bench(ROBOT)
-    sim = bench.sim.model_copy(update={"elapsed_s": elapsed_s, "seed": seed, "load_coulomb_Nm": level * COULOMB_NM,
-                                       "load_stribeck_Nm": level * STRIBECK_NM})
-    bench = bench.model_copy(update={"sim": sim})
-    try:
-        with tempfile.TemporaryDirectory() as folder:
-            current, drive = open_bench(bench, fast=True)
-            path = Recorder(bench, None, current, drive, Path(folder), WINDOW_S).run().path
-            doc = analyze_session(path, write=False).json_dict
-    except Exception as e:  # noqa: BLE001 — a window the analysis refuses is counted, not fatal
-        return {"seed": seed, "elapsed_s": elapsed_s, "level": level, "verdict": f"error: {e}", "outside": []}
-    ci, truth = doc.get("ci95") or {}, doc.get("simulated_truth") or {}
-    outside = [p for p in PARAMS if p in ci and None not in ci[p] and not ci[p][0] <= truth[p] <= ci[p][1]]
-    values = {p: (doc.get(p), *ci[p], truth.get(p)) for p in outside}
-    return {"seed": seed, "elapsed_s": elapsed_s, "level": level, "verdict": doc["quality"]["verdict"],
-            "outside": outside, "values": values}
+    return robot_window(seed, elapsed_s, {"load_coulomb_Nm": level * COULOMB_NM, "load_stribeck_Nm": level * STRIBECK_NM},
+                        {"level": level})
 
 
 def main() -> None:
@@ -111,24 +88,14 @@ def main() -> None:
     jobs = [(s, float(e), lv) for lv in levels for s in range(args.seeds) for e in args.elapsed.split(",")]
     with mp.get_context("spawn").Pool(args.jobs) as pool:
         rows = pool.map(run_window, jobs)
-    table = Table(title=f"sim_robot, {WINDOW_S:g} s windows, i_a only: ok windows with the truth outside an interval")
-    for col in ("friction", "windows", "ok", "poor", "failed", "not excited", "errors", "ok & wrong",
-                *(p.split("_")[0] for p in PARAMS)):
-        table.add_column(col, justify="right")
-    for lv in levels:
-        mine = [r for r in rows if r["level"] == lv]
-        verdicts = Counter("error" if r["verdict"].startswith("error") else r["verdict"] for r in mine)
-        wrong = [r for r in mine if r["verdict"] == "ok" and r["outside"]]
-        per = Counter(p for r in wrong for p in r["outside"])
-        counts = [verdicts[v] for v in ("ok", "poor", "failed", "not excited", "error")]
-        table.add_row(f"×{lv:g}", str(len(mine)), *map(str, counts), str(len(wrong)), *(str(per[p]) for p in PARAMS))
     console = Console(width=120)
-    console.print(table)
+    console.print(count_table(f"sim_robot, {WINDOW_S:g} s windows, i_a only: ok windows with the truth outside an "
+                              "interval", ("friction",),
+                              [((f"×{lv:g}",), [r for r in rows if r["level"] == lv]) for lv in levels]))
     if args.list:
         for r in rows:
-            if r["verdict"] == "ok" and r["outside"]:
-                console.print(f"×{r['level']:g} seed {r['seed']} at {r['elapsed_s']:g} s: " + "; ".join(
-                    f"{p} {v[0]:.6g} [{v[1]:.6g}, {v[2]:.6g}] truth {v[3]:.6g}" for p, v in r["values"].items()))
+            if is_wrong(r):
+                console.print(f"×{r['level']:g} seed {r['seed']} at {r['elapsed_s']:g} s: {wrong_line(r)}")
 
 
 if __name__ == "__main__":

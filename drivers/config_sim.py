@@ -55,6 +55,18 @@ class SimSettings(Strict):
     third_mass_Jl_fraction: NonNegFloat = 0.0  # J_3 / J_l of a third mass behind the load (0 = none)
     third_mass_hz: PositiveFloat = 800.0  # its natural frequency on a clamped load, √(K_2/J_3)/2π, Hz
     third_mass_damping_ratio: NonNegFloat = 0.02
+    # motor side (the reducer's input: bearings, seals, the motor's own cogging), torques the phase current does not
+    # carry — the drive's speed loop supplies them, the analysis sees them as part of k_t·i_q
+    motor_coulomb_Nm: NonNegFloat = 0.0
+    motor_stribeck_Nm: NonNegFloat = 0.0  # breakaway excess over Coulomb at rest
+    motor_stribeck_speed_rad_s: PositiveFloat = 2.0
+    cogging_Nm: NonNegFloat = 0.0  # amplitude of the cogging torque A·sin(n·θ_m + φ), N·m
+    cogging_per_rev: PositiveInt = 24  # n: periods per motor revolution (LCM of slots and poles: 12 slots, 8 poles)
+    cogging_phase_rad: float = Field(default=0.0, ge=-1e3, le=1e3)  # φ, at θ_m = 0
+    # the encoder's once-per-revolution error (a disc mounted off-centre): it reads θ_m + e·sin(θ_m + φ), rad, in the
+    # drive's speed loop and in what it streams
+    encoder_eccentricity_rad: NonNegFloat = 0.0
+    encoder_eccentricity_phase_rad: float = Field(default=0.0, ge=-1e3, le=1e3)
     speed_accel_feedforward: bool = True  # the speed loop adds J_nominal·α_ref
     # measurement chain of the current (drivers.sim.measurement)
     daq_antialias: bool = False  # True: an oversampled analog signal through a linear-phase low-pass

@@ -248,6 +248,12 @@ class SimBench:
             "theta_l_rad": x[:, 2].reshape(shape), "omega_l_rad_s": x[:, 3].reshape(shape),
         }
 
+    def _encoder_rad(self, theta_m_rad: np.ndarray) -> np.ndarray:
+        """The motor angle as the drive's encoder reads it (rad): with its eccentricity, if any. The drive commutates
+        on it, so the phase currents follow it too."""
+        ecc = self.effects.eccentricity
+        return theta_m_rad if ecc is None else ecc.read_rad(theta_m_rad)
+
     def current_samples(self, first_index: int, count: int) -> np.ndarray:
         """Phase currents (A), shape (n_channels, count), of DAQ samples ``first_index …``.
 
@@ -256,7 +262,7 @@ class SimBench:
         if self.chain.active:
             return self._measured_currents(first_index, count)
         x = self._states(self.daq_time_s(np.arange(first_index, first_index + count)))
-        theta_e = self._true_pole_pairs * x[:, 0] + self.sim.theta0_rad
+        theta_e = self._true_pole_pairs * self._encoder_rad(x[:, 0]) + self.sim.theta0_rad
         shifts = np.array([PHASE_SHIFT_RAD[c] for c in self._wired])[:, None]
         clean = -x[:, 4][None, :] * np.sin(theta_e[None, :] + shifts) * self.sim.current_sensor_gain
         noise = self._normal("current", first_index, count, len(self.channels)) * self.sim.current_noise_A
@@ -266,7 +272,7 @@ class SimBench:
         """Phase currents through the measurement chain's effects (:mod:`drivers.sim.measurement`)."""
         t = self.daq_time_s(self.chain.analog_indices(first_index, count))
         x = self._states(t)
-        angle = (self._true_pole_pairs * x[:, 0] + self.sim.theta0_rad)[None, :] + np.array(
+        angle = (self._true_pole_pairs * self._encoder_rad(x[:, 0]) + self.sim.theta0_rad)[None, :] + np.array(
             [PHASE_SHIFT_RAD[c] for c in self._wired])[:, None]
         torque_current = -x[:, 4][None, :] * np.sin(angle) * self.sim.current_sensor_gain
         analog = self.chain.analog(t, torque_current, angle, x[:, 1]) + self.dc_offset_A[:, None]
@@ -308,10 +314,9 @@ class SimBench:
 
     def encoder_counts(self, first_cycle: int, count: int) -> np.ndarray:
         """Unwrapped position (int64 counts) latched at drive cycles ``first_cycle …`` (at
-        :meth:`latch_times_s`): floor(θ_m/2π·cpr) + start."""
+        :meth:`latch_times_s`): floor(θ_m/2π·cpr) + start (θ_m as the encoder reads it: with its eccentricity)."""
         t = self.latch_times_s(first_cycle, count)
-        theta_m = self._states(t)[:, 0]
-        theta_enc = self.sim.encoder_direction * theta_m  # the encoder's true counting direction and resolution
+        theta_enc = self.sim.encoder_direction * self._encoder_rad(self._states(t)[:, 0])  # the encoder's true counting direction and resolution
         return np.floor(theta_enc / (2 * np.pi) * self._encoder_cpr).astype(np.int64) + self.sim.encoder_start_counts
 
     def encoder_register(self, first_cycle: int, count: int) -> np.ndarray:

@@ -90,9 +90,10 @@ class JointSimulation:
     counts_per_rev : encoder resolution the speed loop sees, counts/rev.
     schedule : the speed reference.
     n_sub : fine-grid points per control period.
-    effects : optional load friction, backlash, third mass (:mod:`drivers.sim.joint_effects`); the friction
-        adds to the held load torque input, the backlash correction is a third held input, the third
-        mass's states follow the plant's five.
+    effects : optional load friction, backlash, third mass, motor friction, cogging and the encoder's eccentricity
+        (:mod:`drivers.sim.joint_effects`); the load friction adds to the held load torque input, the backlash
+        correction is a third held input, the motor's friction and cogging the last one, the third mass's states
+        follow the plant's five; the speed loop reads the eccentric encoder.
     """
 
     def __init__(self, plant: TwoMass, pi: SpeedPI, gravity: Gravity, counts_per_rev: int,
@@ -111,7 +112,7 @@ class JointSimulation:
         self._rad_per_count = 2.0 * math.pi / counts_per_rev
         self.x_rest = self._equilibrium()
         self._x = self.x_rest.copy()
-        self._counts_prev = math.floor(self._x[0] / self._rad_per_count)
+        self._counts_prev = math.floor(self._encoder_rad(self._x[0]) / self._rad_per_count)
         self._integral_Nm = self.gravity.torque_Nm(self._x[2])
         self._iq_ref_A = 0.0
         self._clamped = False
@@ -141,6 +142,11 @@ class JointSimulation:
         x[:N_STATES] = [theta_m, 0.0, theta_l, 0.0, iq]
         x[N_STATES:] = [theta_l, 0.0][:self.n_states - N_STATES]
         return x
+
+    def _encoder_rad(self, theta_m_rad: float) -> float:
+        """The angle the drive's encoder reads at motor angle ``theta_m_rad`` (rad; the eccentricity's error added)."""
+        ecc = self.effects.eccentricity
+        return theta_m_rad if ecc is None else float(ecc.read_rad(theta_m_rad))
 
     @property
     def t_end_s(self) -> float:
@@ -172,13 +178,16 @@ class JointSimulation:
         AB = self._psi[-1]
         z = np.empty(ns + self.n_inputs)
         friction, backlash = self.effects.friction, self.effects.backlash
+        motor = self.effects if self.effects.motor_torque else None
+        ecc = self.effects.eccentricity
+        motor_col = ns + self.n_inputs - 1
         x, counts_prev, integral = self._x, self._counts_prev, self._integral_Nm
         rad_per_count, q_per_T = self._rad_per_count, self._rad_per_count / T
         g = self.gravity
         g_scale, g_start, g_ratio = g.mass_kg * G_M_S2 * g.com_distance_m / g.ratio, g.start_rad, g.ratio
         for j in range(n):
             if (k0 + j) % n_inner == 0:                             # a control instant
-                counts = math.floor(x[0] / rad_per_count)
+                counts = math.floor((x[0] if ecc is None else ecc.read_rad(x[0])) / rad_per_count)
                 err = wref[j] - (counts - counts_prev) * q_per_T
                 iq_ref = (ff[j] + kp * err + integral) / kt         # i_q reference, A
                 clamped = abs(iq_ref) > iq_max
@@ -195,6 +204,8 @@ class JointSimulation:
                 z[ns + 1] += friction.torque_Nm(x[3])               # load friction, held like T_g
             if backlash is not None:
                 z[ns + 2] = backlash.correction_Nm(x[0] - x[2])     # dead-zone torque pair
+            if motor is not None:
+                z[motor_col] = motor.motor_torque_Nm(x[0], x[1])    # motor friction + cogging, held like T_g
             xs[j] = z
             x = AB @ z
         self._x, self._counts_prev, self._integral_Nm, self._iq_ref_A = x, counts_prev, integral, iq_ref
