@@ -32,6 +32,7 @@ from scipy.interpolate import CubicSpline
 
 from analysis.clock_angle import AngleFit, angle_alignment
 from analysis.clock_frequency import frequency_alignment
+from analysis.clock_host import HostRelation
 from analysis.clock_model import MAX_DRIFT_PPM, ClockFit, ClockMethod, plausible_drift
 from analysis.clock_search import starting_relation, wide_search
 from analysis.fit import Z95
@@ -40,10 +41,13 @@ from analysis.zero_crossings import angle_crossings_s, crossing_frequency_hz, cu
 _GRID_HZ = 1000.0  # grid of the frequency stage
 _NARROW_S = 0.03  # half-range of the frequency stage's first pass around its starting relation, s
 _PIECE_S = 2.0  # current the angle stage uses to tell the wide search's candidates apart, s
+#: What is known of the drift before the data when no host stamps tell: two crystal clocks differ by at most
+#: MAX_DRIFT_PPM (clock_model), read as the 95 % bound of a normal prior about 0 (σ ≈ 102 ppm).
+CRYSTAL_DRIFT_STD_PPM = MAX_DRIFT_PPM / Z95
 
 
 def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline, pole_pairs: int,
-              host: tuple[float, float] | None, max_lag_s: float = 2.0) -> ClockFit:
+              host: HostRelation | None, max_lag_s: float = 2.0) -> ClockFit:
     """Align the DAQ clock to the drive clock through the stages of the module docstring.
 
     Parameters
@@ -58,10 +62,11 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
         Mechanical angle θ_m(t_drive), rad, over a gap-free encoder run (:func:`analysis.encoder.angle_spline`).
     pole_pairs : int
         Pole pairs p.
-    host : (offset_s, drift_ppm) or None
+    host : HostRelation or None
         Stage 1 result (:func:`analysis.clock_host.host_relation`) when the stamps are arrival times on one host
         clock; None otherwise. The wide search runs either way, ±``max_lag_s`` around the host relation or, without
-        it, around "both streams started together".
+        it, around "both streams started together". Its drift (± its standard error) is what is known of the drift
+        before the angle stage (without it: 0 ± :data:`CRYSTAL_DRIFT_STD_PPM`): :func:`_with_prior`.
     max_lag_s : float
         Half-width of the wide search, s.
     """
@@ -97,6 +102,8 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
         if fit is not None and not plausible_drift(fit.drift_ppm, fit.drift_std_ppm):
             rejected.append(fit)
             fit = None
+        if fit is not None:
+            fit = _with_prior(fit, host, current_a, rate_hz, first_index, angle, pole_pairs)
         return offset_s, drift_ppm, freq, method, fit
 
     offset_s, drift_ppm, freq, method, fit = refine(offset_s, drift_ppm, start)
@@ -118,6 +125,8 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
                    "the streams on (or they do not belong together), so K, J and C would be those of a wrong alignment")
     elif rejected:
         notes.append(f"clock: rejected a fit of the electrical angle: {_rejection_text(rejected)}")
+    if fit is not None and not _drift_from_data(fit):
+        notes.append(_prior_text(fit, host, float(current_a.size / rate_hz)))
     common = dict(host_offset_s=host[0] if host else np.nan, host_drift_ppm=host[1] if host else np.nan,
                   frequency_offset_s=freq[0], frequency_drift_ppm=freq[1],
                   wide_offset_s=wide.offset_s if wide else np.nan, ambiguous_by_s=ambiguous_by, notes=tuple(notes))
@@ -125,6 +134,57 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
         return ClockFit(offset_s, drift_ppm, method=method, failure=failure, **common)
     return ClockFit(fit.offset_s, fit.drift_ppm, fit.residual_s, fit.offset_std_s, fit.drift_std_ppm,
                     fit.theta0_rad, n_windows=fit.n_windows, method="angle", **common)
+
+def _with_prior(fit: AngleFit, host: HostRelation | None, current_a: np.ndarray, rate_hz: float, first_index: int,
+                angle: CubicSpline, pole_pairs: int) -> AngleFit:
+    """The angle fit with its drift combined with what was known before (the host stamps' drift ± its standard
+    error, else 0 ± :data:`CRYSTAL_DRIFT_STD_PPM`), inverse-variance weighted, and offset and θ_0 fitted again at
+    that drift.
+
+    The angle stage's drift rests on how its windows' timing changes from move to move; on a short record of a few
+    moves its jackknife error (:func:`analysis.clock_angle.angle_alignment`) is large, and the prior decides: a
+    robot's 6 s window of three moves read −155 ± 1030 ppm (truth +40) where its host stamps said +37 ± 5.
+    On a record of many moves the data decide (±1…10 ppm against a prior of ±5 or ±102) and nothing changes.
+    The result's ``n_moves`` is negative when the prior decided more than the data (its drift's variance below the
+    data's): :func:`_drift_from_data`.
+    """
+    prior_ppm, prior_std = ((host.drift_ppm, host.drift_std_ppm) if host is not None and np.isfinite(host.drift_std_ppm)
+                            else (0.0, CRYSTAL_DRIFT_STD_PPM))
+    data_w = 1.0 / fit.drift_std_ppm**2 if np.isfinite(fit.drift_std_ppm) and fit.drift_std_ppm > 0 else 0.0
+    if prior_std <= 0.0:  # stamps without delay: the host clock relates the streams exactly
+        drift_ppm, drift_std = prior_ppm, 0.0
+    else:
+        prior_w = 1.0 / prior_std**2
+        drift_ppm = (data_w * fit.drift_ppm + prior_w * prior_ppm) / (data_w + prior_w)
+        drift_std = float(1.0 / np.sqrt(data_w + prior_w))
+    t_mid = (first_index + 0.5 * current_a.size) / rate_hz
+    again = angle_alignment(current_a, rate_hz, first_index, angle, pole_pairs,
+                            fit.offset_s + (fit.drift_ppm - drift_ppm) * 1e-6 * t_mid, drift_ppm, fixed_drift=True)
+    if again is None:
+        return fit
+    offset_std = float(np.hypot(again.offset_std_s, t_mid * drift_std * 1e-6))
+    from_data = data_w * drift_std**2 >= 0.5  # the data's weight is at least half the combined
+    return AngleFit(again.offset_s, drift_ppm, again.theta0_rad, again.residual_s, offset_std, drift_std,
+                    again.n_windows, fit.n_moves if from_data else -fit.n_moves)
+
+
+def _drift_from_data(fit: AngleFit) -> bool:
+    """Whether the record's own motion decided the drift of ``fit`` (:func:`_with_prior`) more than the prior."""
+    return fit.n_moves >= 0
+
+
+def _prior_text(fit: AngleFit, host: HostRelation | None, duration_s: float) -> str:
+    """The note for a drift the record's motion could not decide: what decided it, and the timing it leaves open."""
+    moves = abs(fit.n_moves)
+    told = f"the record's {moves} move{'s' if moves != 1 else ''} tell the drift less well than "
+    if host is not None and np.isfinite(host.drift_std_ppm):
+        return (f"clock: {told}the host stamps: their drift is used ({fit.drift_ppm:+.1f} ± "
+                f"{Z95 * fit.drift_std_ppm:.1f} ppm, 95 %)")
+    ends_us = 1e6 * Z95 * fit.drift_std_ppm * 1e-6 * 0.5 * duration_s
+    return (f"clock: {told}two crystal clocks' tolerance (±{MAX_DRIFT_PPM:.0f} ppm): drift {fit.drift_ppm:+.0f} ± "
+            f"{Z95 * fit.drift_std_ppm:.0f} ppm (95 %), so the streams' timing is known only to ±{ends_us:.0f} µs at "
+            "the record's ends — record longer, with more moves, or both streams on one host clock")
+
 
 def _rejection_text(rejected: list[AngleFit]) -> str:
     """What the rejected angle fits needed (the smallest drift of them), for a note or the failure."""
