@@ -519,7 +519,7 @@ def _bursty_blf(path: Path, late_tpdo: bool) -> None:
 def test_the_sync_period_of_a_bursty_log_is_its_rate_and_a_listener_is_not_told_to_set_the_masters_period(
         tmp_path: Path) -> None:
     """A listening selftest printed "SYNC every 0.286 ms ± 1531 µs" on a 1 ms bus (the median and standard deviation
-    of consecutive spacings, which bursts of caught-up SYNCs decide: here it read "SYNC every 0.150 ms ± 2449 µs") and advised raising [drive] period_s, the
+    of consecutive spacings, which bursts of caught-up SYNCs decide: here it read "SYNC every 0.150 ms ± 2080 µs") and advised raising [drive] period_s, the
     master's period. The period is now the slope of the stamps over the SYNC counter; a listener's fix names the
     master."""
     from acq.commissioning.selftest_checks import blf_check
