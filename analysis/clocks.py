@@ -36,6 +36,7 @@ from analysis.clock_host import HostRelation
 from analysis.clock_model import MAX_DRIFT_PPM, ClockFit, ClockMethod, plausible_drift
 from analysis.clock_search import starting_relation, wide_search
 from analysis.fit import Z95
+from analysis.verdict_limits import Thresholds
 from analysis.zero_crossings import angle_crossings_s, crossing_frequency_hz, current_crossings_s
 
 _GRID_HZ = 1000.0  # grid of the frequency stage
@@ -125,6 +126,9 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
                    "the streams on (or they do not belong together), so K, J and C would be those of a wrong alignment")
     elif rejected:
         notes.append(f"clock: rejected a fit of the electrical angle: {_rejection_text(rejected)}")
+    if not failure and start != "host" and (fit is None and method == "wide" or _angle_residual(fit) >
+                                            Thresholds().clock_residual_amplitude_s):
+        failure = _undetermined_text(fit, host, offset_s)
     if fit is not None and not _drift_from_data(fit):
         notes.append(_prior_text(fit, host, float(current_a.size / rate_hz)))
     common = dict(host_offset_s=host[0] if host else np.nan, host_drift_ppm=host[1] if host else np.nan,
@@ -133,7 +137,7 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
     if fit is None:
         return ClockFit(offset_s, drift_ppm, method=method, failure=failure, **common)
     return ClockFit(fit.offset_s, fit.drift_ppm, fit.residual_s, fit.offset_std_s, fit.drift_std_ppm,
-                    fit.theta0_rad, n_windows=fit.n_windows, method="angle", **common)
+                    fit.theta0_rad, n_windows=fit.n_windows, method="angle", failure=failure, **common)
 
 def _with_prior(fit: AngleFit, host: HostRelation | None, current_a: np.ndarray, rate_hz: float, first_index: int,
                 angle: CubicSpline, pole_pairs: int) -> AngleFit:
@@ -176,7 +180,8 @@ def _drift_from_data(fit: AngleFit) -> bool:
 def _prior_text(fit: AngleFit, host: HostRelation | None, duration_s: float) -> str:
     """The note for a drift the record's motion could not decide: what decided it, and the timing it leaves open."""
     moves = abs(fit.n_moves)
-    told = f"the record's {moves} move{'s' if moves != 1 else ''} tell the drift less well than "
+    told = (f"the record's {moves} stretch{'es' if moves != 1 else ''} of motion fast enough for the electrical angle "
+            "tell the drift less well than ")
     if host is not None and np.isfinite(host.drift_std_ppm):
         return (f"clock: {told}the host stamps: their drift is used ({fit.drift_ppm:+.1f} ± "
                 f"{Z95 * fit.drift_std_ppm:.1f} ppm, 95 %)")
@@ -184,6 +189,27 @@ def _prior_text(fit: AngleFit, host: HostRelation | None, duration_s: float) -> 
     return (f"clock: {told}two crystal clocks' tolerance (±{MAX_DRIFT_PPM:.0f} ppm): drift {fit.drift_ppm:+.0f} ± "
             f"{Z95 * fit.drift_std_ppm:.0f} ppm (95 %), so the streams' timing is known only to ±{ends_us:.0f} µs at "
             "the record's ends — record longer, with more moves, or both streams on one host clock")
+
+
+def _undetermined_text(fit: AngleFit | None, host: HostRelation | None, offset_s: float) -> str:
+    """Why the record cannot place the streams when neither host stamps nor the electrical angle do (the alignment
+    rests on the data alone, and the angle stage found too little motion or fits no better than the loosest residual
+    a verdict accepts, :attr:`analysis.verdict_limits.Thresholds.clock_residual_amplitude_s`): the failure's text."""
+    limit_us = 1e6 * Thresholds().clock_residual_amplitude_s
+    if fit is None:
+        why = (f"its motion is too slow or too short for the electrical angle (only the electrical frequencies matched, "
+               f"at {offset_s:+.3f} s)")
+    else:
+        stretches = abs(fit.n_moves)
+        why = (f"at the best offset its {stretches} stretch{'es' if stretches != 1 else ''} of motion fast enough for the "
+               f"electrical angle allow ({fit.offset_s:+.3f} s) the current's phase "
+               f"follows the encoder's angle only to {1e6 * fit.residual_s:.0f} µs RMS, above the {limit_us:.0f} µs "
+               "any fit accepts")
+    unplaced = ("no shared host clock places the streams" if host is None else
+                "the host stamps, which the data overruled, do not either")
+    return (f"clock: this record cannot align the two streams — {why}, and {unplaced}: K, J and C would be those of a "
+            "guessed alignment, and whether the moves excite the joint cannot be judged — record longer (more moves), "
+            "or both streams on one host clock")
 
 
 def _rejection_text(rejected: list[AngleFit]) -> str:
