@@ -11,6 +11,10 @@ from typing import NamedTuple
 import numpy as np
 
 _ENVELOPE_PIECES = 8  # pieces of a record whose least-delayed host stamps give the host relation's slope
+#: Stamps that all lie on their line to within this, s, were computed from the stream's own clock, not taken at arrival
+#: (an imported CSV's current: DAQ time placed on the host timeline, rounded to its 1 ns): a real arrival carries the
+#: host's latency scatter, microseconds at the least. 2 ns: the 1 ns rounding of each of two stamps.
+_COMPUTED_STAMPS_S = 2e-9
 
 
 class HostRelation(NamedTuple):
@@ -61,7 +65,8 @@ def _lower_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
     stamp of each of up to ``_ENVELOPE_PIECES`` equal pieces of the record; the intercept is then moved
     down to the 2nd percentile of the residual. The slope's standard error is the least-squares one of those
     stamps (their scatter about the line: what is left of the delays at the least-delayed arrivals); NaN with
-    fewer than four pieces (one degree of freedom or none).
+    fewer than four pieces (one degree of freedom or none), or when every stamp lies on the line to
+    :data:`_COMPUTED_STAMPS_S` (computed stamps tell nothing of the drift between the clocks).
     """
     if x.size < 2:
         return float(np.min(y - x)), 1.0, float("nan")
@@ -73,4 +78,6 @@ def _lower_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
     else:
         (b, _), cov = np.polyfit(x[least], y[least], 1, cov=True)
         b_std = float(np.sqrt(cov[0, 0]))
+    if np.ptp(y - b * x) <= _COMPUTED_STAMPS_S:
+        b_std = float("nan")
     return float(np.percentile(y - b * x, 2.0)), float(b), b_std
