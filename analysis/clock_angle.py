@@ -36,7 +36,8 @@ class AngleFit:
     offset_std_s: float
     drift_std_ppm: float
     n_windows: int
-    n_moves: int = 0
+    n_moves: int = 0  # stretches of motion the windows fall in (:func:`_move_jackknife`); 0 when not counted
+    drift_from_data: bool = True  # False: the drift's prior decided it more than the data (analysis.clocks)
 
 
 def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline, pole_pairs: int,

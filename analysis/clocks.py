@@ -21,6 +21,12 @@ Four stages, each narrowing the search of the next:
 No pair of crystal clocks drifts by more than :data:`analysis.clock_model.MAX_DRIFT_PPM`: the frequency stage fits
 only the offset where its slope would need more, and an angle fit that needs more is rejected (the next candidate
 of the wide search, or the host relation, is taken; with none left the alignment fails, :attr:`ClockFit.failure`).
+
+The angle stage's drift rests on how the timing changes from one stretch of motion to the next; its error is a
+jackknife over them, and it is combined with what was known before — the host stamps' drift, or the crystals' bound
+— by inverse variance (:func:`_with_prior`): on a short record of a few moves the host stamps decide. A record whose
+alignment rests on the data alone and whose angle stage fits worse than any verdict accepts (or found too little
+motion) cannot be aligned: the alignment fails and says so (:func:`_undetermined_text`).
 """
 
 from __future__ import annotations
@@ -129,7 +135,7 @@ def fit_clock(current_a: np.ndarray, rate_hz: float, first_index: int, angle: Cu
     if not failure and start != "host" and (fit is None and method == "wide" or _angle_residual(fit) >
                                             Thresholds().clock_residual_amplitude_s):
         failure = _undetermined_text(fit, host, offset_s)
-    if fit is not None and not _drift_from_data(fit):
+    if fit is not None and not fit.drift_from_data:
         notes.append(_prior_text(fit, host, float(current_a.size / rate_hz)))
     common = dict(host_offset_s=host[0] if host else np.nan, host_drift_ppm=host[1] if host else np.nan,
                   frequency_offset_s=freq[0], frequency_drift_ppm=freq[1],
@@ -149,8 +155,8 @@ def _with_prior(fit: AngleFit, host: HostRelation | None, current_a: np.ndarray,
     moves its jackknife error (:func:`analysis.clock_angle.angle_alignment`) is large, and the prior decides: a
     robot's 6 s window of three moves read −155 ± 1030 ppm (truth +40) where its host stamps said +37 ± 5.
     On a record of many moves the data decide (±1…10 ppm against a prior of ±5 or ±102) and nothing changes.
-    The result's ``n_moves`` is negative when the prior decided more than the data (its drift's variance below the
-    data's): :func:`_drift_from_data`.
+    The result's ``drift_from_data`` is False when the prior decided more than the data (the data's weight less than
+    half the combined).
     """
     prior_ppm, prior_std = ((host.drift_ppm, host.drift_std_ppm) if host is not None and np.isfinite(host.drift_std_ppm)
                             else (0.0, CRYSTAL_DRIFT_STD_PPM))
@@ -169,17 +175,12 @@ def _with_prior(fit: AngleFit, host: HostRelation | None, current_a: np.ndarray,
     offset_std = float(np.hypot(again.offset_std_s, t_mid * drift_std * 1e-6))
     from_data = data_w * drift_std**2 >= 0.5  # the data's weight is at least half the combined
     return AngleFit(again.offset_s, drift_ppm, again.theta0_rad, again.residual_s, offset_std, drift_std,
-                    again.n_windows, fit.n_moves if from_data else -fit.n_moves)
-
-
-def _drift_from_data(fit: AngleFit) -> bool:
-    """Whether the record's own motion decided the drift of ``fit`` (:func:`_with_prior`) more than the prior."""
-    return fit.n_moves >= 0
+                    again.n_windows, fit.n_moves, from_data)
 
 
 def _prior_text(fit: AngleFit, host: HostRelation | None, duration_s: float) -> str:
     """The note for a drift the record's motion could not decide: what decided it, and the timing it leaves open."""
-    moves = abs(fit.n_moves)
+    moves = fit.n_moves
     told = (f"the record's {moves} stretch{'es' if moves != 1 else ''} of motion fast enough for the electrical angle "
             "tell the drift less well than ")
     if host is not None and np.isfinite(host.drift_std_ppm):
@@ -200,7 +201,7 @@ def _undetermined_text(fit: AngleFit | None, host: HostRelation | None, offset_s
         why = (f"its motion is too slow or too short for the electrical angle (only the electrical frequencies matched, "
                f"at {offset_s:+.3f} s)")
     else:
-        stretches = abs(fit.n_moves)
+        stretches = fit.n_moves
         why = (f"at the best offset its {stretches} stretch{'es' if stretches != 1 else ''} of motion fast enough for the "
                f"electrical angle allow ({fit.offset_s:+.3f} s) the current's phase "
                f"follows the encoder's angle only to {1e6 * fit.residual_s:.0f} µs RMS, above the {limit_us:.0f} µs "
