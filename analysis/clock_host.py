@@ -50,12 +50,12 @@ def host_relation(daq_last_index: np.ndarray, daq_host_ns: np.ndarray, rate_hz: 
         Drive cycle, s.
     """
     ref_ns = int(min(np.min(daq_host_ns), np.min(encoder_host_ns)))
-    a_d, b_d, sb_d = _lower_line(np.asarray(daq_last_index) / rate_hz, (np.asarray(daq_host_ns) - ref_ns) * 1e-9)
-    a_e, b_e, sb_e = _lower_line(np.asarray(encoder_index) * period_s, (np.asarray(encoder_host_ns) - ref_ns) * 1e-9)
+    a_d, b_d, sb_d = lower_line(np.asarray(daq_last_index) / rate_hz, (np.asarray(daq_host_ns) - ref_ns) * 1e-9)
+    a_e, b_e, sb_e = lower_line(np.asarray(encoder_index) * period_s, (np.asarray(encoder_host_ns) - ref_ns) * 1e-9)
     return HostRelation((a_d - a_e) / b_e, (b_d / b_e - 1.0) * 1e6, float(np.hypot(sb_d, sb_e)) * 1e6)
 
 
-def _lower_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+def lower_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
     """The line under the least-delayed arrivals: (intercept, slope, the slope's standard error) of host time ``y``
     against stream time ``x``.
 

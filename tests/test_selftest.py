@@ -564,3 +564,29 @@ def test_a_listening_canopen_selftest_names_what_it_heard_and_verifies_no_profil
     assert frames["values"]["sync_period_s"] == pytest.approx(1e-3, rel=0.01)
     assert frames["figure"].startswith("SYNC every 1.0") or frames["figure"].startswith("SYNC every 0.99")
     assert "period_s" not in frames["fix"] and "period_s" not in by["SYNC jitter"]["fix"]
+
+
+def test_the_drive_period_from_host_stamps_a_stalled_reader_delivers_in_bursts_is_the_drives(tmp_path: Path) -> None:
+    """Under load a listening selftest failed "drive period 1.0103 ms on the host clock … set period_s to the drive's
+    cycle" on a 1 ms bus: a reader held off up to 60 ms and then draining its queue tilts a least-squares line through
+    every stamp. The slope under the least-delayed arrivals is the drive's period."""
+    from acq.commissioning.selftest_checks import drive_period_check
+    from acq.recording.reader import load
+    from tests.test_one_phase_doubt import recorded_window
+
+    session = load(recorded_window(tmp_path, ["i_a"], seed=0, elapsed_s=0.0, window_s=3.0))
+    k = session.encoder.index
+    rng = np.random.default_rng(1)
+    # the reader wakes every 5 ms, or after a stall of up to 200 ms — more often as the record goes on (a host loaded
+    # more and more) — and takes every frame sent by then
+    wakes, t = [], 0.0
+    while t < (k[-1] + 1) * 1e-3 + 0.2:
+        t += rng.uniform(0.0, 0.2) if rng.random() < 0.8 * t / (k[-1] * 1e-3) else 0.005
+        wakes.append(t)
+    arrival_s = np.asarray(wakes)[np.searchsorted(wakes, k * 1e-3)]
+    bursty = replace(session, encoder=replace(session.encoder, host_ns=np.rint(arrival_s * 1e9).astype(np.int64)))
+    least_squares = np.polyfit(k - k[0], arrival_s - arrival_s[0], 1)[0]
+    assert abs(least_squares / 1e-3 - 1.0) > 0.01  # what the check measured before: a "wrong" period_s (fail)
+    check = drive_period_check(bursty)
+    assert check.status == "pass", check.figure
+    assert check.values["period_host_s"] == pytest.approx(1e-3, rel=1e-3)
