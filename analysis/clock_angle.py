@@ -36,11 +36,13 @@ class AngleFit:
     offset_std_s: float
     drift_std_ppm: float
     n_windows: int
+    n_moves: int = 0  # stretches of motion the windows fall in (:func:`_move_jackknife`); 0 when not counted
+    drift_from_data: bool = True  # False: the drift's prior decided it more than the data (analysis.clocks)
 
 
 def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, angle: CubicSpline, pole_pairs: int,
                     offset_s: float, drift_ppm: float, search_s: float = 4e-3, window_s: float = 0.02,
-                    iterations: int = 2) -> AngleFit | None:
+                    iterations: int = 2, fixed_drift: bool = False) -> AngleFit | None:
     """Stage 4: offset, drift and θ_0 from the phase of i_a against the encoder's electrical angle.
 
     Parameters
@@ -63,11 +65,19 @@ def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, ang
         Demodulation window, s.
     iterations : int
         Re-demodulations after the search.
+    fixed_drift : bool
+        Keep ``drift_ppm`` (known from elsewhere, :func:`analysis.clocks.fit_clock`) and fit offset and θ_0 only; the
+        result's ``drift_std_ppm`` is then NaN (the caller knows the drift's uncertainty).
 
     Returns
     -------
     AngleFit or None
         None when fewer than 10 windows turn half an electrical revolution.
+
+    The drift's standard error is the larger of the least-squares one and a jackknife over the record's moves
+    (:func:`_move_jackknife`): within one move the windows share the estimator's errors (the same slowly changing
+    torque, the same few electrical turns per window), so a least-squares error that takes them as independent reads
+    a drift resting on two or three moves as known to ±26 ppm when it is 195 ppm off.
     """
     t_ref = (first_index + 0.5 * current_a.size) / rate_hz
     t_span = angle.x[[0, -1]]
@@ -88,12 +98,13 @@ def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, ang
             z = z * np.exp(-1j * k * shift)
             theta0 = 0.5 * np.angle(np.sum(z))
         A = np.column_stack((2.0 * np.ones_like(k), k, k * (t_c - t_ref)))
+        if fixed_drift:
+            A[:, 2] = 0.0  # no drift column's worth: lstsq's minimum-norm solution leaves its coefficient 0
         w = np.abs(z)
         r = np.angle(z * np.exp(-2j * theta0))
         keep = np.ones(z.size, bool)
         for _ in range(3):
-            sw = np.sqrt(w[keep])
-            sol = np.linalg.lstsq(A[keep] * sw[:, None], r[keep] * sw, rcond=None)[0]
+            sol = _weighted_solution(A, r, w, keep)
             res = r - A @ sol
             mad = 1.4826 * np.median(np.abs(res[keep]))
             keep = np.abs(res) <= max(4.0 * mad, 1e-3)
@@ -102,15 +113,63 @@ def angle_alignment(current_a: np.ndarray, rate_hz: float, first_index: int, ang
         offset_s += sol[1] - d_drift * t_ref
         drift_ppm += d_drift * 1e6
     # uncertainty of the last step (the corrections are then tiny), at t_ref then moved to t = 0
+    fitted = A[:, :2] if fixed_drift else A
     sw = np.sqrt(w[keep])
-    Aw = A[keep] * sw[:, None]
-    s2 = np.sum((res[keep] * sw) ** 2) / max(1, keep.sum() - 3)
-    cov = s2 * np.linalg.inv(Aw.T @ Aw)
+    Aw = fitted[keep] * sw[:, None]
+    s2 = np.sum((res[keep] * sw) ** 2) / max(1, keep.sum() - fitted.shape[1])
+    cov = np.zeros((3, 3))
+    cov[:fitted.shape[1], :fitted.shape[1]] = s2 * np.linalg.inv(Aw.T @ Aw)
+    n_moves = 0
+    if not fixed_drift:
+        jack, n_moves = _move_jackknife(A, r, w, keep, t_c)
+        if not jack[2, 2] <= cov[2, 2]:  # NaN (too few moves to tell): the drift rests on them, unknown
+            cov = jack
     var_off0 = cov[1, 1] - 2 * t_ref * cov[1, 2] + t_ref**2 * cov[2, 2]
     resid = np.sqrt(np.sum(w[keep] * res[keep] ** 2) / np.sum(w[keep] * k[keep] ** 2))
     theta0 = float(np.angle(np.exp(2j * theta0)) / 2.0)
     return AngleFit(offset_s, drift_ppm, theta0, float(resid), float(np.sqrt(var_off0)),
-                     float(np.sqrt(cov[2, 2]) * 1e6), int(keep.sum()))
+                    float("nan") if fixed_drift else float(np.sqrt(cov[2, 2]) * 1e6), int(keep.sum()), n_moves)
+
+
+def _weighted_solution(A: np.ndarray, r: np.ndarray, w: np.ndarray, keep: np.ndarray) -> np.ndarray:
+    """Weighted least squares of ``r`` on the columns of ``A`` over the rows ``keep`` (weights ``w``)."""
+    sw = np.sqrt(w[keep])
+    return np.linalg.lstsq(A[keep] * sw[:, None], r[keep] * sw, rcond=None)[0]
+
+
+def _move_jackknife(A: np.ndarray, r: np.ndarray, w: np.ndarray, keep: np.ndarray, t_c: np.ndarray
+                    ) -> tuple[np.ndarray, int]:
+    """Delete-a-move jackknife covariance of the angle stage's solution (θ_0, offset, drift), and the moves found.
+
+    A move is a run of consecutive windows (window centres one window apart; a gap is a stretch the motor turned
+    less than half an electrical revolution per window). A record of fewer than three moves is split into three
+    pieces of equal windows (a block jackknife of one long motion), so that leaving one out leaves two to fit a
+    drift on. The covariance is (G − 1)/G · Σ (x_g − x̄)(x_g − x̄)ᵀ over the G moves; NaN where a move left out leaves
+    the rest unable to fit the drift (all its windows in one move, or fewer than three of them).
+    """
+    idx = np.flatnonzero(keep)
+    if idx.size < 4:
+        return np.full((3, 3), np.nan), 1
+    spacing = float(np.median(np.diff(t_c[idx])))
+    starts = np.flatnonzero(np.diff(t_c[idx]) > 1.5 * spacing) + 1
+    moves = np.split(idx, starts)
+    n_moves = len(moves)
+    if len(moves) < 3:
+        moves = np.array_split(idx, 3)
+    solutions = []
+    for g in range(len(moves)):
+        rest = keep.copy()
+        rest[moves[g]] = False
+        # the drift needs the rest to span time: two moves, or one long enough to be split above
+        if rest.sum() < 3 or np.ptp(t_c[rest]) <= 1.5 * spacing:
+            return np.full((3, 3), np.nan), n_moves
+        sw = np.sqrt(w[rest])
+        if np.linalg.matrix_rank(A[rest] * sw[:, None]) < 3:
+            return np.full((3, 3), np.nan), n_moves
+        solutions.append(_weighted_solution(A, r, w, rest))
+    x = np.array(solutions)
+    d = x - x.mean(axis=0)
+    return (len(moves) - 1) / len(moves) * (d.T @ d), n_moves
 
 
 def _coherent_sums(z: np.ndarray, k: np.ndarray, tau0_s: float, step_s: float, n: int) -> np.ndarray:

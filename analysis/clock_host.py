@@ -6,14 +6,29 @@ stamps give the relation of :mod:`analysis.clock_model` to a few ms — if the t
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 _ENVELOPE_PIECES = 8  # pieces of a record whose least-delayed host stamps give the host relation's slope
+#: Stamps that all lie on their line to within this, s, were computed from the stream's own clock, not taken at arrival
+#: (an imported CSV's current: DAQ time placed on the host timeline, rounded to its 1 ns): a real arrival carries the
+#: host's latency scatter, microseconds at the least. 2 ns: the 1 ns rounding of each of two stamps.
+_COMPUTED_STAMPS_S = 2e-9
+
+
+class HostRelation(NamedTuple):
+    """The clock relation the host stamps give: offset_s, s, drift_ppm, ppm, and the drift's standard error, ppm,
+    from the scatter of the least-delayed stamps about their lines (NaN with too few pieces to tell)."""
+
+    offset_s: float
+    drift_ppm: float
+    drift_std_ppm: float
 
 
 def host_relation(daq_last_index: np.ndarray, daq_host_ns: np.ndarray, rate_hz: float,
-                  encoder_index: np.ndarray, encoder_host_ns: np.ndarray, period_s: float) -> tuple[float, float]:
-    """Stage 1: offset, s, and drift, ppm, from host arrival stamps.
+                  encoder_index: np.ndarray, encoder_host_ns: np.ndarray, period_s: float) -> HostRelation:
+    """Stage 1: offset, s, and drift, ppm (with its standard error), from host arrival stamps.
 
     Each stream's host time is fitted as a line of its own time (DAQ: the last sample of each block;
     encoder: each sample), shifted to the 2nd percentile of the residual (the least-delayed
@@ -35,24 +50,34 @@ def host_relation(daq_last_index: np.ndarray, daq_host_ns: np.ndarray, rate_hz: 
         Drive cycle, s.
     """
     ref_ns = int(min(np.min(daq_host_ns), np.min(encoder_host_ns)))
-    a_d, b_d = _lower_line(np.asarray(daq_last_index) / rate_hz, (np.asarray(daq_host_ns) - ref_ns) * 1e-9)
-    a_e, b_e = _lower_line(np.asarray(encoder_index) * period_s, (np.asarray(encoder_host_ns) - ref_ns) * 1e-9)
-    return (a_d - a_e) / b_e, (b_d / b_e - 1.0) * 1e6
+    a_d, b_d, sb_d = lower_line(np.asarray(daq_last_index) / rate_hz, (np.asarray(daq_host_ns) - ref_ns) * 1e-9)
+    a_e, b_e, sb_e = lower_line(np.asarray(encoder_index) * period_s, (np.asarray(encoder_host_ns) - ref_ns) * 1e-9)
+    return HostRelation((a_d - a_e) / b_e, (b_d / b_e - 1.0) * 1e6, float(np.hypot(sb_d, sb_e)) * 1e6)
 
 
-def _lower_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """The line under the least-delayed arrivals: (intercept, slope) of host time ``y`` against stream time ``x``.
+def lower_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """The line under the least-delayed arrivals: (intercept, slope, the slope's standard error) of host time ``y``
+    against stream time ``x``.
 
     Arrival delays are one-sided and bursty (a thread held off for 20 ms stamps a whole run late), so a
     least-squares slope through every stamp tilts by delay/duration — thousands of ppm on a 4 s record.
     As clock filters do (NTP keeps the minimum-delay sample), the slope is fitted through the least-delayed
     stamp of each of up to ``_ENVELOPE_PIECES`` equal pieces of the record; the intercept is then moved
-    down to the 2nd percentile of the residual.
+    down to the 2nd percentile of the residual. The slope's standard error is the least-squares one of those
+    stamps (their scatter about the line: what is left of the delays at the least-delayed arrivals); NaN with
+    fewer than four pieces (one degree of freedom or none), or when every stamp lies on the line to
+    :data:`_COMPUTED_STAMPS_S` (computed stamps tell nothing of the drift between the clocks).
     """
     if x.size < 2:
-        return float(np.min(y - x)), 1.0
+        return float(np.min(y - x)), 1.0, float("nan")
     delay = y - x  # both in s: the nominal slope is 1
     pieces = np.array_split(np.arange(x.size), min(_ENVELOPE_PIECES, x.size))
     least = np.array([p[np.argmin(delay[p])] for p in pieces])
-    b = np.polyfit(x[least], y[least], 1)[0]
-    return float(np.percentile(y - b * x, 2.0)), float(b)
+    if least.size < 4:
+        b, b_std = float(np.polyfit(x[least], y[least], 1)[0]), float("nan")
+    else:
+        (b, _), cov = np.polyfit(x[least], y[least], 1, cov=True)
+        b_std = float(np.sqrt(cov[0, 0]))
+    if np.ptp(y - b * x) <= _COMPUTED_STAMPS_S:
+        b_std = float("nan")
+    return float(np.percentile(y - b * x, 2.0)), float(b), b_std

@@ -26,6 +26,8 @@ from typing import Literal
 import numpy as np
 from scipy import signal
 
+from analysis.clock_host import HostRelation
+
 COARSE_STEP_S = 0.01  # grid of the wide search; the frequency stage's first pass searches ±30 ms around it
 #: A lag is as good as the best when (1) its misfit 1 − ρ is at most this many times the best one's — the
 #: misfit of an equally good lag scatters by ~√(2/N) relative, N the independent samples of the overlap
@@ -201,7 +203,7 @@ def _parabola_peak(score: np.ndarray, i: int, offsets: np.ndarray, step: float) 
     return float(offsets[i] + (0.5 * step * (c0 - c2) / curv if curv < 0 else 0.0))
 
 
-def starting_relation(host: tuple[float, float] | None, wide: WideSearch | None, together_s: float, narrow_s: float
+def starting_relation(host: HostRelation | None, wide: WideSearch | None, together_s: float, narrow_s: float
                       ) -> tuple[float, float, Start, tuple[float, ...], list[str]]:
     """Where the frequency stage starts: (offset_s, drift_ppm, what it rests on, ambiguous_by_s, notes).
 

@@ -10,7 +10,8 @@ coherence misses:
 * the torque estimate's noise is at least half of it → the motion puts too little torque there (the torque sits at
   its estimate's noise floor);
 * neither, while both are known → the torque estimate carries power the speed does not follow (interference on the
-  phase current, or a drive that does not respond linearly);
+  phase current — named, with its remedy, only when the torque estimate found some: a line or a moving offset — or a
+  drive that does not respond linearly, or the streams' timing);
 * otherwise (neither noise known) only what is weak and where.
 
 How the motion is shaped decides the motion's remedy: a step of torque (a ramp's corner) has a spectrum falling as
@@ -114,11 +115,17 @@ def weak_coherence_cause(frf: FrequencyResponse, check: np.ndarray, limit: float
                 f"{low:.0f} Hz — {motion}")
     if lsb_rad > 0.0:
         torque_db = float(-10.0 * np.log10(max(float(np.median(torque_noise)), 1e-12)))
-        return (f"{where}, though the speed there is {above_floor_db:.0f} dB above the encoder's quantisation floor "
-                f"and the torque {torque_db:.0f} dB above its estimate's noise: the torque estimate carries power "
-                f"the speed does not follow — interference on the phase current that the torque model leaves in "
-                f"it{_removed(interference)}, or a drive that does not respond linearly: remove interference at its "
-                f"source (PWM ripple: the DAQ's anti-alias filter)")
+        found = (f"{where}, though the speed there is {above_floor_db:.0f} dB above the encoder's quantisation floor "
+                 f"and the torque {torque_db:.0f} dB above its estimate's noise: the torque estimate carries power "
+                 f"the speed does not follow — ")
+        removed = _removed(interference)
+        if not removed:  # no line, no moving offset on the current: nothing in the data points at interference
+            return (found + "no interference was found on the phase current (no line, no moving offset), so a drive "
+                    "that does not respond linearly, or a timing error between the two streams (the clock "
+                    "alignment), is left: check the clock notes before the drive")
+        return (found + f"interference on the phase current that the torque model leaves in it{removed}, or a drive "
+                "that does not respond linearly: remove interference at its source (PWM ripple: the DAQ's anti-alias "
+                "filter)")
     return f"{where} (the encoder's resolution and the torque estimate's noise unknown: no cause judged)"
 
 

@@ -129,6 +129,16 @@ def _not_excited(quality: Quality, moves: tuple[Move, ...], excited_fraction: fl
         f"not excited: {summary} — record while the machine runs fast moves of this joint", *clock, *notes))
 
 
+def _clock_failed(quality: Quality) -> Quality:
+    """The verdict of a record whose streams could not be aligned (:attr:`analysis.clock_model.ClockFit.failure`, the
+    first reason): failed, with the clock's findings and the notes only — the other reasons judge spectra of misaligned
+    streams, and their advice (interference on the phase current, the motion, the encoder) would send someone to fix
+    what the clock did (a 6 s robot window without shared host stamps read "the torque estimate carries power the speed
+    does not follow" at coherence 0.10)."""
+    kept = tuple(r for r in quality.reasons if r.startswith(("clock", "note: ")) or r in quality.faults)
+    return replace(quality, verdict="failed", reasons=kept)
+
+
 def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Result:
     """Identify K, J_m, J_l, C of a joint from a raw recording.
 
@@ -190,9 +200,11 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     scale_fault = nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95)  # a unit or scale mistake
     quality = with_nominal_fault(quality, scale_fault)
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
-    if frf.selection is not None and not frf.selection.applied and not sig.clock.failure and not quality.faults:
-        # a failed clock keeps its own reasons; so does a fault found in the data (a wrong constant garbles the
-        # torque, and no segment then excites: the fault, not the motion, is why — pole_pairs 8 stated 4, seed 5)
+    if sig.clock.failure:
+        quality = _clock_failed(quality)
+    elif frf.selection is not None and not frf.selection.applied and not quality.faults:
+        # a fault found in the data keeps its reasons (a wrong constant garbles the torque, and no segment then
+        # excites: the fault, not the motion, is why — pole_pairs 8 stated 4, seed 5)
         quality = _not_excited(quality, moves, frf.selection.excited_fraction, select)  # type: ignore[arg-type]
     limited = drive_limit_reason(rec)  # the drive held a limit: at best poor, whatever else was found
     if limited is not None:

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from analysis.clock_host import HostRelation
 from analysis.encoder import Span, gap_free_spans
 from analysis.recording import Recording
 
@@ -57,7 +58,7 @@ def daq_runs(rec: Recording) -> list[DaqRun]:
             for a, b in zip(edges[:-1], edges[1:])]
 
 
-def shared_runs(rec: Recording, relation: tuple[float, float] | None) -> tuple[Span, DaqRun]:
+def shared_runs(rec: Recording, relation: HostRelation | None) -> tuple[Span, DaqRun]:
     """The encoder span and the DAQ run that share the most time (the first such pair), each stream's longest when no
     pair shares any.
 
@@ -65,12 +66,12 @@ def shared_runs(rec: Recording, relation: tuple[float, float] | None) -> tuple[S
     ----------
     rec : Recording
         The recording (its encoder index and DAQ block table).
-    relation : (float, float) or None
+    relation : HostRelation or None
         Offset, s, and drift, ppm, of t_drive = offset + t_daq·(1 + drift·10⁻⁶) from the host stamps; None: the
         streams taken as started together (offset 0, no drift).
     """
     spans, runs = gap_free_spans(rec.encoder_index), daq_runs(rec)
-    offset_s, drift_ppm = relation or (0.0, 0.0)
+    offset_s, drift_ppm = (0.0, 0.0) if relation is None else (relation.offset_s, relation.drift_ppm)
     scale = (1.0 + drift_ppm * 1e-6) / rec.rate_hz
     cycles = np.asarray(rec.encoder_index, dtype=np.int64)
     enc_lo = np.array([cycles[s.start] for s in spans]) * rec.period_s

@@ -17,7 +17,7 @@ import numpy as np
 from analysis import encoder, sample_instants
 from analysis.antialias import band_edges_hz
 from analysis.chain import SignalChain, TorqueMethod
-from analysis.clock_host import host_relation
+from analysis.clock_host import HostRelation, host_relation
 from analysis.clock_model import ClockFit
 from analysis.clocks import fit_clock
 from analysis.quantisation_lock import NOTED_LOCKED_SHARE, locked_share
@@ -200,7 +200,7 @@ def _shared(longest: bool, other: str) -> str:
     return "" if longest else f", the longest that the {other}'s data share"
 
 
-def _host(rec: Recording) -> tuple[float, float] | None:
+def _host(rec: Recording) -> HostRelation | None:
     if not rec.host_clock_shared:
         return None  # stamps of separate tools: their time columns relate nothing
     if rec.block_host_ns is None or rec.encoder_host_ns is None or rec.block_first_index is None:

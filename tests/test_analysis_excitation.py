@@ -89,3 +89,30 @@ def test_a_value_against_its_limit_shows_the_digits_that_tell_them_apart() -> No
     assert against_limit(0.71996, 0.72) == "0.71996"
     assert against_limit(0.65, 0.72) == "0.65"
     assert against_limit(0.3, 0.4) == "0.30"
+
+
+def test_interference_and_pwm_ripple_are_named_only_when_the_torque_estimate_removed_some() -> None:
+    """A weak coherence that neither the encoder's quantisation nor the torque estimate's noise explains advised "remove
+    interference at its source (PWM ripple …)" on a robot bench without any ripple (the streams were misaligned).
+    Without a line or a moving offset removed from the phase current the reason names what is left instead."""
+    import numpy as np
+
+    from analysis.excitation import weak_coherence_cause
+    from analysis.frf import FrequencyResponse
+    from analysis.torque import Interference
+
+    f = np.arange(10.0, 402.0, 2.0)
+    frf = FrequencyResponse(f, 1.0 / (2j * np.pi * f * 0.01), np.full(f.size, 0.3), np.ones(f.size), np.ones(f.size),
+                            0.5, 20, 1e-3, noise_ratio=np.full(f.size, 1e-4))  # γ² 0.3, the estimate's noise 40 dB down
+    check, lsb_rad = np.ones(f.size, bool), 2.0 * np.pi / 2**20
+    common = ("below 0.72 in 10…400 Hz, though the speed there is 63 dB above the encoder's quantisation floor and the "
+              "torque 40 dB above its estimate's noise: the torque estimate carries power the speed does not follow — ")
+    assert weak_coherence_cause(frf, check, 0.72, lsb_rad=lsb_rad) == common + (
+        "no interference was found on the phase current (no line, no moving offset), so a drive that does not respond "
+        "linearly, or a timing error between the two streams (the clock alignment), is left: check the clock notes "
+        "before the drive")
+    line = (Interference(lines_hz=(2000.0,), amplitude_a=(0.05,), inseparable_hz=(), offset_drift_a=0.0),)
+    assert weak_coherence_cause(frf, check, 0.72, lsb_rad=lsb_rad, interference=line) == common + (
+        "interference on the phase current that the torque model leaves in it (it removed a line at 2000 Hz), or a "
+        "drive that does not respond linearly: remove interference at its source (PWM ripple: the DAQ's anti-alias "
+        "filter)")

@@ -324,9 +324,11 @@ def test_simulated_session_exported_and_imported_back_keeps_its_history_and_K(
     assert origin["host_timeline"].startswith(f"shared ({recorded.stem}.session.json)")
     k_recorded = analyze_session(recorded, write=False).result.fit.values.K_Nm_per_rad
     k_imported = analyze_session(tmp_path / "imported.h5", write=False).result.fit.values.K_Nm_per_rad
-    # the CSV keeps the host stamps relative to the start (to 1 ns), which seed the clock search: the same K to
-    # ~1e-9 relative (1.13e-9 seen once with the recording's own dither seed), ~1e6 times below K's 95 % interval
-    assert abs(k_imported / k_recorded - 1.0) < 1e-8
+    # the CSV keeps the host stamps relative to the start (to 1 ns), which seed the clock search, but its current
+    # column is DAQ time placed on the host timeline, not the blocks' arrival stamps: the recording's drift also takes
+    # in its host stamps' (analysis.clocks._with_prior), the import's is the data's alone — K 5.5e-5 relative apart
+    # (session 13; ~1e-9 before), ~100 times below K's 95 % interval
+    assert abs(k_imported / k_recorded - 1.0) < 1e-4
     # a file changed since export is not the pair the metadata describes: nothing restored, no shared clock
     enc.write_text(enc.read_text() + "\n")
     r = run_import(capsys, cur, enc, tmp_path / "edited.h5")

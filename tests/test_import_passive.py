@@ -75,10 +75,12 @@ def test_a_passive_recording_exported_and_imported_back_is_passive_and_analyses_
     assert original.quality.verdict == imported.quality.verdict == "ok"
     assert original.request.select_segments is True and imported.request.select_segments is True
     assert k0 == pytest.approx(TRUE_K, rel=0.02)
-    # the CSV keeps the samples and the host stamps to 1 ns: measured 3e-10 relative (as the commanded round trip
-    # of tests/test_import.py), ~1e7 times below the intervals
+    # the CSV keeps the samples and the encoder's host stamps to 1 ns, but its current column is DAQ time placed on the
+    # host timeline: the import has no DAQ arrival stamps, so the drift is the data's (39.95 ppm) where the recording's
+    # also takes in its host stamps' (36.8 ± 2.3 ppm → 39.17): K 1.1e-5 relative apart (session 13; 3e-10 before the
+    # host stamps' drift counted), ~1000 times below the intervals
     for before, after in ((k0, k1), (jm0, jm1), (jl0, jl1)):
-        assert after == pytest.approx(before, rel=1e-8)
+        assert after == pytest.approx(before, rel=1e-4)
     # the bench given as the user's own file (the trial's repro): the same passive session
     run = _import(capsys, exported["current"], exported["encoder"], tmp_path / "re2.h5", "--bench",
                   str(exported["bench"]))
@@ -100,8 +102,9 @@ def test_files_of_a_listening_bench_without_metadata_import_without_a_profile_as
     result, (k, jm, jl) = _fit(tmp_path / "st3.h5")
     assert result.request.select_segments is True and result.quality.verdict == "ok"
     assert k == pytest.approx(TRUE_K, rel=0.02)
-    # separate tools' time columns: aligned from the data alone, to the recorded session's K (measured 4e-10)
-    assert k == pytest.approx(_fit(exported["recorded"])[1][0], rel=1e-6)
+    # separate tools' time columns: aligned from the data alone, to the recorded session's K but for the host stamps'
+    # part in the recording's drift (measured 1.1e-5 relative; 4e-10 before session 13)
+    assert k == pytest.approx(_fit(exported["recorded"])[1][0], rel=1e-4)
 
 
 def test_a_commanding_bench_without_profile_names_both_ways_out_and_a_passive_one_refuses_a_profile(

@@ -156,7 +156,7 @@ def _devices_and_streams(bench: Bench, profile: Profile | None, work_dir: Path, 
     blf = result.path.with_suffix(".can.blf")
     yield _sync_jitter(session, blf if isinstance(bench.drive, DriveCanopen) and blf.exists() else None)
     if isinstance(bench.drive, DriveCanopen) and blf.exists():
-        yield blf_check(blf, bench.drive)
+        yield blf_check(blf, bench.drive, bench.listens())
     stats = getattr(drive, "stats", None)  # a serial link's frame and CRC counters
     if callable(stats):
         yield _serial_check(stats(), bench)
@@ -168,16 +168,30 @@ def _sync_jitter(session: Session, blf: Path | None) -> Check:
     """The drive cycle's irregularity, from the best timing the session has: the drive's own time stamps (0x1013 /
     the serial frame's drive time: when it really sampled), else the SYNC frames' host stamps in the raw ``.blf``
     (SocketCAN stamps them in the kernel), else the host arrival stamps of the samples (the host's latency in them)."""
-    enc, period_s = session.encoder, session.encoder.period_s
+    enc, period_s, listens = session.encoder, session.encoder.period_s, session.bench.listens()
     if enc.drive_time_s is not None:
         return sync_jitter_check(enc.index, enc.drive_time_s, period_s, "the drive's own time stamps",
-                                 IDENTIFICATION_S, from_drive=True)
+                                 IDENTIFICATION_S, from_drive=True, listens=listens)
     if blf is not None:
         index, stamps_s = sync_times(blf, session.bench.drive)
         return sync_jitter_check(index, stamps_s, period_s, f"host stamps of the SYNC frames in {blf.name}",
-                                 IDENTIFICATION_S, from_drive=False)
+                                 IDENTIFICATION_S, from_drive=False, listens=listens)
     return sync_jitter_check(enc.index, enc.host_ns * 1e-9, period_s, "host arrival stamps of the samples, an upper "
-                             "bound", IDENTIFICATION_S, from_drive=False)
+                             "bound", IDENTIFICATION_S, from_drive=False, listens=listens)
+
+
+def _listening_text(drive: DriveCanopen) -> str:
+    """What opening a listening CANopen drive established: the master's SYNC heard and the TPDO recorded (its mapping
+    taken from where, :func:`drivers.canopen_eds.passive_tpdo`, or mapped by acq); no profile, no heartbeat asked."""
+    if drive.configure:
+        mapping = f"TPDO{drive.tpdo} mapped by acq (SDO)"
+    else:
+        from drivers.canopen_eds import passive_tpdo
+
+        tpdo = passive_tpdo(drive)
+        mapping = f"TPDO 0x{tpdo.cob_id:X} as {tpdo.source} state it (not read back)"
+    return (f"listening: the machine's master's SYNC heard, {mapping}; no NMT, SYNC or motion sent, so no profile "
+            "verified")
 
 
 def _daq_check(bench: Bench, recorder: Recorder) -> Check:
@@ -202,7 +216,8 @@ def _drive_check(bench: Bench, recorder: Recorder) -> Check:
               "counts_per_rev": info.counts_per_rev}
     drive = bench.drive
     if isinstance(drive, DriveCanopen):
-        figure += f"; heartbeat, TPDO{drive.tpdo} mapping read back and Profile Position verified"
+        figure += "; " + (_listening_text(drive) if bench.listens() else
+                          f"heartbeat, TPDO{drive.tpdo} mapping read back and Profile Position verified")
         identity = read_identity(drive)
         if isinstance(identity, str):  # 0x1018 is mandatory (vendor ID) in CiA 301: say so, but it blocks nothing
             return Check("devices", "drive", "warn", f"{figure}; identity 0x1018: {identity}",

@@ -17,6 +17,7 @@ from acq.recording.summary import summarize
 from analysis import (MAX_STAMP_DEVIATION, SpeedRatio, cycle_deviation_s, first_move_sign, inertia_from_torque,
                       likely_counts_per_rev, longest_gap_free_span, phase_sequence_agreement, ratio_doubt, ratio_fault,
                       sequence_fault, speed_from_counts)
+from analysis.clock_host import lower_line
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen
 
 CheckStatus = Literal["pass", "warn", "fail"]
@@ -109,12 +110,18 @@ def daq_blocks_check(session: Session) -> Check:
 
 
 def drive_period_check(session: Session) -> Check:
-    """The drive's period and jitter: counters against host stamps (and the drive's own time if sent)."""
+    """The drive's period and jitter: counters against host stamps (and the drive's own time if sent).
+
+    The period is the slope under the least-delayed arrivals (:func:`analysis.clock_host.lower_line`): a host that
+    holds the reader off and then delivers a burst tilts a least-squares line through every stamp (1.0103 ms on a 1 ms
+    listening bus with 31 ms of latency scatter, read as "set period_s"); the jitter is the stamps' RMS about it."""
     enc, stated = session.encoder, session.bench.drive.period_s
     k = enc.index.astype(np.float64)
     host_s = (enc.host_ns - enc.host_ns[0]) * 1e-9
-    slope, intercept = np.polyfit(k - k[0], host_s, 1)
-    jitter = float(np.std(host_s - (slope * (k - k[0]) + intercept)))
+    nominal_s = (k - k[0]) * stated  # the drive's time as stated: lower_line takes the delays against it
+    intercept, rate, _ = lower_line(nominal_s, host_s)
+    slope = rate * stated
+    jitter = float(np.std(host_s - (intercept + rate * nominal_s)))
     values: dict[str, Any] = {"period_host_s": float(slope), "host_jitter_s": jitter}
     figure = f"period {1e3 * slope:.4f} ms on the host clock, host-stamp jitter {1e3 * jitter:.2f} ms RMS"
     if enc.drive_time_s is not None and enc.drive_time_s.size > 2:
@@ -163,35 +170,54 @@ def _blf_frames(blf_path: Path, settings: DriveCanopen) -> dict[str, tuple[np.nd
     return {k: (np.asarray(t), data) for k, (t, data) in frames.items()}
 
 
-def blf_check(blf_path: Path, settings: DriveCanopen) -> Check:
-    """From the raw ``.blf``: SYNC period and jitter, SYNC-to-TPDO spacing, heartbeat period."""
+def blf_check(blf_path: Path, settings: DriveCanopen, listens: bool = False) -> Check:
+    """From the raw ``.blf``: SYNC period, SYNC-to-TPDO spacing, heartbeat period (``listens``: the SYNC and the drive's
+    TPDO timing are the machine's master's, which acq does not set).
+
+    The period is the least-squares slope of the SYNC frames' host stamps over their cycle numbers (the SYNC counter,
+    :func:`sync_times`): a producer that falls behind and catches up the SYNCs it owes, or a host that stamps frames
+    as a batch, packs several SYNCs within microseconds, so the median of consecutive spacings reads a fraction of the
+    cycle (0.286 ms on a 1 ms bus) and their standard deviation the bursts, not the cycle; the slope keeps the rate.
+    How irregular the SYNC is the "SYNC jitter" check measures, against the cycle grid.
+    """
     frames = _blf_frames(blf_path, settings)
     sync, tpdo, hb = (frames[k][0] for k in ("sync", "tpdo", "hb"))
     if sync.size < 3 or tpdo.size < 3:
         return Check("streams", "CAN frames", "fail", f"{blf_path.name}: {sync.size} SYNC, {tpdo.size} TPDO frames",
                      f"no SYNC/TPDO traffic logged: check [drive] tpdo = {settings.tpdo}, node_id = {settings.node_id}")
+    index, stamps = _sync_cycles(frames["sync"], settings)
+    period_s = float(np.polyfit(index - index[0], stamps - stamps[0], 1)[0])
     prev = np.searchsorted(sync, tpdo, side="right") - 1
     delay = tpdo[prev >= 0] - sync[prev[prev >= 0]]
     hb_period = float(np.median(np.diff(hb))) if hb.size > 2 else float("nan")
-    values = {"sync_period_s": float(np.median(np.diff(sync))), "sync_jitter_s": float(np.std(np.diff(sync))),
+    values = {"sync_period_s": period_s, "sync_frames": int(sync.size), "sync_cycles": int(index[-1] - index[0]),
               "sync_to_tpdo_median_s": float(np.median(delay)), "sync_to_tpdo_p99_s": float(np.percentile(delay, 99)),
               "heartbeat_period_s": hb_period}
-    figure = (f"SYNC every {1e3 * values['sync_period_s']:.3f} ms ± {1e6 * values['sync_jitter_s']:.0f} µs, TPDO "
+    figure = (f"SYNC every {1e3 * period_s:.3f} ms ({sync.size} SYNC frames over {stamps[-1] - stamps[0]:.1f} s), TPDO "
               f"{1e6 * values['sync_to_tpdo_median_s']:.0f} µs after SYNC (99 %: "
               f"{1e6 * values['sync_to_tpdo_p99_s']:.0f} µs), heartbeat every {1e3 * hb_period:.0f} ms")
-    if values["sync_to_tpdo_p99_s"] > settings.period_s:
-        return Check("streams", "CAN frames", "warn", figure,
-                     f"TPDOs arrive later than one SYNC period: raise [drive] period_s = {settings.period_s:g}", values,
-                     "TPDOs that miss their SYNC's window are lost samples")
+    if values["sync_to_tpdo_p99_s"] > period_s:
+        fix = (f"TPDOs arrive later than one SYNC period ({1e3 * period_s:.3f} ms, the machine's master's): acq pairs a "
+               "TPDO with the SYNC before it, so one after the next SYNC is placed a cycle late — the SYNC period, the "
+               "bus load and the drive's TPDO timing are the master's to set, not acq's (it listens): have the "
+               "machine's integrator check them" if listens else
+               f"TPDOs arrive later than one SYNC period: raise [drive] period_s = {settings.period_s:g}")
+        return Check("streams", "CAN frames", "warn", figure, fix, values,
+                     "TPDOs placed a cycle late" if listens else "TPDOs that miss their SYNC's window are lost samples")
     return Check("streams", "CAN frames", "pass", figure, values=values)
 
 
 def sync_times(blf_path: Path, settings: DriveCanopen) -> tuple[np.ndarray, np.ndarray]:
     """The SYNC frames of the raw ``.blf``: their cycle index (from the SYNC counter, 0x1019, where they carry one;
     else their order) and host stamps, s."""
+    return _sync_cycles(_blf_frames(blf_path, settings)["sync"], settings)
+
+
+def _sync_cycles(sync: tuple[np.ndarray, list[bytes]], settings: DriveCanopen) -> tuple[np.ndarray, np.ndarray]:
+    """The cycle index and host stamps, s, of SYNC frames (their stamps and payloads, :func:`_blf_frames`)."""
     from drivers.canopen_stream import SYNC_COUNTER_OVERFLOW  # python-can: only where a .blf is read
 
-    stamps, payloads = _blf_frames(blf_path, settings)["sync"]
+    stamps, payloads = sync
     counters = np.array([p[0] if p else 0 for p in payloads], dtype=np.int64)
     if counters.size and np.all(counters > 0):  # 1…overflow: a step of 0 or less wrapped
         # the counter's own overflow — the master's 0x1019 when acq listens, else the one acq sets — not the largest
@@ -211,7 +237,7 @@ def sync_times(blf_path: Path, settings: DriveCanopen) -> tuple[np.ndarray, np.n
 #: with its SYNC. What a smaller jitter costs (speed noise at speed, without stamps) the identification's verdict judges
 #: from its own spectra.
 def sync_jitter_check(index: np.ndarray, times_s: np.ndarray, period_s: float, source: str, identification_s: float,
-                      from_drive: bool) -> Check:
+                      from_drive: bool, listens: bool = False) -> Check:
     """The drive cycle's irregularity (``times_s`` of cycles ``index``, s, measured by ``source``) against half a cycle.
 
     The scatter σ is robust (1.4826 × the median absolute deviation from the cycle grid: one stall does not stand
@@ -219,7 +245,7 @@ def sync_jitter_check(index: np.ndarray, times_s: np.ndarray, period_s: float, s
     the identification's N = ``identification_s``/T cycles is ≈ σ·√(2 ln N); at half a cycle or more
     (:data:`analysis.MAX_STAMP_DEVIATION`) it is a ⚠. A deviation already seen that large in the drive's own stamps
     (``from_drive``) is a ✗; in host stamps, which carry the host's own latency (an upper bound of the drive's
-    irregularity), a ⚠.
+    irregularity), a ⚠. On a bench that ``listens`` the SYNC is the machine's master's: the remedy is its integrator's.
     """
     bound_s = MAX_STAMP_DEVIATION * period_s
     dev = cycle_deviation_s(index, times_s, period_s)
@@ -235,10 +261,12 @@ def sync_jitter_check(index: np.ndarray, times_s: np.ndarray, period_s: float, s
               "period_s": period_s, "source": source}
     figure = (f"{1e6 * sigma:.1f} µs RMS, largest {1e6 * largest:.0f} µs off the {1e3 * period_s:g} ms cycle grid "
               f"({source}); bound {1e6 * bound_s:.0f} µs")
+    remedy = ("the SYNC is the machine's master's, not acq's (it listens): have the machine's integrator give it a "
+              "hardware-timed SYNC or unload the host that produces it" if listens else
+              "use a hardware-timed SYNC (SocketCAN's broadcast manager, the interface's own timer, or the drive as SYNC "
+              "producer) or unload the host that produces it")
     why = ("half a cycle or more, where the analysis refuses the drive's time stamps (a drive that samples at SYNC "
-           "arrival then has samples it cannot place) and a TPDO can miss its SYNC's window — use a hardware-timed "
-           "SYNC (SocketCAN's broadcast manager, the interface's own timer, or the drive as SYNC producer) or unload "
-           "the host that produces it")
+           f"arrival then has samples it cannot place) and a TPDO can miss its SYNC's window — {remedy}")
     if largest >= bound_s and from_drive:
         return Check("streams", "SYNC jitter", "fail", figure, f"a cycle {1e6 * largest:.0f} µs off its grid, {why}",
                      values)
