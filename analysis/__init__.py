@@ -16,12 +16,13 @@ Everything outside ``analysis/`` (the application ``acq``) imports from here onl
   before it records.
 - The bench checks of ``acq selftest`` (:mod:`analysis.speed_ratio`, :mod:`analysis.bench_checks`,
   :mod:`analysis.encoder`; the cycle grid of :mod:`analysis.sample_instants`: :func:`cycle_deviation_s`,
-  :data:`MAX_STAMP_DEVIATION`).
+  :data:`MAX_STAMP_DEVIATION`; a stream's period from its least-delayed arrival stamps: :func:`lower_line`).
 """
 
 from __future__ import annotations
 
 from analysis.chain import PAPER_CHAIN, Pipeline, SignalChain, TorqueMethod, our_chain
+from analysis.clock_host import lower_line
 from analysis.bench_checks import first_move_sign, inertia_from_torque, phase_sequence_agreement, sequence_fault
 from analysis.encoder import longest_gap_free_span, speed_from_counts
 from analysis.excitation import against_limit
@@ -46,6 +47,6 @@ __all__ = [
     "against_limit", "analyze", "code_fingerprint", "cycle_deviation_s", "electrical_speed_ratio", "encoder_period_problem", "excitation_summary", "segments_summary",
     "min_current_rate_hz",
     "min_duration_s", "min_record_s", "min_speed_rpm", "first_move_sign", "inertia_from_torque",
-    "likely_counts_per_rev", "longest_gap_free_span", "our_chain", "phase_sequence_agreement", "prepare_signals",
+    "likely_counts_per_rev", "longest_gap_free_span", "lower_line", "our_chain", "phase_sequence_agreement", "prepare_signals",
     "ratio_doubt", "ratio_fault", "sequence_fault", "speed_from_counts",
 ]

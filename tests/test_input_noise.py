@@ -49,7 +49,7 @@ def test_mains_hum_reads_c_high_and_a_note_says_why_its_interval_is_wide(tmp_pat
         "C's interval [0.09, 0.135] N·m·s/rad allows for an error on the torque estimate (noise, hum, the one-phase "
         "estimate's own error): at the resonance (102 Hz) the coherence lost is 9.2 %, of which the Welch window's own "
         "spreading of the peak takes 3.4 %; the rest is noise on the torque, which flattens H1's peak and reads C high "
-        "— from H2 = H1/γ² there C is 0.0939 (-15 %), and the truth lies between the two readings; without that "
+        "— from H2 = H1/γ² there C is 0.094 (-15 %), and the truth lies between the two readings; without that "
         "allowance the interval would be [0.1, 0.121], 2.2× narrower on a log scale"]
 
 

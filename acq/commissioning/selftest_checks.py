@@ -14,10 +14,9 @@ import numpy as np
 
 from acq.recording.session import Session
 from acq.recording.summary import summarize
-from analysis import (MAX_STAMP_DEVIATION, SpeedRatio, cycle_deviation_s, first_move_sign, inertia_from_torque,
+from analysis import (MAX_STAMP_DEVIATION, SpeedRatio, cycle_deviation_s, first_move_sign, inertia_from_torque, lower_line,
                       likely_counts_per_rev, longest_gap_free_span, phase_sequence_agreement, ratio_doubt, ratio_fault,
                       sequence_fault, speed_from_counts)
-from analysis.clock_host import lower_line
 from drivers.config import Bench, DaqNidaqmx, DriveCanopen
 
 CheckStatus = Literal["pass", "warn", "fail"]
