@@ -128,4 +128,6 @@ def with_nominal_fault(quality: Quality, fault: str | None) -> Quality:
     J_m 1/14 of nominal)."""
     if fault is None or quality.verdict == "failed":
         return quality
-    return replace(quality, verdict="poor", reasons=(fault, *quality.reasons), faults=(fault, *quality.faults))
+    # not a fault in :attr:`Quality.faults`: the value is the fit's, and a fit of data that did not excite the joint
+    # may be that far off — such a record stays "not excited" (an idle robot window's junk fit read J_m 11× nominal)
+    return replace(quality, verdict="poor", reasons=(fault, *quality.reasons))

@@ -129,13 +129,15 @@ def _not_excited(quality: Quality, moves: tuple[Move, ...], excited_fraction: fl
         f"not excited: {summary} — record while the machine runs fast moves of this joint", *clock, *notes))
 
 
-def _clock_failed(quality: Quality) -> Quality:
+def _clock_failed(quality: Quality, failure: str) -> Quality:
     """The verdict of a record whose streams could not be aligned (:attr:`analysis.clock_model.ClockFit.failure`, the
     first reason): failed, with the clock's findings and the notes only — the other reasons judge spectra of misaligned
     streams, and their advice (interference on the phase current, the motion, the encoder) would send someone to fix
     what the clock did (a 6 s robot window without shared host stamps read "the torque estimate carries power the speed
     does not follow" at coherence 0.10)."""
     kept = tuple(r for r in quality.reasons if r.startswith(("clock", "note: ")) or r in quality.faults)
+    if failure not in kept:  # a fault found in the data replaced the reasons (with_fault): the clock's failure follows it
+        kept = (*(r for r in kept if not r.startswith("note: ")), failure, *(r for r in kept if r.startswith("note: ")))
     return replace(quality, verdict="failed", reasons=kept)
 
 
@@ -201,7 +203,7 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     quality = with_nominal_fault(quality, scale_fault)
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
     if sig.clock.failure:
-        quality = _clock_failed(quality)
+        quality = _clock_failed(quality, sig.clock.failure)
     elif frf.selection is not None and not frf.selection.applied and not quality.faults:
         # a fault found in the data keeps its reasons (a wrong constant garbles the torque, and no segment then
         # excites: the fault, not the motion, is why — pole_pairs 8 stated 4, seed 5)

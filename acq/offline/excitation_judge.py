@@ -49,8 +49,8 @@ def _unselected(doc: dict[str, Any]) -> bool:
 
 def not_excited(doc: dict[str, Any]) -> bool:
     """True when a verdict that is not ok comes from a lack of excitation, with clocks that were aligned at all, and
-    the analysis found no fault in the data (``quality.faults``: a wrong bench constant or phase sequence, a value an
-    order of magnitude off the nominal, the drive holding a limit — each garbles the torque, so the coherence is weak
+    the analysis found no fault in the data (``quality.faults``: a wrong bench constant or phase sequence, the drive
+    holding a limit — each garbles the torque, so the coherence is weak
     whatever the motion: the verdict stays the analysis', the fault and its advice its reason).
 
     Either the segment selection found fewer than two segments that excite (:func:`_unselected`: the motion itself
