@@ -68,12 +68,17 @@ def shared_runs(rec: Recording, relation: HostRelation | None) -> tuple[Span, Da
         The recording (its encoder index and DAQ block table).
     relation : HostRelation or None
         Offset, s, and drift, ppm, of t_drive = offset + t_daq·(1 + drift·10⁻⁶) from the host stamps; None: the
-        streams taken as started together (offset 0, no drift).
+        streams taken as started together (the first encoder cycle with the first DAQ sample, no drift).
     """
     spans, runs = gap_free_spans(rec.encoder_index), daq_runs(rec)
-    offset_s, drift_ppm = (0.0, 0.0) if relation is None else (relation.offset_s, relation.drift_ppm)
-    scale = (1.0 + drift_ppm * 1e-6) / rec.rate_hz
     cycles = np.asarray(rec.encoder_index, dtype=np.int64)
+    if relation is None:  # started together: the record's first encoder cycle with its first DAQ sample (an imported
+        # encoder keeps the drive's cycle numbers, which need not start at 0)
+        offset_s = float(cycles[0]) * rec.period_s - min(r.first_index for r in runs) / rec.rate_hz
+        drift_ppm = 0.0
+    else:
+        offset_s, drift_ppm = relation.offset_s, relation.drift_ppm
+    scale = (1.0 + drift_ppm * 1e-6) / rec.rate_hz
     enc_lo = np.array([cycles[s.start] for s in spans]) * rec.period_s
     enc_hi = np.array([cycles[s.stop - 1] for s in spans]) * rec.period_s
     daq_lo = offset_s + np.array([r.first_index for r in runs]) * scale
