@@ -21,9 +21,10 @@ the two apart; the rows can, by what the column holds:
   ``|value| > largest step × rows apart``, the largest step being the largest absolute difference between two
   adjacent readable rows outside the zeroed chunks (derived from the record, no constant). A moving joint's
   position lands tens of thousands of counts from 0 next to a zeroed chunk; a joint resting at 0 that starts to
-  move takes a step no larger than its others: at count 0 for the whole first encoder chunk, moving at row 500 (1
-  window in about 250 of the simulated robot), it reads 0 → 9 counts there, its largest step 1 793. A run with no
-  readable neighbour, or a column with no step to compare with, is kept (nothing in the file says otherwise).
+  move takes a step no larger than its others: at count 0 for the whole first encoder chunk, moving at row 500 (a
+  new user reported about 1 monitor window in 250 of the simulated robot), it reads 0 → 9 counts there, its
+  largest step 1 793. A run with no readable neighbour, or a column with no step to compare with, is kept (nothing
+  in the file says otherwise).
   A phase current is a DAQ's analog reading: its noise never lets it hold one value for long, so a run of zeroed
   chunks of a phase is also invented when it is longer than the longest run of one repeated value among the phase's
   readable rows (a channel reading exactly 0.0 throughout has no readable row besides its zero chunks: kept). The
