@@ -16,6 +16,7 @@ import time
 from dataclasses import replace
 from pathlib import Path
 
+import h5py
 import pytest
 
 import acq.offline.analyze
@@ -228,6 +229,41 @@ def test_restart_resumes_numbering_and_marks_an_interrupted_window(four_windows:
     assert not (out / "cut.h5").exists()  # marked, then its raw file went (not baseline, not the last)
 
 
+def test_a_window_the_analysis_refuses_as_damaged_keeps_its_raw_file(four_windows: Path, tmp_path: Path) -> None:
+    """A window found on a restart (recorded by the real recorder, 10 s of the robot) whose cycle index chunk of rows
+    2 000–2 499 the storage zeroed: its analysis refuses it as damaged, the catalogue row holds why and no K. Before:
+    filed "failed", then deleted by --keep 1 as an analysed window (not baseline, not the last), its raw file the
+    only copy of what it recorded; now kept, and --keep still keeps the last window with a K."""
+    out = tmp_path / "resumed"
+    _restarted_elsewhere(four_windows, out)
+    bench = _bench(seed=EXCITING_SEED)
+    current, drive = open_bench(bench, fast=True)
+    result = Recorder(bench, None, current, drive, out, 10.0,
+                      tags={"monitor_window": 4, "monitor_elapsed_s": 240.0}).run()
+    assert result.status == "complete"
+    with h5py.File(result.path, "r") as f:
+        info = f["encoder/index"].id.get_chunk_info_by_coord((2000,))
+    with result.path.open("r+b") as fh:  # zero bytes, data and checksum, as storage that lost them leaves them
+        fh.seek(info.byte_offset)
+        fh.write(bytes(info.size))
+    assert load(result.path).damage == ("encoder: samples 2 000–2 499 zeroed on disk",)
+    with pytest.raises(SystemExit) as exc:
+        from acq.ui.cli import main
+
+        main(["monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for", "1m",
+              "--baseline-windows", "2", "--keep", "1", "--out", str(out)])
+    assert exc.value.code == 0
+    db = sqlite3.connect(out / "catalogue.sqlite")
+    (error, k), = db.execute("SELECT a.error, a.K_Nm_per_rad FROM sessions s JOIN analyses a USING (session_key) "
+                             "WHERE s.path = ?", (str(result.path.resolve()),)).fetchall()
+    db.close()
+    assert k is None and error == (f"{result.path.resolve()}: damaged (encoder: samples 2 000–2 499 zeroed on disk) "
+                                   "— run acq check, or use --partial to analyse the intact part")
+    rows = _rows(out)
+    assert [r["window"] for r in rows] == [0, 1, 2, 3, 4, 5]
+    assert [(out / Path(r["path"]).name).exists() for r in rows] == [True, True, False, False, True, True]
+
+
 def test_a_restart_with_other_alarm_rules_is_refused(four_windows: Path, tmp_path: Path,
                                                     capsys: pytest.CaptureFixture[str]) -> None:
     """The second trial: a restart with --baseline-windows 5 --threshold-pct 20 re-baselined on the windows already
@@ -396,6 +432,23 @@ def test_disk_budget_frees_the_oldest_unprotected_windows_or_refuses(tmp_path: P
     assert fits and [w.index for w in victims] == [1, 2]
     victims, fits = make_room(windows, tmp_path, need_bytes=3500, budget_bytes=4000)
     assert not fits  # even without 1, 2, 3 the protected window 0 leaves no room
+
+
+def test_a_window_refused_as_damaged_never_goes_for_keep_and_goes_last_for_the_budget(tmp_path: Path) -> None:
+    """Retention's docstring: a window the analysis refused as damaged is not deleted for --keep nor counted among the
+    last --keep; the budget takes it only after every other unprotected window of this monitor."""
+    windows = []
+    for i in range(5):
+        path = tmp_path / f"w{i}.h5"
+        path.write_bytes(b"x" * 1000)
+        windows.append(WindowFiles(i, path, done=True, protected=i == 0, key=path.stem, refused=i in (1, 4)))
+    assert [w.key for w in to_delete(windows, keep=1)] == ["w2"]  # 3 the last with a K; 1, 4 refused
+    victims, fits = make_room(windows, tmp_path, need_bytes=2000, budget_bytes=5000)
+    assert fits and [w.key for w in victims] == ["w2", "w3"]
+    victims, fits = make_room(windows, tmp_path, need_bytes=3000, budget_bytes=5000)
+    assert fits and [w.key for w in victims] == ["w2", "w3", "w1"]
+    victims, fits = make_room(windows, tmp_path, need_bytes=4500, budget_bytes=5000)
+    assert not fits  # the baseline window 0 stays
 
 
 def test_windows_of_another_monitor_copied_here_go_first_for_the_budget_and_never_for_keep(tmp_path: Path) -> None:

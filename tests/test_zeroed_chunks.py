@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import h5py
@@ -323,3 +325,35 @@ def test_a_cut_copy_pre_allocated_to_full_size_keeps_what_a_cut_copy_keeps(
     copy = load(tmp_path / "zeroed.recovered.h5")
     assert copy.damage == () and (copy.current.sample_count, copy.encoder.index.size) == (c.current.sample_count,
                                                                                           c.encoder.index.size)
+
+
+def test_a_joint_resting_at_count_0_through_the_first_encoder_chunk_is_intact(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The simulated robot 13 140 s into its program (``acq record --fast``, 10 s): the joint rests at count 0 (a drive
+    zeroes its position at enable or homing) for rows 0–499, the whole first encoder chunk, stored as zero bytes with
+    checksum 0, and moves from row 500 (9 counts). Before: "damaged (encoder: samples 0–499 zeroed on disk)", the
+    analysis refused, a monitor window counted failed. The step 0 → 9 is no larger than the position's other steps,
+    so the chunk is kept; a zeroed chunk of the moving joint in the same file (rows 1 000–1 499, −27 426 counts
+    before it) is still a hole."""
+    bench = (Path(__file__).parents[1] / "configs/benches/sim_robot.toml").read_text()
+    assert "\n[sim]\n" in bench
+    bench_path = tmp_path / "robot.toml"
+    bench_path.write_text(bench.replace("\n[sim]\n", "\n[sim]\nelapsed_s = 13140.0\n"))
+    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--bench", str(bench_path), "--duration", "10",
+                           "--fast", "--no-analyze", "--out", str(tmp_path / "out")],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    (path,) = (tmp_path / "out").glob("*.h5")
+    with h5py.File(path, "r") as f:  # the case the test is about
+        ds = f["encoder/position_counts"]
+        assert ds.chunks == (500,) and not any(ds.id.read_direct_chunk((0,))[1])
+        assert ds[495:505].tolist() == [0, 0, 0, 0, 0, 9, 26, 47, 66, 84]
+    s = load(path)
+    assert s.damage == () and s.encoder.index.size == 10000
+    run = run_cli(capsys, "analyze", str(path), "--no-report", "--json")
+    assert run.code == 0, run.err
+    doc = json.loads(run.out)
+    assert doc["partial"] is False and doc["quality"]["verdict"] == "ok"
+    assert abs(doc["K_Nm_per_rad"] - 891.0) < 0.01 * 891.0
+    damaged = load(_zeroed(path, tmp_path / "z.h5", ("encoder/position_counts", 2)))
+    assert damaged.damage == ("encoder: samples 1 000–1 499 zeroed on disk",)

@@ -44,7 +44,8 @@ from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, catalogue_te
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
                                           check_user_tags, own_windows)
 from acq.monitoring.monitor_status import SIZE_MARGIN, MonitorSettings, MonitorStatus, expected_window_bytes
-from acq.monitoring.monitor_windows import FolderWindows, StorageFailures, check_budget, copies_deletable, write_cause
+from acq.monitoring.monitor_windows import (FolderWindows, StorageFailures, check_budget, copies_deletable,
+                                           refused_as_damaged, write_cause)
 from acq.monitoring.retention import WindowFiles
 from acq.monitoring.session_outcome import CATALOGUE_NAME, session_meta
 from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
@@ -272,7 +273,7 @@ class Monitor:
         key = window.key
         self._filed += 1
         self.status.count(window.outcome, window.kind, earlier=key in self._earlier)
-        self._windows.done(key)
+        self._windows.done(key, refused_as_damaged(self._windows.path(key), window.outcome.error))
         self._unjudged.append(key)
         try:
             trend = self._trend()
@@ -384,7 +385,8 @@ class Monitor:
                 self._windows.add(WindowFiles(n, path, True, key not in deletable, key, copied=True))  # (retention's)
                 continue
             numbers.append(n)
-            self._windows.add(WindowFiles(n, path, key in known, False, key))
+            refused = key in known and known[key].error is not None and bool(session.damage)
+            self._windows.add(WindowFiles(n, path, key in known, False, key, refused=refused))
             if key in known:
                 continue
             self._earlier.add(key)

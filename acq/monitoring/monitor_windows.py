@@ -2,7 +2,8 @@
 
 The monitor loop (:mod:`acq.monitoring.monitor`) tells :class:`FolderWindows` of each window it captures, finds on a
 restart or files; this keeps which are protected — the baseline's windows and the one that raised each alarm
-(:func:`kept_windows`), and of another monitor's windows copied here those that monitor keeps
+(:func:`kept_windows`), those the analysis refused as damaged (:func:`refused_as_damaged`), and of another monitor's
+windows copied here those that monitor keeps
 (:func:`copies_deletable`, by its rows in this catalogue) — and deletes by the rules of
 :mod:`acq.monitoring.retention`; :func:`check_budget` refuses a ``--max-disk`` too small for the baseline.
 """
@@ -13,6 +14,7 @@ import math
 from dataclasses import replace
 from pathlib import Path
 
+from acq.recording.reader import load
 from acq.recording.recorder import FLUSH_BYTES
 from acq.recording.storage import free_bytes
 from acq.recording.writer import RESERVE_BYTES
@@ -22,7 +24,7 @@ from acq.monitoring.monitor_scope import own_windows
 from acq.monitoring.monitor_status import MonitorSettings
 from acq.monitoring.retention import WindowFiles, delete, folder_bytes, make_room, to_delete
 from acq.monitoring.trend import Trend, alarm_onsets, compute_trend
-from acqcore.errors import ConfigError, StorageError
+from acqcore.errors import AcqError, ConfigError, StorageError
 
 #: Storage failures in a row after which a monitor stops (exit 1): after the first, retention makes room and the next
 #: window is tried; a second shows that the room is not there (the trial's monitor lost 8 windows of 12 on a full
@@ -120,9 +122,10 @@ class FolderWindows:
         """The number of the window of session id ``key`` (from 0)."""
         return self._files[key].index
 
-    def done(self, key: str) -> None:
-        """The window's catalogue row is written: retention may delete its raw files."""
-        self._files[key] = replace(self._files[key], done=True)
+    def done(self, key: str, refused: bool = False) -> None:
+        """The window's catalogue row is written: retention may delete its raw files (``refused``: its analysis
+        refused it as damaged, :func:`refused_as_damaged`; kept)."""
+        self._files[key] = replace(self._files[key], done=True, refused=refused)
 
     def kept_copies(self) -> int:
         """How many windows of another monitor copied here are its baseline or alarms (never deleted)."""
@@ -169,6 +172,18 @@ class FolderWindows:
     def _remove(self, window: WindowFiles) -> None:
         delete(window)
         del self._files[window.key]
+
+
+def refused_as_damaged(path: Path, error: str | None) -> bool:
+    """Whether the analysis of the window at ``path`` gave no result but ``error`` because its file is damaged
+    (``Session.damage``) or cannot be read as a session at all: retention keeps its raw file, the only copy of what
+    it recorded. A window the analysis failed on for another reason is not."""
+    if error is None:
+        return False
+    try:
+        return bool(load(path).damage)
+    except (AcqError, OSError):
+        return True
 
 
 def kept_windows(trend: Trend) -> set[str]:

@@ -2,10 +2,13 @@
 
 Catalogue rows are always kept; a window's raw files (``<stem>.h5``, ``.result.json``, ``.report.png``,
 a transport's raw log) are deleted once the window is done (analysed or marked), except the baseline
-windows, the window that raised each alarm and the last ``keep`` windows. A disk budget is never exceeded: before
-a window is captured the folder's size plus the window's expected size must fit, else the oldest
-unprotected raw files go first, then the oldest of the last ``keep``; when even that is not enough
-the window is not captured (and the monitor says so).
+windows, the window that raised each alarm, the windows the analysis refused as damaged and the last ``keep``
+windows. A refused window's catalogue row holds no K, only why: its raw file is the only copy of what it recorded
+(``acq check --repair`` and ``acq analyze --partial`` recover the intact part), and ``--keep`` counts the windows
+that have a K in the catalogue, not it. A disk budget is never exceeded: before a window is captured the folder's
+size plus the window's expected size must fit, else the oldest unprotected raw files go first, then the oldest of
+the last ``keep``, then the oldest refused ones (a disk that damages every window must not stop the capture); when
+even that is not enough the window is not captured (and the monitor says so).
 
 Windows of another monitor in the folder (a folder copied, then started with ``--new-identity``: the copied windows
 stay the monitor's that captured them) are no window of this one: no baseline or alarm of its history depends on
@@ -40,6 +43,7 @@ class WindowFiles:
     key : what the caller knows the window by (e.g. its session id).
     copied : another monitor's window, copied into this folder (unless protected by that monitor, deleted first for
         the budget; never for ``keep``).
+    refused : done, its analysis refused it as damaged (never deleted for ``keep``; last for the budget).
     """
 
     index: int
@@ -48,6 +52,7 @@ class WindowFiles:
     protected: bool
     key: str = ""
     copied: bool = False
+    refused: bool = False
 
 
 def raw_files(session_path: Path) -> list[Path]:
@@ -73,8 +78,8 @@ def folder_bytes(folder: Path) -> int:
 
 def to_delete(windows: Iterable[WindowFiles], keep: int) -> list[WindowFiles]:
     """This monitor's windows whose raw files go now: done, not protected, not among its last ``keep`` (oldest first);
-    never another monitor's copied here."""
-    ordered = sorted((w for w in windows if not w.copied), key=lambda w: w.index)
+    never another monitor's copied here, nor one refused as damaged (nor does one count among the last ``keep``)."""
+    ordered = sorted((w for w in windows if not w.copied and not w.refused), key=lambda w: w.index)
     last = {w.index for w in ordered[-keep:]} if keep > 0 else set()
     return [w for w in ordered if w.done and not w.protected and w.index not in last]
 
@@ -84,12 +89,12 @@ def make_room(windows: Iterable[WindowFiles], folder: Path, need_bytes: int, bud
     """Windows to delete so that ``need_bytes`` more fit in ``budget_bytes``, and whether they then fit.
 
     Other monitors' unprotected windows copied here go first, then unprotected done windows oldest first, the last
-    ``keep`` included (the budget outranks ``keep``); baseline and alarming windows (of this monitor or of the one a
-    copy is of) and windows not yet done are never chosen.
+    ``keep`` included (the budget outranks ``keep``), then those refused as damaged oldest first; baseline and
+    alarming windows (of this monitor or of the one a copy is of) and windows not yet done are never chosen.
     """
     used = folder_bytes(folder)
     chosen: list[WindowFiles] = []
-    for w in sorted(windows, key=lambda w: (not w.copied, w.index)):
+    for w in sorted(windows, key=lambda w: (not w.copied, w.refused, w.index)):
         if used + need_bytes <= budget_bytes:
             break
         if w.done and not w.protected:

@@ -12,15 +12,26 @@ the two apart; the rows can, by what the column holds:
   recorder drops rows out of order, :mod:`acq.recording.stream_check`), a read holds at least one sample, host
   stamps are nanoseconds of the host's monotonic clock (an import's may start at 0 once), every event and flush row
   has its stamp. A zeroed chunk of them (more than one row, or not the stream's first row) is invented.
-* **Values** (the phase currents, the position, the drive's time and speeds) can be 0, but a run of exact zeros is
-  bounded by its cause: a channel reading exactly 0.0 (a real card's reading carries noise and its calibration
-  offset, so that is a noise-free simulation or a disconnected simulated channel) or a joint resting exactly at
-  count 0 reads 0 also next to the chunk, unless the zeros began exactly at the chunk's first row and ended exactly
-  at its last (about 1 in 500² for the encoder's chunk of 500 rows, 1 in 2 560² for the current's; 1 in 500 for a
-  joint resting at count 0 from the start of the recording, whose first chunk has no row before it: the simulated
-  joint rests there 0.2 s, 201 rows). So a run of zeroed chunks of a value column is invented when the nearest
-  readable row before it and the one after it (where there is one) are both not 0, and real when either is 0 or
-  there is none (the whole column zero: nothing in the file says otherwise).
+* **Values** (the phase currents, the position, the drive's time and speeds) can be 0 for any number of rows: a
+  channel reading exactly 0.0 (a noise-free simulation, a disconnected simulated channel), a joint resting at count
+  0 (drives zero their position at enable or homing, so a record that starts at rest at 0 is common), a speed of 0
+  at rest. Zeros alone are no evidence; the rows around them are. A run of zeroed chunks of a value column is
+  invented when the column reads NaN next to it (a value never stored as zeros: an optional column the drive does
+  not give) or when its value next to it is farther from 0 than the column ever moves in as many rows elsewhere:
+  ``|value| > largest step × rows apart``, the largest step being the largest absolute difference between two
+  adjacent readable rows outside the zeroed chunks (derived from the record, no constant). A moving joint's
+  position lands tens of thousands of counts from 0 next to a zeroed chunk; a joint resting at 0 that starts to
+  move takes a step no larger than its others: at count 0 for the whole first encoder chunk, moving at row 500 (a
+  new user reported about 1 monitor window in 250 of the simulated robot), it reads 0 → 9 counts there, its
+  largest step 1 793. A run with no readable neighbour, or a column with no step to compare with, is kept (nothing
+  in the file says otherwise).
+  A phase current is a DAQ's analog reading: its noise never lets it hold one value for long, so a run of zeroed
+  chunks of a phase is also invented when it is longer than the longest run of one repeated value among the phase's
+  readable rows (a channel reading exactly 0.0 throughout has no readable row besides its zero chunks: kept). The
+  largest step alone would miss a zeroed chunk of a phase whose both ends lie within it of 0 (the simulated phases
+  step up to 1.1 A at 3 A amplitude: 150 of the 894 inner chunks of a 30 s three-phase session). The encoder's
+  values are a drive's digital readings, which hold still at rest as long as the joint rests: for them only the
+  step counts. A run that joins a real zero chunk to a zeroed one is lost whole (its rows cannot be told apart).
 
 Finding a zeroed chunk costs an intact file nearly nothing: only a chunk whose first row is 0 in every byte is
 looked at whole, and only a chunk whose rows are all 0 has its stored bytes read (``read_direct_chunk``).
@@ -80,6 +91,29 @@ def _runs(chunks: list[Span]) -> list[Span]:
     return runs
 
 
+def _largest_step(values: np.ndarray, unreadable: np.ndarray) -> float:
+    """The largest absolute difference between two adjacent rows of ``values`` neither ``unreadable`` (in the
+    column's unit); NaN when there is none."""
+    both = ~unreadable[:-1] & ~unreadable[1:]
+    steps = np.abs(np.diff(values.astype(np.float64)))[both]
+    steps = steps[np.isfinite(steps)]
+    return float(steps.max()) if steps.size else float("nan")
+
+
+def _longest_still(values: np.ndarray, unreadable: np.ndarray) -> int:
+    """The most rows of ``values`` in a row, none ``unreadable``, holding one value (0 when every row is)."""
+    if unreadable.all():
+        return 0
+    same = (values[1:] == values[:-1]) & ~unreadable[:-1] & ~unreadable[1:]
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], same.astype(np.int8), [0]))))
+    return int((edges[1::2] - edges[::2]).max()) + 1 if edges.size else 1
+
+
+def _is_phase(name: str) -> bool:
+    """Dataset ``name`` is a phase current (``current/<channel>_A``), an analog reading."""
+    return name.startswith("current/") and name.endswith("_A")
+
+
 def invented(name: str, values: np.ndarray, chunks: list[Span], holes: tuple[Span, ...]) -> tuple[Span, ...]:
     """The zeroed ``chunks`` of dataset ``name`` whose rows were invented by the storage, joined into runs (the
     rule: module doc). ``values`` are the rows read, ``holes`` the spans of them not readable."""
@@ -89,10 +123,15 @@ def invented(name: str, values: np.ndarray, chunks: list[Span], holes: tuple[Spa
     for a, b in (*holes, *chunks):
         unreadable[a:b] = True
     readable_rows = np.flatnonzero(~unreadable)
+    step = _largest_step(values, unreadable)
+    still = _longest_still(values, unreadable) if _is_phase(name) else values.size
     lost: list[Span] = []
     for a, b in _runs(chunks):
         at = np.searchsorted(readable_rows, a)
-        near = readable_rows[at - 1:at + 1] if at else readable_rows[:1]
-        if near.size and bool(np.all(values[near] != 0)):  # NaN, a value never stored as zeros, is not 0
+        near = readable_rows[max(at - 1, 0):at + 1]  # the nearest readable row before the run and the one after
+        apart = np.where(near < a, a - near, near - (b - 1))  # rows from the run's zero at that end
+        value = np.abs(values[near].astype(np.float64))
+        jumps = bool(np.any(np.isnan(value) | (value > step * apart)))  # a NaN step: nothing to compare with, kept
+        if jumps or (still and b - a > still):
             lost.append((a, b))
     return tuple(lost)
