@@ -226,8 +226,10 @@ def test_wrong_pole_pairs_or_counts_is_named_by_selftest_and_by_analyze(
     assert record.code == 0
     (session,) = (tmp_path / "s").glob("*.h5")
     analyzed = run_cli(capsys, "analyze", str(session), "--json", "--no-report")
-    quality = json.loads(analyzed.out)["quality"]
+    result = json.loads(analyzed.out)
+    quality = result["quality"]
     assert quality["verdict"] == "failed"
+    assert isinstance(result["K_Nm_per_rad"], float)  # the JSON keeps the fit's raw numbers, the verdict failed
     fault, *others = [r for r in quality["reasons"] if not r.startswith("note: ")]
     assert re.fullmatch(r"the current turns 2\.0\d× faster than pole_pairs·ω \(pole_pairs = 4, counts_per_rev = "
                         r"131072\): check \[motor\] pole_pairs = 8 or \[encoder\] counts_per_rev = 65536",
@@ -236,6 +238,8 @@ def test_wrong_pole_pairs_or_counts_is_named_by_selftest_and_by_analyze(
     printed = run_cli(capsys, "analyze", str(session), "--no-report")
     words = " ".join(printed.out.split())  # the table's lines wrap at the terminal's width
     assert printed.code == 0 and "check [motor] pole_pairs = 8" in words and "acceleration time" not in words
+    assert f"{result['K_Nm_per_rad']:.4g}" not in printed.out  # the table: "—", "not a result" (tests/test_display.py)
+    assert re.search(r"^ K \[N·m/rad\] +│ +— │ +not a result │", printed.out, re.M), printed.out
 
 
 def test_reversed_encoder_is_named(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
