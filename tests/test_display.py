@@ -208,6 +208,9 @@ def test_batch_table_wraps_a_long_error_and_keeps_K_whole() -> None:
     text = render(batch_table(report))
     for value in ("2026-11-29T19-55-02_joint1.h5", "893.4", "failed", "Welch", "joint joint1", "2 analysed (1 failed)"):
         assert value in text, value
+    failed = {"K_Nm_per_rad": 8904.2, "quality": {"verdict": "failed"}}  # a failed verdict's K is not a result
+    report = BatchReport([Outcome("/s/a_joint1.h5", "a", "{}", {"joint": "joint1"}, failed, None, 1.0)], [], 1.0)
+    assert " a_joint1.h5 │       — │ failed  \n" in render(batch_table(report))
 
 
 def test_summary_table_at_80_columns() -> None:

@@ -361,7 +361,8 @@ def batch_table(report: BatchReport) -> FittedTable:
     """
     outcomes = sorted(report.outcomes, key=lambda o: o.path)
     joints = [str(o.session.get("joint") or "?") for o in outcomes]
-    ks = [None if o.doc is None else o.doc.get("K_Nm_per_rad") for o in outcomes]  # none when not excited
+    # none when not excited; a failed verdict's K is not a result ("—" beside "failed", as in the result table)
+    ks = [None if o.doc is None or fit_failed(o.doc) else o.doc.get("K_Nm_per_rad") for o in outcomes]
     columns = [Column("session", [Path(o.path).name for o in outcomes], "left")]
     one_joint = len(set(joints)) == 1
     if not one_joint:
