@@ -191,25 +191,31 @@ def bench_label(path: Path | str | None) -> str:
     return str(path) if path is not None else str(DEFAULT_BENCH.relative_to(CONFIG_DIR.parent))
 
 
-def resolve_bench_path(name_or_path: Path | str) -> Path:
-    """A bench given as a path, or as a name under ``configs/benches/`` (``sim_robot``, ``sim_robot.toml``), as a
-    profile's name is (:func:`resolve_profile_path`); a relative ``configs/…`` path that is not there (a README
-    example run outside the repository) is acq's own ``configs/`` file of that name. A name no file answers:
-    :class:`ConfigError` listing the shipped benches."""
+def _resolve_shipped(name_or_path: Path | str, folder: str, option: str, what: str) -> Path:
+    """A config given as a path, or as a name under ``configs/<folder>/`` (``sim_robot``, ``sim_robot.toml``,
+    ``triangle_0.2s``); a relative ``configs/…`` path that is not there (a README example run outside the
+    repository) is acq's own ``configs/`` file of that name; a file of the person's own of that name is theirs. A
+    name no file answers: :class:`ConfigError` ``<option> <name>: no such file, nor a <what> in <folder>`` listing
+    the shipped ones."""
     p = Path(name_or_path)
     if p.exists() or p.is_absolute():
         return p
-    if len(p.parts) == 1:  # a name
-        shipped = CONFIG_DIR / "benches" / p.with_suffix(".toml").name
-    elif p.parts[0] == CONFIG_DIR.name:  # configs/benches/x.toml
+    if len(p.parts) == 1:  # a name ("triangle_0.2s": its ".2s" is no suffix to replace)
+        shipped = CONFIG_DIR / folder / (p.name if p.suffix == ".toml" else f"{p.name}.toml")
+    elif p.parts[0] == CONFIG_DIR.name:  # configs/<folder>/x.toml
         shipped = CONFIG_DIR.parent / p
     else:
         return p  # a path of the person's own: read_toml names it
     if shipped.is_file():
         return shipped
-    known = sorted(q.stem for q in (CONFIG_DIR / "benches").glob("*.toml"))
-    raise ConfigError(f"--bench {name_or_path}: no such file, nor a bench in {CONFIG_DIR / 'benches'} (known: "
+    known = sorted(q.stem for q in (CONFIG_DIR / folder).glob("*.toml"))
+    raise ConfigError(f"{option} {name_or_path}: no such file, nor a {what} in {CONFIG_DIR / folder} (known: "
                       f"{', '.join(known)})")
+
+
+def resolve_bench_path(name_or_path: Path | str) -> Path:
+    """A bench given as a path or as a shipped bench's name (:func:`_resolve_shipped`, ``configs/benches/``)."""
+    return _resolve_shipped(name_or_path, "benches", "--bench", "bench")
 
 
 def load_bench(path: Path | str | None = None) -> Bench:
@@ -246,15 +252,9 @@ def require_analysable(bench: Bench, path: Path) -> Bench:
 
 
 def resolve_profile_path(name_or_path: str) -> Path:
-    """A profile given as a path, or as a name under ``configs/profiles/`` (e.g. ``triangle_0.2s``)."""
-    p = Path(name_or_path)
-    if p.suffix == ".toml" or p.exists():
-        return p
-    candidate = CONFIG_DIR / "profiles" / f"{name_or_path}.toml"
-    if candidate.exists():
-        return candidate
-    known = sorted(q.stem for q in (CONFIG_DIR / "profiles").glob("*.toml"))
-    raise ConfigError(f"--profile {name_or_path}: no such profile (known: {', '.join(known)})")
+    """A profile given as a path or as a shipped profile's name (``triangle_0.2s``), by the bench's rules
+    (:func:`_resolve_shipped`, ``configs/profiles/``)."""
+    return _resolve_shipped(name_or_path, "profiles", "--profile", "profile")
 
 
 def load_profile(name_or_path: str) -> Profile:

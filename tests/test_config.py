@@ -99,8 +99,10 @@ def test_toml_syntax_error_names_file(tmp_path: Path, capsys: pytest.CaptureFixt
 def test_unknown_profile_lists_known_ones(capsys: pytest.CaptureFixture[str]) -> None:
     run = run_cli(capsys, "record", "--profile", "sawtooth")
     assert run.code == 2
-    assert run.err.strip() == ("acq: error: --profile sawtooth: no such profile (known: triangle_0.2s, "
-                               "triangle_0.5s)")
+    from acq.config import CONFIG_DIR
+
+    assert run.err.strip() == (f"acq: error: --profile sawtooth: no such file, nor a profile in "
+                               f"{CONFIG_DIR / 'profiles'} (known: triangle_0.2s, triangle_0.5s)")
 
 
 def test_bad_profile_value(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
@@ -164,6 +166,27 @@ def test_a_bench_is_found_by_its_name_as_a_profile_is(tmp_path: Path, capsys: py
                                       f"{CONFIG_DIR / 'benches'} (known: {known})\n")
     run = run_cli(capsys, "selftest", "--bench", "sim", "--fast", "--json")
     assert run.code == 0, run.err
+
+
+def test_a_profile_resolves_as_a_bench_does_outside_the_repository(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
+    """The new user's trial: from outside the repository README's --profile configs/profiles/triangle_0.2s.toml and
+    --profile triangle_0.2s.toml said "no such file" while --bench configs/benches/sim.toml and --bench sim.toml
+    worked."""
+    from acq.config import CONFIG_DIR, resolve_profile_path
+
+    monkeypatch.chdir(tmp_path)  # outside the repository
+    shipped = CONFIG_DIR / "profiles" / "triangle_0.2s.toml"
+    assert [resolve_profile_path(n) for n in ("triangle_0.2s", "triangle_0.2s.toml",
+                                              "configs/profiles/triangle_0.2s.toml")] == [shipped] * 3
+    (tmp_path / "triangle_0.2s.toml").write_text("x = 1\n")  # a file of the person's own is theirs
+    assert resolve_profile_path("triangle_0.2s.toml") == Path("triangle_0.2s.toml")
+    run = run_cli(capsys, "record", "--profile", "configs/profiles/triangle_0.2s.toml", "--fast", "--duration", "1",
+                  "--no-analyze", "--out", str(tmp_path / "s"))
+    assert run.code == 0, run.err
+    run = run_cli(capsys, "record", "--profile", "configs/profiles/sawtooth.toml", "--fast")
+    assert (run.code, run.err) == (2, f"acq: error: --profile configs/profiles/sawtooth.toml: no such file, nor a "
+                                      f"profile in {CONFIG_DIR / 'profiles'} (known: triangle_0.2s, triangle_0.5s)\n")
 
 
 def test_a_binary_file_given_as_bench_is_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -79,6 +79,49 @@ def test_an_interval_that_does_not_determine_its_value_reads_so() -> None:
     assert "0.033 – 1.7: not determined" in wide and "not determined" in narrow and "e+02" not in wide + narrow
 
 
+def _failed_doc() -> dict[str, Any]:
+    """The new user's failed result (sim.toml with [sim] pole_pairs = 5): the fit's numbers absurd, an interval
+    without an upper end."""
+    doc = _doc(K_Nm_per_rad=995.5, Jl_kgm2=3.061e16,
+               ci95={"K_Nm_per_rad": [0.0, None], "Jm_kgm2": [0.001, 0.005], "Jl_kgm2": [0.0, None],
+                     "C_Nms_per_rad": [0.01, 0.2]})
+    doc["quality"] = {"verdict": "failed", "mean_coherence": 0.09, "reasons": [
+        "the current turns 1.25× faster than pole_pairs·ω (pole_pairs = 4, counts_per_rev = 131072): check [motor] "
+        "pole_pairs = 5 or [encoder] counts_per_rev = 104742"]}
+    return doc
+
+
+def test_a_failed_verdict_shows_no_number_of_its_fit_as_a_result() -> None:
+    """The new user's table read K 995.5, J_l 3.061e+16, error "+409220974935903633408.00 %", interval "0 – —"
+    under "verdict failed": the fit's numbers are "—", "not a result" (the clock's and the coherence stay)."""
+    assert render(result_table(_failed_doc())) == """\
+                   identification — verdict failed                    
+ quantity            ┃  value ┃ 95 % interval ┃ sim truth ┃     error 
+━━━━━━━━━━━━━━━━━━━━━╇━━━━━━━━╇━━━━━━━━━━━━━━━╇━━━━━━━━━━━╇━━━━━━━━━━━
+ K [N·m/rad]         │      — │  not a result │       891 │         — 
+ J_m [kg·m²]         │      — │  not a result │  0.003027 │         — 
+ J_l [kg·m²]         │      — │  not a result │   0.00748 │         — 
+ C [N·m·s/rad]       │      — │  not a result │       0.1 │         — 
+ f_a [Hz]            │      — │  not a result │           │           
+ f_r [Hz]            │      — │  not a result │           │           
+ clock offset [ms]   │ 36.999 │               │        37 │   -1.5 µs 
+ clock drift [ppm]   │  40.13 │               │        40 │ +0.13 ppm 
+ clock residual [µs] │   13.3 │               │           │           
+ coherence in band   │  0.090 │               │           │           
+options: torque encoder · params K,Jm,Jl · fit amplitude · band 10–400
+Hz                                                                    
+verdict failed: the fit's K, J_m, J_l, C, f_a and f_r are not a result
+(--json keeps them)                                                   
+the current turns 1.25× faster than pole_pairs·ω (pole_pairs = 4,     
+counts_per_rev = 131072): check [motor] pole_pairs = 5 or [encoder]   
+counts_per_rev = 104742                                               
+"""
+    poor = _failed_doc()
+    poor["quality"]["verdict"] = "poor"  # poor and ok show their numbers, as before
+    text = render(result_table(poor), width=120)
+    assert "995.5" in text and "3.061e+16" in text and "not a result" not in text
+
+
 def test_params_K_shows_the_inertias_as_fixed_nominal() -> None:
     doc = _doc(K_Nm_per_rad=890.7, Jm_kgm2=0.003027, Jl_kgm2=0.00748,
                ci95={"K_Nm_per_rad": [881.8, 899.6], "Jm_kgm2": [0.003027, 0.003027],
@@ -165,6 +208,9 @@ def test_batch_table_wraps_a_long_error_and_keeps_K_whole() -> None:
     text = render(batch_table(report))
     for value in ("2026-11-29T19-55-02_joint1.h5", "893.4", "failed", "Welch", "joint joint1", "2 analysed (1 failed)"):
         assert value in text, value
+    failed = {"K_Nm_per_rad": 8904.2, "quality": {"verdict": "failed"}}  # a failed verdict's K is not a result
+    report = BatchReport([Outcome("/s/a_joint1.h5", "a", "{}", {"joint": "joint1"}, failed, None, 1.0)], [], 1.0)
+    assert " a_joint1.h5 │       — │ failed  \n" in render(batch_table(report))
 
 
 def test_summary_table_at_80_columns() -> None:

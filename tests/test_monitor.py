@@ -710,7 +710,8 @@ def test_a_window_the_joint_barely_moved_in_is_not_excited_and_not_counted_as_ex
     assert (excitation["segments"], excitation["segments_excited"], excitation["segments_needed"]) == (38, 1, 2)
     assert excitation["snr_limit"] == pytest.approx(1.33, abs=0.005)
     log = " ".join(run.err.split())
-    assert f"12.2 min: 2 filed = 2 not excited, excited 3 % of the last window ({segments}), last K —" in log
+    assert (f"12.2 min: 2 filed = 2 not excited, last window not excited (0 of the window's 12 moves put torque into "
+            f"10…400 Hz beyond chance; time that does: 3 % of the window; {segments}), last K —") in log
     assert "windows filed (this run) │ 2 = 2 not excited │" in log
     trend = run_cli(capsys, "trend", str(tmp_path / "m"), "--joint", "joint1")
     assert "31084" not in trend.out and "PWM" not in trend.out
@@ -799,6 +800,40 @@ def test_the_status_table_shows_the_excited_share_and_the_moves() -> None:
     assert "moves of the last window: 1 of 2 excite" in text
     assert "1200" in text and "40" in text and "yes" in text  # peak speeds in rpm
 
+
+
+def test_a_window_filed_not_excited_reads_not_excited_with_why_not_its_excited_share() -> None:
+    """The new user's log: "excited 87 % of the last window" for a window filed "not excited" (its moves excite 87 % of
+    it, its coherence between f_a and f_r is 0.66): the line and the table say the verdict and why."""
+    from rich.console import Console
+
+    from acq.monitoring.catalogue import Outcome
+    from acq.monitoring.monitor import MonitorStatus
+    from acq.offline.excitation_judge import judged
+    from acq.ui.monitor_cli import status_line, status_table
+
+    moves = [{"index": i, "start_s": 0.8 * i, "duration_s": 0.7, "peak_rad_s": 100.0, "excited": i < 10}
+             for i in range(12)]
+    analysed = {"K_Nm_per_rad": 950.0, "clock": {"residual_s": 20e-6}, "options": {"band_hz": [10.0, 400.0]},
+                "session": {"tags": {"monitor_window": 3}},
+                "quality": {"verdict": "poor", "mean_coherence": 0.8, "excitation_coherence": 0.66,
+                            "reasons": ["coherence 0.66 between f_a 55 Hz and f_r 102 Hz", "note: using 0.06–9.97 s"]},
+                "excitation": {"excited_fraction": 0.87, "selection_applied": True, "moves": moves}}
+    filed = judged(analysed)  # as the monitor files it
+    assert filed["quality"]["verdict"] == "not excited"
+    st = MonitorStatus("joint1", machine_time_s=40.0)
+    st.count(Outcome("w.h5", "0", "{}", {}, filed, None, 1.0))
+    why = ("10 of the window's 12 moves put torque into 10…400 Hz beyond chance; time that does: 87 % of the window, "
+           "but too little between f_a and f_r (coherence 0.66, below 0.7)")
+    assert status_line(st) == (f"40 s: 1 filed = 1 not excited, last window not excited ({why}), last K —, ΔK — %, "
+                               "starting, 0.0 MB")
+    console = Console(width=240, record=True)  # the reason on one line
+    console.print(status_table(st))
+    assert re.search(rf"│ the last window is filed not excited +│ +{re.escape(why)} │", console.export_text())
+    # a window filed ok after it: its excited share, as before
+    ok = {**analysed, "quality": {**analysed["quality"], "verdict": "ok", "excitation_coherence": 0.9}}
+    st.count(Outcome("w2.h5", "1", "{}", {}, ok, None, 1.0))
+    assert ", excited 87 % of the last window, last K" in status_line(st) and "not excited (" not in status_line(st)
 
 
 def test_machine_time_reads_in_seconds_minutes_or_hours() -> None:

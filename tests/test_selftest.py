@@ -6,8 +6,10 @@ from __future__ import annotations
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
+import time
 from dataclasses import replace
 from pathlib import Path
 
@@ -17,6 +19,7 @@ import pytest
 import acq.commissioning.devices
 from acq.commissioning.selftest_checks import Check, sync_jitter_check
 from acq.config import DEFAULT_BENCH
+from acq.recording.reader import load
 from acq.ui.selftest_cli import next_step, selftest_json
 from acqcore.errors import DeviceError
 from analysis.speed_ratio import SpeedRatio, likely_counts_per_rev, ratio_doubt, ratio_fault
@@ -223,8 +226,10 @@ def test_wrong_pole_pairs_or_counts_is_named_by_selftest_and_by_analyze(
     assert record.code == 0
     (session,) = (tmp_path / "s").glob("*.h5")
     analyzed = run_cli(capsys, "analyze", str(session), "--json", "--no-report")
-    quality = json.loads(analyzed.out)["quality"]
+    result = json.loads(analyzed.out)
+    quality = result["quality"]
     assert quality["verdict"] == "failed"
+    assert isinstance(result["K_Nm_per_rad"], float)  # the JSON keeps the fit's raw numbers, the verdict failed
     fault, *others = [r for r in quality["reasons"] if not r.startswith("note: ")]
     assert re.fullmatch(r"the current turns 2\.0\d× faster than pole_pairs·ω \(pole_pairs = 4, counts_per_rev = "
                         r"131072\): check \[motor\] pole_pairs = 8 or \[encoder\] counts_per_rev = 65536",
@@ -233,6 +238,8 @@ def test_wrong_pole_pairs_or_counts_is_named_by_selftest_and_by_analyze(
     printed = run_cli(capsys, "analyze", str(session), "--no-report")
     words = " ".join(printed.out.split())  # the table's lines wrap at the terminal's width
     assert printed.code == 0 and "check [motor] pole_pairs = 8" in words and "acceleration time" not in words
+    assert f"{result['K_Nm_per_rad']:.4g}" not in printed.out  # the table: "—", "not a result" (tests/test_display.py)
+    assert re.search(r"^ K \[N·m/rad\] +│ +— │ +not a result │", printed.out, re.M), printed.out
 
 
 def test_reversed_encoder_is_named(capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
@@ -590,3 +597,37 @@ def test_the_drive_period_from_host_stamps_a_stalled_reader_delivers_in_bursts_i
     check = drive_period_check(bursty)
     assert check.status == "pass", check.figure
     assert check.values["period_host_s"] == pytest.approx(1e-3, rel=1e-3)
+
+
+def test_ctrl_c_during_the_identification_is_an_interruption_by_the_user_not_a_failed_bench(tmp_path: Path) -> None:
+    """A real ``acq selftest`` on the simulated CANopen bench (real time), SIGINT as the terminal sends it once the
+    identification's session has samples: exit 130 and one line saying the user stopped it — no ✗, no fix."""
+    keep = tmp_path / "keep"
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "selftest", "--bench",
+                             str(DEFAULT_BENCH.parent / "sim_canopen.toml"), "--keep", str(keep)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                            env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)})
+    deadline = time.monotonic() + 120
+    while not _has_samples([p for p in keep.glob("*.h5") if _tag(p) == "identification"]):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGINT)  # what the terminal does on Ctrl-C
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err == ("acq: selftest interrupted during identification (interrupted by user (Ctrl-C)): no verdict on the "
+                   "bench — run acq selftest again to check it\n")
+    assert "✓ motion · phase order" in out and "✗" not in out and "identification ·" not in out
+
+
+def _tag(path: Path) -> str | None:
+    try:
+        return load(path).meta.tags.get("selftest")
+    except Exception:  # noqa: BLE001 - the file may be mid-creation
+        return None
+
+
+def _has_samples(paths: list[Path]) -> bool:
+    try:
+        return bool(paths) and load(paths[0]).current.sample_count > 0
+    except Exception:  # noqa: BLE001 - the file may be mid-creation
+        return False

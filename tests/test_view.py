@@ -439,6 +439,46 @@ def test_the_side_panel_gives_the_ends_of_an_interval_that_does_not_determine_it
     assert band_width_text(band) == "± 4.6–360 %"  # type: ignore[arg-type]
 
 
+def test_the_frf_of_a_failed_verdict_labels_its_fit_failed_and_gives_no_f_a_f_r_number(session: Path) -> None:
+    """The report of a failed verdict labelled the fit's resonances "f_a 67.2 Hz", "f_r 77.9 Hz" like a result."""
+    from acq.ui.qt_app import ensure_app
+    from acq.ui.report_panel import SessionFigure
+    from acq.ui.report_view import ReportView
+    from acq.ui.view import session_figure
+
+    ensure_app()
+    shown = session_figure(session)
+    for verdict, legend, marks in (
+            ("failed", "failed two-mass fit, 95 % band ± ", ["f_a of the failed fit", "f_r of the failed fit"]),
+            ("poor", "two-mass fit, 95 % band ± ", [f"f_a {shown.figures.f_a_hz:.1f} Hz",
+                                                    f"f_r {shown.figures.f_r_hz:.1f} Hz"])):
+        values = {**shown.values, "quality": {**shown.values["quality"], "verdict": verdict}}
+        view = ReportView([SessionFigure(shown.name, shown.figures, values)])
+        assert [label.text for _, label in view.legend.items][1].startswith(legend)
+        assert [t.toPlainText() for t in view.mark_labels] == marks
+
+
+def test_the_side_panel_shows_a_failed_verdicts_fit_as_not_a_result() -> None:
+    """The new user's report panel showed K 995.5 and J_l 3.061e+16 in bold under "verdict failed"."""
+    from types import SimpleNamespace
+
+    from acq.ui.report_panel import SessionFigure, values_html
+    from tests.test_display import _failed_doc
+
+    figures = SimpleNamespace(phase_valid=True)
+    html = values_html([SessionFigure("s", figures, _failed_doc())])  # type: ignore[arg-type]
+    for name, unit in (("K", "N·m/rad"), ("J_l", "kg·m²"), ("f_a", "Hz")):
+        assert (f"<tr><td nowrap>{name}</td><td align='right'>—</td><td align='right' nowrap>not a result</td>"
+                f"<td nowrap>{unit}</td></tr>") in html
+    assert ("<p>verdict failed: the fit&#x27;s K, J_m, J_l, C, f_a and f_r are not a result (the .result.json keeps "
+            "them)</p>") in html
+    assert "995.5" not in html and "3.061e+16" not in html and "<b>40.13</b>" in html  # the clock's numbers stay
+    poor = _failed_doc()
+    poor["quality"]["verdict"] = "poor"
+    html = values_html([SessionFigure("s", figures, poor)])  # type: ignore[arg-type]
+    assert "<b>995.5</b>" in html and "not a result" not in html
+
+
 @pytest.mark.parametrize(("dither", "kind"), [(0.02, "misfit"), (0.0, "third mode")], ids=["misfit", "third-mode"])
 def test_the_report_marks_where_a_poor_verdict_says_the_model_misses(tmp_path: Path, dither: float, kind: str) -> None:
     """The third mass at 150 Hz: the verdict named a misfit band (shipped dithered profile) or a third mode

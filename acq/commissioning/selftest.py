@@ -36,7 +36,7 @@ from acq.commissioning.selftest_checks import (Check, blf_check, daq_blocks_chec
                                                standstill_current_check, sync_jitter_check, sync_times,
                                                torque_constant_check)
 from acq.offline.analyze import analyze_session, joint_travel, recording_from_session
-from acq.recording.recorder import Recorder
+from acq.recording.recorder import Recorder, RecordingResult
 from acq.recording.reader import load
 from acq.recording.session import Session
 from analysis import AnalysisRequest, electrical_speed_ratio, prepare_signals
@@ -52,6 +52,23 @@ SLOW_MOVE = Profile(kind="triangle", top_speed_rpm=200.0, accel_time_s=0.3, dece
                     duration_s=2.5)
 STANDSTILL = Profile(kind="triangle", top_speed_rpm=1.0, accel_time_s=1.0, decel_time_s=1.0,
                      duration_s=STANDSTILL_S)  # stored in the session; never executed (see _HoldStill)
+
+
+class Stopped(Exception):
+    """A recording of the selftest stopped by Ctrl-C or SIGTERM (the only stop requests a selftest's recorder gets):
+    no verdict on the bench, not a failed check. ``stage``: the stage that was recording; ``reason``: the
+    recorder's stop reason ("interrupted by user (Ctrl-C)", "stopped by SIGTERM")."""
+
+    def __init__(self, stage: str, reason: str) -> None:
+        super().__init__(f"{stage}: {reason}")
+        self.stage, self.reason = stage, reason
+
+
+def _not_stopped(result: RecordingResult, stage: str) -> RecordingResult:
+    """``result`` unless a stop request ended it (status ``interrupted``): then :class:`Stopped`."""
+    if result.status == "interrupted":
+        raise Stopped(stage, result.stop_reason)
+    return result
 
 
 class _HoldStill:
@@ -147,7 +164,7 @@ def _devices_and_streams(bench: Bench, profile: Profile | None, work_dir: Path, 
         if result is None:  # stopped at a device check (or interrupted): release the started devices
             drive.stop()
             current.stop()
-    session = load(result.path)
+    session = load(_not_stopped(result, "streams").path)
     yield samples_check(session, "streams")
     if session.status != "complete":
         return
@@ -302,16 +319,17 @@ def _serial_check(stats: Any, bench: Bench) -> Check:
     return Check("streams", "serial link", "pass", figure, values=values)
 
 
-def _record(bench: Bench, profile: Profile | None, work_dir: Path, fast: bool, duration_s: float, tag: str) -> Path:
+def _record(bench: Bench, profile: Profile | None, work_dir: Path, fast: bool, duration_s: float, tag: str,
+            stage: str) -> Path:
     """Record ``duration_s`` of ``profile`` (None: passively) through the registry and the recorder; the session's
-    path."""
+    path (:class:`Stopped` when Ctrl-C or SIGTERM ended it)."""
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, work_dir, duration_s, tags={"selftest": tag})
-    return recorder.run().path
+    return _not_stopped(recorder.run(), stage).path
 
 
 def _motion(bench: Bench, profile: Profile, work_dir: Path, fast: bool) -> Iterator[Check]:
-    session = load(_record(bench, SLOW_MOVE, work_dir, fast, SLOW_MOVE.duration_s, "slow move"))
+    session = load(_record(bench, SLOW_MOVE, work_dir, fast, SLOW_MOVE.duration_s, "slow move", "motion"))
     moved = samples_check(session, "motion")
     if moved.status == "fail":
         yield moved
@@ -326,7 +344,7 @@ def _motion(bench: Bench, profile: Profile, work_dir: Path, fast: bool) -> Itera
 
 
 def _identification(bench: Bench, profile: Profile, work_dir: Path, fast: bool) -> Iterator[Check]:
-    path = _record(bench, profile, work_dir, fast, IDENTIFICATION_S, "identification")
+    path = _record(bench, profile, work_dir, fast, IDENTIFICATION_S, "identification", "identification")
     recorded = samples_check(load(path), "identification")
     if recorded.status == "fail":  # frames lost while moving: the identification would only echo it
         yield recorded
@@ -338,7 +356,7 @@ def _passive_motion_and_identification(bench: Bench, profile: Profile | None, wo
                                        fast: bool) -> Iterator[Check]:
     """On a listening bench: 10 s of the machine's own motion, the motion checks that need no command, and the
     identification on the segments that excite."""
-    path = _record(bench, None, work_dir, fast, IDENTIFICATION_S, "machine's motion")
+    path = _record(bench, None, work_dir, fast, IDENTIFICATION_S, "machine's motion", "motion")
     session = load(path)
     recorded = samples_check(session, "motion")
     if recorded.status == "fail":

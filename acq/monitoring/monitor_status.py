@@ -92,6 +92,9 @@ class MonitorStatus:
     last_moves: tuple[dict[str, Any], ...] = ()  # its moves: index, start_s, duration_s, peak_rad_s, excited
     # of a last window whose segment selection did not apply: how many Welch segments it examined, why too few excite
     last_segments: str | None = None
+    # of a last window filed "not excited": why, the first of its reasons (its moves may excite 87 % of it, and its
+    # coherence between f_a and f_r fall short: the excited share alone contradicted the verdict)
+    last_not_excited_why: str | None = None
     excited_fraction_sum: float = 0.0  # over the windows judged for excitation (for the share of the program)
     excitation_judged: int = 0
 
@@ -135,6 +138,8 @@ class MonitorStatus:
         self.last_excited_fraction = excitation["excited_fraction"] if excitation else 0.0
         self.last_moves = tuple(excitation["moves"]) if excitation else ()
         self.last_segments = selection_reason(excitation) if excitation and not excitation["selection_applied"] else None
+        reasons = [r for r in outcome.doc["quality"]["reasons"] if not r.startswith("note: ")] if outcome.doc else []
+        self.last_not_excited_why = (reasons[0] if reasons else "no reason given") if verdict == "not excited" else None
         self.excited_fraction_sum += self.last_excited_fraction
         self.excitation_judged += 1
 

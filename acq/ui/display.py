@@ -26,7 +26,8 @@ from rich.measure import Measurement
 from rich.table import Table
 from rich.text import Text
 
-from acq.ui.values import PARAMS, format_value, interval_text, options_text
+from acq.ui.values import (FIT_KEYS, NOT_A_RESULT, PARAMS, fit_failed, format_value, interval_text, not_a_result_note,
+                           options_text)
 
 if TYPE_CHECKING:
     from acq.monitoring.batch import BatchReport
@@ -170,13 +171,14 @@ def result_table(doc: dict[str, Any]) -> FittedTable:
     """The identified values with 95 % intervals, frequencies, clock relation and verdict of a result document;
     on the simulated bench also the truth and the error."""
     truth = doc.get("simulated_truth") or {}
+    failed = fit_failed(doc)  # the fit's numbers are not a result: "—", "not a result" (--json keeps them)
     names, values, intervals, relative, true_values, errors = [], [], [], [], [], []
     for key, name, unit in PARAMS:
-        value = doc.get(key)
+        value = None if failed else doc.get(key)
         names.append(f"{name} [{unit}]")
         values.append(format_value(value))
-        intervals.append(interval_text(doc, key))
-        relative.append(interval_text(doc, key, relative=True))
+        intervals.append(NOT_A_RESULT if failed else interval_text(doc, key))
+        relative.append(NOT_A_RESULT if failed else interval_text(doc, key, relative=True))
         true_values.append(format_value(truth.get(key)))
         errors.append("—" if value is None or not truth.get(key) else f"{100.0 * (value / truth[key] - 1.0):+.2f} %")
     for name, unit, path, scale, spec, truth_key in RESULT_ROWS:
@@ -185,9 +187,10 @@ def result_table(doc: dict[str, Any]) -> FittedTable:
             continue
         true = truth.get(truth_key) if truth_key else None
         names.append(f"{name} [{unit}]" if unit else name)
-        values.append(format_value(value, spec, scale))
-        intervals.append("")
-        relative.append("")
+        gone = failed and path[-1] in FIT_KEYS  # f_a, f_r of a failed fit
+        values.append(format_value(None if gone else value, spec, scale))
+        intervals.append(NOT_A_RESULT if gone else "")
+        relative.append(NOT_A_RESULT if gone else "")
         true_values.append(format_value(true, ".4g", scale) if truth_key else "")
         errors.append("" if value is None or true is None else
                       _signed_seconds(value - true) if truth_key == "offset_s" else f"{value - true:+.2f} {unit}")
@@ -196,7 +199,8 @@ def result_table(doc: dict[str, Any]) -> FittedTable:
     if truth:
         columns += [Column("sim truth", true_values, drop=2), Column("error", errors, drop=1)]
     quality = doc["quality"]
-    caption = [f"options: {options_text(doc)}", *quality["reasons"]]
+    caption = [f"options: {options_text(doc)}", *([not_a_result_note("--json")] if failed else []),
+               *quality["reasons"]]
     title = f"identification — verdict [bold]{escape(quality['verdict'])}[/bold]"
     if doc.get("partial"):  # why (the spans left out) is the first note of the caption
         title += (" — [bold]partial[/bold]: readable part of a damaged session" if doc["session"].get("damage")
@@ -357,7 +361,8 @@ def batch_table(report: BatchReport) -> FittedTable:
     """
     outcomes = sorted(report.outcomes, key=lambda o: o.path)
     joints = [str(o.session.get("joint") or "?") for o in outcomes]
-    ks = [None if o.doc is None else o.doc.get("K_Nm_per_rad") for o in outcomes]  # none when not excited
+    # none when not excited; a failed verdict's K is not a result ("—" beside "failed", as in the result table)
+    ks = [None if o.doc is None or fit_failed(o.doc) else o.doc.get("K_Nm_per_rad") for o in outcomes]
     columns = [Column("session", [Path(o.path).name for o in outcomes], "left")]
     one_joint = len(set(joints)) == 1
     if not one_joint:

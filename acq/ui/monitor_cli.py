@@ -59,6 +59,8 @@ def status_table(st: MonitorStatus) -> Table:
         ("baseline K N·m/rad", format_value(st.baseline_K, ".1f")),
         ("excited share: last window · all windows", f"{_pct(st.last_excited_fraction)} · "
                                                      f"{_pct(st.program_excited_fraction)}"),
+        *([("the last window is filed not excited", escape(st.last_not_excited_why))]
+          if st.last_not_excited_why is not None else []),  # its excited share alone contradicted that
         *([("segment selection of the last window", escape(st.last_segments))] if st.last_segments else []),
         ("trend state", f"[bold red]{st.state}[/]" if st.state == "alarm" else st.state),
         ("alarms raised", str(st.alarms) + (f" · [bold red]{escape(st.alarm_command_failure)}[/]"
@@ -191,19 +193,7 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
     last = [""]
 
     def log(st: MonitorStatus) -> None:  # one line per change when not on a terminal (a service, a log file)
-        last_k = "—" if st.last_K is None else f"{st.last_K:.1f} (window {st.last_K_window})"
-        line = (f"{duration_text(st.machine_time_s)}: {st.filed_total} filed"
-                + (f" in this run ({st.in_folder} in the folder)" if st.resumed else "")
-                + (f" = {filed_parts(st)}" if st.filed_total else "")
-                + (f", {st.not_captured} not captured (disk budget)" if st.not_captured else "")
-                + (f", {st.no_room} not captured (disk full)" if st.no_room else "")
-                + (f", {catalogue_text(st)}" if st.catalogue_down_since or st.waiting else "")
-                + (f", {st.unfinished} not filed (analysis unfinished)" if st.unfinished else "")
-                + f", excited {_pct(st.last_excited_fraction)} of the last window"
-                + (f" ({st.last_segments})" if st.last_segments else "") + f", last K {last_k}, "
-                f"ΔK {format_value(st.change_pct, '+.1f')} %, {st.state}"
-                + (" (baseline unstable)" if st.baseline_warning else "") + f", {st.disk_bytes / 1e6:.1f} MB"
-                + (f" — {st.message}" if st.message else ""))
+        line = status_line(st)
         if line != last[0]:
             console.print(line, highlight=False, markup=False, soft_wrap=True)
             last[0] = line
@@ -213,6 +203,27 @@ def monitor_command(bench_path: Path, window_s: float, every: str, for_text: str
     console.print(status_table(monitor.status))
     _say_if_stopped(monitor, catalogue_path or out_dir / CATALOGUE_NAME)
     return code
+
+
+def status_line(st: MonitorStatus) -> str:
+    """The monitor's figures in one line, as a log (not a terminal) gets them at each change: "12.2 min: 2 filed = …,
+    excited 93 % of the last window, last K 890.9 (window 3), ΔK — %, learning baseline, 2.3 MB"; a last window filed
+    not excited says so and why, "last window not excited (… but too little between f_a and f_r (coherence 0.66,
+    below 0.7))", never its excited share alone."""
+    last_k = "—" if st.last_K is None else f"{st.last_K:.1f} (window {st.last_K_window})"
+    why = "; ".join(filter(None, (st.last_not_excited_why, st.last_segments)))
+    excitation = (f", last window not excited ({why})" if st.last_not_excited_why is not None else
+                  f", excited {_pct(st.last_excited_fraction)} of the last window" + (f" ({why})" if why else ""))
+    return (f"{duration_text(st.machine_time_s)}: {st.filed_total} filed"
+            + (f" in this run ({st.in_folder} in the folder)" if st.resumed else "")
+            + (f" = {filed_parts(st)}" if st.filed_total else "")
+            + (f", {st.not_captured} not captured (disk budget)" if st.not_captured else "")
+            + (f", {st.no_room} not captured (disk full)" if st.no_room else "")
+            + (f", {catalogue_text(st)}" if st.catalogue_down_since or st.waiting else "")
+            + (f", {st.unfinished} not filed (analysis unfinished)" if st.unfinished else "")
+            + excitation + f", last K {last_k}, ΔK {format_value(st.change_pct, '+.1f')} %, {st.state}"
+            + (" (baseline unstable)" if st.baseline_warning else "") + f", {st.disk_bytes / 1e6:.1f} MB"
+            + (f" — {st.message}" if st.message else ""))
 
 
 def _say_if_stopped(monitor: Monitor, catalogue: Path | str) -> None:

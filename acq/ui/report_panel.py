@@ -11,7 +11,8 @@ from html import escape
 from typing import Any
 
 from acq.ui.plot_style import COLORS
-from acq.ui.values import PARAMS, format_value, interval_text, not_determined, options_text, readable_number
+from acq.ui.values import (NOT_A_RESULT, PARAMS, fit_failed, format_value, interval_text, not_a_result_note,
+                           not_determined, options_text, readable_number)
 from analysis import FigureData, Thresholds
 
 
@@ -44,25 +45,30 @@ def values_html(sessions: Sequence[SessionFigure]) -> str:
         if not v:
             parts.append("<p>no identified values</p>")
             continue
+        failed = fit_failed(v)  # the fit's numbers are not a result: "—", "not a result" (result.json keeps them)
         rows = []
         for key, name, unit in PARAMS:
-            rows.append((name, format_value(v.get(key)), interval_text(v, key, relative=True), unit))
+            rows.append((name, None if failed else format_value(v.get(key)),
+                         NOT_A_RESULT if failed else interval_text(v, key, relative=True), unit))
         clock = v.get("clock", {})
-        rows += [("f_a", format_value(v.get("antiresonance_hz")), "", "Hz"),
-                 ("f_r", format_value(v.get("resonance_hz")), "", "Hz"),
-                 ("clock offset", format_value(clock.get("offset_s"), scale=1e3), "", "ms"),
+        rows += [(name, None if failed else format_value(v.get(key)), NOT_A_RESULT if failed else "", "Hz")
+                 for name, key in (("f_a", "antiresonance_hz"), ("f_r", "resonance_hz"))]
+        rows += [("clock offset", format_value(clock.get("offset_s"), scale=1e3), "", "ms"),
                  ("clock drift", format_value(clock.get("drift_ppm")), "", "ppm"),
                  ("clock residual", format_value(clock.get("residual_s"), scale=1e6), "", "µs")]
         quality = v.get("quality", {})
-        table = "".join(f"<tr><td nowrap>{escape(n)}</td><td align='right'><b>{val}</b></td>"
-                        f"<td align='right' nowrap>{ci}</td><td nowrap>{escape(u)}</td></tr>" for n, val, ci, u in rows)
+        table = "".join(f"<tr><td nowrap>{escape(n)}</td><td align='right'>{'—' if val is None else f'<b>{val}</b>'}"
+                        f"</td><td align='right' nowrap>{ci}</td><td nowrap>{escape(u)}</td></tr>"
+                        for n, val, ci, u in rows)
         parts.append("<table cellspacing='0' cellpadding='2'><tr><th></th><th>value</th><th>95 % CI</th><th></th></tr>"
                      f"{table}</table>")
         # a value the data do not determine: its interval, whose ends the relative "± 360 %" hid
         wide = [f"{name} {format_value(v.get(key))} {escape(unit)}: its 95 % interval "
                 f"{' – '.join(readable_number(b) for b in v['ci95'][key])} does not determine it"
-                for key, name, unit in PARAMS if not_determined(v, key)]
-        if wide:
+                for key, name, unit in PARAMS if not failed and not_determined(v, key)]
+        if failed:
+            parts.append(f"<p>{escape(not_a_result_note('the .result.json'))}</p>")
+        elif wide:
             parts.append(f"<p>{'<br>'.join(wide)}</p>")
         parts.append(f"<p>verdict <b>{escape(str(quality.get('verdict', '—')))}</b>, mean γ² in band "
                      f"{format_value(quality.get('mean_coherence'), '.3g')}</p>")

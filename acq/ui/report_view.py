@@ -39,7 +39,7 @@ from acq.ui.plot_style import COLORS, add_plot, legend_box, log_ticks, positive,
 from acq.ui.qt_app import DEFAULT_SIZE_PX, ensure_app, save_png, widget_image
 from acq.ui.report_marks import VERDICT_MARK_COLOR, place_marks, setup_mark_strip, verdict_mark, verdict_marks
 from acq.ui.report_panel import SessionFigure, values_html
-from acq.ui.values import readable_number
+from acq.ui.values import fit_failed, readable_number
 from analysis import FigureData
 
 PANEL_WIDTH_PX = 360  # the side panel's width (twice that for more than three sessions)
@@ -219,8 +219,9 @@ class ReportView(QtWidgets.QWidget):
         frf.addItem(pg.FillBetweenItem(low_curve, high_curve, brush=fill))
         model_pen = pg.mkPen(color, width=2)
         frf.plot(mf, model, pen=model_pen)
-        self.legend.addItem(legend_box(pg.mkBrush(fill), model_pen), f"{prefix}two-mass fit, 95 % band "
-                                                                      f"{band_width_text(fd)}")
+        failed = fit_failed(s.values)  # drawn to show how it misses, its f_a and f_r without numbers
+        self.legend.addItem(legend_box(pg.mkBrush(fill), model_pen),
+                            f"{prefix}{'failed ' if failed else ''}two-mass fit, 95 % band {band_width_text(fd)}")
         if phase is not None:
             mp, model_phase = positive(fd.model_f_hz, fd.model_phase_deg)
             phase.plot(mp, model_phase, pen=model_pen)
@@ -243,7 +244,8 @@ class ReportView(QtWidgets.QWidget):
                                                pen=pg.mkPen(color, width=1, style=QtCore.Qt.PenStyle.DashLine))
                         line.setObjectName(f"{prefix}{label}")
                         plot.addItem(line)
-                text = pg.TextItem(f"{label} {f_hz:.1f} Hz", color=color, anchor=(0.5, 0.5))
+                text = pg.TextItem(f"{label} of the failed fit" if failed else f"{label} {f_hz:.1f} Hz", color=color,
+                                   anchor=(0.5, 0.5))
                 text.setPos(math.log10(f_hz), 0.5)
                 self.marks.addItem(text, ignoreBounds=True)
                 self.mark_labels.append(text)

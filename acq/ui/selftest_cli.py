@@ -12,10 +12,10 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from acq.commissioning.selftest import SLOW_MOVE, run_selftest
+from acq.commissioning.selftest import SLOW_MOVE, Stopped, run_selftest
 from acq.commissioning.selftest_checks import Check
 from acq.config import bench_label, load_bench, load_profile, resolve_profile_path
-from acqcore.errors import ConfigError
+from acqcore.errors import EXIT_INTERRUPTED, ConfigError
 from drivers.limits import refuse_beyond_limits
 
 MARK = {"pass": "[green]✓[/]", "warn": "[yellow]⚠[/]", "fail": "[bold red]✗[/]"}
@@ -62,6 +62,12 @@ def next_step(checks: list[Check], bench_path: Path | None, profile_name: str | 
     return f"{ready}: acq record --profile {profile_name}{bench}"
 
 
+def stopped_line(where: str, reason: str) -> str:
+    """The one line of a selftest Ctrl-C or SIGTERM stopped (exit 130): no verdict on the bench, not a failed check;
+    ``where``: "during identification" (a recording it stopped), "after motion · direction" (elsewhere)."""
+    return f"acq: selftest interrupted {where} ({reason}): no verdict on the bench — run acq selftest again to check it"
+
+
 def selftest_json(checks: list[Check], bench_path: str) -> dict[str, object]:
     """``{"bench", "passed", "stopped_at", "checks": [...]}``."""
     failed = next((c for c in checks if c.status == "fail"), None)
@@ -86,7 +92,8 @@ def selftest_command(bench_path: Path | None, profile_name: str | None, fast: bo
     """Check the bench and its config against the data: devices, streams, a slow move, an identification.
 
     Each check prints ✓ / ⚠ / ✗ with its figure; a ✗ says what to change in which config key and stops the
-    run. Exit code 0 when nothing failed, 2 when the devices refused the config at opening, 1 otherwise. A bench with
+    run. Exit code 0 when nothing failed, 2 when the devices refused the config at opening, 130 when Ctrl-C or
+    SIGTERM stopped it (one line: no verdict on the bench), 1 otherwise. A bench with
     [drive] motion = "external" is checked on the machine's own motion: acq commands none there.
     """
     bench = load_bench(bench_path)
@@ -108,6 +115,12 @@ def selftest_command(bench_path: Path | None, profile_name: str | None, fast: bo
             checks.append(check)
             if not as_json:
                 out.print(check_line(check))
+    except (Stopped, KeyboardInterrupt) as e:  # the person stopped it: not a fault of the bench
+        where = (f"during {e.stage}" if isinstance(e, Stopped) else
+                 f"after {checks[-1].stage} · {checks[-1].name}" if checks else "before its first check")
+        click.echo(stopped_line(where, e.reason if isinstance(e, Stopped) else "interrupted by user (Ctrl-C)"),
+                   err=True)  # one plain line (rich would wrap it)
+        return EXIT_INTERRUPTED
     finally:
         if keep_dir is None:
             shutil.rmtree(work_dir, ignore_errors=True)

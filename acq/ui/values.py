@@ -51,6 +51,24 @@ def format_value(x: float | None, spec: str = ".4g", scale: float = 1.0) -> str:
 NOT_DETERMINED_SHARE = 1.0
 
 
+#: The fit's numbers a ``failed`` verdict leaves: its parameters and the f_a, f_r they give (the result document keeps
+#: them, with the verdict; the table and the report panel show them as not a result).
+FIT_KEYS: tuple[str, ...] = (*(key for key, _, _ in PARAMS), "antiresonance_hz", "resonance_hz")
+NOT_A_RESULT = "not a result"
+
+
+def fit_failed(doc: dict[str, Any]) -> bool:
+    """True when the verdict of result document ``doc`` is ``failed``: its fit's numbers are not a result."""
+    return (doc.get("quality") or {}).get("verdict") == "failed"
+
+
+def not_a_result_note(kept_in: str) -> str:
+    """The line under a failed verdict's values: "verdict failed: the fit's K, J_m, J_l, C, f_a and f_r are not a
+    result (<kept_in> keeps them)"."""
+    names = ", ".join(name for _, name, _ in PARAMS)
+    return f"verdict failed: the fit's {names}, f_a and f_r are {NOT_A_RESULT} ({kept_in} keeps them)"
+
+
 def readable_number(x: float) -> str:
     """``x`` to 2 significant digits, in plain decimals from 0.0001 to below 10⁶ ("0.00049", "120", "360"), else
     in powers of ten ("2.2e+06"): the two ends of a wide interval, read at a glance."""
