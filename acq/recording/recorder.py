@@ -25,7 +25,7 @@ from typing import Any
 from acq.recording.device_reader import READ_TIMEOUT_S, DeviceReader
 from acq.recording.layout import Status, utc_now_iso
 from acq.recording.paths import new_session_path
-from acq.recording.room import FLUSH_BYTES, require_room
+from acq.recording.room import FLUSH_BYTES
 from acq.recording.stream_check import StreamChecker, join_encoder_blocks
 from acq.recording.writer import SessionExists, SessionWriter
 from drivers.base import CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock, StreamEvent
@@ -186,7 +186,6 @@ class Recorder:
             return self._writer
         try:
             make_folders(self.out_dir)
-            require_room(self.out_dir, self.bench, self.duration_s)  # not a progress bar run to its end for nothing
             for _ in range(100):  # another recorder may take the name between the check and the create
                 path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
                 try:

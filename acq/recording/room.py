@@ -39,8 +39,12 @@ def bytes_to_record(session_bytes: int) -> int:
 
 def require_room(folder: Path, bench: Bench, duration_s: float) -> None:
     """Raise :class:`StorageError` naming ``folder``, its free and the needed bytes when a recording of
-    ``duration_s`` on ``bench`` cannot fit there (checked before the session file is made)."""
-    need, free = bytes_to_record(expected_session_bytes(bench, duration_s)), free_bytes(folder)
+    ``duration_s`` on ``bench`` cannot fit there (checked before any device starts; a folder still to be made: the
+    free space where it will be)."""
+    existing = next((p for p in (folder, *folder.parents) if p.is_dir()), None)
+    if existing is None:
+        return  # nothing to measure: making the folder says what is wrong
+    need, free = bytes_to_record(expected_session_bytes(bench, duration_s)), free_bytes(existing)
     if free < need:
         raise StorageError(f"disk full: {folder} has {free / 1e6:.1f} MB free, a {duration_s:g} s recording needs "
                            f"{need / 1e6:.1f} MB (record shorter, or make room)")
