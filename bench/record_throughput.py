@@ -142,7 +142,8 @@ from rich.table import Table
 
 from acq.config import load_bench, load_profile
 from acq.entry import keep_freed_memory
-from acq.recording.recorder import FLUSH_BYTES, Recorder
+from acq.recording.recorder import Recorder
+from acq.recording.room import FLUSH_BYTES
 from acq.recording.writer import SessionWriter
 from drivers.base import CurrentSource, Drive
 from drivers.config import Bench

@@ -55,8 +55,9 @@ def test_recording_session_is_refused_unless_partial(recorded: Path, tmp_path: P
                                                      capsys: pytest.CaptureFixture[str]) -> None:
     path = copy_session(recorded, tmp_path / "live.h5", status="recording")
     run = run_cli(capsys, "analyze", str(path), "--no-report")
-    assert (run.code, run.err) == (2, f"acq: error: {path}: status recording (still being recorded, or the recorder "
-                                      "was killed) — run acq check, or use --partial to analyse what is stored\n")
+    assert (run.code, run.err) == (2, f"acq: error: {path}: status recording, but no recorder holds it (killed, or "
+                                      f"stopped without finishing the file) — run acq check {path} to repair it, or "
+                                      "use --partial to analyse what is stored\n")
     assert not path.with_name("live.result.json").exists()
     run = run_cli(capsys, "analyze", str(path), "--no-report", "--partial", "--json")
     assert run.code == 0, run.err

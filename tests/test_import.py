@@ -234,6 +234,44 @@ def test_tdms_round_trip_picks_channels_in_phase_order_and_takes_rate_from_wf_in
     assert json.loads(s.attrs["origin_json"])["files"][0]["channels"] == ["DAQ/ai1", "DAQ/ai0"]
 
 
+def _cut_in_last_line(path: Path, keep: int) -> str:
+    """Cut ``path`` ``keep`` characters into its last line (after the first comma), as a copy stopped there; return
+    the line as it was."""
+    *lines, last, _ = path.read_text().split("\n")
+    path.write_text("\n".join(lines) + "\n" + last[:last.index(",") + keep])
+    return last
+
+
+def test_a_csv_cut_in_its_last_line_leaves_that_line_out_with_a_warning_naming_file_and_line(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    t, i_a, _ = current_columns()
+    cur = write_csv(tmp_path / "cur.csv", "t_s,i_a_A", [t, i_a], ["%.9f", "%r"])
+    assert _cut_in_last_line(cur, 4) == "2.500000000,9.999802871917556e-14"  # left as "2.500000000,9.9"
+    t_enc, counts, k = encoder_columns()
+    enc = write_csv(tmp_path / "enc.csv", "t_s,position_counts,index", [t_enc, counts, k], ["%.9f", "%d", "%d"])
+    _cut_in_last_line(enc, 2)
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5")
+    assert r.code == 0, r.err
+    s = load(tmp_path / "s.h5")
+    np.testing.assert_array_equal(s.current.phases_a["i_a"], i_a[:-1])
+    np.testing.assert_array_equal(s.encoder.position_counts, counts[:-1])
+    details = [f"cur.csv: line {t.size + 1} has no end of line (the file was cut in it): left out, {t.size - 1} rows "
+               "read", f"enc.csv: line {k.size + 1} has no end of line (the file was cut in it): left out, "
+               f"{k.size - 1} rows read"]
+    assert [(e.stream, e.kind, e.detail) for e in s.events] == [("current", "warning", details[0]),
+                                                                 ("encoder", "warning", details[1])]
+    assert all(f"warning: {d}" in " ".join(r.err.split()) for d in details)
+
+
+def test_a_bad_cell_before_the_cut_is_still_named(capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                                  pair: tuple[Path, Path]) -> None:
+    cur, enc = pair
+    _with_row_changed(cur, 5, "0.000156250,abc,1.0")
+    _cut_in_last_line(cur, 4)
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5")
+    assert (r.code, r.err) == (2, f"acq: error: {cur}: line 5, column i_a_A: 'abc' is not a number\n")
+
+
 def test_truncated_tdms_is_read_up_to_the_cut_with_a_warning_event(
         capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
     _, enc = pair

@@ -5,7 +5,9 @@ from __future__ import annotations
 import contextlib
 import json
 import re
+import os
 import shutil
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -44,6 +46,33 @@ def small_disk(folder: Path, size: str, monkeypatch: pytest.MonkeyPatch) -> Iter
         yield "tmpfs" if refused is None else "injected"
 
 
+@contextlib.contextmanager
+def filled_while_recording(folder: Path, leave_bytes: int) -> Iterator[None]:
+    """Another program fills the disk of ``folder`` while a recording runs: once its session file holds 1 MB (a
+    commit or two), a file there takes all but ``leave_bytes`` of the free space (a recording that cannot fit is
+    refused before it starts, so only this makes a disk full mid-recording)."""
+    from acq.recording.storage import free_bytes
+
+    stop = threading.Event()
+
+    def fill() -> None:
+        while not stop.is_set():
+            if any(p.stat().st_size > 1 << 20 for p in folder.glob("*.h5")):
+                with (folder / "other-program.bin").open("wb") as f:
+                    os.posix_fallocate(f.fileno(), 0, free_bytes(folder) - leave_bytes)
+                return
+            time.sleep(0.001)
+
+    filler = threading.Thread(target=fill)
+    filler.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        filler.join()
+    assert (folder / "other-program.bin").exists(), "the recording ended before the disk was filled"
+
+
 def _assert_counts_are_stored(path: Path, current: int, encoder: int) -> None:
     s = load(path)
     assert s.damage == ()
@@ -56,8 +85,10 @@ def _assert_counts_are_stored(path: Path, current: int, encoder: int) -> None:
 def test_disk_full_while_recording_fails_with_what_is_stored(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                              monkeypatch: pytest.MonkeyPatch) -> None:
     out = tmp_path / "disk"
-    with small_disk(out, "8m", monkeypatch):
-        run = run_cli(capsys, "record", "--profile", "triangle_0.5s", "--fast", "--duration", "120", "--out", str(out))
+    with small_disk(out, "8m", monkeypatch) as kind:
+        with filled_while_recording(out, 1_500_000) if kind == "tmpfs" else contextlib.nullcontext():
+            run = run_cli(capsys, "record", "--profile", "triangle_0.5s", "--fast", "--duration", "12", "--out",
+                          str(out))
         path = _only_session(out)
         assert run.code == 1
         lines = run.err.strip().splitlines()
@@ -67,7 +98,7 @@ def test_disk_full_while_recording_fails_with_what_is_stored(tmp_path: Path, cap
         s = load(path)
         assert s.status == "failed"
         kept = s.current.sample_count
-        assert 0 < kept < 120 * RATE_HZ
+        assert 0 < kept < 12 * RATE_HZ
         assert error == (f"acq: failed: disk full: {path} — {kept / RATE_HZ:.1f} s kept ({kept} current and "
                          f"{s.encoder.index.size} encoder samples stored in {path})")
         assert s.attrs["stop_reason"] == f"disk full: {path} — {kept / RATE_HZ:.1f} s kept"
@@ -75,15 +106,39 @@ def test_disk_full_while_recording_fails_with_what_is_stored(tmp_path: Path, cap
         _assert_counts_are_stored(path, kept, s.encoder.index.size)
 
 
+def test_a_recording_that_cannot_fit_is_refused_before_it_starts(tmp_path: Path,
+                                                                  capsys: pytest.CaptureFixture[str]) -> None:
+    """Before: --fast ran its progress bar to 10.0 / 10 s, then "disk full … 0.0 s kept" (exit 1, an empty file)."""
+    from acq.recording.storage import free_bytes
+
+    out = tmp_path / "disk"
+    out.mkdir()
+    with tmpfs(out, "size=2m") as refused:
+        if refused is not None:
+            pytest.skip(f"needs a 2 MB tmpfs: {refused}")
+        free = free_bytes(out)
+        run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--out", str(out))
+        # 10 s × (25 600 S/s × 8 B + 1 000 S/s × 40 B) × 1.5 + 0.2 MB = 3.9 MB, + its last flush 2.1 + reserve 1.0
+        assert (run.code, run.err) == (1, f"acq: error: disk full: {out} has {free / 1e6:.1f} MB free, a 10 s "
+                                          "recording needs 7.0 MB (record shorter, or make room)\n")
+        assert list(out.iterdir()) == []
+        run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--out", str(out), "--duration",
+                      "0.5", "--no-analyze")
+        assert run.code == 0, run.err  # 0.5 s needs 0.4 + 0.4 + 1.0 MB: it fits
+        assert load(_only_session(out)).status == "complete"
+
+
 def test_write_error_inside_hdf5_keeps_only_committed_samples(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                                monkeypatch: pytest.MonkeyPatch) -> None:
     """The free-space guard off: ENOSPC reaches HDF5 mid-flush; the process neither crashes nor counts that flush."""
     out = tmp_path / "disk"
-    with small_disk(out, "3m", monkeypatch) as kind:
+    with small_disk(out, "8m", monkeypatch) as kind:
         if kind != "tmpfs":
             pytest.skip("needs a real full file system (mount a tmpfs as root)")
         monkeypatch.setattr(acq.recording.writer, "RESERVE_BYTES", -(1 << 40))
-        run = run_cli(capsys, "record", "--profile", "triangle_0.5s", "--fast", "--duration", "120", "--out", str(out))
+        with filled_while_recording(out, 300_000):
+            run = run_cli(capsys, "record", "--profile", "triangle_0.5s", "--fast", "--duration", "12", "--out",
+                          str(out))
         path = _only_session(out)
         assert run.code == 1
         assert run.err.strip().splitlines()[-1].startswith(f"acq: failed: disk full: {path} — ")

@@ -214,7 +214,8 @@ def test_restart_resumes_numbering_and_marks_an_interrupted_window(four_windows:
                            drive_info=DriveInfo(period_s=0.001, counts_per_rev=131072, transport="sim",
                                                 timestamp_kind="drive_cycle", device="sim-drive"),
                            host_ns_at_start=0, tags={"monitor_window": 4, "monitor_elapsed_s": 240.0})
-    writer._file.close()  # as a kill -9 leaves it
+    writer._file.close()  # as a kill -9 leaves it (the kernel drops its lock: acq.recording.live)
+    writer._marker.close()
     with pytest.raises(SystemExit) as exc:
         from acq.ui.cli import main
 

@@ -188,7 +188,8 @@ def test_a_window_cut_in_an_earlier_run_is_filed_as_that_runs_and_the_counts_add
                                                 timestamp_kind="drive_cycle", device="sim-drive"),
                            host_ns_at_start=0, tags={"monitor_window": 4, "monitor_elapsed_s": 240.0,
                                                      "monitor_id": identity["monitor_id"]})
-    writer._file.close()  # as a kill -9 leaves it
+    writer._file.close()  # as a kill -9 leaves it (the kernel drops its lock: acq.recording.live)
+    writer._marker.close()
     run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for",
                   "1m", "--baseline-windows", "2", "--keep", "1", "--out", str(out))
     assert run.code == 0, run.err

@@ -43,7 +43,8 @@ from acq.monitoring.monitor_alarm import AlarmState
 from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, catalogue_text, check_comparable, open_bound
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
                                           check_user_tags, own_windows)
-from acq.monitoring.monitor_status import SIZE_MARGIN, MonitorSettings, MonitorStatus, expected_window_bytes
+from acq.monitoring.monitor_status import MonitorSettings, MonitorStatus
+from acq.recording.room import SIZE_MARGIN, expected_session_bytes
 from acq.monitoring.monitor_windows import (FolderWindows, StorageFailures, check_budget, copies_deletable,
                                            refused_as_damaged, write_cause)
 from acq.monitoring.retention import WindowFiles
@@ -81,7 +82,7 @@ class Monitor:
         #: filed from the spool at start), in filing order; and the alarm state before the spool's windows were filed
         self._unjudged: list[str] = []
         self._alarm_before_spool: bool | None = None
-        self._size = expected_window_bytes(settings.bench, settings.window_s)
+        self._size = expected_session_bytes(settings.bench, settings.window_s)
         # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
         self._rules = AlarmRules(settings.baseline_windows, settings.threshold_pct, settings.ewma_lambda)
         check_user_tags(settings.tags, (WINDOW_TAG, ELAPSED_TAG, EVERY_TAG, *RULE_TAGS.values(), *FACT_TAGS))

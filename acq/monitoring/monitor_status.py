@@ -15,10 +15,6 @@ from acq.offline.excitation_judge import selection_reason
 from analysis import AnalysisRequest
 from drivers.config import Bench
 
-#: Expected window size = this × the data's raw size (HDF5 chunks, block tables, events): measured 1.1…1.2.
-SIZE_MARGIN = 1.5
-
-
 @dataclass(frozen=True)
 class MonitorSettings:
     """What ``acq monitor`` was asked for (SI units; sizes in bytes)."""
@@ -147,10 +143,3 @@ class MonitorStatus:
     def program_excited_fraction(self) -> float | None:
         """Share of the program's windows (time) that excites the joint, over the windows judged so far."""
         return self.excited_fraction_sum / self.excitation_judged if self.excitation_judged else None
-
-
-def expected_window_bytes(bench: Bench, window_s: float) -> int:
-    """Bytes a window's session file needs at most: current (f8 per channel) and encoder (5 columns of 8 bytes)."""
-    current = bench.daq.rate_hz * len(bench.daq.channels) * 8
-    encoder = 5 * 8 / bench.drive.period_s
-    return int(SIZE_MARGIN * window_s * (current + encoder)) + 200_000

@@ -15,9 +15,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from acq.recording.reader import load
-from acq.recording.recorder import FLUSH_BYTES
+from acq.recording.room import bytes_to_record
 from acq.recording.storage import free_bytes
-from acq.recording.writer import RESERVE_BYTES
 
 from acq.monitoring.catalogue import Catalogue
 from acq.monitoring.monitor_scope import own_windows
@@ -148,13 +147,8 @@ class FolderWindows:
     def room_on_disk(self, window_bytes: int) -> tuple[bool, int, int]:
         """Whether a window of ``window_bytes`` fits on the folder's file system as the writer judges room, once
         windows are deleted as for the budget (:meth:`make_room`: the disk outranks ``keep`` as the budget does); the
-        file system's free bytes then, and the bytes a window needs.
-
-        The writer commits a flush only with twice its size free beyond its reserve
-        (:data:`acq.recording.writer.RESERVE_BYTES`): its last flush — up to
-        :data:`acq.recording.recorder.FLUSH_BYTES`, the whole window of a --fast bench — needs that room once the
-        rest of the window is written (window + reserve alone passed with 3.0 MB free, and the window failed at 0 s)."""
-        need = window_bytes + min(window_bytes, FLUSH_BYTES) + RESERVE_BYTES
+        file system's free bytes then, and the bytes a window needs (:func:`acq.recording.room.bytes_to_record`)."""
+        need = bytes_to_record(window_bytes)
         fits, _ = self.make_room(need, self.disk_bytes() + free_bytes(self.out_dir))
         return fits, free_bytes(self.out_dir), need
 

@@ -47,6 +47,8 @@ class CsvTable:
 
     path: Path
     columns: dict[str, np.ndarray]
+    #: The line left out as the file was cut in it (its last line, without an end of line), or None.
+    cut_line: int | None = None
 
     @property
     def rows(self) -> int:
@@ -91,16 +93,22 @@ def read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = 
     ConfigError
         No such file, an unknown, duplicate or missing column, a wrong number of fields, a cell that
         is not a number, or a cell that is NaN or infinite.
+
+    A last data line without its end of line is where the file was cut (a copy or a writer stopped mid-line:
+    "4.963957424,-0." would read as −0.0): it is left out, and :attr:`CsvTable.cut_line` names it.
     """
     names = _header(path, required, optional)
     fault = _decimal_comma(path, len(names))
     if fault is not None:
         raise ConfigError(f"{path}: {fault}")
+    cut = _unended_last_line(path, data)
+    if cut is not None:
+        data = (data if data is not None else pa.memory_map(str(path)).read_buffer()).slice(0, cut[1])
     columns = _parse_with_arrow(path, names, data)
     if columns is None:
-        rows = _parse_with_numpy(path, names)
+        rows = _parse_with_numpy(path, names, None if cut is None else cut[0])
         columns = [np.ascontiguousarray(rows[:, i]) for i in range(len(names))]
-    table = CsvTable(path, dict(zip(names, columns)))
+    table = CsvTable(path, dict(zip(names, columns)), None if cut is None else cut[0])
     limits = bounds or {}
     for name, values in table.columns.items():
         # min and max propagate NaN: two passes without temporaries clear a valid column; the cell is looked
@@ -167,17 +175,20 @@ def _parse_with_arrow(path: Path, names: list[str], data: pa.Buffer | None) -> l
     return [column.to_numpy() for column in table.columns]
 
 
-def _parse_with_numpy(path: Path, names: list[str]) -> np.ndarray:
-    """The data rows as :func:`numpy.loadtxt` reads them; where it cannot, the error names the first bad cell."""
+def _parse_with_numpy(path: Path, names: list[str], cut_line: int | None = None) -> np.ndarray:
+    """The data rows as :func:`numpy.loadtxt` reads them (those before ``cut_line``, if given); where it cannot, the
+    error names the first bad cell."""
+    rows = None if cut_line is None else len(_data_line_numbers(path)) - 1  # blank lines are not counted either
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # "input contained no data": the caller checks length
         try:
             data = np.loadtxt(path, delimiter=",", skiprows=1, comments=None, quotechar=None, ndmin=2,
-                              dtype=np.float64, encoding="utf-8-sig")
+                              dtype=np.float64, encoding="utf-8-sig", max_rows=rows)
         except ValueError as e:
-            raise _first_bad_cell(path, names) or ConfigError(f"{path}: {e}") from None
+            raise _first_bad_cell(path, names, cut_line) or ConfigError(f"{path}: {e}") from None
     if data.shape[0] and data.shape[1] != len(names):  # every row wider than the header: loadtxt reads them all
-        raise _first_bad_cell(path, names) or ConfigError(f"{path}: {data.shape[1]} fields, the header has {len(names)}")
+        raise (_first_bad_cell(path, names, cut_line)
+               or ConfigError(f"{path}: {data.shape[1]} fields, the header has {len(names)}"))
     return data if data.shape[0] else np.zeros((0, len(names)))
 
 
@@ -261,10 +272,13 @@ def _decimal_comma_in(path: Path, separator: str) -> str:
     return ""
 
 
-def _first_bad_cell(path: Path, names: list[str]) -> ConfigError | None:
-    """The first row numpy could not read, found by reading the file again line by line."""
+def _first_bad_cell(path: Path, names: list[str], cut_line: int | None = None) -> ConfigError | None:
+    """The first row numpy could not read (before ``cut_line``, if given), found by reading the file again line by
+    line."""
     with path.open(encoding="utf-8-sig", newline="") as f:
         for line, fields in enumerate(csv.reader(f), start=1):
+            if line == cut_line:
+                break
             if line == 1 or not fields:
                 continue
             if len(fields) != len(names):
@@ -276,6 +290,22 @@ def _first_bad_cell(path: Path, names: list[str]) -> ConfigError | None:
                     what = "empty cell" if not cell.strip() else f"{cell.strip()!r} is not a number"
                     return ConfigError(f"{path}: line {line}, column {name}: {what}")
     return None
+
+
+def _unended_last_line(path: Path, data: pa.Buffer | None) -> tuple[int, int] | None:
+    """The line number and first byte of the file's last line when it is a data line (not the header) with text but
+    no end of line — the file was cut in it; else None."""
+    if data is None:
+        data = pa.memory_map(str(path)).read_buffer()  # mapped, not read: only its end is looked at unless cut
+    if data.size == 0 or data.slice(data.size - 1).to_pybytes() in (b"\r", b"\n"):
+        return None  # a whole file: nothing more is looked at
+    raw = np.frombuffer(data, dtype=np.uint8)
+    ends = np.flatnonzero((raw == ord("\n")) | (raw == ord("\r")))
+    if ends.size == 0 or not bytes(raw[ends[-1] + 1:]).strip():
+        return None  # the header alone, or trailing blanks
+    lines = int(np.count_nonzero(raw[:ends[-1] + 1] == ord("\n")))
+    lines = lines if lines else ends.size  # old Mac files end their lines with "\r" alone
+    return lines + 1, int(ends[-1]) + 1
 
 
 def _data_line_numbers(path: Path) -> list[int]:

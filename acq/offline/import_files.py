@@ -126,6 +126,14 @@ def _check_rate(path: Path, where: Callable[[], str], rate_hz: float, expected: 
                           f"{expected:g} by {100 * deviation:.2f} % (more than {100 * RATE_TOLERANCE:g} %)")
 
 
+def _cut_notes(table: CsvTable, stream: FileStream, t_s: np.ndarray) -> list[Note]:
+    """A warning when the file was cut in its last line (left out by :func:`read_csv`), at the last sample kept."""
+    if table.cut_line is None:
+        return []
+    return [Note(float(t_s[-1]), stream, "warning", f"{table.path.name}: line {table.cut_line} has no end of line "
+                 f"(the file was cut in it): left out, {table.rows} rows read")]
+
+
 def _nonempty(table: CsvTable) -> None:
     if table.rows == 0:
         raise ConfigError(f"{table.path}: line 2: no data rows (at least {MIN_DURATION_S:g} s needed)")
@@ -204,7 +212,7 @@ def read_current_csv(path: Path, bench_rate_hz: float, data: pa.Buffer | None = 
     if not phases:
         raise ConfigError(f"{path}: line 1: no phase column (expected one or more of i_a_A, i_b_A, i_c_A)")
     return CurrentTable(phases, index, rate, float(t[0]), {"format": "csv", "rate_from": "t_s"},
-                        _gap_notes("current", index, t, "samples"))
+                        _cut_notes(table, "current", t) + _gap_notes("current", index, t, "samples"))
 
 
 def _tdms_channels(tdms: Any, path: Path, wanted: tuple[str, ...]) -> list[tuple[str, Any]]:
@@ -339,7 +347,7 @@ def read_encoder_csv(path: Path, period_s: float, data: pa.Buffer | None = None)
                           f"{path.name}: no index or drive_time_s column; drive cycles taken as row numbers, gaps "
                           f"found where the host stamps step by {GAP_STEP_PERIODS:g} periods or more"))
     _check_duration(path, lambda: f"line {table.line(-1)}, column t_s", float(index[-1] - index[0] + 1) * period_s)
-    notes += _gap_notes("encoder", index, t, "drive cycles")
+    notes += _cut_notes(table, "encoder", t) + _gap_notes("encoder", index, t, "drive cycles")
     return EncoderTable(t, position, index, drive_time, kind, notes)
 
 

@@ -25,6 +25,7 @@ from typing import Any
 from acq.recording.device_reader import READ_TIMEOUT_S, DeviceReader
 from acq.recording.layout import Status, utc_now_iso
 from acq.recording.paths import new_session_path
+from acq.recording.room import FLUSH_BYTES
 from acq.recording.stream_check import StreamChecker, join_encoder_blocks
 from acq.recording.writer import SessionExists, SessionWriter
 from drivers.base import CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock, StreamEvent
@@ -35,13 +36,6 @@ from acq.recording.storage import WRITE_FAILURES, make_folders, storage_error
 from acqcore.errors import AcqError, ConfigError, DeviceError
 
 FLUSH_INTERVAL_S = 0.5
-#: Also flush once this much is pending (a --fast simulated bench delivers seconds of data per 0.5 s): bounds
-#: the memory held and what a failed write can lose. 2 MiB ≈ 1.7 s of 3 × 51.2 kS/s float64, so in real time the
-#: 0.5 s interval commits first for any card below 4 MB/s. Each commit costs its two H5Fflush and the partial chunks
-#: it rewrites: a 10 s --fast session at those rates commits 7 times instead of 13 and the recording thread's CPU
-#: falls from 38.4 to 29.5 ms (4 MiB: 27.0; medians of 10, bench/record_throughput.py rates, load 2–3). Not more:
-#: a commit needs twice its size free (SessionWriter's room check), 4 MiB kept nothing on an 8 MB disk.
-FLUSH_BYTES = 2 << 20
 #: The recording thread takes what the readers queued once per this interval, all of it, instead of waking for each
 #: block: a wake-up (and the GIL handed over to it) per batch. Real time: a block waits at most this long (the
 #: flush interval is 0.5 s, a display frame ~30 ms); --fast: ~35 blocks a batch instead of one.

@@ -11,6 +11,7 @@ import numpy as np
 
 from acq.recording.h5safe import open_read, superblock_eof
 from acq.recording.layout import EVENT_DTYPE, LIBVER, OPTIONAL_ENCODER, footer_unwritten, write_footer
+from acq.recording.live import refuse_if_recorded
 from acq.recording.reader import load
 from acq.recording.session import Session
 from acq.recording.storage import atomic_path, storage_error
@@ -29,9 +30,11 @@ def repair(path: Path | str, stop_reason: str) -> Session:
     HDF5 keeps a crashed SWMR writer's file marked as open for writing, so it cannot be reopened
     for writing in place: every committed, intact sample is copied into a fresh file beside it
     (uneven column lengths cut to the common length), which then atomically replaces the original.
-    A write failure leaves the original untouched and no temp file.
+    A write failure leaves the original untouched and no temp file. A file a running recorder still holds is not
+    touched (:class:`~acq.recording.live.SessionBeingRecorded`).
     """
     p = Path(path)
+    refuse_if_recorded(p)
     session = load(p)
     if session.damage:
         stop_reason = f"{stop_reason}; kept the intact part ({'; '.join(session.damage)})"
@@ -49,9 +52,11 @@ def recover(path: Path | str) -> Session:
     status ``interrupted``, the loss in its stop reason; return the copy as read. ``path`` itself is not written.
 
     The stop reason says what was lost and what is kept, e.g. "recovered from a file cut at 1 279 293 of 2 558 587
-    bytes: 4.8 s of current, 5.5 s of encoder kept (was complete: recorded 10 s)".
+    bytes: 4.8 s of current, 5.5 s of encoder kept (was complete: recorded 10 s)". A file a running recorder still
+    holds is not copied (:class:`~acq.recording.live.SessionBeingRecorded`).
     """
     p = Path(path)
+    refuse_if_recorded(p)
     session = load(p)
     c, e = session.current, session.encoder
     kept = f"{c.sample_count / c.rate_hz:.1f} s of current, {e.index.size * e.period_s:.1f} s of encoder kept"

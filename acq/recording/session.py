@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from acq.recording.live import being_recorded
 from drivers.base import StreamEvent
 from drivers.config import Bench, Profile
 from acqcore.errors import ConfigError
@@ -150,8 +151,15 @@ class Session:
             raise ConfigError(f"{self.path}: damaged ({'; '.join(self.damage)}) — run acq check, or use --partial "
                               f"to {action} the intact part")
         if self.status == "recording":
-            raise ConfigError(f"{self.path}: status recording (still being recorded, or the recorder was killed) — "
-                              f"run acq check, or use --partial to {action} what is stored")
+            raise ConfigError(f"{self.path}: {self.unfinished_note()}, or use --partial to {action} what is stored")
+
+    def unfinished_note(self) -> str:
+        """What a session with status ``recording`` is and what to do about it: a running recorder still holds it
+        (wait), or none does any more (acq check repairs it)."""
+        if being_recorded(self.path):
+            return "still being recorded by a running recorder — wait until it finishes"
+        return ("status recording, but no recorder holds it (killed, or stopped without finishing the file) — "
+                f"run acq check {self.path} to repair it")
 
     def kept_after_first_damage(self, stream: str) -> int:
         """Samples of ``stream`` (``"current"``, ``"encoder"``) kept after its first damaged span (every sample before

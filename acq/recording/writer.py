@@ -3,7 +3,8 @@
 Crash safety: the writer creates every dataset, then switches to SWMR mode (libver v110) and
 flushes regularly, so a killed recorder leaves a file that opens (``swmr=True``) with every
 flushed sample. ``status`` is ``recording`` until :meth:`SessionWriter.finish` reopens the file
-and writes the footer. :func:`acq.recording.repair.repair` rewrites a killed session into a clean file.
+and writes the footer. :func:`acq.recording.repair.repair` rewrites a killed session into a clean file; a
+live one it leaves alone: the writer marks its file as being recorded until finished (:mod:`acq.recording.live`).
 
 Durability (a power cut, a kernel crash): HDF5's flush only hands the file to the kernel's page cache, which writes
 it back in any order. Each commit is therefore made durable in order — the samples written and flushed, the file's
@@ -32,6 +33,7 @@ import numpy as np
 
 from acq import __version__
 from acq.recording.h5safe import abandon
+from acq.recording.live import create_marked
 from acq.recording.layout import (EVENT_DTYPE, FLUSH_DTYPE, FORMAT, FORMAT_VERSION, LIBVER, OPTIONAL_ENCODER, Status,
                                   committed_rows, footer_unwritten, utc_now_iso, write_footer)
 from acq.recording.pending import Column, PendingColumns
@@ -110,10 +112,18 @@ class SessionWriter:
             # allocated anew each flush); without it the write goes straight through (a --fast 10 s session: the
             # recording thread's CPU −1.7 ms of 38, medians of 10 at load 5). A partial last chunk is read back (its
             # checksum verified) when the next flush completes it.
-            f = h5py.File(self.path, "w-", libver=LIBVER, rdcc_nbytes=0)
+            # The name is taken and marked as being recorded (until finish) before HDF5 writes into it: acq check
+            # never rewrites a file in that state.
+            self._marker = create_marked(self.path)
         except FileExistsError:
             raise SessionExists(f"{self.path}: a file of that name exists") from None
         except OSError as e:
+            raise storage_error(e, self.path) from None
+        try:
+            f = h5py.File(self.path, "w", libver=LIBVER, rdcc_nbytes=0)
+        except OSError as e:
+            self._marker.close()
+            self.path.unlink(missing_ok=True)
             raise storage_error(e, self.path) from None
         self._file = f
         try:
@@ -123,6 +133,7 @@ class SessionWriter:
             sync_folder(self.path.parent)  # the new name durable: once per session
         except Exception as e:  # the disk filled (or a sync failed) while the layout was created: no session at all
             abandon(f)
+            self._marker.close()
             self.path.unlink(missing_ok=True)
             raise storage_error(e, self.path) from None
         self._inode = os.stat(self.path).st_ino
@@ -337,8 +348,15 @@ class SessionWriter:
         After a write failure the status is ``failed`` with the failure and the seconds kept as reason
         ("disk full: /data/x.h5 — 3.2 s kept"); the footer is written when the disk has room for it and
         the file could be closed cleanly, else the file stays ``recording`` and its ``/flushes`` rows
-        tell readers (and ``acq check``) what is stored.
+        tell readers (and ``acq check``) what is stored. The file is no longer marked as being recorded after this.
         """
+        try:
+            self._finish(status, stop_reason)
+        finally:
+            self._marker.close()
+
+    def _finish(self, status: Status, stop_reason: str) -> None:
+        """:meth:`finish` while the file is still marked as being recorded."""
         try:
             self.flush()
         except StorageError:

@@ -23,16 +23,22 @@ out = Console()
 def check_command(session_path: Path, write_intact: bool) -> int:
     """Verify a session's checksums and committed counts; repair one left by a killed recorder.
 
-    Exit 0 when the session is intact (or was repaired, or --repair copied its intact part), 1 when damage remains
-    (each damaged span is listed).
+    Exit 0 when the session is intact (or was repaired, or --repair copied its intact part, or a running recorder
+    still writes it: then it is only read), 1 when damage remains (each damaged span is listed).
     """
     require_session_file(session_path)
     from acq.ui.display import summary_table
+    from acq.recording.live import being_recorded
     from acq.recording.reader import load
     from acq.recording.repair import recover, recovered_path, repair
     from acq.recording.summary import summarize
 
     session = load(session_path)
+    if being_recorded(session_path):  # a live file is never rewritten nor copied: report what it holds now
+        out.print(summary_table(summarize(session)))
+        click.echo(f"{session_path}: being recorded by a running recorder: "
+                   f"{session.current.sample_count / session.current.rate_hz:.1f} s committed so far; not modified")
+        return 0
     if session.status == "recording":
         session = repair(session_path, "recorder stopped without finishing the file (found by acq check)")
         out.print(summary_table(summarize(session)))

@@ -44,10 +44,9 @@ def info_command(session_path: Path, as_json: bool) -> int:
 
 
 def _integrity_warning(session: Session) -> str | None:
-    """One line when a session is damaged or still ``recording`` (killed recorder), saying to run acq check."""
+    """One line when a session is damaged (saying to run acq check) or still ``recording`` (what to do then)."""
     if session.damage:
         return f"{session.path}: damaged ({'; '.join(session.damage)}) — run acq check {session.path}"
     if session.status == "recording":
-        return (f"{session.path}: status recording (still being recorded, or the recorder was killed) — "
-                f"run acq check {session.path}")
+        return f"{session.path}: {session.unfinished_note()}"
     return None

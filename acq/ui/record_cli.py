@@ -53,6 +53,7 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
     from acq.ui.display import summary_table
     from acq.recording.recorder import Recorder
     from acq.recording.reader import load
+    from acq.recording.room import require_room
     from acq.recording.summary import summarize
     from drivers.limits import refuse_beyond_limits
     from drivers.registry import open_bench
@@ -77,6 +78,7 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
     if profile is not None:
         refuse_beyond_limits(profile, bench, str(resolve_profile_path(profile_name)), bench_label(bench_path))
     check_memory(bench)
+    require_room(out_dir, bench, duration)  # before the devices start, not a progress bar run to its end for nothing
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=session_tags)
     if live:

@@ -1,0 +1,84 @@
+"""A session a running recorder still writes is never rewritten: acq check (and --repair) only read it, acq analyze
+says to wait; once its recorder is killed the same file is repaired. Real recorder in a child process, real HDF5."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from acq.recording.live import SessionBeingRecorded
+from acq.recording.reader import load
+from acq.recording.repair import recover, repair
+from tests.helpers import run_cli, seeded_profile
+
+#: The recording's length: long enough that the checks below run while it goes on (real time, not --fast).
+DURATION_S = 6.0
+
+
+def start_recording(folder: Path) -> tuple[subprocess.Popen[str], Path]:
+    """``acq record`` in real time on the simulated bench in a child process; return it and its session file once
+    the file has committed at least 1 s of current."""
+    out = folder / "live"
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "record", "--profile", str(seeded_profile(folder)),
+                             "--duration", f"{DURATION_S:g}", "--no-analyze", "--out", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        files = list(out.glob("*.h5"))
+        if files:
+            session = load(files[0])
+            if session.current.sample_count >= session.current.rate_hz:
+                return proc, files[0]
+        time.sleep(0.2)
+    proc.kill()
+    raise AssertionError(f"no second committed within 30 s: {proc.communicate()}")
+
+
+def test_check_and_analyze_leave_a_live_session_alone(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    proc, path = start_recording(tmp_path)
+    try:
+        inode = path.stat().st_ino
+        for args in (("check", str(path)), ("check", str(path), "--repair")):
+            run = run_cli(capsys, *args)
+            assert run.code == 0, run.err
+            line = run.out.strip().splitlines()[-1]
+            assert line.startswith(f"{path}: being recorded by a running recorder: ")
+            assert line.endswith(" s committed so far; not modified")
+            assert 1.0 <= float(line.split(": ")[2].split(" s ")[0]) < DURATION_S
+        run = run_cli(capsys, "analyze", str(path), "--no-report")
+        assert (run.code, run.err) == (2, f"acq: error: {path}: still being recorded by a running recorder — wait "
+                                          "until it finishes, or use --partial to analyse what is stored\n")
+        with pytest.raises(SessionBeingRecorded, match="being recorded by a running recorder — not modified"):
+            repair(path, "test")
+        with pytest.raises(SessionBeingRecorded):
+            recover(path)
+        assert path.stat().st_ino == inode and load(path).status == "recording"
+        assert not path.with_name(f"{path.stem}.recovered.h5").exists()
+    finally:
+        _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert "vanished" not in err
+    session = load(path)
+    assert session.status == "complete" and session.meta.stop_reason == f"recorded {DURATION_S:g} s"
+    assert session.current.sample_count == round(DURATION_S * session.current.rate_hz)
+    run = run_cli(capsys, "check", str(path))
+    assert run.code == 0 and "complete, checksums and counts verified" in run.out
+
+
+def test_a_killed_recorders_session_is_repaired(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    proc, path = start_recording(tmp_path)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.communicate(timeout=30)
+    assert load(path).status == "recording"
+    run = run_cli(capsys, "check", str(path))
+    assert run.code == 0, run.err
+    assert "interrupted — the recorder stopped without finishing the file; repaired: status = interrupted" in " ".join(
+        run.out.split())  # rich wraps the line
+    session = load(path)
+    assert session.status == "interrupted" and session.current.sample_count >= session.current.rate_hz
