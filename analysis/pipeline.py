@@ -17,7 +17,7 @@ import numpy as np
 from analysis.chain import SignalChain, chain_caveat
 from analysis.clock_model import ClockFit
 from analysis.drive_limits import drive_limit_reason
-from analysis.diagnose import nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
+from analysis.diagnose import inertia_fault, nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
 from analysis.fit import FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit
 from analysis.encoder import longest_gap_free_span
 from analysis.estimator_check import kernel_model_error, model_estimate
@@ -197,7 +197,9 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     caveat = chain_caveat(chain, AnalysisRequest().chain(rec))
     if caveat is not None and quality.verdict != "ok":
         quality = replace(quality, reasons=(caveat, *quality.reasons))
-    scale_fault = nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95)  # a unit or scale mistake
+    # a torque scaled against a known inertia (its words name what the 10× rule's would), else a unit or scale mistake
+    scale_fault = (inertia_fault(fit, request.nominal, request.inertia_tolerance)
+                   or nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95))
     quality = with_nominal_fault(quality, scale_fault)
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
     if sig.clock.failure:
