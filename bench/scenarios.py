@@ -198,6 +198,9 @@ def scenario_bench(sc: Scenario, seed: int, offset_s: float, drift_ppm: float) -
     base.update({"seed": seed, "daq_offset_s": offset_s, "daq_drift_ppm": drift_ppm,
                  "K_Nm_per_rad": base["K_Nm_per_rad"] * k, "Jm_kgm2": base["Jm_kgm2"] * jm,
                  "Jl_kgm2": base["Jl_kgm2"] * jl, **sc.sim})
+    # [nominal] stays the paper's while the plant changes: it states its inertia known (as the shipped bench does, its
+    # Jm + Jl being the simulator's) only where that is still the joint's whole inertia — no J factor, no third mass
+    data["nominal"]["inertia_known"] &= (jm, jl) == (1.0, 1.0) and not base.get("third_mass_Jl_fraction")
     data["daq"].update(sc.daq)
     data["drive"].update(sc.drive)  # e.g. {"driver": "canopen", "simulated_node": True}: another transport
     if sc.counts_per_rev is not None:
