@@ -197,9 +197,10 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     caveat = chain_caveat(chain, AnalysisRequest().chain(rec))
     if caveat is not None and quality.verdict != "ok":
         quality = replace(quality, reasons=(caveat, *quality.reasons))
-    # a torque scaled against a known inertia (its words name what the 10× rule's would), else a unit or scale mistake
-    scale_fault = (inertia_fault(fit, request.nominal, request.inertia_tolerance)
-                   or nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95))
+    # a unit or scale mistake (10× off [nominal]: its words name the current's unit), else, below that, a torque
+    # scaled against a known inertia
+    scale_fault = (nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95)
+                   or inertia_fault(fit, request.nominal, request.inertia_tolerance))
     quality = with_nominal_fault(quality, scale_fault)
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
     if sig.clock.failure:
