@@ -43,7 +43,8 @@ class Scenario:
         ``dither_seed`` the run's seed unless given; ``profile={"speed_dither": 0.0}``: a motion that repeats exactly),
         ``[daq]``, ``[drive]``.
     counts_per_rev : encoder resolution (None: the bench's 2^17).
-    plant : factors on the paper's K, J_m, J_l (the bench's nominal values stay the paper's).
+    plant : factors on the paper's K, J_m, J_l (the bench's nominal values stay the paper's; with a J factor, or a
+        third mass, the bench no longer states ``[nominal] inertia_known``: its Jm + Jl are not the joint's).
     clock : DAQ offset (s) and drift (ppm); None: |offset| 10–60 ms, |drift| 20–60 ppm of random signs.
     jl_truth : the J_l the fit is scored against (``load+third``: J_l + J_3, the two-mass equivalent).
     realtime : record in real time (a simulated CANopen node on the virtual bus needs it), not ``--fast``.
