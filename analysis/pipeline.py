@@ -198,9 +198,10 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     if caveat is not None and quality.verdict != "ok":
         quality = replace(quality, reasons=(caveat, *quality.reasons))
     # a unit or scale mistake (10× off [nominal]: its words name the current's unit), else, below that, a torque
-    # scaled against a known inertia
+    # scaled against a known inertia — by acq's own chain only: another's J carries that chain's errors (the paper's
+    # read J_m + J_l 1.73× on a correct 10 s session, which is no k_t)
     scale_fault = (nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95)
-                   or inertia_fault(fit, request.nominal, request.inertia_tolerance))
+                   or (inertia_fault(fit, request.nominal, request.inertia_tolerance) if caveat is None else None))
     quality = with_nominal_fault(quality, scale_fault)
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
     if sig.clock.failure:
