@@ -157,9 +157,8 @@ def _times(factor: float) -> str:
 def with_nominal_fault(quality: Quality, fault: str | None) -> Quality:
     """``quality`` at least poor with ``fault`` (:func:`nominal_fault`, :func:`inertia_fault`) as its first reason: a
     value an order of magnitude off, or a torque scaled against a known inertia, is a mistake however well the data
-    hold together. A failed ``quality``: unchanged — its reasons
-    say why the numbers cannot be trusted, and a value far off follows from them (20 µs of SYNC jitter gave
-    J_m 1/14 of nominal)."""
+    hold together. A failed ``quality``: unchanged — its reasons say why the numbers cannot be trusted, and a value
+    far off follows from them (20 µs of SYNC jitter gave J_m 1/14 of nominal)."""
     if fault is None or quality.verdict == "failed":
         return quality
     return replace(quality, verdict="poor", reasons=(fault, *quality.reasons), faults=(fault, *quality.faults))
