@@ -3,7 +3,8 @@
 A wrong ``pole_pairs`` or ``counts_per_rev`` (:mod:`analysis.speed_ratio`) or a reversed phase sequence
 (:mod:`analysis.bench_checks`) found in a recording (:func:`recording_diagnosis`) replaces a poor or failed verdict's
 reasons (:func:`with_fault`); an identified K, J_m or J_l an order of magnitude off the bench's nominal
-(:func:`nominal_fault`: a unit or scale mistake) leads them (:func:`with_nominal_fault`).
+(:func:`nominal_fault`: a unit or scale mistake), or J_m + J_l outside the tolerance of an inertia the bench knows
+(:func:`inertia_fault`: the torque's scale), leads them (:func:`with_nominal_fault`).
 """
 
 from __future__ import annotations
@@ -12,7 +13,10 @@ import math
 from collections.abc import Callable
 from dataclasses import replace
 
+import numpy as np
+
 from analysis.bench_checks import phase_sequence_agreement, sequence_fault
+from analysis.fit import Z95, FitResult
 from analysis.model import PARAM_LABELS, TwoMassParams
 from analysis.quality import Quality
 from analysis.recording import Recording
@@ -109,6 +113,35 @@ def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: 
             "and that the bench file is this joint's")
 
 
+def inertia_fault(fit: FitResult, nominal: TwoMassParams | None, tolerance: float | None) -> str | None:
+    """The words for a fitted J_m + J_l off a known nominal J_m + J_l by more than ``tolerance`` (a fraction; None: the
+    bench knows no inertia, no check), or None.
+
+    H = speed/torque: a torque read ×q (a wrong k_t or current-sensor gain) gives K, J_m, J_l and C all ×q, so the
+    fitted inertia against one known from a datasheet or CAD shows q. It counts only when the 95 % interval of the
+    sum (from the log parameters' covariance, delta method) lies wholly outside (1 ± ``tolerance``) × nominal: an
+    interval overlapping the band is no evidence. Needs J_m and J_l both fitted (``params="K"`` fixes them).
+    """
+    if tolerance is None or nominal is None or not {"Jm_kgm2", "Jl_kgm2"} <= set(fit.fitted):
+        return None
+    jm, jl = fit.values.Jm_kgm2, fit.values.Jl_kgm2
+    i, j = fit.fitted.index("Jm_kgm2"), fit.fitted.index("Jl_kgm2")
+    grad = np.array([jm, jl])  # d(J_m + J_l)/d(ln J_m, ln J_l)
+    cov = np.asarray(fit.covariance)[np.ix_([i, j], [i, j])]
+    total, known = jm + jl, nominal.Jm_kgm2 + nominal.Jl_kgm2
+    sigma_log = math.sqrt(max(float(grad @ cov @ grad), 0.0)) / total if np.all(np.isfinite(cov)) else math.inf
+    if not (math.isfinite(total) and total > 0.0 and math.isfinite(sigma_log)):
+        return None
+    low, high = total * math.exp(-Z95 * sigma_log), total * math.exp(Z95 * sigma_log)
+    if (1.0 - tolerance) * known <= high and low <= (1.0 + tolerance) * known:
+        return None
+    q = total / known
+    return (f"J_m + J_l is {q:.2f}× [nominal] Jm_kgm2 + Jl_kgm2 = {known:.4g} kg·m² (95 % interval "
+            f"{low / known:.2f}–{high / known:.2f}×, [nominal] inertia_tolerance ±{tolerance * 100:g} %): the torque's "
+            "scale — [motor] torque_constant_Nm_per_A or the current sensor's gain — is off by that factor; K, J_m, "
+            "J_l, C all carry it")
+
+
 def _side(factor: float, limit: float = NOMINAL_FACTOR) -> int:
     """+1 for a factor ≥ ``limit``, −1 for ≤ its inverse, 0 between (or not a positive number)."""
     if not (math.isfinite(factor) and factor > 0):
@@ -122,10 +155,10 @@ def _times(factor: float) -> str:
 
 
 def with_nominal_fault(quality: Quality, fault: str | None) -> Quality:
-    """``quality`` at least poor with ``fault`` (:func:`nominal_fault`) as its first reason: a value an order of
-    magnitude off is a mistake however well the data hold together. A failed ``quality``: unchanged — its reasons
-    say why the numbers cannot be trusted, and a value far off follows from them (20 µs of SYNC jitter gave
-    J_m 1/14 of nominal)."""
+    """``quality`` at least poor with ``fault`` (:func:`nominal_fault`, :func:`inertia_fault`) as its first reason: a
+    value an order of magnitude off, or a torque scaled against a known inertia, is a mistake however well the data
+    hold together. A failed ``quality``: unchanged — its reasons say why the numbers cannot be trusted, and a value
+    far off follows from them (20 µs of SYNC jitter gave J_m 1/14 of nominal)."""
     if fault is None or quality.verdict == "failed":
         return quality
     # not a fault in :attr:`Quality.faults`: the value is the fit's, and a fit of data that did not excite the joint

@@ -17,7 +17,7 @@ import numpy as np
 from analysis.chain import SignalChain, chain_caveat
 from analysis.clock_model import ClockFit
 from analysis.drive_limits import drive_limit_reason
-from analysis.diagnose import nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
+from analysis.diagnose import inertia_fault, nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
 from analysis.fit import FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit
 from analysis.encoder import longest_gap_free_span
 from analysis.estimator_check import kernel_model_error, model_estimate
@@ -199,7 +199,11 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     caveat = chain_caveat(chain, AnalysisRequest().chain(rec))
     if caveat is not None and quality.verdict != "ok":
         quality = replace(quality, reasons=(caveat, *quality.reasons))
-    scale_fault = nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95)  # a unit or scale mistake
+    # a unit or scale mistake (10× off [nominal]: its words name the current's unit), else, below that, a torque
+    # scaled against a known inertia — by acq's own chain only: another's J carries that chain's errors (the paper's
+    # read J_m + J_l 1.73× on a correct 10 s session, which is no k_t)
+    scale_fault = (nominal_fault(fit.values, request.nominal, fit.fitted, fit.ci95)
+                   or (inertia_fault(fit, request.nominal, request.inertia_tolerance) if caveat is None else None))
     quality = with_nominal_fault(quality, scale_fault)
     quality = with_fault(quality, lambda: recording_diagnosis(rec))  # a wrong bench constant (looked for when not ok)
     if sig.clock.failure:

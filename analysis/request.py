@@ -46,6 +46,11 @@ class AnalysisRequest:
     nominal : TwoMassParams or None
         The bench's nominal values (needed for ``params="K"``; otherwise one extra fit start). None: the
         application fills in the bench's (:func:`acq.offline.analyze.analyze_session`).
+    inertia_tolerance : float or None
+        When the bench knows its inertia (``[nominal] inertia_known``): how far, as a fraction, the true J_m + J_l may
+        lie from ``nominal``'s (``[nominal] inertia_tolerance``). A fitted J_m + J_l whose interval lies wholly outside
+        that band is a torque-scale mistake (:func:`analysis.diagnose.inertia_fault`). None: no inertia known, no
+        such check. Filled in by the application with ``nominal``.
     pipeline : {"acq", "paper"}
         Our chain or the paper's (:mod:`analysis.chain`).
     partial : bool
@@ -66,6 +71,7 @@ class AnalysisRequest:
     align: bool = True
     segment_s: float = 0.5
     nominal: TwoMassParams | None = None
+    inertia_tolerance: float | None = None
     pipeline: Pipeline = "acq"
     partial: bool = False
     select_segments: bool | None = None
@@ -116,8 +122,8 @@ class AnalysisRequest:
         band as given, Hz, ``%g``), ``no-align``, ``segment-<s>s``, ``segments-on``/``segments-off`` (a segment
         selection asked for, not left to the recording: the monitor's own results are the default's) — letters,
         digits, ``-`` and ``.`` only. The paper's chain ignores the torque method and the alignment, so they are not in
-        its label. Not in the label: ``partial`` (the intact part of a session is its result so far) and ``nominal``
-        (the bench's, filled in by the application).
+        its label. Not in the label: ``partial`` (the intact part of a session is its result so far), ``nominal`` and
+        ``inertia_tolerance`` (the bench's, filled in by the application).
         """
         default = AnalysisRequest()
         paper = self.pipeline == "paper"
@@ -144,13 +150,15 @@ class AnalysisRequest:
         return {"pipeline": self.pipeline, "torque_method": self.torque_method if chain is None else chain.torque_method,
                 "params": self.params, "fit": self.fit, "band_hz": None if self.band_hz is None else list(self.band_hz),
                 "align": self.align if chain is None else chain.align, "segment_s": self.segment_s, "nominal": nominal,
+                "inertia_tolerance": self.inertia_tolerance,
                 **({"select_segments": True} if self.select_segments else {})}
 
     @classmethod
     def from_json_dict(cls, options: dict[str, Any]) -> AnalysisRequest:
         """The request a result's ``options`` document came from (the torque method as it was resolved, the
-        nominal values left to the application). Raises ValueError or TypeError for a document that is none."""
-        known = {f.name for f in fields(cls)} - {"nominal", "partial"}
+        nominal values and the inertia's tolerance left to the application). Raises ValueError or TypeError for a
+        document that is none."""
+        known = {f.name for f in fields(cls)} - {"nominal", "inertia_tolerance", "partial"}
         values = {k: v for k, v in options.items() if k in known}
         if values.get("pipeline", "acq") != "acq":
             values.pop("torque_method", None)

@@ -43,7 +43,8 @@ class Scenario:
         ``dither_seed`` the run's seed unless given; ``profile={"speed_dither": 0.0}``: a motion that repeats exactly),
         ``[daq]``, ``[drive]``.
     counts_per_rev : encoder resolution (None: the bench's 2^17).
-    plant : factors on the paper's K, J_m, J_l (the bench's nominal values stay the paper's).
+    plant : factors on the paper's K, J_m, J_l (the bench's nominal values stay the paper's; with a J factor, or a
+        third mass, the bench no longer states ``[nominal] inertia_known``: its Jm + Jl are not the joint's).
     clock : DAQ offset (s) and drift (ppm); None: |offset| 10–60 ms, |drift| 20–60 ppm of random signs.
     jl_truth : the J_l the fit is scored against (``load+third``: J_l + J_3, the two-mass equivalent).
     realtime : record in real time (a simulated CANopen node on the virtual bus needs it), not ``--fast``.
@@ -198,6 +199,9 @@ def scenario_bench(sc: Scenario, seed: int, offset_s: float, drift_ppm: float) -
     base.update({"seed": seed, "daq_offset_s": offset_s, "daq_drift_ppm": drift_ppm,
                  "K_Nm_per_rad": base["K_Nm_per_rad"] * k, "Jm_kgm2": base["Jm_kgm2"] * jm,
                  "Jl_kgm2": base["Jl_kgm2"] * jl, **sc.sim})
+    # [nominal] stays the paper's while the plant changes: it states its inertia known (as the shipped bench does, its
+    # Jm + Jl being the simulator's) only where that is still the joint's whole inertia — no J factor, no third mass
+    data["nominal"]["inertia_known"] &= (jm, jl) == (1.0, 1.0) and not base.get("third_mass_Jl_fraction")
     data["daq"].update(sc.daq)
     data["drive"].update(sc.drive)  # e.g. {"driver": "canopen", "simulated_node": True}: another transport
     if sc.counts_per_rev is not None:

@@ -71,13 +71,25 @@ class Gear(Strict):
     ratio: float = Field(gt=0.0, le=1e5)
 
 
+#: How far the true J_m + J_l may lie from a stated (``inertia_known``) [nominal] Jm + Jl, as a fraction: the default of
+#: ``[nominal] inertia_tolerance``. The rigid-body inertia from torque/acceleration (``acq selftest``) is within ~3 % of
+#: J_m + J_l on the simulated bench (10 Hz low-pass, gravity and friction fitted); a datasheet/CAD inertia is rarely
+#: better than 10 %. A wrong sensor scale or k_t is usually a factor (2×, √2 for RMS vs peak, 10×): 15 % separates them.
+INERTIA_TOLERANCE = 0.15
+
+
 class Nominal(Strict):
-    """Nominal plant: the fit's starting point and the fixed inertias for ``--params K``."""
+    """Nominal plant: the fit's starting point and the fixed inertias for ``--params K``.
+
+    With ``inertia_known`` (Jm + Jl known independently: datasheet, CAD) ``acq selftest`` checks k_t against them and
+    the analysis flags a fitted J_m + J_l outside ``inertia_tolerance`` (a fraction) of them as a torque-scale mistake.
+    """
 
     K_Nm_per_rad: Stiffness
     Jm_kgm2: Inertia
     Jl_kgm2: Inertia
-    inertia_known: bool = False  # Jm + Jl known independently (datasheet, CAD): `acq selftest` checks k_t against it
+    inertia_known: bool = False
+    inertia_tolerance: float = Field(default=INERTIA_TOLERANCE, gt=0.0, lt=1.0)
 
 
 class Limits(Strict):

@@ -25,12 +25,12 @@ def test_key_is_the_request_as_asked_and_the_code(monkeypatch: pytest.MonkeyPatc
     asked = AnalysisRequest()
     key = json.loads(asked.key())
     assert key == {"torque_method": None, "params": "K,Jm,Jl", "fit": "amplitude", "band_hz": None, "align": True,
-                   "segment_s": 0.5, "nominal": None, "pipeline": "acq", "partial": False,
+                   "segment_s": 0.5, "nominal": None, "inertia_tolerance": None, "pipeline": "acq", "partial": False,
                    "select_segments": None, "analysis": code_fingerprint()}
     others = [replace(asked, params="K"), replace(asked, band_hz=(20.0, 300.0)), replace(asked, pipeline="paper"),
               replace(asked, partial=True), replace(asked, torque_method="encoder"),
               replace(asked, select_segments=True), replace(asked, select_segments=False),
-              replace(asked, nominal=TwoMassParams(900.0, 1e-4, 5e-4, 0.0))]
+              replace(asked, nominal=TwoMassParams(900.0, 1e-4, 5e-4, 0.0)), replace(asked, inertia_tolerance=0.15)]
     assert len({asked.key(), *(o.key() for o in others)}) == 1 + len(others)
     monkeypatch.setattr(analysis.request, "code_fingerprint", lambda: "other code")
     assert asked.key() != json.dumps(key, sort_keys=True)
@@ -61,8 +61,10 @@ def test_options_document_says_what_ran_and_gives_the_request_back() -> None:
     asked = AnalysisRequest(params="K", fit="complex", band_hz=(20.0, 300.0))
     doc = json.loads(json.dumps(asked.to_json_dict(asked.chain(THREE))))
     assert doc == {"pipeline": "acq", "torque_method": "park", "params": "K", "fit": "complex", "band_hz": [20.0, 300.0],
-                   "align": True, "segment_s": 0.5, "nominal": None}
+                   "align": True, "segment_s": 0.5, "nominal": None, "inertia_tolerance": None}
     assert AnalysisRequest.from_json_dict(doc) == replace(asked, torque_method="park")
+    # the bench's tolerance is the application's to fill in, as its nominal values are
+    assert AnalysisRequest.from_json_dict({**doc, "inertia_tolerance": 0.15}).inertia_tolerance is None
     paper = AnalysisRequest(pipeline="paper")
     assert paper.to_json_dict()["torque_method"] is None  # as asked; what ran says hilbert
     again = AnalysisRequest.from_json_dict(paper.to_json_dict(PAPER_CHAIN))

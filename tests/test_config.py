@@ -48,6 +48,9 @@ def test_shipped_configs_validate() -> None:
         # a key with a default misspelt: before, "unknown key" alone (only missing keys were offered)
         ("host_jitter_s", "host_jiter_s", "[sim] host_jiter_s = 0.0002: unknown key (did you mean host_jitter_s?)"),
         ("inertia_known", "inertia_knwn", "[nominal] inertia_knwn = true: unknown key (did you mean inertia_known?)"),
+        # a tolerance is a fraction of the inertia: 1.5 (a percentage meant?) would accept any k_t
+        ("inertia_known = true", "inertia_known = true\ninertia_tolerance = 1.5",
+         "[nominal] inertia_tolerance = 1.5: must be less than 1"),
         ("period_s = 0.001", "period_s = 0.001\nmotoin = \"commanded\"",
          "[drive] motoin = \"commanded\": unknown key (did you mean motion?)"),
         # an item of a list by its index: before "[daq.channels] 1 = \"i_x\""

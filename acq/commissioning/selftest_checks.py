@@ -24,10 +24,6 @@ RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
 #: A drive whose speed loop follows a slow triangle reaches its top speed within a few %; a wrong
 #: counts_per_rev or velocity unit is off by a factor (2×, 4×, 10×…). 15 % separates the two.
 SPEED_TOLERANCE = 0.15
-#: The rigid-body inertia from torque/acceleration is within ~3 % of J_m + J_l on the simulated bench
-#: (10 Hz low-pass, gravity and friction fitted); a datasheet/CAD inertia is rarely better than 10 %.
-#: A wrong sensor scale or k_t is usually a factor (2×, √2 for RMS vs peak, 10×): 15 % separates them.
-INERTIA_TOLERANCE = 0.15
 
 
 @dataclass(frozen=True)
@@ -369,7 +365,7 @@ def torque_constant_check(t_s: np.ndarray, torque_Nm: np.ndarray, speed_rad_s: n
                      "k_t and the current sensor's scale are not checked (a wrong one scales K, J_m, J_l and C alike): "
                      "set [nominal] Jm_kgm2 and Jl_kgm2 from the datasheet or CAD and inertia_known = true", values,
                      "k_t and the current sensor's scale are unchecked (a wrong one scales K alike)")
-    if abs(q - 1.0) > max(INERTIA_TOLERANCE, 4.0 * fit.J_std_kgm2 / nominal):
+    if abs(q - 1.0) > max(bench.nominal.inertia_tolerance, 4.0 * fit.J_std_kgm2 / nominal):
         kt = bench.motor.torque_constant_Nm_per_A
         daq = bench.daq
         sensor = ("the current sensor's scale" if not isinstance(daq, DaqNidaqmx) else

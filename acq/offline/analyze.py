@@ -93,13 +93,15 @@ def drive_limited_spans(session: Session) -> np.ndarray | None:
 
 
 def request_for(session: Session, request: AnalysisRequest = AnalysisRequest()) -> AnalysisRequest:
-    """``request`` with the bench's nominal plant when it names none."""
+    """``request`` with the bench's nominal plant when it names none, and then, when the bench knows its inertia
+    (``[nominal] inertia_known``), the tolerance of that inertia (``[nominal] inertia_tolerance``)."""
     if request.nominal is not None:
         return request
     nominal = session.bench.nominal
     return replace(request, nominal=TwoMassParams(K_Nm_per_rad=nominal.K_Nm_per_rad, Jm_kgm2=nominal.Jm_kgm2,
                                                   Jl_kgm2=nominal.Jl_kgm2,
-                                                  C_Nms_per_rad=0.0))  # the bench gives no damping; C is always fitted
+                                                  C_Nms_per_rad=0.0),  # the bench gives no damping; C is always fitted
+                   inertia_tolerance=nominal.inertia_tolerance if nominal.inertia_known else None)
 
 
 def sha256_of(path: Path) -> str:
