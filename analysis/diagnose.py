@@ -139,7 +139,7 @@ def inertia_fault(fit: FitResult, nominal: TwoMassParams | None, tolerance: floa
     return (f"J_m + J_l is {q:.2f}× [nominal] Jm_kgm2 + Jl_kgm2 = {known:.4g} kg·m² (95 % interval "
             f"{low / known:.2f}–{high / known:.2f}×, [nominal] inertia_tolerance ±{tolerance * 100:g} %): the torque's "
             "scale — [motor] torque_constant_Nm_per_A or the current sensor's gain — is off by that factor; K, J_m, "
-            "J_l, C all carry it")
+            "J_l, C all carry it — unless [nominal] Jm_kgm2 + Jl_kgm2 miss part of the joint's inertia")
 
 
 def _side(factor: float, limit: float = NOMINAL_FACTOR) -> int:

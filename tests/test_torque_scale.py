@@ -22,7 +22,7 @@ from tests.test_selftest import INERTIA_KNOWN
 GAIN_125 = re.compile(r"J_m \+ J_l is 1\.2[4-6]× \[nominal\] Jm_kgm2 \+ Jl_kgm2 = 0\.01051 kg·m² \(95 % interval "
                       r"1\.2\d–1\.2\d×, \[nominal\] inertia_tolerance ±15 %\): the torque's scale — \[motor\] "
                       r"torque_constant_Nm_per_A or the current sensor's gain — is off by that factor; K, J_m, J_l, C "
-                      r"all carry it")
+                      r"all carry it — unless \[nominal\] Jm_kgm2 \+ Jl_kgm2 miss part of the joint's inertia")
 
 
 def recorded(capsys: pytest.CaptureFixture[str], folder: Path, gain: float, *, inertia_known: bool = True) -> Path:
@@ -52,7 +52,9 @@ def test_a_current_read_25_percent_high_is_poor_naming_the_torque_scale(capsys: 
     assert fit.values.K_Nm_per_rad / 891.0 == pytest.approx(1.25, abs=0.02)  # before: this K and verdict ok
     assert quality["verdict"] == "poor"
     assert GAIN_125.fullmatch(quality["reasons"][0]), quality["reasons"][0]
-    assert quality["faults"][0] == quality["reasons"][0]
+    # a finding of the fit, not a fault found in the data whatever the motion (quality.faults: a window that did not
+    # excite the joint stays "not excited" whatever its junk fit reads)
+    assert quality["faults"] == []
     assert done.json_dict["options"]["inertia_tolerance"] == 0.15
 
 
