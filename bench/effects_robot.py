@@ -35,7 +35,7 @@ Measured at 4818a25 (analysis/ as on main 3d6370f), the defaults (robot: seeds 0
   window reads C 0.145 (poor, ratio 1.14) / 0.139 / 0.127 (ok). The robot rests between its moves — this window
   67 % of its time at |ω_m| < 0.5 rad/s, where the resonance rings out against the friction — the paper bench's
   1000 rpm triangles 0.5 %: there ×1 moves C only 0.103 → 0.110 (seed 0); ×2 misses f_a by +8.6 % (limit 5.4 %): poor,
-  the reason naming the *load* side's friction. tests/test_robot_motor_friction.py pins seed 1 at 540 s.
+  the reason naming the *load* side's friction. tests/test_robot_friction.py pins seed 1 at 540 s (its "motor" case).
 * cogging ×0.5, ×1, ×2 (0.05, 0.1, 0.2 N·m): robot 17 / 0, 18 / 0, 12 / 0 (poor 5); paper 5 / 0, 4 / 0, 0 (poor 5).
   Not confidently wrong; at 0.2 N·m the paper bench's misfit at f_a (+11.3 % against 5.9 %, seed 0) is worded as
   the load side's friction or backlash.
