@@ -18,6 +18,7 @@ from acq.config import load_bench, load_profile
 from acq.recording.reader import load
 from acq.recording.session import Session
 from acq.recording.writer import SessionWriter
+from acq.recording.zeroed import invented
 from drivers.base import CurrentSourceInfo, DriveInfo, EncoderBlock
 from tests.helpers import footer_strings_past, record_session_in_subprocess, rewritten_in_real_time, run_cli
 
@@ -357,3 +358,30 @@ def test_a_joint_resting_at_count_0_through_the_first_encoder_chunk_is_intact(
     assert abs(doc["K_Nm_per_rad"] - 891.0) < 0.01 * 891.0
     damaged = load(_zeroed(path, tmp_path / "z.h5", ("encoder/position_counts", 2)))
     assert damaged.damage == ("encoder: samples 1 000–1 499 zeroed on disk",)
+
+
+def test_a_zeroed_chunk_of_a_joint_resting_near_count_0_is_a_hole(tmp_path: Path) -> None:
+    """The simulated robot as shipped (``acq record --fast``, 10 s): the joint rests at 361–364 counts through rows
+    2 500–2 999 while a move elsewhere steps 1 762 counts. Zeroed, that chunk was taken for a joint at rest at 0 by the
+    record's largest step (session 13's reviewer); by the pace beside it (steps of a few counts) 362 is a jump."""
+    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--bench", "sim_robot", "--duration", "10", "--fast",
+                           "--no-analyze", "--out", str(tmp_path / "out")], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    (path,) = (tmp_path / "out").glob("*.h5")
+    with h5py.File(path, "r") as f:  # the case the test is about
+        rest = f["encoder/position_counts"][2500:3000]
+        assert 0 < rest.min() and rest.max() < 1000 and np.ptp(rest) <= 10, (rest.min(), rest.max())
+    damaged = load(_zeroed(path, tmp_path / "z.h5", ("encoder/position_counts", 5)))
+    assert damaged.damage == ("encoder: samples 2 500–2 999 zeroed on disk",)
+
+
+def test_a_phase_logged_as_exact_zeros_past_its_chunks_is_kept() -> None:
+    """A drive disabled for the first 2.2 s of an import, its current logged as 0.000 (25.6 kS/s, chunks of 25 600
+    rows): the two zero chunks and the zeros after them are the reading, not storage (the zeros go on past the chunks,
+    which storage does not do); before, a run longer than any still stretch left outside it was called invented."""
+    rng = np.random.default_rng(0)
+    values = np.round(rng.normal(0.0, 0.5, 256_000), 3)
+    values[:56_320] = 0.0
+    assert invented("current/i_a_A", values, [(0, 25_600), (25_600, 51_200)], ()) == ()
+    values[51_200:56_320] = rng.normal(0.0, 0.5, 5_120)  # the same chunks with the reading going on beside them
+    assert invented("current/i_a_A", values, [(0, 25_600), (25_600, 51_200)], ()) == ((0, 51_200),)
