@@ -255,31 +255,40 @@ def test_a_postgresql_restart_mid_run_loses_no_window_and_files_each_once(stoppa
     assert not (tmp_path / "catalogue-spool.jsonl").exists()
 
 
-def test_windows_waiting_when_the_monitor_stops_are_filed_by_its_next_start(stoppable_postgres: object,
-                                                                          tmp_path: Path,
-                                                                          capsys: pytest.CaptureFixture[str]) -> None:
-    """Stopped while the server is down, the monitor leaves its windows in the spool file and says so; the next start
-    (server back) files them first, then goes on: each window filed once, none analysed twice."""
+def _two_windows_spooled(server: object, out: Path) -> tuple[object, str]:
+    """A 3-window monitor run into a new database of ``server`` that stops the server once window 0 is filed: it ends
+    with 1 window filed and windows 1, 2 in ``out``'s spool; the server is started again. Its settings and the
+    database's URL."""
     from acq.monitoring.monitor import Monitor, MonitorSettings
     from tests.pg_server import new_database
 
-    server = stoppable_postgres
     url = new_database(server.url)  # type: ignore[attr-defined]
 
     def operator(st: object) -> None:
         if monitor.status.filed_total == 1 and server.running:  # type: ignore[attr-defined]
             server.stop()  # type: ignore[attr-defined]
 
-    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=tmp_path, window_s=10.0, every_s=60.0,
+    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=out, window_s=10.0, every_s=60.0,
                                for_s=180.0, fast=True, baseline_windows=2, catalogue=url)
     monitor = Monitor(settings, on_status=operator)
     try:
         assert monitor.run() == 0
         assert (monitor.status.filed_total, monitor.status.waiting) == (1, 2)
-        spool = [json.loads(line) for line in (tmp_path / "catalogue-spool.jsonl").read_text().splitlines()]
-        assert [w["outcome"]["session"]["tags"]["monitor_window"] for w in spool] == [1, 2]
     finally:
         server.start()  # type: ignore[attr-defined]
+    return settings, url
+
+
+def test_windows_waiting_when_the_monitor_stops_are_filed_by_its_next_start(stoppable_postgres: object,
+                                                                          tmp_path: Path,
+                                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """Stopped while the server is down, the monitor leaves its windows in the spool file and says so; the next start
+    (server back) files them first, then goes on: each window filed once, none analysed twice."""
+    from acq.monitoring.monitor import Monitor
+
+    settings, url = _two_windows_spooled(stoppable_postgres, tmp_path)
+    spool = [json.loads(line) for line in (tmp_path / "catalogue-spool.jsonl").read_text().splitlines()]
+    assert [w["outcome"]["session"]["tags"]["monitor_window"] for w in spool] == [1, 2]
     again = Monitor(replace(settings, for_s=60.0))
     assert again.run() == 0
     assert _pg_windows(url) == [(n, 1) for n in range(4)]
@@ -296,24 +305,9 @@ def test_a_window_from_the_spool_does_not_replace_a_later_analysis_of_it(stoppab
     from datetime import datetime, timedelta
 
     from acq.monitoring.catalogue import Catalogue, Outcome
-    from acq.monitoring.monitor import Monitor, MonitorSettings
-    from tests.pg_server import new_database
+    from acq.monitoring.monitor import Monitor
 
-    server = stoppable_postgres
-    url = new_database(server.url)  # type: ignore[attr-defined]
-
-    def operator(st: object) -> None:
-        if monitor.status.filed_total == 1 and server.running:  # type: ignore[attr-defined]
-            server.stop()  # type: ignore[attr-defined]
-
-    settings = MonitorSettings(bench=_bench(seed=EXCITING_SEED), out_dir=tmp_path, window_s=10.0, every_s=60.0,
-                               for_s=180.0, fast=True, baseline_windows=2, catalogue=url)
-    monitor = Monitor(settings, on_status=operator)
-    try:
-        assert monitor.run() == 0
-        assert (monitor.status.filed_total, monitor.status.waiting) == (1, 2)
-    finally:
-        server.start()  # type: ignore[attr-defined]
+    settings, url = _two_windows_spooled(stoppable_postgres, tmp_path)
     spooled = Outcome(**json.loads((tmp_path / "catalogue-spool.jsonl").read_text().splitlines()[0])["outcome"])
     assert spooled.session["tags"]["monitor_window"] == 1 and spooled.doc is not None
     assert spooled.analyzed_utc == spooled.doc["analyzed_utc"]
