@@ -1002,7 +1002,10 @@ def test_alarm_commands_run_in_a_session_of_their_own_and_share_one_wait_at_the_
 
     monkeypatch.setattr(alarm_module, "ALARM_WAIT_S", 0.6)
     sid_file = tmp_path / "sid"
-    command = f"{sys.executable} -c 'import os; open(\"{sid_file}\", \"w\").write(str(os.getsid(0)))'; sleep 5"
+    # written under another name and renamed: the test waits for the name, which then has its whole content (a file
+    # opened for writing exists before its text is in it: CI once read it empty)
+    command = (f"{sys.executable} -c 'import os; f = open(\"{sid_file}.tmp\", \"w\"); f.write(str(os.getsid(0))); "
+               f"f.close(); os.replace(\"{sid_file}.tmp\", \"{sid_file}\")'; sleep 5")
     m = Monitor(MonitorSettings(bench=_bench(), out_dir=tmp_path, window_s=10.0, every_s=60.0, on_alarm=command))
     entry = Entry("k", "k", str(tmp_path / "w.h5"), "joint1", None, {}, "ok", [], None, 700.0, (690.0, 710.0), None,
                   None, "{}", "2026-11-30T00:00:00+00:00", None)
