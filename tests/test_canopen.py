@@ -293,3 +293,35 @@ def test_rules_between_drive_keys_name_the_bench_file(tmp_path: Path, edit: tupl
     with pytest.raises(ConfigError) as err:
         load_bench(bench)
     assert str(err.value) == f"{bench}: {message}"
+
+
+def test_a_raw_frame_log_the_disk_refuses_finishes_the_new_session_as_failed_and_releases_the_bus(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The session file exists before the drive's raw log is opened: a disk that refuses the .can.blf (the disk is
+    the hardware faked here: the BLF writer's open fails with ENOSPC) leaves no file "recording" nor a bus held."""
+    import errno
+    import os
+
+    from tests.helpers import run_cli
+
+    def disk_full(path: object, *args: object, **kwargs: object) -> None:
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(can, "BLFWriter", disk_full)
+    bench = tmp_path / "canopen.toml"
+    bench.write_text(BENCH_TOML.read_text().replace('"acq-sim-canopen"', f'"acq-test-{next(_channels)}"'))
+    run = run_cli(capsys, "record", "--bench", str(bench), "--profile", "triangle_0.2s", "--duration", "1",
+                  "--no-analyze", "--out", str(tmp_path / "s"))
+    (session,) = (tmp_path / "s").glob("*.h5")
+    blf = session.with_suffix(".can.blf")
+    assert run.code == 1
+    assert run.err == (f"acq: error: raw frame log not kept: disk full: {blf} (nothing recorded; {session.name} finished "
+                       "as failed)\n")
+    s = load(session)
+    assert (s.status, s.attrs["stop_reason"]) == ("failed", f"raw frame log not kept: disk full: {blf}")
+    assert (s.current.sample_count, s.encoder.index.size) == (0, 0)
+    assert not blf.exists() and sorted(p.name for p in (tmp_path / "s").iterdir()) == [session.name]
+    # the bus was released: the same channel opens again, and a drive there starts (nobody holds its node)
+    sim, current, drive = _parts(load_bench(bench))
+    assert drive.start().transport == "canopen"
+    drive.stop()

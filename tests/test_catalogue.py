@@ -281,3 +281,38 @@ def test_trend_and_fleet_read_a_catalogue_in_a_read_only_folder(tmp_path: Path, 
     finally:
         if writer_open:
             writer.close()
+
+
+def test_two_analyses_of_a_window_in_the_same_second_keep_the_later_against_the_spool(
+        catalogue_location: Path | str, tmp_path: Path) -> None:
+    """The monitor's spool holds window A's analysis; ``acq analyze`` of the same file, made later within the same
+    second, was filed meanwhile. Replaying the spool keeps the later one and says so. Before: both were stamped to the
+    second, the tie went to the spooled (earlier) copy and replaced the later analysis."""
+    from dataclasses import replace
+
+    from acq.monitoring.catalogue_spool import FilingQueue, Waiting
+    from acq.offline.analyze import not_excited_json, request_for, sha256_of
+    from acq.recording.reader import load
+    from tests.helpers import record_session_in_subprocess
+
+    session = load(record_session_in_subprocess(tmp_path / "s", 1.0))
+    request = request_for(session)
+    while True:  # two analyses of the file made within one second of the wall clock
+        second = int(time.time())
+        spooled_doc = not_excited_json(session, request, "the monitor's")
+        later_doc = not_excited_json(session, request, "acq analyze's")
+        if int(time.time()) == second:
+            break
+    assert spooled_doc["analyzed_utc"] < later_doc["analyzed_utc"]
+    meta = {"session_id": session.meta.session_id, "joint": session.meta.joint,
+            "created_utc": session.meta.created_utc, "start_monotonic_ns": 1, "status": "complete", "tags": {}}
+    spooled = Outcome(str(session.path), sha256_of(session.path), request.key(), meta, spooled_doc, None, 1.0)
+    with Catalogue(catalogue_location) as c:
+        assert c.record(replace(spooled, doc=later_doc)) is None  # acq analyze --catalogue, meanwhile
+        queue = FilingQueue(c, tmp_path / "spool.jsonl")
+        filed = queue.file(Waiting("A", spooled))
+        assert filed == [Waiting("A", replace(spooled, analyzed_utc=spooled_doc["analyzed_utc"]))]
+        (entry,) = c.entries()
+    assert entry.analyzed_utc == later_doc["analyzed_utc"]
+    assert queue.notes == [f"{session.path.name}: not filed — the catalogue holds a later analysis of it "
+                           f"({later_doc['analyzed_utc']}; this one {spooled_doc['analyzed_utc']})"]

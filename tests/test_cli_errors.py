@@ -241,3 +241,16 @@ def test_a_catalogue_url_of_another_scheme_names_it_and_the_ones_acq_reads(capsy
         assert (run.code, run.err) == (2, "acq: error: --catalogue mysql://u:***@x/y: mysql:// is not a catalogue acq "
                                           "can use — give a SQLite file's path or a postgresql:// URL (or "
                                           "postgres://)\n"), command
+
+
+@pytest.mark.parametrize(("typed", "error"), [
+    ("analyse", "No such command 'analyse'. Did you mean analyze?"),
+    ("ANALYZE", "No such command 'ANALYZE'. Did you mean analyze?"),
+    ("recrod", "No such command 'recrod'. Did you mean record?"),
+    ("xport", "No such command 'xport'. (Possible commands: export, import)"),
+    ("xyz", "No such command 'xyz'."),
+])
+def test_a_mistyped_command_names_the_one_meant(capsys: pytest.CaptureFixture[str], typed: str, error: str) -> None:
+    """`acq analyse x` said only "No such command 'analyse'." (click suggests for options, not commands)."""
+    run = run_cli(capsys, typed, "x")
+    assert (run.code, run.out, run.err) == (2, "", f"acq: error: {error}\n")

@@ -13,12 +13,14 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from acq.offline.analyze import analyze_session, recording_from_session
 from acq.offline.excitation_judge import not_excited
 from acq.recording.reader import load
 from analysis import AnalysisRequest, analyze
+from analysis.signals import prepare_signals
 from tests.test_one_phase_doubt import recorded_window
 
 TRUE_DRIFT_PPM = 40.0  # sim_robot.toml [sim] daq_drift_ppm
@@ -75,3 +77,16 @@ def test_without_shared_host_stamps_a_record_that_cannot_be_aligned_says_so_not_
         "both streams on one host clock")
     assert all(r.startswith(("clock", "note: ")) for r in reasons)  # no advice judged on misaligned spectra
     assert not not_excited(doc)  # the clock failed, not the motion (with host stamps: ok, K 890.2)
+
+
+def test_a_latency_creeping_in_the_daq_stamps_no_longer_pulls_the_drift_of_a_10s_window(tmp_path: Path) -> None:
+    """Seed 1's 10 s window with its DAQ blocks' arrival latency growing by 0.5 ms (quadratically, from a standstill)
+    over the record: the stamps alone read +87.4 ppm. Their error counted only their scatter (±9.7 ppm at 95 % once
+    combined) and pulled the angle stage's drift to +82.8; it now counts their bow (analysis.clock_host._creep_std),
+    and the record's 10 s of motion decide."""
+    rec = recording_from_session(load(recorded_window(tmp_path, ["i_a"], seed=1, elapsed_s=0.0, window_s=10.0)))
+    u = (rec.block_host_ns - rec.block_host_ns[0]) / (rec.block_host_ns[-1] - rec.block_host_ns[0])
+    clock = prepare_signals(replace(rec, block_host_ns=rec.block_host_ns + np.rint(5e5 * u**2).astype(np.int64))).clock
+    assert clock.host_drift_ppm == pytest.approx(87.4, abs=0.05)
+    assert clock.drift_ppm == pytest.approx(43.6, abs=0.05)  # before: 82.8 ± 9.7
+    assert abs(clock.drift_ppm - TRUE_DRIFT_PPM) <= 1.96 * clock.drift_std_ppm <= 31.0

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 
 from acq.monitoring.retention import parse_size
+from acq.ui.monitor_cli import parse_duration
 from acqcore.errors import ConfigError
 from tests.helpers import run_cli
 
@@ -22,10 +23,16 @@ ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot
     ("--window", "0", "Invalid value for '--window': 0.0 is not in the range x>=1.0."),
     ("--threshold-pct", "nan", "Invalid value for '--threshold-pct': nan is not a finite number."),
     ("--threshold-pct", "-inf", "Invalid value for '--threshold-pct': -inf is not in the range 0<x<=100."),
-    ("--every", "nan", "--every nan: not a duration (e.g. 600, 10m, 8h)"),
-    ("--every", "inf", "--every inf: not a duration (e.g. 600, 10m, 8h)"),
-    ("--every", "0", "--every 0: not a duration (e.g. 600, 10m, 8h)"),
-    ("--for", "-1", "--for -1: not a duration (e.g. 600, 10m, 8h)"),
+    ("--every", "nan", "--every nan: not a duration — seconds, or numbers with s, min (m), h or d, summed: "
+     "600, 90s, 10min, 1.5h, 2h10min, 2h 10min"),
+    ("--every", "inf", "--every inf: not a duration — seconds, or numbers with s, min (m), h or d, summed: "
+     "600, 90s, 10min, 1.5h, 2h10min, 2h 10min"),
+    ("--every", "0", "--every 0: not a duration — seconds, or numbers with s, min (m), h or d, summed: "
+     "600, 90s, 10min, 1.5h, 2h10min, 2h 10min"),
+    ("--for", "2h10", "--for 2h10: not a duration — seconds, or numbers with s, min (m), h or d, summed: "
+     "600, 90s, 10min, 1.5h, 2h10min, 2h 10min"),
+    ("--for", "-1", "--for -1: not a duration — seconds, or numbers with s, min (m), h or d, summed: "
+     "600, 90s, 10min, 1.5h, 2h10min, 2h 10min"),
     ("--max-disk", "nanMB", "--max-disk nanMB: 'nanMB' is not a size (e.g. 2GB, 500MB)"),
     ("--max-disk", "infGB", "--max-disk infGB: 'infGB' is not a size (e.g. 2GB, 500MB)"),
     ("--max-disk", "-5MB", "--max-disk -5MB: '-5MB' is not a size (e.g. 2GB, 500MB)"),
@@ -50,6 +57,20 @@ def test_the_alarm_rules_of_trend_and_fleet_refuse_nan_too(capsys: pytest.Captur
                                                            command: str) -> None:
     run = run_cli(capsys, command, "--catalogue", str(tmp_path / "c.sqlite"), "--ewma-lambda", "nan")
     assert (run.code, run.err) == (2, "acq: error: Invalid value for '--ewma-lambda': nan is not a finite number.\n")
+
+
+@pytest.mark.parametrize(("text", "seconds"), [
+    ("600", 600.0), ("90s", 90.0), ("10min", 600.0), ("10m", 600.0), ("1.5h", 5400.0), ("1d", 86400.0),
+    ("2h10min", 7800.0), ("2h 10min", 7800.0), (" 2H10MIN ", 7800.0), ("1h30m15s", 5415.0), (".5h", 1800.0)])
+def test_a_duration_takes_units_and_summed_parts(text: str, seconds: float) -> None:
+    """`acq monitor --for 2h10min` was refused ("not a duration"): a compound duration is the parts summed."""
+    assert parse_duration("--for", text) == seconds
+
+
+@pytest.mark.parametrize("text", ["2h 2h", "10m 5min", "1h,10min", "2h10", "h", "1e3", "0s"])
+def test_a_duration_with_a_unit_twice_or_a_bare_part_is_refused(text: str) -> None:
+    with pytest.raises(ConfigError, match=f"^--for {text}: not a duration — "):
+        parse_duration("--for", text)
 
 
 def test_a_size_of_nan_or_inf_is_not_a_size() -> None:

@@ -217,7 +217,7 @@ class Catalogue:
         (:mod:`acq.monitoring.catalogue_spool`) while ``acq analyze`` filed a new analysis of it.
 
         Returns None when stored, else the ``analyzed_utc`` of the analysis the catalogue kept."""
-        from acq.recording.layout import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
+        from acq.recording.layout import analysis_time_utc  # here, not at the top: `acq --help` loads no h5py
 
         meta, doc = outcome.session, outcome.doc or {}
         key = meta.get("session_id") or f"path:{Path(outcome.path).resolve()}"
@@ -225,7 +225,7 @@ class Catalogue:
             "session_key": key, "sha256": outcome.sha256, "request_key": outcome.request_key,
             "file_path": str(Path(outcome.path).resolve()),
             "options_json": json.dumps(doc["options"]) if doc else None,
-            "analyzed_utc": outcome.analyzed_utc or doc.get("analyzed_utc") or utc_now_iso(),
+            "analyzed_utc": outcome.analyzed_utc or doc.get("analyzed_utc") or analysis_time_utc(),
             "acq_version": doc.get("acq_version"),
             "seconds": outcome.seconds, "verdict": doc.get("quality", {}).get("verdict"),
             "reasons_json": json.dumps(doc.get("quality", {}).get("reasons", [])), "error": outcome.error,
@@ -263,7 +263,7 @@ class Catalogue:
             # replace an analysis of a whole file
             # (a row filed before schema 5 has no file path: its file hash tells the same file; rowcount, not RETURNING:
             # SQLite before 3.35 has none — both back ends count 0 rows when the WHERE skips the update)
-            # (ISO 8601 times of one form, UTC: their order as text is their order in time)
+            # (ISO 8601 times, UTC, with microseconds or whole seconds: their order as text is their order in time)
             newer = " AND analyses.analyzed_utc <= excluded.analyzed_utc" if keep_newer else ""
             stored = self._execute(
                 f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"

@@ -69,12 +69,12 @@ class FilingQueue:
         """Queue ``window`` and file what may be filed now (:meth:`flush`); return the windows filed (or kept out by a
         later analysis: :attr:`notes`). Its analysis time is fixed now (an outcome without one would be stamped when
         filed, and one that waited would look newer than an analysis made meanwhile)."""
-        from acq.recording.layout import utc_now_iso  # here, not at the top: `acq --help` and its errors load no h5py
+        from acq.recording.layout import analysis_time_utc  # here, not at the top: `acq --help` loads no h5py
 
         outcome = window.outcome
         if outcome.analyzed_utc is None:
             window = replace(window, outcome=replace(
-                outcome, analyzed_utc=(outcome.doc or {}).get("analyzed_utc") or utc_now_iso()))
+                outcome, analyzed_utc=(outcome.doc or {}).get("analyzed_utc") or analysis_time_utc()))
         self.waiting.append(window)
         filed = self.flush()
         if self.waiting:

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from acq import __version__
-from acq.recording.layout import utc_now_iso
+from acq.recording.layout import analysis_time_utc
 from acq.recording.reader import load
 from acq.recording.session import Session
 from acq.recording.storage import free_bytes, refused_write, storage_error, write_text_atomically
@@ -179,7 +179,7 @@ def _identified(doc: dict[str, Any], session: Session) -> dict[str, Any]:
         "sha256": sha256_of(session.path),
         "tags": session.tags,
     }
-    doc["analyzed_utc"] = utc_now_iso()
+    doc["analyzed_utc"] = analysis_time_utc()
     doc["acq_version"] = __version__
     doc["analysis_fingerprint"] = code_fingerprint()
     truth = simulated_truth(session)

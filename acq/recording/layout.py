@@ -75,6 +75,15 @@ def utc_now_iso() -> str:
     return datetime.now(UTC).isoformat(timespec="seconds")
 
 
+def analysis_time_utc() -> str:
+    """When an analysis is made: the current UTC time, ISO 8601 with microseconds ("2026-01-02T03:04:05.678901+00:00").
+
+    Two analyses of one window made in the same second stay ordered (the catalogue keeps the later: a window that
+    waited in the monitor's spool against ``acq analyze`` of its file). As text these order with the whole-second
+    stamps of earlier results, which read as .000000 ("+" sorts before "."), and on both catalogue back ends."""
+    return datetime.now(UTC).isoformat(timespec="microseconds")
+
+
 def _datasets(f: h5py.File) -> list[h5py.Dataset]:
     found: list[h5py.Dataset] = []
     f.visititems(lambda name, obj: found.append(obj) if isinstance(obj, h5py.Dataset) else None)

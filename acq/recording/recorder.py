@@ -32,8 +32,8 @@ from drivers.base import CurrentSource, CurrentSourceInfo, Drive, DriveInfo, Enc
 from drivers.config import Bench, Profile
 from drivers.limits import refuse_beyond_limits
 from drivers.motion import with_dither_seed
-from acq.recording.storage import WRITE_FAILURES, make_folders, storage_error
-from acqcore.errors import AcqError, ConfigError, DeviceError
+from acq.recording.storage import WRITE_FAILURES, cause_of, make_folders, storage_error
+from acqcore.errors import AcqError, ConfigError, DeviceError, StorageError
 
 FLUSH_INTERVAL_S = 0.5
 #: The recording thread takes what the readers queued once per this interval, all of it, instead of waking for each
@@ -180,7 +180,8 @@ class Recorder:
 
     def open_session(self) -> SessionWriter:
         """Start the devices and create the session file (and the drive's raw log beside it); idempotent.
-        A failure releases the devices and raises before anything is recorded."""
+        A failure releases the devices and raises before anything is recorded; once the session file exists (the raw
+        log failed) it is finished first, as ``failed`` with the raw log's problem as reason."""
         self.start_devices()
         if self._writer is not None:
             return self._writer
@@ -199,7 +200,19 @@ class Recorder:
                 raise ConfigError(f"{self.out_dir}: no free session file name for joint {self.bench.joint}")
             keep_raw = getattr(self.drive, "keep_raw_frames", None)  # transports that can log their raw traffic
             if keep_raw is not None:
-                keep_raw(path)
+                try:
+                    keep_raw(path)
+                except KeyboardInterrupt:
+                    writer.finish("interrupted", "interrupted by user (Ctrl-C)")
+                    raise
+                except Exception as e:
+                    # The session file exists (its layout on disk) but holds nothing: finished as failed with the
+                    # reason, like any file once it exists (acq check never sees it "recording"), then one line.
+                    where = getattr(e, "filename", None) or f"the drive's raw frame log beside {path.name}"
+                    reason = f"raw frame log not kept: {cause_of(e)}: {where}"
+                    writer.finish("failed", reason)
+                    error = StorageError if isinstance(e, OSError) and e.errno in WRITE_FAILURES else DeviceError
+                    raise error(f"{reason} (nothing recorded; {path.name} finished as failed)") from None
             self._writer = writer
             return self._writer
         except OSError as e:

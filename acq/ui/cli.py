@@ -7,6 +7,7 @@ failed write); a usage error is one line too (exit 2); Ctrl-C is exit 130.
 
 from __future__ import annotations
 
+import difflib
 import importlib
 import os
 import signal
@@ -93,6 +94,19 @@ class LazyGroup(click.Group):
             module, attribute, _ = LAZY_COMMANDS[cmd_name]
             return getattr(importlib.import_module(module), attribute)
         return super().get_command(ctx, cmd_name)
+
+    def resolve_command(self, ctx: click.Context, args: list[str]) -> tuple[str | None, click.Command | None,
+                                                                            list[str]]:
+        """click's, but a mistyped command names the one meant: "No such command 'analyse'. Did you mean analyze?"
+        (click suggests for options only); several near ones are listed, as click lists options."""
+        name = args[0] if args else ""
+        if name and name not in LAZY_COMMANDS and not name.startswith("-") and not ctx.resilient_parsing:
+            near = difflib.get_close_matches(name.lower(), self.list_commands(ctx), n=3)
+            if len(near) == 1:
+                ctx.fail(f"No such command {name!r}. Did you mean {near[0]}?")
+            if near:
+                ctx.fail(f"No such command {name!r}. (Possible commands: {', '.join(near)})")
+        return super().resolve_command(ctx, args)
 
     def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
         """The command list as click writes it, each command's short help taken from :data:`LAZY_COMMANDS`."""

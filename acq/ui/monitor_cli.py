@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import re
 from typing import Any
 from pathlib import Path
@@ -23,17 +24,30 @@ from acq.ui.values import duration_text, format_value
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
 
-_UNITS_S = {"": 1.0, "s": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
+#: Seconds per unit of a duration; each part of ``2h 10min`` is a number and one of these (none: seconds).
+_UNITS_S = {"s": 1.0, "sec": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
+_NUMBER = r"(?:[0-9]+\.?[0-9]*|\.[0-9]+)"
+_PART = re.compile(rf"\s*({_NUMBER})\s*([a-z]+)")
 #: Moves listed in the status table (a window of a busy program holds a dozen or more).
 _MOVES_SHOWN = 8
 
 
 def parse_duration(option: str, text: str) -> float:
-    """``600``, ``600s``, ``10m``, ``8h``, ``1.5d`` → seconds; ConfigError naming the option otherwise."""
-    m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+)\s*([a-z]*)\s*", text.lower())
-    if m is None or m.group(2) not in _UNITS_S or float(m.group(1)) <= 0:
-        raise ConfigError(f"{option} {text}: not a duration (e.g. 600, 10m, 8h)")
-    return float(m.group(1)) * _UNITS_S[m.group(2)]
+    """``600``, ``90s``, ``10min`` (``10m``), ``1.5h``, ``1d``, and parts summed (``2h10min``, ``2h 10min``) →
+    seconds (s); ConfigError naming the option, the value and the accepted forms otherwise (zero too)."""
+    lowered = text.strip().lower()
+    seconds = math.nan
+    if re.fullmatch(_NUMBER, lowered):
+        seconds = float(lowered)
+    elif re.fullmatch(rf"(?:{_PART.pattern})+", lowered):
+        parts = _PART.findall(lowered)
+        units = [_UNITS_S.get(unit) for _, unit in parts]
+        if None not in units and len(set(units)) == len(units):  # each unit once: "2h 2h" is more likely a typo
+            seconds = sum(float(number) * _UNITS_S[unit] for number, unit in parts)
+    if not (math.isfinite(seconds) and seconds > 0):
+        raise ConfigError(f"{option} {text}: not a duration — seconds, or numbers with s, min (m), h or d, summed: "
+                          "600, 90s, 10min, 1.5h, 2h10min, 2h 10min")
+    return seconds
 
 
 def status_table(st: MonitorStatus) -> Table:
