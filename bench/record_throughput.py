@@ -129,6 +129,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import statistics
 import sys
 import tempfile
@@ -218,16 +219,23 @@ def generate_threaded(bench: Bench, seconds: float) -> tuple[float, float, int]:
     return wall, cpu, counts["current"] * len(cur_info.channels) + counts["encoder"]
 
 
-def record(bench: Bench, seconds: float, fast: bool, out: Path) -> tuple[float, float, int, float]:
-    """Record; return (wall s, CPU s, samples stored over all channels, CPU s of the recording thread alone: the
-    checks, the handoff and the writing, not the readers)."""
+def children_cpu_s() -> float:
+    """CPU s of this process's ended and reaped children (the recorder's writer process)."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def record(bench: Bench, seconds: float, fast: bool, out: Path) -> tuple[float, float, int, float, float]:
+    """Record; return (wall s, CPU s of the process and its writer process, samples stored over all channels, CPU s
+    of the recording thread alone: the checks and the handoff, not the readers; CPU s of the writer process)."""
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, load_profile("triangle_0.2s"), current, drive, out, seconds)
-    wall0, cpu0, own0 = time.perf_counter(), time.process_time(), time.thread_time()
+    wall0, cpu0, own0, child0 = time.perf_counter(), time.process_time(), time.thread_time(), children_cpu_s()
     result = recorder.run()
     wall, cpu, own = time.perf_counter() - wall0, time.process_time() - cpu0, time.thread_time() - own0
+    child = children_cpu_s() - child0
     assert result.status == "complete", result.stop_reason
-    return wall, cpu, result.current_samples * len(bench.daq.channels) + result.encoder_samples, own
+    return wall, cpu + child, result.current_samples * len(bench.daq.channels) + result.encoder_samples, own, child
 
 
 def writer_alone(bench: Bench, seconds: float, out: Path) -> float:
@@ -272,18 +280,20 @@ def main() -> None:
     bench = heavy_bench()
     runs: dict[str, list[tuple[float, float, int]]] = {"sim": [], "sim2": [], "recorder": []}
     own_rates: list[float] = []
+    child_ms: list[float] = []
     reader_rates: list[float] = []
     alone_rates: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
         for _ in range(args.repeat):
             runs["sim"].append(generate_only(bench, args.seconds))
             runs["sim2"].append(generate_threaded(bench, args.seconds))
-            wall, cpu, samples, own = record(bench, args.seconds, True, Path(tmp))
+            wall, cpu, samples, own, child = record(bench, args.seconds, True, Path(tmp))
             runs["recorder"].append((wall, cpu, samples))
             own_rates.append(samples / own)
-            reader_rates.append(samples / (cpu - own))
+            child_ms.append(1e3 * child)
+            reader_rates.append(samples / (cpu - child - own))
             alone_rates.append(samples / writer_alone(bench, args.seconds, Path(tmp)))
-        rt_wall, rt_cpu, _, _ = record(bench, args.realtime_seconds, False, Path(tmp))
+        rt_wall, rt_cpu, _, _, _ = record(bench, args.realtime_seconds, False, Path(tmp))
     rates = {name: (statistics.median(n / wall for wall, _, n in r), statistics.median(n / cpu for _, cpu, n in r))
              for name, r in runs.items()}
     wall = statistics.median(wall for wall, _, _ in runs["recorder"])
@@ -298,6 +308,7 @@ def main() -> None:
     table.add_row(f"recorder, --fast, {args.seconds:g} s session [samples/s]", *(f"{v:,.0f}" for v in rates["recorder"]))
     table.add_row("  its recording thread alone: checks, handoff, writing [samples/s]", "",
                   f"{statistics.median(own_rates):,.0f}")
+    table.add_row("  its writer process (the writing) [CPU ms]", "", f"{statistics.median(child_ms):.1f}")
     table.add_row("    the same writing alone: its blocks replayed, no simulator beside it [samples/s]", "",
                   f"{statistics.median(alone_rates):,.0f}")
     table.add_row("  its readers: the simulator as the recorder reads it (the rest of its CPU) [samples/s]", "",
