@@ -18,6 +18,7 @@ last commit intact, is repaired by ``acq check``.
 from __future__ import annotations
 
 import fcntl
+import mmap
 import os
 import pickle
 import select
@@ -28,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import h5py
+import numpy as np
 
 from acq.recording.layout import EVENT_DTYPE, OPTIONAL_ENCODER, Status
 from acq.recording.writer import SessionWriter
@@ -40,23 +42,62 @@ PIPE_BYTES = 1 << 20
 #: How often the child looks whether the recording process still lives while its pipe is silent, s.
 PARENT_CHECK_S = 1.0
 _HEAD = struct.Struct("<II")  # pickle bytes, out-of-band buffers
-_LEN = struct.Struct("<Q")
+_RING_HEAD = 64
+#: Shared memory for the arrays in flight, bytes: 2 commits of 2 MiB (FLUSH_BYTES), so the recording thread waits only
+#: when the child is that far behind.
+RING_BYTES = 4 << 20
 _ENCODER_ROW = 8 * (3 + len(OPTIONAL_ENCODER))  # bytes a stored encoder sample takes, all columns
 
 
-def _send(fd: int, obj: Any) -> None:
-    """Write ``obj`` to ``fd``: its pickle, then each array's bytes from its own buffer (no copy in between)."""
+class _Ring:
+    """Shared memory the arrays of the messages go through (mapped before the fork: both processes see it); the
+    child stores in its first 8 bytes how many bytes it has taken, the parent waits for room."""
+
+    def __init__(self, size: int) -> None:
+        self.size = size
+        self.map = mmap.mmap(-1, _RING_HEAD + size, flags=mmap.MAP_SHARED)
+        self.view = memoryview(self.map)
+        self.taken = np.frombuffer(self.map, np.int64, 1, 0)  # bytes the child has taken (padding included)
+        self.written = 0
+
+    def put(self, raw: memoryview, alive: Any) -> tuple[int, int]:
+        """Copy ``raw`` into the ring (waiting for room); its (offset, bytes)."""
+        n = raw.nbytes
+        if n > self.size:
+            raise ValueError(f"{n} bytes do not fit the writer's ring of {self.size}")
+        pos = self.written % self.size
+        pad = self.size - pos if pos + n > self.size else 0
+        while self.written + pad + n - int(self.taken[0]) > self.size:
+            alive()
+            time.sleep(0.0005)
+        self.written += pad
+        off = self.written % self.size
+        self.view[_RING_HEAD + off:_RING_HEAD + off + n] = raw
+        self.written += n
+        return off, n
+
+
+def _send_ring(fd: int, ring: _Ring, obj: Any, alive: Any) -> None:
     buffers: list[pickle.PickleBuffer] = []
     meta = pickle.dumps(obj, protocol=5, buffer_callback=buffers.append)
-    head = [_HEAD.pack(len(meta), len(buffers)), *(_LEN.pack(b.raw().nbytes) for b in buffers), meta]
-    views = [memoryview(p).cast("B") for p in (b"".join(head), *(b.raw() for b in buffers))]
-    while views:
-        done = os.writev(fd, views)
-        while views and done >= views[0].nbytes:
-            done -= views[0].nbytes
-            views.pop(0)
-        if views and done:
-            views[0] = views[0][done:]
+    spans = [ring.put(b.raw(), alive) for b in buffers]
+    _send(fd, (meta, spans, ring.written))
+
+
+def _recv_ring(fd: int, ring: _Ring) -> tuple[Any, int] | None:
+    message = _recv(fd)
+    if message is None:
+        return None
+    meta, spans, end = message
+    return pickle.loads(meta, buffers=[ring.view[_RING_HEAD + off:_RING_HEAD + off + n] for off, n in spans]), end
+
+
+def _send(fd: int, obj: Any) -> None:
+    """Write ``obj`` to ``fd`` (a small pickle)."""
+    meta = pickle.dumps(obj, protocol=5)
+    view = memoryview(_HEAD.pack(len(meta), 0) + meta)
+    while view.nbytes:
+        view = view[os.write(fd, view):]
 
 
 def _read_exactly(fd: int, n: int) -> bytearray | None:
@@ -76,13 +117,8 @@ def _recv(fd: int) -> Any:
     head = _read_exactly(fd, _HEAD.size)
     if head is None:
         return None
-    meta_len, n_buffers = _HEAD.unpack(head)
-    sizes = [_LEN.unpack(_read_exactly(fd, _LEN.size) or b"\0" * 8)[0] for _ in range(n_buffers)]
-    meta = _read_exactly(fd, meta_len)
-    buffers = [_read_exactly(fd, size) for size in sizes]
-    if meta is None or any(b is None for b in buffers):
-        return None
-    return pickle.loads(meta, buffers=buffers)
+    meta = _read_exactly(fd, _HEAD.unpack(head)[0])
+    return None if meta is None else pickle.loads(meta)
 
 
 class WriterProcess:
@@ -106,13 +142,14 @@ class WriterProcess:
             fcntl.fcntl(to_child, fcntl.F_SETPIPE_SZ, PIPE_BYTES)
         except OSError:
             pass  # the default capacity: the recording thread waits for the child more often
+        self._ring = ring = _Ring(RING_BYTES)
         parent = os.getpid()
         with h5py._objects.phil:  # no other thread inside HDF5 while forking: the child could never take its lock
             pid = os.fork()
         if pid == 0:  # the child: never returns
             os.close(to_child)
             os.close(from_child)
-            _child(from_parent, to_parent, parent, self.path, writer_args)
+            _child(from_parent, to_parent, parent, ring, self.path, writer_args)
         os.close(from_parent)
         os.close(to_parent)
         self._pid, self._to_child, self._from_child = pid, to_child, from_child
@@ -153,10 +190,16 @@ class WriterProcess:
         if self.failure is not None:
             return
         try:
-            _send(self._to_child, message)
+            _send_ring(self._to_child, self._ring, message, self._alive)
         except BrokenPipeError:
             self.failure = self._unraised = StorageError(
                 f"session writer ended unexpectedly ({self._how_it_ended()}): {self.path}")
+
+    def _alive(self) -> None:
+        """Raise BrokenPipeError when the child has ended (while waiting for room in the ring)."""
+        if self._pid and os.waitpid(self._pid, os.WNOHANG)[0]:
+            self._pid = 0
+            raise BrokenPipeError
 
     @property
     def seconds_kept(self) -> float:
@@ -209,7 +252,7 @@ class WriterProcess:
             if not self._pid:
                 return
             try:
-                _send(self._to_child, ("finish", status, stop_reason))
+                _send_ring(self._to_child, self._ring, ("finish", status, stop_reason), self._alive)
             except BrokenPipeError:
                 pass
             while True:
@@ -227,7 +270,7 @@ class WriterProcess:
             self._end()
 
 
-def _child(from_parent: int, to_parent: int, parent: int, path: Path, writer_args: dict[str, Any]) -> None:
+def _child(from_parent: int, to_parent: int, parent: int, ring: _Ring, path: Path, writer_args: dict[str, Any]) -> None:
     """The child's whole life (see module doc); ends the process."""
     code = 0
     try:
@@ -239,28 +282,30 @@ def _child(from_parent: int, to_parent: int, parent: int, path: Path, writer_arg
             _send(to_parent, e if _picklable(e) else StorageError(f"{type(e).__name__}: {e}"))
             return
         _send(to_parent, writer.committed)
-        _serve(writer, from_parent, to_parent, parent)
+        _serve(writer, from_parent, to_parent, parent, ring)
     except BaseException:  # noqa: BLE001 - a bug: the parent sees the pipe end
         code = 1
     finally:
         os._exit(code)
 
 
-def _serve(writer: SessionWriter, from_parent: int, to_parent: int, parent: int) -> None:
+def _serve(writer: SessionWriter, from_parent: int, to_parent: int, parent: int, ring: _Ring) -> None:
     appends = {"current": writer.append_current, "encoder": writer.append_encoder, "event": writer.add_event}
     while True:
         while not select.select([from_parent], [], [], PARENT_CHECK_S)[0]:
             if os.getppid() != parent:  # the recording process ended; its pipe may live on in a process it forked
                 break
-        message = _recv(from_parent) if os.getppid() == parent else None
-        if message is None:  # the recording process ended without finishing the file
+        got = _recv_ring(from_parent, ring) if os.getppid() == parent else None
+        if got is None:  # the recording process ended without finishing the file
             writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "info",
                                          "stopped: the recording process ended"))
             writer.finish("interrupted", "the recording process ended before finishing the file")
             return
+        message, end = got
         kind = message[0]
         if kind in appends:
-            appends[kind](message[1])
+            appends[kind](message[1])  # copied: the ring's bytes are free again
+            ring.taken[0] = end
         elif kind == "flush":
             try:
                 writer.flush()
