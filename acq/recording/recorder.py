@@ -2,7 +2,7 @@
 
 One reader thread per stream (:mod:`acq.recording.device_reader`) only reads its device and queues what it
 got; the calling thread checks stream indices (:mod:`acq.recording.stream_check`: gaps by counters, never
-by timing), writes through :class:`acq.recording.writer_process.WriterProcess`, flushes at least every 0.5 s and
+by timing), writes through :class:`acq.recording.writer.SessionWriter`, flushes at least every 0.5 s and
 always finishes the file: ``complete`` when both streams have the requested duration, ``interrupted`` on
 Ctrl-C / SIGTERM, ``failed`` on a device error or a failed write (disk full, I/O error: the drive is
 stopped at once and only the samples committed before the failure count). Timestamps are never altered:
@@ -27,8 +27,7 @@ from acq.recording.layout import Status, utc_now_iso
 from acq.recording.paths import new_session_path
 from acq.recording.room import FLUSH_BYTES
 from acq.recording.stream_check import StreamChecker, join_encoder_blocks
-from acq.recording.writer import SessionExists
-from acq.recording.writer_process import WriterProcess
+from acq.recording.writer import SessionExists, SessionWriter
 from drivers.base import CurrentSource, CurrentSourceInfo, Drive, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from drivers.limits import refuse_beyond_limits
@@ -135,7 +134,7 @@ class Recorder:
         self.listeners = listeners or []
         self.progress = progress
         self._started = False
-        self._writer: WriterProcess | None = None
+        self._writer: SessionWriter | None = None
         self._ran = False
         self._stop_request: str | None = None
         self._shutting_down = False
@@ -179,7 +178,7 @@ class Recorder:
         self.drive.stop()
         self.current.stop()
 
-    def open_session(self) -> WriterProcess:
+    def open_session(self) -> SessionWriter:
         """Start the devices and create the session file (and the drive's raw log beside it); idempotent.
         A failure releases the devices and raises before anything is recorded."""
         self.start_devices()
@@ -190,7 +189,7 @@ class Recorder:
             for _ in range(100):  # another recorder may take the name between the check and the create
                 path = new_session_path(self.out_dir, self.bench.joint, utc_now_iso())
                 try:
-                    writer = WriterProcess(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
+                    writer = SessionWriter(path, bench=self.bench, profile=self.profile, current_info=self._cur_info,
                                            drive_info=self._drive_info, host_ns_at_start=time.monotonic_ns(),
                                            operator=self.operator, tags=self.tags)
                 except SessionExists:
@@ -260,7 +259,7 @@ class Recorder:
                                checker.current_gaps, checker.encoder_gaps, writer.failure is not None)
 
     def _pump(self, inbox: queue.SimpleQueue[tuple[str, Any]], readers: dict[str, DeviceReader],
-              writer: WriterProcess, checker: StreamChecker, counts: dict[str, int]) -> None:
+              writer: SessionWriter, checker: StreamChecker, counts: dict[str, int]) -> None:
         done: set[str] = set()
         last_flush = last_data = time.monotonic()
         while len(done) < len(readers):
@@ -298,7 +297,7 @@ class Recorder:
                 writer.flush()
                 last_flush = now
 
-    def _store_run(self, run: list[EncoderBlock], writer: WriterProcess, checker: StreamChecker,
+    def _store_run(self, run: list[EncoderBlock], writer: SessionWriter, checker: StreamChecker,
                    counts: dict[str, int]) -> None:
         """Store encoder blocks that arrived one after another as one block (emptying ``run``): one check, one append
         and one call to each listener for the lot (a --fast bench queues ~20 blocks of 40 cycles in a row)."""
@@ -307,7 +306,7 @@ class Recorder:
             run.clear()
             self._store("encoder", block, writer, checker, counts)
 
-    def _store(self, kind: str, item: Any, writer: WriterProcess, checker: StreamChecker,
+    def _store(self, kind: str, item: Any, writer: SessionWriter, checker: StreamChecker,
                counts: dict[str, int]) -> None:
         if kind == "event":
             self._event(writer, item)
@@ -326,7 +325,7 @@ class Recorder:
         if self.progress is not None and kind == "current":
             self._call_out(self.progress, min(1.0, counts["current"] / (self.duration_s * self._cur_info.rate_hz)))
 
-    def _event(self, writer: WriterProcess, event: StreamEvent) -> None:
+    def _event(self, writer: SessionWriter, event: StreamEvent) -> None:
         """Store an event and show it to the listeners as ``("event", event)``."""
         writer.add_event(event)
         self._notify("event", event)
@@ -345,7 +344,7 @@ class Recorder:
                 raise
 
     def _shut_down(self, inbox: queue.SimpleQueue[tuple[str, Any]], readers: dict[str, DeviceReader],
-                   writer: WriterProcess, checker: StreamChecker, counts: dict[str, int], status: Status,
+                   writer: SessionWriter, checker: StreamChecker, counts: dict[str, int], status: Status,
                    reason: str) -> tuple[Status, str]:
         """Stop motion first (safety); store everything the readers still deliver until each has ended; then
         stop the devices, store what is left and finish the file."""
@@ -384,7 +383,7 @@ class Recorder:
                 status, reason = "failed", f"{writer.failure} — {writer.seconds_kept:.1f} s kept"
         return status, reason
 
-    def _drain(self, inbox: queue.SimpleQueue[tuple[str, Any]], writer: WriterProcess, checker: StreamChecker,
+    def _drain(self, inbox: queue.SimpleQueue[tuple[str, Any]], writer: SessionWriter, checker: StreamChecker,
                counts: dict[str, int], status: Status, reason: str, wait_s: float) -> tuple[Status, str]:
         """Store what the readers queued (waiting up to ``wait_s`` for the first item); a late error fails
         a recording that was complete."""
