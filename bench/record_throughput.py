@@ -138,14 +138,20 @@ pipe, 5 pairs at load 6.0–6.8: per wall 0.79 / 0.82 → 0.81 / 0.80 (per-pair 
 CPU 0.85 / 0.88 → 0.75 / 0.77; ring, 5 pairs at load 6.8–9.9: per wall 0.90 / 0.89 → 0.87 / 0.91 (−0.03 / +0.02), per
 CPU 0.87 / 0.87 → 0.76 / 0.78; 6 triples main / pipe / ring at load 9.9–18.4: per wall 0.935 / 0.895, 0.825 / 0.810,
 0.735 / 0.820 (differences pipe −0.085 / −0.075, ring −0.150 / −0.100), per CPU 0.865 / 0.855, 0.745 / 0.765, 0.760 /
-0.775 (differences −0.11 / −0.11, −0.10 / −0.085, every pair lower). Not kept: per wall it gains nothing measurable at
-these loads (the second core is not idle: the child waits for it like everything else), and even on an idle core it
-is bounded by what the recording process sheds, ≈ 4 % of its CPU, against the 4–7 % the fork and the wait for the
+0.775 (differences −0.11 / −0.11, −0.10 / −0.085, every pair lower); pipe, 6 more pairs as the load fell (2.1–5.6):
+per wall 0.820 / 0.835 → 0.720 / 0.725 (differences −0.080 / −0.100, 2 of 12 higher by 0.01), per CPU 0.850 / 0.860 →
+0.745 / 0.765 (−0.105 / −0.100), the recording thread 36.3 → 21.4 ms but its readers 312 → 325 ms, the process −6 ms.
+Not kept: per wall it gains nothing at these loads (the second core is not idle: the child waits for it like everything
+else), and even on an idle core it is bounded by what the recording process sheds, 1–4 % of its CPU (the readers pay
+back most of the recording thread's saving: the copy-on-write faults), against the 4–7 % the fork and the wait for the
 child's file add to a session's wall; per CPU it costs 0.10 (the child's and the parent's copy-on-write faults, the
-transport). The pipe was the cheaper transport for the recording thread (per-message pickling either way; the ring's
-copies keep the GIL). Also in the way: a recorder killed with SIGKILL leaves its file finished as ``interrupted`` by the
-child (``tests/test_recorder.py`` and ``tests/test_live_session.py`` expect ``recording`` and a repair), and
-``tests/test_durability.py`` logs the syncs in the recording process's memory, which the child's syncs never reach.
+transport). A child started by exec instead of a fork would share no pages, but its start (a new interpreter importing
+the writer, numpy and h5py: 0.33–0.36 s CPU, 0.44–0.47 s wall at load 5) would come before the file exists: more than a
+whole ``--fast`` session. The pipe was the cheaper transport for the recording thread (per-message pickling either way;
+the ring's copies keep the GIL). Also in the way: a recorder killed with SIGKILL leaves its file finished as
+``interrupted`` by the child (``tests/test_recorder.py`` and ``tests/test_live_session.py`` expect ``recording`` and a
+repair), and ``tests/test_durability.py`` logs the syncs in the recording process's memory, which the child's syncs
+never reach.
 
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
