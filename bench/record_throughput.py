@@ -118,6 +118,41 @@ CPU 0.96–1.07 (median 1.00, 8 of 16). No gain: a blocked sync already lets go 
 so only the session's end waits on the disk, and the change saved one short row sync there (0.1–8 ms measured). Not
 merged: it also let a power cut lose up to two commits instead of one.
 
+Session 14, the writing in a child process (2026-12-01; built on branch wp/s14-writerproc, commits a7b39c9 and 291caa3,
+reverted there): an unchanged :class:`SessionWriter` in a child forked by ``Recorder.open_session`` before any reader
+thread (h5py's lock held across the fork, SIGINT and SIGTERM ignored in the child, which creates the file and holds its
+live lock, and finishes it as ``interrupted`` when its pipe closes); the recording thread kept the checks and the order
+and sent each block, event and commit to it, the commits answered with the totals on the disk (failures raised at the
+next flush, as the writer's). Two transports: a 1 MiB pipe carrying pickles (protocol 5, the arrays written from their
+own buffers by ``os.writev``), or the arrays copied into a 4 MiB shared-memory ring and only the pickles through the
+pipe. The script then counted the reaped child's CPU (``getrusage(RUSAGE_CHILDREN)``) in the recorder's. Per 10 s
+session, medians of the runs below: the recording thread 40.5 ms → 26.5 (pipe) / 26.1 (ring), its readers 319 → 326 /
+325, the recording process as a whole 361 → 352 / 349 (−14 / −17 ms, medians of pairs); the child 61 / 57 ms beside it
+(the same writing alone 20–27 ms: the rest is its copy-on-write faults, ≈ 3 450 a session, reading the pipe or ring,
+unpickling, the writing beside the simulator). What the fork costs the recording process (``getrusage``, 6 sessions,
+load ≈ 5): ≈ 2 450 more minor faults (copy-on-write of the heap pages it shares with the child; the ring ≈ 1 000 more,
+its pages touched), the fork 2 ms CPU (61 MB resident), and opening the session 22–49 ms of wall instead of 10–17 (it
+waits for the child to create the file) — 4–7 % of a ``--fast`` session's ≈ 0.4 s. Pairs interleaved with main at
+a8802db, ``--repeat 7 --realtime-seconds 1``, recorder / sim alone (one thread / a thread per stream), medians:
+pipe, 5 pairs at load 6.0–6.8: per wall 0.79 / 0.82 → 0.81 / 0.80 (per-pair differences' medians +0.05 / −0.02), per
+CPU 0.85 / 0.88 → 0.75 / 0.77; ring, 5 pairs at load 6.8–9.9: per wall 0.90 / 0.89 → 0.87 / 0.91 (−0.03 / +0.02), per
+CPU 0.87 / 0.87 → 0.76 / 0.78; 6 triples main / pipe / ring at load 9.9–18.4: per wall 0.935 / 0.895, 0.825 / 0.810,
+0.735 / 0.820 (differences pipe −0.085 / −0.075, ring −0.150 / −0.100), per CPU 0.865 / 0.855, 0.745 / 0.765, 0.760 /
+0.775 (differences −0.11 / −0.11, −0.10 / −0.085, every pair lower); pipe, 6 more pairs as the load fell (2.1–5.6):
+per wall 0.820 / 0.835 → 0.720 / 0.725 (differences −0.080 / −0.100, 2 of 12 higher by 0.01), per CPU 0.850 / 0.860 →
+0.745 / 0.765 (−0.105 / −0.100), the recording thread 36.3 → 21.4 ms but its readers 312 → 325 ms, the process −6 ms.
+Not kept: per wall it gains nothing at these loads (the second core is not idle: the child waits for it like everything
+else), and even on an idle core it is bounded by what the recording process sheds, 1–4 % of its CPU (the readers pay
+back most of the recording thread's saving: the copy-on-write faults), against the 4–7 % the fork and the wait for the
+child's file add to a session's wall; per CPU it costs 0.10 (the child's and the parent's copy-on-write faults, the
+transport). A child started by exec instead of a fork would share no pages, but its start (a new interpreter importing
+the writer, numpy and h5py: 0.33–0.36 s CPU, 0.44–0.47 s wall at load 5) would come before the file exists: more than a
+whole ``--fast`` session. The pipe was the cheaper transport for the recording thread (per-message pickling either way;
+the ring's copies keep the GIL). Also in the way: a recorder killed with SIGKILL leaves its file finished as
+``interrupted`` by the child (``tests/test_recorder.py`` and ``tests/test_live_session.py`` expect ``recording`` and a
+repair), and ``tests/test_durability.py`` logs the syncs in the recording process's memory, which the child's syncs
+never reach.
+
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
 (7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it
