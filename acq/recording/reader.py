@@ -62,13 +62,20 @@ def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
 
 
 def _span(stream: str, first: int, end: int, what: str = "unreadable") -> str:
-    return f"{stream}: samples {first:,}–{end - 1:,} {what}".replace(",", " ")
+    """One damage line: a stream's samples, or the rows of a table dataset (``/flushes``, ``current/blocks/…``)."""
+    unit = "rows" if stream == FLUSHES or "/" in stream else "samples"
+    return f"{stream}: {unit} {first:,}–{end - 1:,} {what}".replace(",", " ")
 
 
 #: A damaged span found while reading: (stream, first row, end row, what), the words of :func:`_span`.
 Damage = tuple[str, int, int, str]
 #: What a span lost to chunks the storage zeroed is called (a checksum failure or a tail: "unreadable").
 ZEROED = "zeroed on disk"
+#: The commit table's dataset: its damage is named in rows ("flushes: rows 0–5 unreadable").
+FLUSHES = "flushes"
+#: Added to the damage of ``/flushes`` when its last row is lost with it: the commits are unknown, so what the
+#: datasets store is read instead (their checksums, extents and block table decide what is kept).
+COMMITS_UNKNOWN = "unreadable (the last commit lost with them: the samples stored are read)"
 
 
 def _lost(stream: str, keep: np.ndarray, zeroed: np.ndarray, total: int) -> list[Damage]:
@@ -168,9 +175,10 @@ def _checked_for_zeros(name: str, ds: h5py.Dataset, step: int, values: np.ndarra
     return Column(values, lost_from, holes, invented(name, values, chunks, holes) if chunks else ())
 
 
-def _committed(f: h5py.File, attrs: dict[str, Any], reader: _Reader) -> dict[str, int] | None:
-    """What the writer committed: the footer's counts (``attrs``, the root attributes read), else the last
-    ``/flushes`` row; None if neither exists.
+def _committed(attrs: dict[str, Any], flushes: Column | None) -> dict[str, int] | None:
+    """What the writer committed: the footer's counts (``attrs``, the root attributes read), else the last row of
+    ``flushes`` (``/flushes`` as read); None if neither is known (no ``/flushes``, or its last row unreadable: then
+    every sample stored is read, and the holes, tails and block table decide which are kept).
 
     The counts are numbers overwritten in place, and :func:`~acq.recording.layout.write_footer` writes them before
     the status: a count other than :data:`NO_COUNT` is a footer's whatever the status says, or if a cut lost the
@@ -178,13 +186,27 @@ def _committed(f: h5py.File, attrs: dict[str, Any], reader: _Reader) -> dict[str
     counts = [int(attrs.get(name, NO_COUNT)) for name in ("current_samples", "encoder_samples")]
     if min(counts) > NO_COUNT:
         return {"current_samples": counts[0], "encoder_samples": counts[1]}
-    if "flushes" not in f:
+    if flushes is None or not _last_commit_readable(flushes):
         return None
-    flushes = reader.column("flushes", None)
-    rows = flushes.values[readable((flushes,), len(flushes.values))]
-    if rows.size == 0:
+    if flushes.values.size == 0:
         return {"current_samples": 0, "current_blocks": 0, "encoder_samples": 0, "events": 0}
-    return {name: int(rows[-1][name]) for name in FLUSH_DTYPE.names if name != "host_ns"}
+    return {name: int(flushes.values[-1][name]) for name in FLUSH_DTYPE.names if name != "host_ns"}
+
+
+def _last_commit_readable(flushes: Column) -> bool:
+    """Whether the last row ``/flushes`` stores was read (none stored: nothing committed, known)."""
+    rows = flushes.values.size
+    return flushes.lost_from is None and (rows == 0 or bool(readable((flushes,), rows)[-1]))
+
+
+def _flushes_damage(flushes: Column, stored: int) -> list[Damage]:
+    """The spans of ``/flushes`` (``stored`` rows) not read, in rows; the last one says when the last commit is
+    lost with it."""
+    keep = readable((flushes,), flushes.values.size)
+    spans = [(FLUSHES, a, b, "unreadable") for a, b in lost_spans(keep, stored)]
+    if spans and not _last_commit_readable(flushes):
+        spans[-1] = (*spans[-1][:3], COMMITS_UNKNOWN)
+    return spans
 
 
 def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage]) -> CurrentData:
@@ -226,6 +248,9 @@ def _current_with_holes(rate_hz: float, device: str, table: list[Column], column
     rows = current_rows(*table, list(columns.values()), want)
     keep = rows.sample_keep
     total = want if want is not None else max(len(c.values) for c in columns.values())
+    for name, column in zip(("count", "first_index", "host_ns"), table):  # the block rows, named by their dataset
+        damage.extend((f"current/blocks/{name}", a, b, ZEROED if (a, b) in column.zeroed else "unreadable")
+                      for a, b in sorted(column.lost))
     damage.extend(_lost("current", keep, rows.zeroed, total))
     return CurrentData(rate_hz=rate_hz, device=device,
                        phases_a={ch: c.values[:keep.size][keep] for ch, c in columns.items()},
@@ -370,8 +395,9 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
     bench = _config_attr(p, attrs, "bench_json", Bench)
     profile = None if attrs.get("profile_json") == "null" else _config_attr(p, attrs, "profile_json", Profile)
     reader = _Reader(f, p, notes, end)
-    committed = _committed(f, attrs, reader)
-    damage: list[Damage] = []
+    flushes = reader.column(FLUSHES, None) if FLUSHES in f else None  # read whole: its checksums verified too
+    committed = _committed(attrs, flushes)
+    damage: list[Damage] = [] if flushes is None else _flushes_damage(flushes, reader.node(FLUSHES).shape[0])
     current = _read_current(reader, committed, damage)
     encoder = _read_encoder(reader, committed, damage)
     events = _read_events(reader, committed, damage)
