@@ -63,8 +63,10 @@ def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
 
 def _span(stream: str, first: int, end: int, what: str = "unreadable") -> str:
     """One damage line: a stream's samples, or the rows of a table dataset (``/flushes``, ``current/blocks/…``)."""
-    unit = "rows" if stream == FLUSHES or "/" in stream else "samples"
-    return f"{stream}: {unit} {first:,}–{end - 1:,} {what}".replace(",", " ")
+    if stream == FLUSHES or "/" in stream:
+        rows = f"row {first:,}" if end - first == 1 else f"rows {first:,}–{end - 1:,}"
+        return f"{stream}: {rows} {what}".replace(",", " ")
+    return f"{stream}: samples {first:,}–{end - 1:,} {what}".replace(",", " ")
 
 
 #: A damaged span found while reading: (stream, first row, end row, what), the words of :func:`_span`.
@@ -199,12 +201,12 @@ def _last_commit_readable(flushes: Column) -> bool:
     return flushes.lost_from is None and (rows == 0 or bool(readable((flushes,), rows)[-1]))
 
 
-def _flushes_damage(flushes: Column, stored: int) -> list[Damage]:
-    """The spans of ``/flushes`` (``stored`` rows) not read, in rows; the last one says when the last commit is
-    lost with it."""
+def _flushes_damage(flushes: Column, stored: int, committed: dict[str, int] | None) -> list[Damage]:
+    """The spans of ``/flushes`` (``stored`` rows) not read, in rows; the last one says when the commits are unknown
+    for it (``committed`` None: no footer's counts either)."""
     keep = readable((flushes,), flushes.values.size)
     spans = [(FLUSHES, a, b, "unreadable") for a, b in lost_spans(keep, stored)]
-    if spans and not _last_commit_readable(flushes):
+    if spans and committed is None:
         spans[-1] = (*spans[-1][:3], COMMITS_UNKNOWN)
     return spans
 
@@ -397,7 +399,8 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
     reader = _Reader(f, p, notes, end)
     flushes = reader.column(FLUSHES, None) if FLUSHES in f else None  # read whole: its checksums verified too
     committed = _committed(attrs, flushes)
-    damage: list[Damage] = [] if flushes is None else _flushes_damage(flushes, reader.node(FLUSHES).shape[0])
+    damage: list[Damage] = [] if flushes is None else _flushes_damage(flushes, reader.node(FLUSHES).shape[0],
+                                                                      committed)
     current = _read_current(reader, committed, damage)
     encoder = _read_encoder(reader, committed, damage)
     events = _read_events(reader, committed, damage)

@@ -69,7 +69,9 @@ def check_command(session_path: Path, write_intact: bool) -> int:
         click.echo(f"acq: damaged: {session_path} ({'; '.join(session.damage)}) — not modified; its intact part is "
                    f"in {copy.path}", err=True)
         return 1
-    after = [session.kept_after_first_damage(stream) for stream in ("current", "encoder")]
+    streams = ("current", "encoder")
+    after = ([session.kept_after_first_damage(stream) for stream in streams]
+             if any(name in streams for name, _, _ in session.damage_spans) else [0, 0])  # /flushes alone: none
     use = (f" (acq analyze --partial uses it; acq check --repair copies it into {recovered_path(session_path)})"
            if intact else "")
     click.echo(f"acq: damaged: {session_path} ({'; '.join(session.damage)}) — the intact part holds "
