@@ -91,13 +91,13 @@ def test_a_middle_chunk_of_the_block_table_costs_its_reads_only(recorded: Path, 
     them can (from the committed total when the counts are what was lost)."""
     path = _damaged(recorded, tmp_path, (f"current/blocks/{column}", 1))
     s = load(path)
-    span = "current: samples 655 360–1 310 719 unreadable"
-    assert s.damage == (span,)
+    span = f"current/blocks/{column}: rows 256–511 unreadable; current: samples 655 360–1 310 719 unreadable"
+    assert s.damage == tuple(span.split("; "))  # the dataset's rows, and the samples they placed
     assert s.current.sample_count == TOTAL - 256 * 2560 == 655360 + 20480
     _assert_current_kept_as_in(s, intact, [(655360, 1310720)])
     run = run_cli(capsys, "check", str(path))
     assert run.code == 1
-    assert f"{path}: {span}\n" in run.out
+    assert "".join(f"{path}: {line}\n" for line in s.damage) in run.out
     assert run.err == (f"acq: damaged: {path} ({span}) — the intact part holds 675840 current and 52000 encoder "
                        "samples, 20480 and 52000 of them after the first damaged span (acq analyze --partial uses "
                        f"it; acq check --repair copies it into {tmp_path / 'damaged.recovered.h5'})\n")
