@@ -120,7 +120,7 @@ def test_a_zeroed_chunk_of_one_encoder_column_is_a_hole_in_every_column(recorded
     assert s.encoder.index[15000] - s.encoder.index[14999] == 501  # the loss is a jump in the drive cycle: a gap
 
 
-@pytest.mark.parametrize("column", ["count", "first_index", "host_ns"])
+@pytest.mark.parametrize("column", ["count", "first_index"])
 def test_a_zeroed_chunk_of_the_block_table_costs_its_reads(recorded: Path, intact: Session, tmp_path: Path,
                                                            column: str) -> None:
     """Block-table rows 0–255 zeroed: the samples of those reads (0–655 359) cannot be placed; the 44 reads after
@@ -130,6 +130,17 @@ def test_a_zeroed_chunk_of_the_block_table_costs_its_reads(recorded: Path, intac
     assert s.damage == (f"current/blocks/{column}: rows 0–255 zeroed on disk",
                         "current: samples 0–655 359 zeroed on disk")
     _assert_kept(s, intact, _keep(TOTAL, (0, 655360)), _keep(SECONDS * ENCODER_HZ))
+    assert np.array_equal(s.current.block_host_ns, intact.current.block_host_ns[256:])
+
+
+def test_reads_whose_host_stamps_are_zeroed_join_the_next_read(recorded: Path, intact: Session,
+                                                               tmp_path: Path) -> None:
+    """Host stamps 0–255 zeroed, the counts and DAQ indices read: the 256 reads join read 256 into one block stamped
+    when it returned; every sample kept (before: samples 0–655 359 lost)."""
+    s = load(_zeroed(recorded, tmp_path / "z.h5", ("current/blocks/host_ns", 0)))
+    assert s.damage == ("current/blocks/host_ns: rows 0–255 zeroed on disk",)
+    _assert_kept(s, intact, _keep(TOTAL), _keep(SECONDS * ENCODER_HZ))
+    assert (s.current.block_first_index[0], s.current.block_count[0]) == (0, 257 * 2560)
     assert np.array_equal(s.current.block_host_ns, intact.current.block_host_ns[256:])
 
 
