@@ -156,3 +156,45 @@ def test_a_complete_file_with_its_commit_table_unreadable_is_damaged_not_verifie
     assert (copy.current.sample_count, copy.encoder.index.size) == (2 * RATE_HZ, 2000) and copy.damage == ()
     np.testing.assert_array_equal(copy.current.phases_a["i_a"], intact.current.phases_a["i_a"])
     np.testing.assert_array_equal(copy.encoder.position_counts, intact.encoder.position_counts)
+
+
+@pytest.fixture(scope="module")
+def partial_chunks(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """2.2 s: about 22 reads of 2 560 samples (block-table chunks of 256 rows) and 2 200 encoder rows (chunks of
+    500), so the last chunk of each holds rows never written."""
+    return record_session_in_subprocess(tmp_path_factory.mktemp("partial"), 2.2)
+
+
+def test_without_its_commits_a_file_extended_over_unwritten_rows_keeps_only_stamped_rows(
+        partial_chunks: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """As a kill can leave it: the datasets extended over rows of their last chunk, already on disk, that were never
+    written there (zeros that pass the checksum), no footer, /flushes unreadable. Rows with a host stamp of 0 are not
+    read as samples (before: 300 encoder rows of zeros, cycle 0 at host time 0, kept; 8 reads of 0 samples)."""
+    path = tmp_path / "extended.h5"
+    shutil.copyfile(partial_chunks, path)
+    intact = load(partial_chunks)
+    blocks, encoder = intact.current.block_count.size, intact.encoder.index.size
+    assert blocks < 256 and encoder % 500 and intact.current.sample_count == blocks * 2560
+    extended = encoder + 500 - encoder % 500  # the last chunk's end
+    with h5py.File(path, "r+") as f:
+        for name in ("current_samples", "encoder_samples"):
+            f.attrs.modify(name, np.int64(-1))  # the footer never written
+        f.attrs.modify("status", "recording")
+        for name in ("count", "first_index", "host_ns"):
+            f[f"current/blocks/{name}"].resize((blocks + 8,))
+        for name in f["encoder"]:
+            f[f"encoder/{name}"].resize((extended,))
+    with h5py.File(path, "r") as f:
+        assert not f["encoder/host_ns"][encoder:].any()
+        assert f["encoder/host_ns"].id.get_num_chunks() == extended // 500  # the zeros lie in a chunk on disk
+    rows = _flip(path, "flushes")
+    s = load(path)
+    assert s.damage == (f"flushes: {'row 0' if rows == 1 else f'rows 0–{rows - 1}'} unreadable ({DAMAGED_COMMITS})",)
+    assert (s.current.block_count.size, s.current.sample_count, s.encoder.index.size) == (blocks, blocks * 2560,
+                                                                                          encoder)
+    np.testing.assert_array_equal(s.encoder.host_ns, intact.encoder.host_ns)
+    np.testing.assert_array_equal(s.current.block_host_ns, intact.current.block_host_ns)
+    run = run_cli(capsys, "check", str(path))
+    assert run.code == 1
+    copy = load(tmp_path / "extended.recovered.h5")
+    assert (copy.current.sample_count, copy.encoder.index.size) == (blocks * 2560, encoder)

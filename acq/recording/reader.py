@@ -11,6 +11,7 @@ seen as a gap); a chunk never written or beyond the file's end ends the intact p
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -211,10 +212,25 @@ def _flushes_damage(flushes: Column, stored: int, committed: dict[str, int] | No
     return spans
 
 
+def _stamped(columns: list[Column], stamps: Column) -> list[Column]:
+    """``columns`` (of one stream) cut after the last row whose host stamp in ``stamps`` (ns) is not 0 or not read.
+
+    For a file whose commits are unknown (:func:`_committed` None): a kill can leave a dataset extended over rows
+    of a chunk already on disk that were never written there; they read as zeros that pass the checksum, and no host
+    arrival stamp is 0 (a monotonic clock's ns since boot)."""
+    zero = stamps.values == 0
+    for a, b in stamps.lost:  # a row not read says nothing
+        zero[a:b] = False
+    rows = int(np.flatnonzero(~zero)[-1]) + 1 if (~zero).any() else 0
+    return [replace(c, values=c.values[:rows]) if len(c.values) > rows else c for c in columns]
+
+
 def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage]) -> CurrentData:
     g = reader.node("current")
     n_blocks = None if committed is None else committed.get("current_blocks")
     table = [reader.column(f"current/blocks/{name}", n_blocks) for name in ("count", "first_index", "host_ns")]
+    if committed is None:
+        table = _stamped(table, table[2])
     try:
         rate_hz, device = float(g.attrs["rate_hz"]), str(_attr(g.attrs["device"]))
         channels = [c for c in str(_attr(g.attrs["channels"])).split(",") if c]
@@ -266,6 +282,8 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
     for name in OPTIONAL_ENCODER:
         if name in g:
             columns[name] = reader.column(f"encoder/{name}", want)
+    if committed is None:
+        columns = dict(zip(columns, _stamped(list(columns.values()), columns["host_ns"])))
     n = min(len(c.values) for c in columns.values())
     total = want if want is not None else max(len(c.values) for c in columns.values())
     keep = readable(list(columns.values()), n)  # a row lost in one column is lost in all: a jump in the cycle index
