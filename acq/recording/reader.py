@@ -11,7 +11,6 @@ seen as a gap); a chunk never written or beyond the file's end ends the intact p
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -20,8 +19,9 @@ import numpy as np
 from pydantic import ValidationError
 
 from acq.recording.h5safe import open_read, superblock_eof, zero_tail_start
+from acq.recording.commits import FLUSHES, committed_counts, flushes_damage, stamped
 from acq.recording.holes import Column, Span, current_rows, lost_spans, only_zeroed, readable
-from acq.recording.layout import FLUSH_DTYPE, FOOTER_TEXT, FORMAT, FORMAT_VERSION, NO_COUNT, OPTIONAL_ENCODER
+from acq.recording.layout import FOOTER_TEXT, FORMAT, FORMAT_VERSION, OPTIONAL_ENCODER
 from acq.recording.paths import require_session_file
 from acq.recording.session import CurrentData, EncoderData, Session
 from acq.recording.zeroed import invented, zero_chunks
@@ -74,11 +74,6 @@ def _span(stream: str, first: int, end: int, what: str = "unreadable") -> str:
 Damage = tuple[str, int, int, str]
 #: What a span lost to chunks the storage zeroed is called (a checksum failure or a tail: "unreadable").
 ZEROED = "zeroed on disk"
-#: The commit table's dataset: its damage is named in rows ("flushes: rows 0–5 unreadable").
-FLUSHES = "flushes"
-#: Added to the damage of ``/flushes`` when its last row is lost with it: the commits are unknown, so what the
-#: datasets store is read instead (their checksums, extents and block table decide what is kept).
-COMMITS_UNKNOWN = "unreadable (the last commit lost with them: the samples stored are read)"
 
 
 def _lost(stream: str, keep: np.ndarray, zeroed: np.ndarray, total: int) -> list[Damage]:
@@ -178,59 +173,12 @@ def _checked_for_zeros(name: str, ds: h5py.Dataset, step: int, values: np.ndarra
     return Column(values, lost_from, holes, invented(name, values, chunks, holes) if chunks else ())
 
 
-def _committed(attrs: dict[str, Any], flushes: Column | None) -> dict[str, int] | None:
-    """What the writer committed: the footer's counts (``attrs``, the root attributes read), else the last row of
-    ``flushes`` (``/flushes`` as read); None if neither is known (no ``/flushes``, or its last row unreadable: then
-    every sample stored is read, and the holes, tails and block table decide which are kept).
-
-    The counts are numbers overwritten in place, and :func:`~acq.recording.layout.write_footer` writes them before
-    the status: a count other than :data:`NO_COUNT` is a footer's whatever the status says, or if a cut lost the
-    status string."""
-    counts = [int(attrs.get(name, NO_COUNT)) for name in ("current_samples", "encoder_samples")]
-    if min(counts) > NO_COUNT:
-        return {"current_samples": counts[0], "encoder_samples": counts[1]}
-    if flushes is None or not _last_commit_readable(flushes):
-        return None
-    if flushes.values.size == 0:
-        return {"current_samples": 0, "current_blocks": 0, "encoder_samples": 0, "events": 0}
-    return {name: int(flushes.values[-1][name]) for name in FLUSH_DTYPE.names if name != "host_ns"}
-
-
-def _last_commit_readable(flushes: Column) -> bool:
-    """Whether the last row ``/flushes`` stores was read (none stored: nothing committed, known)."""
-    rows = flushes.values.size
-    return flushes.lost_from is None and (rows == 0 or bool(readable((flushes,), rows)[-1]))
-
-
-def _flushes_damage(flushes: Column, stored: int, committed: dict[str, int] | None) -> list[Damage]:
-    """The spans of ``/flushes`` (``stored`` rows) not read, in rows; the last one says when the commits are unknown
-    for it (``committed`` None: no footer's counts either)."""
-    keep = readable((flushes,), flushes.values.size)
-    spans = [(FLUSHES, a, b, "unreadable") for a, b in lost_spans(keep, stored)]
-    if spans and committed is None:
-        spans[-1] = (*spans[-1][:3], COMMITS_UNKNOWN)
-    return spans
-
-
-def _stamped(columns: list[Column], stamps: Column) -> list[Column]:
-    """``columns`` (of one stream) cut after the last row whose host stamp in ``stamps`` (ns) is not 0 or not read.
-
-    For a file whose commits are unknown (:func:`_committed` None): a kill can leave a dataset extended over rows
-    of a chunk already on disk that were never written there; they read as zeros that pass the checksum, and no host
-    arrival stamp is 0 (a monotonic clock's ns since boot)."""
-    zero = stamps.values == 0
-    for a, b in stamps.lost:  # a row not read says nothing
-        zero[a:b] = False
-    rows = int(np.flatnonzero(~zero)[-1]) + 1 if (~zero).any() else 0
-    return [replace(c, values=c.values[:rows]) if len(c.values) > rows else c for c in columns]
-
-
 def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage]) -> CurrentData:
     g = reader.node("current")
     n_blocks = None if committed is None else committed.get("current_blocks")
     table = [reader.column(f"current/blocks/{name}", n_blocks) for name in ("count", "first_index", "host_ns")]
     if committed is None:
-        table = _stamped(table, table[2])
+        table = stamped(table, table[2])
     try:
         rate_hz, device = float(g.attrs["rate_hz"]), str(_attr(g.attrs["device"]))
         channels = [c for c in str(_attr(g.attrs["channels"])).split(",") if c]
@@ -283,7 +231,7 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
         if name in g:
             columns[name] = reader.column(f"encoder/{name}", want)
     if committed is None:
-        columns = dict(zip(columns, _stamped(list(columns.values()), columns["host_ns"])))
+        columns = dict(zip(columns, stamped(list(columns.values()), columns["host_ns"])))
     n = min(len(c.values) for c in columns.values())
     total = want if want is not None else max(len(c.values) for c in columns.values())
     keep = readable(list(columns.values()), n)  # a row lost in one column is lost in all: a jump in the cycle index
@@ -416,8 +364,8 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
     profile = None if attrs.get("profile_json") == "null" else _config_attr(p, attrs, "profile_json", Profile)
     reader = _Reader(f, p, notes, end)
     flushes = reader.column(FLUSHES, None) if FLUSHES in f else None  # read whole: its checksums verified too
-    committed = _committed(attrs, flushes)
-    damage: list[Damage] = [] if flushes is None else _flushes_damage(flushes, reader.node(FLUSHES).shape[0],
+    committed = committed_counts(attrs, flushes)
+    damage: list[Damage] = [] if flushes is None else flushes_damage(flushes, reader.node(FLUSHES).shape[0],
                                                                       committed)
     current = _read_current(reader, committed, damage)
     encoder = _read_encoder(reader, committed, damage)
