@@ -137,8 +137,10 @@ def test_check_repair_copies_the_samples_before_the_cut_into_a_new_session_and_l
     before = hashlib.sha256(path.read_bytes()).hexdigest()
     current, encoder = _kept_before(recorded, cut)
     run = run_cli(capsys, "check", "--repair", str(path))
-    assert run.code == 0, run.err
+    assert run.code == 1  # the copy is written, and the loss is an error still
     copy_path = tmp_path / "cut.recovered.h5"
+    assert run.err == (f"acq: damaged: {path} ({'; '.join(load(path).damage)}) — not modified; its intact part is "
+                       f"in {copy_path}\n")
     copy = load(copy_path)
     was = load(path).meta
     reason = (f"recovered from a file cut at {_bytes(cut)} of {_bytes(size)} bytes: {current / RATE_HZ:.1f} s of "
@@ -217,7 +219,7 @@ def test_a_cut_copy_whose_status_is_lost_keeps_the_samples_the_footer_counts(
                         f"current: samples {_bytes(current)}–{_bytes(10 * RATE_HZ - 1)} unreadable",
                         f"encoder: samples {_bytes(encoder)}–{_bytes(10 * ENCODER_HZ - 1)} unreadable")
     run = run_cli(capsys, "check", "--repair", str(path))
-    assert run.code == 0, run.err
+    assert run.code == 1 and run.err.startswith(f"acq: damaged: {path} (")
     copy = load(tmp_path / "cut.recovered.h5")
     assert copy.damage == () and copy.status == "interrupted"
     _assert_prefix_of(copy, intact, current, encoder)
@@ -230,7 +232,7 @@ def test_a_cut_copy_of_a_recovered_copy_keeps_its_attributes_and_the_samples_bef
     of a recording is. Before: refused, 'not a readable HDF5 session file (file cut: …, root attributes lost)'."""
     path = tmp_path / "cut.h5"
     _cut_copy(recorded, path, 90)
-    assert run_cli(capsys, "check", "--repair", str(path)).code == 0
+    assert run_cli(capsys, "check", "--repair", str(path)).code == 1
     recovered = tmp_path / "cut.recovered.h5"
     copy = load(recovered)
     again = tmp_path / "again.h5"

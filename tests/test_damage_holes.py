@@ -83,7 +83,7 @@ def test_two_holes_are_two_spans_and_everything_between_and_after_is_kept(record
     _assert_current_kept_as_in(s, intact, [(256000, 258560), (768000, 770560)])
 
 
-@pytest.mark.parametrize("column", ["count", "first_index", "host_ns"])
+@pytest.mark.parametrize("column", ["count", "first_index"])
 def test_a_middle_chunk_of_the_block_table_costs_its_reads_only(recorded: Path, intact: Session, tmp_path: Path,
                                                                column: str, capsys: pytest.CaptureFixture[str]
                                                                ) -> None:
@@ -91,16 +91,42 @@ def test_a_middle_chunk_of_the_block_table_costs_its_reads_only(recorded: Path, 
     them can (from the committed total when the counts are what was lost)."""
     path = _damaged(recorded, tmp_path, (f"current/blocks/{column}", 1))
     s = load(path)
-    span = "current: samples 655 360–1 310 719 unreadable"
-    assert s.damage == (span,)
+    span = f"current/blocks/{column}: rows 256–511 unreadable; current: samples 655 360–1 310 719 unreadable"
+    assert s.damage == tuple(span.split("; "))  # the dataset's rows, and the samples they placed
     assert s.current.sample_count == TOTAL - 256 * 2560 == 655360 + 20480
     _assert_current_kept_as_in(s, intact, [(655360, 1310720)])
     run = run_cli(capsys, "check", str(path))
     assert run.code == 1
-    assert f"{path}: {span}\n" in run.out
+    assert "".join(f"{path}: {line}\n" for line in s.damage) in run.out
     assert run.err == (f"acq: damaged: {path} ({span}) — the intact part holds 675840 current and 52000 encoder "
                        "samples, 20480 and 52000 of them after the first damaged span (acq analyze --partial uses "
                        f"it; acq check --repair copies it into {tmp_path / 'damaged.recovered.h5'})\n")
+
+
+def test_reads_whose_host_stamps_are_lost_join_the_next_read_and_keep_their_samples(
+        recorded: Path, intact: Session, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Block-table host stamps 256–511 lost, their counts and DAQ indices read: the 256 reads join read 512 into one
+    block stamped when read 512 returned (its samples had all arrived then; the stamp stays paired with the block's
+    last sample). Before: samples 655 360–1 310 719 lost (675 840 of 1 331 200 kept)."""
+    path = _damaged(recorded, tmp_path, ("current/blocks/host_ns", 1))
+    s = load(path)
+    assert s.damage == ("current/blocks/host_ns: rows 256–511 unreadable",)
+    assert s.current.sample_count == TOTAL
+    np.testing.assert_array_equal(s.current.sample_index(), np.arange(TOTAL))
+    for phase in ("i_a", "i_b", "i_c"):
+        np.testing.assert_array_equal(s.current.phases_a[phase], intact.current.phases_a[phase])
+    assert s.current.block_count.size == intact.current.block_count.size - 256
+    joined = 256  # the block that starts at read 256 and ends with read 512
+    assert (s.current.block_first_index[joined], s.current.block_count[joined]) == (256 * 2560, 257 * 2560)
+    assert s.current.block_host_ns[joined] == intact.current.block_host_ns[512]
+    keep = np.ones(intact.current.block_count.size, dtype=bool)
+    keep[256:512] = False
+    np.testing.assert_array_equal(s.current.block_host_ns, intact.current.block_host_ns[keep])
+    run = run_cli(capsys, "check", str(path))
+    assert run.code == 1
+    assert run.err == (f"acq: damaged: {path} (current/blocks/host_ns: rows 256–511 unreadable) — the intact part "
+                       f"holds {TOTAL} current and 52000 encoder samples (acq analyze --partial uses it; acq check "
+                       f"--repair copies it into {tmp_path / 'damaged.recovered.h5'})\n")
 
 
 def test_a_middle_chunk_of_the_encoder_position_costs_those_rows_in_every_column(recorded: Path, intact: Session,

@@ -392,7 +392,8 @@ class Monitor:
                 continue
             self._earlier.add(key)
             if session.status == "recording":
-                repair(path, "the monitor stopped during this window's capture (found on restart)")
+                if not session.damage:  # a damaged one stays as it is (repair would copy it beside: acq check does)
+                    repair(path, "the monitor stopped during this window's capture (found on restart)")
                 self._mark(key, "interrupted", "the monitor stopped during this window's capture (found on restart)")
             elif session.status != "complete":
                 self._mark(key, "interrupted", f"window capture {session.status}: {session.meta.stop_reason}")

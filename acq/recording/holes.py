@@ -129,7 +129,7 @@ def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Se
     """
     samples_stored = min(len(phase.values) for phase in phases)
     rows = min(len(count.values), len(first_index.values), len(host_ns.values))
-    block_ok = readable((count, first_index, host_ns), rows)
+    block_ok = readable((count, first_index), rows)
     n = count.values.astype(np.int64)
     n_known = n.copy()
     for start, stop in count.lost:
@@ -145,13 +145,35 @@ def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Se
     block_ok &= known[:rows]
     offset, n = offset[:rows], n[:rows]
     block_ok &= offset + n <= samples_stored  # samples of a read not all stored (a kill between the two writes)
+    first = first_index.values[:rows].astype(np.int64)
+    borrowed = _borrowing_stamps(block_ok, readable((host_ns,), rows), offset, n, first)
+    block_ok &= readable((host_ns,), rows) | borrowed
     placed = np.zeros(samples_stored, dtype=bool)
     for a, b in zip(offset[block_ok], offset[block_ok] + n[block_ok]):
         placed[a:b] = True
     sample_keep = placed & readable(phases, samples_stored)
     zeroed = _zeroed_samples(placed, offset, block_ok, only_zeroed((count, first_index, host_ns), rows), phases)
-    return _split_blocks(sample_keep, zeroed & ~sample_keep, offset[block_ok], n[block_ok],
-                         first_index.values[:rows][block_ok], host_ns.values[:rows][block_ok])
+    ok = np.flatnonzero(block_ok)
+    heads = np.flatnonzero(~np.concatenate(([False], borrowed[ok[:-1]])) | (np.diff(ok, prepend=-1) != 1))
+    last = np.append(heads[1:], ok.size)[:heads.size] - 1  # each group's last row: the read whose stamp it takes
+    grouped = np.add.reduceat(n[ok], heads) if ok.size else n[ok]
+    return _split_blocks(sample_keep, zeroed & ~sample_keep, offset[ok][heads], grouped, first[ok][heads],
+                         host_ns.values[:rows][ok][last])
+
+
+def _borrowing_stamps(placeable: np.ndarray, stamped: np.ndarray, offset: np.ndarray, n: np.ndarray,
+                      first_index: np.ndarray) -> np.ndarray:
+    """Block rows placed (``placeable``: count and DAQ index read) whose host stamp is lost (not ``stamped``) that
+    join the next read with a stamp: a run of them followed by such a read, every sample of the run and of that read
+    contiguous in the file and in the DAQ's index. The joined reads are one block stamped when its last read
+    returned: its samples had all arrived then, and the stamp is paired with its last sample, as a read's is."""
+    borrowed = np.zeros(placeable.size, dtype=bool)
+    for a, b in lost_spans(stamped, placeable.size):
+        if b < placeable.size and placeable[a:b + 1].all() \
+                and np.array_equal(offset[a:b] + n[a:b], offset[a + 1:b + 1]) \
+                and np.array_equal(first_index[a:b] + n[a:b], first_index[a + 1:b + 1]):
+            borrowed[a:b] = True
+    return borrowed
 
 
 def _zeroed_samples(placed: np.ndarray, offset: np.ndarray, block_ok: np.ndarray, table_zeroed: np.ndarray,

@@ -19,8 +19,9 @@ import numpy as np
 from pydantic import ValidationError
 
 from acq.recording.h5safe import open_read, superblock_eof, zero_tail_start
+from acq.recording.commits import FLUSHES, committed_counts, flushes_damage, stamped
 from acq.recording.holes import Column, Span, current_rows, lost_spans, only_zeroed, readable
-from acq.recording.layout import FLUSH_DTYPE, FOOTER_TEXT, FORMAT, FORMAT_VERSION, NO_COUNT, OPTIONAL_ENCODER
+from acq.recording.layout import FOOTER_TEXT, FORMAT, FORMAT_VERSION, OPTIONAL_ENCODER
 from acq.recording.paths import require_session_file
 from acq.recording.session import CurrentData, EncoderData, Session
 from acq.recording.zeroed import invented, zero_chunks
@@ -62,6 +63,10 @@ def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
 
 
 def _span(stream: str, first: int, end: int, what: str = "unreadable") -> str:
+    """One damage line: a stream's samples, or the rows of a table dataset (``/flushes``, ``current/blocks/…``)."""
+    if stream == FLUSHES or "/" in stream:
+        rows = f"row {first:,}" if end - first == 1 else f"rows {first:,}–{end - 1:,}"
+        return f"{stream}: {rows} {what}".replace(",", " ")
     return f"{stream}: samples {first:,}–{end - 1:,} {what}".replace(",", " ")
 
 
@@ -168,29 +173,12 @@ def _checked_for_zeros(name: str, ds: h5py.Dataset, step: int, values: np.ndarra
     return Column(values, lost_from, holes, invented(name, values, chunks, holes) if chunks else ())
 
 
-def _committed(f: h5py.File, attrs: dict[str, Any], reader: _Reader) -> dict[str, int] | None:
-    """What the writer committed: the footer's counts (``attrs``, the root attributes read), else the last
-    ``/flushes`` row; None if neither exists.
-
-    The counts are numbers overwritten in place, and :func:`~acq.recording.layout.write_footer` writes them before
-    the status: a count other than :data:`NO_COUNT` is a footer's whatever the status says, or if a cut lost the
-    status string."""
-    counts = [int(attrs.get(name, NO_COUNT)) for name in ("current_samples", "encoder_samples")]
-    if min(counts) > NO_COUNT:
-        return {"current_samples": counts[0], "encoder_samples": counts[1]}
-    if "flushes" not in f:
-        return None
-    flushes = reader.column("flushes", None)
-    rows = flushes.values[readable((flushes,), len(flushes.values))]
-    if rows.size == 0:
-        return {"current_samples": 0, "current_blocks": 0, "encoder_samples": 0, "events": 0}
-    return {name: int(rows[-1][name]) for name in FLUSH_DTYPE.names if name != "host_ns"}
-
-
 def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage]) -> CurrentData:
     g = reader.node("current")
     n_blocks = None if committed is None else committed.get("current_blocks")
     table = [reader.column(f"current/blocks/{name}", n_blocks) for name in ("count", "first_index", "host_ns")]
+    if committed is None:
+        table = stamped(table, table[2])
     try:
         rate_hz, device = float(g.attrs["rate_hz"]), str(_attr(g.attrs["device"]))
         channels = [c for c in str(_attr(g.attrs["channels"])).split(",") if c]
@@ -226,6 +214,9 @@ def _current_with_holes(rate_hz: float, device: str, table: list[Column], column
     rows = current_rows(*table, list(columns.values()), want)
     keep = rows.sample_keep
     total = want if want is not None else max(len(c.values) for c in columns.values())
+    for name, column in zip(("count", "first_index", "host_ns"), table):  # the block rows, named by their dataset
+        damage.extend((f"current/blocks/{name}", a, b, ZEROED if (a, b) in column.zeroed else "unreadable")
+                      for a, b in sorted(column.lost))
     damage.extend(_lost("current", keep, rows.zeroed, total))
     return CurrentData(rate_hz=rate_hz, device=device,
                        phases_a={ch: c.values[:keep.size][keep] for ch, c in columns.items()},
@@ -239,6 +230,8 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
     for name in OPTIONAL_ENCODER:
         if name in g:
             columns[name] = reader.column(f"encoder/{name}", want)
+    if committed is None:
+        columns = dict(zip(columns, stamped(list(columns.values()), columns["host_ns"])))
     n = min(len(c.values) for c in columns.values())
     total = want if want is not None else max(len(c.values) for c in columns.values())
     keep = readable(list(columns.values()), n)  # a row lost in one column is lost in all: a jump in the cycle index
@@ -370,8 +363,10 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
     bench = _config_attr(p, attrs, "bench_json", Bench)
     profile = None if attrs.get("profile_json") == "null" else _config_attr(p, attrs, "profile_json", Profile)
     reader = _Reader(f, p, notes, end)
-    committed = _committed(f, attrs, reader)
-    damage: list[Damage] = []
+    flushes = reader.column(FLUSHES, None) if FLUSHES in f else None  # read whole: its checksums verified too
+    committed = committed_counts(attrs, flushes)
+    damage: list[Damage] = [] if flushes is None else flushes_damage(flushes, reader.node(FLUSHES).shape[0],
+                                                                      committed)
     current = _read_current(reader, committed, damage)
     encoder = _read_encoder(reader, committed, damage)
     events = _read_events(reader, committed, damage)

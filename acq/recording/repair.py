@@ -28,16 +28,21 @@ def repair(path: Path | str, stop_reason: str) -> Session:
     """Rewrite a session left with status ``recording`` (writer killed) as ``interrupted``; return it as read.
 
     HDF5 keeps a crashed SWMR writer's file marked as open for writing, so it cannot be reopened
-    for writing in place: every committed, intact sample is copied into a fresh file beside it
+    for writing in place: every committed sample is copied into a fresh file beside it
     (uneven column lengths cut to the common length), which then atomically replaces the original.
     A write failure leaves the original untouched and no temp file. A file a running recorder still holds is not
     touched (:class:`~acq.recording.live.SessionBeingRecorded`).
+
+    A damaged file (anything unreadable: a chunk failing its checksum, the commit table ``/flushes``, a cut) is never
+    rewritten: what the reader cannot use now (samples no readable block row places, rows of a damaged chunk)
+    would be gone for good. Its readable part is copied into :func:`recovered_path` instead (:func:`recover`), and
+    that copy is returned: its ``path`` is not ``path``.
     """
     p = Path(path)
     refuse_if_recorded(p)
     session = load(p)
     if session.damage:
-        stop_reason = f"{stop_reason}; kept the intact part ({'; '.join(session.damage)})"
+        return _recover(p, session)
     return _copy(p, session, p, stop_reason)
 
 
@@ -57,7 +62,11 @@ def recover(path: Path | str) -> Session:
     """
     p = Path(path)
     refuse_if_recorded(p)
-    session = load(p)
+    return _recover(p, load(p))
+
+
+def _recover(p: Path, session: Session) -> Session:
+    """:func:`recover` of ``session``, read from ``p``."""
     c, e = session.current, session.encoder
     kept = f"{c.sample_count / c.rate_hz:.1f} s of current, {e.index.size * e.period_s:.1f} s of encoder kept"
     size, eof = p.stat().st_size, superblock_eof(p)
