@@ -316,3 +316,28 @@ def test_two_analyses_of_a_window_in_the_same_second_keep_the_later_against_the_
     assert entry.analyzed_utc == later_doc["analyzed_utc"]
     assert queue.notes == [f"{session.path.name}: not filed — the catalogue holds a later analysis of it "
                            f"({later_doc['analyzed_utc']}; this one {spooled_doc['analyzed_utc']})"]
+
+
+def test_a_whole_second_stamp_replayed_against_a_later_one_in_its_second_loses_under_an_icu_collation(
+        postgres_server: str) -> None:
+    """Stamps compare as text. A database whose default collation is ICU's orders '…05+00:00' (an older acq's
+    whole-second stamp, replayed from a spool) after '…05.500000+00:00' (weighing the punctuation last), so the older
+    analysis replaced the later one (reviewer, session 14). The comparison is bytewise on both back ends."""
+    import psycopg
+    from dataclasses import replace
+
+    url = new_database(postgres_server)
+    name = url.rsplit("/", 1)[1]
+    with psycopg.connect(f"{postgres_server}/postgres", autocommit=True) as db:
+        db.execute(f"DROP DATABASE {name}")
+        db.execute(f"CREATE DATABASE {name} TEMPLATE template0 LOCALE_PROVIDER icu ICU_LOCALE 'en-US' LOCALE 'C'")
+        icu_order = db.execute("SELECT '2026-01-02T00:00:05+00:00' COLLATE \"und-x-icu\""
+                               " <= '2026-01-02T00:00:05.500000+00:00' COLLATE \"und-x-icu\"").fetchone()[0]
+    later, older = _outcome("s-01", 890.0), _outcome("s-01", 880.0)
+    later = replace(later, doc={**later.doc, "analyzed_utc": "2026-01-02T00:00:05.500000+00:00"})
+    older = replace(older, doc={**older.doc, "analyzed_utc": "2026-01-02T00:00:05+00:00"})
+    with Catalogue(url) as c:
+        assert c.record(later) is None
+        kept = c.record(older, keep_newer=True)
+        (entry,) = c.entries()
+    assert (icu_order, kept, entry.K_Nm_per_rad) == (False, "2026-01-02T00:00:05.500000+00:00", 890.0)

@@ -263,8 +263,9 @@ class Catalogue:
             # replace an analysis of a whole file
             # (a row filed before schema 5 has no file path: its file hash tells the same file; rowcount, not RETURNING:
             # SQLite before 3.35 has none — both back ends count 0 rows when the WHERE skips the update)
-            # (ISO 8601 times, UTC, with microseconds or whole seconds: their order as text is their order in time)
-            newer = " AND analyses.analyzed_utc <= excluded.analyzed_utc" if keep_newer else ""
+            # (ISO 8601 times, UTC, with microseconds or whole seconds: their order as bytes is their order in time)
+            order = self._dialect.bytewise
+            newer = f" AND analyses.analyzed_utc{order} <= excluded.analyzed_utc{order}" if keep_newer else ""
             stored = self._execute(
                 f"INSERT INTO analyses ({columns}) VALUES ({', '.join('?' * len(values))})"
                 f" ON CONFLICT (session_key, request_key) DO UPDATE SET {updates}"
@@ -306,7 +307,8 @@ class Catalogue:
         rows = self._execute(
             "SELECT s.*, a.*, COALESCE(a.file_path, s.path) AS analysed_path FROM sessions s JOIN analyses a"
             f" ON a.session_key = s.session_key{where}"
-            " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path, a.analyzed_utc, a.id",
+            " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path,"
+            f" a.analyzed_utc{self._dialect.bytewise}, a.id",
             params).fetchall()
         if monitor is None:
             return [_entry(r) for r in rows]
