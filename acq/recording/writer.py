@@ -19,7 +19,6 @@ counted (:attr:`SessionWriter.failure`).
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import time
@@ -42,7 +41,8 @@ from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBloc
 from drivers.config import Bench, Profile
 from acqcore.errors import ConfigError, StorageError
 
-#: Free bytes kept for the footer and HDF5's metadata beyond what a flush writes; a flush that would leave
+#: Free bytes kept for HDF5's metadata beyond what a flush writes (the footer needs none: it is written in place); a
+#: flush that would leave
 #: less fails the recording as "disk full" before HDF5 sees an ENOSPC (which leaves HDF5 unreliable, see
 #: acq.recording.h5safe). 1 MiB is ~10x the metadata a 60 s session's footer and chunk indexes grow by per flush.
 RESERVE_BYTES = 1 << 20
@@ -346,8 +346,9 @@ class SessionWriter:
         on the disk when this returns.
 
         After a write failure the status is ``failed`` with the failure and the seconds kept as reason
-        ("disk full: /data/x.h5 — 3.2 s kept"); the footer is written when the disk has room for it and
-        the file could be closed cleanly, else the file stays ``recording`` and its ``/flushes`` rows
+        ("disk full: /data/x.h5 — 3.2 s kept"). The footer takes no new byte of the disk (its strings are created at
+        full size and overwritten in place, :mod:`acq.recording.layout`), so a full disk still gets it; only a file
+        HDF5 itself failed to write (abandoned, its state unreliable) stays ``recording``, and its ``/flushes`` rows
         tell readers (and ``acq check``) what is stored. The file is no longer marked as being recorded after this.
         """
         try:
@@ -367,9 +368,6 @@ class SessionWriter:
             self._file.close()
         if self._abandoned:
             return
-        with contextlib.suppress(OSError):
-            if free_bytes(self.path.parent) < RESERVE_BYTES // 4:
-                return  # no room for a footer: the /flushes rows say what is stored
         f = self._reopen()
         try:
             # only a column longer than what was committed is opened to be cut (the writer knows each length)
