@@ -13,7 +13,9 @@ import h5py
 import numpy as np
 import pytest
 
+import acq.recording.writer
 from acq.config import load_bench, load_profile
+from acq.recording import layout
 from acq.recording.reader import load
 from acq.recording.recorder import Recorder
 from acq.recording.session import Session
@@ -116,9 +118,10 @@ def test_a_cut_copy_keeps_the_samples_before_the_cut_and_says_what_is_lost(
         assert current >= (percent - 20) / 100 * 10 * RATE_HZ and encoder >= (percent - 20) / 100 * 10 * ENCODER_HZ
     s = load(path)
     _assert_prefix_of(s, intact, current, encoder)
-    past = footer_strings_past(recorded, cut)
-    assert past == ["stop_reason", "stopped_utc"]  # HDF5 put them at the file's end, with the last commit
-    assert s.damage[0] == f"file cut: {_bytes(cut)} of {_bytes(size)} bytes, stop_reason and stopped_utc lost"
+    assert footer_strings_past(recorded, cut) == []  # written in place, before the data (they were at the file's end)
+    assert s.damage[0] == f"file cut: {_bytes(cut)} of {_bytes(size)} bytes"
+    assert (s.status, s.meta.stop_reason) == (intact.status, intact.meta.stop_reason)
+    assert intact.status == "complete" and intact.meta.stop_reason.startswith("recorded")
     assert s.damage[1:] == (f"current: samples {_bytes(current)}–{_bytes(10 * RATE_HZ - 1)} unreadable",
                             f"encoder: samples {_bytes(encoder)}–{_bytes(10 * ENCODER_HZ - 1)} unreadable")
     run = run_cli(capsys, "check", str(path))
@@ -195,14 +198,37 @@ def test_a_cut_copy_of_an_older_file_is_refused_in_one_line(recorded: Path, tmp_
                            f"{_bytes(size)} bytes, root attributes lost)\n")
 
 
+def _older_strings(src: Path, dst: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """``src`` written again (:func:`rewritten_in_real_time`) as acq wrote files before its footer strings were
+    fixed-length: variable-length strings, created with the file and modified in place by the footer."""
+    def older_unwritten() -> dict[str, object]:
+        return {**layout.footer_unwritten(), "stopped_utc": "", "status": "recording", "stop_reason": ""}
+
+    def older_footer(f: h5py.File, status: str, stop_reason: str, filled_optional: set[str], *_: object) -> None:
+        for name in layout.OPTIONAL_ENCODER:
+            if name in f["encoder"] and name not in filled_optional:
+                del f["encoder"][name]
+        f.attrs.modify("current_samples", np.int64(f["current/blocks/count"][...].sum()))
+        f.attrs.modify("encoder_samples", np.int64(f["encoder/index"].shape[0]))
+        for name, text in (("stop_reason", stop_reason), ("stopped_utc", layout.utc_now_iso()), ("status", status)):
+            f.attrs.modify(name, text)  # a variable-length string's new value: in HDF5's string heap
+
+    monkeypatch.setattr(acq.recording.writer, "footer_unwritten", older_unwritten)
+    monkeypatch.setattr(acq.recording.writer, "write_footer", older_footer)
+    rewritten_in_real_time(src, dst)
+    monkeypatch.undo()
+    return dst
+
+
 def test_a_cut_copy_whose_status_is_lost_keeps_the_samples_the_footer_counts(
-        recorded: Path, intact: Session, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+        recorded: Path, intact: Session, tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        monkeypatch: pytest.MonkeyPatch) -> None:
     """The committed counts are the footer's numbers, stored in place: a cut that loses the status string loses no
-    sample. HDF5 puts acq's statuses where "recording" was (measured), so the test moves the status string to the
-    file's end: a value larger than the free room of HDF5's string heap (≈ 4 KiB, measured) goes into a new heap
-    there, as a footer string of another writer may. Before: refused, 'damaged, cannot be read (file cut: …)'."""
-    moved = tmp_path / "moved.h5"
-    shutil.copyfile(recorded, moved)
+    sample. acq now writes its footer strings in place (fixed length); an older acq wrote variable-length strings, and
+    the test moves those to the file's end: a value larger than the free room of HDF5's string heap (≈ 4 KiB,
+    measured) goes into a new heap there, as a footer string of another writer may. Before: refused, 'damaged, cannot
+    be read (file cut: …)'."""
+    moved = _older_strings(recorded, tmp_path / "moved.h5", monkeypatch)
     with h5py.File(moved, "r+", libver=("v110", "latest")) as f:
         f.attrs.modify("status", "complete" + " " * 5000)
     path = tmp_path / "cut.h5"
