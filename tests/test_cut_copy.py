@@ -13,14 +13,12 @@ import h5py
 import numpy as np
 import pytest
 
-import acq.recording.writer
 from acq.config import load_bench, load_profile
-from acq.recording import layout
 from acq.recording.reader import load
 from acq.recording.recorder import Recorder
 from acq.recording.session import Session
 from drivers.registry import open_bench
-from tests.helpers import ReadsFile, footer_strings_past, rewritten_in_real_time, run_cli
+from tests.helpers import ReadsFile, footer_strings_past, rewritten_as_older_acq, rewritten_in_real_time, run_cli
 
 RATE_HZ = 25600
 ENCODER_HZ = 1000
@@ -198,37 +196,14 @@ def test_a_cut_copy_of_an_older_file_is_refused_in_one_line(recorded: Path, tmp_
                            f"{_bytes(size)} bytes, root attributes lost)\n")
 
 
-def _older_strings(src: Path, dst: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
-    """``src`` written again (:func:`rewritten_in_real_time`) as acq wrote files before its footer strings were
-    fixed-length: variable-length strings, created with the file and modified in place by the footer."""
-    def older_unwritten() -> dict[str, object]:
-        return {**layout.footer_unwritten(), "stopped_utc": "", "status": "recording", "stop_reason": ""}
-
-    def older_footer(f: h5py.File, status: str, stop_reason: str, filled_optional: set[str], *_: object) -> None:
-        for name in layout.OPTIONAL_ENCODER:
-            if name in f["encoder"] and name not in filled_optional:
-                del f["encoder"][name]
-        f.attrs.modify("current_samples", np.int64(f["current/blocks/count"][...].sum()))
-        f.attrs.modify("encoder_samples", np.int64(f["encoder/index"].shape[0]))
-        for name, text in (("stop_reason", stop_reason), ("stopped_utc", layout.utc_now_iso()), ("status", status)):
-            f.attrs.modify(name, text)  # a variable-length string's new value: in HDF5's string heap
-
-    monkeypatch.setattr(acq.recording.writer, "footer_unwritten", older_unwritten)
-    monkeypatch.setattr(acq.recording.writer, "write_footer", older_footer)
-    rewritten_in_real_time(src, dst)
-    monkeypatch.undo()
-    return dst
-
-
 def test_a_cut_copy_whose_status_is_lost_keeps_the_samples_the_footer_counts(
-        recorded: Path, intact: Session, tmp_path: Path, capsys: pytest.CaptureFixture[str],
-        monkeypatch: pytest.MonkeyPatch) -> None:
+        recorded: Path, intact: Session, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The committed counts are the footer's numbers, stored in place: a cut that loses the status string loses no
     sample. acq now writes its footer strings in place (fixed length); an older acq wrote variable-length strings, and
     the test moves those to the file's end: a value larger than the free room of HDF5's string heap (≈ 4 KiB,
     measured) goes into a new heap there, as a footer string of another writer may. Before: refused, 'damaged, cannot
     be read (file cut: …)'."""
-    moved = _older_strings(recorded, tmp_path / "moved.h5", monkeypatch)
+    moved = rewritten_as_older_acq(recorded, tmp_path / "moved.h5")
     with h5py.File(moved, "r+", libver=("v110", "latest")) as f:
         f.attrs.modify("status", "complete" + " " * 5000)
     path = tmp_path / "cut.h5"
