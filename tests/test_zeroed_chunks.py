@@ -296,10 +296,11 @@ def test_a_cut_copy_pre_allocated_to_full_size_keeps_what_a_cut_copy_keeps(
         request: pytest.FixtureRequest) -> None:
     """A copier or downloader that pre-allocates the whole file and is cut leaves the rest zero. Where the footer's
     strings lie past the cut (an older acq's variable-length strings, the file committed every 0.5 s: HDF5 puts them
-    at its end) they are unreadable, as in a cut copy. Before: refused whole, 'not a readable HDF5 session file (root attributes unreadable)'. Now the file's
-    data ends where its zeros begin: the same samples as the copy cut there. Where they lie before the cut (acq's
-    fixed-length strings, written in place, whether committed every 0.5 s or 1 s) the footer reads and the zeroed chunks are holes:
-    "zeroed on disk" or "unreadable" (those whose chunk index is zeroed), the same samples lost as in the cut copy."""
+    at its end) they are unreadable, as in a cut copy. Before: refused whole, 'not a readable HDF5 session file (root
+    attributes unreadable)'. Now the file's data ends where its zeros begin: the same samples as the copy cut there.
+    Where they lie before the cut (acq's fixed-length strings, written in place, whether committed every 0.5 s or 1 s)
+    the footer reads and the zeroed chunks are holes: "zeroed on disk" or "unreadable" (those whose chunk index is
+    zeroed), the same samples lost as in the cut copy."""
     recorded: Path = request.getfixturevalue(source)
     size = recorded.stat().st_size
     cut_at = size * percent // 100

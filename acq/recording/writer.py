@@ -31,7 +31,7 @@ import h5py
 import numpy as np
 
 from acq import __version__
-from acq.recording.h5safe import abandon
+from acq.recording.h5safe import abandon, open_abandoned
 from acq.recording.live import create_marked
 from acq.recording.layout import (EVENT_DTYPE, FLUSH_DTYPE, FORMAT, FORMAT_VERSION, LIBVER, OPTIONAL_ENCODER, Status,
                                   committed_rows, footer_unwritten, utc_now_iso, write_footer)
@@ -347,9 +347,10 @@ class SessionWriter:
 
         After a write failure the status is ``failed`` with the failure and the seconds kept as reason
         ("disk full: /data/x.h5 — 3.2 s kept"). The footer takes no new byte of the disk (its strings are created at
-        full size and overwritten in place, :mod:`acq.recording.layout`), so a full disk still gets it; only a file
-        HDF5 itself failed to write (abandoned, its state unreliable) stays ``recording``, and its ``/flushes`` rows
-        tell readers (and ``acq check``) what is stored. The file is no longer marked as being recorded after this.
+        full size and overwritten in place, :mod:`acq.recording.layout`), so a full disk still gets it, also a file
+        HDF5 itself failed to write (abandoned: reopened with its status flags cleared, every column cut to the
+        committed rows). A file that cannot be reopened stays ``recording``, and its ``/flushes`` rows tell readers
+        (and ``acq check``) what is stored. The file is no longer marked as being recorded after this.
         """
         try:
             self._finish(status, stop_reason)
@@ -366,18 +367,27 @@ class SessionWriter:
             status, stop_reason = "failed", f"{self.failure} — {self.seconds_kept:.1f} s kept"
         else:
             self._file.close()
-        if self._abandoned:
-            return
-        f = self._reopen()
-        try:
+        if self._abandoned:  # HDF5 itself met the write error: its flags cleared, every column cut to the commits
+            try:
+                if os.stat(self.path).st_ino != self._inode:
+                    return  # not this writer's file any more
+                f = open_abandoned(self.path, LIBVER)
+            except Exception:  # noqa: BLE001 - not reopened: as HDF5 left it, the /flushes rows say what is stored
+                return
+            longer = None
+        else:
+            f = self._reopen()
             # only a column longer than what was committed is opened to be cut (the writer knows each length)
             counted = {name: committed_rows(name, self.committed) for name in self._columns}
             longer = [name for name, n in counted.items() if n is not None and self._columns[name].length > n]
+        try:
             write_footer(f, status, stop_reason, self._filled_optional, self.committed, longer)
             f.close()
             sync_file(self.path)  # after the close: closing rewrites the superblock (no longer open for writing)
         except Exception as e:  # noqa: BLE001 - the footer could not be written (or synced): the flush rows still hold
             abandon(f)
+            if longer is None:
+                return  # the write error that abandoned the file stays the one reported
             self.failure = storage_error(e, self.path)
             raise StorageError(f"{self.failure} (footer not written; the samples are stored, acq check repairs "
                                "the file)") from None
