@@ -17,6 +17,8 @@ import h5py
 import numpy as np
 import pytest
 
+import acq.recording.writer
+from acq.recording import layout
 from acq.recording.layout import FOOTER_TEXT
 from acq.recording.reader import load
 from acq.recording.writer import SessionWriter
@@ -169,6 +171,28 @@ def rewritten_in_real_time(src: Path, dst: Path, commit_every_s: float = COMMIT_
         w.flush()
     w.finish(meta.status, meta.stop_reason)  # type: ignore[arg-type]
     return dst
+
+
+def rewritten_as_older_acq(src: Path, dst: Path) -> Path:
+    """``src`` written again (:func:`rewritten_in_real_time`) as acq wrote files before its footer strings were
+    fixed-length: variable-length strings, created with the file and modified by the footer (a variable-length
+    string's new value goes into HDF5's string heap, which may lie at the file's end)."""
+    def older_unwritten() -> dict[str, Any]:
+        return {**layout.footer_unwritten(), "stopped_utc": "", "status": "recording", "stop_reason": ""}
+
+    def older_footer(f: h5py.File, status: str, stop_reason: str, filled_optional: set[str], *_: Any) -> None:
+        for name in layout.OPTIONAL_ENCODER:
+            if name in f["encoder"] and name not in filled_optional:
+                del f["encoder"][name]
+        f.attrs.modify("current_samples", np.int64(f["current/blocks/count"][...].sum()))
+        f.attrs.modify("encoder_samples", np.int64(f["encoder/index"].shape[0]))
+        for name, text in (("stop_reason", stop_reason), ("stopped_utc", layout.utc_now_iso()), ("status", status)):
+            f.attrs.modify(name, text)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(acq.recording.writer, "footer_unwritten", older_unwritten)
+        patch.setattr(acq.recording.writer, "write_footer", older_footer)
+        return rewritten_in_real_time(src, dst)
 
 
 class ReadsFile(io.FileIO):

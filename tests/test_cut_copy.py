@@ -18,7 +18,7 @@ from acq.recording.reader import load
 from acq.recording.recorder import Recorder
 from acq.recording.session import Session
 from drivers.registry import open_bench
-from tests.helpers import ReadsFile, footer_strings_past, rewritten_in_real_time, run_cli
+from tests.helpers import ReadsFile, footer_strings_past, rewritten_as_older_acq, rewritten_in_real_time, run_cli
 
 RATE_HZ = 25600
 ENCODER_HZ = 1000
@@ -116,9 +116,10 @@ def test_a_cut_copy_keeps_the_samples_before_the_cut_and_says_what_is_lost(
         assert current >= (percent - 20) / 100 * 10 * RATE_HZ and encoder >= (percent - 20) / 100 * 10 * ENCODER_HZ
     s = load(path)
     _assert_prefix_of(s, intact, current, encoder)
-    past = footer_strings_past(recorded, cut)
-    assert past == ["stop_reason", "stopped_utc"]  # HDF5 put them at the file's end, with the last commit
-    assert s.damage[0] == f"file cut: {_bytes(cut)} of {_bytes(size)} bytes, stop_reason and stopped_utc lost"
+    assert footer_strings_past(recorded, cut) == []  # written in place, before the data (they were at the file's end)
+    assert s.damage[0] == f"file cut: {_bytes(cut)} of {_bytes(size)} bytes"
+    assert (s.status, s.meta.stop_reason) == (intact.status, intact.meta.stop_reason)
+    assert intact.status == "complete" and intact.meta.stop_reason.startswith("recorded")
     assert s.damage[1:] == (f"current: samples {_bytes(current)}–{_bytes(10 * RATE_HZ - 1)} unreadable",
                             f"encoder: samples {_bytes(encoder)}–{_bytes(10 * ENCODER_HZ - 1)} unreadable")
     run = run_cli(capsys, "check", str(path))
@@ -200,11 +201,11 @@ def test_a_cut_copy_of_an_older_file_is_refused_in_one_line(recorded: Path, tmp_
 def test_a_cut_copy_whose_status_is_lost_keeps_the_samples_the_footer_counts(
         recorded: Path, intact: Session, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """The committed counts are the footer's numbers, stored in place: a cut that loses the status string loses no
-    sample. HDF5 puts acq's statuses where "recording" was (measured), so the test moves the status string to the
-    file's end: a value larger than the free room of HDF5's string heap (≈ 4 KiB, measured) goes into a new heap
-    there, as a footer string of another writer may. Before: refused, 'damaged, cannot be read (file cut: …)'."""
-    moved = tmp_path / "moved.h5"
-    shutil.copyfile(recorded, moved)
+    sample. acq now writes its footer strings in place (fixed length); an older acq wrote variable-length strings, and
+    the test moves those to the file's end: a value larger than the free room of HDF5's string heap (≈ 4 KiB,
+    measured) goes into a new heap there, as a footer string of another writer may. Before: refused, 'damaged, cannot
+    be read (file cut: …)'."""
+    moved = rewritten_as_older_acq(recorded, tmp_path / "moved.h5")
     with h5py.File(moved, "r+", libver=("v110", "latest")) as f:
         f.attrs.modify("status", "complete" + " " * 5000)
     path = tmp_path / "cut.h5"

@@ -66,7 +66,7 @@ def test_a_passive_recording_exported_and_imported_back_is_passive_and_analyses_
         recorded_attrs = {k: f.attrs[k] for k in ("session_id", "bench_json", "profile_json", "created_utc")}
     with h5py.File(tmp_path / "re.h5", "r") as f:
         assert {k: f.attrs[k] for k in recorded_attrs} == recorded_attrs
-        assert f.attrs["profile_json"] == "null" and f.attrs["status"] == "complete"
+        assert f.attrs["profile_json"] == "null" and f.attrs["status"] == b"complete"
         assert json.loads(f.attrs["tags_json"]) == {"robot": "r1"}
     info = run_cli(capsys, "info", "--json", str(tmp_path / "re.h5"))
     assert info.code == 0 and (json.loads(info.out)["commanded"], json.loads(info.out)["speed_dither"]) == (False, 0.0)

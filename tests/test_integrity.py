@@ -106,6 +106,57 @@ def test_disk_full_while_recording_fails_with_what_is_stored(tmp_path: Path, cap
         _assert_counts_are_stored(path, kept, s.encoder.index.size)
 
 
+def _fill_to_the_last_byte(folder: Path) -> None:
+    """Another program takes every free byte of ``folder``'s disk (as ``dd if=/dev/zero of=fill`` does)."""
+    from acq.recording.storage import free_bytes
+
+    fd = os.open(folder / "other-program.bin", os.O_WRONLY | os.O_CREAT | os.O_EXCL)
+    try:
+        with contextlib.suppress(OSError):  # until ENOSPC
+            while True:
+                os.write(fd, bytes(1 << 16))
+    finally:
+        os.close(fd)
+    assert free_bytes(folder) == 0
+
+
+def test_a_disk_filled_to_its_last_byte_while_recording_gets_its_file_finished_failed(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """The trial (8 MB tmpfs, ``dd`` filling it 5 s into a recording): the console said "disk full … 3.5 s kept
+    (89600 current and 3560 encoder samples …)", exit 1, but the file stayed status ``recording`` with no reason and
+    no counts (finish skipped the footer below 256 KiB free), and acq check then called it "recorder stopped without
+    finishing the file". The disk is filled between two commits (right after the first that holds 1 s: HDF5 itself
+    never meets the full disk, the next commit's room check does), so the outcome is the same every run."""
+    from acq.recording.writer import SessionWriter
+
+    out = tmp_path / "disk"
+    out.mkdir()
+    commit = SessionWriter.flush
+
+    def commit_then_disk_filled(self: SessionWriter) -> None:
+        commit(self)
+        if self.committed["current_samples"] >= RATE_HZ and not (out / "other-program.bin").exists():
+            _fill_to_the_last_byte(out)
+
+    with tmpfs(out, "size=8m") as refused:
+        if refused is not None:
+            pytest.skip(f"needs a real full file system, a tmpfs mounted as root: {refused}")
+        monkeypatch.setattr(SessionWriter, "flush", commit_then_disk_filled)
+        run = run_cli(capsys, "record", "--profile", "triangle_0.5s", "--fast", "--duration", "12", "--out",
+                      str(out))
+        path = _only_session(out)
+        with h5py.File(path, "r") as f:  # read back as any HDF5 reader does
+            status, reason = f.attrs["status"].decode(), f.attrs["stop_reason"].decode()
+            current, encoder = int(f.attrs["current_samples"]), int(f.attrs["encoder_samples"])
+            stored = (f["current/i_a_A"].shape[0], f["encoder/index"].shape[0],
+                      int(f["flushes"][-1]["current_samples"]))
+    assert RATE_HZ <= current < 12 * RATE_HZ and encoder > 0
+    assert (status, reason) == ("failed", f"disk full: {path} — {current / RATE_HZ:.1f} s kept")
+    assert stored == (current, encoder, current)
+    assert (run.code, run.err.strip().splitlines()[-1]) == (
+        1, f"acq: failed: {reason} ({current} current and {encoder} encoder samples stored in {path})")
+
+
 def test_a_recording_that_cannot_fit_is_refused_before_it_starts(tmp_path: Path,
                                                                   capsys: pytest.CaptureFixture[str]) -> None:
     """Before: --fast ran its progress bar to 10.0 / 10 s, then "disk full … 0.0 s kept" (exit 1, an empty file)."""
@@ -130,7 +181,9 @@ def test_a_recording_that_cannot_fit_is_refused_before_it_starts(tmp_path: Path,
 
 def test_write_error_inside_hdf5_keeps_only_committed_samples(tmp_path: Path, capsys: pytest.CaptureFixture[str],
                                                                monkeypatch: pytest.MonkeyPatch) -> None:
-    """The free-space guard off: ENOSPC reaches HDF5 mid-flush; the process neither crashes nor counts that flush."""
+    """The free-space guard off: ENOSPC reaches HDF5 mid-flush; the process neither crashes nor counts that flush, and
+    the file HDF5 failed to write is finished all the same: status ``failed``, its reason, the committed counts
+    (before: left ``recording``, no reason — HDF5 refused to reopen it, its superblock still open for writing)."""
     out = tmp_path / "disk"
     with small_disk(out, "8m", monkeypatch) as kind:
         if kind != "tmpfs":
@@ -141,11 +194,14 @@ def test_write_error_inside_hdf5_keeps_only_committed_samples(tmp_path: Path, ca
                           str(out))
         path = _only_session(out)
         assert run.code == 1
-        assert run.err.strip().splitlines()[-1].startswith(f"acq: failed: disk full: {path} — ")
         s = load(path)
-        assert s.status == "recording"  # no room for a footer: the /flushes rows say what is stored
-        assert f"({s.current.sample_count} current and {s.encoder.index.size} encoder samples" in run.err
-        _assert_counts_are_stored(path, s.current.sample_count, s.encoder.index.size)
+        kept = s.current.sample_count
+        assert kept < 12 * RATE_HZ  # 0 when the write that met the full disk was the first commit's
+        assert (s.status, s.attrs["stop_reason"]) == ("failed", f"disk full: {path} — {kept / RATE_HZ:.1f} s kept")
+        assert (s.attrs["current_samples"], s.attrs["encoder_samples"]) == (kept, s.encoder.index.size)
+        assert run.err.strip().splitlines()[-1] == (f"acq: failed: {s.attrs['stop_reason']} ({kept} current and "
+                                                    f"{s.encoder.index.size} encoder samples stored in {path})")
+        _assert_counts_are_stored(path, kept, s.encoder.index.size)
 
 
 # ------------------------------------------------------------------------------------------ damage

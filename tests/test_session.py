@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from acq.config import load_bench, load_profile
-from acq.recording.layout import FORMAT
+from acq.recording.layout import FOOTER_TEXT, FOOTER_TEXT_BYTES, FORMAT
 from acq.recording.reader import load
 from acq.recording.repair import repair
 from acq.recording.writer import SessionWriter
@@ -54,8 +54,10 @@ def test_round_trip_layout_and_footer(tmp_path: Path) -> None:
     w.finish("complete", "recorded 10 s")
 
     with h5py.File(path, "r") as f:
-        assert f.attrs["format"] == FORMAT and f.attrs["status"] == "complete"
-        assert f.attrs["stop_reason"] == "recorded 10 s" and len(f.attrs["session_id"]) == 36
+        assert f.attrs["format"] == FORMAT and f.attrs["status"] == b"complete"  # fixed-length: h5py reads bytes
+        assert f.attrs["stop_reason"] == b"recorded 10 s" and len(f.attrs["session_id"]) == 36
+        sizes = [f.attrs.get_id(name).dtype.itemsize for name in FOOTER_TEXT]
+        assert sizes == [FOOTER_TEXT_BYTES[name] for name in FOOTER_TEXT]
         assert f["current"].attrs["rate_hz"] == 25600.0
         assert f["current/i_a_A"].dtype == np.float64 and f["current/i_a_A"].shape == (150,)
         assert list(f["current/blocks/first_index"][...]) == [0, 150]

@@ -20,7 +20,8 @@ from acq.recording.session import Session
 from acq.recording.writer import SessionWriter
 from acq.recording.zeroed import invented
 from drivers.base import CurrentSourceInfo, DriveInfo, EncoderBlock
-from tests.helpers import footer_strings_past, record_session_in_subprocess, rewritten_in_real_time, run_cli
+from tests.helpers import (footer_strings_past, record_session_in_subprocess, rewritten_as_older_acq,
+                           rewritten_in_real_time, run_cli)
 
 RATE_HZ = 25600
 ENCODER_HZ = 1000
@@ -46,9 +47,15 @@ def recorded(fast: Path) -> Path:
 @pytest.fixture(scope="module")
 def coarse(fast: Path) -> Path:
     """:func:`fast` written again committed every 1 s of data, as a recorder whose commits come at its byte limit
-    rather than its clock (as a --fast one's mostly do): HDF5 puts the footer's strings in a block an early commit
-    freed, near the file's start, not at its end."""
+    rather than its clock (as a --fast one's mostly do): its chunks lie otherwise than :func:`recorded`'s."""
     return rewritten_in_real_time(fast, fast.with_name("coarse.h5"), commit_every_s=1.0)
+
+
+@pytest.fixture(scope="module")
+def older(fast: Path) -> Path:
+    """:func:`recorded` as an older acq wrote it: its footer strings variable-length, which HDF5 puts at the file's
+    end (:func:`rewritten_as_older_acq`)."""
+    return rewritten_as_older_acq(fast, fast.with_name("older.h5"))
 
 
 @pytest.fixture(scope="module")
@@ -295,16 +302,17 @@ def _merged(spans: tuple[tuple[str, int, int], ...]) -> list[tuple[str, int, int
     return merged
 
 
-@pytest.mark.parametrize(("source", "percent"), [("recorded", 10), ("recorded", 50), ("coarse", 50)])
+@pytest.mark.parametrize(("source", "percent"), [("older", 10), ("older", 50), ("recorded", 10), ("coarse", 50)])
 def test_a_cut_copy_pre_allocated_to_full_size_keeps_what_a_cut_copy_keeps(
         source: str, percent: int, tmp_path: Path, capsys: pytest.CaptureFixture[str],
         request: pytest.FixtureRequest) -> None:
     """A copier or downloader that pre-allocates the whole file and is cut leaves the rest zero. Where the footer's
-    strings lie past the cut (the file committed every 0.5 s: HDF5 puts them at its end) they are unreadable, as in
-    a cut copy. Before: refused whole, 'not a readable HDF5 session file (root attributes unreadable)'. Now the file's
-    data ends where its zeros begin: the same samples as the copy cut there. Where HDF5 put them before the cut (the
-    file committed every 1 s: in a block an early commit freed) the footer reads and the zeroed chunks are holes:
-    "zeroed on disk" or "unreadable" (those whose chunk index is zeroed), the same samples lost as in the cut copy."""
+    strings lie past the cut (an older acq's variable-length strings, the file committed every 0.5 s: HDF5 puts them
+    at its end) they are unreadable, as in a cut copy. Before: refused whole, 'not a readable HDF5 session file (root
+    attributes unreadable)'. Now the file's data ends where its zeros begin: the same samples as the copy cut there.
+    Where they lie before the cut (acq's fixed-length strings, written in place, whether committed every 0.5 s or 1 s)
+    the footer reads and the zeroed chunks are holes: "zeroed on disk" or "unreadable" (those whose chunk index is
+    zeroed), the same samples lost as in the cut copy."""
     recorded: Path = request.getfixturevalue(source)
     size = recorded.stat().st_size
     cut_at = size * percent // 100
@@ -318,7 +326,7 @@ def test_a_cut_copy_pre_allocated_to_full_size_keeps_what_a_cut_copy_keeps(
         fh.truncate(cut_at)
     z, c = load(zeroed), load(cut)
     past = footer_strings_past(recorded, cut_at)
-    assert past == (["stop_reason", "stopped_utc"] if source == "recorded" else [])  # the case the test is about
+    assert past == (["stop_reason", "stopped_utc"] if source == "older" else [])  # the case the test is about
     lost = f", {' and '.join(past)} lost" if past else ""
     assert c.damage[0] == f"file cut: {cut_at:,} of {size:,} bytes".replace(",", " ") + lost
     if past:

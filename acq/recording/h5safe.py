@@ -16,6 +16,10 @@ guards it needs, each written by hand because h5py has no binding for it:
   unreliable: closing it rewrites the failed blocks and can crash the process (seen: SIGSEGV,
   ``free(): invalid pointer``). :func:`abandon` points the file descriptor at ``/dev/null`` first,
   so the close completes and nothing after the failure reaches the disk.
+* **Reopening an abandoned file.** Its superblock still says it is open for SWMR writing, and HDF5 refuses to open it
+  for writing again ("file is already open for write"). :func:`open_abandoned` clears those flags as ``h5clear -s``
+  does (the file-access property ``clear_status_flags``, set through ``H5Pset``), so the writer can finish the file:
+  what its flushes committed was synced before the failed write began.
 """
 
 from __future__ import annotations
@@ -132,3 +136,18 @@ def abandon(f: h5py.File) -> None:
         f.close()
     except Exception:  # noqa: BLE001 - the close of a dropped file may report the old error again
         pass
+
+
+def open_abandoned(path: Path, libver: tuple[str, str]) -> h5py.File:
+    """Open for writing the file an abandoned writer left (see module doc): its status flags cleared. Raises
+    :class:`OSError` when this libhdf5 offers no way to clear them, or HDF5 refuses the file."""
+    lib = _libhdf5()
+    if lib is None:
+        raise OSError("libhdf5 not found to clear the file's status flags")
+    fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
+    fapl.set_libver_bounds(*(getattr(h5py.h5f, f"LIBVER_{v.upper()}") for v in libver))
+    clear = ctypes.c_bool(True)
+    lib.H5Pset.argtypes = [ctypes.c_int64, ctypes.c_char_p, ctypes.c_void_p]
+    if lib.H5Pset(fapl.id, b"clear_status_flags", ctypes.byref(clear)) < 0:
+        raise OSError("this libhdf5 cannot clear a file's status flags")
+    return h5py.File(h5py.h5f.open(os.fsencode(path), h5py.h5f.ACC_RDWR, fapl=fapl))

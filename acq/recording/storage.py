@@ -55,6 +55,12 @@ def cause_of(e: BaseException) -> str:
     return full.splitlines()[0] if full else type(e).__name__
 
 
+def out_of_room(e: BaseException) -> bool:
+    """Whether the write failed only for room (disk full, quota exceeded): the storage itself is sound, and what is on
+    it may be overwritten in place (unlike after an I/O error, when nothing more should be written)."""
+    return cause_of(e) in (_CAUSES[errno.ENOSPC], _CAUSES[errno.EDQUOT])
+
+
 def storage_error(e: BaseException, path: Path | str) -> StorageError:
     """The one-line error for a failed write of ``path``: ``<cause>: <path>``."""
     return StorageError(f"{cause_of(e)}: {path}")

@@ -14,12 +14,12 @@ layout is synced and its folder too when it is created (its name is durable from
 is written. A failed sync is a failed write (on Linux the pages it could not write may be dropped already).
 
 A failed write (disk full, I/O error, the file vanished) stops the writer at once: nothing after it is written or
-counted (:attr:`SessionWriter.failure`).
+counted (:attr:`SessionWriter.failure`) but the footer, which overwrites its attributes in place (a full disk has no
+new byte to give, and needs none).
 """
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import time
@@ -32,17 +32,18 @@ import h5py
 import numpy as np
 
 from acq import __version__
-from acq.recording.h5safe import abandon
+from acq.recording.h5safe import abandon, open_abandoned
 from acq.recording.live import create_marked
 from acq.recording.layout import (EVENT_DTYPE, FLUSH_DTYPE, FORMAT, FORMAT_VERSION, LIBVER, OPTIONAL_ENCODER, Status,
                                   committed_rows, footer_unwritten, utc_now_iso, write_footer)
 from acq.recording.pending import Column, PendingColumns
-from acq.recording.storage import cause_of, free_bytes, storage_error, sync_file, sync_folder
+from acq.recording.storage import cause_of, free_bytes, out_of_room, storage_error, sync_file, sync_folder
 from drivers.base import CurrentBlock, CurrentSourceInfo, DriveInfo, EncoderBlock, StreamEvent
 from drivers.config import Bench, Profile
 from acqcore.errors import ConfigError, StorageError
 
-#: Free bytes kept for the footer and HDF5's metadata beyond what a flush writes; a flush that would leave
+#: Free bytes kept for HDF5's metadata beyond what a flush writes (the footer needs none: it is written in place); a
+#: flush that would leave
 #: less fails the recording as "disk full" before HDF5 sees an ENOSPC (which leaves HDF5 unreliable, see
 #: acq.recording.h5safe). 1 MiB is ~10x the metadata a 60 s session's footer and chunk indexes grow by per flush.
 RESERVE_BYTES = 1 << 20
@@ -106,6 +107,8 @@ class SessionWriter:
         #: The write error that stopped this writer (None while writing works).
         self.failure: StorageError | None = None
         self._abandoned = False
+        #: The write HDF5 failed in was refused for room only: the abandoned file may still be finished in place.
+        self._out_of_room = False
         try:
             # No chunk cache: a flush writes whole chunks but for the last of each dataset, and a cached chunk is only
             # copied into HDF5's memory to be checksummed and written at the H5Fflush that follows anyway (chunk buffers
@@ -304,6 +307,7 @@ class SessionWriter:
             self._file.flush()
             self._sync()
         except Exception as e:  # noqa: BLE001 - h5py reports write errors as OSError or RuntimeError
+            self._out_of_room = out_of_room(e)
             self._stop(storage_error(e, self.path), abandon_file=True)
         self.committed = totals
 
@@ -346,9 +350,12 @@ class SessionWriter:
         on the disk when this returns.
 
         After a write failure the status is ``failed`` with the failure and the seconds kept as reason
-        ("disk full: /data/x.h5 — 3.2 s kept"); the footer is written when the disk has room for it and
-        the file could be closed cleanly, else the file stays ``recording`` and its ``/flushes`` rows
-        tell readers (and ``acq check``) what is stored. The file is no longer marked as being recorded after this.
+        ("disk full: /data/x.h5 — 3.2 s kept"). The footer takes no new byte of the disk (its strings are created at
+        full size and overwritten in place, :mod:`acq.recording.layout`), so a full disk still gets it, also a file
+        HDF5 itself failed to write for room (abandoned: reopened with its status flags cleared, every column cut to
+        the committed rows). After an I/O error inside HDF5 nothing more is written, and a file that cannot be
+        reopened is left too: it stays ``recording``, and its ``/flushes`` rows tell readers (and ``acq check``) what
+        is stored. The file is no longer marked as being recorded after this.
         """
         try:
             self._finish(status, stop_reason)
@@ -365,21 +372,29 @@ class SessionWriter:
             status, stop_reason = "failed", f"{self.failure} — {self.seconds_kept:.1f} s kept"
         else:
             self._file.close()
-        if self._abandoned:
-            return
-        with contextlib.suppress(OSError):
-            if free_bytes(self.path.parent) < RESERVE_BYTES // 4:
-                return  # no room for a footer: the /flushes rows say what is stored
-        f = self._reopen()
-        try:
+        if self._abandoned:  # HDF5 itself met the full disk: its flags cleared, every column cut to the commits
+            if not self._out_of_room:
+                return  # an I/O error: nothing more is written (the /flushes rows say what is stored)
+            try:
+                if os.stat(self.path).st_ino != self._inode:
+                    return  # not this writer's file any more
+                f = open_abandoned(self.path, LIBVER)
+            except Exception:  # noqa: BLE001 - not reopened: as HDF5 left it, the /flushes rows say what is stored
+                return
+            longer = None
+        else:
+            f = self._reopen()
             # only a column longer than what was committed is opened to be cut (the writer knows each length)
             counted = {name: committed_rows(name, self.committed) for name in self._columns}
             longer = [name for name, n in counted.items() if n is not None and self._columns[name].length > n]
+        try:
             write_footer(f, status, stop_reason, self._filled_optional, self.committed, longer)
             f.close()
             sync_file(self.path)  # after the close: closing rewrites the superblock (no longer open for writing)
         except Exception as e:  # noqa: BLE001 - the footer could not be written (or synced): the flush rows still hold
             abandon(f)
+            if longer is None:
+                return  # the write error that abandoned the file stays the one reported
             self.failure = storage_error(e, self.path)
             raise StorageError(f"{self.failure} (footer not written; the samples are stored, acq check repairs "
                                "the file)") from None

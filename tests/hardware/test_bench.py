@@ -93,7 +93,7 @@ def test_recorder_writes_every_sample_to_a_readable_file(hw_bench: Bench, hw_ses
     assert session.encoder.index.size >= math.ceil(RECORD_S / session.encoder.period_s)
     assert np.all(np.diff(session.encoder.index) == 1)
     with h5py.File(result.path, "r") as f:  # the file itself, not only acq's reader
-        assert f.attrs["status"] == "complete"
+        assert f.attrs["status"] == b"complete"  # fixed-length: h5py reads bytes
         assert f["current/i_a_A"].shape[0] == session.current.sample_count
     if isinstance(hw_bench.drive, DriveCanopen):
         import can
