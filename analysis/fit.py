@@ -9,9 +9,18 @@ clipped to 0.99 so that no handful of bins rules the fit.
 Parameters are fitted as logarithms (positive, well scaled) with Levenberg–Marquardt
 (``scipy.optimize.least_squares(method="lm")``) from a few starts built from the FRF itself
 (:func:`initial_guess`); the lowest cost wins. The joint damping C is always fitted: fixing C = 0
-biases K by about 20 %. The viscous frictions b_m, b_l are fixed at 0: they only shape |H| below
+biases K by about 20 %. The viscous frictions b_m, b_l are fixed at 0: their rigid-body terms only shape |H| below
 (b_m+b_l)/(2π(J_m+J_l)), a fraction of a hertz for any joint, far below the 10 Hz band edge, so
-they are not identifiable from the band and fitting them would only make JᵀJ singular.
+they are not identifiable from the band and fitting them would only make JᵀJ singular. But a motor-side damping also
+damps the resonance, and not the anti-resonance, whose depth C alone sets: acq's chain fits that share, b_v
+(:data:`analysis.fit_problem.VIBRATION_DAMPING`, analysis.model), beside C, so the resonance's damping is C's share plus
+b_v's and C is read at the anti-resonance. Without it a motor-side friction that damps the resonance (a robot resting
+between its moves: Coulomb and Stribeck friction act like a steep viscous one at rest) was read as C, confidently
+wrong (bench/effects_robot.py: C +30…50 % outside its interval in 13…18 of 15…22 ``ok`` windows). b_v is fitted as its
+ratio r to C's share ((J_m+J_l) C/J_l), linearly: on a healthy joint r is 0 within its interval, and its interval is
+regular there. It costs C's precision (C is then read from the anti-resonance's few bins: on healthy robot windows its
+95 % interval ±31 % against ±19 % with C alone, median) and hardly K's and J's (±0.81 against ±0.74 %). The paper's
+chain holds b_v at 0 (:attr:`analysis.fit_problem.FitOptions.vibration_damping`).
 
 Confidence intervals come from the session's own scatter when the FRF carries delete-one-block
 replicates (:attr:`analysis.frf.FrequencyResponse.replicates`): each replicate is refitted from the
@@ -33,7 +42,8 @@ quantisation (:func:`analysis.systematic_errors.chain_pull`) — computed from t
 resolution (:attr:`FitOptions.speed_lsb_rad`); without the resolution, the constant :data:`CHAIN_REL_STD`. Last, the
 bias an error on the torque estimate may leave (noise on the FRF's input flattens the resonance peak of H1, and C
 reads high): the shift of the parameters when the resonance is read from H2 instead (:mod:`analysis.input_noise`),
-the truth lying between the two readings. The 95 % interval is exp(ln θ ± half-width) on each value.
+the truth lying between the two readings. The 95 % interval is exp(ln θ ± half-width) on each value (b_v's: its
+ratio r ± half-width).
 
 The model is compared with the measurement as the Welch estimator sees it: H convolved with the
 Hann window's spectral kernel |W(ν)|², weighted by the finely resolved torque spectrum
@@ -54,8 +64,9 @@ from analysis.systematic_errors import chain_pull, quantisation_pull, systematic
 from analysis.fit_judging import (judged_fit, kernel_model_log_ratio, log_ratio_jacobian, model_log_ratios,
                                   model_misfits, quantisation_terms, weighted_jacobian)
 from analysis.fit_problem import (BAND_HIGH_FRACTION_OF_FENC, BAND_HIGH_MAX_HZ, BAND_LOW_HZ, COHERENCE_CLIP, PARAM_NAMES,
-                                  FitKind, FitOptions, FitParams, FitResult, FitStatus, FitWeighting, _free_params,
-                                  _jacobian, _Problem, band_mask, default_band_hz, fitted_bins, wrapped)
+                                  VIBRATION_DAMPING, FitKind, FitOptions, FitParams, FitResult, FitStatus, FitWeighting,
+                                  _free_params, _jacobian, _Problem, band_mask, default_band_hz, fitted_bins,
+                                  free_is_finite, wrapped)
 from analysis.frf import FrequencyResponse
 from analysis.input_noise import h2_at_resonance
 from analysis.model import TwoMassParams, antiresonance_hz, resonance_hz
@@ -195,8 +206,7 @@ def fit_two_mass(
                 continue
             # a finite cost at a parameter that under- or overflowed (an inertia of exactly 0 on a far-off FRF,
             # seen with an analytic Jacobian) is no solution: f_a, f_r and the intervals divide by it
-            physical = bool(np.all(np.isfinite(np.exp(res.x))) and np.all(np.exp(res.x) > 0.0))
-            if np.isfinite(res.cost) and physical and (best is None or res.cost < best.cost):
+            if np.isfinite(res.cost) and free_is_finite(problem.free, res.x) and (best is None or res.cost < best.cost):
                 best = res
         if best is None:
             return _failed(problem, band, options, "no start gave a finite cost")
@@ -205,7 +215,7 @@ def fit_two_mass(
 
 
 def _input_noise_shift(frf: FrequencyResponse, problem: _Problem, x: np.ndarray, options: FitOptions) -> np.ndarray:
-    """How far the free log parameters move when the resonance is read from H2 instead of H1
+    """How far the free parameters (:func:`analysis.fit_problem.free_vector`) move when the resonance is read from H2 instead of H1
     (:func:`analysis.input_noise.h2_at_resonance`, one Levenberg–Marquardt run from the optimum ``x``): the bias an
     error on the torque estimate may leave (zero when the band holds no resonance peak; infinite when the refit
     fails, stops without converging or ends off the finite numbers: the fit is not stable under it)."""
@@ -231,7 +241,7 @@ def _refit_from(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
 
 def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
                         options: FitOptions) -> np.ndarray | None:
-    """Variance of each free log parameter that the systematic errors no scatter shows may pull it by: the encoder's
+    """Variance of each free parameter (:func:`analysis.fit_problem.free_vector`) that the systematic errors no scatter shows may pull it by: the encoder's
     quantisation (:func:`analysis.systematic_errors.quantisation_pull`, times the share of the error that repeats with the
     motion) and the smooth systematic errors of the chain and of the loop's feedback of the rest of the quantisation
     (:func:`analysis.systematic_errors.chain_pull`); None without the encoder's resolution.
@@ -263,7 +273,7 @@ def _starts_inertias_fixed(guess: TwoMassParams, nominal: TwoMassParams) -> list
 def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, float],
             options: FitOptions, n_res: int, quantisation_floor: np.ndarray | None = None,
             input_noise_shift: np.ndarray | None = None) -> FitResult:
-    """Package the best least-squares solution with its covariance and intervals (``input_noise_shift``: the log
+    """Package the best least-squares solution with its covariance and intervals (``input_noise_shift``: the free
     parameters' shift from H1 to H2 at the resonance, :func:`_input_noise_shift`; None: none)."""
     values = problem.params(res.x)
     n_free = res.x.size
@@ -306,17 +316,23 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
 
 def _intervals(values: TwoMassParams, free: tuple[str, ...], x: np.ndarray,
                cov: np.ndarray) -> dict[str, tuple[float, float]]:
-    """The 95 % interval exp(ln θ ± 1.96 σ) of each free parameter from the log parameters' covariance ``cov``; a fixed
-    parameter's is its value."""
+    """The 95 % interval exp(ln θ ± 1.96 σ) of each free parameter from the free vector's covariance ``cov`` (b_v's: its
+    ratio r ± 1.96 σ times C's share (J_m+J_l) C/J_l, C's own uncertainty left to C's interval); a fixed parameter's is
+    its value."""
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     ci = {n: (getattr(values, n), getattr(values, n)) for n in PARAM_NAMES}
     for name, xi, s in zip(free, x, sigma):
-        ci[name] = (float(np.exp(xi - Z95 * s)), float(np.exp(xi + Z95 * s)))
+        if name == VIBRATION_DAMPING:
+            share = (values.Jm_kgm2 + values.Jl_kgm2) * values.C_Nms_per_rad / values.Jl_kgm2
+            ci[name] = (float((xi - Z95 * s) * share), float((xi + Z95 * s) * share))
+        else:
+            ci[name] = (float(np.exp(xi - Z95 * s)), float(np.exp(xi + Z95 * s)))
     return ci
 
 
 def _jackknife(problem: _Problem, x_best: np.ndarray, options: FitOptions) -> tuple[np.ndarray, float]:
-    """Delete-one-block jackknife covariance of the log parameters and its 95 % t quantile.
+    """Delete-one-block jackknife covariance of the free parameters (:func:`analysis.fit_problem.free_vector`) and its
+    95 % t quantile.
 
     Each replicate FRF is refitted by one Levenberg–Marquardt run from the full fit's optimum
     (the replicates differ from the full record by one block, so the optimum is close).
@@ -354,7 +370,7 @@ def _failed(problem: _Problem, band: tuple[float, float], options: FitOptions, m
     cov = np.full((n, n), nan)
     cov.setflags(write=False)
     return FitResult(
-        values=values, ci95={k: (nan, nan) for k in PARAM_NAMES}, fitted=problem.free, covariance=cov,
+        values=values, ci95={k: (nan, nan) for k in (*PARAM_NAMES, *problem.free)}, fitted=problem.free, covariance=cov,
         cost=nan, residual_rms=nan, status="failed", message=message, band=band, options=options,
         f_a=nan, f_r=nan, n_points=int(problem.f.size),
     )

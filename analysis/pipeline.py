@@ -18,7 +18,8 @@ from analysis.chain import SignalChain, chain_caveat
 from analysis.clock_model import ClockFit
 from analysis.drive_limits import drive_limit_reason
 from analysis.diagnose import inertia_fault, nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
-from analysis.fit import FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit
+from analysis.fit import (VIBRATION_DAMPING, FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz,
+                          fit_two_mass, judged_fit)
 from analysis.encoder import longest_gap_free_span
 from analysis.estimator_check import kernel_model_error, model_estimate
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments, segment_layout
@@ -82,6 +83,7 @@ class Result:
         v = self.fit.values
         return {
             **{n: _num(getattr(v, n)) for n in PARAM_NAMES},
+            **({VIBRATION_DAMPING: _num(v.bv_Nms_per_rad)} if VIBRATION_DAMPING in self.fit.fitted else {}),
             "ci95": {n: [_num(lo), _num(hi)] for n, (lo, hi) in self.fit.ci95.items()},
             "antiresonance_hz": _num(self.fit.f_a),
             "resonance_hz": _num(self.fit.f_r),
@@ -185,7 +187,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     fit = fit_two_mass(frf, FitOptions(params=request.params, kind=request.fit, band_hz=request.band_hz,
                                        weighting=chain.weighting, speed_lsb_rad=2.0 * math.pi / rec.counts_per_rev,
                                        quantisation_repeating_share=1.0 if sig.encoder_jitter is None
-                                       else sig.encoder_jitter.repeating_share),
+                                       else sig.encoder_jitter.repeating_share,
+                                       vibration_damping=chain.pipeline == "acq"),
                        nominal=request.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))

@@ -165,13 +165,36 @@ def test_complex_fit_agrees_with_the_amplitude_fit():
         assert getattr(cpx.values, name) == pytest.approx(getattr(amp.values, name), rel=0.01)
 
 
+def test_vibration_damping_damps_the_resonance_and_leaves_the_anti_resonance_to_c():
+    """b_v adds J_l b_v to H's s² denominator term only: the zeros (the anti-resonance) are C's alone, and the resonance's
+    damping grows by the share J_l b_v/((J_m+J_l) C) of C's."""
+    plain, damped = transfer_function(PAPER), transfer_function(replace(PAPER, bv_Nms_per_rad=0.05))
+    np.testing.assert_array_equal(damped[0], plain[0])
+    np.testing.assert_allclose(damped[1] - plain[1], [0.0, PAPER.Jl_kgm2 * 0.05, 0.0, 0.0], atol=1e-15)
+
+
+def test_fit_reads_c_at_the_anti_resonance_and_the_resonances_extra_damping_as_b_v():
+    """A plant whose resonance is damped beyond C's share (b_v = 0.1 N·m·s/rad, as much again as C's): the fit with b_v
+    holds the truth of C and b_v in their intervals; with C alone (the paper's model) C reads about 0.1 + J_l b_v/(J_m+J_l)
+    = 0.17 N·m·s/rad, its interval far from the truth."""
+    truth = replace(PAPER, bv_Nms_per_rad=0.1)
+    frf, fit = identify(simulate(truth, 3))
+    ci = fit.ci95
+    assert ci["C_Nms_per_rad"][0] <= truth.C_Nms_per_rad <= ci["C_Nms_per_rad"][1], (fit.values, ci)
+    assert ci["bv_Nms_per_rad"][0] <= truth.bv_Nms_per_rad <= ci["bv_Nms_per_rad"][1], (fit.values, ci)
+    assert fit.values.K_Nm_per_rad == pytest.approx(truth.K_Nm_per_rad, rel=0.01)
+    alone = fit_two_mass(frf, FitOptions(vibration_damping=False))
+    assert "bv_Nms_per_rad" not in alone.fitted and alone.values.bv_Nms_per_rad == 0.0
+    assert alone.ci95["C_Nms_per_rad"][0] > 1.4 * truth.C_Nms_per_rad, alone.ci95["C_Nms_per_rad"]
+
+
 def test_params_K_keeps_the_nominal_inertias_and_fits_K_and_C():
     truth = scaled(1.6, 1.0)
     _, fit = identify(simulate(truth, 5), options=FitOptions(params="K"), nominal=PAPER)
-    assert fit.fitted == ("K_Nm_per_rad", "C_Nms_per_rad")
+    assert fit.fitted == ("K_Nm_per_rad", "C_Nms_per_rad", "bv_Nms_per_rad")  # b_v: the resonance's share of damping
     assert fit.values.Jm_kgm2 == PAPER.Jm_kgm2 and fit.ci95["Jl_kgm2"] == (PAPER.Jl_kgm2, PAPER.Jl_kgm2)
     assert fit.values.K_Nm_per_rad == pytest.approx(truth.K_Nm_per_rad, rel=0.01)
-    assert fit.covariance.shape == (2, 2)
+    assert fit.covariance.shape == (3, 3)
 
 
 def test_params_K_without_nominal_inertias_is_refused():
