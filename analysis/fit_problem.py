@@ -20,7 +20,7 @@ FitStatus = Literal["converged", "max_evaluations", "failed"]
 FitWeighting = Literal["coherence", "uniform"]
 
 PARAM_NAMES: tuple[str, ...] = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")
-#: The motor-side damping of the vibration alone (analysis.model's b_v), free beside C in acq's fit
+#: The motor-side damping of the vibration alone (analysis.model's b_v), free beside C in acq's second fit
 #: (:attr:`FitOptions.vibration_damping`): the resonance's damping beyond C's share, so that C is read where it alone sets
 #: the response, the anti-resonance. Fitted as the ratio r = J_l b_v/((J_m+J_l) C) of the two shares, not as a logarithm:
 #: 0 (no such damping) is an ordinary value, and the data may put r a little below it.
@@ -54,8 +54,9 @@ class FitOptions:
         (:func:`analysis.quantisation_lock.locked_share`): only that share is a bias the jackknife cannot see; the
         rest scatters from period to period and is in the jackknife's spread. 1 (all of it) when not measured.
     vibration_damping : bool
-        Fit the motor-side damping of the vibration b_v (:data:`VIBRATION_DAMPING`) beside C (acq's chain) or hold it at
-        0, C the model's one damping (the paper's).
+        Fit the model again with the motor-side damping of the vibration b_v (:data:`VIBRATION_DAMPING`) free beside C
+        and widen the intervals to hold that reading's too (acq's chain), or not (the paper's: C its model's one
+        damping).
     """
 
     params: FitParams = "K,Jm,Jl"
@@ -74,17 +75,18 @@ class FitResult:
     Attributes
     ----------
     values : TwoMassParams
-        Best-fit parameters (b_m = b_l = 0; b_v fitted with :attr:`FitOptions.vibration_damping`, else 0).
+        Best-fit parameters (b_m = b_l = b_v = 0: C the model's one damping).
     ci95 : dict of str to (float, float)
         95 % confidence interval (low, high) per parameter name of :data:`PARAM_NAMES`, SI units;
         a fixed parameter has a zero-width interval.
     fitted : tuple of str
         Names of the fitted parameters, the order of ``covariance``.
     covariance : ndarray, shape (p, p)
-        Covariance of the fitted parameters' free vector (:func:`free_vector`: natural logarithms, b_v as its ratio
-        to C's share of the resonance's damping) (the jackknife's scaled by
+        Covariance of the natural logarithms of the fitted parameters (the jackknife's scaled by
         (t/1.96)², so that ±1.96 σ is the 95 % interval in either case), with the misfit's or the systematic pull's
-        share and the input-noise bound d dᵀ/3 (:mod:`analysis.input_noise`) added.
+        share and the input-noise bound d dᵀ/3 (:mod:`analysis.input_noise`) added, then each parameter's variance
+        widened (its correlations kept) until ±1.96 σ holds the interval of the fit with b_v free too
+        (:attr:`vibration_damping`).
     cost : float
         Final cost ½ Σ r² of the weighted residuals.
     residual_rms : float
@@ -106,6 +108,12 @@ class FitResult:
         (:mod:`analysis.input_noise`; empty when not computed): the bias an error on the torque estimate may leave.
     ci95_without_input_noise : dict of str to (float, float)
         The 95 % intervals without the allowance for that bias (empty when none was made): what it widened.
+    vibration_damping : tuple of float or None
+        The fit with b_v free beside C (:attr:`FitOptions.vibration_damping`): b_v, N·m·s/rad, and its 95 % interval
+        (low, high), and that fit's C; None when not made, or when it or its intervals did not come out finite (the
+        intervals are then C alone's).
+    ci95_c_alone : dict of str to (float, float)
+        The 95 % intervals before they were widened to hold the b_v fit's (empty when not widened).
     """
 
     values: TwoMassParams
@@ -123,6 +131,8 @@ class FitResult:
     n_points: int
     input_noise_shift: dict[str, float] = field(default_factory=dict)
     ci95_without_input_noise: dict[str, tuple[float, float]] = field(default_factory=dict)
+    vibration_damping: tuple[float, float, float, float] | None = None
+    ci95_c_alone: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def rel_halfwidth(fit: FitResult, name: str) -> float:
@@ -146,10 +156,10 @@ def fitted_bins(frf: FrequencyResponse, band: tuple[float, float]) -> np.ndarray
     return band_mask(frf.f_hz, band) & np.isfinite(frf.H) & (np.abs(frf.H) > 0)
 
 
-def _free_params(options: FitOptions) -> tuple[str, ...]:
-    """Names of the parameters a fit with ``options`` adjusts."""
+def _free_params(options: FitOptions, vibration: bool = False) -> tuple[str, ...]:
+    """Names of the parameters a fit with ``options`` adjusts (``vibration``: b_v too, :data:`VIBRATION_DAMPING`)."""
     names = ("K_Nm_per_rad", "C_Nms_per_rad") if options.params == "K" else PARAM_NAMES
-    return (*names, VIBRATION_DAMPING) if options.vibration_damping else names
+    return (*names, VIBRATION_DAMPING) if vibration else names
 
 
 def free_vector(p: TwoMassParams, free: tuple[str, ...]) -> np.ndarray:
@@ -187,7 +197,7 @@ class _Problem:
     """Residuals of one fit: which parameters are free, the data, the weights."""
 
     def __init__(self, frf: FrequencyResponse, band: tuple[float, float], options: FitOptions,
-                 fixed: TwoMassParams) -> None:
+                 fixed: TwoMassParams, vibration: bool = False) -> None:
         sel = fitted_bins(frf, band)
         self.f = frf.f_hz[sel]
         self.log_h = np.log(frf.H[sel])
@@ -195,7 +205,8 @@ class _Problem:
         self.w = g2 / (1.0 - g2) if options.weighting == "coherence" else np.ones_like(g2)
         self.sqrt_w = np.sqrt(self.w)
         self.kind = options.kind
-        self.free = _free_params(options)
+        self.vibration = vibration  # b_v free beside the others (analysis.fit's bracketing fit)
+        self.free = _free_params(options, vibration)
         self.fixed = fixed
         self.band = band
         self.replicates = frf.replicates or ()

@@ -80,11 +80,12 @@ class Result:
         ``quality.reasons`` lists the verdict's reasons, then the signal chain's notes prefixed
         ``"note: "``.
         """
-        v = self.fit.values
+        v, vib = self.fit.values, self.fit.vibration_damping
         return {
             **{n: _num(getattr(v, n)) for n in PARAM_NAMES},
-            **({VIBRATION_DAMPING: _num(v.bv_Nms_per_rad)} if VIBRATION_DAMPING in self.fit.fitted else {}),
-            "ci95": {n: [_num(lo), _num(hi)] for n, (lo, hi) in self.fit.ci95.items()},
+            **({} if vib is None else {VIBRATION_DAMPING: _num(vib[0])}),
+            "ci95": {**{n: [_num(lo), _num(hi)] for n, (lo, hi) in self.fit.ci95.items()},
+                     **({} if vib is None else {VIBRATION_DAMPING: [_num(vib[1]), _num(vib[2])]})},
             "antiresonance_hz": _num(self.fit.f_a),
             "resonance_hz": _num(self.fit.f_r),
             "clock": {"offset_s": _num(self.clock.offset_s), "drift_ppm": _num(self.clock.drift_ppm),

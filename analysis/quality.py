@@ -17,7 +17,7 @@ from analysis.averages import few_averages
 from analysis.encoder import difference_response
 from analysis.excitation import RESOLUTION_NAMED, against_limit, weak_coherence_cause
 from analysis.fit import COHERENCE_CLIP, FitResult, band_mask
-from analysis.fit_problem import PARAM_NAMES, rel_halfwidth
+from analysis.fit_problem import rel_halfwidth
 from analysis.frf import FrequencyResponse
 from analysis.misfit_advice import beyond_band, estimate_explains, first_order_pull, misfit_cause, one_phase_doubt
 from analysis.misfit_band import missed_band
@@ -48,8 +48,7 @@ class Quality:
         ``residual_rms`` over the RMS that noise alone would leave, from the coherence: ≈ 1 when
         the model explains everything but noise.
     ci_rel_halfwidth : dict of str to float
-        Half-width of each fitted parameter's 95 % interval relative to its value (K, J_m, J_l, C; not b_v, whose
-        value may be 0).
+        Half-width of each fitted parameter's 95 % interval relative to its value.
     clock_residual_s : float or None
         Clock-alignment residual as given, s.
     reasons : tuple of str
@@ -230,7 +229,7 @@ def assess(
                 f"{ratio:.1f}× what noise explains — another mode or a nonlinearity in the band; try --band"
                 if few is None else f"but {few}")))
 
-    ci_rel = {name: rel_halfwidth(fit, name) for name in fit.fitted if name in PARAM_NAMES}  # b_v may be 0
+    ci_rel = {name: rel_halfwidth(fit, name) for name in fit.fitted}
     undetermined = _undetermined(fit) if fit.status != "failed" else None
     if undetermined is not None:
         findings.append(("failed", undetermined))

@@ -11,12 +11,11 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from analysis.fit import Z95, FitResult
-from analysis.fit_problem import free_vector, with_free
 from analysis.frf import FrequencyResponse
 from analysis.model import frequency_response
 
@@ -113,10 +112,11 @@ def model_band(fit: FitResult, f_hz: np.ndarray) -> tuple[np.ndarray, np.ndarray
         |H| and its 95 % band, (rad/s)/(N·m).
     """
     log_abs = np.log(np.abs(frequency_response(fit.values, f_hz)))
-    x = free_vector(fit.values, fit.fitted)
     grads = []
-    for step in np.eye(x.size) * _LOG_STEP:  # the covariance's own coordinates (logarithms, b_v's ratio)
-        up, down = with_free(fit.values, fit.fitted, x + step), with_free(fit.values, fit.fitted, x - step)
+    for name in fit.fitted:
+        value = getattr(fit.values, name)
+        up = replace(fit.values, **{name: value * np.exp(_LOG_STEP)})
+        down = replace(fit.values, **{name: value * np.exp(-_LOG_STEP)})
         grads.append((np.log(np.abs(frequency_response(up, f_hz)))
                       - np.log(np.abs(frequency_response(down, f_hz)))) / (2.0 * _LOG_STEP))
     g = np.array(grads)
