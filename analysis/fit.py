@@ -10,20 +10,20 @@ Parameters are fitted as logarithms (positive, well scaled) with Levenberg–Mar
 (``scipy.optimize.least_squares(method="lm")``) from a few starts built from the FRF itself
 (:func:`initial_guess`); the lowest cost wins. The joint damping C is always fitted: fixing C = 0
 biases K by about 20 %. The viscous frictions b_m, b_l are fixed at 0: their rigid-body terms only shape |H| below
-(b_m+b_l)/(2π(J_m+J_l)), a fraction of a hertz for any joint, far below the 10 Hz band edge, so
-they are not identifiable from the band and fitting them would only make JᵀJ singular. But a motor-side damping also
-damps the resonance, and not the anti-resonance, whose depth C alone sets: a motor-side friction (a robot resting
-between its moves, where Coulomb and Stribeck friction act like a steep viscous one) was read as C, confidently wrong
-(bench/effects_robot.py: C +30…50 %, outside its interval, in 13…18 of 19…22 ``ok`` windows). So acq's chain fits the
-model again with that share, b_v (:data:`analysis.fit_problem.VIBRATION_DAMPING`, analysis.model), free beside C — C then
-read at the anti-resonance — and widens each interval until it holds that fit's too (:func:`_bracketed`): the truth
-lies in C alone's interval when the resonance's damping is the shaft's, in b_v's when something on the motor side adds
-to it, and the data cannot tell which (b_v's interval held 0 in 84 of 85 `ok` robot windows, with friction or without). Fitting
-b_v always instead moved the values: C read from the anti-resonance's few low-weight bins is off on some plants of the
-accuracy family (J_m ×0.5, J_l ×2: C off by up to 95 %, its interval missing in 3 of 5 runs; C's coverage 98 → 94 %), and the
-resonance no longer told a backlash's misfit (one confident wrong result). The values, the residuals and the verdict
-stay C alone's; b_v's reading is reported beside them. The paper's chain makes no second fit
-(:attr:`analysis.fit_problem.FitOptions.vibration_damping`).
+(b_m+b_l)/(2π(J_m+J_l)), a fraction of a hertz for any joint, far below the 10 Hz band edge, so they are not
+identifiable from the band and fitting them would only make JᵀJ singular. But a motor-side damping also damps the
+resonance, and not the anti-resonance, whose depth C alone sets: a motor-side friction (a robot resting between its
+moves, where Coulomb and Stribeck friction act like a steep viscous one) was read as C, confidently wrong
+(bench/effects_robot.py, Coulomb 0.3 + Stribeck 0.2 N·m: C 25–55 % high, outside its interval, in 17 of 19 ``ok``
+windows). So acq's chain fits the model again with that share, b_v (:data:`analysis.fit_problem.VIBRATION_DAMPING`,
+analysis.model), free beside C — C then read at the anti-resonance — and widens each interval until it holds that
+fit's too (:func:`_bracketed`): the truth lies in C alone's interval when the resonance's damping is the shaft's, in
+b_v's when something on the motor side adds to it, and the data cannot tell which (b_v's interval held 0 in 84 of 85
+`ok` robot windows, with friction or without). Fitting b_v always instead moved the values: C read from the
+anti-resonance's few low-weight bins is off on some plants of the accuracy family (J_m ×0.5, J_l ×2: C off by up to 95
+%, its interval missing in 3 of 5 runs; C's coverage 98 → 94 %), and the resonance no longer told a backlash's misfit
+(one confident wrong result). The values, the residuals and the verdict stay C alone's; b_v's reading is reported
+beside them. The paper's chain makes no second fit (:attr:`analysis.fit_problem.FitOptions.vibration_damping`).
 
 Confidence intervals come from the session's own scatter when the FRF carries delete-one-block
 replicates (:attr:`analysis.frf.FrequencyResponse.replicates`): each replicate is refitted from the
