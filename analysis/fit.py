@@ -20,8 +20,8 @@ analysis.model), free beside C — C then read at the anti-resonance — and wid
 fit's too (:func:`_bracketed`): the truth lies in C alone's interval when the resonance's damping is the shaft's, in
 b_v's when something on the motor side adds to it, and the data cannot tell which (b_v's interval held 0 in 84 of 85
 `ok` robot windows, with friction or without). Fitting b_v always instead moved the values: C read from the
-anti-resonance's few low-weight bins is off on some plants of the accuracy family (J_m ×0.5, J_l ×2: C off by up to 95
-%, its interval missing in 3 of 5 runs; C's coverage 98 → 94 %), and the resonance no longer told a backlash's misfit
+anti-resonance's few low-weight bins is off on some plants of the accuracy family (J_m ×0.5, J_l ×2: C off by up to
+95 %, its interval missing in 3 of 5 runs; C's coverage 98 → 94 %), and the resonance no longer told a backlash's misfit
 (one confident wrong result). The values, the residuals and the verdict stay C alone's; b_v's reading is reported
 beside them. The paper's chain makes no second fit (:attr:`analysis.fit_problem.FitOptions.vibration_damping`).
 
