@@ -52,6 +52,8 @@ Measured at 4818a25 (analysis/ as on main 3d6370f), the defaults (robot: seeds 0
     holds that fit's (analysis.fit._bracketed), b_v reported beside: ×0 22 / 0, ×0.5 22 / **0**, ×1 19 / **1** (C: seed
     2 at 300 s, 0.134 [0.1011, 0.1778]), ×2 9 / **1** (C: seed 2 at 180 s, 0.155 [0.1033, 0.2332]; two windows poor
     on K's widened interval, ±5.1/5.6 %). Seed 1 at 540 s ×1: C 0.1390 [0.0773, 0.2499], b_v 0.052 [−0.011, 0.115].
+    The same counts from ``--effects "motor friction" --levels 0.5,1,2 --paper-seeds 0 --list`` on the
+    branch (analysis as at bf04cfe), load 15–17, ~12 min.
 * cogging ×0.5, ×1, ×2 (0.05, 0.1, 0.2 N·m): robot 17 / 0, 18 / 0, 12 / 0 (poor 5); paper 5 / 0, 4 / 0, 0 (poor 5).
   Not confidently wrong; at 0.2 N·m the paper bench's misfit at f_a (+11.3 % against 5.9 %, seed 0) is worded as
   the load side's friction or backlash.
