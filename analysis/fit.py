@@ -9,9 +9,21 @@ clipped to 0.99 so that no handful of bins rules the fit.
 Parameters are fitted as logarithms (positive, well scaled) with Levenberg–Marquardt
 (``scipy.optimize.least_squares(method="lm")``) from a few starts built from the FRF itself
 (:func:`initial_guess`); the lowest cost wins. The joint damping C is always fitted: fixing C = 0
-biases K by about 20 %. The viscous frictions b_m, b_l are fixed at 0: they only shape |H| below
-(b_m+b_l)/(2π(J_m+J_l)), a fraction of a hertz for any joint, far below the 10 Hz band edge, so
-they are not identifiable from the band and fitting them would only make JᵀJ singular.
+biases K by about 20 %. The viscous frictions b_m, b_l are fixed at 0: their rigid-body terms only shape |H| below
+(b_m+b_l)/(2π(J_m+J_l)), a fraction of a hertz for any joint, far below the 10 Hz band edge, so they are not
+identifiable from the band and fitting them would only make JᵀJ singular. But a motor-side damping also damps the
+resonance, and not the anti-resonance, whose depth C alone sets: a motor-side friction (a robot resting between its
+moves, where Coulomb and Stribeck friction act like a steep viscous one) was read as C, confidently wrong
+(bench/effects_robot.py, Coulomb 0.3 + Stribeck 0.2 N·m: C 25–55 % high, outside its interval, in 17 of 19 ``ok``
+windows). So acq's chain fits the model again with that share, b_v (:data:`analysis.fit_problem.VIBRATION_DAMPING`,
+analysis.model), free beside C — C then read at the anti-resonance — and widens each interval until it holds that
+fit's too (:func:`_bracketed`): the truth lies in C alone's interval when the resonance's damping is the shaft's, in
+b_v's when something on the motor side adds to it, and the data cannot tell which (b_v's interval held 0 in 84 of 85
+`ok` robot windows, with friction or without). Fitting b_v always instead moved the values: C read from the
+anti-resonance's few low-weight bins is off on some plants of the accuracy family (J_m ×0.5, J_l ×2: C off by up to
+95 %, its interval missing in 3 of 5 runs; C's coverage 98 → 94 %), and the resonance no longer told a backlash's misfit
+(one confident wrong result). The values, the residuals and the verdict stay C alone's; b_v's reading is reported
+beside them. The paper's chain makes no second fit (:attr:`analysis.fit_problem.FitOptions.vibration_damping`).
 
 Confidence intervals come from the session's own scatter when the FRF carries delete-one-block
 replicates (:attr:`analysis.frf.FrequencyResponse.replicates`): each replicate is refitted from the
@@ -33,7 +45,8 @@ quantisation (:func:`analysis.systematic_errors.chain_pull`) — computed from t
 resolution (:attr:`FitOptions.speed_lsb_rad`); without the resolution, the constant :data:`CHAIN_REL_STD`. Last, the
 bias an error on the torque estimate may leave (noise on the FRF's input flattens the resonance peak of H1, and C
 reads high): the shift of the parameters when the resonance is read from H2 instead (:mod:`analysis.input_noise`),
-the truth lying between the two readings. The 95 % interval is exp(ln θ ± half-width) on each value.
+the truth lying between the two readings. The 95 % interval is exp(ln θ ± half-width) on each value, widened to hold the
+b_v fit's (above).
 
 The model is compared with the measurement as the Welch estimator sees it: H convolved with the
 Hann window's spectral kernel |W(ν)|², weighted by the finely resolved torque spectrum
@@ -54,8 +67,9 @@ from analysis.systematic_errors import chain_pull, quantisation_pull, systematic
 from analysis.fit_judging import (judged_fit, kernel_model_log_ratio, log_ratio_jacobian, model_log_ratios,
                                   model_misfits, quantisation_terms, weighted_jacobian)
 from analysis.fit_problem import (BAND_HIGH_FRACTION_OF_FENC, BAND_HIGH_MAX_HZ, BAND_LOW_HZ, COHERENCE_CLIP, PARAM_NAMES,
-                                  FitKind, FitOptions, FitParams, FitResult, FitStatus, FitWeighting, _free_params,
-                                  _jacobian, _Problem, band_mask, default_band_hz, fitted_bins, wrapped)
+                                  VIBRATION_DAMPING, FitKind, FitOptions, FitParams, FitResult, FitStatus, FitWeighting,
+                                  _free_params, _jacobian, _Problem, band_mask, default_band_hz, fitted_bins,
+                                  free_is_finite, wrapped)
 from analysis.frf import FrequencyResponse
 from analysis.input_noise import h2_at_resonance
 from analysis.model import TwoMassParams, antiresonance_hz, resonance_hz
@@ -195,17 +209,57 @@ def fit_two_mass(
                 continue
             # a finite cost at a parameter that under- or overflowed (an inertia of exactly 0 on a far-off FRF,
             # seen with an analytic Jacobian) is no solution: f_a, f_r and the intervals divide by it
-            physical = bool(np.all(np.isfinite(np.exp(res.x))) and np.all(np.exp(res.x) > 0.0))
-            if np.isfinite(res.cost) and physical and (best is None or res.cost < best.cost):
+            if np.isfinite(res.cost) and free_is_finite(problem.free, res.x) and (best is None or res.cost < best.cost):
                 best = res
         if best is None:
             return _failed(problem, band, options, "no start gave a finite cost")
-        return _result(problem, best, band, options, n_res, _quantisation_floor(frf, problem, best.x, options),
-                       _input_noise_shift(frf, problem, best.x, options))
+        fit = _result(problem, best, band, options, n_res, _quantisation_floor(frf, problem, best.x, options),
+                      _input_noise_shift(frf, problem, best.x, options))
+        if options.vibration_damping and fit.status != "failed":
+            fit = _bracketed(fit, _vibration_damping_fit(frf, problem, best.x, options, n_res))
+        return fit
+
+
+def _vibration_damping_fit(frf: FrequencyResponse, problem: _Problem, x: np.ndarray, options: FitOptions,
+                           n_res: int) -> FitResult | None:
+    """The fit made again with b_v free beside C (:data:`analysis.fit_problem.VIBRATION_DAMPING`), from C alone's optimum
+    ``x`` and b_v = 0, with its own intervals (jackknife, misfit, systematic floor, the H2 reading); None when its run
+    raises or ends off the finite numbers."""
+    vib = _Problem(frf, problem.band, options, problem.params(x), vibration=True)
+    try:
+        res = optimize.least_squares(vib.residuals, vib.x0(problem.params(x)), method="lm", x_scale=1.0)
+    except (ValueError, FloatingPointError):
+        return None
+    if not (np.isfinite(res.cost) and free_is_finite(vib.free, res.x)):
+        return None
+    return _result(vib, res, problem.band, options, n_res, _quantisation_floor(frf, vib, res.x, options),
+                   _input_noise_shift(frf, vib, res.x, options))
+
+
+def _bracketed(fit: FitResult, other: FitResult | None) -> FitResult:
+    """``fit`` (C alone) with each parameter's 95 % interval widened, symmetrically on the log scale around its value,
+    until it holds ``other``'s (the fit with b_v free too) — the truth lies in one model's interval or the other's: C
+    alone's when the resonance's damping is the shaft's, b_v's when a motor-side damping adds to it — and the covariance
+    scaled alike (its correlations kept). Unchanged when ``other`` is None or its intervals are not all finite (no
+    reading to add)."""
+    names = fit.fitted
+    if other is None or not all(np.isfinite(other.ci95[n]).all() for n in (*names, VIBRATION_DAMPING)):
+        return fit
+    x = np.log([getattr(fit.values, n) for n in names])
+    sigma = np.sqrt(np.clip(np.diag(fit.covariance), 0.0, None))
+    reach = np.array([max(xi - np.log(min(fit.ci95[n][0], other.ci95[n][0])),
+                          np.log(max(fit.ci95[n][1], other.ci95[n][1])) - xi) for n, xi in zip(names, x)])
+    wider = np.maximum(sigma, reach / Z95)
+    scale = np.where(sigma > 0.0, wider / np.where(sigma > 0.0, sigma, 1.0), 1.0)
+    cov = np.array(fit.covariance) * np.outer(scale, scale)
+    cov.setflags(write=False)
+    return replace(fit, covariance=cov, ci95=_intervals(fit.values, names, x, cov), ci95_c_alone=fit.ci95,
+                   vibration_damping=(other.values.bv_Nms_per_rad, *other.ci95[VIBRATION_DAMPING],
+                                      other.values.C_Nms_per_rad))
 
 
 def _input_noise_shift(frf: FrequencyResponse, problem: _Problem, x: np.ndarray, options: FitOptions) -> np.ndarray:
-    """How far the free log parameters move when the resonance is read from H2 instead of H1
+    """How far the free parameters (:func:`analysis.fit_problem.free_vector`) move when the resonance is read from H2 instead of H1
     (:func:`analysis.input_noise.h2_at_resonance`, one Levenberg–Marquardt run from the optimum ``x``): the bias an
     error on the torque estimate may leave (zero when the band holds no resonance peak; infinite when the refit
     fails, stops without converging or ends off the finite numbers: the fit is not stable under it)."""
@@ -223,7 +277,8 @@ def _refit_from(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
     """The fit of ``problem`` made again on another estimate ``frf`` of the same band (a jackknife replicate, H2 at the
     resonance): one Levenberg–Marquardt run from the optimum ``x``, which lies close; None when the run raises."""
     try:
-        return optimize.least_squares(_Problem(frf, problem.band, options, problem.fixed).residuals, x, method="lm",
+        return optimize.least_squares(_Problem(frf, problem.band, options, problem.fixed, problem.vibration).residuals,
+                                      x, method="lm",
                                       x_scale=1.0)
     except (ValueError, FloatingPointError):
         return None
@@ -231,7 +286,7 @@ def _refit_from(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
 
 def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
                         options: FitOptions) -> np.ndarray | None:
-    """Variance of each free log parameter that the systematic errors no scatter shows may pull it by: the encoder's
+    """Variance of each free parameter (:func:`analysis.fit_problem.free_vector`) that the systematic errors no scatter shows may pull it by: the encoder's
     quantisation (:func:`analysis.systematic_errors.quantisation_pull`, times the share of the error that repeats with the
     motion) and the smooth systematic errors of the chain and of the loop's feedback of the rest of the quantisation
     (:func:`analysis.systematic_errors.chain_pull`); None without the encoder's resolution.
@@ -243,7 +298,7 @@ def _quantisation_floor(frf: FrequencyResponse, problem: _Problem, x: np.ndarray
         return None
     bound, lines = quantisation_terms(frf, problem.band, options.speed_lsb_rad)
     values = problem.params(x)
-    full = _Problem(frf, problem.band, replace(options, params="K,Jm,Jl"), values)
+    full = _Problem(frf, problem.band, replace(options, params="K,Jm,Jl"), values, problem.vibration)
     jac = _jacobian(full, full.x0(values))
     share = options.quantisation_repeating_share
     pull = share * np.diag(quantisation_pull(bound, lines, jac, full.sqrt_w))
@@ -263,7 +318,7 @@ def _starts_inertias_fixed(guess: TwoMassParams, nominal: TwoMassParams) -> list
 def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, float],
             options: FitOptions, n_res: int, quantisation_floor: np.ndarray | None = None,
             input_noise_shift: np.ndarray | None = None) -> FitResult:
-    """Package the best least-squares solution with its covariance and intervals (``input_noise_shift``: the log
+    """Package the best least-squares solution with its covariance and intervals (``input_noise_shift``: the free
     parameters' shift from H1 to H2 at the resonance, :func:`_input_noise_shift`; None: none)."""
     values = problem.params(res.x)
     n_free = res.x.size
@@ -306,17 +361,23 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
 
 def _intervals(values: TwoMassParams, free: tuple[str, ...], x: np.ndarray,
                cov: np.ndarray) -> dict[str, tuple[float, float]]:
-    """The 95 % interval exp(ln θ ± 1.96 σ) of each free parameter from the log parameters' covariance ``cov``; a fixed
-    parameter's is its value."""
+    """The 95 % interval exp(ln θ ± 1.96 σ) of each free parameter from the free vector's covariance ``cov`` (b_v's: its
+    ratio r ± 1.96 σ times C's share (J_m+J_l) C/J_l, C's own uncertainty left to C's interval); a fixed parameter's is
+    its value."""
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     ci = {n: (getattr(values, n), getattr(values, n)) for n in PARAM_NAMES}
-    for name, xi, s in zip(free, x, sigma):
-        ci[name] = (float(np.exp(xi - Z95 * s)), float(np.exp(xi + Z95 * s)))
+    for name, xi, s in zip(free, x, sigma):  # b_v's only in the bracketing fit (_vibration_damping_fit)
+        if name == VIBRATION_DAMPING:
+            share = (values.Jm_kgm2 + values.Jl_kgm2) * values.C_Nms_per_rad / values.Jl_kgm2
+            ci[name] = (float((xi - Z95 * s) * share), float((xi + Z95 * s) * share))
+        else:
+            ci[name] = (float(np.exp(xi - Z95 * s)), float(np.exp(xi + Z95 * s)))
     return ci
 
 
 def _jackknife(problem: _Problem, x_best: np.ndarray, options: FitOptions) -> tuple[np.ndarray, float]:
-    """Delete-one-block jackknife covariance of the log parameters and its 95 % t quantile.
+    """Delete-one-block jackknife covariance of the free parameters (:func:`analysis.fit_problem.free_vector`) and its
+    95 % t quantile.
 
     Each replicate FRF is refitted by one Levenberg–Marquardt run from the full fit's optimum
     (the replicates differ from the full record by one block, so the optimum is close).

@@ -20,6 +20,11 @@ FitStatus = Literal["converged", "max_evaluations", "failed"]
 FitWeighting = Literal["coherence", "uniform"]
 
 PARAM_NAMES: tuple[str, ...] = ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad")
+#: The motor-side damping of the vibration alone (analysis.model's b_v), free beside C in acq's second fit
+#: (:attr:`FitOptions.vibration_damping`): the resonance's damping beyond C's share, so that C is read where it alone sets
+#: the response, the anti-resonance. Fitted as the ratio r = J_l b_v/((J_m+J_l) C) of the two shares, not as a logarithm:
+#: 0 (no such damping) is an ordinary value, and the data may put r a little below it.
+VIBRATION_DAMPING = "bv_Nms_per_rad"
 BAND_LOW_HZ = 10.0
 BAND_HIGH_MAX_HZ = 500.0
 BAND_HIGH_FRACTION_OF_FENC = 0.4
@@ -48,6 +53,10 @@ class FitOptions:
         Share (0…1) of the quantisation error that repeats with the motion
         (:func:`analysis.quantisation_lock.locked_share`): only that share is a bias the jackknife cannot see; the
         rest scatters from period to period and is in the jackknife's spread. 1 (all of it) when not measured.
+    vibration_damping : bool
+        Fit the model again with the motor-side damping of the vibration b_v (:data:`VIBRATION_DAMPING`) free beside C
+        and widen the intervals to hold that reading's too (acq's chain), or not (the paper's: C its model's one
+        damping).
     """
 
     params: FitParams = "K,Jm,Jl"
@@ -56,6 +65,7 @@ class FitOptions:
     weighting: FitWeighting = "coherence"
     speed_lsb_rad: float | None = None
     quantisation_repeating_share: float = 1.0
+    vibration_damping: bool = True
 
 
 @dataclass(frozen=True)
@@ -65,7 +75,7 @@ class FitResult:
     Attributes
     ----------
     values : TwoMassParams
-        Best-fit parameters (b_m = b_l = 0).
+        Best-fit parameters (b_m = b_l = b_v = 0: C the model's one damping).
     ci95 : dict of str to (float, float)
         95 % confidence interval (low, high) per parameter name of :data:`PARAM_NAMES`, SI units;
         a fixed parameter has a zero-width interval.
@@ -74,7 +84,9 @@ class FitResult:
     covariance : ndarray, shape (p, p)
         Covariance of the natural logarithms of the fitted parameters (the jackknife's scaled by
         (t/1.96)², so that ±1.96 σ is the 95 % interval in either case), with the misfit's or the systematic pull's
-        share and the input-noise bound d dᵀ/3 (:mod:`analysis.input_noise`) added.
+        share and the input-noise bound d dᵀ/3 (:mod:`analysis.input_noise`) added, then each parameter's variance
+        widened (its correlations kept) until ±1.96 σ holds the interval of the fit with b_v free too
+        (:attr:`vibration_damping`).
     cost : float
         Final cost ½ Σ r² of the weighted residuals.
     residual_rms : float
@@ -96,6 +108,12 @@ class FitResult:
         (:mod:`analysis.input_noise`; empty when not computed): the bias an error on the torque estimate may leave.
     ci95_without_input_noise : dict of str to (float, float)
         The 95 % intervals without the allowance for that bias (empty when none was made): what it widened.
+    vibration_damping : tuple of float or None
+        The fit with b_v free beside C (:attr:`FitOptions.vibration_damping`): b_v, N·m·s/rad, and its 95 % interval
+        (low, high), and that fit's C; None when not made, or when it or its intervals did not come out finite (the
+        intervals are then C alone's).
+    ci95_c_alone : dict of str to (float, float)
+        The 95 % intervals before they were widened to hold the b_v fit's (empty when not widened).
     """
 
     values: TwoMassParams
@@ -113,6 +131,8 @@ class FitResult:
     n_points: int
     input_noise_shift: dict[str, float] = field(default_factory=dict)
     ci95_without_input_noise: dict[str, tuple[float, float]] = field(default_factory=dict)
+    vibration_damping: tuple[float, float, float, float] | None = None
+    ci95_c_alone: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def rel_halfwidth(fit: FitResult, name: str) -> float:
@@ -136,16 +156,48 @@ def fitted_bins(frf: FrequencyResponse, band: tuple[float, float]) -> np.ndarray
     return band_mask(frf.f_hz, band) & np.isfinite(frf.H) & (np.abs(frf.H) > 0)
 
 
-def _free_params(options: FitOptions) -> tuple[str, ...]:
-    """Names of the parameters a fit with ``options`` adjusts."""
-    return ("K_Nm_per_rad", "C_Nms_per_rad") if options.params == "K" else PARAM_NAMES
+def _free_params(options: FitOptions, vibration: bool = False) -> tuple[str, ...]:
+    """Names of the parameters a fit with ``options`` adjusts (``vibration``: b_v too, :data:`VIBRATION_DAMPING`)."""
+    names = ("K_Nm_per_rad", "C_Nms_per_rad") if options.params == "K" else PARAM_NAMES
+    return (*names, VIBRATION_DAMPING) if vibration else names
+
+
+def free_vector(p: TwoMassParams, free: tuple[str, ...]) -> np.ndarray:
+    """The vector a fit adjusts for the parameters ``free`` of ``p``: each one's natural logarithm, b_v
+    (:data:`VIBRATION_DAMPING`) as r = J_l b_v/((J_m+J_l) C)."""
+    return np.array([_vibration_ratio(p) if n == VIBRATION_DAMPING else np.log(getattr(p, n)) for n in free])
+
+
+def with_free(fixed: TwoMassParams, free: tuple[str, ...], x: np.ndarray) -> TwoMassParams:
+    """``fixed`` with the parameters ``free`` set from the vector ``x`` (:func:`free_vector`'s inverse)."""
+    named = dict(zip(free, np.asarray(x, dtype=float).tolist()))
+    r = named.pop(VIBRATION_DAMPING, None)
+    p = replace(fixed, **{n: float(np.exp(v)) for n, v in named.items()})
+    return p if r is None else replace(p, bv_Nms_per_rad=r * _vibration_share(p))
+
+
+def free_is_finite(free: tuple[str, ...], x: np.ndarray) -> bool:
+    """Whether the vector ``x`` of ``free`` names positive finite parameters (no logarithm's exp under- or overflowed)
+    and a finite b_v ratio."""
+    logs = np.array([v for n, v in zip(free, x) if n != VIBRATION_DAMPING])
+    return bool(np.all(np.isfinite(x)) and np.all(np.isfinite(np.exp(logs))) and np.all(np.exp(logs) > 0.0))
+
+
+def _vibration_share(p: TwoMassParams) -> float:
+    """(J_m+J_l) C/J_l, N·m·s/rad: the b_v that doubles the resonance's damping (r = 1)."""
+    return (p.Jm_kgm2 + p.Jl_kgm2) * p.C_Nms_per_rad / p.Jl_kgm2
+
+
+def _vibration_ratio(p: TwoMassParams) -> float:
+    """r = b_v/((J_m+J_l) C/J_l) of ``p``."""
+    return p.bv_Nms_per_rad / _vibration_share(p)
 
 
 class _Problem:
     """Residuals of one fit: which parameters are free, the data, the weights."""
 
     def __init__(self, frf: FrequencyResponse, band: tuple[float, float], options: FitOptions,
-                 fixed: TwoMassParams) -> None:
+                 fixed: TwoMassParams, vibration: bool = False) -> None:
         sel = fitted_bins(frf, band)
         self.f = frf.f_hz[sel]
         self.log_h = np.log(frf.H[sel])
@@ -153,7 +205,8 @@ class _Problem:
         self.w = g2 / (1.0 - g2) if options.weighting == "coherence" else np.ones_like(g2)
         self.sqrt_w = np.sqrt(self.w)
         self.kind = options.kind
-        self.free = _free_params(options)
+        self.vibration = vibration  # b_v free beside the others (analysis.fit's bracketing fit)
+        self.free = _free_params(options, vibration)
         self.fixed = fixed
         self.band = band
         self.replicates = frf.replicates or ()
@@ -174,15 +227,15 @@ class _Problem:
         self.load_factor: Callable[[np.ndarray], np.ndarray] | None = None  # the fit's model: a rigid load
 
     def params(self, x: np.ndarray) -> TwoMassParams:
-        """Model parameters from the log vector ``x`` of the free ones."""
-        return replace(self.fixed, **dict(zip(self.free, np.exp(x).tolist())))
+        """Model parameters from the vector ``x`` of the free ones (:func:`with_free`)."""
+        return with_free(self.fixed, self.free, x)
 
     def x0(self, p: TwoMassParams) -> np.ndarray:
-        """Log vector of the free parameters of ``p``."""
-        return np.log([getattr(p, n) for n in self.free])
+        """The vector of the free parameters of ``p`` (:func:`free_vector`)."""
+        return free_vector(p, self.free)
 
     def response(self, x: np.ndarray, f_hz: np.ndarray) -> np.ndarray:
-        """The model's torque → motor speed response, (rad/s)/(N·m), at ``f_hz`` (Hz) for the log vector ``x``
+        """The model's torque → motor speed response, (rad/s)/(N·m), at ``f_hz`` (Hz) for the free vector ``x``
         (with the load inertia's factor :attr:`load_factor` of f_hz when one is set)."""
         factor = None if self.load_factor is None else self.load_factor(f_hz)
         return frequency_response(self.params(x), f_hz, factor)
@@ -238,12 +291,13 @@ def _kernel_operator(f_hz: np.ndarray, offsets_hz: np.ndarray, kernel: np.ndarra
 
 
 def _jacobian(problem: _Problem, x: np.ndarray) -> np.ndarray:
-    """Jacobian of ``problem``'s weighted residuals at the log parameters ``x`` by central differences."""
+    """Jacobian of ``problem``'s weighted residuals at the free vector ``x`` by central differences."""
     return _central_differences(problem.residuals, x)
 
 
 def _central_differences(func: Callable[[np.ndarray], np.ndarray], x: np.ndarray) -> np.ndarray:
-    """d func/d x at the log parameters ``x``, one column per parameter."""
-    step = 1e-6  # in ln(parameter): a 1 ppm change, far above rounding (the residuals are ~1e-3…1) and far below
-    # the curvature's scale (the cost changes by ≪ 1 % of its value over it); central differences, error O(step²)
+    """d func/d x at the free vector ``x``, one column per parameter."""
+    step = 1e-6  # in ln(parameter) a 1 ppm change (in b_v's ratio r a 1e-6 share of C's damping), far above rounding
+    # (the residuals are ~1e-3…1) and far below the curvature's scale (the cost changes by ≪ 1 % of its value over it);
+    # central differences, error O(step²)
     return np.stack([(func(x + step * e) - func(x - step * e)) / (2.0 * step) for e in np.eye(x.size)], axis=1)

@@ -6,8 +6,15 @@ All quantities are reflected to the motor side: motor inertia ``J_m`` and load i
 speed ω_m (rad/s) is::
 
     H(s) = (J_l s² + (C + b_l) s + K) /
-           (J_m J_l s³ + ((J_m+J_l) C + J_l b_m + J_m b_l) s²
+           (J_m J_l s³ + ((J_m+J_l) C + J_l (b_m + b_v) + J_m b_l) s²
             + ((J_m+J_l) K + (b_m+b_l) C + b_m b_l) s + K (b_m+b_l))
+
+with ``b_v`` a motor-side damping of the vibration alone: b_m's share of the resonance's damping without its rigid-body
+terms (b_m C s, K b_m, which set the rigid-body pole at b_m/(J_m+J_l) and shape |H| below a few hertz). It stands for a
+motor-side friction that damps the vibration while the motor rests or creeps (where Coulomb and Stribeck friction act
+like a steep viscous one) but is a nearly constant torque over a move (no damping of the rigid-body motion). Neither
+b_m nor b_v enters the numerator: the anti-resonance's depth is C's alone (ζ_a ≈ C/(2√(K J_l))), the resonance's is
+((J_m+J_l) C + J_l b_v)/(2 √(K J_m J_l (J_m+J_l))).
 """
 
 from __future__ import annotations
@@ -18,7 +25,8 @@ import numpy as np
 
 #: Symbol and SI unit of each parameter of :class:`TwoMassParams`, for people (tables, verdict sentences).
 PARAM_LABELS: dict[str, tuple[str, str]] = {"K_Nm_per_rad": ("K", "N·m/rad"), "Jm_kgm2": ("J_m", "kg·m²"),
-                                            "Jl_kgm2": ("J_l", "kg·m²"), "C_Nms_per_rad": ("C", "N·m·s/rad")}
+                                            "Jl_kgm2": ("J_l", "kg·m²"), "C_Nms_per_rad": ("C", "N·m·s/rad"),
+                                            "bv_Nms_per_rad": ("b_v", "N·m·s/rad")}
 
 
 @dataclass(frozen=True)
@@ -37,6 +45,9 @@ class TwoMassParams:
         Joint damping, N·m·s/rad.
     bm_Nms_per_rad, bl_Nms_per_rad : float
         Viscous friction of motor and load, N·m·s/rad (0 by default).
+    bv_Nms_per_rad : float
+        Motor-side damping of the vibration alone (the module's b_v), N·m·s/rad (0 by default); may be negative down to
+        −(J_m+J_l) C/J_l, where the resonance would be undamped.
     """
 
     K_Nm_per_rad: float
@@ -45,6 +56,7 @@ class TwoMassParams:
     C_Nms_per_rad: float
     bm_Nms_per_rad: float = 0.0
     bl_Nms_per_rad: float = 0.0
+    bv_Nms_per_rad: float = 0.0
 
     @property
     def antiresonance_hz(self) -> float:
@@ -80,7 +92,7 @@ def transfer_function(p: TwoMassParams) -> tuple[np.ndarray, np.ndarray]:
     num : ndarray, shape (3,)
         ``[J_l, C + b_l, K]``.
     den : ndarray, shape (4,)
-        ``[J_m J_l, (J_m+J_l) C + J_l b_m + J_m b_l, (J_m+J_l) K + (b_m+b_l) C + b_m b_l, K (b_m+b_l)]``.
+        ``[J_m J_l, (J_m+J_l) C + J_l (b_m + b_v) + J_m b_l, (J_m+J_l) K + (b_m+b_l) C + b_m b_l, K (b_m+b_l)]``.
         Units make H rad/s per N·m (as expected by ``scipy.signal.lti``).
     """
     num, den = _coefficients(p, p.Jl_kgm2)
@@ -91,9 +103,9 @@ def _coefficients(p: TwoMassParams, Jl: float | np.ndarray) -> tuple[tuple, tupl
     """:func:`transfer_function`'s coefficients with ``Jl`` (kg·m², a float or one value per frequency) in J_l's
     place."""
     K, Jm, C = p.K_Nm_per_rad, p.Jm_kgm2, p.C_Nms_per_rad
-    bm, bl = p.bm_Nms_per_rad, p.bl_Nms_per_rad
+    bm, bl, bv = p.bm_Nms_per_rad, p.bl_Nms_per_rad, p.bv_Nms_per_rad
     num = (Jl, C + bl, K)
-    den = (Jm * Jl, (Jm + Jl) * C + Jl * bm + Jm * bl, (Jm + Jl) * K + (bm + bl) * C + bm * bl, K * (bm + bl))
+    den = (Jm * Jl, (Jm + Jl) * C + Jl * (bm + bv) + Jm * bl, (Jm + Jl) * K + (bm + bl) * C + bm * bl, K * (bm + bl))
     return num, den
 
 

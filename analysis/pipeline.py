@@ -18,7 +18,8 @@ from analysis.chain import SignalChain, chain_caveat
 from analysis.clock_model import ClockFit
 from analysis.drive_limits import drive_limit_reason
 from analysis.diagnose import inertia_fault, nominal_fault, recording_diagnosis, with_fault, with_nominal_fault
-from analysis.fit import FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz, fit_two_mass, judged_fit
+from analysis.fit import (VIBRATION_DAMPING, FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz,
+                          fit_two_mass, judged_fit)
 from analysis.encoder import longest_gap_free_span
 from analysis.estimator_check import kernel_model_error, model_estimate
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments, segment_layout
@@ -79,10 +80,12 @@ class Result:
         ``quality.reasons`` lists the verdict's reasons, then the signal chain's notes prefixed
         ``"note: "``.
         """
-        v = self.fit.values
+        v, vib = self.fit.values, self.fit.vibration_damping
         return {
             **{n: _num(getattr(v, n)) for n in PARAM_NAMES},
-            "ci95": {n: [_num(lo), _num(hi)] for n, (lo, hi) in self.fit.ci95.items()},
+            **({} if vib is None else {VIBRATION_DAMPING: _num(vib[0])}),
+            "ci95": {**{n: [_num(lo), _num(hi)] for n, (lo, hi) in self.fit.ci95.items()},
+                     **({} if vib is None else {VIBRATION_DAMPING: [_num(vib[1]), _num(vib[2])]})},
             "antiresonance_hz": _num(self.fit.f_a),
             "resonance_hz": _num(self.fit.f_r),
             "clock": {"offset_s": _num(self.clock.offset_s), "drift_ppm": _num(self.clock.drift_ppm),
@@ -185,7 +188,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     fit = fit_two_mass(frf, FitOptions(params=request.params, kind=request.fit, band_hz=request.band_hz,
                                        weighting=chain.weighting, speed_lsb_rad=2.0 * math.pi / rec.counts_per_rev,
                                        quantisation_repeating_share=1.0 if sig.encoder_jitter is None
-                                       else sig.encoder_jitter.repeating_share),
+                                       else sig.encoder_jitter.repeating_share,
+                                       vibration_damping=chain.pipeline == "acq"),
                        nominal=request.nominal)
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))

@@ -36,6 +36,24 @@ Measured at 4818a25 (analysis/ as on main 3d6370f), the defaults (robot: seeds 0
   67 % of its time at |ω_m| < 0.5 rad/s, where the resonance rings out against the friction — the paper bench's
   1000 rpm triangles 0.5 %: there ×1 moves C only 0.103 → 0.110 (seed 0); ×2 misses f_a by +8.6 % (limit 5.4 %): poor,
   the reason naming the *load* side's friction. tests/test_robot_friction.py pins seed 1 at 540 s (its "motor" case).
+  Session 14 (branch wp/s14-motorfric; the 120 robot windows of levels 0/0.5/1/2 recorded once and analysed by each
+  variant; the same counts as this script's robot rows): main at a8802db, ok / confidently wrong: ×0 22 / 0, ×0.5
+  22 / **13** (C 13, K 1), ×1 19 / **18** (C 17, J_l 1), ×2 11 / **9** (C 9, J_l 1). Tried:
+  - b_m, a viscous motor friction (analysis.model), free as a logarithm: ×1 21 / 3, but in some windows b_m ran to 0
+    (the rigid-body terms b_m C s, K b_m shape |H| at 10–20 Hz, where the friction — a constant torque over a move —
+    does not damp) and C stayed wrong; the same with its rigid-body terms dropped (b_v, "resonance-only"): ×1 21 / 4;
+  - b_v free always, as its ratio r = J_l b_v/((J_m+J_l) C) to C's share, linearly (0 an ordinary value): ×0 22 / 0,
+    ×0.5 21 / 0, ×1 21 / 2, ×2 21 / 10 (C 8, J_l 3: at ×2 the anti-resonance itself reads C 0.13–0.15); b_v's interval
+    held 0 in 84 of 85 ok windows (with friction or without), so no test can choose the model from the data; on healthy
+    windows C's interval ±31 % against ±19 % (median), K's ±0.81 against ±0.74 %. In the accuracy family it failed:
+    C read from the anti-resonance's few low-weight bins is off by up to 95 % on J_m ×0.5, J_l ×2 (interval missing in
+    3 of 5), C's coverage 98 → 94 %, and backlash 0.05 mrad seed 2 became ok, confidently wrong (183 ok, 212/245);
+  - kept: C alone stays the fit (values, residuals, verdict), a second fit with b_v free widens each interval until it
+    holds that fit's (analysis.fit._bracketed), b_v reported beside: ×0 22 / 0, ×0.5 22 / **0**, ×1 19 / **1** (C: seed
+    2 at 300 s, 0.134 [0.1011, 0.1778]), ×2 9 / **1** (C: seed 2 at 180 s, 0.155 [0.1033, 0.2332]; two windows poor
+    on K's widened interval, ±5.1/5.6 %). Seed 1 at 540 s ×1: C 0.1390 [0.0773, 0.2499], b_v 0.052 [−0.011, 0.115].
+    The same counts from ``--effects "motor friction" --levels 0.5,1,2 --paper-seeds 0 --list`` on the
+    branch (analysis as at bf04cfe), load 15–17, ~12 min.
 * cogging ×0.5, ×1, ×2 (0.05, 0.1, 0.2 N·m): robot 17 / 0, 18 / 0, 12 / 0 (poor 5); paper 5 / 0, 4 / 0, 0 (poor 5).
   Not confidently wrong; at 0.2 N·m the paper bench's misfit at f_a (+11.3 % against 5.9 %, seed 0) is worded as
   the load side's friction or backlash.

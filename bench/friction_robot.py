@@ -15,6 +15,12 @@ level not excited): level 0 (no friction): 18 ok, 0 confidently wrong; 0.5: 19 o
 torque, correlated with the motion, lifts |H| by 0.5–5 % at 10–52 Hz, bins the fit trusts) and C 20–50 % high,
 while the misfit test at f_a sees the dip's −4.8 % against its 12.6 % limit (seed 5 at 300 s).
 
+Session 14 (branch wp/s14-motorfric at bf04cfe: each interval widened to hold a second fit with the motor-side damping
+of the vibration b_v free, analysis.fit; ``--levels 0,1 --list``, load 15–17): level 0: 22 ok, 0 wrong (main: 22 / 0);
+level 1: 21 ok, 4 wrong, all J_l (main: 21 / 10) — seed 0 at 60 and 540 s, seed 4 at 180 s, seed 5 at 60 s, J_l
+0.007371–0.007393 with upper ends 0.007456–0.007477 against 0.00748. The J_l bias itself is unchanged: the b_v fit's
+J_l interval is a little wider, not elsewhere.
+
 Session 13 (2026-12-01; the same 90 windows recorded once, seeds 0–5 × 60…540 s × levels 0/1/2, analysed in a scratch
 copy of main at 3d6370f; counts at level 1 unless said): what the friction does to H1 (seed 5 at 300 s, level 1 and
 2 against 0, same program): the dip at f_a filled (+7…+64 % at 48–56 Hz), the resonance flattened (−18…−28 % at

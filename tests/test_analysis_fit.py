@@ -165,6 +165,32 @@ def test_complex_fit_agrees_with_the_amplitude_fit():
         assert getattr(cpx.values, name) == pytest.approx(getattr(amp.values, name), rel=0.01)
 
 
+def test_vibration_damping_damps_the_resonance_and_leaves_the_anti_resonance_to_c():
+    """b_v adds J_l b_v to H's s² denominator term only: the zeros (the anti-resonance) are C's alone, and the resonance's
+    damping grows by the share J_l b_v/((J_m+J_l) C) of C's."""
+    plain, damped = transfer_function(PAPER), transfer_function(replace(PAPER, bv_Nms_per_rad=0.05))
+    np.testing.assert_array_equal(damped[0], plain[0])
+    np.testing.assert_allclose(damped[1] - plain[1], [0.0, PAPER.Jl_kgm2 * 0.05, 0.0, 0.0], atol=1e-15)
+
+
+def test_c_interval_holds_the_anti_resonances_reading_when_the_resonance_is_damped_beyond_c():
+    """A plant whose resonance is damped beyond C's share (b_v = 0.1 N·m·s/rad, as much again as C's): C alone reads
+    about 0.1 + J_l b_v/(J_m+J_l) = 0.17 N·m·s/rad, its own interval far from the truth; the fit with b_v free reads C at
+    the anti-resonance, and C's reported interval, widened to hold that fit's, holds the truth, as b_v's interval does.
+    Measured (seed 3): C 0.171, alone [0.161, 0.183], widened [0.065, 0.45]; b_v 0.114 [0.033, 0.195]."""
+    truth = replace(PAPER, bv_Nms_per_rad=0.1)
+    frf, fit = identify(simulate(truth, 3))
+    assert fit.values.C_Nms_per_rad == pytest.approx(0.171, rel=0.05)  # the values stay C alone's
+    low, high = fit.ci95_c_alone["C_Nms_per_rad"]
+    assert low > 1.4 * truth.C_Nms_per_rad, (low, high)
+    assert fit.ci95["C_Nms_per_rad"][0] <= truth.C_Nms_per_rad <= fit.ci95["C_Nms_per_rad"][1], fit.ci95
+    bv, bv_low, bv_high, c_with_bv = fit.vibration_damping
+    assert bv_low <= truth.bv_Nms_per_rad <= bv_high and c_with_bv == pytest.approx(truth.C_Nms_per_rad, rel=0.2)
+    assert fit.values.K_Nm_per_rad == pytest.approx(truth.K_Nm_per_rad, rel=0.01)
+    alone = fit_two_mass(frf, FitOptions(vibration_damping=False))
+    assert alone.vibration_damping is None and alone.ci95 == fit.ci95_c_alone
+
+
 def test_params_K_keeps_the_nominal_inertias_and_fits_K_and_C():
     truth = scaled(1.6, 1.0)
     _, fit = identify(simulate(truth, 5), options=FitOptions(params="K"), nominal=PAPER)
