@@ -416,10 +416,13 @@ def test_help_and_a_mistyped_path_load_no_numerical_library() -> None:
     for name, (module, attribute, short_help) in LAZY_COMMANDS.items():
         command = getattr(importlib.import_module(module), attribute)
         assert command.name == name and command.get_short_help_str(limit=10_000) == short_help
-    probe = ("import sys; from acq.ui.cli import main\n"
-             "try:\n    main(sys.argv[1:])\nexcept SystemExit as e:\n    code = e.code\n"
-             "heavy = sorted({'numpy', 'scipy', 'h5py', 'pydantic', 'PySide6'} & set(sys.modules))\n"
-             "print('loaded:', heavy, 'exit:', code, file=sys.stderr)")
+    # what was loaded, said as acq exits: at once (os._exit) after a command, else by SystemExit
+    probe = ("import os, sys; from acq.ui.cli import main\nleave = os._exit\n"
+             "def said(code):\n"
+             "    heavy = sorted({'numpy', 'scipy', 'h5py', 'pydantic', 'PySide6'} & set(sys.modules))\n"
+             "    print('loaded:', heavy, 'exit:', code, file=sys.stderr, flush=True)\n    leave(0)\n"
+             "os._exit = said\n"
+             "try:\n    main(sys.argv[1:])\nexcept SystemExit as e:\n    said(e.code)")
     helped = subprocess.run([sys.executable, "-c", probe, "--help"], capture_output=True, text=True, timeout=60)
     assert helped.stderr.strip() == "loaded: [] exit: 0"
     listed = dict(re.findall(r"^  (\w+) +(\S.*)$", helped.stdout.split("Commands:")[1], re.M))

@@ -110,6 +110,21 @@ def test_ctrl_c_stops_a_batch_and_every_result_written_is_catalogued(recorded: P
     os.sync()
 
 
+def test_a_ctrl_c_after_the_last_analysis_says_all_were_analysed_not_that_0_are_left() -> None:
+    from acq.monitoring.batch import BatchReport
+    from acq.monitoring.catalogue import Outcome
+    from acq.ui.batch_cli import interrupted_line
+
+    paths = [Path(f"s{i}.h5") for i in range(9)]
+    ok = [Outcome(str(p), "h", "r", {}, {"K_Nm_per_rad": 890.0}, None, 1.0) for p in paths]
+    failed = Outcome(str(paths[-1]), "h", "r", {}, None, "ValueError: bad", 1.0)
+    assert interrupted_line(paths, BatchReport(ok, [], 3.0, interrupted=True), "c.sqlite") == (
+        "acq: interrupted after the last analysis: all 9 sessions analysed (9 by this run), in c.sqlite")
+    assert interrupted_line(paths, BatchReport(ok[:8] + [failed], [], 3.0, interrupted=True), "c.sqlite") == (
+        "acq: interrupted: 8 of 9 sessions analysed (8 by this run, 1 failed), in c.sqlite; run the same command "
+        "again to analyse the other 1")
+
+
 def test_a_batch_works_where_the_user_stands_in_folders_named_like_our_packages(recorded: Path, tmp_path: Path) -> None:
     """Workers import acq, not the ./acq, ./analysis or ./drivers of the folder the user runs acq in: the forkserver
     runs ``python -c``, which puts that folder first on sys.path (every worker died: BrokenProcessPool)."""
@@ -175,7 +190,9 @@ def test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line(recorded: Path, tmp_pa
                     f"acq: interrupted before any analysis started ({n} sessions found); run the same command again "
                     "to analyse them",
                     f"acq: interrupted: {ok} of {n} sessions analysed ({ok} by this run), in {catalogue}; run the same "
-                    f"command again to analyse the other {n - ok}")
+                    f"command again to analyse the other {n - ok}",
+                    f"acq: interrupted after the last analysis: all {n} sessions analysed ({n} by this run), in "
+                    f"{catalogue}")
     results = {p.name.replace(".result.json", ".h5") for p in folder.glob("*.result.json")}
     assert results == (_ok_names(catalogue) if ok else set())  # a result whose worker was stopped is removed
     if moment == "first result written":  # its worker draws the report (Qt) meanwhile

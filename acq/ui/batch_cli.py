@@ -121,7 +121,10 @@ def interrupted_line(paths: list[Path], done: BatchReport | None, catalogue: Pat
         return (f"acq: interrupted before any analysis started ({len(paths)} sessions found); run the same command "
                 "again to analyse them")
     analysed = len(done.skipped) + sum(o.error is None for o in done.outcomes)
+    by_run = len(done.outcomes) - len(done.failed)
+    if analysed == len(paths):  # the Ctrl-C came after the last analysis: nothing is left for another run
+        return (f"acq: interrupted after the last analysis: all {analysed} sessions analysed ({by_run} by this run), "
+                f"in {catalogue}")
     failed = f", {len(done.failed)} failed" if done.failed else ""
-    return (f"acq: interrupted: {analysed} of {len(paths)} sessions analysed ({len(done.outcomes) - len(done.failed)} "
-            f"by this run{failed}), in {catalogue}; run the same command again to analyse the other "
-            f"{len(paths) - analysed}")
+    return (f"acq: interrupted: {analysed} of {len(paths)} sessions analysed ({by_run} by this run{failed}), in "
+            f"{catalogue}; run the same command again to analyse the other {len(paths) - analysed}")

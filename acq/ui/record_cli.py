@@ -82,7 +82,10 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=session_tags)
     if live:
-        from acq.ui.live import LiveView, require_display  # Qt is imported only when asked for
+        from acq.process_signals import signals_deferred
+
+        with signals_deferred():  # a Ctrl-C inside Qt's import: a fatal error of shiboken's start-up, or lost
+            from acq.ui.live import LiveView, require_display  # Qt is imported only when asked for
 
         require_display()  # before the devices start: no display → one-line error
     recorder.open_session()  # devices and file ready before any progress is drawn; an error is one line

@@ -28,6 +28,7 @@ from pathlib import Path
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
+from acq.process_signals import signals_deferred
 from acq.recording.storage import atomic_path, remove_temp_files
 from acqcore.errors import StorageError
 
@@ -69,10 +70,14 @@ def _render(figures: FigureData, values: dict[str, Any], title: str, report_path
     drawn or superseded, else why not. A write that failed raises :class:`StorageError` (disk full, I/O error: a
     failure, named by the file)."""
     try:
-        from acq.ui.report_view import render_report_png  # Qt only when a picture is drawn
-
         with atomic_path(report_path) as tmp_png:
-            render_report_png(figures, tmp_png, values=values, title=title)
+            # Ctrl-C / SIGTERM wait for Qt to return (then a KeyboardInterrupt here, the temp picture removed): raised
+            # inside a Qt virtual (paintEvent) it unwound through C++ frames — a segfault, or a traceback and lost;
+            # inside Qt's import, a fatal error of shiboken's start-up
+            with signals_deferred():
+                from acq.ui.report_view import render_report_png  # Qt only when a picture is drawn
+
+                render_report_png(figures, tmp_png, values=values, title=title)
             if not still_current():  # drawing takes ≈ 0.6 s: a newer result (or --no-report) may have come meanwhile
                 raise _Superseded
     except _Superseded:
