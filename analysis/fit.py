@@ -233,7 +233,7 @@ def _vibration_damping_fit(frf: FrequencyResponse, problem: _Problem, x: np.ndar
     if not (np.isfinite(res.cost) and free_is_finite(vib.free, res.x)):
         return None
     return _result(vib, res, problem.band, options, n_res, _quantisation_floor(frf, vib, res.x, options),
-                   _input_noise_shift(frf, vib, res.x, options))
+                   _input_noise_shift(frf, vib, res.x, options), linearised=True)
 
 
 def _bracketed(fit: FitResult, other: FitResult | None) -> FitResult:
@@ -317,9 +317,10 @@ def _starts_inertias_fixed(guess: TwoMassParams, nominal: TwoMassParams) -> list
 
 def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, float],
             options: FitOptions, n_res: int, quantisation_floor: np.ndarray | None = None,
-            input_noise_shift: np.ndarray | None = None) -> FitResult:
+            input_noise_shift: np.ndarray | None = None, linearised: bool = False) -> FitResult:
     """Package the best least-squares solution with its covariance and intervals (``input_noise_shift``: the free
-    parameters' shift from H1 to H2 at the resonance, :func:`_input_noise_shift`; None: none)."""
+    parameters' shift from H1 to H2 at the resonance, :func:`_input_noise_shift`; None: none; ``linearised``: the
+    jackknife's replicates by one Gauss–Newton step each, :func:`_linearised_jackknife`)."""
     values = problem.params(res.x)
     n_free = res.x.size
     dof = max(n_res - n_free, 1)
@@ -328,7 +329,8 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
     cov = s2 * np.linalg.pinv(jac.T @ jac)
     quantile = Z95
     if problem.replicates:
-        cov, quantile = _jackknife(problem, res.x, options)
+        cov, quantile = (_linearised_jackknife(problem, res.x, jac, options) if linearised
+                         else _jackknife(problem, res.x, options))
     cov = cov * (quantile / Z95) ** 2  # the interval below is ±1.96 σ of this covariance
     misfit = misfit_covariance(res.fun, jac, problem.f.size)
     # at least the quantisation's pull on the parameters (what the fit absorbed of an error no scatter and no residual
@@ -388,6 +390,25 @@ def _jackknife(problem: _Problem, x_best: np.ndarray, options: FitOptions) -> tu
     if b < 2 or not np.all(np.isfinite(xs)):  # a replicate that diverged: the fit is not stable under the data
         return np.full((x_best.size, x_best.size), np.inf), Z95
     d = np.asarray(xs) - np.mean(xs, axis=0)
+    return (b - 1) / b * (d.T @ d), float(stats.t.ppf(0.975, b - 1))
+
+
+def _linearised_jackknife(problem: _Problem, x_best: np.ndarray, jac: np.ndarray,
+                          options: FitOptions) -> tuple[np.ndarray, float]:
+    """:func:`_jackknife` with each replicate's optimum taken one Gauss–Newton step from the full fit's,
+    x_b = x̂ − J⁺ r_b(x̂), J the full fit's Jacobian (the linearised jackknife: a replicate lacks one block of B, so its
+    optimum lies within a step; the refits by Levenberg–Marquardt took 3–5 iterations of 6 residuals each). For the
+    bracketing fit (:func:`_vibration_damping_fit`), whose replicates cost 0.02–0.03 s of a 60 s session's 0.4 s."""
+    steps = []
+    for frf in problem.replicates:
+        rep = _Problem(frf, problem.band, options, problem.fixed, problem.vibration)
+        if rep.f.size != problem.f.size:  # a replicate with an empty bin the full record has: rows would misalign
+            continue
+        steps.append(np.linalg.lstsq(jac, -rep.residuals(x_best), rcond=None)[0])
+    b = len(steps)
+    if b < 2 or not np.all(np.isfinite(steps)):
+        return np.full((x_best.size, x_best.size), np.inf), Z95
+    d = np.asarray(steps) - np.mean(steps, axis=0)
     return (b - 1) / b * (d.T @ d), float(stats.t.ppf(0.975, b - 1))
 
 
