@@ -68,11 +68,11 @@ def json_column(path: Path | str, r: Any, column: str, empty: str) -> Any:
     text = r[column] or empty
     kind = dict if empty == "{}" else list
     try:
-        value = json.loads(text)
-    except ValueError:
-        value = None
+        value, at = json.loads(text), 0
+    except json.JSONDecodeError as e:
+        value, at = None, e.pos
     if isinstance(value, kind):
         return value
     row = f"sessions row of session_key {r['session_key']!r}" if column == "tags_json" else f"analyses row {r['id']}"
     what = "JSON object" if kind is dict else "JSON list"
-    raise ConfigError(f"{path}: damaged catalogue: {row}, column {column} = {shown(text)}: not a {what}")
+    raise ConfigError(f"{path}: damaged catalogue: {row}, column {column} = {shown(text, at)}: not a {what}")

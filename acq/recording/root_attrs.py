@@ -23,12 +23,12 @@ from acqcore.errors import ConfigError
 SHOWN_AROUND = 30
 
 
-def shown(value: Any) -> str:
-    """``value`` for a one-line message: quoted, a byte that is not UTF-8 as ``\\xc6``, a long text cut around its
-    first such byte (or after its start) with ``…`` when longer than 2 × :data:`SHOWN_AROUND`."""
+def shown(value: Any, at: int | None = None) -> str:
+    """``value`` for a one-line message: quoted, a byte that is not UTF-8 as ``\\xc6``, a text longer than 2 ×
+    :data:`SHOWN_AROUND` cut with ``…`` around character ``at`` (default: its first such byte, else its start)."""
     if not isinstance(value, str):
         return repr(value)
-    bad = next((i for i, c in enumerate(value) if "\udc80" <= c <= "\udcff"), 0)
+    bad = at if at is not None else next((i for i, c in enumerate(value) if "\udc80" <= c <= "\udcff"), 0)
     lo, hi = (0, len(value)) if len(value) <= 2 * SHOWN_AROUND else (max(bad - SHOWN_AROUND, 0), bad + SHOWN_AROUND)
     part = "".join(f"\\x{ord(c) - 0xDC00:02x}" if "\udc80" <= c <= "\udcff"
                    else c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in value[lo:hi])
