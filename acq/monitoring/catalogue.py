@@ -326,7 +326,8 @@ class Catalogue:
                 params).fetchall()
         if monitor is None:
             return [_entry(self.path, r) for r in rows]
-        entries = [(r["monitor_id"], _entry(self.path, r)) for r in rows]  # a session without the column is whose its tag says
+        # a session without the column is whose its tag says
+        entries = [(r["monitor_id"], _entry(self.path, r)) for r in rows]
         return [e for column, e in entries if column is not None or (
             str(e.tags[MONITOR_TAG]) == monitor if e.tags.get(MONITOR_TAG) is not None else unowned)]
 
