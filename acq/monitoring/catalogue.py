@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.catalogue_backends import one_line, open_catalogue_db, open_error
+from acq.monitoring.catalogue_damage import json_column, read_error
 from acq.monitoring.catalogue_schema import MIGRATIONS, MONITOR_COLUMN_VERSION, SCHEMA_VERSION
 from acq.recording.storage import cause_of
 from acqcore.errors import ConfigError, StorageError
@@ -118,9 +119,10 @@ class Catalogue:
                 self._require_current_schema()
             else:
                 self._migrate()
-        except self._dialect.errors as e:
+        except (*self._dialect.errors, UnicodeDecodeError) as e:
+            damaged = read_error(self.path, self._db, e) if self._dialect.name == "sqlite" else None
             self._db.close()
-            raise open_error(self.path, e, "not a usable catalogue") from None
+            raise damaged or open_error(self.path, e, "not a usable catalogue") from None
         except BaseException:
             self._db.close()
             raise
@@ -157,6 +159,18 @@ class Catalogue:
         stores them (PostgreSQL refuses a boolean for an integer column)."""
         values = tuple(int(p) if isinstance(p, bool) else p for p in params)
         return self._db.execute(self._dialect.sql(sql), values)
+
+    @contextmanager
+    def _reading(self) -> Iterator[None]:
+        """Reads of a SQLite file damaged on disk raise one line naming it, the table, row and column
+        (:func:`~acq.monitoring.catalogue_damage.read_error`); any other error goes on as it is."""
+        try:
+            yield
+        except (*self._dialect.errors, UnicodeDecodeError) as e:
+            damaged = read_error(self.path, self._db, e) if self._dialect.name == "sqlite" else None
+            if damaged is None:
+                raise
+            raise damaged from None
 
     @contextmanager
     def _transaction(self) -> Iterator[Any]:
@@ -204,8 +218,9 @@ class Catalogue:
 
     def current(self, request_key: str) -> set[str]:
         """SHA-256 of the files already analysed successfully with this request."""
-        rows = self._execute("SELECT sha256 FROM analyses WHERE request_key = ? AND error IS NULL", (request_key,))
-        return {r[0] for r in rows}
+        with self._reading():
+            return {r[0] for r in self._execute("SELECT sha256 FROM analyses WHERE request_key = ? AND error IS NULL",
+                                                (request_key,))}
 
     def record(self, outcome: Outcome, *, keep_newer: bool = False) -> str | None:
         """Store one analysis (replacing that session's earlier one with the same request) — but a failure, or a
@@ -304,15 +319,17 @@ class Catalogue:
             terms.append("s.joint = ?" if monitor is None else "s.joint || '' = ?")
             params.append(joint)
         where = "".join(f" {'AND' if i else 'WHERE'} {term}" for i, term in enumerate(terms))
-        rows = self._execute(
-            "SELECT s.*, a.*, COALESCE(a.file_path, s.path) AS analysed_path FROM sessions s JOIN analyses a"
-            f" ON a.session_key = s.session_key{where}"
-            " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path,"
-            f" a.analyzed_utc{self._dialect.bytewise}, a.id",
-            params).fetchall()
+        with self._reading():
+            rows = self._execute(
+                "SELECT s.*, a.*, COALESCE(a.file_path, s.path) AS analysed_path FROM sessions s JOIN analyses a"
+                f" ON a.session_key = s.session_key{where}"
+                " ORDER BY s.created_utc NULLS FIRST, s.start_monotonic_ns NULLS FIRST, s.path,"
+                f" a.analyzed_utc{self._dialect.bytewise}, a.id",
+                params).fetchall()
         if monitor is None:
-            return [_entry(r) for r in rows]
-        entries = [(r["monitor_id"], _entry(r)) for r in rows]  # a session without the column is whose its tag says
+            return [_entry(self.path, r) for r in rows]
+        # a session without the column is whose its tag says
+        entries = [(r["monitor_id"], _entry(self.path, r)) for r in rows]
         return [e for column, e in entries if column is not None or (
             str(e.tags[MONITOR_TAG]) == monitor if e.tags.get(MONITOR_TAG) is not None else unowned)]
 
@@ -323,7 +340,7 @@ class Catalogue:
         the index) and :meth:`copy_windows` by the column alone: without this, such a monitor's windows were nobody's
         once it restarted upgraded. Returns the number of sessions filled (one transaction)."""
         try:
-            with self._transaction():
+            with self._reading(), self._transaction():
                 return self._fill_monitor_ids()
         except self._dialect.errors as e:
             raise self._write_error(e) from None
@@ -345,14 +362,16 @@ class Catalogue:
         rows this catalogue already has are kept); with ``unowned`` also the sessions of no monitor, filed as
         ``monitor``'s (windows from before monitors had an identity). Returns the number of the monitor's sessions."""
         mine = "SELECT * FROM sessions WHERE monitor_id = ? OR (? = 1 AND monitor_id IS NULL)"
-        sessions = list(source._execute(mine, (monitor, unowned)))
-        analyses = list(source._execute(f"SELECT * FROM analyses WHERE session_key IN"
-                                        f" ({mine.replace('*', 'session_key')}) ORDER BY id", (monitor, unowned)))
+        with source._reading():
+            sessions = list(source._execute(mine, (monitor, unowned)))
+            analyses = list(source._execute(f"SELECT * FROM analyses WHERE session_key IN"
+                                            f" ({mine.replace('*', 'session_key')}) ORDER BY id", (monitor, unowned)))
         try:
             with self._transaction():
                 for r in sessions:
                     row = {name: r[name] for name in r.keys()}
-                    row["tags_json"] = json.dumps({**json.loads(row["tags_json"]), MONITOR_TAG: monitor})
+                    tags = json_column(source.path, r, "tags_json", "{}")
+                    row["tags_json"] = json.dumps({**tags, MONITOR_TAG: monitor})
                     row["monitor_id"] = monitor
                     self._insert("sessions", row, "session_key")
                 for r in analyses:
@@ -372,7 +391,8 @@ class Catalogue:
 
     def joints(self) -> list[str]:
         """The joints the catalogue knows."""
-        return [r[0] for r in self._execute("SELECT DISTINCT joint FROM sessions WHERE joint IS NOT NULL")]
+        with self._reading():
+            return [r[0] for r in self._execute("SELECT DISTINCT joint FROM sessions WHERE joint IS NOT NULL")]
 
 
 def _tags(text: str) -> dict[str, Any]:
@@ -384,10 +404,10 @@ def _tags(text: str) -> dict[str, Any]:
     return tags if isinstance(tags, dict) else {}
 
 
-def _entry(r: Any) -> Entry:
-    truth = json.loads(r["truth_json"]) if r["truth_json"] else {}
+def _entry(path: Path | str, r: Any) -> Entry:
+    truth = json_column(path, r, "truth_json", "{}")
     return Entry(session_key=r["session_key"], session_id=r["session_id"], path=r["analysed_path"], joint=r["joint"],
-                 created_utc=r["created_utc"], tags=json.loads(r["tags_json"]), verdict=r["verdict"],
-                 reasons=json.loads(r["reasons_json"] or "[]"), error=r["error"], K_Nm_per_rad=r["K_Nm_per_rad"],
+                 created_utc=r["created_utc"], tags=json_column(path, r, "tags_json", "{}"), verdict=r["verdict"],
+                 reasons=json_column(path, r, "reasons_json", "[]"), error=r["error"], K_Nm_per_rad=r["K_Nm_per_rad"],
                  K_ci95=(r["K_lo"], r["K_hi"]), f_a_hz=r["f_a_hz"], f_r_hz=r["f_r_hz"], request_key=r["request_key"],
                  analyzed_utc=r["analyzed_utc"], truth_K_Nm_per_rad=truth.get("K_Nm_per_rad"))

@@ -24,6 +24,7 @@ from acq import __version__
 from acq.config import validate
 from acq.offline.analyze import sha256_of
 from acq.recording.layout import Status, utc_now_iso
+from acq.recording.root_attrs import not_utf8, shown
 from acq.recording.session import Session, SessionHistory
 from acqcore.errors import ConfigError
 from drivers.config import Bench, Profile
@@ -137,6 +138,9 @@ def read_metadata(current_path: Path, encoder_path: Path, digest: Callable[[Path
         raise ConfigError(f"{path}: not readable as acq export metadata ({e})") from None
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ConfigError(f"{path}: format: not {FORMAT!r}")
+    bad = _not_utf8(doc)
+    if bad is not None:
+        raise ConfigError(f"{path}: {bad[0]} = {shown(bad[1])}: not UTF-8 text")
     try:
         read = _Document.model_validate(doc)
     except ValidationError as e:
@@ -149,6 +153,23 @@ def read_metadata(current_path: Path, encoder_path: Path, digest: Callable[[Path
     configs = {"bench_json": json.dumps(read.bench), "profile_json": json.dumps(read.profile)}
     return ExportMetadata(**history, **configs, path=path,
                           status=read.status, stop_reason=read.stop_reason, damage=tuple(read.damage)), None
+
+
+def _not_utf8(node: Any, key: str = "") -> tuple[str, str] | None:
+    """The first text of the document (a key or a value) that is not UTF-8, with its key path ("tags.robot"), or
+    None: JSON's ``\\udcc6`` escape reads as a lone surrogate (an export of before acq checked a session's
+    attributes wrote one from a damaged byte), which no session attribute may hold."""
+    items = node.items() if isinstance(node, dict) else enumerate(node) if isinstance(node, list) else ()
+    for name, value in items:
+        where = f"{key}.{name}" if key else str(name)
+        if not_utf8(name):
+            return where, str(name)
+        if not_utf8(value):
+            return where, value
+        found = _not_utf8(value, where)
+        if found is not None:
+            return found
+    return None
 
 
 def _tag_value(value: Any) -> Any:

@@ -1,6 +1,7 @@
 """The session file's layout: HDF5 via h5py. Only the modules of ``acq.recording`` that write it
-(:mod:`~acq.recording.writer`), read it (:mod:`~acq.recording.reader`, :mod:`~acq.recording.session`) and rewrite it
-(:mod:`~acq.recording.repair`) know it; everything else goes through :class:`acq.recording.session.Session`.
+(:mod:`~acq.recording.writer`), read it (:mod:`~acq.recording.reader`, :mod:`~acq.recording.session`; the root
+attributes checked by :mod:`~acq.recording.root_attrs`) and rewrite it (:mod:`~acq.recording.repair`) know it;
+everything else goes through :class:`acq.recording.session.Session`.
 
 Layout (``format = "acq-session"``, ``format_version = 1``)::
 

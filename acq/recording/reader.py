@@ -10,7 +10,6 @@ seen as a gap); a chunk never written or beyond the file's end ends the intact p
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +22,7 @@ from acq.recording.commits import FLUSHES, committed_counts, flushes_damage, sta
 from acq.recording.holes import Column, Span, current_rows, lost_spans, only_zeroed, readable
 from acq.recording.layout import FOOTER_TEXT, FORMAT, FORMAT_VERSION, OPTIONAL_ENCODER
 from acq.recording.paths import require_session_file
+from acq.recording.root_attrs import check_root_attributes, check_text
 from acq.recording.session import CurrentData, EncoderData, Session
 from acq.recording.zeroed import invented, zero_chunks
 from acq.recording.storage import cause_of
@@ -185,6 +185,8 @@ def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: lis
     except (KeyError, ValueError, TypeError):
         raise ConfigError(f"{reader.path}: malformed session: /current lacks a valid rate_hz, device or channels "
                           "attribute") from None
+    for name, value in (("device", device), ("channels", ",".join(channels))):
+        check_text(reader.path, f"current/{name}", value)
     if not channels:
         raise ConfigError(f"{reader.path}: malformed session: /current names no channels")
     want = None if committed is None else committed["current_samples"]
@@ -253,6 +255,8 @@ def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: lis
     except (KeyError, ValueError, TypeError):
         raise ConfigError(f"{reader.path}: malformed session: /encoder lacks a valid period_s, counts_per_rev, "
                           "transport, timestamp_kind or device attribute") from None
+    for name, value in (("transport", transport), ("timestamp_kind", kind), ("device", device)):
+        check_text(reader.path, f"encoder/{name}", value)
     return EncoderData(
         period_s=period_s, counts_per_rev=counts_per_rev, transport=transport, timestamp_kind=kind, device=device,
         position_counts=kept["position_counts"], index=kept["index"], host_ns=kept["host_ns"],
@@ -356,10 +360,7 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
         raise ConfigError(f"{p}: malformed session: format_version {attrs.get('format_version')!r}") from None
     if version > FORMAT_VERSION:
         raise ConfigError(f"{p}: format_version {version} is newer than this acq reads ({FORMAT_VERSION})")
-    try:
-        json.loads(attrs.get("tags_json", "{}"))
-    except (TypeError, ValueError):
-        raise ConfigError(f"{p}: malformed session: attribute tags_json is not JSON") from None
+    check_root_attributes(p, attrs)
     bench = _config_attr(p, attrs, "bench_json", Bench)
     profile = None if attrs.get("profile_json") == "null" else _config_attr(p, attrs, "profile_json", Profile)
     reader = _Reader(f, p, notes, end)

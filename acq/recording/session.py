@@ -93,7 +93,7 @@ class SessionMeta(SessionHistory):
 
     @classmethod
     def from_attrs(cls, attrs: dict[str, Any]) -> SessionMeta:
-        """From the root attributes as read (``load`` has checked that ``tags_json`` is JSON)."""
+        """From the root attributes as read (``load`` has checked them: :mod:`acq.recording.root_attrs`)."""
         origin = json.loads(attrs.get("origin_json", "{}"))
         if "host_clock_shared" in attrs:
             shared = bool(attrs["host_clock_shared"])
