@@ -184,8 +184,10 @@ def free_is_finite(free: tuple[str, ...], x: np.ndarray) -> bool:
 
 
 def _vibration_share(p: TwoMassParams) -> float:
-    """(J_m+J_l) C/J_l, N·m·s/rad: the b_v that doubles the resonance's damping (r = 1)."""
-    return (p.Jm_kgm2 + p.Jl_kgm2) * p.C_Nms_per_rad / p.Jl_kgm2
+    """(J_m+J_l) C/J_l, N·m·s/rad: the b_v that doubles the resonance's damping (r = 1). In numpy's arithmetic: an
+    inertia whose logarithm's exp underflowed to 0 (a far-off step of Levenberg–Marquardt) gives inf or NaN, judged
+    by the fit as any other overflow (:func:`free_is_finite`, a non-finite cost), not a ZeroDivisionError."""
+    return float((np.float64(p.Jm_kgm2) + p.Jl_kgm2) * p.C_Nms_per_rad / np.float64(p.Jl_kgm2))
 
 
 def _vibration_ratio(p: TwoMassParams) -> float:

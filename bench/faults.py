@@ -302,7 +302,7 @@ def recovered_copy(path: Path, cut: Session, whole: Session) -> str | None:
     """Why ``acq check --repair`` of the cut ``path`` did not write its intact part beside it (None when it did)."""
     run = acq("check", "--repair", str(path), timeout=60)
     target = path.with_name(f"{path.stem}.recovered{path.suffix}")
-    problem = clean(run, (0,))
+    problem = clean(run, (1,))  # damage found (and its intact part copied): exit 1, as fsck's "errors corrected"
     if problem is None:
         copy = load(target)
         if copy.damage or copy.status != "interrupted" or "recovered from a file cut at" not in copy.meta.stop_reason:

@@ -272,3 +272,16 @@ def test_a_start_that_reaches_a_zero_inertia_at_a_finite_cost_is_no_solution(mon
     _, fit = identify(simulate(PAPER, 0))
     assert fit.values.Jm_kgm2 == pytest.approx(PAPER.Jm_kgm2, rel=0.02)
     assert np.isfinite(fit.f_r) and fit.f_r == pytest.approx(PAPER.resonance_hz, rel=0.01)
+
+
+def test_an_inertia_underflowed_by_the_vibration_fit_is_a_non_finite_point_not_an_exception() -> None:
+    """A Levenberg–Marquardt step of the fit with b_v free took ln J_l to where its exp is 0: b_v's share (J_m+J_l) C/J_l
+    divided by zero in Python's floats and the window's analysis failed with "ZeroDivisionError: float division by
+    zero" (a 1 s monitor window of slow moves, session 14). Now b_v is not finite and the fit rejects the point."""
+    from analysis.fit_problem import PARAM_NAMES, VIBRATION_DAMPING, free_is_finite, with_free
+
+    free = (*PARAM_NAMES, VIBRATION_DAMPING)
+    x = np.array([np.log(890.0), np.log(3e-3), -800.0, np.log(0.1), 0.5])  # exp(−800) underflows to 0
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        p = with_free(TwoMassParams(890.0, 3e-3, 7.5e-3, 0.1), free, x)
+    assert (p.Jl_kgm2, np.isfinite(p.bv_Nms_per_rad), free_is_finite(free, x)) == (0.0, False, False)

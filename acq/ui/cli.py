@@ -32,7 +32,8 @@ LAZY_COMMANDS: dict[str, tuple[str, str, str]] = {
     "analyze": ("acq.ui.analyze_cli", "analyze_command",
                 "Identify K, J_m, J_l, C of SESSION; write <session>.result.json and <session>.report.png."),
     "check": ("acq.ui.check_cli", "check_command",
-              "Verify a session's checksums and committed counts; repair one left by a killed recorder."),
+              "Verify a session's checksums (every dataset's, the commit table's too) and committed counts; repair "
+              "one left by a killed recorder."),
     "devices": ("acq.ui.devices_cli", "devices_command",
                 "List NI devices and AI channels, CAN interfaces, serial ports and the simulated bench."),
     "export": ("acq.ui.export_cli", "export_command",
