@@ -12,6 +12,7 @@ import uuid
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 
 from tests.helpers import record_session_in_subprocess, run_cli
@@ -226,3 +227,22 @@ def test_a_monitor_restarting_on_a_damaged_catalogue_is_one_line(tmp_path: Path)
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert (again.returncode, again.stderr) == (2, f"acq: error: {catalogue}: damaged catalogue: analyses row {row}, "
                                                    f"column sha256 = '{sha[:5]}\\xff{sha[6:35]}…': not UTF-8 text\n")
+
+
+def test_a_flipped_bit_in_the_footers_fixed_length_status_is_one_line_and_a_batch_goes_on(
+        recorded: Path, tmp_path: Path) -> None:
+    """The footer's texts are fixed-length (read as bytes; acq.recording.layout): a bit flipped in ``status``
+    (b'complete' → b'\\xe3omplete', the attribute's own dtype kept) raised UnicodeDecodeError in the batch's status
+    read — a traceback, the other sessions not analysed (reviewer, session 14); one file said "cannot be read"."""
+    folder = tmp_path / "batch"
+    good, bad = _copy(recorded, folder / "a.h5"), _copy(recorded, folder / "b.h5")
+    with h5py.File(bad, "r+") as f:
+        dtype = f.attrs.get_id("status").dtype
+        assert dtype.kind == "S"  # as the writer stores it
+        f.attrs.modify("status", np.array(b"\xe3omplete", dtype=dtype))
+    proc = subprocess.run([sys.executable, "-m", "acq", "analyze", str(folder), "--jobs", "1", "--no-report",
+                           "--json"], capture_output=True, text=True, timeout=300)
+    assert "Traceback" not in proc.stderr and proc.returncode == 1, proc.stderr
+    outcomes = {Path(o["path"]).name: (o["outcome"], o.get("verdict"), o.get("error")) for o in json.loads(proc.stdout)}
+    assert outcomes == {good.name: ("analysed", "ok", None),
+                        bad.name: ("failed", None, f"{bad}: damaged: attribute status = '\\xe3omplete': not UTF-8 text")}

@@ -32,8 +32,10 @@ from acqcore.errors import ConfigError
 
 
 def _attr(value: Any) -> Any:
+    """An attribute as Python: a fixed-length text (bytes, the footer's) decoded as h5py decodes a variable-length one —
+    a byte that is not UTF-8 (a flipped bit) kept as a surrogate escape, for :mod:`acq.recording.root_attrs` to name."""
     if isinstance(value, bytes):
-        return value.decode()
+        return value.decode("utf-8", "surrogateescape")
     if isinstance(value, np.generic):
         return value.item()
     return value
