@@ -41,7 +41,7 @@ def test_analyze_json_has_documented_keys_and_finds_K(session_10s: Path, capsys:
     # b_v's interval beside the four (README's key table: the second fit with the vibration's motor-side damping free)
     assert set(doc["ci95"]) == {"K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2", "C_Nms_per_rad", "bv_Nms_per_rad"}
     bv_low, bv_high = doc["ci95"]["bv_Nms_per_rad"]
-    assert bv_low <= doc["bv_Nms_per_rad"] <= bv_high and bv_low <= 0.0 <= bv_high  # a healthy joint: 0 held
+    assert 0.0 == bv_low <= doc["bv_Nms_per_rad"] <= bv_high  # passive (clipped at 0), and a healthy joint: 0 held
     assert set(doc["clock"]) == {"offset_s", "drift_ppm", "residual_s", "ambiguous_by_s", "failure"}
     assert {"verdict", "mean_coherence", "reasons"} <= set(doc["quality"])
     assert doc["quality"]["verdict"] == "ok"

@@ -3,10 +3,8 @@ N·m — the accuracy family's friction law): acq must not give a confident wron
 outside a 95 % interval.
 
 On the load side (seed 5 at 300 s; measured on main at 6edb9f7) it did: ok, J_l 0.007396 [0.007316, 0.007476] against
-0.00748. For a while in session 14 J_l's interval held the truth by a hair (J_l 0.007390 [0.007296, 0.007485]), widened
-to hold a fit with the vibration's motor-side damping b_v free — but that fit read b_v −0.033, a negative damping; since
-b_v is held passive (≥ 0, analysis.fit._bracketed) such a fit widens nothing, and the window is wrong again (J_l 0.007390
-[0.007304, 0.007477]): a strict xfail until the bias itself is removed. The friction's torque, correlated with the motion, lifts |H| by 0.5–5 % at 10–52 Hz — bins the
+0.00748. Since the intervals hold the fit with b_v free too (analysis.fit, session 14) J_l's interval holds the truth by
+a hair — J_l 0.007390 [0.007296, 0.007485] — the bias itself unchanged. The friction's torque, correlated with the motion, lifts |H| by 0.5–5 % at 10–52 Hz — bins the
 fit trusts (weights 22–88) — which reads J_l 1.1 % low and C 19 % high; the misfit test sees the anti-resonance's −4.8 %
 against its 12.6 % limit (the jackknife's scatter there grows with the friction), the misfit's HAC share of J_l's
 interval (±0.40 %) stays under the quantisation floor (±0.56 %), and the jackknife (±0.92 %) cannot show a bias every
@@ -45,10 +43,9 @@ def _window(sim: dict[str, Any], folder: Path) -> dict[str, Any]:
     return analyze_session(Recorder(bench, None, current, drive, folder, 10.0).run().path, write=False).json_dict
 
 
-@pytest.mark.xfail(strict=True, reason="load friction reads J_l 1.2 % low with an interval that excludes the truth "
-                                       "(bench/friction_robot.py: ×1 4–10 of 21 ok windows)")
 def test_load_friction_on_the_robot_is_not_a_confident_wrong_result(tmp_path: Path) -> None:
-    """Measured at session 14's end: ok, J_l 0.007390 [0.007304, 0.007477] (truth 0.00748, just above the upper end)."""
+    """Measured at session 14: ok, J_l 0.007390 [0.007296, 0.007485] (truth 0.00748: 0.07 % inside the upper end), K 887.2
+    [877.6, 896.9], C 0.115 [0.074, 0.179]; b_v −0.033 [−0.077, 0.012] N·m·s/rad."""
     doc = _window(LOAD, tmp_path)
     truth = doc["simulated_truth"]
     outside = [p for p in PARAMS if not doc["ci95"][p][0] <= truth[p] <= doc["ci95"][p][1]]
