@@ -33,6 +33,9 @@ ROBOT = Path(__file__).resolve().parents[1] / "configs" / "benches" / "sim_robot
      "600, 90s, 10min, 1.5h, 2h10min, 2h 10min"),
     ("--for", "-1", "--for -1: not a duration — seconds, or numbers with s, min (m), h or d, summed: "
      "600, 90s, 10min, 1.5h, 2h10min, 2h 10min"),
+    # a line break between parts was taken as their space and, refused, split the message over two lines (reviewer)
+    ("--for", "2h\n10min", "--for 2h\\n10min: not a duration — seconds, or numbers with s, min (m), h or d, summed: "
+     "600, 90s, 10min, 1.5h, 2h10min, 2h 10min"),
     ("--max-disk", "nanMB", "--max-disk nanMB: 'nanMB' is not a size (e.g. 2GB, 500MB)"),
     ("--max-disk", "infGB", "--max-disk infGB: 'infGB' is not a size (e.g. 2GB, 500MB)"),
     ("--max-disk", "-5MB", "--max-disk -5MB: '-5MB' is not a size (e.g. 2GB, 500MB)"),

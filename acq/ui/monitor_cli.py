@@ -27,7 +27,7 @@ from drivers.motion import RPM_TO_RAD_S
 #: Seconds per unit of a duration; each part of ``2h 10min`` is a number and one of these (none: seconds).
 _UNITS_S = {"s": 1.0, "sec": 1.0, "m": 60.0, "min": 60.0, "h": 3600.0, "d": 86400.0}
 _NUMBER = r"(?:[0-9]+\.?[0-9]*|\.[0-9]+)"
-_PART = re.compile(rf"\s*({_NUMBER})\s*([a-z]+)")
+_PART = re.compile(rf"[ \t]*({_NUMBER})[ \t]*([a-z]+)")  # spaces between parts, never a line break
 #: Moves listed in the status table (a window of a busy program holds a dozen or more).
 _MOVES_SHOWN = 8
 
@@ -45,7 +45,8 @@ def parse_duration(option: str, text: str) -> float:
         if None not in units and len(set(units)) == len(units):  # each unit once: "2h 2h" is more likely a typo
             seconds = sum(float(number) * _UNITS_S[unit] for number, unit in parts)
     if not (math.isfinite(seconds) and seconds > 0):
-        raise ConfigError(f"{option} {text}: not a duration — seconds, or numbers with s, min (m), h or d, summed: "
+        shown = text if text.isprintable() else text.encode("unicode_escape").decode("ascii")  # the error on one line
+        raise ConfigError(f"{option} {shown}: not a duration — seconds, or numbers with s, min (m), h or d, summed: "
                           "600, 90s, 10min, 1.5h, 2h10min, 2h 10min")
     return seconds
 
@@ -142,8 +143,8 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
               help="Bench TOML with [drive] motion = \"external\" (e.g. configs/benches/sim_robot.toml).")
 @click.option("--window", "window_s", type=FiniteFloatRange(min=1.0), default=10.0, show_default=True,
               help="Seconds per window.")
-@click.option("--every", "every", default="60", show_default=True, help="One window per this (600, 10m, 1h).")
-@click.option("--for", "for_text", default=None, help="Stop after this (8h); default: until Ctrl-C.")
+@click.option("--every", "every", default="60", show_default=True, help="One window per this (600, 90s, 10min, 1.5h, 2h10min).")
+@click.option("--for", "for_text", default=None, help="Stop after this (8h, 2h10min); default: until Ctrl-C.")
 @click.option("--on-alarm", default=None, metavar="CMD",
               help="Run CMD through sh -c on entering alarm (in the background; a failure is reported), with "
                    "ACQ_JOINT, ACQ_K, ACQ_BASELINE_K, ACQ_CHANGE_PCT, ACQ_SESSION, ACQ_WINDOW (from 1) in its "
