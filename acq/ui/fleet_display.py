@@ -91,19 +91,11 @@ def _relative_half_width(entry: Entry | None) -> str:
 def render_fleet_png(statuses: Sequence[JointStatus], path: Path | str, *, now: datetime, threshold_pct: float,
                      stale_days: float, size: tuple[int, int] | None = None) -> Path:
     """Draw :func:`fleet_widget` offscreen into a PNG (default 1400 px wide, 40 px per joint and the legend)."""
-    from acq.process_signals import signals_deferred
+    from acq.ui.offscreen_png import render_offscreen_png
 
-    with signals_deferred():  # Ctrl-C / SIGTERM wait for Qt to return (raised in its frames: a segfault, or lost)
-        import shiboken6
-
-        from acq.ui.qt_app import ensure_app, grab_png
-
-        ensure_app(offscreen=True)
-        frame = fleet_widget(statuses, now=now, threshold_pct=threshold_pct, stale_days=stale_days)
-        try:
-            return grab_png(frame, path, size or (1400, 270 + 40 * len(statuses)))
-        finally:
-            shiboken6.delete(frame)  # now, not at interpreter exit (deleteLater there crashes Qt's teardown)
+    return render_offscreen_png(lambda: fleet_widget(statuses, now=now, threshold_pct=threshold_pct,
+                                                     stale_days=stale_days),
+                                path, size or (1400, 270 + 40 * len(statuses)))
 
 
 def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pct: float, stale_days: float) -> Any:

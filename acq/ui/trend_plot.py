@@ -13,19 +13,9 @@ from acq.ui.values import alarm_rules_line, clock_text
 
 def render_trend_png(trend: Trend, path: Path | str, size: tuple[int, int] = (1400, 900)) -> Path:
     """Draw :func:`trend_widget` offscreen into a PNG of ``size`` (width, height) px."""
-    from acq.process_signals import signals_deferred
+    from acq.ui.offscreen_png import render_offscreen_png
 
-    with signals_deferred():  # Ctrl-C / SIGTERM wait for Qt to return (raised in its frames: a segfault, or lost)
-        import shiboken6
-
-        from acq.ui.qt_app import ensure_app, grab_png
-
-        ensure_app(offscreen=True)
-        frame = trend_widget(trend)
-        try:
-            return grab_png(frame, path, size)
-        finally:
-            shiboken6.delete(frame)  # now, not at interpreter exit (deleteLater there crashes Qt's teardown)
+    return render_offscreen_png(lambda: trend_widget(trend), path, size)
 
 
 def trend_widget(trend: Trend) -> Any:
