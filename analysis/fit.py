@@ -283,8 +283,7 @@ def _refit_from(frf: FrequencyResponse, problem: _Problem, x: np.ndarray,
     resonance): one Levenberg–Marquardt run from the optimum ``x``, which lies close; None when the run raises."""
     try:
         return optimize.least_squares(_Problem(frf, problem.band, options, problem.fixed, problem.vibration).residuals,
-                                      x, method="lm",
-                                      x_scale=1.0)
+                                      x, method="lm", x_scale=1.0)
     except (ValueError, FloatingPointError):
         return None
 
@@ -404,12 +403,8 @@ def _linearised_jackknife(problem: _Problem, x_best: np.ndarray, jac: np.ndarray
     x_b = x̂ − J⁺ r_b(x̂), J the full fit's Jacobian (the linearised jackknife: a replicate lacks one block of B, so its
     optimum lies within a step; the refits by Levenberg–Marquardt took 3–5 iterations of 6 residuals each). For the
     bracketing fit (:func:`_vibration_damping_fit`), whose replicates cost 0.02–0.03 s of a 60 s session's 0.4 s."""
-    steps = []
-    for frf in problem.replicates:
-        rep = _Problem(frf, problem.band, options, problem.fixed, problem.vibration)
-        if rep.f.size != problem.f.size:  # a replicate with an empty bin the full record has: rows would misalign
-            continue
-        steps.append(np.linalg.lstsq(jac, -rep.residuals(x_best), rcond=None)[0])
+    steps = [np.linalg.lstsq(jac, -rep.residuals(x_best), rcond=None)[0]
+             for rep in problem.replicate_problems(options)]  # rows as the Jacobian's: the same bins only
     b = len(steps)
     if b < 2 or not np.all(np.isfinite(steps)):
         return np.full((x_best.size, x_best.size), np.inf), Z95

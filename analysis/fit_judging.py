@@ -103,9 +103,5 @@ def model_misfits(frf: FrequencyResponse, fit: FitResult) -> tuple[np.ndarray, n
     """
     problem = _Problem(frf, fit.band, fit.options, fit.values)
     x = problem.x0(fit.values)
-    # a replicate with an empty (non-finite or zero) bin the full record has would misalign the rows: left out
-    same_bins = [p for p in (_Problem(r, fit.band, fit.options, fit.values) for r in frf.replicates or ())
-                 if np.array_equal(p.f, problem.f)]
-
-    reps = [wrapped(p.log_ratio(x)) for p in same_bins]
+    reps = [wrapped(p.log_ratio(x)) for p in problem.replicate_problems(fit.options)]
     return problem.f, wrapped(problem.log_ratio(x)), np.asarray(reps, dtype=complex).reshape(len(reps), problem.f.size)

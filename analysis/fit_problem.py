@@ -228,6 +228,13 @@ class _Problem:
         self.n_fine = f_fine.size
         self.load_factor: Callable[[np.ndarray], np.ndarray] | None = None  # the fit's model: a rigid load
 
+    def replicate_problems(self, options: FitOptions) -> list[_Problem]:
+        """This problem on each delete-one-block replicate (:attr:`replicates`, ``options`` as this one's), those with
+        the same bins only: a replicate with an empty (non-finite or zero) bin the full record has would misalign the
+        rows of anything compared row by row with this one's."""
+        reps = (_Problem(r, self.band, options, self.fixed, self.vibration) for r in self.replicates)
+        return [p for p in reps if np.array_equal(p.f, self.f)]
+
     def params(self, x: np.ndarray) -> TwoMassParams:
         """Model parameters from the vector ``x`` of the free ones (:func:`with_free`)."""
         return with_free(self.fixed, self.free, x)
