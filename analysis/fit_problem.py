@@ -110,7 +110,7 @@ class FitResult:
         The 95 % intervals without the allowance for that bias (empty when none was made): what it widened.
     vibration_damping : tuple of float or None
         The fit with b_v free beside C (:attr:`FitOptions.vibration_damping`): b_v, N·m·s/rad, and its 95 % interval
-        (low, high), and that fit's C; None when not made, or when it or its intervals did not come out finite (the
+        (low, high), each clipped at 0 (a damping is passive), and that fit's C; None when not made, or when it or its intervals did not come out finite (the
         intervals are then C alone's).
     ci95_c_alone : dict of str to (float, float)
         The 95 % intervals before they were widened to hold the b_v fit's (empty when not widened).

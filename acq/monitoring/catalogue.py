@@ -120,7 +120,7 @@ class Catalogue:
             else:
                 self._migrate()
         except (*self._dialect.errors, UnicodeDecodeError) as e:
-            damaged = read_error(self.path, self._db, e) if self._dialect.name == "sqlite" else None
+            damaged = self._damage(e)
             self._db.close()
             raise damaged or open_error(self.path, e, "not a usable catalogue") from None
         except BaseException:
@@ -167,10 +167,15 @@ class Catalogue:
         try:
             yield
         except (*self._dialect.errors, UnicodeDecodeError) as e:
-            damaged = read_error(self.path, self._db, e) if self._dialect.name == "sqlite" else None
+            damaged = self._damage(e)
             if damaged is None:
                 raise
             raise damaged from None
+
+    def _damage(self, e: BaseException) -> ConfigError | None:
+        """The one line for ``e`` when it is a SQLite file's damage on disk (:func:`read_error`), else None (a
+        PostgreSQL server's errors are never a damaged file)."""
+        return read_error(self.path, self._db, e) if self._dialect.name == "sqlite" else None
 
     @contextmanager
     def _transaction(self) -> Iterator[Any]:

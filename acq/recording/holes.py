@@ -146,8 +146,9 @@ def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Se
     offset, n = offset[:rows], n[:rows]
     block_ok &= offset + n <= samples_stored  # samples of a read not all stored (a kill between the two writes)
     first = first_index.values[:rows].astype(np.int64)
-    borrowed = _borrowing_stamps(block_ok, readable((host_ns,), rows), offset, n, first)
-    block_ok &= readable((host_ns,), rows) | borrowed
+    stamp_ok = readable((host_ns,), rows)
+    borrowed = _borrowing_stamps(block_ok, stamp_ok, offset, n, first)
+    block_ok &= stamp_ok | borrowed
     placed = np.zeros(samples_stored, dtype=bool)
     for a, b in zip(offset[block_ok], offset[block_ok] + n[block_ok]):
         placed[a:b] = True
