@@ -74,9 +74,7 @@ def lower_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
     """
     if x.size < 2:
         return float(np.min(y - x)), 1.0, float("nan")
-    delay = y - x  # both in s: the nominal slope is 1
-    pieces = np.array_split(np.arange(x.size), min(_ENVELOPE_PIECES, x.size))
-    least = np.array([p[np.argmin(delay[p])] for p in pieces])
+    least = _least_delayed(x, y, min(_ENVELOPE_PIECES, x.size))
     if least.size < 4:
         b, b_std = float(np.polyfit(x[least], y[least], 1)[0]), float("nan")
     else:
@@ -86,6 +84,12 @@ def lower_line(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
         b_std = float("nan")
     return float(np.percentile(y - b * x, 2.0)), float(b), b_std
 
+
+def _least_delayed(x: np.ndarray, y: np.ndarray, pieces: int) -> np.ndarray:
+    """Index of the least-delayed stamp (host time ``y`` − stream time ``x``, both s: the nominal slope is 1) in each of
+    ``pieces`` equal pieces of the record."""
+    delay = y - x
+    return np.array([p[np.argmin(delay[p])] for p in np.array_split(np.arange(x.size), pieces)])
 
 
 def _creep_std(x: np.ndarray, y: np.ndarray) -> float:
@@ -101,16 +105,15 @@ def _creep_std(x: np.ndarray, y: np.ndarray) -> float:
     t at 97.5 %). The bow is read on the least-delayed stamps of :data:`_CREEP_PIECES` pieces, more degrees of freedom
     for the quadratic's error than the slope's :data:`_ENVELOPE_PIECES` leave. Synthetic 6 s records (60 DAQ blocks,
     0.2 ms jitter, tests/test_clock_host.py), 200 seeds: the interval holds the truth through a creep of 0.3 ms in 106
-    (88 on 8 pieces, 0 before), through one of 1 ms in all; ordinary jitter is taken for a creep in 17 (the others keep their least-squares error). A block
-    jackknife of the slope over four parts of the record widens by a fraction of c·T only (its parts' slopes spread
+    (88 on 8 pieces, 0 before), through one of 1 ms in all; ordinary jitter is taken for a creep in 17 (the others keep
+    their least-squares error). A block jackknife of the slope over four parts of the record widens by a fraction of c·T only (its parts' slopes spread
     about the line's): it held the truth in 9 of 40 records of a 0.3 ms creep. A latency growing at one rate all
     along bows nothing: on one stream's stamps it is a drift, and no error can show it. 0 with fewer than six pieces.
     """
     n = min(_CREEP_PIECES, x.size)
     if n < 6:
         return 0.0
-    delay = y - x
-    least = np.array([p[np.argmin(delay[p])] for p in np.array_split(np.arange(x.size), n)])
+    least = _least_delayed(x, y, n)
     (c, _, _), cov = np.polyfit(x[least] - np.mean(x[least]), y[least], 2, cov=True)
     if abs(c) <= float(stats.t.ppf(0.975, n - 3)) * np.sqrt(cov[0, 0]):
         return 0.0
