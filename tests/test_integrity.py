@@ -204,6 +204,30 @@ def test_write_error_inside_hdf5_keeps_only_committed_samples(tmp_path: Path, ca
         _assert_counts_are_stored(path, kept, s.encoder.index.size)
 
 
+def test_a_reason_longer_than_its_room_is_cut_to_fit_on_a_full_disk(tmp_path: Path) -> None:
+    """The footer's reason has 8 192 bytes of room, overwritten in place. A longer one (a device's error text) was
+    written as a new attribute, which a disk full to its last byte refuses: the footer was not written and the file
+    stayed ``recording`` (before: OSError "No space left on device" from HDF5). Now cut to fit, saying how much."""
+    from acq.recording.layout import FOOTER_TEXT_BYTES, OPTIONAL_ENCODER, write_footer
+
+    out = tmp_path / "disk"
+    out.mkdir()
+    with tmpfs(out, "size=2m") as refused:
+        if refused is not None:
+            pytest.skip(f"needs a real full file system, a tmpfs mounted as root: {refused}")
+        path = record_session_in_subprocess(out, 0.2)
+        _fill_to_the_last_byte(out)
+        reason = "device error: " + "é" * 5000 + " the end"  # 10 022 bytes of UTF-8, a 2-byte character at the cut
+        with h5py.File(path, "r+") as f:
+            write_footer(f, "failed", reason, {n for n in OPTIONAL_ENCODER if n in f["encoder"]})
+        with h5py.File(path, "r") as f:  # read back as any HDF5 reader does
+            status, stored = f.attrs["status"].decode(), f.attrs["stop_reason"].decode()
+    cut = len(reason.encode()) - len(stored.rsplit(" … [", 1)[0].encode())
+    assert status == "failed" and len(stored.encode()) <= FOOTER_TEXT_BYTES["stop_reason"]
+    assert stored == reason[:len(stored) - len(f" … [{cut} bytes cut]")] + f" … [{cut} bytes cut]"
+    assert (len(stored.encode()), cut) == (8191, 1852)
+
+
 # ------------------------------------------------------------------------------------------ damage
 
 
