@@ -293,7 +293,8 @@ class Monitor:
         key = window.key
         self._filed += 1
         self.status.count(window.outcome, window.kind, earlier=key in self._earlier)
-        self._windows.done(key, refused_as_damaged(self._windows.path(key), window.outcome.error))
+        verdict = (window.outcome.doc or {}).get("quality", {}).get("verdict")
+        self._windows.done(key, refused_as_damaged(self._windows.path(key), window.outcome.error, verdict))
         self._unjudged.append(key)
         try:
             trend = self._trend()
@@ -327,6 +328,7 @@ class Monitor:
     def _retain(self, trend: Trend) -> None:
         self._windows.retain(trend)
         self.status.disk_bytes = self._windows.disk_bytes()
+        self.status.damaged_kept = self._windows.refused()
 
     def _room_for_window(self) -> bool:
         if self.s.max_disk_bytes is None:
@@ -405,7 +407,8 @@ class Monitor:
                 self._windows.add(WindowFiles(n, path, True, key not in deletable, key, copied=True))  # (retention's)
                 continue
             numbers.append(n)
-            refused = key in known and known[key].error is not None and bool(session.damage)
+            refused = key in known and bool(session.damage) and (
+                known[key].error is not None or known[key].verdict == "interrupted")
             self._windows.add(WindowFiles(n, path, key in known, False, key, refused=refused))
             if key in known:
                 continue
