@@ -217,7 +217,10 @@ class Monitor:
         """Window ``n``'s file, finished failed at its start (the drive's raw frame log not kept), catalogued with its
         reason as a capture that failed (before: never filed, the fleet did not learn of it); then a write failure
         goes as any (:meth:`_storage_failed`), a device's stops the monitor with its one line."""
-        session = load(path)
+        try:
+            session = load(path)
+        except AcqError:  # not readable as a session: its error is the one to tell
+            raise error from None
         key, reason = str(session.meta.session_id), session.meta.stop_reason
         self._windows.add(WindowFiles(n, path, False, False, key))
         storage = isinstance(error, StorageError)
