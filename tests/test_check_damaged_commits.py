@@ -8,6 +8,7 @@ recorder (a SIGKILLed one, a finished --fast one), damaged with one byte.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import signal
@@ -105,10 +106,15 @@ def test_a_killed_file_with_its_commit_table_unreadable_is_not_rewritten_and_its
     assert again.code == 1 and path.read_bytes() == before
 
 
-def test_a_killed_file_with_its_block_host_stamps_unreadable_keeps_the_encoder_and_the_original(
+def test_a_killed_file_with_its_block_host_stamps_unreadable_keeps_its_current_stamped_by_its_commits(
         killed: Path, repaired_intact: tuple[int, int], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """Block-table chunk 0 of host_ns holds every read of this short recording: no current sample can be placed in
-    time (the only link of its clock to the encoder's), so the copy keeps the encoder; the file keeps them all."""
+    """Block-table chunk 0 of host_ns holds every read of this short recording. Before: no current sample was kept
+    ("current: samples 0–25 599 unreadable", the copy "0 current and 1120 encoder samples"), though each sample's place
+    on the DAQ's own clock (count, first_index) was intact: a host stamp only relates that clock to the encoder's. Now
+    every sample is kept, each read stamped by the commit that stored it (its /flushes row: true as "had arrived by
+    then"), the session read with host_clock_shared false (no prior for the clock search), and acq check says so."""
+    from acq.recording.reader import STAMPS_FROM_COMMITS
+
     path = tmp_path / "host.h5"
     shutil.copyfile(killed, path)
     blocks = _flip(path, "current/blocks/host_ns")
@@ -116,18 +122,26 @@ def test_a_killed_file_with_its_block_host_stamps_unreadable_keeps_the_encoder_a
     current, encoder = repaired_intact
     with h5py.File(path, "r", swmr=True) as f:
         assert f["current/blocks/host_ns"].chunks[0] >= blocks  # one chunk: every block row is in it
+        commits = f["flushes"][...]
     run = run_cli(capsys, "check", str(path))
     assert run.code == 1
     assert path.read_bytes() == before
-    samples = f"current: samples 0–{current - 1:,} unreadable".replace(",", " ")
-    lines = (f"current/blocks/host_ns: rows 0–{blocks - 1} unreadable", samples)
+    lines = (STAMPS_FROM_COMMITS, f"current/blocks/host_ns: rows 0–{blocks - 1} unreadable")
     out = run.out.replace("\n", "")
     assert all(f"{path}: {line}" in out for line in lines)
     copy_path = tmp_path / "host.recovered.h5"
-    assert f"{path}: intact part copied into {copy_path}: 0 current and {encoder} encoder samples" in out
+    assert f"{path}: intact part copied into {copy_path}: {current} current and {encoder} encoder samples" in out
     assert run.err == f"acq: damaged: {path} ({'; '.join(lines)}) — not modified; its intact part is in {copy_path}\n"
-    copy = load(copy_path)
-    assert (copy.current.sample_count, copy.encoder.index.size) == (0, encoder)
+    intact, copy = load(killed), load(copy_path)
+    assert (copy.current.sample_count, copy.encoder.index.size, copy.damage) == (current, encoder, ())
+    np.testing.assert_array_equal(copy.current.phases_a["i_a"], intact.current.phases_a["i_a"][:current])
+    np.testing.assert_array_equal(copy.current.block_first_index, intact.current.block_first_index[:blocks])
+    committing = np.searchsorted(commits["current_blocks"], np.arange(blocks), side="right")  # each read's commit
+    np.testing.assert_array_equal(copy.current.block_host_ns, commits["host_ns"][committing])
+    assert np.all(copy.current.block_host_ns >= intact.current.block_host_ns[:blocks])  # arrived before its commit
+    assert (copy.meta.host_clock_shared, load(path).meta.host_clock_shared) == (False, False)
+    with h5py.File(copy_path, "r") as f:  # as any HDF5 reader reads the copy
+        assert (f["current/i_a_A"].shape[0], bool(f.attrs["host_clock_shared"])) == (current, False)
 
 
 @pytest.fixture(scope="module")
@@ -198,3 +212,28 @@ def test_without_its_commits_a_file_extended_over_unwritten_rows_keeps_only_stam
     assert run.code == 1
     copy = load(tmp_path / "extended.recovered.h5")
     assert (copy.current.sample_count, copy.encoder.index.size) == (blocks * 2560, encoder)
+
+
+def test_a_copy_whose_current_host_stamps_were_all_lost_is_analysed_from_the_data_alone(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The copy acq check makes of a 10 s recording whose every current host stamp is lost (each chunk of
+    current/blocks/host_ns flipped) holds every current sample (before: none, and its analysis failed) and identifies
+    the joint, its clocks related from the data alone (the stamps its reads got from their commits are no prior)."""
+    path = record_session_in_subprocess(tmp_path / "rec", 10.0)
+    with h5py.File(path, "r") as f:
+        chunks = f["current/blocks/host_ns"].id.get_num_chunks()
+    for chunk in range(chunks):
+        _flip(path, "current/blocks/host_ns", chunk)
+    run = run_cli(capsys, "check", "--repair", str(path))
+    copy = path.with_name(f"{path.stem}.recovered.h5")
+    assert run.code == 1 and run.err.endswith(f"its intact part is in {copy}\n"), run.err
+    assert load(copy).current.sample_count == 10 * RATE_HZ
+    analysed = run_cli(capsys, "analyze", str(copy), "--json", "--no-report")
+    assert analysed.code == 0, analysed.err
+    doc = json.loads(analysed.out)
+    truth = doc["simulated_truth"]
+    assert doc["quality"]["verdict"] == "ok"
+    assert doc["K_Nm_per_rad"] == pytest.approx(truth["K_Nm_per_rad"], rel=0.01)
+    assert doc["clock"]["offset_s"] == pytest.approx(truth["offset_s"], abs=50e-6)
+    assert "note: clock: the streams' time stamps are not on one host clock; aligned from the data alone" in \
+        doc["quality"]["reasons"]

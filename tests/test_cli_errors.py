@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -188,6 +190,28 @@ def test_every_command_taking_tags_refuses_a_duplicate_key_in_one_line(
     assert (run.code, run.out) == (2, "")
     assert run.err == "acq: error: --tag pose=b: pose is given twice (pose=a, pose=b) — give each key once\n"
     assert sorted(tmp_path.rglob("*")) == before  # nothing made
+
+
+@pytest.mark.parametrize(("command", "option", "given", "byte"), [
+    (("record", "--profile", "triangle_0.2s", "--fast", "--duration", "3", "--no-analyze", "--out", "{out}"),
+     "--operator", b"Ren\xe9", "e9"),
+    (("record", "--profile", "triangle_0.2s", "--fast", "--duration", "3", "--no-analyze", "--out", "{out}"),
+     "--tag", b"site=K\xf6ln", "f6"),
+    (("monitor", "--bench", str(ROBOT), "--fast", "--for", "10s", "--out", "{out}"), "--tag", b"site=K\xf6ln", "f6")])
+def test_text_from_a_latin_1_shell_is_refused_naming_the_option_and_the_byte(
+        tmp_path: Path, command: tuple[str, ...], option: str, given: bytes, byte: str) -> None:
+    """The bytes a shell or terminal in Latin-1 passes (é is the one byte 0xe9), as the real argv of a child process:
+    Python reads them as lone surrogates. Before: --operator gave "acq: error: 'utf-8' codec can't encode character
+    '\\udce9' in position 3: surrogates not allowed: <file>", and a --tag was recorded exit 0, stored escaped
+    ({"site": "K\\udcf6ln"}). Now one line naming the option and the byte, exit 2, nothing made."""
+    out = tmp_path / "out"
+    argv = [sys.executable, "-m", "acq", *(part.format(out=out) for part in command), option, given]
+    run = subprocess.run(argv, capture_output=True, timeout=120, cwd=tmp_path)
+    shown = given.decode("latin-1").encode("ascii", "backslashreplace").decode()
+    assert (run.returncode, run.stdout) == (2, b"")
+    assert run.stderr.decode() == (f"acq: error: {option} '{shown}': byte 0x{byte} is not UTF-8 (a shell or terminal "
+                                   "in Latin-1 sends é as 0xe9) — give the text in UTF-8\n")
+    assert not out.exists()
 
 
 def test_a_recorded_tag_keeps_its_spelling(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

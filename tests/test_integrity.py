@@ -6,7 +6,11 @@ import contextlib
 import json
 import re
 import os
+import resource
 import shutil
+import signal
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Iterator
@@ -202,6 +206,61 @@ def test_write_error_inside_hdf5_keeps_only_committed_samples(tmp_path: Path, ca
         assert run.err.strip().splitlines()[-1] == (f"acq: failed: {s.attrs['stop_reason']} ({kept} current and "
                                                     f"{s.encoder.index.size} encoder samples stored in {path})")
         _assert_counts_are_stored(path, kept, s.encoder.index.size)
+
+
+def _under_file_size_limit(limit_bytes: int) -> None:
+    """In the child before it runs acq: files it writes may not grow past ``limit_bytes`` (``ulimit -f``), and a write
+    past it fails with EFBIG instead of killing the process (SIGXFSZ ignored, as a shell's ``trap '' XFSZ`` does)."""
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
+
+
+def test_a_file_size_limit_met_while_recording_fails_the_recording_like_a_full_disk(tmp_path: Path) -> None:
+    """A real RLIMIT_FSIZE of 2 MB in the child that records 12 s (~6 MB): HDF5's write meets EFBIG. Before: "acq:
+    failed: [Errno 27] Can't synchronously write data (file write failed: time = …" (HDF5's text cut mid-sentence) and
+    the file left open for writing in its superblock (h5py: "file is already open for write"), no status, no reason.
+    Now as for a full disk: status ``failed``, "file size limit reached: <file> — N s kept", the samples kept."""
+    out = tmp_path / "limited"
+    limit = 2_000_000
+    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.5s", "--fast", "--duration",
+                           "12", "--no-analyze", "--out", str(out)], capture_output=True, text=True, timeout=300,
+                          preexec_fn=lambda: _under_file_size_limit(limit))
+    path = _only_session(out)
+    assert path.stat().st_size <= limit
+    with h5py.File(path, "r") as f:  # read back as any HDF5 reader does
+        status, reason = f.attrs["status"].decode(), f.attrs["stop_reason"].decode()
+        current, encoder = int(f.attrs["current_samples"]), int(f.attrs["encoder_samples"])
+        stored = (f["current/i_a_A"].shape[0], f["encoder/index"].shape[0])
+    assert 0 < current < 12 * RATE_HZ and encoder > 0 and stored == (current, encoder)
+    assert (status, reason) == ("failed", f"file size limit reached: {path} — {current / RATE_HZ:.1f} s kept")
+    assert proc.returncode == 1 and "Traceback" not in proc.stderr
+    assert [ln for ln in proc.stderr.splitlines() if ln.startswith("acq:")] == [
+        f"acq: failed: {reason} ({current} current and {encoder} encoder samples stored in {path})"]
+    _assert_counts_are_stored(path, current, encoder)
+
+
+def test_a_reason_longer_than_its_room_is_cut_to_fit_on_a_full_disk(tmp_path: Path) -> None:
+    """The footer's reason has 8 192 bytes of room, overwritten in place. A longer one (a device's error text) was
+    written as a new attribute, which a disk full to its last byte refuses: the footer was not written and the file
+    stayed ``recording`` (before: OSError "No space left on device" from HDF5). Now cut to fit, saying how much."""
+    from acq.recording.layout import FOOTER_TEXT_BYTES, OPTIONAL_ENCODER, write_footer
+
+    out = tmp_path / "disk"
+    out.mkdir()
+    with tmpfs(out, "size=2m") as refused:
+        if refused is not None:
+            pytest.skip(f"needs a real full file system, a tmpfs mounted as root: {refused}")
+        path = record_session_in_subprocess(out, 0.2)
+        _fill_to_the_last_byte(out)
+        reason = "device error: " + "é" * 5000 + " the end"  # 10 022 bytes of UTF-8, a 2-byte character at the cut
+        with h5py.File(path, "r+") as f:
+            write_footer(f, "failed", reason, {n for n in OPTIONAL_ENCODER if n in f["encoder"]})
+        with h5py.File(path, "r") as f:  # read back as any HDF5 reader does
+            status, stored = f.attrs["status"].decode(), f.attrs["stop_reason"].decode()
+    cut = len(reason.encode()) - len(stored.rsplit(" … [", 1)[0].encode())
+    assert status == "failed" and len(stored.encode()) <= FOOTER_TEXT_BYTES["stop_reason"]
+    assert stored == reason[:len(stored) - len(f" … [{cut} bytes cut]")] + f" … [{cut} bytes cut]"
+    assert (len(stored.encode()), cut) == (8191, 1852)
 
 
 # ------------------------------------------------------------------------------------------ damage

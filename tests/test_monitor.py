@@ -17,6 +17,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import h5py
+import numpy as np
 import pytest
 
 import acq.offline.analyze
@@ -263,6 +264,39 @@ def test_a_window_the_analysis_refuses_as_damaged_keeps_its_raw_file(four_window
     rows = _rows(out)
     assert [r["window"] for r in rows] == [0, 1, 2, 3, 4, 5]
     assert [(out / Path(r["path"]).name).exists() for r in rows] == [True, True, False, False, True, True]
+
+
+def test_a_window_killed_during_its_capture_and_found_damaged_keeps_its_raw_file(
+        four_windows: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A window whose capture the monitor was killed in (its footer unwritten: status ``recording``, no counts) and
+    whose encoder chunk of rows 2 000–2 499 the storage zeroed: found on the restart, not repaired (damaged), filed
+    interrupted. Before: --keep 1 then deleted its raw file as any done window (kept only when an analysis had
+    refused it): the evidence of the damage and the only copy of what it recorded gone. Now kept, and counted in the
+    status line ("1 damaged kept")."""
+    out = tmp_path / "resumed"
+    _restarted_elsewhere(four_windows, out)
+    bench = _bench(seed=EXCITING_SEED)
+    current, drive = open_bench(bench, fast=True)
+    result = Recorder(bench, None, current, drive, out, 10.0,
+                      tags={"monitor_window": 4, "monitor_elapsed_s": 240.0}).run()
+    with h5py.File(result.path, "r+") as f:  # the footer as a kill -9 leaves it: never written
+        f.attrs.modify("status", np.array(b"recording", dtype=f.attrs.get_id("status").dtype))
+        for name in ("current_samples", "encoder_samples"):
+            f.attrs.modify(name, np.int64(-1))
+        info = f["encoder/index"].id.get_chunk_info_by_coord((2000,))
+    with result.path.open("r+b") as fh:  # zero bytes, data and checksum, as storage that lost them leaves them
+        fh.seek(info.byte_offset)
+        fh.write(bytes(info.size))
+    killed = load(result.path)
+    assert (killed.status, killed.damage) == ("recording", ("encoder: samples 2 000–2 499 zeroed on disk",))
+    run = run_cli(capsys, "monitor", "--bench", str(_bench_file(tmp_path, seed=EXCITING_SEED)), "--fast", "--for",
+                  "1m", "--baseline-windows", "2", "--keep", "1", "--out", str(out))
+    assert run.code == 0, run.err
+    rows = _rows(out)
+    assert [(r["window"], r["verdict"]) for r in rows][4:] == [(4, "interrupted"), (5, "ok")]
+    assert [(out / Path(r["path"]).name).exists() for r in rows] == [True, True, False, False, True, True]
+    (done,) = [ln for ln in run.err.splitlines() if ln.endswith(" — done")]
+    assert ", 1 damaged kept, " in done
 
 
 def test_a_restart_with_other_alarm_rules_is_refused(four_windows: Path, tmp_path: Path,

@@ -3,6 +3,7 @@ catalogue server restarted — every window filed exactly once, or left for the 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -168,6 +169,49 @@ def test_a_window_cut_by_a_full_disk_is_named_so_and_the_monitor_goes_on_once_th
     said = next(m for m in messages if m.startswith("window 2 capture failed"))
     assert said == (f"window 2 capture failed: {reason.removeprefix('window capture failed: ')} — the next window is "
                     "tried once room is made; a second failure stops")
+
+
+def test_a_window_whose_raw_frame_log_the_disk_refuses_is_filed_failed_with_its_reason(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch) -> None:
+    """A monitor on the CANopen robot whose first window's raw frame log (.can.blf) the disk refuses (the disk is the
+    hardware faked: the BLF writer's open fails with ENOSPC once). Before: the monitor stopped, exit 1, "raw frame log
+    not kept: disk full: …", and the window's file, finished failed, was in no catalogue (the catalogue, empty, was
+    even removed): the fleet never learned the window failed. Now it is filed — session status failed, verdict
+    interrupted, the file's reason — counted "write failed", and the next window is captured."""
+    import errno
+
+    import can
+
+    opened: list[str] = []
+    blf_writer = can.BLFWriter
+
+    def refused_once(path: object, *args: object, **kwargs: object) -> object:
+        opened.append(str(path))
+        if len(opened) == 1:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+        return blf_writer(path, *args, **kwargs)
+
+    monkeypatch.setattr(can, "BLFWriter", refused_once)
+    bench = tmp_path / "canopen.toml"
+    bench.write_text((ROBOT.parent / "sim_robot_canopen.toml").read_text()
+                     .replace('"acq-sim-robot"', f'"acq-test-rawlog-{os.getpid()}"'))
+    out = tmp_path / "m"
+    run = run_cli(capsys, "monitor", "--bench", str(bench), "--window", "4", "--every", "4", "--for", "8s", "--out",
+                  str(out))
+    assert run.code == 0 and "Traceback" not in run.err, run.err
+    failed = Path(opened[0]).with_suffix("").with_suffix(".h5")
+    rows = _rows(out)
+    assert [(r["window"], r["verdict"]) for r in rows][0] == (0, "interrupted") and len(rows) == 2
+    assert rows[1]["verdict"] != "interrupted"  # the next window captured (and analysed)
+    reason = f"raw frame log not kept: disk full: {opened[0]}"
+    assert (rows[0]["path"], json.loads(rows[0]["reasons_json"])) == (str(failed.resolve()),
+                                                                       [f"window capture failed: {reason}"])
+    import sqlite3
+
+    with contextlib.closing(sqlite3.connect(out / "catalogue.sqlite")) as db:
+        assert db.execute("SELECT status FROM sessions WHERE path = ?", (str(failed.resolve()),)).fetchall() == [
+            ("failed",)]
+    assert "1 write failed" in run.err or "1 write failed" in run.out, run.err
 
 
 def test_a_window_cut_in_an_earlier_run_is_filed_as_that_runs_and_the_counts_add_up(

@@ -54,10 +54,10 @@ from acq.monitoring.window_analyses import WindowAnalyses
 from acq.monitoring.window_bench import FACT_TAGS, window_recorder
 from acq.monitoring.window_judge import marked
 from acq.offline.analyze import sha256_of
-from acq.recording.recorder import Recorder, stop_on_signals
+from acq.recording.recorder import RAW_LOG_NOT_KEPT, Recorder, stop_on_signals
 from acq.recording.reader import load
 from acq.recording.repair import repair
-from acqcore.errors import EXIT_INTERRUPTED, ConfigError, StorageError
+from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError, StorageError
 
 class Monitor:
     """The monitor loop; :meth:`run` returns the exit code (3 when the last state is alarm, else 0)."""
@@ -178,6 +178,11 @@ class Monitor:
             recorder.request_stop(self._stop)
         try:
             result = recorder.run()
+        except AcqError as e:
+            if recorder.session_path is None:  # a set-up error before its file existed: the monitor stops, as before
+                raise
+            self._failed_at_start(n, recorder.session_path, e)
+            return
         finally:
             self._recorder = None
         # a Ctrl-C the recorder's handler took once both streams were complete (its shutdown) left the window complete:
@@ -207,6 +212,23 @@ class Monitor:
             return
         self._submit(key)
         self._show()
+
+    def _failed_at_start(self, n: int, path: Path, error: AcqError) -> None:
+        """Window ``n``'s file, finished failed at its start (the drive's raw frame log not kept), catalogued with its
+        reason as a capture that failed (before: never filed, the fleet did not learn of it); then a write failure
+        goes as any (:meth:`_storage_failed`), a device's stops the monitor with its one line."""
+        try:
+            session = load(path)
+        except AcqError:  # not readable as a session: its error is the one to tell
+            raise error from None
+        key, reason = str(session.meta.session_id), session.meta.stop_reason
+        self._windows.add(WindowFiles(n, path, False, False, key))
+        storage = isinstance(error, StorageError)
+        self._mark(key, "interrupted", f"window capture failed: {reason}", kind="write failed" if storage else None)
+        if not storage:
+            raise error
+        self._storage_failed(n, write_cause(reason.removeprefix(f"{RAW_LOG_NOT_KEPT}: ")),
+                             f"window {n + 1} capture failed: {reason}")
 
     def _submit(self, key: str) -> None:
         assert self._analyses is not None  # _run made them before any window
@@ -274,7 +296,8 @@ class Monitor:
         key = window.key
         self._filed += 1
         self.status.count(window.outcome, window.kind, earlier=key in self._earlier)
-        self._windows.done(key, refused_as_damaged(self._windows.path(key), window.outcome.error))
+        verdict = (window.outcome.doc or {}).get("quality", {}).get("verdict")
+        self._windows.done(key, refused_as_damaged(self._windows.path(key), window.outcome.error, verdict))
         self._unjudged.append(key)
         try:
             trend = self._trend()
@@ -308,6 +331,7 @@ class Monitor:
     def _retain(self, trend: Trend) -> None:
         self._windows.retain(trend)
         self.status.disk_bytes = self._windows.disk_bytes()
+        self.status.damaged_kept = self._windows.refused()
 
     def _room_for_window(self) -> bool:
         if self.s.max_disk_bytes is None:
@@ -386,7 +410,8 @@ class Monitor:
                 self._windows.add(WindowFiles(n, path, True, key not in deletable, key, copied=True))  # (retention's)
                 continue
             numbers.append(n)
-            refused = key in known and known[key].error is not None and bool(session.damage)
+            refused = key in known and bool(session.damage) and (
+                known[key].error is not None or known[key].verdict == "interrupted")
             self._windows.add(WindowFiles(n, path, key in known, False, key, refused=refused))
             if key in known:
                 continue

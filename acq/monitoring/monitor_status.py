@@ -69,6 +69,9 @@ class MonitorStatus:
     no_room: int = 0  # not captured: the file system had no room for a window, once retention made what it could
     unfinished: int = 0  # captured, but their analysis did not complete (a worker died): not filed, a restart does
     copied_deleted: int = 0  # raw windows of other monitors copied into the folder, deleted for the disk budget
+    # raw files kept as damaged (filed without a K, the file damaged: evidence): never deleted for --keep, last for
+    # --max-disk or a full disk (acq.monitoring.retention) — counted so that a disk damaging every window is seen
+    damaged_kept: int = 0
     alarms: int = 0
     catalogue_down_since: str | None = None  # the catalogue out of reach since (HH:MM:SS UTC), None: it answers
     catalogue_problem: str = ""  # why, in its driver's words

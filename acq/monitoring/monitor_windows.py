@@ -126,6 +126,10 @@ class FolderWindows:
         refused it as damaged, :func:`refused_as_damaged`; kept)."""
         self._files[key] = replace(self._files[key], done=True, refused=refused)
 
+    def refused(self) -> int:
+        """How many of this monitor's windows are kept as refused for damage (:func:`refused_as_damaged`)."""
+        return sum(w.refused for w in self._files.values())
+
     def kept_copies(self) -> int:
         """How many windows of another monitor copied here are its baseline or alarms (never deleted)."""
         return sum(w.copied and w.protected for w in self._files.values())
@@ -168,11 +172,13 @@ class FolderWindows:
         del self._files[window.key]
 
 
-def refused_as_damaged(path: Path, error: str | None) -> bool:
-    """Whether the analysis of the window at ``path`` gave no result but ``error`` because its file is damaged
-    (``Session.damage``) or cannot be read as a session at all: retention keeps its raw file, the only copy of what
-    it recorded. A window the analysis failed on for another reason is not."""
-    if error is None:
+def refused_as_damaged(path: Path, error: str | None, verdict: str | None) -> bool:
+    """Whether the window at ``path``, filed without a K — its analysis failed (``error``) or its capture was cut
+    (``verdict`` interrupted: the monitor killed during it) — has a file that is damaged (``Session.damage``) or
+    cannot be read as a session at all: retention keeps its raw file, the only copy of what it recorded and the
+    evidence of the damage (a killed window found damaged on a restart was marked, then deleted by --keep). A window
+    without a K for another reason (not excited, a write that failed on a sound disk) is not."""
+    if error is None and verdict != "interrupted":
         return False
     try:
         return bool(load(path).damage)

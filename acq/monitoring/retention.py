@@ -2,13 +2,16 @@
 
 Catalogue rows are always kept; a window's raw files (``<stem>.h5``, ``.result.json``, ``.report.png``,
 a transport's raw log) are deleted once the window is done (analysed or marked), except the baseline
-windows, the window that raised each alarm, the windows the analysis refused as damaged and the last ``keep``
-windows. A refused window's catalogue row holds no K, only why: its raw file is the only copy of what it recorded
-(``acq check --repair`` and ``acq analyze --partial`` recover the intact part), and ``--keep`` counts the windows
-that have a K in the catalogue, not it. A disk budget is never exceeded: before a window is captured the folder's
+windows, the window that raised each alarm, the windows refused as damaged (filed without a K — the analysis
+failed, or the capture was cut by a kill — and their file damaged) and the last ``keep`` windows. A refused window's
+catalogue row holds no K, only why: its raw file is the only copy of what it recorded (``acq check --repair`` and
+``acq analyze --partial`` recover the intact part), and ``--keep`` counts the windows that have a K in the catalogue,
+not it. A disk budget is never exceeded: before a window is captured the folder's
 size plus the window's expected size must fit, else the oldest unprotected raw files go first, then the oldest of
 the last ``keep``, then the oldest refused ones (a disk that damages every window must not stop the capture); when
-even that is not enough the window is not captured (and the monitor says so).
+even that is not enough the window is not captured (and the monitor says so). Without a budget the file system is one
+(the monitor makes room for each window the same way), so refused windows are bounded by the disk, and counted in the
+monitor's status (``damaged kept``).
 
 Windows of another monitor in the folder (a folder copied, then started with ``--new-identity``: the copied windows
 stay the monitor's that captured them) are no window of this one: no baseline or alarm of its history depends on

@@ -58,6 +58,21 @@ def flushes_damage(flushes: Column, stored: int, committed: dict[str, int] | Non
     return spans
 
 
+def commit_stamps(flushes: Column | None, blocks: int) -> np.ndarray | None:
+    """For each of the first ``blocks`` rows of the current's block table, the host time, ns, of the first readable
+    ``/flushes`` row that commits it (its ``current_blocks`` total beyond the row), -1 for a row none commits; None
+    without a ``/flushes``. Each is true as "this read had arrived by then": a commit is written after the samples it
+    counts (a row lost in a hole is committed again by the next, later). What places the current's reads in host time
+    when every stamp of its own is lost."""
+    if flushes is None:
+        return None
+    rows = flushes.values[readable((flushes,), flushes.values.size)]
+    first = np.searchsorted(rows["current_blocks"], np.arange(blocks), side="right")
+    stamps = np.full(blocks, -1, dtype=np.int64)
+    stamps[first < rows.size] = rows["host_ns"][first[first < rows.size]]
+    return stamps
+
+
 def stamped(columns: list[Column], stamps: Column) -> list[Column]:
     """``columns`` (of one stream) cut after the last row whose host stamp in ``stamps`` (ns) is not 0 or not read.
 

@@ -93,10 +93,11 @@ class CurrentRows:
     first_index: np.ndarray
     count: np.ndarray
     host_ns: np.ndarray
+    stamps_from_commits: bool = False  # every host stamp lost: each read stamped by the commit that stored it
 
 
 def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Sequence[Column],
-                 samples_committed: int | None) -> CurrentRows:
+                 samples_committed: int | None, commit_ns: np.ndarray | None = None) -> CurrentRows:
     """Which current samples survive holes in the phases or in the block table, and the block table for them.
 
     Parameters
@@ -108,6 +109,11 @@ def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Se
     samples_committed : int or None
         Samples the writer committed, the sum of every committed block's count: where the samples of blocks after a
         hole in ``count`` start is counted back from it. None: unknown (those blocks are lost).
+    commit_ns : ndarray of int64 or None
+        Per block row, the host time, ns, of the commit that stored it (-1: none;
+        :func:`acq.recording.commits.commit_stamps`): when no host stamp of ``host_ns`` is readable, the reads are
+        stamped with these (``stamps_from_commits``) rather than lost — their samples are on the DAQ's own clock, and
+        a host stamp only relates it to the encoder's. None: not known (the reads are then lost).
 
     Returns
     -------
@@ -146,7 +152,11 @@ def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Se
     offset, n = offset[:rows], n[:rows]
     block_ok &= offset + n <= samples_stored  # samples of a read not all stored (a kill between the two writes)
     first = first_index.values[:rows].astype(np.int64)
-    stamp_ok = readable((host_ns,), rows)
+    stamp_ok, stamps = readable((host_ns,), rows), host_ns.values[:rows]
+    from_commits = rows > 0 and not stamp_ok.any() and commit_ns is not None
+    if from_commits:
+        stamps = commit_ns[:rows]
+        stamp_ok = stamps >= 0
     borrowed = _borrowing_stamps(block_ok, stamp_ok, offset, n, first)
     block_ok &= stamp_ok | borrowed
     placed = np.zeros(samples_stored, dtype=bool)
@@ -158,8 +168,9 @@ def current_rows(count: Column, first_index: Column, host_ns: Column, phases: Se
     heads = np.flatnonzero(~np.concatenate(([False], borrowed[ok[:-1]])) | (np.diff(ok, prepend=-1) != 1))
     last = np.append(heads[1:], ok.size)[:heads.size] - 1  # each group's last row: the read whose stamp it takes
     grouped = np.add.reduceat(n[ok], heads) if ok.size else n[ok]
-    return _split_blocks(sample_keep, zeroed & ~sample_keep, offset[ok][heads], grouped, first[ok][heads],
-                         host_ns.values[:rows][ok][last])
+    rows_kept = _split_blocks(sample_keep, zeroed & ~sample_keep, offset[ok][heads], grouped, first[ok][heads],
+                              stamps[ok][last])
+    return replace(rows_kept, stamps_from_commits=bool(from_commits and ok.size))
 
 
 def _borrowing_stamps(placeable: np.ndarray, stamped: np.ndarray, offset: np.ndarray, n: np.ndarray,

@@ -39,8 +39,9 @@ new attribute rewrites at the end of the file (older files: a cut copy loses eve
 strings (:data:`FOOTER_TEXT`) are fixed-length UTF-8, null-padded, created at their full size
 (:data:`FOOTER_TEXT_BYTES`; h5py reads them as bytes): the footer rewrites them where they are, so finishing a file
 takes no new byte of its disk — a recording stopped by a full disk still gets its status ``failed`` and its reason.
-Older files hold them as variable-length strings, whose new value HDF5 may put at the file's end; so does a reason
-longer than its room here (its whole text kept: then the footer needs free space).
+A reason longer than its room is cut to fit, ending " … [N bytes cut]" (a device's error text of more than 8 kB;
+kept whole it needed new space, and on a full disk the footer was not written at all). Older files hold them as
+variable-length strings, whose new value HDF5 may put at the file's end.
 """
 
 from __future__ import annotations
@@ -69,6 +70,8 @@ FOOTER_TEXT = ("status", "stop_reason", "stopped_utc")
 #: ("2026-01-02T03:04:05+00:00"); a reason names a file once or twice (Linux PATH_MAX 4096) in a sentence, or a
 #: device's error text. The 8.2 kB of the file this costs is 0.03 % of a 10 s recording at 25.6 kS/s.
 FOOTER_TEXT_BYTES = {"status": 16, "stop_reason": 8192, "stopped_utc": 32}
+#: Ends a footer string cut to its room (:func:`fitted_text`), with the bytes of UTF-8 left out.
+CUT_MARK = " … [{} bytes cut]"
 #: The encoder columns a drive may not give (see the layout above).
 OPTIONAL_ENCODER = ("drive_time_s", "velocity_counts_per_s", "velocity_demand_counts_per_s")
 
@@ -88,12 +91,24 @@ def footer_unwritten() -> dict[str, np.ndarray | np.int64]:
             "encoder_samples": np.int64(NO_COUNT)}
 
 
+def fitted_text(text: str, room_bytes: int) -> bytes:
+    """``text`` as UTF-8 in at most ``room_bytes``: whole when it fits, else cut at a character's boundary and ended
+    with :data:`CUT_MARK` naming the bytes left out (a reason is read by a person: its start says what happened)."""
+    data = text.encode()
+    if len(data) <= room_bytes:
+        return data
+    mark = CUT_MARK.format(len(data)).encode()
+    head = data[:room_bytes - len(mark)].decode(errors="ignore").encode()  # a character cut in two is dropped whole
+    return head + CUT_MARK.format(len(data) - len(head)).encode()
+
+
 def _write_text(f: h5py.File, name: str, text: str) -> None:
-    """Overwrite the footer string ``name`` with ``text`` where it is when it fits its fixed length; else (an older
-    file's variable-length string, a text longer than its room) replace the attribute: the whole text, in new space."""
+    """Overwrite the footer string ``name`` with ``text`` where it is (its fixed length: a longer text is cut to fit,
+    :func:`fitted_text` — a file on a full disk has no new byte for it); an older file's variable-length string is
+    replaced, the whole text in new space."""
     dtype = f.attrs.get_id(name).dtype
-    if dtype.kind == "S" and len(text.encode()) <= dtype.itemsize:
-        f.attrs.modify(name, np.array(text.encode(), dtype=dtype))
+    if dtype.kind == "S":
+        f.attrs.modify(name, np.array(fitted_text(text, dtype.itemsize), dtype=dtype))
     else:
         del f.attrs[name]
         f.attrs[name] = _footer_text(name, text)

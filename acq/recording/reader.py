@@ -18,7 +18,7 @@ import numpy as np
 from pydantic import ValidationError
 
 from acq.recording.h5safe import open_read, superblock_eof, zero_tail_start
-from acq.recording.commits import FLUSHES, committed_counts, flushes_damage, stamped
+from acq.recording.commits import FLUSHES, commit_stamps, committed_counts, flushes_damage, stamped
 from acq.recording.holes import Column, Span, current_rows, lost_spans, only_zeroed, readable
 from acq.recording.layout import FOOTER_TEXT, FORMAT, FORMAT_VERSION, OPTIONAL_ENCODER
 from acq.recording.paths import require_session_file
@@ -74,6 +74,10 @@ def _span(stream: str, first: int, end: int, what: str = "unreadable") -> str:
 
 #: A damaged span found while reading: (stream, first row, end row, what), the words of :func:`_span`.
 Damage = tuple[str, int, int, str]
+#: Said of a file whose current's host stamps are all lost and that :func:`acq.recording.holes.current_rows` stamped
+#: by its commits: read with ``host_clock_shared`` false, the analysis relates the streams' clocks from the data alone.
+STAMPS_FROM_COMMITS = ("current/blocks/host_ns: every host stamp lost — the current kept on the DAQ's clock, each read "
+                       "stamped by the commit that stored it; its clock is related to the encoder's from the data alone")
 #: What a span lost to chunks the storage zeroed is called (a checksum failure or a tail: "unreadable").
 ZEROED = "zeroed on disk"
 
@@ -175,7 +179,10 @@ def _checked_for_zeros(name: str, ds: h5py.Dataset, step: int, values: np.ndarra
     return Column(values, lost_from, holes, invented(name, values, chunks, holes) if chunks else ())
 
 
-def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage]) -> CurrentData:
+def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage],
+                  flushes: Column | None) -> tuple[CurrentData, bool]:
+    """The current as read, and whether its reads are stamped by their commits (every host stamp of its own lost,
+    :func:`acq.recording.holes.current_rows`)."""
     g = reader.node("current")
     n_blocks = None if committed is None else committed.get("current_blocks")
     table = [reader.column(f"current/blocks/{name}", n_blocks) for name in ("count", "first_index", "host_ns")]
@@ -194,7 +201,8 @@ def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: lis
     want = None if committed is None else committed["current_samples"]
     columns = {ch: reader.column(f"current/{ch}_A", want) for ch in channels}
     if any(c.lost for c in [*table, *columns.values()]):
-        return _current_with_holes(rate_hz, device, table, columns, want, damage)
+        return _current_with_holes(rate_hz, device, table, columns, want, damage,
+                                   commit_stamps(flushes, min(len(c.values) for c in table)))
     counts, first, host = (c.values for c in table)
     phases = {ch: c.values for ch, c in columns.items()}
     stored = min(len(first), len(counts), len(host))
@@ -208,14 +216,15 @@ def _read_current(reader: _Reader, committed: dict[str, int] | None, damage: lis
     if any(c.damaged for c in [*table, *columns.values()]) and n < total:
         damage.append(("current", n, total, "unreadable"))
     return CurrentData(rate_hz=rate_hz, device=device, phases_a={ch: v[:n] for ch, v in phases.items()},
-                       block_first_index=first, block_count=counts, block_host_ns=host)
+                       block_first_index=first, block_count=counts, block_host_ns=host), False
 
 
 def _current_with_holes(rate_hz: float, device: str, table: list[Column], columns: dict[str, Column],
-                        want: int | None, damage: list[Damage]) -> CurrentData:
+                        want: int | None, damage: list[Damage], commit_ns: np.ndarray | None
+                        ) -> tuple[CurrentData, bool]:
     """The current of a file with a hole in a phase or the block table (:func:`acq.recording.holes.current_rows`):
     the samples after it kept, the loss a jump in the DAQ sample index, one damage line per span lost."""
-    rows = current_rows(*table, list(columns.values()), want)
+    rows = current_rows(*table, list(columns.values()), want, commit_ns)
     keep = rows.sample_keep
     total = want if want is not None else max(len(c.values) for c in columns.values())
     for name, column in zip(("count", "first_index", "host_ns"), table):  # the block rows, named by their dataset
@@ -224,7 +233,8 @@ def _current_with_holes(rate_hz: float, device: str, table: list[Column], column
     damage.extend(_lost("current", keep, rows.zeroed, total))
     return CurrentData(rate_hz=rate_hz, device=device,
                        phases_a={ch: c.values[:keep.size][keep] for ch, c in columns.items()},
-                       block_first_index=rows.first_index, block_count=rows.count, block_host_ns=rows.host_ns)
+                       block_first_index=rows.first_index, block_count=rows.count,
+                       block_host_ns=rows.host_ns), rows.stamps_from_commits
 
 
 def _read_encoder(reader: _Reader, committed: dict[str, int] | None, damage: list[Damage]) -> EncoderData:
@@ -370,7 +380,10 @@ def _load_open(p: Path, f: h5py.File, notes: list[str]) -> Session:
     committed = committed_counts(attrs, flushes)
     damage: list[Damage] = [] if flushes is None else flushes_damage(flushes, reader.node(FLUSHES).shape[0],
                                                                       committed)
-    current = _read_current(reader, committed, damage)
+    current, stamped_by_commits = _read_current(reader, committed, damage, flushes)
+    if stamped_by_commits:  # the commits' stamps are late by up to a commit's interval: no prior for the clock search
+        notes.append(STAMPS_FROM_COMMITS)
+        attrs = {**attrs, "host_clock_shared": False}
     encoder = _read_encoder(reader, committed, damage)
     events = _read_events(reader, committed, damage)
     lines = (*notes, *(_span(*span) for span in damage))

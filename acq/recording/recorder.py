@@ -49,6 +49,10 @@ SHUTDOWN_TIMEOUT_S = 5.0
 Listener = Callable[[str, Any], None]
 
 
+#: How the reason of a session finished failed at its start because the drive's raw frame log failed begins.
+RAW_LOG_NOT_KEPT = "raw frame log not kept"
+
+
 class Interrupted(Exception):
     """Ends a recording as ``interrupted`` (a stop was requested: Ctrl-C, SIGTERM, a live window closed)."""
 
@@ -135,6 +139,7 @@ class Recorder:
         self.progress = progress
         self._started = False
         self._writer: SessionWriter | None = None
+        self.session_path: Path | None = None  # the session file once created (also one finished failed at its start)
         self._ran = False
         self._stop_request: str | None = None
         self._shutting_down = False
@@ -198,6 +203,7 @@ class Recorder:
                 break
             else:
                 raise ConfigError(f"{self.out_dir}: no free session file name for joint {self.bench.joint}")
+            self.session_path = path
             keep_raw = getattr(self.drive, "keep_raw_frames", None)  # transports that can log their raw traffic
             if keep_raw is not None:
                 try:
@@ -209,7 +215,7 @@ class Recorder:
                     # The session file exists (its layout on disk) but holds nothing: finished as failed with the
                     # reason, like any file once it exists (acq check never sees it "recording"), then one line.
                     where = getattr(e, "filename", None) or f"the drive's raw frame log beside {path.name}"
-                    reason = f"raw frame log not kept: {cause_of(e)}: {where}"
+                    reason = f"{RAW_LOG_NOT_KEPT}: {cause_of(e)}: {where}"
                     writer.finish("failed", reason)
                     error = StorageError if isinstance(e, OSError) and e.errno in WRITE_FAILURES else DeviceError
                     raise error(f"{reason} (nothing recorded; {path.name} finished as failed)") from None

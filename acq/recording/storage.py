@@ -28,6 +28,7 @@ from acqcore.errors import StorageError
 _CAUSES = {
     errno.ENOSPC: "disk full",
     errno.EDQUOT: "disk quota exceeded",
+    errno.EFBIG: "file size limit reached",  # RLIMIT_FSIZE (ulimit -f) or the file system's largest file
     errno.EIO: "I/O error",
     errno.EROFS: "read-only file system",
     errno.EACCES: "permission denied",
@@ -48,6 +49,8 @@ def cause_of(e: BaseException) -> str:
     full = str(e)
     if "No space left" in full or "errno = 28" in full:  # HDF5 reports the errno inside its (multi-line) message
         return "disk full"
+    if "errno = 27," in full or "File too large" in full:
+        return _CAUSES[errno.EFBIG]
     if "errno = 5," in full or "Input/output error" in full:
         return "I/O error"
     if isinstance(e, OSError) and e.strerror and e.filename is not None:  # the caller names the path (not a temp one)
@@ -56,9 +59,10 @@ def cause_of(e: BaseException) -> str:
 
 
 def out_of_room(e: BaseException) -> bool:
-    """Whether the write failed only for room (disk full, quota exceeded): the storage itself is sound, and what is on
-    it may be overwritten in place (unlike after an I/O error, when nothing more should be written)."""
-    return cause_of(e) in (_CAUSES[errno.ENOSPC], _CAUSES[errno.EDQUOT])
+    """Whether the write failed only for room (disk full, quota exceeded, the file at its size limit): the storage
+    itself is sound, and what is on it may be overwritten in place (unlike after an I/O error, when nothing more
+    should be written)."""
+    return cause_of(e) in (_CAUSES[errno.ENOSPC], _CAUSES[errno.EDQUOT], _CAUSES[errno.EFBIG])
 
 
 def storage_error(e: BaseException, path: Path | str) -> StorageError:

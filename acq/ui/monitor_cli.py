@@ -69,6 +69,8 @@ def status_table(st: MonitorStatus) -> Table:
         *([("catalogue", catalogue_text(st))] if st.catalogue_down_since or st.waiting else []),
         *([("not filed: analysis unfinished, a restart analyses them", str(st.unfinished))] if st.unfinished else []),
         *([("copies of other monitors' windows deleted", str(st.copied_deleted))] if st.copied_deleted else []),
+        *([("damaged windows kept (not for --keep; last to go for room)", str(st.damaged_kept))]
+          if st.damaged_kept else []),
         ("last K N·m/rad (95 %) · its window", k_text),
         ("ΔK against the baseline", format_value(st.change_pct, "+.1f") + " %"),
         ("baseline K N·m/rad", format_value(st.baseline_K, ".1f")),
@@ -236,6 +238,7 @@ def status_line(st: MonitorStatus) -> str:
             + (f", {st.no_room} not captured (disk full)" if st.no_room else "")
             + (f", {catalogue_text(st)}" if st.catalogue_down_since or st.waiting else "")
             + (f", {st.unfinished} not filed (analysis unfinished)" if st.unfinished else "")
+            + (f", {st.damaged_kept} damaged kept" if st.damaged_kept else "")
             + excitation + f", last K {last_k}, ΔK {format_value(st.change_pct, '+.1f')} %, {st.state}"
             + (" (baseline unstable)" if st.baseline_warning else "") + f", {st.disk_bytes / 1e6:.1f} MB"
             + (f" — {st.message}" if st.message else ""))
