@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import stats
 from scipy.interpolate import CubicSpline
 
 from analysis.phase_offset import window_phasors
@@ -145,7 +146,12 @@ def _move_jackknife(A: np.ndarray, r: np.ndarray, w: np.ndarray, keep: np.ndarra
     less than half an electrical revolution per window). A record of fewer than three moves is split into three
     pieces of equal windows (a block jackknife of one long motion), so that leaving one out leaves two to fit a
     drift on. The covariance is (G − 1)/G · Σ (x_g − x̄)(x_g − x̄)ᵀ over the G moves; NaN where a move left out leaves
-    the rest unable to fit the drift (all its windows in one move, or fewer than three of them).
+    the rest unable to fit the drift (all its windows in one move, or fewer than three of them). It is scaled by
+    (t/z)², Student's t of G − 1 degrees of freedom over the normal's z at 97.5 %, so that its square root, read as a
+    normal standard error as everything downstream does, spans the 95 % interval its G moves allow (×1.09 at 15 moves):
+    the drift's interval of sim_robot 10 s windows (seeds 0–9, 60…540 s into the shift) held the truth in 36 of 42
+    without it (RMS error/σ 1.37), 37 with it (1.27): 36 of the 39 whose error the jackknife gives (1.09), 1 of the 3
+    where the least squares' is larger (2.66).
     """
     idx = np.flatnonzero(keep)
     if idx.size < 4:
@@ -183,7 +189,8 @@ def _move_jackknife(A: np.ndarray, r: np.ndarray, w: np.ndarray, keep: np.ndarra
         solutions.append(np.linalg.solve(rest_normal[g], rest_right[g]) / scale)
     x = np.array(solutions)
     d = x - x.mean(axis=0)
-    return (len(moves) - 1) / len(moves) * (d.T @ d), n_moves
+    t_over_z = stats.t.ppf(0.975, len(moves) - 1) / stats.norm.ppf(0.975)
+    return t_over_z**2 * (len(moves) - 1) / len(moves) * (d.T @ d), n_moves
 
 
 def _coherent_sums(z: np.ndarray, k: np.ndarray, tau0_s: float, step_s: float, n: int) -> np.ndarray:
