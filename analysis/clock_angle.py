@@ -171,17 +171,18 @@ def _move_jackknife(A: np.ndarray, r: np.ndarray, w: np.ndarray, keep: np.ndarra
     np.add.at(normal, group[idx], w[idx, None, None] * Aw[idx, :, None] * Aw[idx, None, :])
     np.add.at(right, group[idx], (w[idx] * r[idx])[:, None] * Aw[idx])
     rest_normal, rest_right = normal.sum(axis=0) - normal, right.sum(axis=0) - right
-    solutions = []
-    for g in range(len(moves)):
-        rest = keep.copy()
-        rest[moves[g]] = False
-        # the drift needs the rest to span time: two moves, or one long enough to be split above
-        if rest.sum() < 3 or np.ptp(t_c[rest]) <= 1.5 * spacing:
-            return np.full((3, 3), np.nan), n_moves
-        if np.linalg.matrix_rank(rest_normal[g], hermitian=True) < 3:
-            return np.full((3, 3), np.nan), n_moves
-        solutions.append(np.linalg.solve(rest_normal[g], rest_right[g]) / scale)
-    x = np.array(solutions)
+    # the drift needs the rest to span time: two moves, or one long enough to be split above. The moves are runs of
+    # consecutive kept windows in time order, so the rest spans from the first kept window outside the move to the
+    # last (the move's neighbours when it is the first or the last) — all moves at once, as one stack of 3 × 3 systems
+    size = np.array([rows.size for rows in moves])
+    first_out = np.where(np.arange(len(moves)) == 0, np.cumsum(size)[0], 0)  # index into idx of the rest's first
+    last_out = np.where(np.arange(len(moves)) == len(moves) - 1, idx.size - 1 - size[-1], idx.size - 1)
+    rest_span = t_c[idx[np.minimum(last_out, idx.size - 1)]] - t_c[idx[np.minimum(first_out, idx.size - 1)]]
+    if np.any(idx.size - size < 3) or np.any(rest_span <= 1.5 * spacing):
+        return np.full((3, 3), np.nan), n_moves
+    if np.any(np.linalg.matrix_rank(rest_normal, hermitian=True) < 3):
+        return np.full((3, 3), np.nan), n_moves
+    x = np.linalg.solve(rest_normal, rest_right[..., None])[..., 0] / scale
     d = x - x.mean(axis=0)
     return (len(moves) - 1) / len(moves) * (d.T @ d), n_moves
 
