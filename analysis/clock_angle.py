@@ -174,10 +174,10 @@ def _move_jackknife(A: np.ndarray, r: np.ndarray, w: np.ndarray, keep: np.ndarra
     # the drift needs the rest to span time: two moves, or one long enough to be split above. The moves are runs of
     # consecutive kept windows in time order, so the rest spans from the first kept window outside the move to the
     # last (the move's neighbours when it is the first or the last) — all moves at once, as one stack of 3 × 3 systems
-    size = np.array([rows.size for rows in moves])
-    first_out = np.where(np.arange(len(moves)) == 0, np.cumsum(size)[0], 0)  # index into idx of the rest's first
-    last_out = np.where(np.arange(len(moves)) == len(moves) - 1, idx.size - 1 - size[-1], idx.size - 1)
-    rest_span = t_c[idx[np.minimum(last_out, idx.size - 1)]] - t_c[idx[np.minimum(first_out, idx.size - 1)]]
+    size, g = np.array([rows.size for rows in moves]), np.arange(len(moves))
+    first = np.where(g == 0, size[0], 0)  # position in idx of the rest's first kept window …
+    last = np.where(g == len(moves) - 1, idx.size - 1 - size[-1], idx.size - 1)  # … and of its last
+    rest_span = t_c[idx[np.clip(last, 0, idx.size - 1)]] - t_c[idx[np.clip(first, 0, idx.size - 1)]]
     if np.any(idx.size - size < 3) or np.any(rest_span <= 1.5 * spacing):
         return np.full((3, 3), np.nan), n_moves
     if np.any(np.linalg.matrix_rank(rest_normal, hermitian=True) < 3):
