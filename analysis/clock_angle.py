@@ -177,17 +177,18 @@ def _move_jackknife(A: np.ndarray, r: np.ndarray, w: np.ndarray, keep: np.ndarra
     np.add.at(normal, group[idx], w[idx, None, None] * Aw[idx, :, None] * Aw[idx, None, :])
     np.add.at(right, group[idx], (w[idx] * r[idx])[:, None] * Aw[idx])
     rest_normal, rest_right = normal.sum(axis=0) - normal, right.sum(axis=0) - right
-    solutions = []
-    for g in range(len(moves)):
-        rest = keep.copy()
-        rest[moves[g]] = False
-        # the drift needs the rest to span time: two moves, or one long enough to be split above
-        if rest.sum() < 3 or np.ptp(t_c[rest]) <= 1.5 * spacing:
-            return np.full((3, 3), np.nan), n_moves
-        if np.linalg.matrix_rank(rest_normal[g], hermitian=True) < 3:
-            return np.full((3, 3), np.nan), n_moves
-        solutions.append(np.linalg.solve(rest_normal[g], rest_right[g]) / scale)
-    x = np.array(solutions)
+    # the drift needs the rest to span time: two moves, or one long enough to be split above. The moves are runs of
+    # consecutive kept windows in time order, so the rest spans from the first kept window outside the move to the
+    # last (the move's neighbours when it is the first or the last) — all moves at once, as one stack of 3 × 3 systems
+    size, g = np.array([rows.size for rows in moves]), np.arange(len(moves))
+    first = np.where(g == 0, size[0], 0)  # position in idx of the rest's first kept window …
+    last = np.where(g == len(moves) - 1, idx.size - 1 - size[-1], idx.size - 1)  # … and of its last
+    rest_span = t_c[idx[np.clip(last, 0, idx.size - 1)]] - t_c[idx[np.clip(first, 0, idx.size - 1)]]
+    if np.any(idx.size - size < 3) or np.any(rest_span <= 1.5 * spacing):
+        return np.full((3, 3), np.nan), n_moves
+    if np.any(np.linalg.matrix_rank(rest_normal, hermitian=True) < 3):
+        return np.full((3, 3), np.nan), n_moves
+    x = np.linalg.solve(rest_normal, rest_right[..., None])[..., 0] / scale
     d = x - x.mean(axis=0)
     t_over_z = stats.t.ppf(0.975, len(moves) - 1) / stats.norm.ppf(0.975)
     return t_over_z**2 * (len(moves) - 1) / len(moves) * (d.T @ d), n_moves

@@ -20,9 +20,9 @@ Two effects the fit models instead of ignoring (:func:`estimate_frf` measures wh
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import lru_cache
 
 import numpy as np
-from scipy import signal
 
 from analysis import welch
 from analysis.encoder import difference_response
@@ -138,13 +138,22 @@ def window_kernel(frf: FrequencyResponse) -> tuple[np.ndarray, np.ndarray]:
         Kernel of each bin of ``frf.f_hz``, rows summing to 1.
     """
     nperseg, _ = segment_layout(frf.segment_s, frf.period_s)
-    spectrum = np.abs(np.fft.fft(signal.get_window("hann", nperseg), nperseg * KERNEL_PER_BIN)) ** 2
+    spectrum = _window_power(nperseg)
     k = np.arange(-KERNEL_HALF_WIDTH_BINS * KERNEL_PER_BIN, KERNEL_HALF_WIDTH_BINS * KERNEL_PER_BIN + 1)
     fine = np.abs(np.arange(frf.f_hz.size)[:, None] * KERNEL_PER_BIN + k[None, :])
     fine = np.minimum(fine, 2 * (frf.torque_psd_fine.size - 1) - fine)  # mirror at Nyquist
     weights = frf.torque_psd_fine[fine] * spectrum[k % spectrum.size][None, :]
     weights /= np.maximum(weights.sum(axis=1, keepdims=True), np.finfo(float).tiny)
     return k / (KERNEL_PER_BIN * frf.segment_s), weights
+
+
+@lru_cache(maxsize=8)
+def _window_power(nperseg: int) -> np.ndarray:
+    """|W|² of the Hann window of ``nperseg`` samples on a grid :data:`KERNEL_PER_BIN` times finer than the bins,
+    read-only: the same for the record and each jackknife replicate, so transformed once per length."""
+    power = np.abs(np.fft.fft(welch.hann(nperseg), nperseg * KERNEL_PER_BIN)) ** 2
+    power.flags.writeable = False
+    return power
 
 
 def estimate_frf(
@@ -279,7 +288,7 @@ def unknown_torque_segments(torque_Nm: np.ndarray, torque_std_Nm: np.ndarray, np
     out = np.zeros(segs.shape[0], dtype=bool)
     if pool.sum() < 4:
         return out
-    w2 = signal.get_window("hann", nperseg) ** 2
+    w2 = welch.hann(nperseg) ** 2
     t = np.arange(nperseg) - 0.5 * (nperseg - 1)
     detrended = segs - segs.mean(axis=1, keepdims=True)
     detrended -= np.outer(detrended @ t / (t @ t), t)

@@ -30,7 +30,7 @@ over them counts.
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
+from scipy import fft, signal
 
 from analysis.sample_instants import QUANTISATION_COUNTS, THIRD_DIFFERENCE, third_difference
 
@@ -69,8 +69,11 @@ def candidate_periods(speed: np.ndarray) -> list[int]:
     if n < 8 or not np.any(x):
         return []
     reach = n // 3
-    # per pair of samples (the sum over n − lag of them), so that the peak is not pulled towards short lags
-    ac = signal.correlate(x, x, mode="full", method="fft")[n - 1:n - 1 + reach] / (n - np.arange(reach))
+    # per pair of samples (the sum over n − lag of them), so that the peak is not pulled towards short lags; the
+    # autocorrelation as the inverse transform of the power spectrum (one forward transform, not correlate's two)
+    size = fft.next_fast_len(2 * n - 1, real=True)
+    spec = fft.rfft(x, size)
+    ac = fft.irfft(spec.real**2 + spec.imag**2, size)[:reach] / (n - np.arange(reach))
     negative = np.flatnonzero(ac < 0.0)
     if negative.size == 0:
         return []
@@ -136,17 +139,23 @@ def locked_share(position_counts: np.ndarray) -> float:
 
 def _correlations(d3: np.ndarray, usable: np.ndarray) -> np.ndarray:
     """Correlation of the usable third differences ``lag`` samples apart, for every lag (index = lag; NaN where
-    fewer than :data:`_MIN_PAIRS` pairs): sums over the pairs usable at both ends, all lags at once by FFT
-    (scipy.signal.correlate) — a dot product per lag would cost the record's length for each of thousands."""
+    fewer than :data:`_MIN_PAIRS` pairs): sums over the pairs usable at both ends, all lags at once by FFT — a dot
+    product per lag would cost the record's length for each of thousands.
+
+    The four sums come from the spectra of the three signals (mask, masked d3, masked d3²), each transformed once, and
+    three inverse transforms: the sums of the squares at the later and at the earlier end are the positive and the
+    negative lags of one cross-correlation (scipy.signal.correlate per sum took 8 forward and 4 inverse transforms,
+    24.7 ms of a 60 s session's 31 ms here, against 6 transforms now).
+    """
     m = usable.astype(float)
     am, a2m = d3 * m, d3 * d3 * m
     n = d3.size
-
-    def at_lags(x: np.ndarray, y: np.ndarray) -> np.ndarray:  # Σ_k x[k + lag]·y[k], lag = 0 … n − 1
-        return signal.correlate(x, y, mode="full", method="fft")[n - 1:]
-
-    pairs, products = at_lags(m, m), at_lags(am, am)
-    later, earlier = at_lags(a2m, m), at_lags(m, a2m)  # Σ of the squares at the later / the earlier end
+    size = fft.next_fast_len(2 * n - 1, real=True)  # no wrap-around for lags −(n − 1) … n − 1
+    spec_m, spec_am, spec_a2m = (fft.rfft(x, size) for x in (m, am, a2m))
+    pairs = fft.irfft(spec_m * spec_m.conj(), size)[:n]  # Σ_k m[k + lag]·m[k], lag = 0 … n − 1
+    products = fft.irfft(spec_am * spec_am.conj(), size)[:n]
+    cross = fft.irfft(spec_a2m * spec_m.conj(), size)  # [lag mod size]: Σ_k a2m[k + lag]·m[k], lag = −(n − 1) … n − 1
+    later, earlier = cross[:n], cross[-np.arange(n) % size]  # Σ of the squares at the later / the earlier end
     with np.errstate(invalid="ignore", divide="ignore"):
         out = products / np.sqrt(later * earlier)
     out[(np.rint(pairs) < _MIN_PAIRS) | ~(later > 0) | ~(earlier > 0)] = np.nan

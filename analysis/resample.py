@@ -15,6 +15,8 @@ transients); callers keep their instants away from the ends.
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy.ndimage import map_coordinates, spline_filter1d
 from scipy.signal import firwin, kaiserord, oaconvolve
@@ -41,8 +43,7 @@ def antialias(x: np.ndarray, rate_hz: float, f_pass_hz: float, f_stop_hz: float)
         raise ValueError(f"need 0 < f_pass_hz < f_stop_hz, got {f_pass_hz}, {f_stop_hz}")
     q = max(1, int(rate_hz // (8.0 * f_stop_hz)))
     x = np.asarray(x, dtype=np.float64)
-    # resample_poly's own filter for (1, q): a Kaiser (β = 5) windowed sinc of 20·q + 1 taps, cut-off at the new Nyquist
-    y = fir_decimate(x, firwin(20 * q + 1, 1.0 / q, window=("kaiser", 5.0)), q) if q > 1 else x
+    y = fir_decimate(x, _decimation_fir(q), q) if q > 1 else x
     rate = rate_hz / q
     h = _lowpass(rate, f_pass_hz, f_stop_hz)
     return oaconvolve(y, h.reshape((1,) * (y.ndim - 1) + h.shape), mode="same", axes=-1), rate
@@ -105,11 +106,25 @@ def fir_decimate(x: np.ndarray, h: np.ndarray, q: int) -> np.ndarray:
     return y
 
 
+# The filters below are designed once per set of arguments (read-only): an analysis asks for the same few ~10 times
+# (each chunk, the torque and its alias terms), and scipy's firwin takes ~0.1 ms a call in argument checks.
+@lru_cache(maxsize=32)
+def _decimation_fir(q: int) -> np.ndarray:
+    """resample_poly's own filter for (1, q): a Kaiser (β = 5) windowed sinc of 20·q + 1 taps, cut-off at the new
+    Nyquist."""
+    h = firwin(20 * q + 1, 1.0 / q, window=("kaiser", 5.0))
+    h.flags.writeable = False
+    return h
+
+
+@lru_cache(maxsize=32)
 def _lowpass(rate_hz: float, f_pass_hz: float, f_stop_hz: float) -> np.ndarray:
     """Odd-length Kaiser FIR, cut-off midway between the edges."""
     numtaps, beta = kaiserord(_RIPPLE_DB, (f_stop_hz - f_pass_hz) / (0.5 * rate_hz))
     numtaps |= 1
-    return firwin(numtaps, 0.5 * (f_pass_hz + f_stop_hz), window=("kaiser", beta), fs=rate_hz)
+    h = firwin(numtaps, 0.5 * (f_pass_hz + f_stop_hz), window=("kaiser", beta), fs=rate_hz)
+    h.flags.writeable = False
+    return h
 
 
 def edge_s(rate_hz: float, f_pass_hz: float, f_stop_hz: float) -> float:

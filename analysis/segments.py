@@ -29,7 +29,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal, stats
+from scipy import stats
+
+from analysis import welch
 
 #: A kept segment "covers" the time of its middle half, where its Hann weight is ≥ 1/2; with 50 % overlap
 #: these middle halves tile the record, so the share of kept segments is the share of excited time.
@@ -136,7 +138,7 @@ def select_segments(X: np.ndarray, Y: np.ndarray, in_band: np.ndarray, nperseg: 
         explained = np.sum(np.abs(h * x) ** 2, axis=1)
         rest = np.sum(np.abs(y - h * x) ** 2, axis=1)
         snr = np.nan_to_num(explained / rest, nan=0.0, posinf=np.finfo(float).max)
-    window = signal.get_window("hann", nperseg)
+    window = welch.hann(nperseg)
     enbw_bins = nperseg * float(np.sum(window**2)) / float(np.sum(window)) ** 2  # 1.5 for Hann
     dof = 2.0 * int(in_band.sum()) / enbw_bins
     limit = float(stats.f.ppf(SIGNIFICANCE, dof, dof))

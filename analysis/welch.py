@@ -9,12 +9,23 @@ window, 50 % overlap, the trailing partial segment dropped, one-sided density sc
 
 from __future__ import annotations
 
+from functools import lru_cache
 from typing import Literal
 
 import numpy as np
 from scipy import signal
 
 Detrend = Literal["constant", "linear"] | None
+
+
+@lru_cache(maxsize=16)
+def hann(nperseg: int) -> np.ndarray:
+    """``scipy.signal.get_window("hann", nperseg)`` (the periodic Hann window of spectral analysis), read-only and
+    computed once per length: an analysis asks for the same few lengths ~50 times (the fit's window kernel for every
+    jackknife replicate), and get_window takes 0.1–0.5 ms a call (its array-API checks, not the cosine)."""
+    window = signal.get_window("hann", nperseg)
+    window.flags.writeable = False
+    return window
 
 
 class Segments:
@@ -38,7 +49,7 @@ class Segments:
                  nfft: int | None = None) -> None:
         self.nperseg, self.step, self.detrend = nperseg, step, detrend
         self.nfft = nperseg if nfft is None else nfft
-        self.window = signal.get_window("hann", nperseg)
+        self.window = hann(nperseg)
         self.scale = 1.0 / (fs_hz * float(np.sum(self.window**2)))
         self.t = np.arange(nperseg) - 0.5 * (nperseg - 1)  # centred: orthogonal to the constant
 

@@ -28,6 +28,11 @@ main at 1ef86d5 60 s 0.47 s and 10 min 4.10 s CPU at load ≈ 1 (0.48 s and 4.27
 table (analysis/trig.py), the BLAS decimating FIR (analysis/resample.fir_decimate), the diagnosis only for a
 poor/failed verdict and the allocator setting 0.36 s and 3.57 s at load ≈ 8 (without the allocator setting 60 s
 0.40 s against 0.37–0.38 s, the same load; again at load 4: 0.39–0.40 s with --default-allocator, 0.36–0.37 s without).
+Session 15 (main at d9a91e0 against the triangular solves on a unit-diagonal factor, the quantisation-lock sums from 6
+FFTs instead of 12, the Hann window and the FIR filters designed once per length, the delete-a-move jackknife in one
+stacked solve; each child alternately, the same session files): 60 s 0.455, 0.456, 0.464, 0.465 s against 0.415,
+0.422, 0.424, 0.438 s at load 14–19 and 0.477, 0.484, 0.477 s against 0.446, 0.443, 0.436 s at load 10 (``--child``
+best of 5); 10 min 4.20, 4.05 s against 3.83, 3.71 s at load 19 (one run each), peak RSS 513–515 MB both.
 """
 
 from __future__ import annotations

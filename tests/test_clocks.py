@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from analysis.clock_angle import _move_jackknife
 from analysis.clock_search import overlap_correlation
 from analysis.zero_crossings import percentile_without_copy
 from analysis.recording import Recording
@@ -164,3 +165,40 @@ def test_the_frequency_stage_fits_only_the_offset_where_its_slope_would_need_an_
     offset_s, drift_ppm, n = frequency_alignment(f_cur, t, moves, 0.0, 0.0, 0.03)
     assert drift_ppm == pytest.approx(-50.0, abs=5.0) and offset_s == pytest.approx(-2e-3, abs=0.1e-3)
     assert MAX_DRIFT_PPM == 200.0 and plausible_drift(-250.0, 30.0) and not plausible_drift(-31730.0, 1240.0)
+
+
+def _windows(gap_after: tuple[int, ...], n: int = 40) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Angle-stage windows 20 ms apart with a pause of 1 s after each window index in ``gap_after``: the rows of
+    (θ_0, offset, drift), weights, phases with a little noise, and the window times."""
+    rng = np.random.default_rng(5)
+    t_c = 0.02 * np.arange(n) + np.array([sum(1.0 for g in gap_after if i > g) for i in range(n)])
+    k = rng.uniform(300.0, 1500.0, n)
+    A = np.column_stack((2.0 * np.ones(n), k, k * (t_c - t_c.mean())))
+    w = rng.uniform(0.5, 2.0, n)
+    r = A @ np.array([0.1, 2e-5, 3e-6]) + rng.normal(0.0, 1e-3, n)
+    return A, r, w, t_c
+
+
+def test_the_move_jackknife_is_the_spread_of_the_fits_without_each_move() -> None:
+    """Four moves (pauses after windows 9, 19, 29; the first window left out by the outlier rule): the covariance is
+    (G − 1)/G·Σ (x_g − x̄)(x_g − x̄)ᵀ of the weighted least squares without move g, to 1e-9; a move whose absence leaves
+    fewer than three windows gives NaN."""
+    A, r, w, t_c = _windows((9, 19, 29))
+    keep = np.ones(t_c.size, bool)
+    keep[0] = False
+    cov, n_moves = _move_jackknife(A, r, w, keep, t_c)
+    assert n_moves == 4
+    moves = [np.arange(1, 10), np.arange(10, 20), np.arange(20, 30), np.arange(30, 40)]
+    fits = []
+    for rows in moves:
+        rest = keep.copy()
+        rest[rows] = False
+        sw = np.sqrt(w[rest])
+        fits.append(np.linalg.lstsq(A[rest] * sw[:, None], r[rest] * sw, rcond=None)[0])
+    x = np.array(fits)
+    d = x - x.mean(axis=0)
+    np.testing.assert_allclose(cov, 3.0 / 4.0 * d.T @ d, rtol=1e-9, atol=1e-30)
+    # three moves, the first two one window each: without the third only two windows are left
+    A, r, w, t_c = _windows((0, 1))
+    cov, n_moves = _move_jackknife(A, r, w, np.ones(t_c.size, bool), t_c)
+    assert n_moves == 3 and np.all(np.isnan(cov))

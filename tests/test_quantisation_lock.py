@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from analysis.quantisation_lock import candidate_periods, locked_share
+from analysis.quantisation_lock import _MIN_PAIRS, _correlations, candidate_periods, locked_share
 
 PERIOD = 800  # samples per motion period (0.8 s at 1 kHz)
 CYCLES = 12
@@ -75,3 +75,27 @@ def test_no_periodic_motion_is_not_measured():
     share = locked_share(np.floor(np.cumsum(speed)).astype(np.int64))
     assert np.isnan(share) or share < 0.1
     assert np.isnan(locked_share(np.zeros(100, dtype=np.int64)))
+
+
+def test_the_correlations_by_fft_equal_their_sums_over_the_usable_pairs() -> None:
+    """Every lag's correlation from the three spectra equals Σ a[k + lag]·a[k] / √(Σ a[k + lag]²·Σ a[k]²) over the
+    pairs usable at both ends (the later and the earlier end's sums differ: the mask is not symmetric), to 1e-9; NaN
+    where fewer than _MIN_PAIRS pairs."""
+    rng = np.random.default_rng(3)
+    n = 3_001
+    d3 = rng.normal(0.0, 1.0, n) + np.sin(np.arange(n) * 2 * np.pi / 97.0)
+    usable = rng.random(n) < np.linspace(0.2, 0.9, n)
+    out = _correlations(d3, usable)
+    assert out.shape == (n,)
+    checked = {True: 0, False: 0}  # lags with enough pairs, and with too few
+    for lag in (0, 1, 2, 97, 500, 1_234, 2_000, 2_600, 2_900):
+        pair = usable[lag:] & usable[:n - lag]
+        later, earlier = d3[lag:][pair], d3[:n - lag][pair]
+        enough = pair.sum() >= _MIN_PAIRS
+        checked[bool(enough)] += 1
+        if enough:
+            expected = np.sum(later * earlier) / np.sqrt(np.sum(later**2) * np.sum(earlier**2))
+            assert out[lag] == pytest.approx(expected, rel=1e-9, abs=1e-12)
+        else:
+            assert np.isnan(out[lag])
+    assert checked[True] >= 5 and checked[False] >= 1
