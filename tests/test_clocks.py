@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from analysis.clock_angle import _move_jackknife
 from analysis.clock_search import overlap_correlation
@@ -181,8 +182,9 @@ def _windows(gap_after: tuple[int, ...], n: int = 40) -> tuple[np.ndarray, np.nd
 
 def test_the_move_jackknife_is_the_spread_of_the_fits_without_each_move() -> None:
     """Four moves (pauses after windows 9, 19, 29; the first window left out by the outlier rule): the covariance is
-    (G − 1)/G·Σ (x_g − x̄)(x_g − x̄)ᵀ of the weighted least squares without move g, to 1e-9; a move whose absence leaves
-    fewer than three windows gives NaN."""
+    (G − 1)/G·Σ (x_g − x̄)(x_g − x̄)ᵀ of the weighted least squares without move g, times (t/z)² (Student's t at G − 1
+    degrees of freedom over the normal's z, both at 97.5 %), to 1e-9; a move whose absence leaves fewer than three
+    windows gives NaN."""
     A, r, w, t_c = _windows((9, 19, 29))
     keep = np.ones(t_c.size, bool)
     keep[0] = False
@@ -197,7 +199,8 @@ def test_the_move_jackknife_is_the_spread_of_the_fits_without_each_move() -> Non
         fits.append(np.linalg.lstsq(A[rest] * sw[:, None], r[rest] * sw, rcond=None)[0])
     x = np.array(fits)
     d = x - x.mean(axis=0)
-    np.testing.assert_allclose(cov, 3.0 / 4.0 * d.T @ d, rtol=1e-9, atol=1e-30)
+    t_over_z = stats.t.ppf(0.975, 3) / stats.norm.ppf(0.975)  # 3.182 / 1.960
+    np.testing.assert_allclose(cov, t_over_z**2 * 3.0 / 4.0 * d.T @ d, rtol=1e-9, atol=1e-30)
     # three moves, the first two one window each: without the third only two windows are left
     A, r, w, t_c = _windows((0, 1))
     cov, n_moves = _move_jackknife(A, r, w, np.ones(t_c.size, bool), t_c)
