@@ -13,8 +13,10 @@ from pathlib import Path
 
 import pytest
 
-import acq.monitoring.catalogue
-from acq.monitoring.catalogue import MIGRATIONS, SCHEMA_VERSION, Catalogue, Outcome
+import acq.monitoring.catalogue_db
+from acq.monitoring.catalogue import Catalogue, Outcome
+from acq.monitoring.catalogue_schema import MIGRATIONS, SCHEMA_VERSION
+from acqcore.errors import ConfigError
 from tests.helpers import read_only_view, run_cli
 from tests.pg_server import new_database
 
@@ -87,7 +89,7 @@ def test_a_damaged_copy_does_not_hide_the_analysis_of_an_intact_copy(catalogue_l
 
 def test_an_older_catalogue_is_migrated_with_its_rows(catalogue_location: Path | str,
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(acq.monitoring.catalogue, "SCHEMA_VERSION", 1)
+    monkeypatch.setattr(acq.monitoring.catalogue_db, "SCHEMA_VERSION", 1)
     with Catalogue(catalogue_location) as old, old._transaction():
         assert old.schema_version == 1
         old._execute("INSERT INTO sessions (session_key, session_id, path, joint, created_utc) "
@@ -102,11 +104,11 @@ def test_an_older_catalogue_is_migrated_with_its_rows(catalogue_location: Path |
 
 
 def test_a_newer_catalogue_is_refused(catalogue_location: Path | str, monkeypatch: pytest.MonkeyPatch) -> None:
-    monkeypatch.setattr(acq.monitoring.catalogue, "MIGRATIONS", (*MIGRATIONS, "CREATE TABLE later (x TEXT)"))
-    monkeypatch.setattr(acq.monitoring.catalogue, "SCHEMA_VERSION", SCHEMA_VERSION + 1)
+    monkeypatch.setattr(acq.monitoring.catalogue_db, "MIGRATIONS", (*MIGRATIONS, "CREATE TABLE later (x TEXT)"))
+    monkeypatch.setattr(acq.monitoring.catalogue_db, "SCHEMA_VERSION", SCHEMA_VERSION + 1)
     Catalogue(catalogue_location).close()
     monkeypatch.undo()
-    with pytest.raises(acq.monitoring.catalogue.ConfigError) as error:
+    with pytest.raises(ConfigError) as error:
         Catalogue(catalogue_location)
     assert str(error.value).endswith(f": catalogue schema version {SCHEMA_VERSION + 1} is newer than this acq knows "
                                      f"({SCHEMA_VERSION}) — update acq")
@@ -164,7 +166,7 @@ def test_a_monitors_windows_are_read_by_its_column_and_an_older_catalogue_gets_i
         catalogue_location: Path | str, monkeypatch: pytest.MonkeyPatch) -> None:
     """Scoping to one monitor filtered every row of a joint's name in Python (the review): now a query on the
     ``monitor_id`` column (indexed), which a catalogue of schema 5 gets from its rows' tags when it is opened."""
-    monkeypatch.setattr(acq.monitoring.catalogue, "SCHEMA_VERSION", 5)
+    monkeypatch.setattr(acq.monitoring.catalogue_db, "SCHEMA_VERSION", 5)
     with Catalogue(catalogue_location) as old:
         _insert_as_an_older_acq(old, {"s1": '{"monitor_id": "h:/m1:0000000a"}', "s2": '{"monitor_id": "h:/m2:0000000b"}',
                                       "s3": '{"robot": "r1"}'})
@@ -220,7 +222,7 @@ def test_a_catalogue_whose_tags_hold_nan_migrates_to_the_monitor_column(catalogu
     """``--tag operator=Nan`` is a float tag, NaN, written as Python's JSON writes it. The migration to schema 6 read
     the tags with json_extract / ::jsonb, which refuse NaN: the catalogue failed to open for every acq command ("not a
     usable catalogue (malformed JSON)", the third read). The tags are read in Python."""
-    monkeypatch.setattr(acq.monitoring.catalogue, "SCHEMA_VERSION", 5)
+    monkeypatch.setattr(acq.monitoring.catalogue_db, "SCHEMA_VERSION", 5)
     with Catalogue(catalogue_location) as old, old._transaction():
         for key, tags in (("s1", {"operator": float("nan"), "monitor_id": "h:/m1:0000000a"}),
                           ("s2", {"operator": float("nan")}), ("s3", {"monitor_id": "h:/m2:0000000b"})):
@@ -246,9 +248,9 @@ def test_a_failed_upgrade_of_a_postgresql_catalogue_is_one_line_with_its_detail(
     with Catalogue(url) as c:
         for n in (1, 2):
             c.record(_outcome(f"s-0{n}", 890.0))  # two sessions of joint j1
-    monkeypatch.setattr(acq.monitoring.catalogue, "MIGRATIONS",
+    monkeypatch.setattr(acq.monitoring.catalogue_db, "MIGRATIONS",
                         (*MIGRATIONS, "CREATE UNIQUE INDEX one_session_per_joint ON sessions (joint)"))
-    monkeypatch.setattr(acq.monitoring.catalogue, "SCHEMA_VERSION", SCHEMA_VERSION + 1)
+    monkeypatch.setattr(acq.monitoring.catalogue_db, "SCHEMA_VERSION", SCHEMA_VERSION + 1)
     run = run_cli(capsys, "trend", "--catalogue", url, "--joint", "j1")
     assert (run.code, run.out, run.err) == (
         2, "", f"acq: error: {url}: not a usable catalogue (could not create unique index \"one_session_per_joint\": "

@@ -131,7 +131,8 @@ def test_drivers_do_not_import_acq_and_the_ground_floor_imports_nothing_of_ours(
 
 def test_the_catalogue_and_the_file_readers_do_not_import_drivers() -> None:
     graph = import_graph()
-    users = ("acq.monitoring.catalogue", "acq.monitoring.catalogue_backends", "acq.offline.csvtable", "acq.offline.import_files")
+    users = ("acq.monitoring.catalogue", "acq.monitoring.catalogue_db", "acq.monitoring.catalogue_backends",
+             "acq.offline.csvtable", "acq.offline.import_files")
     assert {m: sorted(i for i in graph[m] if i.startswith("drivers")) for m in users} == {m: [] for m in users}
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from acq.commissioning.selftest import read_position_frame
+from acq.commissioning.drive_sdo import read_position_frame
 from acq.config import CONFIG_DIR, DEFAULT_BENCH, load_bench, load_profile
 from acq.offline.analyze import analyze_session
 from acq.recording.reader import load

@@ -22,7 +22,8 @@ from typing import Any
 import pytest
 
 from acq.monitoring.batch import run_batch
-from acq.monitoring.catalogue import SCHEMA_VERSION, Catalogue, Entry
+from acq.monitoring.catalogue import Catalogue, Entry
+from acq.monitoring.catalogue_schema import SCHEMA_VERSION
 from acq.monitoring.session_search import find_sessions
 from acq.monitoring.trend import EWMA_L, compute_trend
 from analysis import AnalysisRequest

@@ -26,11 +26,12 @@ The simulated bench runs through the same registry; this module never imports ``
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any
 
 from acq.commissioning.devices import can_section, ni_section, serial_section
+from acq.commissioning.drive_sdo import read_identity, read_position_frame
 from acq.commissioning.selftest_checks import (Check, blf_check, daq_blocks_check, direction_check, drive_period_check,
                                                encoder_speed_check, phase_order_check, samples_check, speed_ratio_check,
                                                standstill_current_check, sync_jitter_check, sync_times,
@@ -245,66 +246,6 @@ def _drive_check(bench: Bench, recorder: Recorder) -> Check:
         if not bench.listens():  # acq sets its travel window in 0x6064's frame (a home offset was refused at start)
             figure += "; " + read_position_frame(drive)
     return Check("devices", "drive", "pass", figure, values=values)
-
-
-IDENTITY = {"vendor": 1, "product": 2, "revision": 3, "serial": 4}
-T = TypeVar("T")
-
-
-def read_identity(settings: DriveCanopen) -> dict[str, int] | str:
-    """The drive's identity object 0x1018 by SDO from a second connection to the bus (the adapter's own
-    client is idle before motion); the reason as a string when it cannot be read."""
-    import canopen
-
-    def identity(node: Any) -> dict[str, int]:
-        found: dict[str, int] = {}
-        for name, sub in IDENTITY.items():
-            try:
-                found[name] = int.from_bytes(node.sdo.upload(0x1018, sub), "little")
-            except canopen.SdoAbortedError:
-                if sub == 1:
-                    raise
-        return found
-
-    return _by_sdo(settings, identity)
-
-
-def read_position_frame(settings: DriveCanopen) -> str:
-    """The 0x607D software position limits the drive holds and its 0x607C home offset, in words, by SDO from a
-    second connection (as :func:`read_identity`). The adapter has refused a home offset other than 0 before motion
-    (:meth:`drivers.canopen_drive.CanopenDrive.start`), so on a bench that got this far it reads 0 or is absent."""
-    import canopen
-
-    def frame(node: Any) -> str:
-        low, high = (int.from_bytes(node.sdo.upload(0x607D, sub), "little", signed=True) for sub in (1, 2))
-        window = "none set" if (low, high) == (-2**31, 2**31 - 1) else f"{low} … {high}"
-        try:
-            offset = f"0x607C home offset {int.from_bytes(node.sdo.upload(0x607C, 0), 'little', signed=True)}"
-        except canopen.SdoAbortedError:
-            offset = "no 0x607C home offset"
-        return f"0x607D window {window}, {offset}"
-
-    return _by_sdo(settings, frame)
-
-
-def _by_sdo(settings: DriveCanopen, read: Callable[[Any], T]) -> T | str:
-    """``read(node)`` on the drive as a RemoteNode of a second connection to the bus; the reason as a string when
-    the bus or an SDO fails."""
-    import can
-    import canopen
-    from canopen.objectdictionary import ObjectDictionary
-    from canopen.sdo.exceptions import SdoError
-
-    network = canopen.Network()
-    try:
-        network.connect(interface=settings.interface, channel=settings.channel, bitrate=settings.bitrate)
-        node = network.add_node(canopen.RemoteNode(settings.node_id, ObjectDictionary()))
-        node.sdo.RESPONSE_TIMEOUT = settings.sdo_timeout_s
-        return read(node)
-    except (SdoError, OSError, can.CanError) as e:
-        return f"not readable ({e})"
-    finally:
-        network.disconnect()
 
 
 def _serial_check(stats: Any, bench: Bench) -> Check:

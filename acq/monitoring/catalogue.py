@@ -5,32 +5,22 @@ Two tables. ``sessions`` holds what identifies a recording (id, path, joint, sta
 (``request_key``) and resolved, K, J_m, J_l, C with their 95 % intervals, f_a, f_r, verdict and
 reasons, clock figures, software version — or the error when the analysis failed.
 
-The database is a SQLite file (the default) or, for several hosts sharing one history, a
-PostgreSQL server (``--catalogue postgresql://user@host/db``); the few things that differ between
-the two are in :mod:`acq.monitoring.catalogue_backends`. :data:`~acq.monitoring.catalogue_schema.MIGRATIONS` brings an older database up to
-:data:`SCHEMA_VERSION` step by step, each step in its own transaction, serialised between processes
-(SQLite's write lock, PostgreSQL's advisory lock). Every write is one transaction per session, an
-upsert, so several processes on one host (SQLite, WAL mode, busy timeout) or on many (PostgreSQL)
-can share a catalogue. Keep a SQLite file on a local disk — its locking is unreliable on network shares.
+This module is what is written and read: an analysis filed (:meth:`Catalogue.record`), the entries the trend reads
+(:meth:`Catalogue.entries`), a monitor's windows copied between catalogues. The database under it — SQLite or
+PostgreSQL, its transactions and schema migrations — is :mod:`acq.monitoring.catalogue_db`. Every write is one
+transaction per session, an upsert, so several processes on one host (SQLite, WAL mode, busy timeout) or on many
+(PostgreSQL) can share a catalogue. Keep a SQLite file on a local disk — its locking is unreliable on network shares.
 """
 
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable, Iterator
-from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from acq.monitoring.catalogue_backends import one_line, open_catalogue_db, open_error
-from acq.monitoring.catalogue_damage import json_column, read_error
-from acq.monitoring.catalogue_schema import MIGRATIONS, MONITOR_COLUMN_VERSION, SCHEMA_VERSION
-from acq.recording.storage import cause_of
-from acqcore.errors import ConfigError, StorageError
-
-#: Session tag of a monitor's window: the identity of the monitor that captured it (also the column ``monitor_id``).
-MONITOR_TAG = "monitor_id"
+from acq.monitoring.catalogue_damage import json_column
+from acq.monitoring.catalogue_db import MONITOR_TAG, CatalogueDatabase
 
 _PARAM_COLUMNS = (("K_Nm_per_rad", "K"), ("Jm_kgm2", "Jm"), ("Jl_kgm2", "Jl"), ("C_Nms_per_rad", "C"))
 
@@ -92,7 +82,7 @@ class Entry:
     truth_K_Nm_per_rad: float | None
 
 
-class Catalogue:
+class Catalogue(CatalogueDatabase):
     """An open catalogue database (created and migrated on open); use as a context manager.
 
     Parameters
@@ -109,117 +99,6 @@ class Catalogue:
     path : Path or str
         The SQLite file, or the URL without its password (for messages).
     """
-
-    def __init__(self, path: Path | str, *, read_only: bool = False):
-        self.path: Path | str
-        self._location = path  # as given (a URL with its password): what reconnect() opens again
-        self._dialect, self._db, self.path = open_catalogue_db(path, read_only)
-        try:
-            if self._dialect.read_only:
-                self._require_current_schema()
-            else:
-                self._migrate()
-        except (*self._dialect.errors, UnicodeDecodeError) as e:
-            damaged = self._damage(e)
-            self._db.close()
-            raise damaged or open_error(self.path, e, "not a usable catalogue") from None
-        except BaseException:
-            self._db.close()
-            raise
-
-    def __enter__(self) -> Catalogue:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
-    def close(self) -> None:
-        """Close the database."""
-        self._db.close()
-
-    @property
-    def errors(self) -> tuple[type[Exception], ...]:
-        """The exceptions of its database driver (a read that fails raises one of them)."""
-        return self._dialect.errors
-
-    @property
-    def connection_lost(self) -> bool:
-        """True when the connection to a PostgreSQL server broke (the server stopped or restarted, the network
-        failed): :meth:`reconnect` may make it usable again. Never for a SQLite file."""
-        return bool(getattr(self._db, "broken", False) or getattr(self._db, "closed", False))
-
-    def reconnect(self) -> None:
-        """Open the connection again (:class:`ConfigError` naming the URL while the server does not answer)."""
-        with suppress(Exception):
-            self._db.close()
-        self._dialect, self._db, self.path = open_catalogue_db(self._location, self._dialect.read_only)
-
-    def _execute(self, sql: str, params: Iterable[Any] = ()) -> Any:
-        """Run one statement written with ``?`` placeholders; return the cursor. Booleans go in as 0/1, as SQLite
-        stores them (PostgreSQL refuses a boolean for an integer column)."""
-        values = tuple(int(p) if isinstance(p, bool) else p for p in params)
-        return self._db.execute(self._dialect.sql(sql), values)
-
-    @contextmanager
-    def _reading(self) -> Iterator[None]:
-        """Reads of a SQLite file damaged on disk raise one line naming it, the table, row and column
-        (:func:`~acq.monitoring.catalogue_damage.read_error`); any other error goes on as it is."""
-        try:
-            yield
-        except (*self._dialect.errors, UnicodeDecodeError) as e:
-            damaged = self._damage(e)
-            if damaged is None:
-                raise
-            raise damaged from None
-
-    def _damage(self, e: BaseException) -> ConfigError | None:
-        """The one line for ``e`` when it is a SQLite file's damage on disk (:func:`read_error`), else None (a
-        PostgreSQL server's errors are never a damaged file)."""
-        return read_error(self.path, self._db, e) if self._dialect.name == "sqlite" else None
-
-    @contextmanager
-    def _transaction(self) -> Iterator[Any]:
-        """One write transaction (on SQLite holding the write lock from its start: waits for others)."""
-        self._db.execute(self._dialect.begin)
-        try:
-            yield self._db
-        except BaseException:
-            self._db.execute("ROLLBACK")
-            raise
-        self._db.execute("COMMIT")
-
-    @property
-    def schema_version(self) -> int:
-        """The database's schema version."""
-        return self._dialect.schema_version(self._db)
-
-    def _require_current_schema(self) -> None:
-        """A catalogue opened read-only is read as it is: one of another schema version is refused."""
-        version = self.schema_version
-        if version > SCHEMA_VERSION:
-            raise ConfigError(f"{self.path}: catalogue schema version {version} is newer than this acq knows "
-                              f"({SCHEMA_VERSION}) — update acq")
-        if version < SCHEMA_VERSION:
-            raise ConfigError(f"{self.path}: catalogue schema version {version} is older than this acq's "
-                              f"({SCHEMA_VERSION}) and its folder may not be written to migrate it — run acq trend "
-                              "once where it may be written (a copy of the folder)")
-
-    def _migrate(self) -> None:
-        while True:
-            with self._transaction() as db:
-                self._dialect.lock_schema(db)
-                version = self.schema_version  # read under the lock: another process may have migrated
-                if version > SCHEMA_VERSION:
-                    raise ConfigError(f"{self.path}: catalogue schema version {version} is newer than this acq "
-                                      f"knows ({SCHEMA_VERSION}) — update acq")
-                if version == SCHEMA_VERSION:
-                    return
-                for statement in MIGRATIONS[version].split(";"):
-                    if statement.strip():
-                        db.execute(self._dialect.ddl(statement))
-                if version + 1 == MONITOR_COLUMN_VERSION:
-                    self._fill_monitor_ids()
-                self._dialect.set_schema_version(db, version + 1)
 
     def current(self, request_key: str) -> set[str]:
         """SHA-256 of the files already analysed successfully with this request."""
@@ -338,30 +217,6 @@ class Catalogue:
         return [e for column, e in entries if column is not None or (
             str(e.tags[MONITOR_TAG]) == monitor if e.tags.get(MONITOR_TAG) is not None else unowned)]
 
-    def fill_monitor_ids(self) -> int:
-        """Fill the ``monitor_id`` column of the sessions whose tags name a monitor but whose column does not: the rows
-        an acq of before schema 6 still running files into a catalogue another one migrated (its INSERT names the
-        columns it knows). :meth:`entries` scopes by the column's index (such a session only by its tag, read outside
-        the index) and :meth:`copy_windows` by the column alone: without this, such a monitor's windows were nobody's
-        once it restarted upgraded. Returns the number of sessions filled (one transaction)."""
-        try:
-            with self._reading(), self._transaction():
-                return self._fill_monitor_ids()
-        except self._dialect.errors as e:
-            raise self._write_error(e) from None
-
-    def _fill_monitor_ids(self) -> int:
-        """:meth:`fill_monitor_ids` inside the caller's transaction: the sessions without the column whose tags name
-        the monitor tag (found by text; read by Python's JSON, which reads the NaN it writes)."""
-        rows = self._execute("SELECT session_key, tags_json FROM sessions WHERE monitor_id IS NULL"
-                             " AND tags_json LIKE ?", (f'%"{MONITOR_TAG}"%',)).fetchall()
-        filled = [(str(tags[MONITOR_TAG]), key) for key, tags in ((r[0], _tags(r[1])) for r in rows)
-                  if tags.get(MONITOR_TAG) is not None]
-        if filled:
-            self._db.cursor().executemany(self._dialect.sql("UPDATE sessions SET monitor_id = ? WHERE session_key = ?"),
-                                          filled)
-        return len(filled)
-
     def copy_windows(self, source: Catalogue, monitor: str, *, unowned: bool = False) -> int:
         """Copy the sessions of ``monitor`` with their analyses from ``source`` into this catalogue (one transaction;
         rows this catalogue already has are kept); with ``unowned`` also the sessions of no monitor, filed as
@@ -386,10 +241,6 @@ class Catalogue:
             raise self._write_error(e) from None
         return len(sessions)
 
-    def _write_error(self, e: BaseException) -> StorageError:
-        """The one-line error of a failed write into this catalogue: ``<cause>: <catalogue> (<its message>)``."""
-        return StorageError(f"{cause_of(e) if 'full' not in str(e) else 'disk full'}: {self.path} ({one_line(e)})")
-
     def _insert(self, table: str, row: dict[str, Any], key: str) -> None:
         self._execute(f"INSERT INTO {table} ({', '.join(row)}) VALUES ({', '.join('?' * len(row))})"
                       f" ON CONFLICT ({key}) DO NOTHING", tuple(row.values()))
@@ -398,15 +249,6 @@ class Catalogue:
         """The joints the catalogue knows."""
         with self._reading():
             return [r[0] for r in self._execute("SELECT DISTINCT joint FROM sessions WHERE joint IS NOT NULL")]
-
-
-def _tags(text: str) -> dict[str, Any]:
-    """A session's tags_json as a dict ({} when it is not a JSON object)."""
-    try:
-        tags = json.loads(text)
-    except ValueError:
-        return {}
-    return tags if isinstance(tags, dict) else {}
 
 
 def _entry(path: Path | str, r: Any) -> Entry:

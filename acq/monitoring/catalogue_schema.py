@@ -2,8 +2,8 @@
 
 Two tables. ``sessions`` holds what identifies a recording (id, path, joint, start time, tags, the monitor that
 captured it); ``analyses`` one row per session and analysis request. A database records its version (SQLite's
-``user_version``, a table on PostgreSQL: :mod:`acq.monitoring.catalogue_backends`); :class:`Catalogue` applies the
-steps from there, each in its own transaction.
+``user_version``, a table on PostgreSQL: :mod:`acq.monitoring.catalogue_backends`);
+:class:`~acq.monitoring.catalogue_db.CatalogueDatabase` applies the steps from there, each in its own transaction.
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ MIGRATIONS: tuple[str, ...] = (
     """,
     # 5 → 6: the monitor that captured a window (its tag MONITOR_TAG, as a column): a monitor reads back its own
     # windows of a catalogue every robot's joint1 shares by an index, not by reading every row of the joint's name.
-    # Filled from the tags by Catalogue._fill_monitor_ids in the same transaction — in Python: tags_json is Python's
+    # Filled from the tags by CatalogueDatabase._fill_monitor_ids in the same transaction — in Python: tags_json is Python's
     # JSON, NaN included (--tag operator=Nan), which SQLite's json_extract and PostgreSQL's jsonb refuse
     """
     ALTER TABLE sessions ADD COLUMN monitor_id TEXT;

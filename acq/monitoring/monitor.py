@@ -16,7 +16,8 @@ shown from 1: :func:`acq.monitoring.monitor_scope.window_number`) and
 placed in machine time (``monitor_elapsed_s``: number × ``every_s``, after a restart going on from the last window at
 the new ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
-``interrupted`` (not counted); what a restart must agree with (bench, ``--window``, alarm rules, catalogue) is in
+``interrupted`` (not counted): what it finds in the folder is read by :mod:`acq.monitoring.monitor_leftovers`; what
+a restart must agree with (bench, ``--window``, alarm rules, catalogue) is in
 :mod:`acq.monitoring.monitor_restart`, the monitor's identity (a copied folder is refused) in
 :mod:`acq.monitoring.monitor_scope`, the alarm in :mod:`acq.monitoring.monitor_alarm` and its command in
 :mod:`acq.monitoring.alarm_command`, which raw windows it keeps and deletes (retention, the disk budget, the file
@@ -40,23 +41,21 @@ from acq.monitoring.catalogue_backends import is_url
 from acq.monitoring.catalogue_spool import SPOOL_NAME, FilingQueue, Waiting
 from acq.monitoring.folder_lock import folder_lock, removed_unless_used
 from acq.monitoring.monitor_alarm import AlarmState
+from acq.monitoring.monitor_leftovers import leftovers
 from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, catalogue_text, check_comparable, open_bound
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
                                           check_user_tags, own_windows)
 from acq.monitoring.monitor_status import MonitorSettings, MonitorStatus
 from acq.recording.room import SIZE_MARGIN, expected_session_bytes
-from acq.monitoring.monitor_windows import (FolderWindows, StorageFailures, check_budget, copies_deletable,
-                                           refused_as_damaged, write_cause)
+from acq.monitoring.monitor_windows import FolderWindows, StorageFailures, check_budget, refused_as_damaged, write_cause
 from acq.monitoring.retention import WindowFiles
-from acq.monitoring.session_outcome import CATALOGUE_NAME, session_meta
+from acq.monitoring.session_outcome import CATALOGUE_NAME
 from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
 from acq.monitoring.window_analyses import WindowAnalyses
 from acq.monitoring.window_bench import FACT_TAGS, window_recorder
-from acq.monitoring.window_judge import marked
-from acq.offline.analyze import sha256_of
+from acq.monitoring.window_judge import marked_file
 from acq.recording.recorder import RAW_LOG_NOT_KEPT, Recorder, stop_on_signals
 from acq.recording.reader import load
-from acq.recording.repair import repair
 from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError, StorageError
 
 class Monitor:
@@ -78,10 +77,7 @@ class Monitor:
         self._alarms = AlarmCommands(settings.on_alarm, self._alarm_problem)
         self._alarm = AlarmState(self.status, self._alarms)
         self._filed = 0  # catalogue rows written by this run
-        #: windows filed whose alarm was not judged yet (the trend could not be read after their write, or they were
-        #: filed from the spool at start), in filing order; and the alarm state before the spool's windows were filed
-        self._unjudged: list[str] = []
-        self._alarm_before_spool: bool | None = None
+        self._alarm_before_spool: bool | None = None  # the alarm state before the spool's windows were filed
         self._size = expected_session_bytes(settings.bench, settings.window_s)
         # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
         self._rules = AlarmRules(settings.baseline_windows, settings.threshold_pct, settings.ewma_lambda)
@@ -253,13 +249,7 @@ class Monitor:
         self._show()
 
     def _mark(self, key: str, verdict: str, reason: str, kind: str | None = None) -> None:
-        path = self._windows.path(key)
-        try:
-            meta = session_meta(load(path))
-        except Exception:  # noqa: BLE001 - a window too broken to read is still marked
-            meta = {}
-        outcome = marked(str(path.resolve()), sha256_of(path), self.s.request, meta, verdict, [reason])
-        self._record(key, outcome, kind)
+        self._record(key, marked_file(self._windows.path(key), self.s.request, verdict, reason), kind)
 
     def _record(self, key: str, outcome: Outcome, kind: str | None = None) -> None:
         """Catalogue one window (``kind``: how it counts when not by its verdict, :meth:`MonitorStatus.count`) — or,
@@ -284,13 +274,6 @@ class Monitor:
             st.catalogue_problem = filing.problem
             self._show()
 
-    def _judge_unjudged(self, trend: Trend) -> None:
-        """Judge the alarm after each window filed and not yet judged, in filing order (an alarm in any of them is
-        raised once, as if the trend had been read after each)."""
-        for key in self._unjudged:
-            self._alarm.judge(trend, key)
-        self._unjudged.clear()
-
     def _filed_one(self, window: Waiting) -> None:
         """A window just filed: count it, update the trend, the alarm and the figures, apply retention."""
         key = window.key
@@ -298,14 +281,14 @@ class Monitor:
         self.status.count(window.outcome, window.kind, earlier=key in self._earlier)
         verdict = (window.outcome.doc or {}).get("quality", {}).get("verdict")
         self._windows.done(key, refused_as_damaged(self._windows.path(key), window.outcome.error, verdict))
-        self._unjudged.append(key)
+        self._alarm.unjudged.append(key)
         try:
             trend = self._trend()
         except self.catalogue.errors as e:  # the server went away right after the write: judged when it is back
             if not self._filing.lost_connection(e):
                 raise
             return
-        self._judge_unjudged(trend)
+        self._alarm.judge_unjudged(trend)
         self._alarms.reap(wait=False)  # an alarm command of an earlier window that ended meanwhile (--fast: no waits)
         self._retain(trend)
         self._show()
@@ -370,7 +353,7 @@ class Monitor:
             if self._filing.waiting:  # windows a run stopped while its catalogue was out of reach: filed first
                 with suppress(*self.catalogue.errors):  # still out of reach: the flush below says so
                     self._alarm_before_spool = self._trend().alarm  # their alarm is judged in _resume, not assumed
-                self._unjudged += [w.key for w in self._filing.flush(force=True)]
+                self._alarm.unjudged += [w.key for w in self._filing.flush(force=True)]
                 if self._filing.waiting:
                     raise StorageError(f"{catalogue_text(self._catalogue_location)}: {self._filing.problem} — "
                                        f"{len(self._filing.waiting)} windows wait in {self._filing.spool}")
@@ -391,37 +374,19 @@ class Monitor:
         trend = self._trend() if known else None
         before = self._alarm_before_spool if self._alarm_before_spool is not None else trend is not None and trend.alarm
         self._alarm.active = bool(known) and before
-        if trend is not None and self._unjudged:  # windows filed from the spool: an alarm in them was never raised
-            self._judge_unjudged(trend)
-        copies: dict[str, set[str]] = {}  # another monitor's windows copied here that it would delete, by monitor
-        for path in sorted(self.s.out_dir.glob("*.h5")):
-            try:
-                session = load(path)
-            except Exception:  # noqa: BLE001 - not a readable session: not ours to judge
-                continue
-            if WINDOW_TAG not in session.tags:
-                continue  # not a window: not ours to file or delete
-            n, key = int(session.tags[WINDOW_TAG]), str(session.meta.session_id)
-            if session.tags.get(MONITOR_TAG, self._id) != self._id:  # another monitor's, copied here: not ours to file
-                owner = str(session.tags[MONITOR_TAG])
-                if owner not in copies:
-                    copies[owner] = copies_deletable(self.catalogue, owner)
-                deletable = copies[owner]
-                self._windows.add(WindowFiles(n, path, True, key not in deletable, key, copied=True))  # (retention's)
-                continue
-            numbers.append(n)
-            refused = key in known and bool(session.damage) and (
-                known[key].error is not None or known[key].verdict == "interrupted")
-            self._windows.add(WindowFiles(n, path, key in known, False, key, refused=refused))
-            if key in known:
+        if trend is not None and self._alarm.unjudged:  # windows filed from the spool: an alarm in them was never raised
+            self._alarm.judge_unjudged(trend)
+        for found in leftovers(self.s.out_dir, self._id, known, self.catalogue):
+            self._windows.add(found.files)
+            if found.files.copied:
+                continue  # another monitor's: retention's only
+            key = found.files.key
+            numbers.append(found.files.index)
+            if not found.unfiled:
                 continue
             self._earlier.add(key)
-            if session.status == "recording":
-                if not session.damage:  # a damaged one stays as it is (repair would copy it beside: acq check does)
-                    repair(path, "the monitor stopped during this window's capture (found on restart)")
-                self._mark(key, "interrupted", "the monitor stopped during this window's capture (found on restart)")
-            elif session.status != "complete":
-                self._mark(key, "interrupted", f"window capture {session.status}: {session.meta.stop_reason}")
+            if found.interrupted is not None:
+                self._mark(key, "interrupted", found.interrupted)
             else:
                 self._submit(key)
         trend = self._trend()

@@ -1,5 +1,6 @@
 """A monitor's trend read into its status figures, and the alarm it raises: counted, said, its ``--on-alarm`` command
-started (:class:`acq.monitoring.alarm_command.AlarmCommands`) — once per episode."""
+started (:class:`acq.monitoring.alarm_command.AlarmCommands`) — once per episode; the windows filed whose alarm is still
+to judge."""
 
 from __future__ import annotations
 
@@ -17,6 +18,9 @@ class AlarmState:
         self.status = status
         self.commands = commands
         self.active = False
+        #: windows filed whose alarm was not judged yet (the trend could not be read after their write, or they were
+        #: filed from the spool at start), in filing order
+        self.unjudged: list[str] = []
 
     def judge(self, trend: Trend, key: str) -> None:
         """Update the status from ``trend`` after window ``key`` (session id; "" after a restart: figures only) was
@@ -40,6 +44,13 @@ class AlarmState:
         elif point.state == "alarm":  # still in alarm: the latest K (the one that raised it stays in the catalogue)
             st.message = alarm_message(point.entry)
         self.active = point.state == "alarm"
+
+    def judge_unjudged(self, trend: Trend) -> None:
+        """Judge the alarm after each window filed and not yet judged (:attr:`unjudged`), in filing order (an alarm in
+        any of them is raised once, as if the trend had been read after each)."""
+        for key in self.unjudged:
+            self.judge(trend, key)
+        self.unjudged.clear()
 
     def raise_alarm(self, entry: Entry, trend: Trend) -> None:
         """Start ``on_alarm`` (:class:`AlarmCommands`: through ``sh -c``, in the background) with the alarm's figures

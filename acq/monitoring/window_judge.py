@@ -17,7 +17,7 @@ from typing import Any
 
 from acq.monitoring.catalogue import Outcome
 from acq.monitoring.session_outcome import analyze_one, session_meta
-from acq.offline.analyze import idle_reason, output_paths, write_json
+from acq.offline.analyze import idle_reason, output_paths, sha256_of, write_json
 from acq.offline.excitation_judge import without_numbers
 from acq.recording.reader import load
 from acqcore.errors import StorageError
@@ -29,6 +29,16 @@ def marked(path: str, sha256: str, request: AnalysisRequest, meta: dict[str, Any
     """A window's catalogue record without numbers: verdict ``not excited`` / ``not analysed`` / ``interrupted``."""
     return Outcome(path, sha256, request.key(), meta, without_numbers({}, request.to_json_dict(), verdict, reasons),
                    None, 0.0)
+
+
+def marked_file(path: Path, request: AnalysisRequest, verdict: str, reason: str) -> Outcome:
+    """:func:`marked` for the window file ``path`` (the monitor's marks: ``interrupted``, ``not analysed``): its
+    session's root attributes ({} for a window too broken to read, still marked) and its SHA-256."""
+    try:
+        meta = session_meta(load(path))
+    except Exception:  # noqa: BLE001 - a window too broken to read is still marked
+        meta = {}
+    return marked(str(path.resolve()), sha256_of(path), request, meta, verdict, [reason])
 
 
 def analyse_window(path: str, sha256: str, request: AnalysisRequest) -> Outcome:
