@@ -179,9 +179,9 @@ def test_the_pull_is_given_as_a_figure_only_where_first_order_holds() -> None:
     from analysis.misfit_advice import first_order_pull
     from analysis.third_mode import ThirdMode
 
-    small = ThirdMode(190.0, 0.2, 5.0, 3.7, -0.021, 0.008, 4.0, 1.8)
+    small = ThirdMode(190.0, 0.2, 5.0, 3.7, -0.021, 0.008, 4.0, 1.8, 3.0)
     assert first_order_pull(small) == "; by roughly -2.1 %"
-    assert first_order_pull(ThirdMode(190.0, 0.9, 5.0, 3.7, -0.06, 0.008, 4.0, 1.8)) == ""
+    assert first_order_pull(ThirdMode(190.0, 0.9, 5.0, 3.7, -0.06, 0.008, 4.0, 1.8, 4.3)) == ""
 
 
 def test_a_healthy_joint_fitted_below_its_resonance_is_not_called_a_misfit_above_it(tmp_path: Path) -> None:
