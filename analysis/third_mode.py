@@ -29,8 +29,8 @@ of freedom times its jackknife standard error, after the loop's bound), the leve
 itself is no test: where a third mass leaves little trace (f_3 above the resonance, near the coupled mode at
 ~180–190 Hz of a 55/95 Hz joint) â is large and uncertain, and its pull lies beyond K's interval by noise alone — on
 healthy simulated robot windows â 0.10–0.13 at 176–193 Hz pulled K −1.3…−1.4 % against K's ±0.8–0.9 % at t 1.1–1.5,
-so a t over the family's level at such a candidate was a `poor` whatever K's interval held. Nothing here is measured
-on a simulator; the two constants below say what they assume.
+so there the K test added nothing to the t test. Nothing here is measured on a simulator; the two constants below say
+what they assume.
 """
 
 from __future__ import annotations
