@@ -113,8 +113,12 @@ def test_a_band_ended_below_the_mode_does_not_hide_it(tmp_path: Path) -> None:
     res = analyze(recording_from_session(session), request)
     assert res.fit.band == (10.0, 150.0) and errors_pct(res, truth)["K_Nm_per_rad"] < -2.0
     assert res.quality.verdict == "poor"
-    assert any(r.startswith("the two-mass model does not fit |H| between 1") and
-               ", beyond the band fitted (up to 150 Hz), which the model fitted below it does not describe — " in r
+    # the window test or the mode test names it beyond the band (with one phase the window test allows for H1's
+    # input-noise bias, −ln γ², and this mode's windows then lie within it: the mode test names it at 8.1 σ)
+    assert any((r.startswith("the two-mass model does not fit |H| between 1") and
+                ", beyond the band fitted (up to 150 Hz), which the model fitted below it does not describe — " in r) or
+               (r.startswith("the two-mass model misses a third mode near 1") and
+                ", beyond the band fitted (up to 150 Hz): narrowing --band does not remove its effect on K — " in r)
                for r in res.quality.reasons), res.quality.reasons
 
 
