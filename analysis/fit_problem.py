@@ -141,6 +141,11 @@ def rel_halfwidth(fit: FitResult, name: str) -> float:
     return float(0.5 * (high - low) / getattr(fit.values, name))
 
 
+#: How :func:`unbracketed_note` begins: a note of the fit's intervals, dropped where the numbers are
+#: (:func:`acq.offline.excitation_judge.judged`).
+UNBRACKETED_NOTE_START = "the intervals are the fit's with C alone"
+
+
 def unbracketed_note(fit: FitResult) -> str | None:
     """Why the intervals allow for no motor-side damping of the vibration, when acq's second fit (b_v free beside C,
     :attr:`FitOptions.vibration_damping`) was made but gave no finite reading (:attr:`FitResult.vibration_damping`
@@ -151,7 +156,7 @@ def unbracketed_note(fit: FitResult) -> str | None:
     if not fit.options.vibration_damping or fit.status == "failed" or fit.vibration_damping is not None:
         return None
     low, high = fit.ci95.get("C_Nms_per_rad", (float("nan"), float("nan")))
-    return (f"the intervals are the fit's with C alone: the second fit, with a motor-side damping of the vibration "
+    return (f"{UNBRACKETED_NOTE_START}: the second fit, with a motor-side damping of the vibration "
             f"(b_v) free beside C, gave no finite interval, so they do not allow for one — friction on the motor "
             f"side damps the resonance and reads C high, beyond its interval [{low:.3g}, {high:.3g}] N·m·s/rad")
 
