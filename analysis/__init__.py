@@ -36,13 +36,14 @@ from analysis.report import FigureData
 from analysis.request import AnalysisRequest, code_fingerprint
 from analysis.sample_instants import MAX_STAMP_DEVIATION, cycle_deviation_s
 from analysis.segments import excitation_summary, segments_summary
+from analysis.fit_problem import UNBRACKETED_NOTE_START
 from analysis.signals import PreparedSignals, prepare_signals
 from analysis.speed_ratio import SpeedRatio, electrical_speed_ratio, likely_counts_per_rev, ratio_doubt, ratio_fault
 from analysis.phase_offset import PHASE_WINDOW_S, TooSlowError, min_speed_rpm
 from analysis.verdict_limits import Thresholds
 
 __all__ = [
-    "MAX_STAMP_DEVIATION", "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",
+    "MAX_STAMP_DEVIATION", "UNBRACKETED_NOTE_START", "PAPER_CHAIN", "PARAM_LABELS", "PHASE_WINDOW_S", "PARAM_NAMES", "AnalysisRequest", "CommandedProfile", "FigureData", "Pipeline", "PreparedSignals",
     "Recording", "Result", "SignalChain", "SpeedRatio", "Thresholds", "TooSlowError", "TorqueMethod", "TwoMassParams", "Z95",
     "against_limit", "analyze", "code_fingerprint", "cycle_deviation_s", "electrical_speed_ratio", "encoder_period_problem", "excitation_summary", "segments_summary",
     "min_current_rate_hz",

@@ -241,11 +241,12 @@ def _bracketed(fit: FitResult, other: FitResult | None) -> FitResult:
     until it holds ``other``'s (the fit with b_v free too) — the truth lies in one model's interval or the other's: C
     alone's when the resonance's damping is the shaft's, b_v's when a motor-side damping adds to it — and the covariance
     scaled alike (its correlations kept). Unchanged when ``other`` is None or its intervals are not all finite (no
-    reading to add). Also where ``other`` reads b_v < 0 — a damping the model's physics rules out: the two structures'
-    disagreement is then the measure of a model error no jackknife shows (without it, the robot's load-friction
-    windows: 10 of 21 ``ok`` confidently wrong against 4, motor friction ×0.5/×1 1/3 against 0/1; session 14). b_v's
-    own reading is reported passive, its value and interval clipped at 0 (a healthy J_l ×2 plant read b_v −0.056
-    [−0.068, −0.044] and reports 0 [0, 0])."""
+    reading to add; :func:`analysis.fit_problem.unbracketed_note` then says so in the result's notes). Also where
+    ``other`` reads b_v < 0 — a damping the model's physics rules out: the two structures' disagreement is then the
+    measure of a model error no jackknife shows (without it, the robot's load-friction windows: 10 of 21 ``ok``
+    confidently wrong against 4, motor friction ×0.5/×1 1/3 against 0/1; session 14). b_v's own reading is reported
+    passive, its value and interval clipped at 0 (a healthy J_l ×2 plant read b_v −0.056 [−0.068, −0.044] and reports
+    0 [0, 0])."""
     names = fit.fitted
     if other is None or not all(np.isfinite(other.ci95[n]).all() for n in (*names, VIBRATION_DAMPING)):
         return fit

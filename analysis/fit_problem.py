@@ -141,6 +141,26 @@ def rel_halfwidth(fit: FitResult, name: str) -> float:
     return float(0.5 * (high - low) / getattr(fit.values, name))
 
 
+#: How :func:`unbracketed_note` begins: a note of the fit's intervals, dropped where the numbers are
+#: (:func:`acq.offline.excitation_judge.judged`).
+UNBRACKETED_NOTE_START = "the intervals are the fit's with C alone"
+
+
+def unbracketed_note(fit: FitResult) -> str | None:
+    """Why the intervals allow for no motor-side damping of the vibration, when acq's second fit (b_v free beside C,
+    :attr:`FitOptions.vibration_damping`) was made but gave no finite reading (:attr:`FitResult.vibration_damping`
+    None): the intervals are then C alone's, which hold the truth only if the resonance's damping is the shaft's. They
+    are kept, not widened to infinity: the values are C alone's either way, and b_v's interval held 0 in 84 of 85 ``ok``
+    robot windows (with motor friction or without, bench/effects_robot.py) — an unknown bracket is a caveat on C's
+    reading, not an unknown joint. None when the bracket was made, not asked for, or the fit failed."""
+    if not fit.options.vibration_damping or fit.status == "failed" or fit.vibration_damping is not None:
+        return None
+    low, high = fit.ci95.get("C_Nms_per_rad", (float("nan"), float("nan")))
+    return (f"{UNBRACKETED_NOTE_START}: the second fit, with a motor-side damping of the vibration "
+            f"(b_v) free beside C, gave no finite interval, so they do not allow for one — friction on the motor "
+            f"side damps the resonance and reads C high, beyond its interval [{low:.3g}, {high:.3g}] N·m·s/rad")
+
+
 def default_band_hz(period_s: float) -> tuple[float, float]:
     """Default fit band (10 Hz, min(0.4·f_enc, 500 Hz)) for an encoder period ``period_s`` (s)."""
     return BAND_LOW_HZ, min(BAND_HIGH_FRACTION_OF_FENC / period_s, BAND_HIGH_MAX_HZ)

@@ -22,6 +22,7 @@ from analysis.fit import (VIBRATION_DAMPING, FitInputError, FitOptions, FitResul
                           fit_two_mass, judged_fit)
 from analysis.encoder import longest_gap_free_span
 from analysis.estimator_check import kernel_model_error, model_estimate
+from analysis.fit_problem import unbracketed_note
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments, segment_layout
 from analysis.input_noise import widened_c_note
 from analysis.limits import band_problem
@@ -226,7 +227,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
                                       third_mode_hz=quality.third_mode_hz, misfit_windows=quality.misfit_windows,
                                       misfit_bins=quality.misfit_bins),
                   request=request, chain=chain,
-                  notes=(*sig.notes, *_unknown_torque_note(frf, sig.t_s), *filter(None, [widened_c_note(fit, frf, model_frf)])),
+                  notes=(*sig.notes, *_unknown_torque_note(frf, sig.t_s),
+                         *filter(None, [widened_c_note(fit, frf, model_frf), unbracketed_note(fit)])),
                   moves=moves)
 
 

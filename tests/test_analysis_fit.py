@@ -15,7 +15,8 @@ import numpy as np
 import pytest
 from scipy import signal
 
-from analysis.fit import FitInputError, FitOptions, fit_two_mass, initial_guess, default_band_hz
+from analysis.fit import FitInputError, FitOptions, _bracketed, fit_two_mass, initial_guess, default_band_hz
+from analysis.fit_problem import VIBRATION_DAMPING, unbracketed_note
 from analysis.frf import RecordTooShortError, estimate_frf
 from analysis.model import TwoMassParams, frequency_response, transfer_function
 from analysis.quality import assess
@@ -189,6 +190,26 @@ def test_c_interval_holds_the_anti_resonances_reading_when_the_resonance_is_damp
     assert fit.values.K_Nm_per_rad == pytest.approx(truth.K_Nm_per_rad, rel=0.01)
     alone = fit_two_mass(frf, FitOptions(vibration_damping=False))
     assert alone.vibration_damping is None and alone.ci95 == fit.ci95_c_alone
+
+
+def test_a_second_fit_without_finite_intervals_keeps_c_alones_and_says_so():
+    """When the fit with b_v free gives no finite reading (no result, or a b_v interval that is not finite) the intervals
+    stay C alone's — and the result's note says they allow for no motor-side damping, where main kept them silently."""
+    frf, fit = identify(simulate(PAPER, 3))
+    assert fit.vibration_damping is not None and unbracketed_note(fit) is None  # the bracket made: nothing to say
+    alone = fit_two_mass(frf, FitOptions(vibration_damping=False))
+    assert unbracketed_note(alone) is None  # not asked for (the paper's chain)
+    asked = replace(alone, options=FitOptions())  # C alone's result as fit_two_mass holds it before the bracket
+    bv_low = fit.vibration_damping[1]
+    unbounded = replace(fit, ci95={**fit.ci95, VIBRATION_DAMPING: (bv_low, np.inf)})
+    for other in (None, unbounded):
+        kept = _bracketed(asked, other)
+        assert kept.ci95 == alone.ci95 and kept.vibration_damping is None
+        low, high = alone.ci95["C_Nms_per_rad"]
+        assert unbracketed_note(kept) == (
+            "the intervals are the fit's with C alone: the second fit, with a motor-side damping of the vibration (b_v) "
+            "free beside C, gave no finite interval, so they do not allow for one — friction on the motor side damps the "
+            f"resonance and reads C high, beyond its interval [{low:.3g}, {high:.3g}] N·m·s/rad")
 
 
 def test_params_K_keeps_the_nominal_inertias_and_fits_K_and_C():

@@ -113,8 +113,12 @@ def test_a_band_ended_below_the_mode_does_not_hide_it(tmp_path: Path) -> None:
     res = analyze(recording_from_session(session), request)
     assert res.fit.band == (10.0, 150.0) and errors_pct(res, truth)["K_Nm_per_rad"] < -2.0
     assert res.quality.verdict == "poor"
-    assert any(r.startswith("the two-mass model does not fit |H| between 1") and
-               ", beyond the band fitted (up to 150 Hz), which the model fitted below it does not describe — " in r
+    # the window test or the mode test names it beyond the band (with one phase the window test allows for H1's
+    # input-noise bias, −ln γ², and this mode's windows then lie within it: the mode test names it at 8.1 σ)
+    assert any((r.startswith("the two-mass model does not fit |H| between 1") and
+                ", beyond the band fitted (up to 150 Hz), which the model fitted below it does not describe — " in r) or
+               (r.startswith("the two-mass model misses a third mode near 1") and
+                ", beyond the band fitted (up to 150 Hz): narrowing --band does not remove its effect on K — " in r)
                for r in res.quality.reasons), res.quality.reasons
 
 
@@ -179,9 +183,9 @@ def test_the_pull_is_given_as_a_figure_only_where_first_order_holds() -> None:
     from analysis.misfit_advice import first_order_pull
     from analysis.third_mode import ThirdMode
 
-    small = ThirdMode(190.0, 0.2, 5.0, 3.7, -0.021, 0.008, 4.0, 1.8)
+    small = ThirdMode(190.0, 0.2, 5.0, 3.7, -0.021, 0.008, 4.0, 1.8, 3.0)
     assert first_order_pull(small) == "; by roughly -2.1 %"
-    assert first_order_pull(ThirdMode(190.0, 0.9, 5.0, 3.7, -0.06, 0.008, 4.0, 1.8)) == ""
+    assert first_order_pull(ThirdMode(190.0, 0.9, 5.0, 3.7, -0.06, 0.008, 4.0, 1.8, 4.3)) == ""
 
 
 def test_a_healthy_joint_fitted_below_its_resonance_is_not_called_a_misfit_above_it(tmp_path: Path) -> None:

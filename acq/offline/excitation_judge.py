@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from analysis import Thresholds, against_limit, excitation_summary, segments_summary
+from analysis import UNBRACKETED_NOTE_START, Thresholds, against_limit, excitation_summary, segments_summary
 
 #: What a document without numbers keeps of the analysis' document: what identifies the session and how it was
 #: analysed, the clock's relation, and the segment selection's figures (the monitor's status and table show them).
@@ -109,8 +109,10 @@ def without_numbers(doc: dict[str, Any], options: dict[str, Any], verdict: str, 
 def judged(doc: dict[str, Any]) -> dict[str, Any]:
     """``doc``, an analysis' result document of a record acq did not command, as it is filed: unchanged when the
     joint was excited; else without numbers, verdict ``not excited`` with :func:`not_excited_reasons` and then the
-    analysis' notes (``note: …``: what the signal chain did — the span used, an offset removed — facts, not advice)."""
+    analysis' notes (``note: …``: what the signal chain did — the span used, an offset removed — facts, not advice;
+    not the one on the intervals it no longer gives, :data:`analysis.UNBRACKETED_NOTE_START`)."""
     if not not_excited(doc):
         return doc
-    notes = [r for r in doc["quality"]["reasons"] if r.startswith("note: ")]
+    notes = [r for r in doc["quality"]["reasons"]
+             if r.startswith("note: ") and not r.startswith(f"note: {UNBRACKETED_NOTE_START}")]
     return without_numbers(doc, doc["options"], "not excited", [*not_excited_reasons(doc), *notes])
