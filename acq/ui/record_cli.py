@@ -14,7 +14,7 @@ from rich.console import Console
 
 from acq.recording.tags import parse_tags
 from acq.ui.analyze_cli import identify, print_result_and_draw
-from acq.ui.options import tag_option
+from acq.ui.options import Folder, tag_option
 from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 
 if TYPE_CHECKING:
@@ -35,7 +35,7 @@ err = Console(stderr=True)
 @click.option("--duration", "duration_s", type=float, default=None,
               help="Seconds to record (default: the profile's duration_s; needed without a profile).")
 @click.option("--joint", default=None, help="Joint name (default: the bench config's).")
-@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("sessions"), show_default=True,
+@click.option("--out", "out_dir", type=Folder(), default=Path("sessions"), show_default=True,
               help="Folder for the session file.")
 @click.option("--operator", default="", help="Who is at the bench (stored in the session).")
 @click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
@@ -61,8 +61,6 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
     session_tags = parse_tags(tags)  # a bad --tag is one line before anything starts
     bench = with_joint(load_bench(bench_path), joint)
     profile = _profile_for(bench, bench_path, profile_name, duration_s)
-    if out_dir.exists() and not out_dir.is_dir():  # before any device starts
-        raise ConfigError(f"--out {out_dir}: is a file, not a folder")
     duration = check_duration(duration_s) if duration_s is not None else profile.duration_s  # type: ignore[union-attr]
     if not no_analyze:
         from acq.config import min_record_duration_s
