@@ -29,7 +29,7 @@ from rich.table import Table
 #: devices: ≈ 2 s on 2 loaded cores) and the finish (footer, summary read back): measured by hand, load ≈ 3.
 TAIL_S = 4.0
 _PROGRESS = re.compile(r"━|^\s*(recording|analysing|identifying)\b")
-_MASKS = ((re.compile(r"\S+\.h5"), "<session>"), (re.compile(r"\d+(\.\d+)?"), "N"))
+_MASKS = ((re.compile(r"[^\s(]+\.h5"), "<session>"), (re.compile(r"\d+(\.\d+)?"), "N"))
 
 
 def masked_lines(err: str) -> tuple[str, ...]:
@@ -40,8 +40,23 @@ def masked_lines(err: str) -> tuple[str, ...]:
     return tuple(lines)
 
 
-def one_run(folder: Path, duration_s: float, delay_s: float, analyze: bool) -> tuple[int, tuple[str, ...]]:
-    """One ``acq record`` sent SIGINT ``delay_s`` after its start; (exit code, masked stderr lines)."""
+def files_left(folder: Path) -> str:
+    """What the run left in ``folder``: each session file's status (``/`` attribute), or "no file"."""
+    import h5py
+
+    statuses = []
+    for path in sorted(folder.glob("*.h5")):
+        try:
+            with h5py.File(path, "r") as f:
+                statuses.append(str(f.attrs.get("status", "no status")))
+        except OSError as e:
+            statuses.append(f"unreadable ({e})")
+    return ", ".join(statuses) or "no file"
+
+
+def one_run(folder: Path, duration_s: float, delay_s: float, analyze: bool) -> tuple[int, str, tuple[str, ...]]:
+    """One ``acq record`` sent SIGINT ``delay_s`` after its start; (exit code, the file left, masked stderr lines).
+    """
     argv = [sys.executable, "-m", "acq", "record", "--profile", "triangle_0.2s", "--duration", f"{duration_s:g}",
             "--out", str(folder)] + ([] if analyze else ["--no-analyze"])
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
@@ -49,7 +64,7 @@ def one_run(folder: Path, duration_s: float, delay_s: float, analyze: bool) -> t
     if proc.poll() is None:
         proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
-    return proc.returncode, masked_lines(err)
+    return proc.returncode, files_left(folder), masked_lines(err)
 
 
 def main() -> None:
@@ -63,8 +78,8 @@ def main() -> None:
     # a child inherits an ignored SIGINT (this script started with & by a shell without job control): acq would then
     # ignore it outside the recording itself; a handled one is the default again in the child
     signal.signal(signal.SIGINT, signal.default_int_handler)
-    seen: collections.Counter[tuple[int, tuple[str, ...]]] = collections.Counter()
-    delays: dict[tuple[int, tuple[str, ...]], list[float]] = collections.defaultdict(list)
+    seen: collections.Counter[tuple[int, str, tuple[str, ...]]] = collections.Counter()
+    delays: dict[tuple[int, str, tuple[str, ...]], list[float]] = collections.defaultdict(list)
     with tempfile.TemporaryDirectory(prefix="acq-ctrl-c-") as tmp:
         for i in range(args.runs):
             delay = rng.uniform(0.0, args.duration + TAIL_S)
@@ -72,13 +87,13 @@ def main() -> None:
             seen[key] += 1
             delays[key].append(delay)
     table = Table(title=f"acq record --duration {args.duration:g}: SIGINT at a random moment, {args.runs} runs")
-    for column in ("runs", "exit", "stderr lines", "SIGINT after s", "stderr (paths, numbers masked)"):
+    for column in ("runs", "exit", "file left", "stderr lines", "SIGINT after s", "stderr (paths, numbers masked)"):
         table.add_column(column)
-    for (code, lines), n in seen.most_common():
-        ds = delays[(code, lines)]
-        table.add_row(str(n), str(code), str(len(lines)), f"{min(ds):.1f}–{max(ds):.1f}", "\n".join(lines))
+    for (code, left, lines), n in seen.most_common():
+        ds = delays[(code, left, lines)]
+        table.add_row(str(n), str(code), left, str(len(lines)), f"{min(ds):.1f}–{max(ds):.1f}", "\n".join(lines))
     Console(width=200).print(table)
-    one = sum(n for (_, lines), n in seen.items() if len(lines) == 1)
+    one = sum(n for (_, _, lines), n in seen.items() if len(lines) == 1)
     print(f"one line: {one}/{args.runs}; other: {args.runs - one}/{args.runs}")
 
 

@@ -150,15 +150,30 @@ def _sigterm_as_ctrl_c(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
+#: Delay of a Ctrl-C delivered again (:func:`_interrupt_again`), s: long enough for the hook to have returned (one
+#: raised while the hook still runs is lost again), short beside a person's wait for the line.
+INTERRUPT_AGAIN_S = 0.05
+
+
 def _interrupt_again(unraisable: Any) -> None:
     """``sys.unraisablehook`` while acq runs: a Ctrl-C (SIGTERM) that Python could not raise where it landed — in a
     weakref callback or a ``__del__`` it printed "Exception ignored in …" with a traceback and the command went on as
     if none had come (1 of 30 ``acq record`` runs, SIGINT during the identification: exit 0) — reaches the main
-    thread's handler again, to be raised in the command's own code; anything else goes to the hook there was."""
-    if issubclass(unraisable.exc_type, (KeyboardInterrupt, _Interrupted)):
-        _thread.interrupt_main()  # does nothing where Python has no handler (the default, or ignored)
+    thread's SIGINT handler again :data:`INTERRUPT_AGAIN_S` later, from another thread (from here it would be raised
+    inside this hook, and lost), to be raised in the command's own code; anything else goes to the hook there was."""
+    if not issubclass(unraisable.exc_type, (KeyboardInterrupt, _Interrupted)):
+        _previous_unraisablehook(unraisable)
         return
-    _previous_unraisablehook(unraisable)
+    # interrupt_main does nothing where Python has no handler (the default, or ignored)
+    again = threading.Timer(INTERRUPT_AGAIN_S, _thread.interrupt_main)
+    again.daemon = True
+    _interrupts_again.append(again)
+    again.start()
+
+
+#: The Ctrl-Cs :func:`_interrupt_again` is about to deliver: cancelled when acq's :func:`main` returns (a command
+#: that ended meanwhile did all its work; an in-process caller gets no Ctrl-C of acq's).
+_interrupts_again: list[threading.Timer] = []
 
 
 _previous_unraisablehook = sys.unraisablehook
@@ -177,6 +192,9 @@ def main(argv: list[str] | None = None) -> None:
     finally:
         if in_main:
             sys.unraisablehook = _previous_unraisablehook
+            for again in _interrupts_again:
+                again.cancel()
+            _interrupts_again.clear()
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
 
