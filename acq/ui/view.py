@@ -126,10 +126,11 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         else:
             require_folder(path, catalogue_option=True)
     if screenshot is None and not has_display():
-        if trend_joint is not None:  # the picture asked for instead needs the catalogue that the window would wait for
+        folder = sessions[0] if sessions else Path("sessions")
+        if trend_joint is not None and catalogue_path is None and not folder.exists():  # a mistyped folder, said first
             from acq.monitoring.trend_catalogue import catalogue_location
 
-            catalogue_location(sessions[0] if sessions else None, catalogue_path)
+            catalogue_location(folder, None)  # "…: no catalogue — the folder … does not exist"
         form = "SESSION" if trend_joint is None else f"--trend {trend_joint} {sessions[0] if sessions else ''}".rstrip()
         raise ConfigError(NO_DISPLAY_MESSAGE.format(form=form))
     from acq.process_signals import signals_deferred
