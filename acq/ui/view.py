@@ -71,8 +71,8 @@ MIN_SIDE_PX = 200
 #: 256 MiB, the allocation limit of Qt's image readers (QImageReader::allocationLimit, 256 MB by default since Qt 6.0):
 #: a PNG of one pixel more is refused by Qt itself ("exceeds the current allocation limit", checked with Qt 6.11). Below
 #: it the offscreen drawing renders every side in full (70000×400 checked); its memory is about three such images
-#: (image, window backing store, PNG encoder; peak RSS 3.3 GB at 16384², 18.9 GB at 40000²), and at 99999² the image
-#: could not be allocated at all, which Qt's PNG writer reported as an I/O error.
+#: (image, window backing store, PNG encoder; peak RSS 1.0 GB at 8192², 3.3 GB at 16384², 18.9 GB at 40000²), and at
+#: 99999² the image could not be allocated at all, which Qt's PNG writer reported as an I/O error.
 MAX_AREA_PX = 8192 * 8192
 
 
