@@ -1,12 +1,14 @@
 """Ctrl-C at a random moment of ``acq record``: what the person sees. Prints one row per distinct stderr (progress bar
 left out, paths and counts masked) with how many of the N runs printed it, and the exit codes.
 
-    python bench/record_ctrl_c.py [--runs 40] [--duration 5] [--seed 1] [--analyze]
+    python bench/record_ctrl_c.py [--runs 40] [--duration 5] [--seed 1] [--analyze] [--from-file]
 
 Each run starts ``acq record --profile triangle_0.2s --duration D`` (real time, the simulated bench; ``--no-analyze``
 unless ``--analyze``) in a child process and sends it one SIGINT at a time drawn uniformly from 0 to the run's expected
 length (start-up, D s of recording, the file's finish: :data:`TAIL_S`), so start-up, recording and the end are all
-hit. The seed fixes the times, not the machine's load.
+hit; with ``--from-file`` the time counts from the moment the session file appears (on a loaded machine the start-up
+takes most of the draws otherwise), so the recording, its end and the identification are hit. The seed fixes the
+times, not the machine's load.
 """
 
 from __future__ import annotations
@@ -54,12 +56,15 @@ def files_left(folder: Path) -> str:
     return ", ".join(statuses) or "no file"
 
 
-def one_run(folder: Path, duration_s: float, delay_s: float, analyze: bool) -> tuple[int, str, tuple[str, ...]]:
-    """One ``acq record`` sent SIGINT ``delay_s`` after its start; (exit code, the file left, masked stderr lines).
-    """
+def one_run(folder: Path, duration_s: float, delay_s: float, analyze: bool,
+            from_file: bool) -> tuple[int, str, tuple[str, ...]]:
+    """One ``acq record`` sent SIGINT ``delay_s`` after its start (``from_file``: after its session file appeared);
+    (exit code, the file left, masked stderr lines)."""
     argv = [sys.executable, "-m", "acq", "record", "--profile", "triangle_0.2s", "--duration", f"{duration_s:g}",
             "--out", str(folder)] + ([] if analyze else ["--no-analyze"])
     proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    while from_file and proc.poll() is None and not any(folder.glob("*.h5")):
+        time.sleep(0.01)
     time.sleep(delay_s)
     if proc.poll() is None:
         proc.send_signal(signal.SIGINT)
@@ -73,6 +78,8 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=5.0)
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--analyze", action="store_true", help="identify after recording (default --no-analyze)")
+    parser.add_argument("--from-file", action="store_true", help="count the SIGINT's time from the session file's "
+                                                                 "appearance, not from the start")
     args = parser.parse_args()
     rng = random.Random(args.seed)
     # a child inherits an ignored SIGINT (this script started with & by a shell without job control): acq would then
@@ -83,10 +90,11 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="acq-ctrl-c-") as tmp:
         for i in range(args.runs):
             delay = rng.uniform(0.0, args.duration + TAIL_S)
-            key = one_run(Path(tmp) / f"r{i}", args.duration, delay, args.analyze)
+            key = one_run(Path(tmp) / f"r{i}", args.duration, delay, args.analyze, args.from_file)
             seen[key] += 1
             delays[key].append(delay)
-    table = Table(title=f"acq record --duration {args.duration:g}: SIGINT at a random moment, {args.runs} runs")
+    since = "of the session file" if args.from_file else "of the start"
+    table = Table(title=f"acq record --duration {args.duration:g}: SIGINT at a random moment {since}, {args.runs} runs")
     for column in ("runs", "exit", "file left", "stderr lines", "SIGINT after s", "stderr (paths, numbers masked)"):
         table.add_column(column)
     for (code, left, lines), n in seen.most_common():
