@@ -65,4 +65,6 @@ def main() -> None:
         run_cli()  # its own Ctrl-C handling begins a few steps in: a Ctrl-C before it is caught here too
     except KeyboardInterrupt:
         sys.stderr.write("acq: interrupted\n")
-        sys.exit(130)
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(130)  # not through the interpreter's teardown, where a second signal kills without a word

@@ -399,7 +399,7 @@ class Recorder:
                 writer.add_event(StreamEvent(time.monotonic_ns(), "recorder", "info", f"stopped: {reason}"))
             writer.finish(status, reason)
             if writer.failure is not None:  # a write failed (now or earlier): the recording failed, whatever else
-                status, reason = "failed", f"{writer.failure} — {writer.seconds_kept:.1f} s kept"
+                status, reason = "failed", writer.failure_reason()
         return status, reason
 
     def _drain(self, inbox: queue.SimpleQueue[tuple[str, Any]], writer: SessionWriter, checker: StreamChecker,

@@ -220,6 +220,17 @@ class SessionWriter:
         """Seconds of current committed to disk."""
         return self.committed["current_samples"] / self._rate_hz
 
+    def failure_reason(self) -> str:
+        """The stop reason after a failed write: the failure and what the file keeps ("disk full: /data/x.h5 — 3.2 s
+        kept"); nothing when the file is no longer at its path (it or its folder was deleted: "— 3.2 s kept" named a
+        file that did not exist)."""
+        try:
+            here = os.stat(self.path).st_ino == self._inode
+        except OSError:
+            here = False
+        kept = f"{self.seconds_kept:.1f} s kept" if here else "nothing kept (the file or its folder was deleted)"
+        return f"{self.failure} — {kept}"
+
     def append_current(self, block: CurrentBlock) -> None:
         """Append one DAQ block (caller guarantees increasing, non-overlapping indices); ignored after a failure."""
         if self.failure is not None:
@@ -369,7 +380,7 @@ class SessionWriter:
         except StorageError:
             pass
         if self.failure is not None:
-            status, stop_reason = "failed", f"{self.failure} — {self.seconds_kept:.1f} s kept"
+            status, stop_reason = "failed", self.failure_reason()
         else:
             self._file.close()
         if self._abandoned:  # HDF5 itself met the full disk: its flags cleared, every column cut to the commits

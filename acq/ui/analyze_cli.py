@@ -15,7 +15,7 @@ import click
 from rich.console import Console
 
 from acq.recording.paths import is_batch, require_session_file
-from acq.ui.options import CatalogueLocation
+from acq.ui.options import CatalogueLocation, Folder
 from acqcore.errors import ConfigError, StorageError
 
 if TYPE_CHECKING:
@@ -55,7 +55,7 @@ err = Console(stderr=True)
 @click.option("--scheduler", default=None, metavar="ADDRESS",
               help="Folder or glob: run on a Dask distributed cluster (tcp://host:8786); the workers must reach "
                    "the session files at the same paths.")
-@click.option("--result-dir", type=click.Path(path_type=Path), default=None, metavar="DIR",
+@click.option("--result-dir", type=Folder(), default=None, metavar="DIR",
               help="Write the .result.json and .report.png (and the default catalogue) into DIR instead of beside "
                    "the session, e.g. for a read-only archive.")
 def analyze_command(session_paths: tuple[Path, ...], torque: str | None, params: str, fit_kind: str, band: str | None,
@@ -77,6 +77,7 @@ def analyze_command(session_paths: tuple[Path, ...], torque: str | None, params:
     batch = len(session_paths) > 1 or is_batch(session_path)
     if not batch:
         require_session_file(session_path)  # a mistyped path is one line before the analysis's libraries load
+        _note_batch_only_options(scheduler, jobs)
     from analysis import AnalysisRequest
 
     request = AnalysisRequest(torque_method=torque, params=params, fit=fit_kind,  # type: ignore[arg-type]
@@ -105,6 +106,18 @@ def analyze_command(session_paths: tuple[Path, ...], torque: str | None, params:
         raise StorageError(f"{e} — the result above is not saved ({elsewhere})") from None
 
 
+def _note_batch_only_options(scheduler: str | None, jobs: int | None) -> None:
+    """One line on stderr when options that only place a batch's analyses (``--scheduler``, ``--jobs``) come with a
+    single session, which is analysed here, in this process: they change where the work runs, never the result, so
+    the analysis goes on (a script passing the same options for a folder or one file keeps working), but not silently
+    elsewhere than asked."""
+    given = ([f"--scheduler {scheduler}"] if scheduler is not None else []) + ([f"--jobs {jobs}"] if jobs else [])
+    if given:
+        click.echo(f"acq: note: {' and '.join(given)} only place{'s' if len(given) == 1 else ''} the analyses of a "
+                   "batch (a folder, a glob or several sessions): this one session is analysed here, in this process",
+                   err=True)
+
+
 def _parse_band(text: str | None) -> tuple[float, float] | None:
     if text is None:
         return None
@@ -119,8 +132,6 @@ def _parse_band(text: str | None) -> tuple[float, float] | None:
 
 def _result_folder(result_dir: Path) -> Path:
     """``--result-dir``: the folder, made if missing, as an absolute path (the batch's workers are handed it)."""
-    if result_dir.exists() and not result_dir.is_dir():
-        raise ConfigError(f"--result-dir {result_dir}: is a file, not a folder")
     from acq.recording.storage import make_folders, storage_error
 
     try:

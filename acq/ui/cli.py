@@ -7,7 +7,9 @@ failed write); a usage error is one line too (exit 2); Ctrl-C is exit 130.
 
 from __future__ import annotations
 
+import _thread
 import difflib
+import gc
 import importlib
 import os
 import signal
@@ -16,6 +18,7 @@ import threading
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
+from typing import Any
 
 import click
 
@@ -127,13 +130,17 @@ def cli() -> None:
 
 
 def _exit_now(code: int) -> None:
-    """Exit at once after a command or a Ctrl-C: every file and the catalogue were closed on the way out (context
-    managers); the interpreter's own teardown of scipy/h5py/Qt and a process pool takes 1–2 s more, which a person
-    who pressed Ctrl-C should not wait for — and in which Python has given Ctrl-C and SIGTERM back to the system: one
-    then killed acq without a line (exit 130 / 143 in the shell) after its command had done all its work (0.8 s after
-    ``acq analyze`` printed ``report:``, load 2). In-process callers (tests) get the usual SystemExit."""
+    """Exit at once after a command, an error or a Ctrl-C: every file and the catalogue were closed on the way out
+    (context managers); the interpreter's own teardown of scipy/h5py/Qt and a process pool takes 1–2 s more, which a
+    person who pressed Ctrl-C should not wait for — and in which Python has given Ctrl-C and SIGTERM back to the
+    system: one then killed acq without a line (exit 130 / 143 in the shell) after its command had done all its work
+    (0.8 s after ``acq analyze`` printed ``report:``, load 2), or turned an error's exit 2 into 143. Objects only the
+    error's traceback held (a file opened without ``with``) are collected first, as the teardown would have closed
+    them. In-process callers (tests) get the usual SystemExit."""
     if threading.current_thread() is not threading.main_thread() or "pytest" in sys.modules:
         sys.exit(code)
+    if code not in (0, EXIT_INTERRUPTED):
+        gc.collect()
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)
@@ -143,14 +150,51 @@ def _sigterm_as_ctrl_c(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
+#: Delay of a Ctrl-C delivered again (:func:`_interrupt_again`), s: long enough for the hook to have returned (one
+#: raised while the hook still runs is lost again), short beside a person's wait for the line.
+INTERRUPT_AGAIN_S = 0.05
+
+
+def _interrupt_again(unraisable: Any) -> None:
+    """``sys.unraisablehook`` while acq runs: a Ctrl-C (SIGTERM) that Python could not raise where it landed — in a
+    weakref callback or a ``__del__`` it printed "Exception ignored in …" with a traceback and the command went on as
+    if none had come (1 of 30 ``acq record`` runs, SIGINT during the identification: exit 0) — reaches the main
+    thread's SIGINT handler again :data:`INTERRUPT_AGAIN_S` later, from another thread (from here it would be raised
+    inside this hook, and lost), to be raised in the command's own code; anything else goes to the hook there was."""
+    if not issubclass(unraisable.exc_type, (KeyboardInterrupt, _Interrupted)):
+        _previous_unraisablehook(unraisable)
+        return
+    # interrupt_main does nothing where Python has no handler (the default, or ignored)
+    again = threading.Timer(INTERRUPT_AGAIN_S, _thread.interrupt_main)
+    again.daemon = True
+    _interrupts_again.append(again)
+    again.start()
+
+
+#: The Ctrl-Cs :func:`_interrupt_again` is about to deliver: cancelled when acq's :func:`main` returns (a command
+#: that ended meanwhile did all its work; an in-process caller gets no Ctrl-C of acq's).
+_interrupts_again: list[threading.Timer] = []
+
+
+_previous_unraisablehook = sys.unraisablehook
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acq`` console script."""
+    global _previous_unraisablehook
     in_main = threading.current_thread() is threading.main_thread()
     # SIGTERM stops acq as Ctrl-C does (a batch cancels and tidies up, a recording finishes its file)
     previous = signal.signal(signal.SIGTERM, _sigterm_as_ctrl_c) if in_main else None
+    if in_main:
+        _previous_unraisablehook, sys.unraisablehook = sys.unraisablehook, _interrupt_again
     try:
         _run(argv)
     finally:
+        if in_main:
+            sys.unraisablehook = _previous_unraisablehook
+            for again in _interrupts_again:
+                again.cancel()
+            _interrupts_again.clear()
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
 
@@ -189,6 +233,14 @@ def _os_error(e: OSError) -> AcqError:
 
 
 def _run(argv: list[str] | None) -> None:
+    """Run the command line; leave through :func:`_exit_now` with its exit code, after its line on stderr if it
+    ended in an error or a Ctrl-C (the exception and its traceback let go of first)."""
+    _exit_now(_command_code(argv))
+
+
+def _command_code(argv: list[str] | None) -> int:
+    """The command line's exit code: the command's own, or that of its error or Ctrl-C, whose one line is written
+    here."""
     try:
         # numpy's floating-point warnings (the filter of acq.monitoring.session_outcome.quiet_numerics, which an analysis adds;
         # numpy is not loaded here yet)
@@ -197,22 +249,19 @@ def _run(argv: list[str] | None) -> None:
             code = cli.main(args=argv, prog_name="acq", standalone_mode=False)
     except AcqError as e:
         click.echo(f"acq: error: {e}", err=True)
-        sys.exit(e.exit_code)
-    except click.exceptions.Abort:  # click's name for a KeyboardInterrupt inside a command
+        return e.exit_code
+    except (click.exceptions.Abort, KeyboardInterrupt, _Interrupted):  # Abort: click's name for a KeyboardInterrupt
         click.echo("acq: interrupted", err=True)
-        _exit_now(EXIT_INTERRUPTED)
-    except (KeyboardInterrupt, _Interrupted):
-        click.echo("acq: interrupted", err=True)
-        _exit_now(EXIT_INTERRUPTED)
+        return EXIT_INTERRUPTED
     except click.UsageError as e:  # one line, like every other error (click's own adds usage and a hint)
         click.echo(f"acq: error: {e.format_message()}", err=True)
-        sys.exit(e.exit_code)
+        return e.exit_code
     except click.ClickException as e:
         e.show()
-        sys.exit(e.exit_code)
+        return e.exit_code
     except OSError as e:  # one a command did not name itself: a write the storage refused is a failed write (exit 1)
         error = _os_error(e)
         click.echo(f"acq: error: {error}", err=True)
-        sys.exit(error.exit_code)
+        return error.exit_code
     # a command that ran to its end, or tidied up after a Ctrl-C (a batch, a recording, a monitor)
-    _exit_now(code if isinstance(code, int) else 0)
+    return code if isinstance(code, int) else 0

@@ -8,10 +8,12 @@ import click
 from rich.console import Console
 from rich.markup import escape
 
+from acq.ui.options import Folder
+
 
 @click.command("export")
 @click.argument("session_path", type=click.Path(path_type=Path))
-@click.option("--csv", "csv_dir", required=True, type=click.Path(path_type=Path, file_okay=False),
+@click.option("--csv", "csv_dir", required=True, type=Folder(its_folder=False),
               help="Folder for the current and encoder CSV files (the pair `acq import` reads) and the metadata.")
 @click.option("--force", is_flag=True, help="Replace files of an earlier export (default: refuse, write nothing).")
 @click.option("--partial", is_flag=True, help="Also export a session still being recorded (status recording) or "

@@ -19,7 +19,7 @@ from rich.console import Console
 
 from acq.monitoring.catalogue import Entry
 from acq.ui.display import Column, start_times
-from acq.ui.options import CatalogueLocation, PngPath, alarm_rule_options
+from acq.ui.options import CatalogueLocation, Folder, PngPath, alarm_rule_options
 from acq.ui.records import RecordTable
 from acq.monitoring.fleet import JointStatus, fleet_json, load_fleet, session_start
 from acq.monitoring.trend import EXIT_ALARM
@@ -179,7 +179,7 @@ def fleet_widget(statuses: Sequence[JointStatus], *, now: datetime, threshold_pc
 
 
 @click.command(name="fleet")
-@click.argument("folders", nargs=-1, type=click.Path(path_type=Path, file_okay=False))
+@click.argument("folders", nargs=-1, type=Folder(catalogue_option=True))
 @click.option("--catalogue", "catalogues", type=CatalogueLocation(), multiple=True,
               help="A catalogue, a file or postgresql:// URL (repeatable; default: FOLDER/catalogue.sqlite of each "
                    "FOLDER, FOLDER defaulting to sessions/). Several are judged apart, each row saying its source.")

@@ -19,7 +19,7 @@ from acq.monitoring.catalogue_backends import is_url, redacted
 from acq.monitoring.monitor import Monitor, MonitorSettings, MonitorStatus
 from acq.monitoring.retention import parse_size
 from acq.recording.tags import parse_tags
-from acq.ui.options import CatalogueLocation, FiniteFloatRange
+from acq.ui.options import CatalogueLocation, FiniteFloatRange, Folder
 from acq.ui.values import duration_text, format_value
 from acqcore.errors import ConfigError
 from drivers.motion import RPM_TO_RAD_S
@@ -154,7 +154,7 @@ def moves_table(moves: tuple[dict[str, Any], ...]) -> Table:
 @click.option("--keep", type=click.IntRange(min=0), default=10, show_default=True,
               help="Keep the raw files of the last N windows (baseline and alarming windows are always kept).")
 @click.option("--max-disk", default=None, help="Disk budget of the folder (2GB, 500MB); never exceeded.")
-@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("monitor"), show_default=True,
+@click.option("--out", "out_dir", type=Folder(), default=Path("monitor"), show_default=True,
               help="Folder for the windows and catalogue.sqlite (a restart there resumes).")
 @click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
               help="File every window into this catalogue, a file or postgresql:// URL, which other monitors and "

@@ -63,6 +63,50 @@ class PngPath(click.ParamType):
         return path
 
 
+#: The first bytes of every SQLite database file (sqlite.org/fileformat.html, "The Database Header").
+SQLITE_HEADER = b"SQLite format 3\0"
+
+
+def require_folder(path: Path, option: str | None = None, *, catalogue_option: bool = False,
+                   its_folder: bool = True) -> None:
+    """Refuse ``path`` in one line (bad input) when it exists but is not a folder, naming ``option`` (``--out``) or,
+    for an argument, the path alone. A catalogue (a SQLite file, e.g. FOLDER/catalogue.sqlite given for FOLDER) is
+    called one, with the folder it lies in as the way out where that is the folder meant (``its_folder``: a catalogue
+    lives in the folder the option names) and ``--catalogue PATH`` where the command reads one (``catalogue_option``).
+    """
+    if not path.exists() or path.is_dir():
+        return
+    named = f"{option} {path}" if option else str(path)
+    try:
+        with path.open("rb") as f:
+            catalogue = f.read(len(SQLITE_HEADER)) == SQLITE_HEADER
+    except OSError:  # unreadable: a file all the same
+        catalogue = False
+    if not catalogue:
+        raise ConfigError(f"{named}: is a file, not a folder")
+    folder = f"{option} {path.parent}" if option else str(path.parent)
+    raise ConfigError(f"{named}: is a catalogue (SQLite) file, not a folder — give "
+                      + (f"the folder, e.g. {folder}" if its_folder else "a folder")
+                      + (f", or --catalogue {path}" if catalogue_option else ""))
+
+
+class Folder(click.ParamType):
+    """A folder acq reads or writes (``--out``, ``--result-dir``, ``--csv``, trend's FOLDER): a :class:`Path` that is
+    a folder or does not exist yet; a file there is refused (:func:`require_folder`) before anything starts."""
+
+    name = "FOLDER"
+
+    def __init__(self, catalogue_option: bool = False, its_folder: bool = True) -> None:
+        self.catalogue_option, self.its_folder = catalogue_option, its_folder
+
+    def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Path:
+        """``value`` as a Path; :class:`ConfigError` naming the option (or, for an argument, the path) for a file."""
+        path = Path(value)
+        option = param.opts[0] if isinstance(param, click.Option) else None
+        require_folder(path, option, catalogue_option=self.catalogue_option, its_folder=self.its_folder)
+        return path
+
+
 #: ``--tag KEY=VALUE`` (repeatable) of the commands that make a session; read by
 #: :func:`acq.recording.tags.parse_tags`.
 tag_option = click.option("--tag", "tags", multiple=True, metavar="KEY=VALUE",

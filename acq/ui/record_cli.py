@@ -14,7 +14,7 @@ from rich.console import Console
 
 from acq.recording.tags import parse_tags, require_utf8
 from acq.ui.analyze_cli import identify, print_result_and_draw
-from acq.ui.options import tag_option
+from acq.ui.options import Folder, tag_option
 from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 
 if TYPE_CHECKING:
@@ -35,7 +35,7 @@ err = Console(stderr=True)
 @click.option("--duration", "duration_s", type=float, default=None,
               help="Seconds to record (default: the profile's duration_s; needed without a profile).")
 @click.option("--joint", default=None, help="Joint name (default: the bench config's).")
-@click.option("--out", "out_dir", type=click.Path(path_type=Path), default=Path("sessions"), show_default=True,
+@click.option("--out", "out_dir", type=Folder(), default=Path("sessions"), show_default=True,
               help="Folder for the session file.")
 @click.option("--operator", default="", help="Who is at the bench (stored in the session).")
 @click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
@@ -50,11 +50,8 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
     On a bench whose machine moves the joint itself ([drive] motion = "external") acq commands no motion: it records
     passively, without --profile, and the identification uses the segments that excite (as acq monitor)."""
     from acq.config import bench_label, check_duration, check_memory, load_bench, resolve_profile_path, with_joint
-    from acq.ui.display import summary_table
     from acq.recording.recorder import Recorder
-    from acq.recording.reader import load
     from acq.recording.room import require_room
-    from acq.recording.summary import summarize
     from drivers.limits import refuse_beyond_limits
     from drivers.registry import open_bench
 
@@ -62,8 +59,6 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
     session_tags = parse_tags(tags)
     bench = with_joint(load_bench(bench_path), joint)
     profile = _profile_for(bench, bench_path, profile_name, duration_s)
-    if out_dir.exists() and not out_dir.is_dir():  # before any device starts
-        raise ConfigError(f"--out {out_dir}: is a file, not a folder")
     duration = check_duration(duration_s) if duration_s is not None else profile.duration_s  # type: ignore[union-attr]
     if not no_analyze:
         from acq.config import min_record_duration_s
@@ -89,7 +84,7 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
             from acq.ui.live import LiveView, require_display  # Qt is imported only when asked for
 
         require_display()  # before the devices start: no display → one-line error
-    recorder.open_session()  # devices and file ready before any progress is drawn; an error is one line
+    session = recorder.open_session()  # devices and file ready before any progress is drawn; an error is one line
     label = f"recording {bench.joint}"
     try:
         live_view = LiveView(recorder) if live else None  # scaled by what the started devices report
@@ -98,24 +93,76 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
     except BaseException as e:  # before the recording ran: finish its file, release the devices
         recorder.abort("interrupted by user (Ctrl-C)" if isinstance(e, KeyboardInterrupt)
                        else f"{type(e).__name__}: {e}")
-        raise
+        if not isinstance(e, KeyboardInterrupt):
+            raise
+        # one line naming the file, as for a Ctrl-C while recording (it was "acq: interrupted")
+        click.echo(f"acq: interrupted twice: stopped before {session.path} was finished — acq check {session.path} "
+                   "repairs it" if recorder.stop_request is not None else
+                   f"acq: interrupted before the recording started — nothing recorded ({session.path}: no samples, "
+                   "status interrupted)", err=True)
+        return EXIT_INTERRUPTED
+    try:
+        return _after_recording(result, analyze=not no_analyze)
+    except KeyboardInterrupt:  # a Ctrl-C once the recorder had let go of its signals: the file is finished
+        click.echo(_interrupted_after_recording(result, analyze=not no_analyze), err=True)
+        return EXIT_INTERRUPTED
+
+
+def _after_recording(result: RecordingResult, *, analyze: bool) -> int:
+    """The summary of the session ``result`` wrote, its identification (``analyze``) and the one line of a recording
+    that did not complete; the command's exit code."""
+    from acq.ui.display import summary_table
+    from acq.recording.reader import load
+    from acq.recording.summary import summarize
+
     if result.write_failed:  # nothing more is written to that disk: no summary read back, no analysis
-        click.echo(f"acq: failed: {result.stop_reason} ({result.current_samples} current and "
-                   f"{result.encoder_samples} encoder samples stored in {result.path})", err=True)
+        stored = (f" ({result.current_samples} current and {result.encoder_samples} encoder samples stored in "
+                  f"{result.path})" if result.path.exists() else "")  # not of a file deleted with its folder
+        click.echo(f"acq: failed: {result.stop_reason}{stored}", err=True)
         return 1
-    out.print(summary_table(summarize(load(result.path))))
-    identified = True
-    if not no_analyze and result.current_samples and result.encoder_samples:
-        if result.status == "interrupted":  # Ctrl-C means stop now: no identification to wait for
-            click.echo(f"acq: not identified (interrupted): acq analyze {result.path}", err=True)
-        else:
-            identified = _analyze_after_recording(result.path)
+    try:
+        summary = summarize(load(result.path))
+    except AcqError:
+        if result.path.exists():
+            raise
+        click.echo(f"acq: failed: {result.path}: the session file is gone (it or its folder was deleted after the "
+                   "recording) — nothing kept", err=True)  # not "not a readable HDF5 session file", exit 2
+        return 1
+    out.print(summary_table(summary))
+    can_identify = analyze and bool(result.current_samples and result.encoder_samples)
+    if result.status == "interrupted":  # Ctrl-C means stop now: no identification to wait for, and one line
+        identify_later = f"; not identified: acq analyze {result.path}" if can_identify else ""
+        click.echo(f"acq: interrupted: {result.stop_reason} — {_kept(result)}{identify_later}", err=True)
+        return EXIT_INTERRUPTED
+    identified = _analyze_after_recording(result.path) if can_identify else True
     if result.status == "complete":
         return 0 if identified else 1
-    click.echo(f"acq: {result.status}: {result.stop_reason} — everything recorded up to the stop is kept in "
-               f"{result.path} ({result.current_samples} current samples, {result.encoder_samples} encoder samples)",
-               err=True)  # one plain line (rich would wrap it)
-    return EXIT_INTERRUPTED if result.status == "interrupted" else 1
+    click.echo(f"acq: {result.status}: {result.stop_reason} — {_kept(result)}", err=True)  # plain: rich would wrap it
+    return 1
+
+
+def _kept(result: RecordingResult) -> str:
+    return (f"everything recorded up to the stop is kept in {result.path} ({result.current_samples} current samples, "
+            f"{result.encoder_samples} encoder samples)")
+
+
+def _interrupted_after_recording(result: RecordingResult, *, analyze: bool) -> str:
+    """The one line of a Ctrl-C after the recorder finished the file (during its summary, identification or report):
+    what the file holds and, with ``analyze``, how far the identification got (read from the disk)."""
+    from acq.offline.analyze import output_paths
+    from analysis import AnalysisRequest
+
+    if result.status == "complete":
+        line = (f"acq: interrupted after the recording — {result.path} is complete ({result.current_samples} current "
+                f"samples, {result.encoder_samples} encoder samples)")
+    else:
+        line = f"acq: interrupted: {result.stop_reason} — {_kept(result)}"
+    if not analyze or not (result.current_samples and result.encoder_samples):
+        return line
+    json_path, report_path = output_paths(result.path, AnalysisRequest())
+    if not json_path.exists():
+        return f"{line}; not identified: acq analyze {result.path}"
+    return f"{line}; identified: {json_path}" + ("" if report_path.exists() else " (report not drawn)")
 
 
 def _record_with_progress(recorder: Recorder, duration_s: float, label: str) -> RecordingResult:

@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 from rich.console import Console
 
-from acq.ui.options import CatalogueLocation, PngPath, alarm_rule_options
+from acq.ui.options import CatalogueLocation, Folder, PngPath, alarm_rule_options
 from acq.monitoring.trend import EXIT_ALARM, trend_json
 from acq.monitoring.trend_catalogue import catalogue_sources, load_trend
 from acq.ui.display import trend_table
@@ -18,7 +18,7 @@ from acqcore.errors import ConfigError
 
 
 @click.command(name="trend")
-@click.argument("folders", nargs=-1, type=click.Path(path_type=Path, file_okay=False))
+@click.argument("folders", nargs=-1, type=Folder(catalogue_option=True))
 @click.option("--catalogue", "catalogues", type=CatalogueLocation(), multiple=True,
               help="A catalogue, a file or postgresql:// URL (repeatable; default: FOLDER/catalogue.sqlite of each "
                    "FOLDER, FOLDER defaulting to sessions/). Several: one trend each, never mixed.")

@@ -20,8 +20,9 @@ from typing import TYPE_CHECKING
 
 import click
 
-from acq.ui.options import CatalogueLocation, PngPath
+from acq.ui.options import CatalogueLocation, PngPath, require_folder
 from acq.offline.analyze import analyze_session
+from acq.recording.paths import require_session_file
 from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 from analysis import AnalysisRequest
 
@@ -63,13 +64,28 @@ def session_figure(path: Path) -> SessionFigure:
     return SessionFigure(Path(path).stem, done.result.figures, done.json_dict)
 
 
+#: Smallest side of ``--size``, px: the floor acq view has had since its first version; at 200×200 the report's panels
+#: are already cut off, so a smaller size is a typo.
+MIN_SIDE_PX = 200
+#: Largest ``--size`` in pixels (width × height): 8192 × 8192 at 4 bytes a pixel (the RGB32 image acq draws into) is
+#: 256 MiB, the allocation limit of Qt's image readers (QImageReader::allocationLimit, 256 MB by default since Qt 6.0):
+#: a PNG of one pixel more is refused by Qt itself ("exceeds the current allocation limit", checked with Qt 6.11). Below
+#: it the offscreen drawing renders every side in full (70000×400 checked); its memory is about three such images
+#: (image, window backing store, PNG encoder; peak RSS 1.0 GB at 8192², 3.3 GB at 16384², 18.9 GB at 40000²), and at
+#: 99999² the image could not be allocated at all, which Qt's PNG writer reported as an I/O error.
+MAX_AREA_PX = 8192 * 8192
+
+
 def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[int, int]:
+    """``--size WIDTHxHEIGHT`` as (width, height) px, refused in one line outside :data:`MIN_SIDE_PX` …
+    :data:`MAX_AREA_PX` before anything loads."""
     try:
         width, height = (int(v) for v in text.lower().split("x"))
     except ValueError:
         raise click.BadParameter(f"{text!r}: must be WIDTHxHEIGHT in pixels, e.g. 1600x1000") from None
-    if width < 200 or height < 200:
-        raise click.BadParameter(f"{text!r}: at least 200x200 pixels")
+    if min(width, height) < MIN_SIDE_PX or width * height > MAX_AREA_PX:
+        raise click.BadParameter(f"{text!r}: out of range — each side at least {MIN_SIDE_PX} px, width × height at "
+                                 f"most {MAX_AREA_PX} px (8192x8192, or e.g. 16384x4096; Qt opens no larger image)")
     return width, height
 
 
@@ -78,7 +94,8 @@ def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[
 @click.option("--screenshot", type=PngPath(), default=None,
               help="Draw the window offscreen into this PNG and exit (needs no display).")
 @click.option("--size", default="1600x1000", show_default=True, callback=_parse_size,
-              help="Window / screenshot size WIDTHxHEIGHT, px.")
+              help="Window / screenshot size WIDTHxHEIGHT, px: each side 200 or more, at most 8192x8192 pixels "
+                   "in all.")
 @click.option("--trend", "trend_joint", default=None, metavar="JOINT",
               help="Show the stiffness trend of JOINT from the catalogue of the folder given (default sessions/).")
 @click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
@@ -103,7 +120,17 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
     if (tags or no_monitor) and trend_joint is None:  # a session is shown whatever its tags: the filter would be lost
         raise ConfigError(f"{f'--tag {tags[0]}' if tags else '--no-monitor'}: only with --trend JOINT (it selects the "
                           "trend's sessions)")
+    for path in sessions:  # a mistyped path is said first: no display is not what stops it
+        if trend_joint is None:
+            require_session_file(path)
+        else:
+            require_folder(path, catalogue_option=True)
     if screenshot is None and not has_display():
+        folder = sessions[0] if sessions else Path("sessions")
+        if trend_joint is not None and catalogue_path is None and not folder.exists():  # a mistyped folder, said first
+            from acq.monitoring.trend_catalogue import catalogue_location
+
+            catalogue_location(folder, None)  # "…: no catalogue — the folder … does not exist"
         form = "SESSION" if trend_joint is None else f"--trend {trend_joint} {sessions[0] if sessions else ''}".rstrip()
         raise ConfigError(NO_DISPLAY_MESSAGE.format(form=form))
     from acq.process_signals import signals_deferred
