@@ -1,4 +1,5 @@
-"""Ctrl-C and SIGTERM held back over code that must not be cut short, for any acq command (no other dependency)."""
+"""The signals that stop acq cleanly, and those signals held back over code that must not be cut short, for any acq
+command (no other dependency)."""
 
 from __future__ import annotations
 
@@ -7,10 +8,26 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
+#: The signals that stop an acq command as Ctrl-C does — a recording finishes its file and stops the drive, a batch
+#: cancels and tidies up — with the stop reason each gives: Ctrl-C at the terminal; kill, timeout or a service
+#: manager; a terminal that closed (an ssh connection dropped, the window shut: the kernel hangs up its session).
+#: A signal the process started with ignored (``nohup`` ignores SIGHUP) stays ignored.
+STOP_REASONS: dict[int, str] = {
+    signal.SIGINT: "interrupted by user (Ctrl-C)",
+    signal.SIGTERM: "stopped by SIGTERM",
+    signal.SIGHUP: "stopped by SIGHUP (its terminal closed)",
+}
+STOP_SIGNALS: tuple[int, ...] = tuple(STOP_REASONS)
+
+
+def handled(signum: int) -> bool:
+    """Whether acq may take ``signum`` over: not when the process was started with it ignored (``nohup``)."""
+    return signal.getsignal(signum) is not signal.SIG_IGN
+
 
 @contextmanager
 def signals_deferred() -> Iterator[None]:
-    """A Ctrl-C or SIGTERM inside the block reaches this process's own handlers when the block has run to its end
+    """A stop signal (:data:`STOP_SIGNALS`) inside the block reaches this process's own handlers when the block has run to its end
     (acq's: a KeyboardInterrupt; an ignored signal stays ignored). For code that must not be cut short: a worker being
     started, Qt's import (shiboken's start-up interrupted is a fatal error, or swallows the Ctrl-C)."""
     if threading.current_thread() is not threading.main_thread():
@@ -18,7 +35,7 @@ def signals_deferred() -> Iterator[None]:
         return
     caught: list[int] = []
     previous = {s: signal.signal(s, lambda signum, frame: caught.append(signum))
-                for s in (signal.SIGINT, signal.SIGTERM)}
+                for s in STOP_SIGNALS if handled(s)}
     try:
         yield
     finally:

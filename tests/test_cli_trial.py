@@ -171,22 +171,43 @@ def test_a_session_folder_deleted_while_recording_keeps_nothing_and_says_so(tmp_
 
 
 # ---- 6. Ctrl-C during acq record: one line, wherever it lands -------------------------------------------------------
-def test_ctrl_c_while_recording_is_one_line_with_what_is_kept(tmp_path: Path) -> None:
-    """It was two lines ("acq: not identified (interrupted): acq analyze …", then the interrupted one)."""
+@pytest.mark.parametrize(("signum", "reason"), [(signal.SIGINT, "interrupted by user (Ctrl-C)"),
+                                                (signal.SIGTERM, "stopped by SIGTERM"),
+                                                (signal.SIGHUP, "stopped by SIGHUP (its terminal closed)")])
+def test_ctrl_c_while_recording_is_one_line_with_what_is_kept(tmp_path: Path, signum: int, reason: str) -> None:
+    """It was two lines ("acq: not identified (interrupted): acq analyze …", then the interrupted one). A SIGHUP (the
+    terminal closed, an ssh connection dropped) killed acq: exit 129, no line, the file left ``recording`` (h5py
+    could not open it) and, on a real drive, no quick stop — now it stops the recording as Ctrl-C does."""
     out = tmp_path / "sessions"
     proc = subprocess.Popen(_acq("record", "--profile", str(seeded_profile(tmp_path)), "--duration", "60",
                                  "--out", str(out)),
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_child_env())
     _wait_for(lambda: any(out.glob("*.h5")), proc, "session file")
     time.sleep(1.0)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(signum)
     _, err = proc.communicate(timeout=60)
     (path,) = out.glob("*.h5")
     s = load(path)
     assert (proc.returncode, s.status) == (130, "interrupted"), err
-    assert _acq_lines(err) == [f"acq: interrupted: interrupted by user (Ctrl-C) — everything recorded up to the stop "
+    assert _acq_lines(err) == [f"acq: interrupted: {reason} — everything recorded up to the stop "
                                f"is kept in {path} ({s.current.sample_count} current samples, {s.encoder.index.size} "
                                f"encoder samples); not identified: acq analyze {path}"]
+
+
+def test_a_sighup_ignored_at_start_stays_ignored(tmp_path: Path) -> None:
+    """``nohup acq record …`` starts acq with SIGHUP ignored so that a closed terminal does not stop it: acq does not
+    take SIGHUP over then, and the recording runs to its end."""
+    out = tmp_path / "sessions"
+    proc = subprocess.Popen(_acq("record", "--profile", str(seeded_profile(tmp_path)), "--duration", "3",
+                                 "--no-analyze", "--out", str(out)),
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=_child_env(),
+                            preexec_fn=lambda: signal.signal(signal.SIGHUP, signal.SIG_IGN))
+    _wait_for(lambda: any(out.glob("*.h5")), proc, "session file")
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGHUP)
+    _, err = proc.communicate(timeout=60)
+    (path,) = out.glob("*.h5")
+    assert (proc.returncode, load(path).status) == (0, "complete"), err
 
 
 def test_ctrl_c_after_the_recording_says_the_file_is_complete(tmp_path: Path) -> None:

@@ -31,10 +31,15 @@ def _env() -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, (str(ROOT), os.environ.get("PYTHONPATH"))))}
 
 
-def test_sigterm_to_the_process_group_lets_the_analysis_under_way_finish_and_be_filed(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("signum", "reason"), [(signal.SIGTERM, "stopped by SIGTERM"),
+                                                (signal.SIGHUP, "stopped by SIGHUP (its terminal closed)")])
+def test_sigterm_to_the_process_group_lets_the_analysis_under_way_finish_and_be_filed(tmp_path: Path, signum: int,
+                                                                                      reason: str) -> None:
     """The trial: ``timeout -s TERM 8 acq monitor …`` (timeout signals its whole group) killed the analysis worker
     too: "2 windows filed (1 analysis failed + 1 interrupted)", reason "worker failed: BrokenProcessPool", and the
-    window's K lost for good. The workers ignore SIGTERM now: acq's process files the analysis, then stops them."""
+    window's K lost for good. The workers ignore SIGTERM now: acq's process files the analysis, then stops them.
+    A closed terminal hangs up the whole group (SIGHUP): it killed acq (exit 129, no summary, the window left
+    ``recording``, monitor.lock left behind); now it stops the monitor as SIGTERM does."""
     out = tmp_path / "m"
     proc = subprocess.Popen([sys.executable, "-m", "acq", "monitor", "--bench", str(ROBOT), "--window", "10",
                              "--every", "10", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -45,14 +50,15 @@ def test_sigterm_to_the_process_group_lets_the_analysis_under_way_finish_and_be_
     assert proc.poll() is None, proc.communicate()
     first = sorted(out.glob("*.h5"))[0]
     assert not first.with_suffix(".result.json").exists()  # its analysis had not ended (10 s of data take longer)
-    os.killpg(proc.pid, signal.SIGTERM)
+    os.killpg(proc.pid, signum)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130, err
     rows = _rows(out)
     assert [(r["window"], r["verdict"]) for r in rows] == [(0, rows[0]["verdict"]), (1, "interrupted")]
     assert rows[0]["verdict"] in ("ok", "not excited", "poor"), rows[0]  # analysed: K or why not
     assert "BrokenProcessPool" not in err and "not analysed" not in json.dumps(rows)
-    assert err.splitlines()[-1].startswith("acq: stopped by SIGTERM: 2 windows filed (")
+    assert err.splitlines()[-1].startswith(f"acq: {reason}: 2 windows filed (")
+    assert not (out / "monitor.lock").exists()
 
 
 def test_a_window_whose_worker_died_is_left_for_the_restart_and_analysed_there(tmp_path: Path) -> None:

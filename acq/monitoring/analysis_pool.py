@@ -16,6 +16,7 @@ from contextlib import contextmanager
 
 from acq.environment import pin_blas_threads
 from acq.install import install_hint
+from acq.process_signals import STOP_SIGNALS
 from acqcore.errors import ConfigError
 
 
@@ -50,26 +51,22 @@ def _start_forkserver_without_cwd() -> None:
             os.environ["PYTHONSAFEPATH"] = before
 
 
-#: The signals a terminal or a service manager sends a whole process group, which acq's own process handles.
-_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
-
-
 @contextmanager
 def _signals_ignored_by_children() -> Iterator[None]:
-    """Processes started inside the block begin with SIGINT and SIGTERM ignored (the disposition survives exec; Python
-    then installs no KeyboardInterrupt handler). A Ctrl-C or SIGTERM meanwhile is held (blocked) and reaches this
-    process after it."""
+    """Processes started inside the block begin with the stop signals (SIGINT, SIGTERM, SIGHUP) ignored (the
+    disposition survives exec; Python then installs no KeyboardInterrupt handler). Such a signal meanwhile is held
+    (blocked) and reaches this process after it."""
     if threading.current_thread() is not threading.main_thread():
         yield  # signal handlers can only change in the main thread (acq starts its pools there)
         return
-    signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
-    previous = {s: signal.signal(s, signal.SIG_IGN) for s in _STOP_SIGNALS}
+    signal.pthread_sigmask(signal.SIG_BLOCK, STOP_SIGNALS)
+    previous = {s: signal.signal(s, signal.SIG_IGN) for s in STOP_SIGNALS}
     try:
         yield
     finally:
         for s, handler in previous.items():
             signal.signal(s, handler)
-        signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, STOP_SIGNALS)
 
 
 def end_with_process(pid: int) -> None:
@@ -83,10 +80,10 @@ def end_with_process(pid: int) -> None:
     exits, and the resource tracker exits when the last of its clients' pipes closes (measured: all three gone < 1 s
     after kill -9 of acq). Without pidfds (not Linux ≥ 5.3) the thread checks the pid once a second.
 
-    The worker ignores Ctrl-C and SIGTERM (again: a forkserver started by another program need not): acq's process
+    The worker ignores the stop signals, which a terminal or a service manager sends a whole process group (again: a forkserver started by another program need not): acq's process
     handles them and shuts the pool down once the analyses under way are filed.
     """
-    for s in _STOP_SIGNALS:
+    for s in STOP_SIGNALS:
         signal.signal(s, signal.SIG_IGN)
     try:
         pidfd: int | None = os.pidfd_open(pid)

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from acq.process_signals import STOP_REASONS, handled
 from acq.recording.device_reader import READ_TIMEOUT_S, DeviceReader
 from acq.recording.layout import Status, utc_now_iso
 from acq.recording.paths import new_session_path
@@ -73,7 +74,8 @@ class RecordingResult:
 
 @contextmanager
 def stop_on_signals(request_stop: Callable[[str], None]) -> Iterator[None]:
-    """While recording (main thread only), Ctrl-C and SIGTERM ask for a stop at the next safe point.
+    """While recording (main thread only), Ctrl-C, SIGTERM and SIGHUP (:data:`acq.process_signals.STOP_REASONS`) ask
+    for a stop at the next safe point.
 
     The handlers never raise: an exception in the middle of a flush could write a part twice or lose one.
     A second Ctrl-C (SIGTERM) is the previous handler's again: it quits at once.
@@ -81,7 +83,7 @@ def stop_on_signals(request_stop: Callable[[str], None]) -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    reasons = {signal.SIGINT: "interrupted by user (Ctrl-C)", signal.SIGTERM: "stopped by SIGTERM"}
+    reasons = {s: reason for s, reason in STOP_REASONS.items() if handled(s)}
 
     def handler(signum: int, frame: object) -> None:
         request_stop(reasons[signum])

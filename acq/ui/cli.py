@@ -23,6 +23,7 @@ from typing import Any
 import click
 
 from acq import __version__
+from acq.process_signals import STOP_SIGNALS, handled
 from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 
 # numpy, scipy, h5py, pydantic and Qt are imported inside the commands that use them: `acq --help`, a command's
@@ -146,7 +147,7 @@ def _exit_now(code: int) -> None:
     os._exit(code)
 
 
-def _sigterm_as_ctrl_c(signum: int, frame: object) -> None:
+def _stop_as_ctrl_c(signum: int, frame: object) -> None:
     raise KeyboardInterrupt
 
 
@@ -183,8 +184,10 @@ def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``acq`` console script."""
     global _previous_unraisablehook
     in_main = threading.current_thread() is threading.main_thread()
-    # SIGTERM stops acq as Ctrl-C does (a batch cancels and tidies up, a recording finishes its file)
-    previous = signal.signal(signal.SIGTERM, _sigterm_as_ctrl_c) if in_main else None
+    # SIGTERM and SIGHUP stop acq as Ctrl-C does (a batch cancels and tidies up, a recording finishes its file and
+    # stops the drive); a SIGHUP the process started with ignored (nohup) stays ignored
+    previous = {s: signal.signal(s, _stop_as_ctrl_c) for s in STOP_SIGNALS
+                if s != signal.SIGINT and handled(s)} if in_main else {}
     if in_main:
         _previous_unraisablehook, sys.unraisablehook = sys.unraisablehook, _interrupt_again
     try:
@@ -195,19 +198,20 @@ def main(argv: list[str] | None = None) -> None:
             for again in _interrupts_again:
                 again.cancel()
             _interrupts_again.clear()
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
 
 
 @contextmanager
 def _interrupted_outside_the_command() -> Iterator[None]:
-    """In the block Ctrl-C and SIGTERM raise :class:`_Interrupted`, except while :meth:`LazyGroup.invoke` runs the
-    command (:data:`_command_handlers`: the handlers they had): click writes an empty line before its Abort on a
-    KeyboardInterrupt in its own frames (a Ctrl-C as it made the command's context). A signal ignored stays ignored."""
+    """In the block the stop signals (Ctrl-C, SIGTERM, SIGHUP) raise :class:`_Interrupted`, except while
+    :meth:`LazyGroup.invoke` runs the command (:data:`_command_handlers`: the handlers they had): click writes an
+    empty line before its Abort on a KeyboardInterrupt in its own frames (a Ctrl-C as it made the command's context).
+    A signal ignored stays ignored."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    handlers = {s: signal.getsignal(s) for s in (signal.SIGINT, signal.SIGTERM)}
+    handlers = {s: signal.getsignal(s) for s in STOP_SIGNALS}
     _command_handlers.clear()
     _command_handlers.update((s, h) for s, h in handlers.items() if h not in (signal.SIG_IGN, None))
     try:

@@ -7,7 +7,7 @@ block is written and for each event stored) only counts samples and events and p
 to the block into a bounded queue; when the queue is full the block is dropped *for display only*
 (it is already on disk). A timer in the main thread drains the queue and redraws ~30 times a second.
 
-Stopping: Ctrl-C or SIGTERM (handled in the main thread: :func:`acq.ui.qt_signals.signals_in_qt_loop`) or
+Stopping: Ctrl-C, SIGTERM or SIGHUP (handled in the main thread: :func:`acq.ui.qt_signals.signals_in_qt_loop`) or
 closing the window calls :meth:`acq.recording.recorder.Recorder.request_stop`; the recorder ends at its next
 safe point with status ``interrupted`` — unless it already has all its samples.
 """
@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import queue
-import signal
 import threading
 import time
 from collections import deque
@@ -29,6 +28,7 @@ import numpy as np
 import pyqtgraph as pg
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
+from acq.process_signals import STOP_REASONS
 from acq.recording.recorder import Recorder, RecordingResult
 from acq.ui.qt_app import ensure_app
 from acq.ui.qt_signals import signals_in_qt_loop
@@ -249,7 +249,7 @@ class LiveView:
                 self.app.quit()
 
         def on_signal(signum: int) -> None:
-            self.feed.request_stop("interrupted by user (Ctrl-C)" if signum == signal.SIGINT else "stopped by SIGTERM")
+            self.feed.request_stop(STOP_REASONS[signum])
 
         timer.timeout.connect(tick)
         with signals_in_qt_loop(on_signal):

@@ -1,4 +1,4 @@
-"""Ctrl-C and SIGTERM while a Qt event loop runs (``acq view``, ``acq view --trend``, ``acq record --live``).
+"""Ctrl-C, SIGTERM and SIGHUP while a Qt event loop runs (``acq view``, ``acq view --trend``, ``acq record --live``).
 
 Python runs a signal handler only when the interpreter gets control. Inside ``QApplication.exec()`` it has none
 until Qt calls back into Python, so a Ctrl-C waited for the next timer or mouse event (``acq view`` of a session:
@@ -21,14 +21,14 @@ from contextlib import contextmanager
 
 from pyqtgraph.Qt import QtCore
 
-#: The signals that stop an acq window: Ctrl-C at the terminal, and kill / timeout / a service manager.
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+from acq.process_signals import STOP_SIGNALS, handled
 
 
 @contextmanager
 def signals_in_qt_loop(on_signal: Callable[[int], None]) -> Iterator[None]:
-    """While the block runs (a Qt event loop in the main thread), SIGINT and SIGTERM call ``on_signal(signum)``
-    within milliseconds, in the main thread, between Qt's events; the previous handlers are restored after it.
+    """While the block runs (a Qt event loop in the main thread), the stop signals (:data:`STOP_SIGNALS`; one the
+    process started with ignored stays ignored) call ``on_signal(signum)`` within milliseconds, in the main thread,
+    between Qt's events; the previous handlers are restored after it.
 
     Parameters
     ----------
@@ -50,7 +50,7 @@ def signals_in_qt_loop(on_signal: Callable[[int], None]) -> Iterator[None]:
     notifier = QtCore.QSocketNotifier(reader.fileno(), QtCore.QSocketNotifier.Type.Read)
     notifier.activated.connect(drain)
     previous_fd = signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
-    previous = {s: signal.signal(s, lambda signum, frame: on_signal(signum)) for s in STOP_SIGNALS}
+    previous = {s: signal.signal(s, lambda signum, frame: on_signal(signum)) for s in STOP_SIGNALS if handled(s)}
     try:
         yield
     finally:
