@@ -26,6 +26,7 @@ from typing import Any
 from acq.monitoring.catalogue_backends import one_line, open_catalogue_db, open_error
 from acq.monitoring.catalogue_damage import json_column, read_error
 from acq.monitoring.catalogue_schema import MIGRATIONS, MONITOR_COLUMN_VERSION, SCHEMA_VERSION
+from acq.monitoring.catalogue_text import from_db, readable, to_db
 from acq.recording.storage import cause_of
 from acqcore.errors import ConfigError, StorageError
 
@@ -157,7 +158,7 @@ class Catalogue:
     def _execute(self, sql: str, params: Iterable[Any] = ()) -> Any:
         """Run one statement written with ``?`` placeholders; return the cursor. Booleans go in as 0/1, as SQLite
         stores them (PostgreSQL refuses a boolean for an integer column)."""
-        values = tuple(int(p) if isinstance(p, bool) else p for p in params)
+        values = tuple(int(p) if isinstance(p, bool) else to_db(p) for p in params)
         return self._db.execute(self._dialect.sql(sql), values)
 
     @contextmanager
@@ -248,7 +249,7 @@ class Catalogue:
             "analyzed_utc": outcome.analyzed_utc or doc.get("analyzed_utc") or analysis_time_utc(),
             "acq_version": doc.get("acq_version"),
             "seconds": outcome.seconds, "verdict": doc.get("quality", {}).get("verdict"),
-            "reasons_json": json.dumps(doc.get("quality", {}).get("reasons", [])), "error": outcome.error,
+            "reasons_json": json.dumps(doc.get("quality", {}).get("reasons", [])), "error": readable(outcome.error),
             "f_a_hz": doc.get("antiresonance_hz"), "f_r_hz": doc.get("resonance_hz"),
             "clock_offset_s": doc.get("clock", {}).get("offset_s"),
             "clock_drift_ppm": doc.get("clock", {}).get("drift_ppm"),
@@ -359,7 +360,7 @@ class Catalogue:
                   if tags.get(MONITOR_TAG) is not None]
         if filled:
             self._db.cursor().executemany(self._dialect.sql("UPDATE sessions SET monitor_id = ? WHERE session_key = ?"),
-                                          filled)
+                                          [(to_db(monitor), to_db(key)) for monitor, key in filled])
         return len(filled)
 
     def copy_windows(self, source: Catalogue, monitor: str, *, unowned: bool = False) -> int:
@@ -411,8 +412,9 @@ def _tags(text: str) -> dict[str, Any]:
 
 def _entry(path: Path | str, r: Any) -> Entry:
     truth = json_column(path, r, "truth_json", "{}")
-    return Entry(session_key=r["session_key"], session_id=r["session_id"], path=r["analysed_path"], joint=r["joint"],
-                 created_utc=r["created_utc"], tags=json_column(path, r, "tags_json", "{}"), verdict=r["verdict"],
+    return Entry(session_key=r["session_key"], session_id=r["session_id"], path=from_db(r["analysed_path"]),
+                 joint=r["joint"], created_utc=r["created_utc"], tags=json_column(path, r, "tags_json", "{}"),
+                 verdict=r["verdict"],
                  reasons=json_column(path, r, "reasons_json", "[]"), error=r["error"], K_Nm_per_rad=r["K_Nm_per_rad"],
                  K_ci95=(r["K_lo"], r["K_hi"]), f_a_hz=r["f_a_hz"], f_r_hz=r["f_r_hz"], request_key=r["request_key"],
                  analyzed_utc=r["analyzed_utc"], truth_K_Nm_per_rad=truth.get("K_Nm_per_rad"))
