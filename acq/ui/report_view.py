@@ -131,6 +131,7 @@ class ReportView(QtWidgets.QWidget):
             self.plots[name] = add_plot(layout, row, 1, None, ("f", "Hz"), lower_axes[name])
         for row, stretch in ((frf_row, 3), *((r, 2) for r in bottom_rows)):
             layout.layout.setRowStretchFactor(row, stretch)
+        layout.layout.setColumnStretchFactor(1, 2)  # the frequency panels twice the traces' width where there is room
         self.plots["speed"].setXLink(self.plots["torque"])
         frf = self.plots["frf"]
         frf.setLogMode(x=True, y=True)
