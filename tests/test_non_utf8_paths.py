@@ -17,8 +17,9 @@ LATIN1 = b"Pr\xfcfstand"  # "Prüfstand" in Latin-1: not UTF-8
 
 
 def _acq(cwd: Path, *args: bytes | str) -> subprocess.CompletedProcess[bytes]:
-    """``acq ARGS`` in a child process in ``cwd`` (offscreen Qt), bytes in and out."""
-    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "COLUMNS": "80"}
+    """``acq ARGS`` in a child process in ``cwd`` (offscreen Qt), bytes in and out; its standard streams strict UTF-8,
+    as Python makes them under a desktop's ``LANG=en_US.UTF-8`` (this machine's C.UTF-8 lets them pass the bytes)."""
+    env = {**os.environ, "QT_QPA_PLATFORM": "offscreen", "COLUMNS": "80", "PYTHONIOENCODING": "utf-8:strict"}
     return subprocess.run([sys.executable.encode(), b"-m", b"acq", *(os.fsencode(a) for a in args)], cwd=cwd,
                           capture_output=True, env=env, timeout=300)
 
@@ -48,6 +49,9 @@ def test_analyze_of_a_session_in_a_latin1_folder_files_its_path_in_the_catalogue
     with Catalogue(folder / "catalogue.sqlite", read_only=True) as catalogue:
         (entry,) = catalogue.entries()
     assert os.fsencode(entry.path) == os.fsencode(folder.resolve() / "s.h5")  # the very bytes, read back
+    missing = _acq(recorded, "analyze", LATIN1 + b"/missing.h5")  # a message naming the path prints its bytes
+    assert (missing.returncode, missing.stdout, missing.stderr) == (
+        2, b"", b"acq: error: " + LATIN1 + b"/missing.h5: no such session file\n")
     again = _acq(recorded, "analyze", LATIN1)  # a batch of the folder: was a UnicodeDecodeError in /proc/self/maps
     assert (again.returncode, again.stderr) == (0, b"")
     assert again.stdout == (b"nothing to analyse: 1 session already analysed (same file, same options) in "
