@@ -6,6 +6,7 @@ import os
 import sys
 
 from acq.environment import pin_blas_threads
+from acq.output_bytes import print_paths_as_bytes
 
 #: BLAS threads of one acq process, set before numpy loads its BLAS (a variable the user set wins). The analysis
 #: multiplies many small, wide matrices (the torque's spline solves): there a second BLAS thread only spins.
@@ -58,6 +59,7 @@ def main() -> None:
     """Import the command line (numpy, scipy, h5py: seconds on a loaded machine), then run it; a Ctrl-C during
     the imports is the usual one line and exit 130."""
     pin_blas_threads(BLAS_THREADS)
+    print_paths_as_bytes()
     if sys.argv[1:2] and sys.argv[1] in ONE_SHOT_COMMANDS:  # the command line's only options come after its command
         keep_freed_memory()
     try:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -115,3 +117,20 @@ def test_every_command_the_monitor_advises_exists(tmp_path: Path) -> None:
                                   "--ewma-lambda 0.3: resume with the same, or start a new --out")
     _parses(monitor_command, ["--bench", str(ROBOT), "--baseline-windows", "5", "--threshold-pct", "10",
                               "--ewma-lambda", "0.3"])
+
+
+@pytest.mark.parametrize(("options", "message"), [
+    # a 27.8 h window was started although --for said 1 min and README limits durations to 24 h (the trial)
+    (("--window", "100000", "--every", "100000", "--for", "1min"),
+     "acq: error: --window 100000: must be a number of seconds in (0, 86400]\n"),
+    # a whole 30 s window was recorded for --for 10s
+    (("--window", "30", "--for", "10s"), "acq: error: --for 10: must be at least --window 30 s (the run records "
+                                         "whole windows)\n"),
+])
+def test_a_window_longer_than_the_run_or_a_day_is_refused_before_anything_is_recorded(
+        tmp_path: Path, options: tuple[str, ...], message: str) -> None:
+    out = tmp_path / "m5"
+    run = subprocess.run([sys.executable, "-m", "acq", "monitor", "--bench", str(ROBOT), *options, "--fast",
+                          "--out", str(out)], capture_output=True, text=True, timeout=60)
+    assert (run.returncode, run.stderr, run.stdout) == (2, message, "")
+    assert not out.exists()

@@ -83,7 +83,7 @@ def test_window_holds_traces_frf_coherence_and_values(session: Path) -> None:
     assert list(plots) == ["torque", "speed", "frf", "misfit", "phase", "coherence"]
     labels = {name: {side: (p.getAxis(side).labelText, p.getAxis(side).labelUnits) for side in ("bottom", "left")}
               for name, p in plots.items()}
-    assert labels["misfit"] == {"bottom": ("f", "Hz"), "left": ("model / measured − 1", "%")}
+    assert labels["misfit"] == {"bottom": ("f", "Hz"), "left": ("misfit", "%")}
     assert labels["torque"] == {"bottom": ("t (drive clock)", "s"), "left": ("T_e", "N·m")}
     assert labels["speed"] == {"bottom": ("t (drive clock)", "s"), "left": ("ω_m", "rad/s")}
     assert labels["frf"] == {"bottom": ("f", "Hz"), "left": ("|H|", "rad/(s·N·m)")}
@@ -171,6 +171,28 @@ def test_legend_and_frequency_labels_cover_no_curve_and_no_label_overlaps(sessio
         for text, f_hz in zip(view.mark_labels, (fd.f_a_hz, fd.f_r_hz)):  # each label is centred on its line
             x_px = frf.vb.mapViewToScene(QtCore.QPointF(np.log10(f_hz), 0.0)).x()
             assert abs(_scene_box(text).center().x() - x_px) < 2.0
+
+
+def test_at_1200x800_the_plots_fit_the_window_and_each_axis_label_stays_beside_its_panel(
+        session: Path, tmp_path: Path) -> None:
+    """The trial: at --size 1200x800 the misfit panel's label ("model / measured − 1 (%)", 167 px) ran 40 px past
+    its 90 px panel into the |H| and phase labels, and a three-column legend made the plots 1085 px wide in an 840 px
+    area (the FRF cut off at 80 Hz). Measured in the scene, rendered at that size."""
+    from acq.ui.qt_app import ensure_app, grab_png
+    from acq.ui.report_view import ReportView
+    from acq.ui.view import session_figure
+
+    ensure_app()
+    view = ReportView([session_figure(session)], title="joint1 · s.h5")
+    png = grab_png(view, tmp_path / "report.png", (1200, 800))
+    _assert_real_image(png, (1200, 800))
+    names = ("frf", "misfit", "phase", "coherence")
+    labels = {n: _scene_box(view.plots[n].getAxis("left").label) for n in names}
+    for name in names:
+        panel = view.plots[name].vb.sceneBoundingRect()
+        assert panel.right() <= view.graphics.width(), name  # the whole frequency axis is in the window
+        assert labels[name].top() >= panel.top() - 5 and labels[name].bottom() <= panel.bottom() + 5, name
+    assert not any(labels[a].intersects(labels[b]) for a, b in zip(names, names[1:]))
 
 
 def test_phase_panel_when_the_clocks_are_aligned_and_none_when_not(session: Path, tmp_path: Path) -> None:

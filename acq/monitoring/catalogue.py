@@ -21,6 +21,7 @@ from typing import Any
 
 from acq.monitoring.catalogue_damage import json_column
 from acq.monitoring.catalogue_db import MONITOR_TAG, CatalogueDatabase
+from acq.monitoring.catalogue_text import from_db, readable
 
 _PARAM_COLUMNS = (("K_Nm_per_rad", "K"), ("Jm_kgm2", "Jm"), ("Jl_kgm2", "Jl"), ("C_Nms_per_rad", "C"))
 
@@ -127,7 +128,7 @@ class Catalogue(CatalogueDatabase):
             "analyzed_utc": outcome.analyzed_utc or doc.get("analyzed_utc") or analysis_time_utc(),
             "acq_version": doc.get("acq_version"),
             "seconds": outcome.seconds, "verdict": doc.get("quality", {}).get("verdict"),
-            "reasons_json": json.dumps(doc.get("quality", {}).get("reasons", [])), "error": outcome.error,
+            "reasons_json": json.dumps(doc.get("quality", {}).get("reasons", [])), "error": readable(outcome.error),
             "f_a_hz": doc.get("antiresonance_hz"), "f_r_hz": doc.get("resonance_hz"),
             "clock_offset_s": doc.get("clock", {}).get("offset_s"),
             "clock_drift_ppm": doc.get("clock", {}).get("drift_ppm"),
@@ -253,8 +254,9 @@ class Catalogue(CatalogueDatabase):
 
 def _entry(path: Path | str, r: Any) -> Entry:
     truth = json_column(path, r, "truth_json", "{}")
-    return Entry(session_key=r["session_key"], session_id=r["session_id"], path=r["analysed_path"], joint=r["joint"],
-                 created_utc=r["created_utc"], tags=json_column(path, r, "tags_json", "{}"), verdict=r["verdict"],
+    return Entry(session_key=r["session_key"], session_id=r["session_id"], path=from_db(r["analysed_path"]),
+                 joint=r["joint"], created_utc=r["created_utc"], tags=json_column(path, r, "tags_json", "{}"),
+                 verdict=r["verdict"],
                  reasons=json_column(path, r, "reasons_json", "[]"), error=r["error"], K_Nm_per_rad=r["K_Nm_per_rad"],
                  K_ci95=(r["K_lo"], r["K_hi"]), f_a_hz=r["f_a_hz"], f_r_hz=r["f_r_hz"], request_key=r["request_key"],
                  analyzed_utc=r["analyzed_utc"], truth_K_Nm_per_rad=truth.get("K_Nm_per_rad"))

@@ -20,6 +20,7 @@ from typing import Any, Self
 from acq.monitoring.catalogue_backends import one_line, open_catalogue_db, open_error
 from acq.monitoring.catalogue_damage import read_error
 from acq.monitoring.catalogue_schema import MIGRATIONS, MONITOR_COLUMN_VERSION, SCHEMA_VERSION
+from acq.monitoring.catalogue_text import to_db
 from acq.recording.storage import cause_of
 from acqcore.errors import ConfigError, StorageError
 
@@ -84,7 +85,7 @@ class CatalogueDatabase:
     def _execute(self, sql: str, params: Iterable[Any] = ()) -> Any:
         """Run one statement written with ``?`` placeholders; return the cursor. Booleans go in as 0/1, as SQLite
         stores them (PostgreSQL refuses a boolean for an integer column)."""
-        values = tuple(int(p) if isinstance(p, bool) else p for p in params)
+        values = tuple(int(p) if isinstance(p, bool) else to_db(p) for p in params)
         return self._db.execute(self._dialect.sql(sql), values)
 
     @contextmanager
@@ -169,7 +170,7 @@ class CatalogueDatabase:
                   if tags.get(MONITOR_TAG) is not None]
         if filled:
             self._db.cursor().executemany(self._dialect.sql("UPDATE sessions SET monitor_id = ? WHERE session_key = ?"),
-                                          filled)
+                                          [(to_db(monitor), to_db(key)) for monitor, key in filled])
         return len(filled)
 
     def _write_error(self, e: BaseException) -> StorageError:

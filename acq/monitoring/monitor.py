@@ -34,6 +34,7 @@ from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager, ExitStack, contextmanager, suppress
 from pathlib import Path
 
+from acq.config import check_duration
 from acq.monitoring.alarm_command import AlarmCommands
 from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules
 from acq.monitoring.catalogue import Entry, Outcome
@@ -62,8 +63,12 @@ class Monitor:
     """The monitor loop; :meth:`run` returns the exit code (3 when the last state is alarm, else 0)."""
 
     def __init__(self, settings: MonitorSettings, on_status: Callable[[MonitorStatus], None] | None = None) -> None:
+        check_duration(settings.window_s, "--window")  # a window is a recording: record's limit (24 h)
         if settings.every_s < settings.window_s:
             raise ConfigError(f"--every {settings.every_s:g}: must be at least --window {settings.window_s:g} s")
+        if settings.for_s is not None and settings.for_s < settings.window_s:  # it recorded the whole window
+            raise ConfigError(f"--for {settings.for_s:g}: must be at least --window {settings.window_s:g} s "
+                              "(the run records whole windows)")
         self.s = settings
         self.status = MonitorStatus(settings.bench.joint)
         self.on_status = on_status

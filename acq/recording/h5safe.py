@@ -93,8 +93,8 @@ def zero_tail_start(path: Path, block: int = 1 << 20) -> int:
 def _libhdf5() -> ctypes.CDLL | None:
     """The libhdf5 h5py runs on (found among the process's mapped files), or None."""
     try:
-        with open("/proc/self/maps") as maps:
-            names = {line.split()[-1] for line in maps if "libhdf5" in line and "libhdf5_hl" not in line}
+        with open("/proc/self/maps", "rb") as maps:  # bytes: a mapped file's path need not be UTF-8 (a Latin-1 folder)
+            names = {os.fsdecode(line.split()[-1]) for line in maps if b"libhdf5" in line and b"libhdf5_hl" not in line}
     except OSError:
         return None
     for name in sorted(names):

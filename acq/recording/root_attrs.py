@@ -30,9 +30,15 @@ def shown(value: Any, at: int | None = None) -> str:
         return repr(value)
     bad = at if at is not None else next((i for i, c in enumerate(value) if "\udc80" <= c <= "\udcff"), 0)
     lo, hi = (0, len(value)) if len(value) <= 2 * SHOWN_AROUND else (max(bad - SHOWN_AROUND, 0), bad + SHOWN_AROUND)
-    part = "".join(f"\\x{ord(c) - 0xDC00:02x}" if "\udc80" <= c <= "\udcff"
-                   else c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in value[lo:hi])
-    return f"'{'…' if lo else ''}{part}{'…' if hi < len(value) else ''}'"
+    return f"'{'…' if lo else ''}{escaped(value[lo:hi])}{'…' if hi < len(value) else ''}'"
+
+
+def escaped(text: str, keep: str = "") -> str:
+    """``text`` safe to print: a byte that is not UTF-8 as ``\\xc6``, any other character that is not printable
+    (a control character: ESC would start a terminal's escape sequence) as its Python escape (``\\x1b``), those in
+    ``keep`` (a caption's line breaks) as they are."""
+    return "".join(f"\\x{ord(c) - 0xDC00:02x}" if "\udc80" <= c <= "\udcff"
+                   else c if c.isprintable() or c in keep else c.encode("unicode_escape").decode("ascii") for c in text)
 
 
 def not_utf8(value: Any) -> bool:

@@ -8,10 +8,11 @@ from __future__ import annotations
 
 import math
 import re
+import unicodedata
 from collections.abc import Iterable
 from typing import Any
 
-from acq.recording.root_attrs import shown
+from acq.recording.root_attrs import escaped, shown
 from acqcore.errors import ConfigError
 
 
@@ -27,7 +28,8 @@ def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
     """``KEY=VALUE`` texts as a tag dict; a value spelt as a number (:data:`_NUMBER`) becomes a float
     (``payload_kg=2.5`` → 2.5), any other stays text (``serial=007`` → "007").
 
-    Raises :class:`ConfigError` naming the tag for a text that is not UTF-8 (:func:`require_utf8`), without ``=``, a
+    Raises :class:`ConfigError` naming the tag for a text that is not UTF-8 (:func:`require_utf8`), one holding a
+    control character (ESC, a line break: the trend prints the value to a terminal), without ``=``, a
     key with other than letters, digits, ``_ . -``, an empty value, a number's spelling beyond a float's range (1e999:
     inf, a tag that could never be matched, and not JSON) and a key given twice.
     """
@@ -35,6 +37,10 @@ def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
     given: dict[str, str] = {}
     for text in texts:
         require_utf8("--tag", text)
+        control = next((c for c in text if unicodedata.category(c) == "Cc"), None)
+        if control is not None:  # in a key or a value (a value went as it was into the catalogue and terminals)
+            raise ConfigError(f"--tag {shown(text)}: holds the control character {escaped(control)} — give the tag "
+                              "without control characters (a terminal that prints it would act on them)")
         key, sep, value = (part.strip() for part in text.partition("="))
         if not sep or not key:
             raise ConfigError(f"--tag {text}: must be KEY=VALUE, e.g. payload_kg=2.5")

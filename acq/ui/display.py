@@ -26,6 +26,7 @@ from rich.measure import Measurement
 from rich.table import Table
 from rich.text import Text
 
+from acq.recording.root_attrs import escaped
 from acq.ui.values import (FIT_KEYS, NOT_A_RESULT, PARAMS, fit_failed, format_value, interval_text, not_a_result_note,
                            options_text)
 
@@ -131,13 +132,14 @@ class FittedTable:
                     if id(c) not in shown and (c.narrow is None or id(c.narrow) not in shown)]
         caption = [*self.caption, *([f"not shown at this width: {', '.join(left_out)} (widen the terminal, or "
                                      "--json)"] if left_out else [])]
-        table = Table(title=self.title, caption=escape("\n".join(caption)) if caption else None,
+        # cells and caption hold values read from catalogues (tags an older acq stored with ESC in them): escaped
+        table = Table(title=self.title, caption=escape(escaped("\n".join(caption), keep="\n")) if caption else None,
                       caption_justify="left", show_edge=False)
         for c in columns:
             table.add_column(c.header, justify=c.justify, no_wrap=not c.wrap, overflow="fold")
         n_rows = len(columns[0].cells) if columns else 0
         for i in range(n_rows):
-            table.add_row(*(Text(c.cells[i]) for c in columns),
+            table.add_row(*(Text(escaped(c.cells[i], keep="\n")) for c in columns),
                           style=self.row_styles[i] if self.row_styles else None, end_section=i in self.section_ends)
         return table
 

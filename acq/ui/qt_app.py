@@ -75,8 +75,13 @@ def widget_image(widget: QtWidgets.QWidget, size: tuple[int, int]) -> QtGui.QIma
 
 
 def save_png(image: QtGui.QImage, path: Path) -> None:
-    """Write ``image`` as a PNG to ``path`` as it stands (the caller makes it atomic); Qt says only whether it could,
-    so a failure is an :class:`OSError` without errno (:func:`acq.recording.storage.atomic_path` then names the
-    cause: disk full, else I/O error)."""
-    if not image.save(str(path), "PNG"):
-        raise OSError(f"{path}: could not write the PNG")
+    """Write ``image`` as a PNG to ``path`` as it stands (the caller makes it atomic). Qt encodes it in memory and
+    Python writes the file: a path is bytes on POSIX, and a folder name that is not UTF-8 (a Latin-1 one from a
+    Windows USB stick) does not survive Qt's QString file names; Python's write also gives the cause of a failure
+    (its errno: disk full, read-only) for :func:`acq.recording.storage.atomic_path` to name."""
+    buffer = QtCore.QBuffer()
+    buffer.open(QtCore.QIODevice.OpenModeFlag.WriteOnly)
+    if not image.save(buffer, "PNG"):
+        raise OSError(f"{path}: could not encode the PNG")
+    with open(path, "wb") as f:
+        f.write(buffer.data().data())

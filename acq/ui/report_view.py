@@ -108,7 +108,9 @@ class ReportView(QtWidgets.QWidget):
         phase = any(s.figures.phase_valid for s in sessions)
         misfit = any(s.figures.misfit_pct.size == s.figures.f_hz.size for s in sessions)
         layout.addLabel("FRF |ω_m / T_e| with the fitted two-mass model", row=1, col=1, size="11pt")
-        self.legend = pg.LegendItem(colCount=1 if len(sessions) > 1 else 3, labelTextSize="9pt")
+        # two columns, not three: three made the scene at least 1076 px wide, wider than the plots get in a 1200 px
+        # window (its right part cut off: the FRF above 80 Hz, f_r's label, the title)
+        self.legend = pg.LegendItem(colCount=1 if len(sessions) > 1 else 2, labelTextSize="9pt")
         layout.addItem(self.legend, row=2, col=1)
         marks = layout.addPlot(row=3, col=1)
         frf_row = 4
@@ -121,12 +123,15 @@ class ReportView(QtWidgets.QWidget):
                            rowspan=len(bottom_rows)),
             "frf": add_plot(layout, frf_row, 1, None, ("f", "Hz"), ("|H|", "rad/(s·N·m)")),
         }
-        lower_axes = {"misfit": ("model / measured − 1", "%"), "phase": ("phase of H", "°"),
+        # "misfit", as the legend names it (with what it is): the whole formula was taller than the panel at 1200×800
+        # and ran into the |H| and phase labels
+        lower_axes = {"misfit": ("misfit", "%"), "phase": ("phase of H", "°"),
                       "coherence": ("γ²", "")}
         for name, row in zip(lower, bottom_rows):
             self.plots[name] = add_plot(layout, row, 1, None, ("f", "Hz"), lower_axes[name])
         for row, stretch in ((frf_row, 3), *((r, 2) for r in bottom_rows)):
             layout.layout.setRowStretchFactor(row, stretch)
+        layout.layout.setColumnStretchFactor(1, 2)  # the frequency panels twice the traces' width where there is room
         self.plots["speed"].setXLink(self.plots["torque"])
         frf = self.plots["frf"]
         frf.setLogMode(x=True, y=True)
