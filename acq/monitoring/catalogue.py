@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from acq.monitoring.catalogue_backends import one_line, open_catalogue_db, open_error
-from acq.monitoring.catalogue_damage import json_column, read_error
+from acq.monitoring.catalogue_damage import integrity_error, json_column, read_error
 from acq.monitoring.catalogue_schema import MIGRATIONS, MONITOR_COLUMN_VERSION, SCHEMA_VERSION
 from acq.recording.storage import cause_of
 from acqcore.errors import ConfigError, StorageError
@@ -119,6 +119,8 @@ class Catalogue:
                 self._require_current_schema()
             else:
                 self._migrate()
+            if read_only and self._dialect.name == "sqlite" and (damaged := integrity_error(self.path, self._db)):
+                raise damaged
         except (*self._dialect.errors, UnicodeDecodeError) as e:
             damaged = self._damage(e)
             self._db.close()
