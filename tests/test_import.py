@@ -5,6 +5,8 @@ from __future__ import annotations
 import errno
 import hashlib
 import json
+import threading
+import time
 from dataclasses import fields
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
@@ -417,6 +419,33 @@ def test_export_refuses_to_replace_files_unless_forced_and_a_failed_export_chang
     meta = json.loads((out / "s.session.json").read_text())
     assert meta["files"]["current"] == {"name": "s.current.csv",
                                         "sha256": hashlib.sha256(exported["s.current.csv"]).hexdigest()}
+
+
+def test_an_export_whose_file_another_writer_makes_meanwhile_refuses_and_keeps_that_file(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path]) -> None:
+    """Two exports of sessions of one name into one folder at once both find the names free before writing; the one
+    that renames second must not replace the other's files. Here the other writer is a thread that makes
+    s.current.csv as soon as this export's temp files appear (while it formats its CSVs). Before: exit 0, "wrote",
+    the other file silently replaced (the trial: 3 of 6 simultaneous exports lost)."""
+    assert run_import(capsys, *pair, tmp_path / "s.h5").code == 0
+    out = tmp_path / "csv"
+    out.mkdir()
+    other = "t_s,i_a_A\n0,1\n"
+
+    def other_writer() -> None:
+        deadline = time.monotonic() + 30.0
+        while not any(out.glob(".s.current.csv.*")) and time.monotonic() < deadline:
+            time.sleep(0.0005)
+        (out / "s.current.csv").write_text(other)
+
+    thread = threading.Thread(target=other_writer)
+    thread.start()
+    refused = run_cli(capsys, "export", str(tmp_path / "s.h5"), "--csv", str(out))
+    thread.join()
+    assert (refused.code, refused.out, refused.err) == (
+        2, "", f"acq: error: {out / 's.current.csv'}: exists (not overwritten; --force replaces it)\n")
+    assert sorted(p.name for p in out.iterdir()) == ["s.current.csv"]  # nothing of this export's, no temp file
+    assert (out / "s.current.csv").read_text() == other
 
 
 def test_a_failed_rename_of_a_forced_export_keeps_the_metadata_and_names_the_target_in_one_line(
