@@ -291,6 +291,28 @@ def test_truncated_tdms_is_read_up_to_the_cut_with_a_warning_event(
     assert f"warning: {detail}" in " ".join(r.err.split())
 
 
+@pytest.mark.parametrize("into_header", [10, 123])
+def test_a_tdms_cut_in_a_segment_header_is_read_up_to_the_cut_with_a_warning_event(
+        capsys: pytest.CaptureFixture[str], tmp_path: Path, pair: tuple[Path, Path], into_header: int) -> None:
+    """10 segments, the file cut 10 bytes (in the lead-in) or 123 bytes (in the metadata) into the 7th. npTDMS drops
+    that segment with only a log line; before: exit 0, status complete, no event, 40 % of the current missing."""
+    _, enc = pair
+    _, i_a, _ = current_columns(5.0)
+    cur = write_tdms(tmp_path / "cur.tdms", [i_a], segments=10)
+    data = cur.read_bytes()
+    header = [i for i in range(len(data)) if data.startswith(b"TDSm", i)][6]
+    assert header > len(data) * 0.59
+    cur.write_bytes(data[:header + into_header])
+    r = run_import(capsys, cur, enc, tmp_path / "s.h5")
+    assert r.code == 0, r.err
+    s = load(tmp_path / "s.h5")
+    n = sum(part.size for part in np.array_split(i_a, 10)[:6])
+    np.testing.assert_array_equal(s.current.phases_a["i_a"], i_a[:n])
+    detail = f"cur.tdms: truncated last segment; read {n} samples per channel, the rest of that segment is missing"
+    assert [(e.stream, e.kind, e.detail) for e in s.events] == [("current", "warning", detail)]
+    assert f"warning: {detail}" in " ".join(r.err.split())
+
+
 def _nan_at(values: np.ndarray, i: int) -> np.ndarray:
     out = values.copy()
     out[i] = np.nan
