@@ -22,6 +22,8 @@ from acqcore.errors import ConfigError
 
 #: Python's sqlite3 message for a text value that is not UTF-8; names the column.
 _NOT_UTF8 = re.compile(r"Could not decode to UTF-8 column '([^']*)'")
+#: The heading integrity_check puts before a damaged page's finding ("*** in database main ***\nPage 4: …").
+_DATABASE_HEADING = re.compile(r"\*\*\* in database \S+ \*\*\*")
 #: The catalogue's tables, in the order a damaged column is looked for (:mod:`acq.monitoring.catalogue_schema`).
 TABLES = ("sessions", "analyses")
 
@@ -49,7 +51,8 @@ def integrity_error(path: Path | str, db: sqlite3.Connection) -> ConfigError | N
     (first,) = db.execute("PRAGMA integrity_check(1)").fetchone()
     if first == "ok":
         return None
-    return ConfigError(f"{path}: not a usable catalogue (database disk image is malformed: {' '.join(first.split())})")
+    finding = " ".join(_DATABASE_HEADING.sub("", first).split())
+    return ConfigError(f"{path}: not a usable catalogue (database disk image is malformed: {finding})")
 
 
 def _where_not_utf8(db: sqlite3.Connection, column: str) -> str:
