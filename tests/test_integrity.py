@@ -562,9 +562,9 @@ def test_every_output_to_a_read_only_folder_is_a_failed_write_exit_1_named_by_th
     folder.mkdir()
     with read_only_view(folder) as ro:
         record = ("record", "--profile", "triangle_0.2s", "--fast", "--duration", "1", "--no-analyze", "--out")
-        run = run_cli(capsys, *record, str(ro))
-        assert run.code == 1 and re.fullmatch(rf"acq: error: read-only file system: {re.escape(str(ro))}/"
-                                              r"[0-9T:-]+_joint1\.h5\n", run.err), run.err
+        run = run_cli(capsys, *record, str(ro))  # refused before the devices start (before: at the file's creation,
+        # naming ro/<stamp>_joint1.h5)
+        assert (run.code, run.err) == (1, f"acq: error: read-only file system: {ro}\n")
         cases = {
             (*record, str(ro / "sub")): ro / "sub",
             ("export", str(session), "--csv", str(ro)): ro / f"{session.stem}.session.json",  # its temp file first
