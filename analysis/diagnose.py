@@ -30,6 +30,14 @@ from analysis.speed_ratio import electrical_speed_ratio, ratio_doubt, ratio_faul
 #: inertia, in the simulator: fitted J_l 0.998× nominal (seed 0). A real arm left out of [nominal] Jl_kgm2 can come
 #: closer: 20 kg as a 0.75 m rod about its end is 0.0375 kg·m² motor-side at ratio 10, J_l 6× the paper's.
 NOMINAL_FACTOR = 10.0
+#: The widest a real joint's K, J_m or J_l is known to stray from a correct [nominal]: the 20 kg arm above, J_l 6×
+#: (datasheet scatter, wear and the scenario family's ×0.5…×2 are well inside it).
+PLAUSIBLE_SPREAD = 6.0
+#: A fitted value is a unit or scale mistake when its whole 95 % interval lies this many times off its nominal (or
+#: 1/this): the midway on a log scale between the plausible spread and the decade mistakes come in,
+#: √(6 × 10) = 7.7×, 1.29× from each. Deciding at 10× itself made a mistake of exactly a decade a coin flip: the
+#: trial's [sim] K 8910 on a nominal 891 fitted 8904 (8621–9197, ok), 8944 and 8933 (poor) in three recordings.
+MISTAKE_THRESHOLD = math.sqrt(PLAUSIBLE_SPREAD * NOMINAL_FACTOR)
 
 
 def recording_diagnosis(rec: Recording) -> tuple[str | None, str | None]:
@@ -80,12 +88,10 @@ def with_fault(quality: Quality, diagnosis: Callable[[], tuple[str | None, str |
 
 def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: tuple[str, ...],
                   ci95: dict[str, tuple[float, float]] | None = None) -> str | None:
-    """The words for fitted K, J_m, J_l :data:`NOMINAL_FACTOR` or more off the bench's ``nominal`` (None if none is).
-
-    With ``ci95`` (the fit's 95 % intervals) a parameter counts only when its whole interval also lies beyond
-    the square root of :data:`NOMINAL_FACTOR` (half a decade, the midway on a log scale between the nominal and the factor): a value
-    the data hardly determine is no evidence of a scale mistake, while one they pin down 10.05× off (K 8950, interval
-    8722…9184, on a nominal of 891) is one, though its interval reaches below 10×.
+    """The words for fitted K, J_m, J_l off the bench's ``nominal`` by a unit or scale mistake (None if none is):
+    :data:`MISTAKE_THRESHOLD` (7.7×) or more, and with ``ci95`` (the fit's 95 % intervals) its whole interval too.
+    A value the data hardly determine is no evidence of a mistake; one they pin down about a decade off is, on
+    either side of 10× (K 8904, interval 8621…9197, on a nominal of 891: 9.99×, 9.68…10.32×).
 
     When every fitted one of them is off by about the same factor (within 2×), the torque is scaled — the
     current's unit or sensor scale, or k_t — because H = speed/torque scales K, J_m and J_l alike; otherwise the
@@ -96,8 +102,7 @@ def nominal_fault(values: TwoMassParams, nominal: TwoMassParams | None, fitted: 
     names = [n for n in ("K_Nm_per_rad", "Jm_kgm2", "Jl_kgm2") if n in fitted]
     factors = {n: getattr(values, n) / getattr(nominal, n) for n in names}
     off = [n for n, f in factors.items() if _side(f) != 0
-           and all(_side(b / getattr(nominal, n), math.sqrt(NOMINAL_FACTOR)) == _side(f)
-                   for b in (ci95 or {}).get(n, ()) if math.isfinite(b))]
+           and all(_side(b / getattr(nominal, n)) == _side(f) for b in (ci95 or {}).get(n, ()) if math.isfinite(b))]
     if not off:
         return None
     first, rest = off[0], off[1:]
@@ -142,7 +147,7 @@ def inertia_fault(fit: FitResult, nominal: TwoMassParams | None, tolerance: floa
             "J_l, C all carry it — unless [nominal] Jm_kgm2 + Jl_kgm2 miss part of the joint's inertia")
 
 
-def _side(factor: float, limit: float = NOMINAL_FACTOR) -> int:
+def _side(factor: float, limit: float = MISTAKE_THRESHOLD) -> int:
     """+1 for a factor ≥ ``limit``, −1 for ≤ its inverse, 0 between (or not a positive number)."""
     if not (math.isfinite(factor) and factor > 0):
         return 0

@@ -207,8 +207,35 @@ def test_a_catalogue_page_damaged_is_not_a_usable_catalogue(batch: tuple[Path, s
     catalogue.write_bytes(data)
     for command in (["trend", "--joint", "joint1"], ["fleet"]):
         run = run_cli(capsys, command[0], "--catalogue", str(catalogue), *command[1:])
+        # found at open by PRAGMA integrity_check (before: by the read of the table, "(database disk image is
+        # malformed)" alone)
         assert (run.code, run.err) == (2, f"acq: error: {catalogue}: not a usable catalogue (database disk image is "
-                                          "malformed)\n")
+                                          f"malformed: Page {root}: btreeInitPage() returns error code 11)\n")
+
+
+@pytest.mark.parametrize("command", [["trend", "--joint", "joint1"], ["fleet"]])
+def test_a_catalogue_index_damaged_is_not_a_usable_catalogue(batch: tuple[Path, subprocess.CompletedProcess[str]],
+                                                             tmp_path: Path, command: list[str],
+                                                             capsys: pytest.CaptureFixture[str]) -> None:
+    """A byte of one session's key flipped where the sessions' unique index holds it (the table's copy intact):
+    every read succeeds and ``PRAGMA quick_check`` passes, but a query through the index misses the session. Before:
+    exit 0, that session's window left out of the trend (the trial: a baseline window gone, every ΔK shifted)."""
+    catalogue = _catalogue_copy(batch, tmp_path)
+    with sqlite3.connect(catalogue) as db:
+        page_size = db.execute("PRAGMA page_size").fetchone()[0]
+        (root,) = db.execute("SELECT rootpage FROM sqlite_master WHERE name = 'sqlite_autoindex_sessions_1'"
+                             ).fetchone()
+        row, key = db.execute("SELECT rowid, session_key FROM sessions ORDER BY rowid LIMIT 1").fetchone()
+    data = bytearray(catalogue.read_bytes())
+    at = data.find(key.encode(), (root - 1) * page_size, root * page_size)
+    assert at > 0
+    data[at + len(key) - 1] ^= 0x01  # still ASCII: every read succeeds
+    catalogue.write_bytes(data)
+    with sqlite3.connect(f"file:{catalogue}?mode=ro", uri=True) as db:
+        assert db.execute("PRAGMA quick_check").fetchone() == ("ok",)
+    run = run_cli(capsys, command[0], "--catalogue", str(catalogue), *command[1:])
+    assert (run.code, run.err) == (2, f"acq: error: {catalogue}: not a usable catalogue (database disk image is "
+                                      f"malformed: row {row} missing from index sqlite_autoindex_sessions_1)\n")
 
 
 def test_a_monitor_restarting_on_a_damaged_catalogue_is_one_line(tmp_path: Path) -> None:

@@ -240,6 +240,41 @@ def test_no_catalogue_is_the_same_error_and_exit_code_for_trend_and_view(tmp_pat
                                           f"{missing} does not exist\n"), command
 
 
+@pytest.mark.parametrize("command", [("analyze", "{session}", "--no-report", "--catalogue", "{folder}"),
+                                     ("trend", "--catalogue", "{folder}", "--joint", "joint1"),
+                                     ("fleet", "--catalogue", "{folder}")])
+def test_a_catalogue_that_is_a_folder_is_named_so(tmp_path: Path, capsys: pytest.CaptureFixture[str],
+                                                  command: tuple[str, ...]) -> None:
+    """The trial: acq analyze S.h5 --catalogue sessions (a folder) said "cannot open the catalogue (unable to open
+    database file)"; acq trend --catalogue sessions "no catalogue — fill it with acq analyze FOLDER/ --catalogue
+    sessions". Refused before any analysis (the session here is an empty file, which would say so)."""
+    folder = tmp_path / "sessions"
+    folder.mkdir()
+    (tmp_path / "s.h5").write_bytes(b"")
+    run = run_cli(capsys, *(part.format(session=tmp_path / "s.h5", folder=folder) for part in command))
+    assert (run.code, run.out, run.err) == (2, "", f"acq: error: {folder}: is a folder, not a catalogue file — give the "
+                                                   f"file, e.g. {folder / 'catalogue.sqlite'}\n")
+
+
+def test_a_folder_where_a_batch_puts_its_catalogue_is_named_so(tmp_path: Path,
+                                                               capsys: pytest.CaptureFixture[str]) -> None:
+    """A folder named catalogue.sqlite where acq analyze FOLDER/ files its results: SQLite said "unable to open
+    database file"."""
+    (tmp_path / "catalogue.sqlite").mkdir()
+    (tmp_path / "s.h5").write_bytes(b"")  # a batch opens its catalogue before it reads a session
+    run = run_cli(capsys, "analyze", str(tmp_path), "--no-report")
+    assert (run.code, run.err) == (2, f"acq: error: {tmp_path / 'catalogue.sqlite'}: is a folder, not a catalogue "
+                                      "file\n")
+
+
+@pytest.mark.parametrize("command", ["analyze", "info", "check"])
+def test_a_session_that_is_no_regular_file_is_named_so(capsys: pytest.CaptureFixture[str], command: str) -> None:
+    """The trial: acq analyze /dev/zero said "empty (0 bytes)" (a character device's size is 0)."""
+    run = run_cli(capsys, command, "/dev/zero")
+    assert (run.code, run.err) == (2, "acq: error: /dev/zero: not a regular file (a device, pipe or socket), not a "
+                                      "session file\n")
+
+
 def test_view_refuses_a_tag_without_a_trend(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = run_cli(capsys, "view", str(tmp_path / "s.h5"), "--tag", "pose=x", "--screenshot", str(tmp_path / "v.png"))
     assert (run.code, run.out) == (2, "")

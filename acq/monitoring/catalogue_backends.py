@@ -53,6 +53,14 @@ def open_error(path: Path | str, e: BaseException, what: str) -> ConfigError | S
     return ConfigError(f"{path}: {what} ({one_line(e)})")
 
 
+def folder_error(path: Path, *, given: bool = True) -> ConfigError:
+    """A catalogue that is a folder: the error naming it and, where the user ``given`` it (``--catalogue``), the file
+    it may have meant (the name a batch gives its catalogue, acq.monitoring.session_outcome.CATALOGUE_NAME, which
+    imports this module)."""
+    hint = f" — give the file, e.g. {path / 'catalogue.sqlite'}" if given else ""
+    return ConfigError(f"{path}: is a folder, not a catalogue file{hint}")
+
+
 def one_line(e: BaseException) -> str:
     """``e``'s message on one line: its first line, with a PostgreSQL error's DETAIL folded in. psycopg's message
     goes on with ``DETAIL:``/``HINT:``/``CONTEXT:`` lines, a failed connection's with libpq's hint ("Is the server
@@ -89,6 +97,8 @@ class SQLiteDialect:
     def connect(self, path: Path, read_only: bool = False) -> sqlite3.Connection:
         """Open (create) the file; raises :class:`ConfigError` naming it when that fails. With ``read_only`` a file
         in a folder this process may not write into is opened read-only (:meth:`connect_read_only`)."""
+        if path.is_dir():  # a folder in a catalogue's place (--catalogue is checked where it is parsed): SQLite
+            raise folder_error(path, given=False)  # would say only "unable to open database file"
         if read_only and path.is_file() and refused_write(path.parent) is not None:
             return self.connect_read_only(path)
         try:

@@ -22,6 +22,8 @@ from acqcore.errors import ConfigError
 
 #: Python's sqlite3 message for a text value that is not UTF-8; names the column.
 _NOT_UTF8 = re.compile(r"Could not decode to UTF-8 column '([^']*)'")
+#: The heading integrity_check puts before a damaged page's finding ("*** in database main ***\nPage 4: …").
+_DATABASE_HEADING = re.compile(r"\*\*\* in database \S+ \*\*\*")
 #: The catalogue's tables, in the order a damaged column is looked for (:mod:`acq.monitoring.catalogue_schema`).
 TABLES = ("sessions", "analyses")
 
@@ -37,6 +39,20 @@ def read_error(path: Path | str, db: Any, e: BaseException) -> ConfigError | Non
     if isinstance(e, sqlite3.DatabaseError) and not isinstance(e, sqlite3.OperationalError):
         return ConfigError(f"{path}: not a usable catalogue ({one_line(e)})")
     return None
+
+
+def integrity_error(path: Path | str, db: sqlite3.Connection) -> ConfigError | None:
+    """The one-line error of a SQLite catalogue whose structure SQLite finds damaged, or None when it is sound.
+
+    A byte flipped in an index page reads without error, but a query through that index then misses rows (a
+    baseline window gone from ``acq trend``: another baseline, every ΔK shifted, exit 0). ``PRAGMA quick_check``
+    does not compare indexes with their tables, so it passes such a file; ``PRAGMA integrity_check`` does (stopped
+    at its first finding). Its cost grows with the file: bench/catalogue_check.py measures it."""
+    (first,) = db.execute("PRAGMA integrity_check(1)").fetchone()
+    if first == "ok":
+        return None
+    finding = " ".join(_DATABASE_HEADING.sub("", first).split())
+    return ConfigError(f"{path}: not a usable catalogue (database disk image is malformed: {finding})")
 
 
 def _where_not_utf8(db: sqlite3.Connection, column: str) -> str:

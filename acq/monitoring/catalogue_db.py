@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, Self
 
 from acq.monitoring.catalogue_backends import one_line, open_catalogue_db, open_error
-from acq.monitoring.catalogue_damage import read_error
+from acq.monitoring.catalogue_damage import integrity_error, read_error
 from acq.monitoring.catalogue_schema import MIGRATIONS, MONITOR_COLUMN_VERSION, SCHEMA_VERSION
 from acq.monitoring.catalogue_text import to_db
 from acq.recording.storage import cause_of
@@ -47,6 +47,8 @@ class CatalogueDatabase:
                 self._require_current_schema()
             else:
                 self._migrate()
+            if read_only and self._dialect.name == "sqlite" and (damaged := integrity_error(self.path, self._db)):
+                raise damaged
         except (*self._dialect.errors, UnicodeDecodeError) as e:
             damaged = self._damage(e)
             self._db.close()

@@ -116,10 +116,26 @@ def export_csv(session_path: Path, out_dir: Path, *, force: bool = False, partia
         if e.errno in WRITE_FAILURES:  # read-only, full, no permission: a failed write named by the folder asked for
             raise storage_error(e, out_dir) from None
         raise ConfigError(f"--csv {out_dir}: {e.strerror or e}") from None
+    try:
+        _write(session, targets, exclusive=not force)
+    except FileExistsError as e:  # every export renames in the same order: the one that loses a race loses at its
+        # current CSV, the first renamed, and leaves nothing of its own
+        raise ConfigError(f"{e.filename2}: exists (not overwritten; --force replaces it)") from None
+    enc = session.encoder
+    left_out = tuple(name for name in NOT_EXPORTED if getattr(enc, name, None) is not None)
+    return targets, left_out, _missing_text(session, meta_path)
+
+
+def _write(session: Session, targets: tuple[Path, Path, Path], *, exclusive: bool) -> None:
+    """Write the current CSV, the encoder CSV and the metadata (``targets``, in that order) under temp names, and
+    rename them when all three are complete; with ``exclusive`` only onto free names (:class:`FileExistsError`)."""
+    current_path, encoder_path, meta_path = targets
     cur, enc = session.current, session.encoder
     with ExitStack() as stack:  # every temp file removed on an error; all three renamed at the end, in reverse order:
         # the metadata last, so a failed rename of a CSV never leaves new metadata beside it
-        tmp_meta, tmp_encoder, tmp_current = (stack.enter_context(atomic_path(path))
+        # without force each is renamed only onto a free name: two exports into one folder at once both found the
+        # names free above, and the second rename replaced the first's files (both said "wrote"; the trial, 3 of 6)
+        tmp_meta, tmp_encoder, tmp_current = (stack.enter_context(atomic_path(path, exclusive=exclusive))
                                               for path in (meta_path, encoder_path, current_path))
         t_cur = current_t0_s(session) + cur.sample_index() / cur.rate_hz
         phases = {f"{p}_A": _exact(cur.phases_a[p]) for p in PHASE_COLUMNS if p in cur.phases_a}
@@ -135,8 +151,6 @@ def export_csv(session_path: Path, out_dir: Path, *, force: bool = False, partia
         with _failure_named(meta_path):
             tmp_meta.write_text(metadata_text(session, (current_path.name, sha256_of(tmp_current)),
                                               (encoder_path.name, sha256_of(tmp_encoder))), encoding="utf-8")
-    left_out = tuple(name for name in NOT_EXPORTED if getattr(enc, name, None) is not None)
-    return targets, left_out, _missing_text(session, meta_path)
 
 
 def _missing_text(session: Session, meta_path: Path) -> str | None:

@@ -235,18 +235,20 @@ def read_current_tdms(path: Path, bench_rate_hz: float, channels: tuple[str, ...
     """Read and check a current TDMS file; ``channels`` are ``GROUP/CHANNEL`` names, phases a, b, c; its rate must be
     the bench's ``[daq] rate_hz`` (``bench_rate_hz``) within :data:`RATE_TOLERANCE`."""
     from nptdms import TdmsFile  # only imports of TDMS files need it
+    from nptdms.log import log_manager
 
     if not path.exists():
         raise ConfigError(f"{path}: no such file")
-    nptdms_log = logging.getLogger("nptdms")
-    level = nptdms_log.level
-    nptdms_log.setLevel(logging.ERROR)  # its truncation warnings become our event and one line
+    level = log_manager.log_level
+    # its truncation warnings become our event and one line; npTDMS sets each of its module loggers' level and gives
+    # each its own console handler, so the "nptdms" logger's level does not reach them: its log manager does
+    log_manager.set_level(logging.ERROR)
     try:
         tdms = TdmsFile.read(path)
     except (ValueError, EOFError, OSError, KeyError) as e:
         raise ConfigError(f"{path}: not a readable TDMS file ({e})") from None
     finally:
-        nptdms_log.setLevel(level)
+        log_manager.set_level(level)
     picked = _tdms_channels(tdms, path, channels)
     increments = []
     for name, ch in picked:
@@ -258,7 +260,8 @@ def read_current_tdms(path: Path, bench_rate_hz: float, channels: tuple[str, ...
         raise ConfigError(f"{path}: channels {', '.join(n for n, _ in picked)}: wf_increment differs between them")
     data = [np.asarray(ch[:], dtype=np.float64) for _, ch in picked]
     n = min(d.size for d in data)
-    truncated = tdms.file_status.incomplete_final_segment or any(d.size != n for d in data)
+    truncated = (tdms.file_status.incomplete_final_segment or any(d.size != n for d in data)
+                 or _cut_in_a_segment(path))
     for (name, _), d in zip(picked, data):
         bad = np.flatnonzero(~np.isfinite(d[:n]))
         if bad.size:
@@ -273,6 +276,35 @@ def read_current_tdms(path: Path, bench_rate_hz: float, channels: tuple[str, ...
                   "per channel, the rest of that segment is missing")] if truncated else []
     return CurrentTable(dict(zip(PHASES, (d[:n] for d in data))), np.arange(n, dtype=np.int64), rate, t0, info, notes,
                         _tdms_start_utc(picked[0][1].properties.get("wf_start_time")))
+
+
+#: A TDMS segment's lead-in (NI, "TDMS File Format Internal Structure"): tag "TDSm", ToC mask (little-endian),
+#: version, then the next segment's offset and the raw data's, 8 bytes each, from the lead-in's end.
+TDMS_LEAD_IN_BYTES = 28
+#: The ToC mask's bit kTocBigEndian: the offsets (and the data) are big-endian.
+TDMS_BIG_ENDIAN = 1 << 6
+#: The next segment's offset a writer that crashed leaves (the segment runs to the file's end; npTDMS flags it).
+TDMS_UNKNOWN_LENGTH = 0xFFFF_FFFF_FFFF_FFFF
+
+
+def _cut_in_a_segment(path: Path) -> bool:
+    """True when the file ends inside a segment, its lead-in and metadata included, by the segments' own lengths.
+    npTDMS flags a cut in the data (``incomplete_final_segment``) but drops a last segment cut in its lead-in or
+    metadata with no more than a log line ("Last segment metadata is incomplete"), the rest read as a whole file."""
+    size = path.stat().st_size
+    position = 0
+    with path.open("rb") as f:
+        while position < size:
+            f.seek(position)
+            lead_in = f.read(TDMS_LEAD_IN_BYTES)
+            if len(lead_in) < TDMS_LEAD_IN_BYTES:
+                return True
+            big = int.from_bytes(lead_in[4:8], "little") & TDMS_BIG_ENDIAN
+            offset = int.from_bytes(lead_in[12:20], "big" if big else "little")
+            if offset == TDMS_UNKNOWN_LENGTH:
+                return False
+            position += TDMS_LEAD_IN_BYTES + offset
+    return position > size
 
 
 def _tdms_start_utc(value: Any) -> str | None:

@@ -20,11 +20,14 @@ def is_batch(spec: Path | str) -> bool:
 
 
 def require_session_file(path: Path) -> None:
-    """Raise :class:`ConfigError` naming ``path`` when it is missing or a folder (what it holds is not looked at)."""
+    """Raise :class:`ConfigError` naming ``path`` when it is missing, a folder or no regular file (a device such as
+    /dev/zero, a pipe, a socket: it would read as "empty (0 bytes)"); what it holds is not looked at."""
     if not path.exists():
         raise ConfigError(f"{path}: no such session file")
     if path.is_dir():
         raise ConfigError(f"{path}: is a folder, not a session file")
+    if not path.is_file():
+        raise ConfigError(f"{path}: not a regular file (a device, pipe or socket), not a session file")
 
 
 def new_session_path(out_dir: Path, joint: str, created_utc: str) -> Path:

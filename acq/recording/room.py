@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from acq.recording.storage import free_bytes
+from acq.recording.storage import free_bytes, refused_write
 from acq.recording.writer import RESERVE_BYTES
 from drivers.config import Bench
 from acqcore.errors import StorageError
@@ -38,12 +38,16 @@ def bytes_to_record(session_bytes: int) -> int:
 
 
 def require_room(folder: Path, bench: Bench, duration_s: float) -> None:
-    """Raise :class:`StorageError` naming ``folder``, its free and the needed bytes when a recording of
+    """Raise :class:`StorageError` naming ``folder`` and why when this process may not write there ("read-only file
+    system"), or naming its free and the needed bytes when a recording of
     ``duration_s`` on ``bench`` cannot fit there (checked before any device starts; a folder still to be made: the
     free space where it will be)."""
     existing = next((p for p in (folder, *folder.parents) if p.is_dir()), None)
     if existing is None:
         return  # nothing to measure: making the folder says what is wrong
+    refused = refused_write(existing)  # first: a small read-only mount has few free bytes too, and is not full
+    if refused is not None:
+        raise StorageError(f"{refused}: {folder}")
     need, free = bytes_to_record(expected_session_bytes(bench, duration_s)), free_bytes(existing)
     if free < need:
         raise StorageError(f"disk full: {folder} has {free / 1e6:.1f} MB free, a {duration_s:g} s recording needs "

@@ -140,14 +140,21 @@ def make_folders(folder: Path | str) -> None:
         sync_folder(made.parent)
 
 
-def replace_durably(tmp: Path | str, target: Path | str) -> None:
+def replace_durably(tmp: Path | str, target: Path | str, *, exclusive: bool = False) -> None:
     """Rename the complete file ``tmp`` over ``target`` so that a power cut leaves either the old ``target`` or the
     whole new one: ``tmp``'s data synced before the rename, the folder after it. Raises the :class:`OSError` of the
     file's sync or the rename as is; a failed sync of the folder, after the rename, raises a :class:`StorageError`
     that says what is true: "<target>: written, but its name may not survive a power cut (I/O error when syncing its
-    folder)" — still a failed write (exit 1): what acq reports as written survives a power cut, and this may not."""
+    folder)" — still a failed write (exit 1): what acq reports as written survives a power cut, and this may not.
+
+    With ``exclusive`` an existing ``target`` is never replaced (:class:`FileExistsError`, ``tmp`` kept), also one
+    another process makes meanwhile: a check before writing leaves a window in which two writers both find the name
+    free and the second rename silently replaces the first's file."""
     sync_file(tmp)
-    os.replace(tmp, target)
+    if exclusive:
+        _rename_no_replace(tmp, target)
+    else:
+        os.replace(tmp, target)
     try:
         sync_folder(Path(target).parent)
     except OSError as e:
@@ -155,10 +162,28 @@ def replace_durably(tmp: Path | str, target: Path | str) -> None:
                            "its folder)") from None
 
 
+def _rename_no_replace(tmp: Path | str, target: Path | str) -> None:
+    """Give ``tmp`` the name ``target`` unless that exists (:class:`FileExistsError`): a hard link, made only when the
+    name is free, then the temp name removed. A file system without hard links (FAT, exFAT on a USB stick: EPERM)
+    takes the name by creating ``target`` with ``O_EXCL`` and renaming over that placeholder."""
+    try:
+        os.link(tmp, target)
+    except FileExistsError:
+        raise
+    except OSError as e:
+        if e.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS):
+            raise
+        os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+        os.replace(tmp, target)
+        return
+    os.unlink(tmp)
+
+
 @contextmanager
-def atomic_path(path: Path | str) -> Iterator[Path]:
+def atomic_path(path: Path | str, *, exclusive: bool = False) -> Iterator[Path]:
     """Yield a temp path beside ``path``; rename it to ``path`` when the block succeeds (:func:`replace_durably`:
-    what the block wrote is on the disk before the rename, the rename is on it when this returns).
+    what the block wrote is on the disk before the rename, the rename is on it when this returns). With
+    ``exclusive`` an existing ``path`` is kept: :class:`FileExistsError` (``filename2`` is ``path``), the temp removed.
 
     On any exception the temp file is removed; an :class:`OSError` becomes a :class:`StorageError`
     naming ``path``. The temp name is unique per writer (two writers never share one). A folder that exists but
@@ -177,9 +202,11 @@ def atomic_path(path: Path | str) -> Iterator[Path]:
     try:
         yield tmp
         os.chmod(tmp, 0o644)
-        replace_durably(tmp, target)
+        replace_durably(tmp, target, exclusive=exclusive)
     except OSError as e:
         tmp.unlink(missing_ok=True)
+        if exclusive and isinstance(e, FileExistsError):  # this one's or a nested exclusive one's: not a failed write
+            raise
         if e.errno is None:  # a library's own "could not write" (e.g. Qt's image writer): say why — a folder that
             # turned read-only (a file system remounted ro on an error) before a full one: a tiny read-only mount has
             # next to no free bytes too, and was called "disk full"

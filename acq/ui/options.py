@@ -10,7 +10,7 @@ from typing import Any, TypeVar
 
 import click
 
-from acq.monitoring.catalogue_backends import URL_SCHEMES, is_url, redacted
+from acq.monitoring.catalogue_backends import URL_SCHEMES, folder_error, is_url, redacted
 from acqcore.errors import ConfigError
 
 
@@ -21,7 +21,7 @@ class CatalogueLocation(click.ParamType):
 
     def convert(self, value: Any, param: click.Parameter | None, ctx: click.Context | None) -> Path | str:
         """The URL as given, anything else as a path; a URL of another scheme (``mysql://…``, which as a path read
-        ``mysql:/…``) is refused naming its scheme and the ones acq reads."""
+        ``mysql:/…``) is refused naming its scheme and the ones acq reads; so is a folder (:func:`folder_error`)."""
         if is_url(value) or isinstance(value, Path):
             return value
         scheme = re.match(r"([A-Za-z][A-Za-z0-9+.-]*)://", value)
@@ -29,6 +29,8 @@ class CatalogueLocation(click.ParamType):
             option = param.opts[0] if param is not None else "--catalogue"
             raise ConfigError(f"{option} {redacted(value)}: {scheme.group(1)}:// is not a catalogue acq can use — "
                               f"give a SQLite file's path or a {URL_SCHEMES[0]} URL (or {', '.join(URL_SCHEMES[1:])})")
+        if Path(value).is_dir():  # before an analysis runs: SQLite would say only "unable to open database file"
+            raise folder_error(Path(value))
         return Path(value)
 
 
