@@ -22,6 +22,7 @@ import pytest
 
 import acq.recording.writer
 from acq.recording.reader import load
+from acq.recording.room import FLUSH_BYTES
 from tests.helpers import read_only_view, record_session_in_subprocess, run_cli, tiny_read_only_folder, tmpfs
 
 RATE_HZ = 25600
@@ -227,14 +228,16 @@ def _under_file_size_limit(limit_bytes: int) -> None:
 
 
 def test_a_file_size_limit_met_while_recording_fails_the_recording_like_a_full_disk(tmp_path: Path) -> None:
-    """A real RLIMIT_FSIZE of 2 MB in the child that records 12 s (~6 MB): HDF5's write meets EFBIG. Before: "acq:
+    """A real RLIMIT_FSIZE in the child that records 30 s (~15 MB): HDF5's write meets EFBIG. Before: "acq:
     failed: [Errno 27] Can't synchronously write data (file write failed: time = …" (HDF5's text cut mid-sentence) and
     the file left open for writing in its superblock (h5py: "file is already open for write"), no status, no reason.
     Now as for a full disk: status ``failed``, "file size limit reached: <file> — N s kept", the samples kept."""
     out = tmp_path / "limited"
-    limit = 2_000_000
+    # room for one commit (at most FLUSH_BYTES of samples, plus the file's own ≈ 0.1 MB) but not for two: a limit below
+    # one commit kept nothing at low load, where --fast's first commit is a whole FLUSH_BYTES (2 MiB)
+    limit = FLUSH_BYTES * 3 // 2 + 200_000
     proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.5s", "--fast", "--duration",
-                           "12", "--no-analyze", "--out", str(out)], capture_output=True, text=True, timeout=300,
+                           "30", "--no-analyze", "--out", str(out)], capture_output=True, text=True, timeout=300,
                           preexec_fn=lambda: _under_file_size_limit(limit))
     path = _only_session(out)
     assert path.stat().st_size <= limit
@@ -242,7 +245,7 @@ def test_a_file_size_limit_met_while_recording_fails_the_recording_like_a_full_d
         status, reason = f.attrs["status"].decode(), f.attrs["stop_reason"].decode()
         current, encoder = int(f.attrs["current_samples"]), int(f.attrs["encoder_samples"])
         stored = (f["current/i_a_A"].shape[0], f["encoder/index"].shape[0])
-    assert 0 < current < 12 * RATE_HZ and encoder > 0 and stored == (current, encoder)
+    assert 0 < current < 30 * RATE_HZ and encoder > 0 and stored == (current, encoder)
     assert (status, reason) == ("failed", f"file size limit reached: {path} — {current / RATE_HZ:.1f} s kept")
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
     assert [ln for ln in proc.stderr.splitlines() if ln.startswith("acq:")] == [
