@@ -21,6 +21,19 @@ level 1: 21 ok, 4 wrong, all J_l (main: 21 / 10) — seed 0 at 60 and 540 s, see
 0.007371–0.007393 with upper ends 0.007456–0.007477 against 0.00748. The J_l bias itself is unchanged: the b_v fit's
 J_l interval is a little wider, not elsewhere.
 
+Session 15 (branch wp/s15-loadfric: the excess incoherence floor, analysis/excess_incoherence.py — the coherence lost
+beyond the encoder's quantisation, the torque estimate's noise and the Welch window's own loss adds √e to ln H as a
+systematic error where a window of 8 bins stands out of the session's own delete-one-block scatter; ``--levels 0,1
+--list``, load 14–17 on 2 cores): level 0: 22 ok, 0 wrong (main: 22 / 0); level 1: 21 ok, 1 poor, 1 wrong (main:
+21 / 4) — seed 0 at 60 s, J_l 0.007393 [0.007319, 0.007467] against 0.00748. There the excess at 42–56 Hz is 0.215
+(the same window without friction: 0.0002) but its jackknife standard error 0.073 (the friction's distortion changes
+with the program from block to block): t 2.97 against Student's 3.83 (9 degrees of freedom, one-sided 95 % shared by
+the band's 25 windows), so no floor. In seed 5 at 300 s (tests/test_robot_friction.py) the 10–40 Hz and 74–88 Hz windows
+stand out (e 0.002–0.011, t 4.2–5.1) and J_l reads −1.20 % [−7.5, +5.5 %], ok. Session 14's floor, judged by Carter's
+formula for independent segments, called every level-1 window poor and healthy 4 s monitor windows too; healthy
+windows here show e/se up to 3.0 (seed 5 at 300 s, 106–120 Hz: e 0.008) — a real, small excess the known noises leave,
+which is why the test is shared by the windows and calibrated on the replicates rather than a formula.
+
 Session 13 (2026-12-01; the same 90 windows recorded once, seeds 0–5 × 60…540 s × levels 0/1/2, analysed in a scratch
 copy of main at 3d6370f; counts at level 1 unless said): what the friction does to H1 (seed 5 at 300 s, level 1 and
 2 against 0, same program): the dip at f_a filled (+7…+64 % at 48–56 Hz), the resonance flattened (−18…−28 % at
