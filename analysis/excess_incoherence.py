@@ -127,8 +127,8 @@ def excess_words(f_hz: np.ndarray, std: np.ndarray) -> str | None:
     worst = int(np.argmax(std))
     return (f"the speed follows the torque less closely at {f_hz[on[0]]:.0f}…{f_hz[on[-1]]:.0f} Hz than the encoder's "
             "resolution and the torque estimate's noise explain (by up to "
-            f"{100.0 * std[worst]:.0f} % of |H| near {f_hz[worst]:.0f} Hz): friction in the joint (load or motor side), "
-            "backlash, a torque the drive does not measure, or an error on the torque estimate beyond its modelled "
+            f"{100.0 * std[worst]:.0f} % of |H| near {f_hz[worst]:.0f} Hz): friction in the joint (load or motor "
+            "side), backlash, a torque the drive does not measure, or an error on the torque estimate beyond its modelled "
             "noise (hum, interference) — H1 is then the joint's best linear approximation, not its two-mass "
             "response, and the intervals of K, J_m, J_l, C carry the difference: check the joint for friction and the "
             "gear and the coupling for play")
