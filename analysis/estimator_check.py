@@ -27,7 +27,8 @@ from analysis.frf import FrequencyResponse, estimate_frf
 from analysis.model import frequency_response
 
 
-def model_estimate(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.ndarray) -> FrequencyResponse:
+def model_estimate(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.ndarray,
+                   jackknife_blocks: int = 0) -> FrequencyResponse:
     """What the Welch estimator makes of the fitted model: H1 and coherence of the model's own speed for the recorded
     torque, through the same segments, window, detrend and selection as the measurement (noise-free: its coherence is
     what the window alone leaves, lowest at a sharp resonance peak).
@@ -40,6 +41,9 @@ def model_estimate(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.ndarray
         A fit of ``frf`` that did not fail.
     torque_Nm : ndarray
         The torque the FRF was estimated from, N·m, on the encoder's grid (``frf.period_s``).
+    jackknife_blocks : int, optional
+        The delete-one-block replicates, as :func:`analysis.frf.estimate_frf` forms ``frf``'s (the same segments, so
+        the same blocks when given the same count); 0: none.
     """
     x = np.asarray(torque_Nm, dtype=float)
     x = x - x.mean()
@@ -48,7 +52,7 @@ def model_estimate(frf: FrequencyResponse, fit: FitResult, torque_Nm: np.ndarray
     h[1:] = frequency_response(fit.values, f[1:]) * difference_response(f[1:], frf.period_s)  # no mean speed
     speed = np.fft.irfft(np.fft.rfft(x) * h, x.size)
     return estimate_frf(x, speed, frf.period_s, segment_s=frf.segment_s, reuse_selection=frf.selection,
-                        leave_out=frf.unknown_torque)
+                        leave_out=frf.unknown_torque, jackknife_blocks=jackknife_blocks)
 
 
 def kernel_model_error(frf: FrequencyResponse, fit: FitResult, model_frf: FrequencyResponse) -> np.ndarray:

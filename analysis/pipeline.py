@@ -21,6 +21,7 @@ from analysis.diagnose import inertia_fault, nominal_fault, recording_diagnosis,
 from analysis.fit import (VIBRATION_DAMPING, FitInputError, FitOptions, FitResult, PARAM_NAMES, default_band_hz,
                           fit_two_mass, judged_fit)
 from analysis.encoder import longest_gap_free_span
+from analysis.excess_incoherence import with_excess_floor, with_excess_reason
 from analysis.estimator_check import kernel_model_error, model_estimate
 from analysis.fit_problem import unbracketed_note
 from analysis.frf import FrequencyResponse, estimate_frf, require_two_segments, segment_layout
@@ -195,12 +196,17 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
     residual = sig.clock.residual_s if sig.aligned and math.isfinite(sig.clock.residual_s) else None
     inseparable = tuple(sorted({round(f, 1) for found in sig.interference for f in found.inseparable_hz}))
     judged = None if fit.status == "failed" else judged_fit(frf, fit)
-    model_frf = None if judged is None else model_estimate(frf, judged, sig.torque_Nm)
+    model_frf = None if judged is None else model_estimate(frf, judged, sig.torque_Nm, JACKKNIFE_BLOCKS)
+    excess_said = None
+    if model_frf is not None and chain.pipeline == "acq":  # the coherence lost beyond the known noises: H1 is then a
+        fit, excess_said = with_excess_floor(fit, frf, model_frf)  # nonlinear joint's BLA (the paper's chain as it is)
     kernel_error = None if judged is None else kernel_model_error(frf, judged, model_frf)
     quality = assess(frf, fit, clock_residual_s=residual, inseparable_hz=inseparable,
                      encoder_jitter=sig.encoder_jitter, clock_failure=sig.clock.failure or None, profile=rec.profile,
                      interference=sig.interference, kernel_error=kernel_error,
                      torque_from_angle=chain.torque_method == "encoder")
+    if excess_said is not None and quality.verdict != "ok":  # why the intervals are as wide as they are
+        quality = replace(quality, reasons=with_excess_reason(quality.reasons, excess_said))
     caveat = chain_caveat(chain, AnalysisRequest().chain(rec))
     if caveat is not None and quality.verdict != "ok":
         quality = replace(quality, reasons=(caveat, *quality.reasons))
@@ -228,7 +234,8 @@ def analyze(rec: Recording, request: AnalysisRequest = AnalysisRequest()) -> Res
                                       misfit_bins=quality.misfit_bins),
                   request=request, chain=chain,
                   notes=(*sig.notes, *_unknown_torque_note(frf, sig.t_s),
-                         *filter(None, [widened_c_note(fit, frf, model_frf), unbracketed_note(fit)])),
+                         *filter(None, [widened_c_note(fit, frf, model_frf), unbracketed_note(fit)]),
+                         *([f"note: {excess_said}"] if excess_said is not None and quality.verdict == "ok" else [])),
                   moves=moves)
 
 

@@ -21,6 +21,28 @@ level 1: 21 ok, 4 wrong, all J_l (main: 21 / 10) — seed 0 at 60 and 540 s, see
 0.007371–0.007393 with upper ends 0.007456–0.007477 against 0.00748. The J_l bias itself is unchanged: the b_v fit's
 J_l interval is a little wider, not elsewhere.
 
+Session 15 (branch wp/s15-loadfric; analysis/excess_incoherence.py): session 14's excess incoherence floor (the
+coherence lost beyond the encoder's quantisation, the torque estimate's noise and the Welch window's own loss, e =
+1/γ̂² − 1/γ²_known, stands for a systematic error √e of ln H carried through the fit) with the test for "excess"
+calibrated on the session's own delete-one-block replicates instead of Carter's formula: e formed again on each
+replicate pair (the measured FRF's and the model estimate's, the same segments left out of both), a window of 8 bins
+standing out when its mean passes Student's t (B − 1 = 9 degrees of freedom, one-sided 95 % shared by the band's 25
+windows: 3.83) times its jackknife standard error; acq's chain only. Measured, ``--levels 0,1 --list``: level 0: 22
+ok, 0 wrong (as main); level 1: 21 ok, 1 poor, **2 wrong** (main: 21 / 4), both J_l — seed 0 at 60 s, 0.007393
+[0.007319, 0.007467]: its excess at 42–56 Hz is 0.215 (0.0002 without friction) but its jackknife standard error 0.073
+(the friction's distortion changes with the program from block to block), t 2.97, so no floor there; seed 0 at 540 s,
+0.007378 [0.007280, 0.007477] against 0.00748. bench/effects_robot.py motor friction ×0/×0.5/×1/×2 (ok / wrong): 22/0,
+21/0, 15/1, 2/0 (main 22/0, 22/0, 19/1, 10/1). Accuracy family (``--seeds 5 --jobs 1``): 183 ok (main 184), 213/245 as
+expected, coverage K 98 J_m 98 J_l 98 C 100 %, 0 confident wrong; the load friction scenario poor 5 (was ok 1). The
+floor tops each interval up to ±1.96 σ of its pull; added on top of the interval (commit e23b771) level 1 read 1
+wrong, the family the same, motor friction 21/0, 14/1, 2/0, but test_monitor's restart case failed: its window 4 (240
+s, no friction) turned poor, K 883.1 [823.8, 946.7] (±7.0 %; main ok at ±4.9 %, near the 5 % line). That window's
+excess is real and large — 0.10 at 42–56 Hz, 0.39 at 90–104 Hz, 0.10 at 106–120 Hz (t 7.1) — though the joint has no
+friction; the likely cause, not checked, is the robot's gravity load (arm and payload, m·g·d·cos φ of the load's
+angle), a torque the drive does not measure that costs coherence as friction does: the excess alone does not tell
+friction from it. A floor of the excess's lower bound (mean − t·se) added on top still read that window ±5.4 %, poor.
+Healthy windows show small real excess too (e/se up to 3.0: seed 5 at 300 s, 106–120 Hz, e 0.008).
+
 Session 13 (2026-12-01; the same 90 windows recorded once, seeds 0–5 × 60…540 s × levels 0/1/2, analysed in a scratch
 copy of main at 3d6370f; counts at level 1 unless said): what the friction does to H1 (seed 5 at 300 s, level 1 and
 2 against 0, same program): the dip at f_a filled (+7…+64 % at 48–56 Hz), the resonance flattened (−18…−28 % at
