@@ -101,10 +101,9 @@ class BandMisfit:
         approximations and the loop's feedback of the rest of the quantisation; 0 when none is given, infinite where
         it is unbounded).
     bound : float
-        The most a bias can move the window's mean towards its misfit's sign (the speed loop's feedback of the
-        quantisation noise, :func:`analysis.systematic_errors.loop_feedback_bound`, either way; where the model lies
-        above the measurement also the most noise on the torque can lower H1, ``input_bound``): taken off |misfit|
-        before it is compared.
+        The most a bias of known sign-less size can move the window's mean (the speed loop's feedback of the
+        quantisation noise, :func:`analysis.systematic_errors.loop_feedback_bound`): taken off |misfit| before it is
+        compared.
     t : float
         max(|misfit| − bound, 0) / √(noise² + systematic²).
     """
@@ -122,8 +121,7 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
                  systematic_cov: np.ndarray | None = None,
                  blind: np.ndarray | None = None,
                  chain_std: float = 0.0,
-                 bias_bound: np.ndarray | None = None,
-                 input_bound: np.ndarray | None = None) -> tuple[BandMisfit, ...]:
+                 bias_bound: np.ndarray | None = None) -> tuple[BandMisfit, ...]:
     """The misfit of ln|H| per window of :data:`WINDOW_BINS` bins, stepped by half a window.
 
     Parameters
@@ -147,10 +145,6 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
     bias_bound : ndarray, shape (n,), optional
         The most a bias may move each bin (:func:`analysis.systematic_errors.loop_feedback_bound`): a window takes its
         mean off |misfit|; None: none.
-    input_bound : ndarray, shape (n,), optional
-        The most noise on the torque (the FRF's input) can lower ln|H1| at each bin, −ln γ² of the session's own
-        coherence (:func:`analysis.input_noise.h1_bias_bound`): a window whose mean misfit is positive (the model above
-        the measurement, as that noise leaves H1) takes its mean off too; None: none.
 
     Returns
     -------
@@ -172,8 +166,6 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
             quant = np.inf  # unbounded (or not computable): the window is not judged
         m = float(np.mean(misfit[w]))
         bound = 0.0 if bias_bound is None else float(np.mean(bias_bound[w]))
-        if input_bound is not None and m > 0:
-            bound += float(np.mean(input_bound[w]))
         excess = max(abs(m) - bound, 0.0) if np.isfinite(bound) else 0.0
         scale = float(np.hypot(noise, quant))
         if not (np.isfinite(m) and np.isfinite(noise)):

@@ -66,19 +66,6 @@ def resonance_bins(f_hz: np.ndarray, params: TwoMassParams, band: tuple[float, f
     return out
 
 
-def h1_bias_bound(frf: FrequencyResponse, f_hz: np.ndarray) -> np.ndarray:
-    """The most noise on the torque may lower ln|H1| at the bins ``f_hz`` (Hz, bins of ``frf``): ln|H2/H1| = −ln γ² of
-    the session's own coherence (infinite where γ² is 0) — the truth lies between H1 and H2, so a model above H1 by no
-    more than this may be H1's bias, not the joint's (:func:`analysis.adequacy.band_misfits`). Across the band it is
-    a bound, not a correction (the encoder's quantisation is noise on the speed and lowers γ² without biasing H1); the
-    estimated γ̂² of a finite number of averages reads high, so the bound errs small. On a healthy one-phase robot
-    window (acq monitor, seed 0, 160 s) |H1| lay 3.2 % below the model at 178–192 Hz in every block (jackknife ±0.5 %)
-    with 2.2 % of the coherence lost there: `poor`, "a third mode", with K's interval holding the truth."""
-    coherence = np.interp(f_hz, frf.f_hz, frf.coherence)
-    with np.errstate(divide="ignore"):
-        return np.where(coherence > 0.0, -np.log(np.clip(coherence, None, 1.0)), np.inf)
-
-
 def h2_at_resonance(frf: FrequencyResponse, params: TwoMassParams,
                     band: tuple[float, float]) -> FrequencyResponse | None:
     """``frf`` with H2 = H1/γ² in the bins that read the resonance of ``params`` (:func:`resonance_bins`) and no

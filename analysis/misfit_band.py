@@ -14,7 +14,7 @@ from analysis.adequacy import BandMisfit, band_misfits, critical_t, missed_spans
 from analysis.fit import band_mask, judged_fit, log_ratio_jacobian, model_log_ratios, model_misfits, quantisation_terms
 from analysis.fit_problem import FitResult, fitted_bins, rel_halfwidth
 from analysis.frf import FrequencyResponse
-from analysis.input_noise import EstimateError, estimate_error_misfit, h1_bias_bound
+from analysis.input_noise import EstimateError, estimate_error_misfit
 from analysis.sample_instants import EncoderJitter
 from analysis.systematic_errors import (CHAIN_WINDOW_STD, loop_feedback_bound, quantisation_through_fit,
                                         spread_beyond_fit)
@@ -44,9 +44,7 @@ def missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, k
     (:func:`analysis.systematic_errors.quantisation_through_fit`); beyond the fitted band the model's own spread from
     its parameters' covariance (:func:`analysis.systematic_errors.spread_beyond_fit`); the chain's smooth errors
     (:data:`analysis.systematic_errors.CHAIN_WINDOW_STD`); and, taken off the misfit as the bound it is, the speed
-    loop's feedback of the rest of the quantisation (:func:`analysis.systematic_errors.loop_feedback_bound`) and, for a
-    torque read from one phase through the angle where the model lies above |H|, the most that estimate's error can
-    lower H1 there (:func:`analysis.input_noise.h1_bias_bound`, −ln γ² of the session's coherence).
+    loop's feedback of the rest of the quantisation (:func:`analysis.systematic_errors.loop_feedback_bound`).
     """
     seen = judged_fit(frf, fit)
     f, misfit, reps = model_misfits(frf, seen)
@@ -63,13 +61,7 @@ def missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, k
     carried = carried + np.where(np.isfinite(beyond), beyond, 0.0)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0) | unknown
     bound = loop_feedback_bound(quant, jitter.repeating_share)
-    # a torque read from one phase through the angle errs by far more than its white-noise model (13–31× at the
-    # resonance, README "One phase on a robot"), an error on the FRF's input no model sizes: the coherence's bound
-    # then; a measured torque's or Park's input noise is modelled (the fit divides it out), its coherence lost to the
-    # speed's noise as much (a 4 % dip at 10–40 Hz on the paper's plant lay within 1.2 % of −ln γ²), so none there
-    h1_bias = h1_bias_bound(frf, f) if torque_from_angle else None
-    windows = band_misfits(f, misfit.real, reps.real, carried[:f.size, :f.size], blind, CHAIN_WINDOW_STD, bound,
-                           h1_bias)
+    windows = band_misfits(f, misfit.real, reps.real, carried[:f.size, :f.size], blind, CHAIN_WINDOW_STD, bound)
     t_crit = critical_t(len(windows), reps.shape[0])
     spans = missed_spans(windows, t_crit)
     judged = tuple((w.low_hz, w.high_hz, w.misfit, w.bound + t_crit * float(np.hypot(w.noise, w.systematic)))
@@ -87,6 +79,6 @@ def missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, k
                                          fit.options.kind, fitted)
         if estimate is not None and missed_spans(band_misfits(
                 f, misfit.real - estimate.misfit, reps.real - estimate.misfit[None, :], carried[:f.size, :f.size],
-                blind, CHAIN_WINDOW_STD, bound, h1_bias), t_crit):
+                blind, CHAIN_WINDOW_STD, bound), t_crit):
             estimate = None  # the estimate's error does not explain all of the misfit: the joint's advice stands
     return (spans[0] if spans else None), mode, judged, bins, estimate

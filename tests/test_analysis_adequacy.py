@@ -258,16 +258,3 @@ def test_spread_beyond_fit_is_the_parameters_covariance_at_the_bins_not_fitted()
     jac = np.array([[1.0 + 2.0j], [3.0 - 1.0j]])
     cov = spread_beyond_fit(jac, np.array([[0.01]]), np.array([True, False]), phase=True)
     np.testing.assert_allclose(cov, [[0, 0, 0, 0], [0, 0.09, 0, -0.03], [0, 0, 0, 0], [0, -0.03, 0, 0.01]], atol=1e-15)
-
-
-def test_the_input_noise_bound_is_taken_off_a_model_above_h_only():
-    """Noise on the torque lowers H1: a window where the model lies above |H| (misfit > 0) takes the input bound off
-    its mean misfit, one where it lies below does not."""
-    f = np.arange(WINDOW_BINS, dtype=float) * 2.0 + 170.0
-    rng = np.random.default_rng(0)
-    reps = 1e-3 * rng.standard_normal((10, f.size))
-    above, below = (band_misfits(f, m + np.zeros(f.size), m + reps, input_bound=np.full(f.size, 0.02))[0]
-                    for m in (0.03, -0.03))
-    plain = band_misfits(f, 0.03 + np.zeros(f.size), 0.03 + reps)[0]
-    assert above.bound == pytest.approx(0.02) and below.bound == 0.0 and plain.bound == 0.0
-    assert above.t == pytest.approx(plain.t / 3.0) and below.t == pytest.approx(plain.t)

@@ -74,3 +74,18 @@ def test_motor_friction_on_the_robot_is_held_by_cs_interval_and_read_as_b_v(tmp_
     taken = (truth["Jm_kgm2"] + truth["Jl_kgm2"]) / truth["Jl_kgm2"] * (0.1390 - truth["C_Nms_per_rad"])
     assert ci["bv_Nms_per_rad"][0] < taken < ci["bv_Nms_per_rad"][1], (doc["bv_Nms_per_rad"], ci["bv_Nms_per_rad"])
     assert doc["bv_Nms_per_rad"] == pytest.approx(taken, rel=0.25)
+
+
+MOTOR_TWICE = {"elapsed_s": 300.0, "seed": 2, "motor_coulomb_Nm": 0.6, "motor_stribeck_Nm": 0.4}
+
+
+def test_twice_the_motor_friction_is_not_a_confident_wrong_result(tmp_path: Path) -> None:
+    """Seed 2 at 300 s with twice the motor friction: the model lies above |H| where the friction also costs coherence.
+    A window test that forgave a one-phase estimate −ln γ² of the coherence there (session 15, reverted after an
+    independent review) called it ok with C 0.165 [0.106, 0.256] against 0.1 (also with the excess-incoherence floor);
+    the misfit must keep it from ``ok`` unless every interval holds the truth."""
+    doc = _window(MOTOR_TWICE, tmp_path)
+    truth = doc["simulated_truth"]
+    outside = [p for p in PARAMS if not doc["ci95"][p][0] <= truth[p] <= doc["ci95"][p][1]]
+    if doc["quality"]["verdict"] == "ok":
+        assert outside == [], {p: (doc[p], doc["ci95"][p], truth[p]) for p in outside}
