@@ -227,18 +227,21 @@ def _under_file_size_limit(limit_bytes: int) -> None:
     resource.setrlimit(resource.RLIMIT_FSIZE, (limit_bytes, limit_bytes))
 
 
-def test_a_file_size_limit_met_while_recording_fails_the_recording_like_a_full_disk(tmp_path: Path) -> None:
+@pytest.mark.parametrize("folder", ["limited", os.fsdecode(b"Pr\xfcfstand")])
+def test_a_file_size_limit_met_while_recording_fails_the_recording_like_a_full_disk(tmp_path: Path, folder: str) -> None:
     """A real RLIMIT_FSIZE in the child that records 30 s (~15 MB): HDF5's write meets EFBIG. Before: "acq:
     failed: [Errno 27] Can't synchronously write data (file write failed: time = …" (HDF5's text cut mid-sentence) and
     the file left open for writing in its superblock (h5py: "file is already open for write"), no status, no reason.
-    Now as for a full disk: status ``failed``, "file size limit reached: <file> — N s kept", the samples kept."""
-    out = tmp_path / "limited"
+    Now as for a full disk: status ``failed``, "file size limit reached: <file> — N s kept", the samples kept. In a
+    folder whose name is not UTF-8 (Latin-1 ``Prüfstand``) the reason naming the file could not be encoded: the footer
+    was not written, h5py could not open the file, and acq said "… s kept" all the same; its byte is now escaped."""
+    out = tmp_path / folder
     # room for one commit (at most FLUSH_BYTES of samples, plus the file's own ≈ 0.1 MB) but not for two: a limit below
     # one commit kept nothing at low load, where --fast's first commit is a whole FLUSH_BYTES (2 MiB)
     limit = FLUSH_BYTES * 3 // 2 + 200_000
     proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.5s", "--fast", "--duration",
                            "30", "--no-analyze", "--out", str(out)], capture_output=True, text=True, timeout=300,
-                          preexec_fn=lambda: _under_file_size_limit(limit))
+                          errors="surrogateescape", preexec_fn=lambda: _under_file_size_limit(limit))
     path = _only_session(out)
     assert path.stat().st_size <= limit
     with h5py.File(path, "r") as f:  # read back as any HDF5 reader does
@@ -246,10 +249,12 @@ def test_a_file_size_limit_met_while_recording_fails_the_recording_like_a_full_d
         current, encoder = int(f.attrs["current_samples"]), int(f.attrs["encoder_samples"])
         stored = (f["current/i_a_A"].shape[0], f["encoder/index"].shape[0])
     assert 0 < current < 30 * RATE_HZ and encoder > 0 and stored == (current, encoder)
-    assert (status, reason) == ("failed", f"file size limit reached: {path} — {current / RATE_HZ:.1f} s kept")
+    shown = str(path).encode("utf-8", "backslashreplace").decode()  # a byte UTF-8 cannot carry as \\udcfc
+    assert (status, reason) == ("failed", f"file size limit reached: {shown} — {current / RATE_HZ:.1f} s kept")
     assert proc.returncode == 1 and "Traceback" not in proc.stderr
-    assert [ln for ln in proc.stderr.splitlines() if ln.startswith("acq:")] == [
-        f"acq: failed: {reason} ({current} current and {encoder} encoder samples stored in {path})"]
+    assert [ln for ln in proc.stderr.splitlines() if ln.startswith("acq:")] == [  # the path's own bytes printed
+        f"acq: failed: file size limit reached: {path} — {current / RATE_HZ:.1f} s kept ({current} current and "
+        f"{encoder} encoder samples stored in {path})"]
     _assert_counts_are_stored(path, current, encoder)
 
 

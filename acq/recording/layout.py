@@ -77,8 +77,10 @@ OPTIONAL_ENCODER = ("drive_time_s", "velocity_counts_per_s", "velocity_demand_co
 
 
 def _footer_text(name: str, text: str) -> np.ndarray:
-    """``text`` as the fixed-length footer string ``name`` (:data:`FOOTER_TEXT_BYTES`); longer: its own length."""
-    data = text.encode()
+    """``text`` as the fixed-length footer string ``name`` (:data:`FOOTER_TEXT_BYTES`); longer: its own length. A byte
+    of a path that is not UTF-8 (a Latin-1 folder name) is written as its escape, ``\\udcfc`` as Python's standard
+    error shows it (the catalogue's :func:`acq.monitoring.catalogue_text.readable` alike): the footer stays text."""
+    data = text.encode(errors="backslashreplace")
     return np.array(data, dtype=h5py.string_dtype("utf-8", max(FOOTER_TEXT_BYTES[name], len(data), 1)))
 
 
@@ -93,8 +95,10 @@ def footer_unwritten() -> dict[str, np.ndarray | np.int64]:
 
 def fitted_text(text: str, room_bytes: int) -> bytes:
     """``text`` as UTF-8 in at most ``room_bytes``: whole when it fits, else cut at a character's boundary and ended
-    with :data:`CUT_MARK` naming the bytes left out (a reason is read by a person: its start says what happened)."""
-    data = text.encode()
+    with :data:`CUT_MARK` naming the bytes left out (a reason is read by a person: its start says what happened). A
+    byte of a path that is not UTF-8 is written as its escape (``\\udcfc``; strictly encoded it raised, and a recording
+    in a Latin-1 folder stopped by a failed write was left without its footer)."""
+    data = text.encode(errors="backslashreplace")
     if len(data) <= room_bytes:
         return data
     mark = CUT_MARK.format(len(data)).encode()

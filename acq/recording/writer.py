@@ -404,7 +404,7 @@ class SessionWriter:
             sync_file(self.path)  # after the close: closing rewrites the superblock (no longer open for writing)
         except Exception as e:  # noqa: BLE001 - the footer could not be written (or synced): the flush rows still hold
             abandon(f)
-            if longer is None:
+            if longer is None and isinstance(e, OSError):
                 return  # the write error that abandoned the file stays the one reported
             self.failure = storage_error(e, self.path)
             raise StorageError(f"{self.failure} (footer not written; the samples are stored, acq check repairs "
