@@ -151,7 +151,7 @@ SCENARIOS: tuple[Scenario, ...] = (
     # ---- appended (a scenario's clock draw depends on its place: new ones go last) ---------------------------
     # The third mass inside the band again, with an encoder fine enough that its trace stands out of the
     # position quantisation: what the misfit test does when the data can tell (with 2^17 counts/rev the
-    # period-locked quantisation biases a healthy |H| by as much at 170–250 Hz, README "How well it works").
+    # period-locked quantisation biases a healthy |H| by as much at 170–250 Hz, docs/accuracy.md "Why the dither").
     Scenario("third mass 150 Hz (inside band), encoder 2^20 counts/rev", expect="not ok",
              reason="three-mass FRF: misfit", sim=THIRD_INSIDE, counts_per_rev=2**20),
 )
@@ -163,7 +163,7 @@ UNDITHERED = {"speed_dither": 0.0}
 # a passive capture, or a profile without ``speed_dither``), a 500 Hz encoder (the mode at the band's top), a 3 s record
 # (5 jackknife blocks: a t of 4 degrees of freedom) — and the same without the third mass. Issue 13's criterion (no
 # confident wrong result) is claimed for the family above, not for these: they measure where the misfit tests stop
-# seeing a mode that moves K by 2.5–4 % (README "How well it works").
+# seeing a mode that moves K by 2.5–4 % (docs/accuracy.md, "Where the data hold little of the mode").
 LIMITS: tuple[Scenario, ...] = (
     Scenario("third mass 150 Hz, undithered motion", expect="not ok", reason="three-mass FRF: misfit",
              sim=THIRD_INSIDE, profile=UNDITHERED),

@@ -385,8 +385,9 @@ def test_on_alarm_runs_with_the_documented_environment_and_exit_code_3(capsys: p
 def test_on_alarm_runs_through_the_shell_and_its_failure_is_reported(capsys: pytest.CaptureFixture[str],
                                                                       tmp_path: Path,
                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    """README's own example: the shell expands $ACQ_K (it printed "K $ACQ_K" literally, run without a shell), and a
-    command that fails (here: not found, exit 127) is said in the status line and the final summary (it said nothing)."""
+    """docs/monitoring.md's own example: the shell expands $ACQ_K (it printed "K $ACQ_K" literally, run without a
+    shell), and a command that fails (here: not found, exit 127) is said in the status line and the final summary (it
+    said nothing)."""
     bench = _bench_file(tmp_path, K_decay_pct_per_hour=300.0, seed=EXCITING_SEED)
     monkeypatch.setenv("COLUMNS", "200")  # the final table unwrapped
     said = tmp_path / "said.txt"
@@ -1066,9 +1067,9 @@ def test_alarm_commands_run_in_a_session_of_their_own_and_share_one_wait_at_the_
 
 def test_a_restart_with_another_bench_or_window_is_refused_but_not_another_simulated_machine(
         four_windows: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    """The new-user trial: README's CANopen monitor, then its serial one, in the same default folder — one series of
-    windows from two measurement chains, no notice; a changed --window was accepted too. Another [sim] truth or seed
-    (a simulated wear series: the machine, not the measurement) resumes."""
+    """The new-user trial: README's (now docs/monitoring.md's) CANopen monitor, then its serial one, in the same
+    default folder — one series of windows from two measurement chains, no notice; a changed --window was accepted
+    too. Another [sim] truth or seed (a simulated wear series: the machine, not the measurement) resumes."""
     out = tmp_path / "other_bench"
     _restarted_elsewhere(four_windows, out)
     same = _bench_file(tmp_path, seed=EXCITING_SEED)
@@ -1201,9 +1202,9 @@ def test_a_monitor_whose_devices_fail_to_open_leaves_no_catalogue(capsys: pytest
 
 
 def test_readmes_two_monitor_benches_differ_in_their_drive_and_not_in_their_simulated_machine() -> None:
-    """README's CANopen example, then its serial one, in the default folder: one series from two measurement chains.
-    What the refusal names, from the benches shipped (the [sim] sections, which differ in nothing that counts, are not
-    compared)."""
+    """docs/monitoring.md's CANopen example, then its serial one, in the default folder: one series from two
+    measurement chains. What the refusal names, from the benches shipped (the [sim] sections, which differ in nothing
+    that counts, are not compared)."""
     from acq.monitoring.catalogue import Entry
     from acq.monitoring.window_bench import differences, window_facts
 

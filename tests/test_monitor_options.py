@@ -120,7 +120,8 @@ def test_every_command_the_monitor_advises_exists(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(("options", "message"), [
-    # a 27.8 h window was started although --for said 1 min and README limits durations to 24 h (the trial)
+    # a 27.8 h window was started although --for said 1 min and docs/monitoring.md limits a window to 24 h
+    # (the trial)
     (("--window", "100000", "--every", "100000", "--for", "1min"),
      "acq: error: --window 100000: must be a number of seconds in (0, 86400]\n"),
     # a whole 30 s window was recorded for --for 10s

@@ -144,7 +144,7 @@ def test_a_robot_window_whose_half_periods_share_no_ratio_names_no_bench_constan
 
 
 def test_an_idle_robot_window_names_no_bench_constant(tmp_path: Path) -> None:
-    """Seed 0's first 4 s window (the README's monitor example) stands still most of the time: the current is
+    """Seed 0's first 4 s window (docs/monitoring.md's monitor example) stands still most of the time: the current is
     noise around zero and crosses zero quickly while the encoder does not move. Those half-periods once read
     "the current turns 500000000000.00× faster … check [motor] pole_pairs = 2000000000000 or [encoder]
     counts_per_rev = 0"; only half-periods in which the encoder travels count now."""

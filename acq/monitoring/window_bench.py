@@ -1,10 +1,11 @@
 """What makes a monitor's windows comparable, filed with every window so that a restart on another bench is refused.
 
 A monitor's trend compares K of its windows with a baseline learned on its first ones: a restart in the same
-``--out`` with another bench (README's CANopen example, then its serial one) or another ``--window`` added windows of
-another measurement to the same series, silently (the new-user trial). :func:`window_facts` are the bench facts the
-K of a window depends on, filed as window tags (:data:`FACT_TAGS`, as :data:`acq.monitoring.alarm_rules.RULE_TAGS` files
-the alarm rules); :func:`differences` names those a restart would change.
+``--out`` with another bench (docs/monitoring.md's CANopen example, then its serial one) or another ``--window``
+added windows of another measurement to the same series, silently (the new-user trial). :func:`window_facts` are
+the bench facts the K of a window depends on, filed as window tags (:data:`FACT_TAGS`, as
+:data:`acq.monitoring.alarm_rules.RULE_TAGS` files the alarm rules); :func:`differences` names those a restart would
+change.
 
 Chosen, and why:
 
