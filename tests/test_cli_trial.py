@@ -275,3 +275,31 @@ def test_an_error_exit_skips_the_interpreters_teardown(tmp_path: Path) -> None:
                           env=_child_env())
     assert (proc.returncode, proc.stdout, proc.stderr) == (
         2, "", f"acq: error: {tmp_path / 'missing.h5'}: no such session file\n")
+
+
+_SWALLOWED_THEN_ERROR = """
+import sys, time, click
+import acq.ui.cli as c
+junk = [[{} for _ in range(50)] for _ in range(20000)]  # work for the collection on the error's way out
+@click.command("fake")
+def fake():
+    class D:
+        def __del__(self): raise KeyboardInterrupt  # a Ctrl-C landing in a __del__: Python cannot raise it there
+    d = D(); del d
+    time.sleep(float(sys.argv[1]))
+    raise c.ConfigError("bad input")
+c.cli.add_command(fake)
+c.main(["fake"])
+"""
+
+
+@pytest.mark.parametrize("delay_s", [0.01, 0.03, 0.045])
+def test_a_ctrl_c_delivered_again_never_replaces_a_finished_commands_exit(tmp_path: Path, delay_s: float) -> None:
+    """A swallowed Ctrl-C is delivered again 0.05 s later; a command that ended before that with an error has its exit
+    code. The review: the re-delivery was cancelled only when main() returned, which os._exit skips, so it fired in the
+    exit's collection — 14 of 15 such exits gave 130 and a second line instead of 2."""
+    script = tmp_path / "fake.py"
+    script.write_text(_SWALLOWED_THEN_ERROR)
+    run = subprocess.run([sys.executable, str(script), str(delay_s)], capture_output=True, text=True, timeout=60,
+                         env=_child_env())
+    assert (run.returncode, _acq_lines(run.stderr)) == (2, ["acq: error: bad input"]), run.stderr
