@@ -3,7 +3,10 @@ command (no other dependency)."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import signal
+import stat
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -18,6 +21,32 @@ STOP_REASONS: dict[int, str] = {
     signal.SIGHUP: "stopped by SIGHUP (its terminal closed)",
 }
 STOP_SIGNALS: tuple[int, ...] = tuple(STOP_REASONS)
+
+
+_hung_up = False
+
+
+def repeated_hangup(signum: int) -> bool:
+    """For a stop signal's handler: True for a SIGHUP after the first, which the handler ignores — a closed terminal
+    sends two (the kernel hangs up its foreground group, the shell forwards one more to its jobs), not a second Ctrl-C
+    that quits at once (the review: a recording's file finished, then a KeyboardInterrupt in the drain). On the first,
+    standard output and error that went to the terminal go to /dev/null: a write to a hung-up terminal fails (EIO),
+    and acq ended "Input/output error", exit 1, instead of its stop's line and 130."""
+    global _hung_up
+    if signum != signal.SIGHUP:
+        return False
+    if _hung_up:
+        return True
+    _hung_up = True
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        for fd in (1, 2):
+            with contextlib.suppress(OSError):  # a descriptor already closed stays so
+                if stat.S_ISCHR(os.fstat(fd).st_mode):  # a terminal; a pipe or a file (a log) keeps the lines
+                    os.dup2(devnull, fd)
+    finally:
+        os.close(devnull)
+    return False
 
 
 def handled(signum: int) -> bool:

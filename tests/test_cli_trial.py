@@ -303,3 +303,28 @@ def test_a_ctrl_c_delivered_again_never_replaces_a_finished_commands_exit(tmp_pa
     run = subprocess.run([sys.executable, str(script), str(delay_s)], capture_output=True, text=True, timeout=60,
                          env=_child_env())
     assert (run.returncode, _acq_lines(run.stderr)) == (2, ["acq: error: bad input"]), run.stderr
+
+
+def test_a_terminal_that_closes_stops_the_recording_once_without_an_io_error(tmp_path: Path) -> None:
+    """A real pseudo-terminal: acq records into it, the terminal goes away (its master closed: a write to it fails
+    with EIO) and two SIGHUPs come, the kernel's and the shell's. The review: the second SIGHUP quit at once as a
+    second Ctrl-C (a KeyboardInterrupt in the drain) and the stop's line failed on the dead terminal — "Input/output
+    error", exit 1. Now: exit 130, the file finished with the SIGHUP's reason."""
+    out = tmp_path / "sessions"
+    master, slave = os.openpty()
+    proc = subprocess.Popen(_acq("record", "--profile", str(seeded_profile(tmp_path)), "--duration", "60",
+                                 "--out", str(out)),
+                            stdin=slave, stdout=slave, stderr=slave, start_new_session=True, env=_child_env())
+    os.close(slave)
+    try:
+        _wait_for(lambda: any(out.glob("*.h5")), proc, "session file")
+        time.sleep(1.0)
+    finally:
+        os.close(master)
+    proc.send_signal(signal.SIGHUP)
+    time.sleep(0.05)
+    proc.send_signal(signal.SIGHUP)
+    assert proc.wait(timeout=60) == 130
+    (path,) = out.glob("*.h5")
+    s = load(path)
+    assert (s.status, s.attrs["stop_reason"]) == ("interrupted", "stopped by SIGHUP (its terminal closed)")

@@ -27,7 +27,7 @@ def _start_forkserver_without_cwd() -> None:
     the variable (they run no program of the user's); acq's own process has it only while the server starts, so
     the commands it runs later (``--on-alarm``) see the user's environment.
 
-    The server (and the resource tracker it starts) begin with SIGINT and SIGTERM ignored, which they and every
+    The server (and the resource tracker it starts) begin with SIGINT, SIGTERM and SIGHUP ignored, which they and every
     worker forked from them keep: a Ctrl-C at the terminal reaches the whole process group, and so does the SIGTERM of
     ``timeout -s TERM`` (it signals its group), and only acq's own process stops the workers (a worker or the server's
     preload stopped mid-import printed tracebacks, Qt a fatal error; a worker killed by SIGTERM broke the pool, the
@@ -40,8 +40,13 @@ def _start_forkserver_without_cwd() -> None:
         # the resource tracker first, outside the window: its start blocks and then unblocks SIGINT itself, which
         # inside the window left SIGINT unblocked while ignored — a Ctrl-C then was lost (the batch ran to its end,
         # 3 of 8 runs of test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line[catalogue opened]); it ignores SIGINT
-        # on its own (CPython's resource_tracker.main)
-        resource_tracker.ensure_running()
+        # on its own (CPython's resource_tracker.main) — and SIGTERM, not SIGHUP: a closed terminal killed it (the
+        # review: "resource tracker … alive: False"), so it starts with SIGHUP ignored (not blocked: nothing is lost)
+        hangup = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+        try:
+            resource_tracker.ensure_running()
+        finally:
+            signal.signal(signal.SIGHUP, hangup)
         with _signals_ignored_by_children():
             forkserver.ensure_running()
     finally:

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from acq.process_signals import STOP_REASONS, handled
+from acq.process_signals import STOP_REASONS, handled, repeated_hangup
 from acq.recording.device_reader import READ_TIMEOUT_S, DeviceReader
 from acq.recording.layout import Status, utc_now_iso
 from acq.recording.paths import new_session_path
@@ -78,7 +78,7 @@ def stop_on_signals(request_stop: Callable[[str], None]) -> Iterator[None]:
     for a stop at the next safe point.
 
     The handlers never raise: an exception in the middle of a flush could write a part twice or lose one.
-    A second Ctrl-C (SIGTERM) is the previous handler's again: it quits at once.
+    A second Ctrl-C (SIGTERM) is the previous handler's again: it quits at once; a second SIGHUP is ignored.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
@@ -86,8 +86,11 @@ def stop_on_signals(request_stop: Callable[[str], None]) -> Iterator[None]:
     reasons = {s: reason for s, reason in STOP_REASONS.items() if handled(s)}
 
     def handler(signum: int, frame: object) -> None:
+        if repeated_hangup(signum):
+            return
         request_stop(reasons[signum])
-        signal.signal(signum, previous[signum])  # the same signal again quits at once (acq check repairs the file)
+        if signum != signal.SIGHUP:
+            signal.signal(signum, previous[signum])  # the same signal again quits at once (acq check repairs the file)
 
     previous = {sig: signal.signal(sig, handler) for sig in reasons}
     try:

@@ -23,7 +23,7 @@ from typing import Any
 import click
 
 from acq import __version__
-from acq.process_signals import STOP_SIGNALS, handled
+from acq.process_signals import STOP_SIGNALS, handled, repeated_hangup
 from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 
 # numpy, scipy, h5py, pydantic and Qt are imported inside the commands that use them: `acq --help`, a command's
@@ -69,7 +69,8 @@ class _Interrupted(BaseException):
 
 
 def _raise_interrupted(signum: int, frame: object) -> None:
-    raise _Interrupted
+    if not repeated_hangup(signum):
+        raise _Interrupted
 
 
 #: The handlers of Ctrl-C and SIGTERM while a command runs (a KeyboardInterrupt, which a batch or a recording catches to
@@ -154,7 +155,8 @@ def _exit_now(code: int) -> None:
 
 
 def _stop_as_ctrl_c(signum: int, frame: object) -> None:
-    raise KeyboardInterrupt
+    if not repeated_hangup(signum):
+        raise KeyboardInterrupt
 
 
 #: Delay of a Ctrl-C delivered again (:func:`_interrupt_again`), s: long enough for the hook to have returned (one

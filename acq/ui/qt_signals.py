@@ -21,7 +21,7 @@ from contextlib import contextmanager
 
 from pyqtgraph.Qt import QtCore
 
-from acq.process_signals import STOP_SIGNALS, handled
+from acq.process_signals import STOP_SIGNALS, handled, repeated_hangup
 
 
 @contextmanager
@@ -50,7 +50,8 @@ def signals_in_qt_loop(on_signal: Callable[[int], None]) -> Iterator[None]:
     notifier = QtCore.QSocketNotifier(reader.fileno(), QtCore.QSocketNotifier.Type.Read)
     notifier.activated.connect(drain)
     previous_fd = signal.set_wakeup_fd(writer.fileno(), warn_on_full_buffer=False)
-    previous = {s: signal.signal(s, lambda signum, frame: on_signal(signum)) for s in STOP_SIGNALS if handled(s)}
+    previous = {s: signal.signal(s, lambda signum, frame: None if repeated_hangup(signum) else on_signal(signum))
+                for s in STOP_SIGNALS if handled(s)}
     try:
         yield
     finally:
