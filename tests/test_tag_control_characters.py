@@ -28,8 +28,18 @@ def test_a_tag_with_a_control_character_is_refused_naming_it(tmp_path: Path, com
     out = tmp_path / "out"
     run = _acq(*command, "--tag", RED, "--out", str(out))
     assert (run.returncode, run.stdout) == (2, "")
-    assert run.stderr == ("acq: error: --tag 't=\\x01\\x1b[31mred': holds the control character \\x01 — give the tag "
+    assert run.stderr == ("acq: error: --tag 't=\\x01\\x1b[31mred': holds the control character \\x01 — give it "
                           "without control characters (a terminal that prints it would act on them)\n")
+    assert not out.exists()
+
+
+def test_an_operator_with_a_control_character_is_refused_naming_it(tmp_path: Path) -> None:
+    """The review: --operator took what --tag refuses (an OSC title sequence and ESC[31m were stored in the session)."""
+    out = tmp_path / "out"
+    run = _acq("record", "--profile", "triangle_0.2s", "--fast", "--operator", "eve\x1b]0;pwned\x07", "--out", str(out))
+    assert (run.returncode, run.stdout) == (2, "")
+    assert run.stderr == ("acq: error: --operator 'eve\\x1b]0;pwned\\x07': holds the control character \\x1b — give "
+                          "it without control characters (a terminal that prints it would act on them)\n")
     assert not out.exists()
 
 

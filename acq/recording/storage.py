@@ -20,7 +20,7 @@ import glob
 import os
 import tempfile
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 
 from acqcore.errors import StorageError
@@ -174,9 +174,15 @@ def _rename_no_replace(tmp: Path | str, target: Path | str) -> None:
         if e.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS):
             raise
         os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
-        os.replace(tmp, target)
+        try:
+            os.replace(tmp, target)
+        except BaseException:
+            with suppress(OSError):  # the empty placeholder would make every later try "exists"
+                os.unlink(target)
+            raise
         return
-    os.unlink(tmp)
+    with suppress(OSError):  # the target is complete under its name; a temp name left over is only clutter
+        os.unlink(tmp)
 
 
 @contextmanager

@@ -28,19 +28,15 @@ def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
     """``KEY=VALUE`` texts as a tag dict; a value spelt as a number (:data:`_NUMBER`) becomes a float
     (``payload_kg=2.5`` → 2.5), any other stays text (``serial=007`` → "007").
 
-    Raises :class:`ConfigError` naming the tag for a text that is not UTF-8 (:func:`require_utf8`), one holding a
-    control character (ESC, a line break: the trend prints the value to a terminal), without ``=``, a
+    Raises :class:`ConfigError` naming the tag for a text that is not UTF-8 or holds a control character
+    (:func:`require_plain_text`), without ``=``, a
     key with other than letters, digits, ``_ . -``, an empty value, a number's spelling beyond a float's range (1e999:
     inf, a tag that could never be matched, and not JSON) and a key given twice.
     """
     tags: dict[str, str | float] = {}
     given: dict[str, str] = {}
     for text in texts:
-        require_utf8("--tag", text)
-        control = next((c for c in text if unicodedata.category(c) == "Cc"), None)
-        if control is not None:  # in a key or a value (a value went as it was into the catalogue and terminals)
-            raise ConfigError(f"--tag {shown(text)}: holds the control character {escaped(control)} — give the tag "
-                              "without control characters (a terminal that prints it would act on them)")
+        require_plain_text("--tag", text)  # in a key or a value (a value went as it was into the catalogue and terminals)
         key, sep, value = (part.strip() for part in text.partition("="))
         if not sep or not key:
             raise ConfigError(f"--tag {text}: must be KEY=VALUE, e.g. payload_kg=2.5")
@@ -55,15 +51,22 @@ def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
     return tags
 
 
-def require_utf8(option: str, text: str) -> str:
-    """``text`` as given for ``option`` ("--operator"), refused (:class:`ConfigError`, naming the option and the byte)
-    when it holds a byte that is not UTF-8: Python reads such a command-line byte as a lone surrogate (a shell or
-    terminal in Latin-1 sends "é" as the one byte 0xe9), which a session file, its JSON and the catalogue cannot hold
-    as text — refused before anything is recorded, not stored escaped nor met by HDF5 as a codec error."""
+def require_plain_text(option: str, text: str) -> str:
+    """``text`` as given for ``option`` ("--operator", "--tag"), refused (:class:`ConfigError`, naming the option and
+    the byte or character) before anything is recorded when it holds
+    - a byte that is not UTF-8: Python reads such a command-line byte as a lone surrogate (a shell or terminal in
+      Latin-1 sends "é" as the one byte 0xe9), which a session file, its JSON and the catalogue cannot hold as text —
+      not stored escaped nor met by HDF5 as a codec error;
+    - a control character (ESC, a line break): the trend and the info print such text to a terminal, which would act
+      on it."""
     bad = next((c for c in text if "\udc80" <= c <= "\udcff"), None)
     if bad is not None:
         raise ConfigError(f"{option} {shown(text)}: byte 0x{ord(bad) - 0xDC00:02x} is not UTF-8 (a shell or terminal "
                           "in Latin-1 sends é as 0xe9) — give the text in UTF-8")
+    control = next((c for c in text if unicodedata.category(c) == "Cc"), None)
+    if control is not None:
+        raise ConfigError(f"{option} {shown(text)}: holds the control character {escaped(control)} — give it "
+                          "without control characters (a terminal that prints it would act on them)")
     return text
 
 

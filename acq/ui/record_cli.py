@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import click
 from rich.console import Console
 
-from acq.recording.tags import parse_tags, require_utf8
+from acq.recording.tags import parse_tags, require_plain_text
 from acq.ui.analyze_cli import identify, print_result_and_draw
 from acq.ui.options import Folder, tag_option
 from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
@@ -55,7 +55,7 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
     from drivers.limits import refuse_beyond_limits
     from drivers.registry import open_bench
 
-    require_utf8("--operator", operator)  # one line before anything starts, as a bad --tag
+    require_plain_text("--operator", operator)  # one line before anything starts, as a bad --tag
     session_tags = parse_tags(tags)
     bench = with_joint(load_bench(bench_path), joint)
     profile = _profile_for(bench, bench_path, profile_name, duration_s)
