@@ -23,7 +23,7 @@ import pytest
 import acq.offline.analyze
 from acq.config import load_bench
 from acq.monitoring.retention import WindowFiles, make_room, parse_size, to_delete
-from acq.recording.recorder import Recorder
+from acq.recording.recorder import Recorder, RecordingResult
 from acq.recording.reader import load
 from acq.recording.writer import SessionWriter
 from drivers.base import CurrentSourceInfo, DriveInfo
@@ -231,17 +231,23 @@ def test_restart_resumes_numbering_and_marks_an_interrupted_window(four_windows:
     assert not (out / "cut.h5").exists()  # marked, then its raw file went (not baseline, not the last)
 
 
+def _fifth_window_recorded(four_windows: Path, out: Path) -> RecordingResult:
+    """The four windows' folder copied to ``out`` (:func:`_restarted_elsewhere`) with a fifth window, 10 s of the
+    robot recorded there by the real recorder as the monitor tags it; its :class:`RecordingResult`."""
+    _restarted_elsewhere(four_windows, out)
+    bench = _bench(seed=EXCITING_SEED)
+    current, drive = open_bench(bench, fast=True)
+    return Recorder(bench, None, current, drive, out, 10.0,
+                    tags={"monitor_window": 4, "monitor_elapsed_s": 240.0}).run()
+
+
 def test_a_window_the_analysis_refuses_as_damaged_keeps_its_raw_file(four_windows: Path, tmp_path: Path) -> None:
     """A window found on a restart (recorded by the real recorder, 10 s of the robot) whose cycle index chunk of rows
     2 000–2 499 the storage zeroed: its analysis refuses it as damaged, the catalogue row holds why and no K. Before:
     filed "failed", then deleted by --keep 1 as an analysed window (not baseline, not the last), its raw file the
     only copy of what it recorded; now kept, and --keep still keeps the last window with a K."""
     out = tmp_path / "resumed"
-    _restarted_elsewhere(four_windows, out)
-    bench = _bench(seed=EXCITING_SEED)
-    current, drive = open_bench(bench, fast=True)
-    result = Recorder(bench, None, current, drive, out, 10.0,
-                      tags={"monitor_window": 4, "monitor_elapsed_s": 240.0}).run()
+    result = _fifth_window_recorded(four_windows, out)
     assert result.status == "complete"
     with h5py.File(result.path, "r") as f:
         info = f["encoder/index"].id.get_chunk_info_by_coord((2000,))
@@ -274,11 +280,7 @@ def test_a_window_killed_during_its_capture_and_found_damaged_keeps_its_raw_file
     refused it): the evidence of the damage and the only copy of what it recorded gone. Now kept, and counted in the
     status line ("1 damaged kept")."""
     out = tmp_path / "resumed"
-    _restarted_elsewhere(four_windows, out)
-    bench = _bench(seed=EXCITING_SEED)
-    current, drive = open_bench(bench, fast=True)
-    result = Recorder(bench, None, current, drive, out, 10.0,
-                      tags={"monitor_window": 4, "monitor_elapsed_s": 240.0}).run()
+    result = _fifth_window_recorded(four_windows, out)
     with h5py.File(result.path, "r+") as f:  # the footer as a kill -9 leaves it: never written
         f.attrs.modify("status", np.array(b"recording", dtype=f.attrs.get_id("status").dtype))
         for name in ("current_samples", "encoder_samples"):
