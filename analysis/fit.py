@@ -59,7 +59,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy import optimize, stats
+from scipy import optimize
 from scipy.ndimage import median_filter
 
 from analysis.adequacy import misfit_covariance
@@ -70,6 +70,8 @@ from analysis.fit_problem import (BAND_HIGH_FRACTION_OF_FENC, BAND_HIGH_MAX_HZ, 
                                   VIBRATION_DAMPING, FitKind, FitOptions, FitParams, FitResult, FitStatus, FitWeighting,
                                   _free_params, _jacobian, _Problem, band_mask, default_band_hz, fitted_bins,
                                   free_is_finite, wrapped)
+from analysis.fit_spread import (Z95, correlation_inflation, intervals_from_covariance, linearised_jackknife,
+                                 replicate_covariance)
 from analysis.frf import FrequencyResponse
 from analysis.input_noise import h2_at_resonance
 from analysis.model import TwoMassParams, antiresonance_hz, resonance_hz
@@ -84,7 +86,6 @@ __all__ = [
     "weighted_jacobian", "wrapped",
 ]
 
-Z95 = 1.959963984540054
 # 1σ relative floor of the systematic part of an interval, used only when the fit is not given the encoder's
 # resolution (a direct call of fit_two_mass; the pipeline always gives it). Where it comes from: on the simulated
 # bench (8 plants with K, J_m, J_l scaled 0.5…2, 10 seeds each, 10 s sessions) every seed of a plant shares an
@@ -258,7 +259,7 @@ def _bracketed(fit: FitResult, other: FitResult | None) -> FitResult:
     scale = np.where(sigma > 0.0, wider / np.where(sigma > 0.0, sigma, 1.0), 1.0)
     cov = np.array(fit.covariance) * np.outer(scale, scale)
     cov.setflags(write=False)
-    return replace(fit, covariance=cov, ci95=_intervals(fit.values, names, x, cov), ci95_c_alone=fit.ci95,
+    return replace(fit, covariance=cov, ci95=intervals_from_covariance(fit.values, names, x, cov), ci95_c_alone=fit.ci95,
                    vibration_damping=(max(other.values.bv_Nms_per_rad, 0.0),
                                       *(max(end, 0.0) for end in other.ci95[VIBRATION_DAMPING]),
                                       other.values.C_Nms_per_rad))
@@ -325,16 +326,16 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
             input_noise_shift: np.ndarray | None = None, linearised: bool = False) -> FitResult:
     """Package the best least-squares solution with its covariance and intervals (``input_noise_shift``: the free
     parameters' shift from H1 to H2 at the resonance, :func:`_input_noise_shift`; None: none; ``linearised``: the
-    jackknife's replicates by one Gauss–Newton step each, :func:`_linearised_jackknife`)."""
+    jackknife's replicates by one Gauss–Newton step each, :func:`analysis.fit_spread.linearised_jackknife`)."""
     values = problem.params(res.x)
     n_free = res.x.size
     dof = max(n_res - n_free, 1)
-    s2 = 2.0 * res.cost / dof * _correlation_inflation(res.fun[: problem.f.size])
+    s2 = 2.0 * res.cost / dof * correlation_inflation(res.fun[: problem.f.size])
     jac = np.asarray(res.jac)
     cov = s2 * np.linalg.pinv(jac.T @ jac)
     quantile = Z95
     if problem.replicates:
-        cov, quantile = (_linearised_jackknife(problem, res.x, jac, options) if linearised
+        cov, quantile = (linearised_jackknife(problem, res.x, jac, options) if linearised
                          else _jackknife(problem, res.x, options))
     cov = cov * (quantile / Z95) ** 2  # the interval below is ±1.96 σ of this covariance
     misfit = misfit_covariance(res.fun, jac, problem.f.size)
@@ -344,13 +345,13 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
     floor = (quantisation_floor if quantisation_floor is not None
              else np.full(n_free, np.log1p(CHAIN_REL_STD) ** 2))
     cov += misfit + np.diag(np.clip(floor - np.diag(misfit), 0.0, None))
-    without = _intervals(values, problem.free, res.x, cov)
+    without = intervals_from_covariance(values, problem.free, res.x, cov)
     if input_noise_shift is not None:
         # the truth lies between the H1 and the H2 reading of the resonance (analysis.input_noise): a bias bounded by
         # the shift d, of unknown size within it, carried as a rectangular distribution of half-width |d| (GUM:
         # variance d²/3, so the 95 % interval holds the whole bracket, 1.96/√3 = 1.13 |d|), along d (a joint shift)
         cov += np.outer(input_noise_shift, input_noise_shift) / 3.0
-    ci = _intervals(values, problem.free, res.x, cov)
+    ci = intervals_from_covariance(values, problem.free, res.x, cov)
     amp = problem.log_ratio(res.x).real
     rms = float(np.sqrt(np.sum(problem.w * amp**2) / np.sum(problem.w)))
     status: FitStatus = "converged" if res.status > 0 else ("max_evaluations" if res.status == 0 else "failed")
@@ -366,22 +367,6 @@ def _result(problem: _Problem, res: optimize.OptimizeResult, band: tuple[float, 
     )
 
 
-def _intervals(values: TwoMassParams, free: tuple[str, ...], x: np.ndarray,
-               cov: np.ndarray) -> dict[str, tuple[float, float]]:
-    """The 95 % interval exp(ln θ ± 1.96 σ) of each free parameter from the free vector's covariance ``cov`` (b_v's: its
-    ratio r ± 1.96 σ times C's share (J_m+J_l) C/J_l, C's own uncertainty left to C's interval); a fixed parameter's is
-    its value."""
-    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    ci = {n: (getattr(values, n), getattr(values, n)) for n in PARAM_NAMES}
-    for name, xi, s in zip(free, x, sigma):  # b_v's only in the bracketing fit (_vibration_damping_fit)
-        if name == VIBRATION_DAMPING:
-            share = (values.Jm_kgm2 + values.Jl_kgm2) * values.C_Nms_per_rad / values.Jl_kgm2
-            ci[name] = (float((xi - Z95 * s) * share), float((xi + Z95 * s) * share))
-        else:
-            ci[name] = (float(np.exp(xi - Z95 * s)), float(np.exp(xi + Z95 * s)))
-    return ci
-
-
 def _jackknife(problem: _Problem, x_best: np.ndarray, options: FitOptions) -> tuple[np.ndarray, float]:
     """Delete-one-block jackknife covariance of the free parameters (:func:`analysis.fit_problem.free_vector`) and its
     95 % t quantile.
@@ -391,42 +376,7 @@ def _jackknife(problem: _Problem, x_best: np.ndarray, options: FitOptions) -> tu
     """
     xs = [refit.x for refit in (_refit_from(rep, problem, x_best, options) for rep in problem.replicates)
           if refit is not None]
-    b = len(xs)
-    if b < 2 or not np.all(np.isfinite(xs)):  # a replicate that diverged: the fit is not stable under the data
-        return np.full((x_best.size, x_best.size), np.inf), Z95
-    d = np.asarray(xs) - np.mean(xs, axis=0)
-    return (b - 1) / b * (d.T @ d), float(stats.t.ppf(0.975, b - 1))
-
-
-def _linearised_jackknife(problem: _Problem, x_best: np.ndarray, jac: np.ndarray,
-                          options: FitOptions) -> tuple[np.ndarray, float]:
-    """:func:`_jackknife` with each replicate's optimum taken one Gauss–Newton step from the full fit's,
-    x_b = x̂ − J⁺ r_b(x̂), J the full fit's Jacobian (the linearised jackknife: a replicate lacks one block of B, so its
-    optimum lies within a step; the refits by Levenberg–Marquardt took 3–5 iterations of 6 residuals each). For the
-    bracketing fit (:func:`_vibration_damping_fit`), whose replicates cost 0.02–0.03 s of a 60 s session's 0.4 s."""
-    steps = [np.linalg.lstsq(jac, -rep.residuals(x_best), rcond=None)[0]
-             for rep in problem.replicate_problems(options)]  # rows as the Jacobian's: the same bins only
-    b = len(steps)
-    if b < 2 or not np.all(np.isfinite(steps)):
-        return np.full((x_best.size, x_best.size), np.inf), Z95
-    d = np.asarray(steps) - np.mean(steps, axis=0)
-    return (b - 1) / b * (d.T @ d), float(stats.t.ppf(0.975, b - 1))
-
-
-def _correlation_inflation(r: np.ndarray, max_lag: int = 3) -> float:
-    """Variance inflation 1 + 2 Σ ρ_k for residuals correlated between neighbouring bins.
-
-    Welch bins overlap (Hann: adjacent bins share much of their window), and a model misfit is
-    smooth in frequency, so neighbouring residuals are not independent; the effective number of
-    points is N / (1 + 2 Σ ρ_k) with ρ_k the lag-k autocorrelation (positive lags up to
-    ``max_lag``, negative values ignored).
-    """
-    r = r - r.mean()
-    denom = float(r @ r)
-    if denom <= 0.0 or r.size <= max_lag + 1:
-        return 1.0
-    rho = [float(r[:-k] @ r[k:]) / denom for k in range(1, max_lag + 1)]
-    return 1.0 + 2.0 * sum(max(v, 0.0) for v in rho)
+    return replicate_covariance(xs, x_best.size)
 
 
 def _failed(problem: _Problem, band: tuple[float, float], options: FitOptions, message: str) -> FitResult:
