@@ -4,6 +4,7 @@ drivers (``--fast``) and analysed as ``acq analyze`` does (bench/scenarios.py)."
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -45,7 +46,11 @@ def test_ramps_already_short_get_no_advice_to_shorten_them(tmp_path: Path) -> No
     verdict, reasons = _reasons(tmp_path, "", short)
     weak = [r for r in reasons if r.startswith("mean coherence")]
     assert verdict == "failed" and len(weak) == 1
-    assert weak[0] == (
+    # The offset's swing moves with the CPU's BLAS kernels (measured: 757.13 mA on this AVX-512 Xeon, 756.81 with
+    # OPENBLAS_CORETYPE=Haswell, 756.76 Prescott; session 14's CI machine printed 758), so it is read within ±2 mA.
+    offset_mA = re.search(r"an offset moving by (\d+) mA", weak[0])
+    assert offset_mA is not None and abs(int(offset_mA.group(1)) - 758) <= 2
+    assert weak[0].replace(f"moving by {offset_mA.group(1)} mA", "moving by 758 mA") == (
         "mean coherence 0.23 in 10…400 Hz (in closed loop that biases |H|, not only scatters it), below 0.72 in "
         "230…400 Hz, though the speed there is 18 dB above the encoder's quantisation floor and the torque 52 dB above "
         "its estimate's noise: the torque estimate carries power the speed does not follow — interference on the "

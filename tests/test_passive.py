@@ -237,7 +237,7 @@ def test_a_listening_bench_without_the_tpdo_layout_is_refused_naming_file_and_ke
                               "syncs the TPDO itself when it commands the motion)")
     missing = _bench_file(tmp_path, text.replace("tpdo_cob_id = 0x181", "").replace(
         "tpdo_mapping = [0x60410010, 0x60640020]", f'eds = "{tmp_path / "nope.dcf"}"'))
-    run = run_cli(capsys, "monitor", "--bench", str(missing), "--for", "1s", "--out", str(tmp_path / "m"))
+    run = run_cli(capsys, "monitor", "--bench", str(missing), "--for", "10s", "--out", str(tmp_path / "m"))
     assert run.code == 2 and run.err.strip().endswith(f"{tmp_path / 'nope.dcf'}: [drive] eds: no such file")
 
 
