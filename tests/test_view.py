@@ -362,6 +362,30 @@ def test_the_trend_window_waiting_for_a_monitors_first_window_says_so_once_and_c
     assert err == f"waiting for the first window of joint1 in {tmp_path / 'catalogue.sqlite'} …\nacq: interrupted\n"
 
 
+@pytest.mark.parametrize("what", ["missing", "uncatalogued", "file"])
+def test_the_trend_window_of_a_folder_no_monitor_fills_is_one_line_not_a_wait(session: Path, tmp_path: Path,
+                                                                             what: str) -> None:
+    """The report: acq view --trend of a mistyped folder, with a display, waited for ever for a monitor's first window
+    (without a display, or with --screenshot, it said the folder was not there); a folder of sessions never catalogued
+    waited too (a monitor makes its catalogue before its first window). Now one line, exit 2, no window."""
+    folder = tmp_path / ("nosuch" if what == "missing" else "sessions")
+    if what == "uncatalogued":
+        folder.mkdir()
+        shutil.copy(session, folder)
+    elif what == "file":
+        folder.write_text("not a folder")
+    try:
+        run = subprocess.run([sys.executable, "-m", "acq", "view", "--trend", "joint1", str(folder), "--refresh", "1"],
+                             capture_output=True, text=True, timeout=20,
+                             env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
+    except subprocess.TimeoutExpired:
+        pytest.fail("acq view --trend still waiting after 20 s")
+    expected = {"missing": f"{folder / 'catalogue.sqlite'}: no catalogue — the folder {folder} does not exist",
+                "uncatalogued": f"{folder / 'catalogue.sqlite'}: no catalogue — fill one with acq analyze {folder}/ first",
+                "file": f"{folder}: is a file, not a folder"}[what]
+    assert (run.returncode, run.stdout, run.stderr) == (2, "", f"acq: error: {expected}\n")
+
+
 #: ``python -c`` of acq's entry point with a Ctrl-C to itself while Qt's import runs shiboken's start-up (the signature
 #: module imports PySide6.support): the moment a terminal's Ctrl-C made a fatal error (exit 134) or was lost
 _CTRL_C_INSIDE_QT_IMPORT = """

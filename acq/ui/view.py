@@ -64,6 +64,19 @@ def session_figure(path: Path) -> SessionFigure:
     return SessionFigure(Path(path).stem, done.result.figures, done.json_dict)
 
 
+def refuse_unawaited_catalogue(folder: Path | None, catalogue: Path | str | None) -> None:
+    """Raise the :class:`~acq.monitoring.trend_catalogue.NoSessions` of ``acq view --trend`` for a catalogue no monitor
+    is to make (``…/catalogue.sqlite: no catalogue — the folder … does not exist``); nothing for one that is there
+    or may still come."""
+    from acq.monitoring.trend_catalogue import NoSessions, catalogue_location
+
+    try:
+        catalogue_location(folder, catalogue)
+    except NoSessions as e:
+        if not e.awaited:
+            raise
+
+
 #: Smallest side of ``--size``, px: the floor acq view has had since its first version; at 200×200 the report's panels
 #: are already cut off, so a smaller size is a typo.
 MIN_SIDE_PX = 200
@@ -126,11 +139,8 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         else:
             require_folder(path, catalogue_option=True)
     if screenshot is None and not has_display():
-        folder = sessions[0] if sessions else Path("sessions")
-        if trend_joint is not None and catalogue_path is None and not folder.exists():  # a mistyped folder, said first
-            from acq.monitoring.trend_catalogue import catalogue_location
-
-            catalogue_location(folder, None)  # "…: no catalogue — the folder … does not exist"
+        if trend_joint is not None:  # a mistyped folder is said first
+            refuse_unawaited_catalogue(sessions[0] if sessions else None, catalogue_path)
         form = "SESSION" if trend_joint is None else f"--trend {trend_joint} {sessions[0] if sessions else ''}".rstrip()
         raise ConfigError(NO_DISPLAY_MESSAGE.format(form=form))
     from acq.process_signals import signals_deferred
@@ -149,9 +159,10 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
             first: Trend | NoSessions = load()  # any other error (a bad URL, mixed monitors) is one line, no window
         except NoSessions as e:  # started before the monitor has filed its first window: the window waits for it
             # — only when the catalogue has no session yet: one with sessions, none of this joint (and tags), holds a
-            # misspelt joint or tag, which was waited for for ever. A script's picture of "waiting" with exit 0 would
-            # hide a wrong joint or folder; bad input (exit 2), as acq trend says it
-            if screenshot is not None or e.joints:
+            # misspelt joint or tag, which was waited for for ever, as was a folder that is not there. A script's
+            # picture of "waiting" with exit 0 would hide a wrong joint or folder; bad input (exit 2), as acq trend
+            # says it
+            if screenshot is not None or not e.awaited:
                 raise
             first = e
     else:
