@@ -77,8 +77,9 @@ def refuse_unawaited_catalogue(folder: Path | None, catalogue: Path | str | None
             raise
 
 
-#: Smallest side of ``--size``, px: the floor acq view has had since its first version; at 200×200 the report's panels
-#: are already cut off, so a smaller size is a typo.
+#: Smallest side of ``--size``, px, refused before anything loads: the floor acq view has had since its first version; a
+#: smaller size is a typo. The report needs more (one session 921×446 px): :func:`fitting_size` says how much once its
+#: sessions are drawn.
 MIN_SIDE_PX = 200
 #: Largest ``--size`` in pixels (width × height): 8192 × 8192 at 4 bytes a pixel (the RGB32 image acq draws into) is
 #: 256 MiB, the allocation limit of Qt's image readers (QImageReader::allocationLimit, 256 MB by default since Qt 6.0):
@@ -102,13 +103,24 @@ def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[
     return width, height
 
 
+def fitting_size(size: tuple[int, int], minimum: tuple[int, int], given: bool) -> tuple[int, int]:
+    """The window's or screenshot's size, px: ``size`` when the report's ``minimum`` fits in it; ``--size`` left at its
+    default grows to ``minimum`` (several sessions' values are taller than 1000 px); a ``size`` ``given`` smaller is
+    refused in one line naming the minimum (at 1000×700 the FRF was cut off at 60 Hz)."""
+    if given and (size[0] < minimum[0] or size[1] < minimum[1]):
+        raise ConfigError(f"--size {size[0]}x{size[1]}: too small for this report — it needs at least "
+                          f"{minimum[0]}x{minimum[1]} px (smaller, its plots and values would be cut off)")
+    return max(size[0], minimum[0]), max(size[1], minimum[1])
+
+
 @click.command(name="view")
 @click.argument("sessions", nargs=-1, type=click.Path(path_type=Path))
 @click.option("--screenshot", type=PngPath(), default=None,
               help="Draw the window offscreen into this PNG and exit (needs no display).")
 @click.option("--size", default="1600x1000", show_default=True, callback=_parse_size,
               help="Window / screenshot size WIDTHxHEIGHT, px: each side 200 or more, at most 8192x8192 pixels "
-                   "in all.")
+                   "in all; a report refuses one smaller than it needs (one session: about 920x450), and the default "
+                   "grows to it.")
 @click.option("--trend", "trend_joint", default=None, metavar="JOINT",
               help="Show the stiffness trend of JOINT from the catalogue of the folder given (default sessions/).")
 @click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
@@ -180,6 +192,8 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
             title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}"
                      if len(figures) == 1 else f"{len(figures)} sessions")
             window = ReportView(figures, title=title)
+            given = click.get_current_context().get_parameter_source("size") != click.core.ParameterSource.DEFAULT
+            size = fitting_size(size, window.minimum_size(), given)
         if screenshot is not None:
             grab_png(window, screenshot, size)
         else:
