@@ -275,6 +275,28 @@ def test_a_session_that_is_no_regular_file_is_named_so(capsys: pytest.CaptureFix
                                       "session file\n")
 
 
+@pytest.mark.parametrize("command", [("analyze",), ("analyze", "{other}"), ("info",), ("check",),
+                                     ("export", "--csv", "{folder}/csv"), ("view", "--screenshot", "{folder}/v.png")],
+                         ids=["analyze", "batch", "info", "check", "export", "view"])
+def test_a_catalogue_given_for_a_session_is_named_so_with_the_commands_that_read_it(
+        tmp_path: Path, capsys: pytest.CaptureFixture[str], command: tuple[str, ...]) -> None:
+    """The report: acq analyze sessions/catalogue.sqlite said "not a readable HDF5 session file (no HDF5 signature:
+    another kind of file)", which neither said what the file is nor what reads it (a batch listed it as a failed
+    session)."""
+    catalogue = _catalogue(tmp_path / "monitor") / "catalogue.sqlite"
+    other = tmp_path / "s.h5"
+    other.touch()
+    name, *rest = command
+    run = run_cli(capsys, name, str(catalogue), *(a.format(folder=tmp_path, other=other) for a in rest))
+    assert (run.code, run.out) == (2, "")
+    assert run.err == (f"acq: error: {catalogue}: is a catalogue (SQLite) file, not a session file — read it with "
+                       f"acq fleet --catalogue {catalogue} (every joint's latest K) or acq trend --joint NAME "
+                       f"--catalogue {catalogue} (one joint over time)\n")
+    fleet = run_cli(capsys, "fleet", "--catalogue", str(catalogue))  # what it names reads it
+    trend = run_cli(capsys, "trend", "--joint", "joint1", "--catalogue", str(catalogue))
+    assert (fleet.code, trend.code) == (0, 0) and "joint1" in fleet.out and "890.0" in trend.out
+
+
 def test_view_refuses_a_tag_without_a_trend(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     run = run_cli(capsys, "view", str(tmp_path / "s.h5"), "--tag", "pose=x", "--screenshot", str(tmp_path / "v.png"))
     assert (run.code, run.out) == (2, "")

@@ -60,9 +60,9 @@ def test_analyze_of_a_session_in_a_latin1_folder_files_its_path_in_the_catalogue
 
 def test_view_screenshot_into_a_latin1_folder_is_written(recorded: Path) -> None:
     """It said "acq: error: I/O error: Pr\\udcfcfstand/v.png" (Qt's QString file name cannot carry the bytes)."""
-    run = _acq(recorded, "view", LATIN1 + b"/s.h5", "--screenshot", LATIN1 + b"/v.png", "--size", "800x600")
+    run = _acq(recorded, "view", LATIN1 + b"/s.h5", "--screenshot", LATIN1 + b"/v.png", "--size", "1000x700")
     assert (run.returncode, run.stderr) == (0, b"")
-    assert run.stdout == b"screenshot: " + LATIN1 + "/v.png (800×600 px)\n".encode()
+    assert run.stdout == b"screenshot: " + LATIN1 + "/v.png (1000×700 px)\n".encode()
     assert (recorded / os.fsdecode(LATIN1) / "v.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 

@@ -195,6 +195,49 @@ def test_at_1200x800_the_plots_fit_the_window_and_each_axis_label_stays_beside_i
     assert not any(labels[a].intersects(labels[b]) for a, b in zip(names, names[1:]))
 
 
+def _assert_nothing_cut_off(view: Any) -> None:
+    """Every plot, the legend and the headings inside the plots' area, the values inside the panel (measured in the
+    scene and the widget, as drawn)."""
+    area = QtCore.QRectF(0, 0, view.graphics.width(), view.graphics.height())
+    items = {**view.plots, "legend": view.legend,
+             **{f"label {i}": item for i, item in enumerate(view.graphics.ci.items) if type(item).__name__ == "LabelItem"}}
+    for name, item in items.items():
+        box = item.sceneBoundingRect()
+        assert area.contains(box), (name, box, area)
+    assert view.graphics.ci.layout.minimumSize().width() <= area.width()
+    assert view.panel.heightForWidth(view.panel.width()) <= view.panel.height()
+
+
+def test_at_1000x700_nothing_is_cut_off_and_a_size_too_small_is_refused_naming_the_minimum(
+        session: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """The report: at --size 1000x700 the two-column legend made the plots 828 px wide in the 640 px beside the values
+    (the FRF, misfit, phase and coherence cut off at 60 Hz, f_r's label with them). The legend now takes one column
+    where two do not fit; a size smaller than the report's minimum is one line naming it, exit 2, no PNG."""
+    from acq.ui.qt_app import ensure_app, grab_png
+    from acq.ui.report_view import ReportView
+    from acq.ui.view import session_figure
+
+    shot = tmp_path / "shot.png"
+    run = run_cli(capsys, "view", str(session), "--screenshot", str(shot), "--size", "1000x700")
+    assert (run.code, run.out) == (0, f"screenshot: {shot} (1000×700 px)\n")
+    _assert_real_image(shot, (1000, 700))
+    ensure_app()
+    view = ReportView([session_figure(session)], title=f"joint1 · {session.name}")
+    width, height = view.minimum_size()
+    assert 880 <= width <= 960 and 420 <= height <= 480  # 921×446 px with Qt 6.11's fonts here
+    for size, columns in (((1000, 700), 1), ((width, height), 1), ((1600, 1000), 2)):
+        grab_png(view, tmp_path / "report.png", size)
+        assert view.legend.columnCount == columns, size
+        _assert_nothing_cut_off(view)
+    assert view.plots["torque"].vb.sceneBoundingRect().left() == view.plots["speed"].vb.sceneBoundingRect().left()
+    small = tmp_path / "small.png"
+    run = run_cli(capsys, "view", str(session), "--screenshot", str(small), "--size", f"{width - 1}x{height}")
+    assert (run.code, run.out) == (2, "")
+    assert run.err == (f"acq: error: --size {width - 1}x{height}: too small for this report — it needs at least "
+                       f"{width}x{height} px (smaller, its plots and values would be cut off)\n")
+    assert not small.exists()
+
+
 def test_phase_panel_when_the_clocks_are_aligned_and_none_when_not(session: Path, tmp_path: Path) -> None:
     from acq.ui.qt_app import ensure_app
     from acq.ui.report_panel import SessionFigure
@@ -230,7 +273,7 @@ def test_screenshot_and_report_are_real_images_of_the_asked_size(session: Path, 
     _assert_real_image(session.with_name(session.stem + ".report.png"), (1600, 1000))
 
 
-def test_without_a_display_view_says_so_in_one_line(session: Path, monkeypatch: pytest.MonkeyPatch,
+def test_without_a_display_view_says_so_in_one_line(session: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
                                                    capsys: pytest.CaptureFixture[str]) -> None:
     for name in ("DISPLAY", "WAYLAND_DISPLAY", "QT_QPA_PLATFORM"):
         monkeypatch.delenv(name, raising=False)
@@ -239,10 +282,18 @@ def test_without_a_display_view_says_so_in_one_line(session: Path, monkeypatch: 
     assert (run.code, run.out) == (2, "")
     assert run.err == ("acq: error: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window as an image "
                        "instead: acq view SESSION --screenshot out.png\n")
-    run = run_cli(capsys, "view", "--trend", "joint1", str(session.parent))  # a trend's own form, not a session's
+    # a trend's own form, not a session's: of a folder a monitor may still fill (one of uncatalogued sessions is said
+    # first, as a window would say it)
+    run = run_cli(capsys, "view", "--trend", "joint1", str(tmp_path))
     assert (run.code, run.err) == (2, "acq: error: no display (DISPLAY and WAYLAND_DISPLAY are unset) — save the window "
-                                      f"as an image instead: acq view --trend joint1 {session.parent} --screenshot "
+                                      f"as an image instead: acq view --trend joint1 {tmp_path} --screenshot "
                                       "out.png\n")
+    uncatalogued = tmp_path / "sessions"
+    uncatalogued.mkdir()
+    shutil.copy(session, uncatalogued)
+    run = run_cli(capsys, "view", "--trend", "joint1", str(uncatalogued))
+    assert (run.code, run.err) == (2, f"acq: error: {uncatalogued / 'catalogue.sqlite'}: no catalogue — fill one with "
+                                      f"acq analyze {uncatalogued}/ first\n")
     run = run_cli(capsys, "record", "--profile", "triangle_0.2s", "--fast", "--live", "--out",
                   str(session.parent / "live"))
     assert (run.code, run.err) == (2, "acq: error: --live needs a display (DISPLAY or WAYLAND_DISPLAY is unset); "
@@ -360,6 +411,30 @@ def test_the_trend_window_waiting_for_a_monitors_first_window_says_so_once_and_c
     err = _stop_and_wait(proc, signal.SIGINT)
     assert proc.returncode == 130
     assert err == f"waiting for the first window of joint1 in {tmp_path / 'catalogue.sqlite'} …\nacq: interrupted\n"
+
+
+@pytest.mark.parametrize("what", ["missing", "uncatalogued", "file"])
+def test_the_trend_window_of_a_folder_no_monitor_fills_is_one_line_not_a_wait(session: Path, tmp_path: Path,
+                                                                             what: str) -> None:
+    """The report: acq view --trend of a mistyped folder, with a display, waited for ever for a monitor's first window
+    (without a display, or with --screenshot, it said the folder was not there); a folder of sessions never catalogued
+    waited too (a monitor makes its catalogue before its first window). Now one line, exit 2, no window."""
+    folder = tmp_path / ("nosuch" if what == "missing" else "sessions")
+    if what == "uncatalogued":
+        folder.mkdir()
+        shutil.copy(session, folder)
+    elif what == "file":
+        folder.write_text("not a folder")
+    try:
+        run = subprocess.run([sys.executable, "-m", "acq", "view", "--trend", "joint1", str(folder), "--refresh", "1"],
+                             capture_output=True, text=True, timeout=20,
+                             env={**os.environ, "QT_QPA_PLATFORM": "offscreen"})
+    except subprocess.TimeoutExpired:
+        pytest.fail("acq view --trend still waiting after 20 s")
+    expected = {"missing": f"{folder / 'catalogue.sqlite'}: no catalogue — the folder {folder} does not exist",
+                "uncatalogued": f"{folder / 'catalogue.sqlite'}: no catalogue — fill one with acq analyze {folder}/ first",
+                "file": f"{folder}: is a file, not a folder"}[what]
+    assert (run.returncode, run.stdout, run.stderr) == (2, "", f"acq: error: {expected}\n")
 
 
 #: ``python -c`` of acq's entry point with a Ctrl-C to itself while Qt's import runs shiboken's start-up (the signature

@@ -19,13 +19,15 @@ from acqcore.errors import ConfigError
 
 
 class NoSessions(ConfigError):
-    """The catalogue has no session of the joint asked for, or there is no catalogue file yet (``acq view --trend``
-    waits for a monitor's first window). ``location``: the catalogue (a URL without its password); ``joints``: the
-    joints it has."""
+    """The catalogue has no session of the joint asked for, or there is no catalogue file yet. ``location``: the
+    catalogue (a URL without its password); ``joints``: the joints it has. ``awaited``: a monitor may still file the
+    joint's first window there, so ``acq view --trend`` waits for it — the catalogue is empty, or not made yet in a
+    folder that exists, may be written and holds no session file; not for a folder that is not there (a mistyped
+    path was waited for for ever), one of sessions never catalogued, or a catalogue of other joints."""
 
-    def __init__(self, message: str, location: Path | str, joints: Sequence[str] = ()) -> None:
+    def __init__(self, message: str, location: Path | str, joints: Sequence[str] = (), *, awaited: bool) -> None:
         super().__init__(message)
-        self.location, self.joints = location, list(joints)
+        self.location, self.joints, self.awaited = location, list(joints), awaited
 
 
 def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Path | str:
@@ -39,7 +41,9 @@ def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Pat
                 if not sessions.exists() else
                 f"{sessions} is not writable ({refused}): fill one with acq analyze {sessions}/ --result-dir DIR, "
                 "then acq trend DIR" if refused else f"fill one with acq analyze {sessions}/ first")
-        raise NoSessions(f"{path}: no catalogue — {fill}", path)
+        uncatalogued = not catalogue and sessions.is_dir() and any(sessions.glob("*.h5"))
+        awaited = Path(path).parent.is_dir() and refused is None and not uncatalogued
+        raise NoSessions(f"{path}: no catalogue — {fill}", path, awaited=awaited)
     return path
 
 
@@ -73,7 +77,7 @@ def load_trend(folder: Path | None, catalogue_path: Path | str | None, joint: st
         if not entries:
             joints = catalogue.joints()
             raise NoSessions(f"{catalogue.path}: no sessions of joint {joint}{tagged} "
-                             f"(joints: {', '.join(joints) or 'none'})", catalogue.path, joints)
+                             f"(joints: {', '.join(joints) or 'none'})", catalogue.path, joints, awaited=not joints)
         histories = split_by_monitor(entries)
         if len(histories) > 1:  # several monitors (or one and a bench's sessions), one joint name: one trend mixes them
             monitors = monitors_of(entries)

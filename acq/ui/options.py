@@ -11,6 +11,7 @@ from typing import Any, TypeVar
 import click
 
 from acq.monitoring.catalogue_backends import URL_SCHEMES, folder_error, is_url, redacted
+from acq.recording.paths import is_catalogue_file
 from acqcore.errors import ConfigError
 
 
@@ -65,10 +66,6 @@ class PngPath(click.ParamType):
         return path
 
 
-#: The first bytes of every SQLite database file (sqlite.org/fileformat.html, "The Database Header").
-SQLITE_HEADER = b"SQLite format 3\0"
-
-
 def require_folder(path: Path, option: str | None = None, *, catalogue_option: bool = False,
                    its_folder: bool = True) -> None:
     """Refuse ``path`` in one line (bad input) when it exists but is not a folder, naming ``option`` (``--out``) or,
@@ -79,12 +76,7 @@ def require_folder(path: Path, option: str | None = None, *, catalogue_option: b
     if not path.exists() or path.is_dir():
         return
     named = f"{option} {path}" if option else str(path)
-    try:
-        with path.open("rb") as f:
-            catalogue = f.read(len(SQLITE_HEADER)) == SQLITE_HEADER
-    except OSError:  # unreadable: a file all the same
-        catalogue = False
-    if not catalogue:
+    if not is_catalogue_file(path):  # unreadable: a file all the same
         raise ConfigError(f"{named}: is a file, not a folder")
     folder = f"{option} {path.parent}" if option else str(path.parent)
     raise ConfigError(f"{named}: is a catalogue (SQLite) file, not a folder — give "

@@ -35,7 +35,7 @@ import pyqtgraph as pg
 import shiboken6
 from pyqtgraph.Qt import QtCore, QtGui, QtWidgets
 
-from acq.ui.plot_style import COLORS, add_plot, legend_box, log_ticks, positive, with_alpha
+from acq.ui.plot_style import COLORS, TITLE_SIZE, add_plot, legend_box, log_ticks, positive, with_alpha
 from acq.ui.qt_app import DEFAULT_SIZE_PX, ensure_app, save_png, widget_image
 from acq.ui.report_marks import VERDICT_MARK_COLOR, place_marks, setup_mark_strip, verdict_mark, verdict_marks
 from acq.ui.report_panel import SessionFigure, values_html
@@ -44,6 +44,10 @@ from analysis import FigureData
 
 PANEL_WIDTH_PX = 360  # the side panel's width (twice that for more than three sessions)
 LEGEND_ROW_PX = 20  # height of a legend row (9 pt text, pyqtgraph's 20 px samples)
+#: Width of the time traces' y axes, px: one width, so that the two linked time axes line up (each axis sized itself
+#: to its tick labels: torque's 18 px narrower than speed's) and the report's minimum size is known before it is drawn
+#: (:meth:`ReportView.minimum_size`); room for four characters of tick label ("-100", "0.05") beside the axis's name.
+TRACE_AXIS_PX = 56
 #: The measured |H| of a single session: dark grey, apart from the model in the session's colour (both were blue). With
 #: several sessions the colour tells the sessions apart, and the measured dots are a faint shade of it.
 MEASURED_COLOR = "#404040"
@@ -107,9 +111,10 @@ class ReportView(QtWidgets.QWidget):
             layout.addLabel(escape(title), row=0, col=0, colspan=2, size="12pt")
         phase = any(s.figures.phase_valid for s in sessions)
         misfit = any(s.figures.misfit_pct.size == s.figures.f_hz.size for s in sessions)
-        layout.addLabel("FRF |ω_m / T_e| with the fitted two-mass model", row=1, col=1, size="11pt")
+        layout.addLabel("FRF |ω_m / T_e| with the fitted two-mass model", row=1, col=1, size=TITLE_SIZE)
         # two columns, not three: three made the scene at least 1076 px wide, wider than the plots get in a 1200 px
-        # window (its right part cut off: the FRF above 80 Hz, f_r's label, the title)
+        # window (its right part cut off: the FRF above 80 Hz, f_r's label, the title); one where two do not fit
+        # (resizeEvent)
         self.legend = pg.LegendItem(colCount=1 if len(sessions) > 1 else 2, labelTextSize="9pt")
         layout.addItem(self.legend, row=2, col=1)
         marks = layout.addPlot(row=3, col=1)
@@ -133,6 +138,8 @@ class ReportView(QtWidgets.QWidget):
             layout.layout.setRowStretchFactor(row, stretch)
         layout.layout.setColumnStretchFactor(1, 2)  # the frequency panels twice the traces' width where there is room
         self.plots["speed"].setXLink(self.plots["torque"])
+        for name in ("torque", "speed"):
+            self.plots[name].getAxis("left").setWidth(TRACE_AXIS_PX)
         frf = self.plots["frf"]
         frf.setLogMode(x=True, y=True)
         for name in lower:
@@ -163,9 +170,10 @@ class ReportView(QtWidgets.QWidget):
             self.legend.addItem(legend_box(*_allowance_style()), "allowed misfit (noise, quantisation)")
         for band in dict.fromkeys(s.figures.band_hz for s in sessions):
             self.legend.addItem(legend_box(self._shade_band(band)), f"fit band {band[0]:g}–{band[1]:g} Hz")
-        rows = -(-len(self.legend.items) // self.legend.columnCount)
         layout.layout.setRowFixedHeight(1, 24)
-        layout.layout.setRowFixedHeight(2, rows * LEGEND_ROW_PX + 6)
+        self._legend_columns = self.legend.columnCount  # where they fit
+        self._set_legend_columns(self._legend_columns)
+        self._legend_columns_min_px = layout.layout.minimumSize().width()  # the plots' narrowest with them
         self.panel = QtWidgets.QLabel(values_html(sessions))
         self.panel.setTextFormat(QtCore.Qt.TextFormat.RichText)
         self.panel.setAlignment(QtCore.Qt.AlignmentFlag.AlignTop | QtCore.Qt.AlignmentFlag.AlignLeft)
@@ -177,7 +185,31 @@ class ReportView(QtWidgets.QWidget):
         box.setSpacing(0)
         box.addWidget(self.graphics, stretch=1)
         box.addWidget(self.panel)
+        self.setMinimumSize(*self.minimum_size())  # a window made smaller would cut plots off
         self.resize(*DEFAULT_SIZE_PX)
+
+    def minimum_size(self) -> tuple[int, int]:
+        """The smallest (width, height), px, at which nothing is cut off: the plots at their narrowest (the legend in
+        one column) beside the side panel, as high as the higher of the two. One session: 921×446 px."""
+        columns = self.legend.columnCount
+        self._set_legend_columns(1)
+        plots = self.graphics.ci.layout.minimumSize()
+        self._set_legend_columns(columns)
+        panel_px = self.panel.minimumWidth()
+        return (math.ceil(plots.width()) + panel_px,
+                max(math.ceil(plots.height()), self.panel.heightForWidth(panel_px)))
+
+    def resizeEvent(self, event: QtGui.QResizeEvent) -> None:  # noqa: N802 - Qt's name
+        """The legend in its columns where they fit beside the panel, else in one (two made the plots 828 px wide at
+        least, which a 1000 px window gave 640: the FRF was cut off at 60 Hz, f_r with it)."""
+        room_px = event.size().width() - self.panel.minimumWidth()
+        self._set_legend_columns(self._legend_columns if room_px >= self._legend_columns_min_px else 1)
+        super().resizeEvent(event)
+
+    def _set_legend_columns(self, columns: int) -> None:
+        """Lay the legend out in ``columns`` columns, its row as high as its rows."""
+        self.legend.setColumnCount(columns)
+        self.graphics.ci.layout.setRowFixedHeight(2, self.legend.rowCount * LEGEND_ROW_PX + 6)
 
     def _shade_band(self, band_hz: tuple[float, float]) -> QtGui.QBrush:
         """The fit band, shaded on the FRF, the misfit, the phase and the coherence; returns its brush."""

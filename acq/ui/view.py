@@ -64,8 +64,22 @@ def session_figure(path: Path) -> SessionFigure:
     return SessionFigure(Path(path).stem, done.result.figures, done.json_dict)
 
 
-#: Smallest side of ``--size``, px: the floor acq view has had since its first version; at 200×200 the report's panels
-#: are already cut off, so a smaller size is a typo.
+def refuse_unawaited_catalogue(folder: Path | None, catalogue: Path | str | None) -> None:
+    """Raise the :class:`~acq.monitoring.trend_catalogue.NoSessions` of ``acq view --trend`` for a catalogue no monitor
+    is to make (``…/catalogue.sqlite: no catalogue — the folder … does not exist``); nothing for one that is there
+    or may still come."""
+    from acq.monitoring.trend_catalogue import NoSessions, catalogue_location
+
+    try:
+        catalogue_location(folder, catalogue)
+    except NoSessions as e:
+        if not e.awaited:
+            raise
+
+
+#: Smallest side of ``--size``, px, refused before anything loads: the floor acq view has had since its first version; a
+#: smaller size is a typo. The report needs more (one session 921×446 px): :func:`fitting_size` says how much once its
+#: sessions are drawn.
 MIN_SIDE_PX = 200
 #: Largest ``--size`` in pixels (width × height): 8192 × 8192 at 4 bytes a pixel (the RGB32 image acq draws into) is
 #: 256 MiB, the allocation limit of Qt's image readers (QImageReader::allocationLimit, 256 MB by default since Qt 6.0):
@@ -89,13 +103,24 @@ def _parse_size(ctx: click.Context, param: click.Parameter, text: str) -> tuple[
     return width, height
 
 
+def fitting_size(size: tuple[int, int], minimum: tuple[int, int], given: bool) -> tuple[int, int]:
+    """The window's or screenshot's size, px: ``size`` when the report's ``minimum`` fits in it; ``--size`` left at its
+    default grows to ``minimum`` (several sessions' values are taller than 1000 px); a ``size`` ``given`` smaller is
+    refused in one line naming the minimum (at 1000×700 the FRF was cut off at 60 Hz)."""
+    if given and (size[0] < minimum[0] or size[1] < minimum[1]):
+        raise ConfigError(f"--size {size[0]}x{size[1]}: too small for this report — it needs at least "
+                          f"{minimum[0]}x{minimum[1]} px (smaller, its plots and values would be cut off)")
+    return max(size[0], minimum[0]), max(size[1], minimum[1])
+
+
 @click.command(name="view")
 @click.argument("sessions", nargs=-1, type=click.Path(path_type=Path))
 @click.option("--screenshot", type=PngPath(), default=None,
               help="Draw the window offscreen into this PNG and exit (needs no display).")
 @click.option("--size", default="1600x1000", show_default=True, callback=_parse_size,
               help="Window / screenshot size WIDTHxHEIGHT, px: each side 200 or more, at most 8192x8192 pixels "
-                   "in all.")
+                   "in all; a report refuses one smaller than it needs (one session: about 920x450), and the default "
+                   "grows to it.")
 @click.option("--trend", "trend_joint", default=None, metavar="JOINT",
               help="Show the stiffness trend of JOINT from the catalogue of the folder given (default sessions/).")
 @click.option("--catalogue", "catalogue_path", type=CatalogueLocation(), default=None,
@@ -126,11 +151,8 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
         else:
             require_folder(path, catalogue_option=True)
     if screenshot is None and not has_display():
-        folder = sessions[0] if sessions else Path("sessions")
-        if trend_joint is not None and catalogue_path is None and not folder.exists():  # a mistyped folder, said first
-            from acq.monitoring.trend_catalogue import catalogue_location
-
-            catalogue_location(folder, None)  # "…: no catalogue — the folder … does not exist"
+        if trend_joint is not None:  # a mistyped folder is said first
+            refuse_unawaited_catalogue(sessions[0] if sessions else None, catalogue_path)
         form = "SESSION" if trend_joint is None else f"--trend {trend_joint} {sessions[0] if sessions else ''}".rstrip()
         raise ConfigError(NO_DISPLAY_MESSAGE.format(form=form))
     from acq.process_signals import signals_deferred
@@ -149,9 +171,10 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
             first: Trend | NoSessions = load()  # any other error (a bad URL, mixed monitors) is one line, no window
         except NoSessions as e:  # started before the monitor has filed its first window: the window waits for it
             # — only when the catalogue has no session yet: one with sessions, none of this joint (and tags), holds a
-            # misspelt joint or tag, which was waited for for ever. A script's picture of "waiting" with exit 0 would
-            # hide a wrong joint or folder; bad input (exit 2), as acq trend says it
-            if screenshot is not None or e.joints:
+            # misspelt joint or tag, which was waited for for ever, as was a folder that is not there. A script's
+            # picture of "waiting" with exit 0 would hide a wrong joint or folder; bad input (exit 2), as acq trend
+            # says it
+            if screenshot is not None or not e.awaited:
                 raise
             first = e
     else:
@@ -169,6 +192,8 @@ def view_command(sessions: tuple[Path, ...], screenshot: Path | None, size: tupl
             title = (f"{figures[0].values.get('session', {}).get('joint', '')} · {sessions[0].name}"
                      if len(figures) == 1 else f"{len(figures)} sessions")
             window = ReportView(figures, title=title)
+            given = click.get_current_context().get_parameter_source("size") != click.core.ParameterSource.DEFAULT
+            size = fitting_size(size, window.minimum_size(), given)
         if screenshot is not None:
             grab_png(window, screenshot, size)
         else:
