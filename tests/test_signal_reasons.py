@@ -22,42 +22,49 @@ from tests.test_monitor import ROBOT
 
 ROOT = Path(__file__).resolve().parents[1]
 
-#: ``acq ARGV[3:]`` in a child whose ``MODULE.CLASS.METHOD`` (argv[2]) first lets an object be collected whose
-#: ``__del__`` touches the marker file argv[1] and waits (≤ 60 s) for a stop signal to raise in it; Python prints
-#: nothing of it (acq's unraisable hook takes a KeyboardInterrupt) and the method runs on.
+#: ``acq ARGV[4:]`` in a child whose ``MODULE.CLASS.METHOD`` (argv[3]) first touches the marker file argv[1] and
+#: waits (≤ 60 s) for a stop signal to raise: with argv[2] ``swallowed`` in the ``__del__`` of an object collected
+#: there — Python prints nothing of it (acq's unraisable hook takes a KeyboardInterrupt) and the method runs on —,
+#: with ``raised`` in the method itself, out of which it goes.
 _SWALLOWED_AT = """
 import importlib, sys, time
 from pathlib import Path
-marker, where = Path(sys.argv[1]), sys.argv[2]
+marker, how, where = Path(sys.argv[1]), sys.argv[2], sys.argv[3]
 module, cls, method = where.rsplit(".", 2)
 owner = getattr(importlib.import_module(module), cls)
 original = getattr(owner, method)
 
+def wait_for_the_signal():
+    marker.touch()
+    end = time.monotonic() + 60
+    while time.monotonic() < end:
+        time.sleep(0.01)
+
 class SignalLandsHere:
     def __del__(self):
-        marker.touch()
-        end = time.monotonic() + 60
-        while time.monotonic() < end:
-            time.sleep(0.01)
+        wait_for_the_signal()
 
-def swallowing_first(self, *args, **kwargs):
+def signalled_first(self, *args, **kwargs):
     if not marker.exists():
-        SignalLandsHere()  # no reference kept: collected, its __del__ run, at once
+        if how == "swallowed":
+            SignalLandsHere()  # no reference kept: collected, its __del__ run, at once
+        else:
+            wait_for_the_signal()
     return original(self, *args, **kwargs)
 
-setattr(owner, method, swallowing_first)
-sys.argv = ["acq", *sys.argv[3:]]
+setattr(owner, method, signalled_first)
+sys.argv = ["acq", *sys.argv[4:]]
 from acq.entry import main
 main()
 """
 
 
-def _signalled_at_the_swallowing_point(tmp_path: Path, signum: int, where: str, *args: str) -> tuple[int, list[str]]:
-    """Run ``acq ARGS`` with :data:`_SWALLOWED_AT` at ``where``, send ``signum`` once the child waits there; its exit
-    code and stderr's lines."""
+def _signalled_at(tmp_path: Path, signum: int, how: str, where: str, *args: str) -> tuple[int, list[str]]:
+    """Run ``acq ARGS`` with :data:`_SWALLOWED_AT` at ``where`` (``how``: ``swallowed`` or ``raised``), send
+    ``signum`` once the child waits there; its exit code and stderr's lines starting ``acq:``."""
     script, marker = tmp_path / "swallowed.py", tmp_path / "in_del"
     script.write_text(_SWALLOWED_AT)
-    proc = subprocess.Popen([sys.executable, str(script), str(marker), where, *args], stdout=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, str(script), str(marker), how, where, *args], stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
     end = time.monotonic() + 120
     while not marker.exists():
@@ -81,8 +88,8 @@ def test_a_swallowed_signal_stops_a_recording_with_its_own_reason(tmp_path: Path
     yet set); delivered again 0.05 s later it stops the recording. Before: status interrupted, reason "interrupted by
     user (Ctrl-C)", and that line printed."""
     out = tmp_path / "sessions"
-    code, lines = _signalled_at_the_swallowing_point(
-        tmp_path, signum, "acq.recording.recorder.Recorder.run", "record", "--profile", str(seeded_profile(tmp_path)),
+    code, lines = _signalled_at(
+        tmp_path, signum, "swallowed", "acq.recording.recorder.Recorder.run", "record", "--profile", str(seeded_profile(tmp_path)),
         "--duration", "20", "--no-analyze", "--out", str(out))
     (path,) = out.glob("*.h5")
     reason = STOP_REASONS[signum]
@@ -97,10 +104,23 @@ def test_a_swallowed_signal_stops_a_monitor_with_its_own_reason(tmp_path: Path, 
     delivered again it stops the monitor in its first window. Before: "acq: interrupted by user (Ctrl-C): …", the
     window's file stopped with that reason."""
     out = tmp_path / "m"
-    code, lines = _signalled_at_the_swallowing_point(
-        tmp_path, signum, "acq.monitoring.monitor.Monitor._signals", "monitor", "--bench", str(ROBOT), "--window",
+    code, lines = _signalled_at(
+        tmp_path, signum, "swallowed", "acq.monitoring.monitor.Monitor._signals", "monitor", "--bench", str(ROBOT), "--window",
         "10", "--every", "10", "--out", str(out))
     reason = STOP_REASONS[signum]
     assert code == 130, lines
     assert lines[-1].startswith(f"acq: {reason}: ") and "Ctrl-C" not in "".join(lines), lines
     assert [_stop_reason(p) for p in out.glob("*.h5")] in ([], [("interrupted", reason)])
+
+
+def test_a_signal_before_the_recording_started_names_itself(tmp_path: Path) -> None:
+    """A SIGTERM raised as the recording starts (its file made, the recorder's handlers not yet set) finishes the file
+    empty. Before: its reason "interrupted by user (Ctrl-C)", and "acq: interrupted before the recording started"."""
+    out = tmp_path / "sessions"
+    code, lines = _signalled_at(tmp_path, signal.SIGTERM, "raised", "acq.recording.recorder.Recorder.run", "record",
+                                "--profile", str(seeded_profile(tmp_path)), "--duration", "20", "--no-analyze",
+                                "--out", str(out))
+    (path,) = out.glob("*.h5")
+    assert (code, _stop_reason(path)) == (130, ("interrupted", "stopped by SIGTERM"))
+    assert lines == [f"acq: stopped by SIGTERM before the recording started — nothing recorded ({path}: no samples, "
+                     "status interrupted)"]

@@ -170,8 +170,8 @@ INTERRUPT_AGAIN_S = 0.05
 
 def _interrupt_again(unraisable: Any) -> None:
     """``sys.unraisablehook`` while acq runs: a Ctrl-C (SIGTERM, SIGHUP) that Python could not raise where it landed —
-    in a weakref callback or a ``__del__`` it printed "Exception ignored in …" with a traceback and the command went on
-    as if none had come (1 of 30 ``acq record`` runs, SIGINT during the identification: exit 0) — reaches the main
+    in a weakref callback or a ``__del__`` it printed "Exception ignored in …" with a traceback and the command went
+    on as if none had come (1 of 30 ``acq record`` runs, SIGINT during the identification: exit 0) — reaches the main
     thread's handler of the same signal again :data:`INTERRUPT_AGAIN_S` later, from another thread (from here it would
     be raised inside this hook, and lost), to be raised in the command's own code or taken by a recorder's handler
     (with SIGINT's, a SIGTERM stopped a recording as "interrupted by user (Ctrl-C)"); anything else goes to the hook

@@ -159,8 +159,8 @@ def _interrupted_after_recording(result: RecordingResult, e: BaseException, *, a
     from analysis import AnalysisRequest
 
     if result.status == "complete":
-        line = (f"acq: {_stopped(e)} after the recording — {result.path} is complete ({result.current_samples} current "
-                f"samples, {result.encoder_samples} encoder samples)")
+        line = (f"acq: {_stopped(e)} after the recording — {result.path} is complete ({result.current_samples} "
+                f"current samples, {result.encoder_samples} encoder samples)")
     else:
         line = f"acq: interrupted: {result.stop_reason} — {_kept(result)}"
     if not analyze or not (result.current_samples and result.encoder_samples):
