@@ -259,8 +259,8 @@ class Recorder:
         status: Status = "complete"
         reason = f"recorded {self.duration_s:g} s"
         with stop_on_signals(self.request_stop):
-            # from here a stop signal raises nothing and the file is finished below; one before, a KeyboardInterrupt,
-            # leaves it to abort() (the file was left "recording" when it came after _ran was set, before this)
+            # from here a stop signal raises nothing and the file is finished below; one before (a KeyboardInterrupt)
+            # leaves it to abort() — _ran was set before the handlers, and one in between left the file "recording"
             self._ran = True
             try:
                 # Motion first: the started devices buffer their samples meanwhile, and a simulated
