@@ -3,6 +3,7 @@ command (no other dependency)."""
 
 from __future__ import annotations
 
+import _thread
 import contextlib
 import os
 import signal
@@ -23,7 +24,40 @@ STOP_REASONS: dict[int, str] = {
 STOP_SIGNALS: tuple[int, ...] = tuple(STOP_REASONS)
 
 
+class StopSignal(KeyboardInterrupt):
+    """The KeyboardInterrupt a stop signal other than Ctrl-C raises (SIGTERM, SIGHUP): it carries the signal's number,
+    so the reason a file stores and a line prints names that signal, not Ctrl-C."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+
+def signal_of(e: BaseException | None) -> int:
+    """The stop signal that raised ``e``: its ``signum`` (:class:`StopSignal`, or an exception of acq's that carries
+    one), else SIGINT (Python's own KeyboardInterrupt is Ctrl-C's)."""
+    signum = getattr(e, "signum", signal.SIGINT)
+    return signum if signum in STOP_REASONS else signal.SIGINT
+
+
+def stop_reason(e: BaseException | None) -> str:
+    """The stop reason (:data:`STOP_REASONS`) of the stop signal that raised ``e``."""
+    return STOP_REASONS[signal_of(e)]
+
+
 _hung_up = False
+_hangup_again = False
+
+
+def deliver_again(signum: int) -> None:
+    """Deliver stop signal ``signum`` once more to the main thread's handler of that signal (from another thread:
+    where it was raised, Python lost it). It used to go to SIGINT's handler, whatever the signal: a SIGTERM or SIGHUP
+    then stopped a recording as "interrupted by user (Ctrl-C)". A SIGHUP delivered again is not taken for the
+    terminal's second (:func:`repeated_hangup`). Nothing happens where Python has no handler of ``signum``."""
+    global _hangup_again
+    if signum == signal.SIGHUP:
+        _hangup_again = True
+    _thread.interrupt_main(signum)
 
 
 def repeated_hangup(signum: int) -> bool:
@@ -32,10 +66,13 @@ def repeated_hangup(signum: int) -> bool:
     that quits at once (the review: a recording's file finished, then a KeyboardInterrupt in the drain). On the first,
     standard output and error that went to the terminal go to /dev/null: a write to a hung-up terminal fails (EIO),
     and acq ended "Input/output error", exit 1, instead of its stop's line and 130."""
-    global _hung_up
+    global _hung_up, _hangup_again
     if signum != signal.SIGHUP:
         return False
     if _hung_up:
+        if _hangup_again:  # the first, delivered again (:func:`deliver_again`)
+            _hangup_again = False
+            return False
         return True
     _hung_up = True
     devnull = os.open(os.devnull, os.O_WRONLY)

@@ -3,6 +3,7 @@ table/row/column and the value, exit 2 — in a batch only that session fails (t
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 import sqlite3
@@ -238,14 +239,20 @@ def test_a_catalogue_index_damaged_is_not_a_usable_catalogue(batch: tuple[Path, 
                                       f"malformed: row {row} missing from index sqlite_autoindex_sessions_1)\n")
 
 
-def test_a_monitor_restarting_on_a_damaged_catalogue_is_one_line(tmp_path: Path) -> None:
-    """A --fast monitor of 2 windows, a byte of its catalogue's second analysis flipped, the monitor started again
-    on its folder; before: a traceback of sqlite3.OperationalError."""
-    out = tmp_path / "monitor"
+def _monitored_twice(out: Path) -> list[str]:
+    """A --fast monitor of 2 windows run into ``out``; the command that restarts it there."""
     cmd = [sys.executable, "-m", "acq", "monitor", "--bench", str(SIM_ROBOT), "--fast", "--window", "10", "--every",
            "60", "--for", "2m", "--baseline-windows", "2", "--out", str(out)]
     first = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert first.returncode == 0, first.stderr
+    return cmd
+
+
+def test_a_monitor_restarting_on_a_damaged_catalogue_is_one_line(tmp_path: Path) -> None:
+    """A --fast monitor of 2 windows, a byte of its catalogue's second analysis flipped, the monitor started again
+    on its folder; before: a traceback of sqlite3.OperationalError."""
+    out = tmp_path / "monitor"
+    cmd = _monitored_twice(out)
     catalogue = out / "catalogue.sqlite"
     sha = _flip_in_text(catalogue, "SELECT sha256 FROM analyses ORDER BY id LIMIT 1 OFFSET 1")
     with sqlite3.connect(f"file:{catalogue}?mode=ro", uri=True) as db:
@@ -254,6 +261,39 @@ def test_a_monitor_restarting_on_a_damaged_catalogue_is_one_line(tmp_path: Path)
     again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
     assert (again.returncode, again.stderr) == (2, f"acq: error: {catalogue}: damaged catalogue: analyses row {row}, "
                                                    f"column sha256 = '{sha[:5]}\\xff{sha[6:35]}…': not UTF-8 text\n")
+
+
+@pytest.mark.parametrize("damage", ["index key flipped", "index page zeroed"])
+def test_a_monitor_restarting_on_a_damaged_index_refuses_it_before_capturing(tmp_path: Path, damage: str) -> None:
+    """The catalogue is opened for writing on a restart, where only readers (trend, fleet) ran PRAGMA integrity_check.
+    A byte of a session's key flipped in the sessions' unique index: the restart filed a third window into the
+    damaged file, exit 0 (the index still missing row 1). The index's page overwritten with zeros: the restart
+    captured a window, then failed "acq: error: database disk image is malformed: …catalogue.sqlite (database disk
+    image is malformed)", exit 1. Now one line naming the finding, exit 2, nothing captured or written."""
+    out = tmp_path / "monitor"
+    cmd = _monitored_twice(out)
+    catalogue = out / "catalogue.sqlite"
+    with contextlib.closing(sqlite3.connect(catalogue)) as db:  # closed: no -wal or -shm left beside it
+        page_size = db.execute("PRAGMA page_size").fetchone()[0]
+        (root,) = db.execute("SELECT rootpage FROM sqlite_master WHERE name = 'sqlite_autoindex_sessions_1'"
+                             ).fetchone()
+        row, key = db.execute("SELECT rowid, session_key FROM sessions ORDER BY rowid LIMIT 1").fetchone()
+    data = bytearray(catalogue.read_bytes())
+    if damage == "index key flipped":
+        at = data.find(key.encode(), (root - 1) * page_size, root * page_size)
+        assert at > 0
+        data[at + len(key) - 1] ^= 0x01  # still ASCII: every read succeeds
+        finding = f"row {row} missing from index sqlite_autoindex_sessions_1"
+    else:
+        data[(root - 1) * page_size:root * page_size] = bytes(page_size)
+        finding = f"Page {root}: btreeInitPage() returns error code 11"
+    catalogue.write_bytes(data)
+    before = sorted(p.name for p in out.iterdir())
+    again = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert (again.returncode, again.stderr) == (2, f"acq: error: {catalogue}: not a usable catalogue (database disk "
+                                                   f"image is malformed: {finding})\n")
+    assert sorted(p.name for p in out.iterdir()) == before
+    assert catalogue.read_bytes() == data, "the catalogue was written"  # (a bool: no diff of the bytes)
 
 
 def test_a_flipped_bit_in_the_footers_fixed_length_status_is_one_line_and_a_batch_goes_on(

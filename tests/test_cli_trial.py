@@ -210,9 +210,11 @@ def test_a_sighup_ignored_at_start_stays_ignored(tmp_path: Path) -> None:
     assert (proc.returncode, load(path).status) == (0, "complete"), err
 
 
-def test_ctrl_c_after_the_recording_says_the_file_is_complete(tmp_path: Path) -> None:
+@pytest.mark.parametrize(("signum", "stopped"), [(signal.SIGINT, "interrupted"),
+                                                 (signal.SIGTERM, "stopped by SIGTERM")])
+def test_ctrl_c_after_the_recording_says_the_file_is_complete(tmp_path: Path, signum: int, stopped: str) -> None:
     """A Ctrl-C during the summary or the identification said only "acq: interrupted" (or, inside a weakref callback,
-    a traceback and exit 0), nothing of the complete file."""
+    a traceback and exit 0), nothing of the complete file. A SIGTERM names itself (it said "interrupted" too)."""
     out = tmp_path / "sessions"
     proc = subprocess.Popen(_acq("record", "--profile", str(seeded_profile(tmp_path)), "--duration", "6", "--fast",
                                  "--out", str(out)),
@@ -226,12 +228,12 @@ def test_ctrl_c_after_the_recording_says_the_file_is_complete(tmp_path: Path) ->
             return False
 
     _wait_for(complete, proc, "complete session")
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(signum)
     _, err = proc.communicate(timeout=60)
     (path,) = out.glob("*.h5")
     s = load(path)
     assert proc.returncode == 130, err
-    line = (f"acq: interrupted after the recording — {path} is complete ({s.current.sample_count} current samples, "
+    line = (f"acq: {stopped} after the recording — {path} is complete ({s.current.sample_count} current samples, "
             f"{s.encoder.index.size} encoder samples); ")
     json_path = path.with_name(path.stem + ".result.json")
     assert _acq_lines(err) in ([line + f"not identified: acq analyze {path}"],

@@ -22,7 +22,6 @@ import pytest
 
 import acq.recording.writer
 from acq.recording.reader import load
-from acq.recording.room import FLUSH_BYTES
 from tests.helpers import read_only_view, record_session_in_subprocess, run_cli, tiny_read_only_folder, tmpfs
 
 RATE_HZ = 25600
@@ -229,19 +228,26 @@ def _under_file_size_limit(limit_bytes: int) -> None:
 
 @pytest.mark.parametrize("folder", ["limited", os.fsdecode(b"Pr\xfcfstand")])
 def test_a_file_size_limit_met_while_recording_fails_the_recording_like_a_full_disk(tmp_path: Path, folder: str) -> None:
-    """A real RLIMIT_FSIZE in the child that records 30 s (~15 MB): HDF5's write meets EFBIG. Before: "acq:
+    """A real RLIMIT_FSIZE in the child that records 30 s (~8 MB): HDF5's write meets EFBIG. Before: "acq:
     failed: [Errno 27] Can't synchronously write data (file write failed: time = …" (HDF5's text cut mid-sentence) and
     the file left open for writing in its superblock (h5py: "file is already open for write"), no status, no reason.
     Now as for a full disk: status ``failed``, "file size limit reached: <file> — N s kept", the samples kept. In a
     folder whose name is not UTF-8 (Latin-1 ``Prüfstand``) the reason naming the file could not be encoded: the footer
-    was not written, h5py could not open the file, and acq said "… s kept" all the same; its byte is now escaped."""
+    was not written, h5py could not open the file, and acq said "… s kept" all the same; its byte is now escaped.
+    A limit the child starts with is refused before recording (the test below), so it is lowered once the file
+    exists (``prlimit --pid``), in real time: a commit every 0.5 s, a few of them before the limit."""
     out = tmp_path / folder
-    # room for one commit (at most FLUSH_BYTES of samples, plus the file's own ≈ 0.1 MB) but not for two: a limit below
-    # one commit kept nothing at low load, where --fast's first commit is a whole FLUSH_BYTES (2 MiB)
-    limit = FLUSH_BYTES * 3 // 2 + 200_000
-    proc = subprocess.run([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.5s", "--fast", "--duration",
-                           "30", "--no-analyze", "--out", str(out)], capture_output=True, text=True, timeout=300,
-                          errors="surrogateescape", preexec_fn=lambda: _under_file_size_limit(limit))
+    limit = 1_200_000
+    proc = subprocess.Popen([sys.executable, "-m", "acq", "record", "--profile", "triangle_0.5s", "--duration", "30",
+                             "--no-analyze", "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            text=True, errors="surrogateescape",
+                            preexec_fn=lambda: signal.signal(signal.SIGXFSZ, signal.SIG_IGN))
+    end = time.monotonic() + 120
+    while not any(out.glob("*.h5")):
+        assert proc.poll() is None and time.monotonic() < end, proc.communicate()
+        time.sleep(0.01)
+    resource.prlimit(proc.pid, resource.RLIMIT_FSIZE, (limit, limit))
+    _, err = proc.communicate(timeout=300)
     path = _only_session(out)
     assert path.stat().st_size <= limit
     with h5py.File(path, "r") as f:  # read back as any HDF5 reader does
@@ -251,11 +257,32 @@ def test_a_file_size_limit_met_while_recording_fails_the_recording_like_a_full_d
     assert 0 < current < 30 * RATE_HZ and encoder > 0 and stored == (current, encoder)
     shown = str(path).encode("utf-8", "backslashreplace").decode()  # a byte UTF-8 cannot carry as \\udcfc
     assert (status, reason) == ("failed", f"file size limit reached: {shown} — {current / RATE_HZ:.1f} s kept")
-    assert proc.returncode == 1 and "Traceback" not in proc.stderr
-    assert [ln for ln in proc.stderr.splitlines() if ln.startswith("acq:")] == [  # the path's own bytes printed
+    assert proc.returncode == 1 and "Traceback" not in err
+    assert [ln for ln in err.splitlines() if ln.startswith("acq:")] == [  # the path's own bytes printed
         f"acq: failed: file size limit reached: {path} — {current / RATE_HZ:.1f} s kept ({current} current and "
         f"{encoder} encoder samples stored in {path})"]
     _assert_counts_are_stored(path, current, encoder)
+
+
+@pytest.mark.parametrize(("argv", "line"), [
+    (("record", "--profile", "triangle_0.5s", "--duration", "30", "--no-analyze"),
+     "acq: error: file size limit: files may grow to 3.0 MB (ulimit -f 2929), a 30 s recording needs 11.2 MB (record "
+     "shorter, or raise ulimit -f)"),
+    (("monitor", "--bench", "configs/benches/sim_robot.toml", "--window", "10", "--every", "10", "--fast"),
+     "acq: error: file size limit: files may grow to 3.0 MB (ulimit -f 2929), a 10 s window needs 3.9 MB (shorten "
+     "--window, or raise ulimit -f)")], ids=["record", "monitor"])
+def test_a_file_size_limit_below_the_session_is_refused_before_it_starts(tmp_path: Path, argv: tuple[str, ...],
+                                                                         line: str) -> None:
+    """``ulimit -f`` below the session's expected size (as the free-space check sizes it; a monitor: one window) was
+    found only when a write failed (EFBIG) — a recording failed part way, a monitor failing every window. Now refused
+    in one line naming the limit and the size, exit 1, before anything is made (the folder neither)."""
+    out = tmp_path / "out"
+    limit = 3_000_000
+    proc = subprocess.run([sys.executable, "-m", "acq", *argv, "--out", str(out)], capture_output=True, text=True,
+                          timeout=300, cwd=Path(__file__).resolve().parents[1],
+                          preexec_fn=lambda: _under_file_size_limit(limit))
+    assert (proc.returncode, proc.stdout, proc.stderr) == (1, "", line + "\n")
+    assert not out.exists()
 
 
 def test_a_reason_longer_than_its_room_is_cut_to_fit_on_a_full_disk(tmp_path: Path) -> None:

@@ -29,8 +29,9 @@ MONITOR_TAG = "monitor_id"
 
 
 class CatalogueDatabase:
-    """An open catalogue database, created and migrated on open (read-only: its schema only checked); use as a
-    context manager. Parameters as :class:`acq.monitoring.catalogue.Catalogue`'s.
+    """An open catalogue database, created and migrated on open (read-only: its schema only checked), a SQLite file's
+    structure checked first (:func:`~acq.monitoring.catalogue_damage.integrity_error`); use as a context manager.
+    Parameters as :class:`acq.monitoring.catalogue.Catalogue`'s.
 
     Attributes
     ----------
@@ -43,12 +44,15 @@ class CatalogueDatabase:
         self._location = path  # as given (a URL with its password): what reconnect() opens again
         self._dialect, self._db, self.path = open_catalogue_db(path, read_only)
         try:
+            # a SQLite file is checked whether it is read or written (a monitor's restart, a batch): through a damaged
+            # index a read misses rows and a write goes on into the damage — a restarted monitor filed its windows
+            # into such a file (exit 0), or captured a window and then failed "database disk image is malformed"
+            if self._dialect.name == "sqlite" and (damaged := integrity_error(self.path, self._db)):
+                raise damaged
             if self._dialect.read_only:
                 self._require_current_schema()
             else:
                 self._migrate()
-            if read_only and self._dialect.name == "sqlite" and (damaged := integrity_error(self.path, self._db)):
-                raise damaged
         except (*self._dialect.errors, UnicodeDecodeError) as e:
             damaged = self._damage(e)
             self._db.close()

@@ -47,7 +47,7 @@ from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, catalogue_te
 from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
                                           check_user_tags, own_windows)
 from acq.monitoring.monitor_status import MonitorSettings, MonitorStatus
-from acq.recording.room import SIZE_MARGIN, expected_session_bytes
+from acq.recording.room import SIZE_MARGIN, expected_session_bytes, require_file_size_limit
 from acq.monitoring.monitor_windows import FolderWindows, StorageFailures, check_budget, refused_as_damaged, write_cause
 from acq.monitoring.retention import WindowFiles
 from acq.monitoring.session_outcome import CATALOGUE_NAME
@@ -93,6 +93,8 @@ class Monitor:
             Path(self._catalogue_location).resolve() == (settings.out_dir / CATALOGUE_NAME).resolve()
         self._id = ""  # the monitor's identity (monitor_scope), read or made in its folder when it runs
         self._clock = MachineClock(settings.every_s)  # a restart goes on from its last window (monitor_restart)
+        # a window that cannot be written whole under ulimit -f: refused now, not every window failed for hours
+        require_file_size_limit(self._size, f"a {settings.window_s:g} s window", "shorten --window")
         check_budget(settings, self._size)
 
     @property

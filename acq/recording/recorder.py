@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from acq.process_signals import STOP_REASONS, handled, repeated_hangup
+from acq.process_signals import STOP_REASONS, handled, repeated_hangup, stop_reason
 from acq.recording.device_reader import READ_TIMEOUT_S, DeviceReader
 from acq.recording.layout import Status, utc_now_iso
 from acq.recording.paths import new_session_path
@@ -213,8 +213,8 @@ class Recorder:
             if keep_raw is not None:
                 try:
                     keep_raw(path)
-                except KeyboardInterrupt:
-                    writer.finish("interrupted", "interrupted by user (Ctrl-C)")
+                except KeyboardInterrupt as e:
+                    writer.finish("interrupted", stop_reason(e))
                     raise
                 except Exception as e:
                     # The session file exists (its layout on disk) but holds nothing: finished as failed with the
@@ -247,7 +247,6 @@ class Recorder:
     def run(self) -> RecordingResult:
         """Record; always returns with the file finished (device set-up errors raise before a file exists)."""
         writer = self.open_session()
-        self._ran = True
         cur_info, drive_info = self._cur_info, self._drive_info
         path = writer.path
         inbox: queue.SimpleQueue[tuple[str, Any]] = queue.SimpleQueue()  # C: a fraction of Queue's cost per item
@@ -260,6 +259,9 @@ class Recorder:
         status: Status = "complete"
         reason = f"recorded {self.duration_s:g} s"
         with stop_on_signals(self.request_stop):
+            # from here a stop signal raises nothing and the file is finished below; one before (a KeyboardInterrupt)
+            # leaves it to abort() — _ran was set before the handlers, and one in between left the file "recording"
+            self._ran = True
             try:
                 # Motion first: the started devices buffer their samples meanwhile, and a simulated
                 # bench then starts the motion at the same point of its record in every run.
@@ -270,8 +272,8 @@ class Recorder:
                 self._pump(inbox, readers, writer, checker, counts)
             except Interrupted as e:
                 status, reason = "interrupted", str(e)
-            except KeyboardInterrupt:  # raised by code that embeds the recorder, or where no handler could be set
-                status, reason = "interrupted", "interrupted by user (Ctrl-C)"
+            except KeyboardInterrupt as e:  # raised by code that embeds the recorder, or where no handler could be set
+                status, reason = "interrupted", stop_reason(e)
             except AcqError as e:
                 status, reason = "failed", str(e)
             except Exception as e:  # noqa: BLE001 - keep the data whatever went wrong, and say what

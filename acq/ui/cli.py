@@ -7,7 +7,6 @@ failed write); a usage error is one line too (exit 2); Ctrl-C is exit 130.
 
 from __future__ import annotations
 
-import _thread
 import difflib
 import gc
 import importlib
@@ -23,7 +22,7 @@ from typing import Any
 import click
 
 from acq import __version__
-from acq.process_signals import STOP_SIGNALS, handled, repeated_hangup
+from acq.process_signals import STOP_SIGNALS, StopSignal, deliver_again, handled, repeated_hangup, signal_of
 from acqcore.errors import EXIT_INTERRUPTED, AcqError, ConfigError
 
 # numpy, scipy, h5py, pydantic and Qt are imported inside the commands that use them: `acq --help`, a command's
@@ -65,12 +64,16 @@ LAZY_COMMANDS: dict[str, tuple[str, str, str]] = {
 
 class _Interrupted(BaseException):
     """A Ctrl-C inside a command, carried past click (whose own handling writes an empty line before its Abort):
-    acq says ``acq: interrupted`` in one line."""
+    acq says ``acq: interrupted`` in one line. ``signum``: the stop signal that raised it."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
 
 
 def _raise_interrupted(signum: int, frame: object) -> None:
     if not repeated_hangup(signum):
-        raise _Interrupted
+        raise _Interrupted(signum)
 
 
 #: The handlers of Ctrl-C and SIGTERM while a command runs (a KeyboardInterrupt, which a batch or a recording catches to
@@ -86,8 +89,8 @@ class LazyGroup(click.Group):
         try:
             outside.update((s, signal.signal(s, h)) for s, h in _command_handlers.items())  # type: ignore[arg-type]
             return super().invoke(ctx)
-        except KeyboardInterrupt:
-            raise _Interrupted from None
+        except KeyboardInterrupt as e:
+            raise _Interrupted(signal_of(e)) from None
         finally:
             for s, h in outside.items():
                 signal.signal(s, h)  # type: ignore[arg-type]
@@ -155,8 +158,9 @@ def _exit_now(code: int) -> None:
 
 
 def _stop_as_ctrl_c(signum: int, frame: object) -> None:
+    """SIGTERM's and SIGHUP's handler: a KeyboardInterrupt that names its signal (:class:`StopSignal`)."""
     if not repeated_hangup(signum):
-        raise KeyboardInterrupt
+        raise StopSignal(signum)
 
 
 #: Delay of a Ctrl-C delivered again (:func:`_interrupt_again`), s: long enough for the hook to have returned (one
@@ -165,16 +169,17 @@ INTERRUPT_AGAIN_S = 0.05
 
 
 def _interrupt_again(unraisable: Any) -> None:
-    """``sys.unraisablehook`` while acq runs: a Ctrl-C (SIGTERM) that Python could not raise where it landed — in a
-    weakref callback or a ``__del__`` it printed "Exception ignored in …" with a traceback and the command went on as
-    if none had come (1 of 30 ``acq record`` runs, SIGINT during the identification: exit 0) — reaches the main
-    thread's SIGINT handler again :data:`INTERRUPT_AGAIN_S` later, from another thread (from here it would be raised
-    inside this hook, and lost), to be raised in the command's own code; anything else goes to the hook there was."""
+    """``sys.unraisablehook`` while acq runs: a Ctrl-C (SIGTERM, SIGHUP) that Python could not raise where it landed —
+    in a weakref callback or a ``__del__`` it printed "Exception ignored in …" with a traceback and the command went
+    on as if none had come (1 of 30 ``acq record`` runs, SIGINT during the identification: exit 0) — reaches the main
+    thread's handler of the same signal again :data:`INTERRUPT_AGAIN_S` later, from another thread (from here it would
+    be raised inside this hook, and lost), to be raised in the command's own code or taken by a recorder's handler
+    (with SIGINT's, a SIGTERM stopped a recording as "interrupted by user (Ctrl-C)"); anything else goes to the hook
+    there was."""
     if not issubclass(unraisable.exc_type, (KeyboardInterrupt, _Interrupted)):
         _previous_unraisablehook(unraisable)
         return
-    # interrupt_main does nothing where Python has no handler (the default, or ignored)
-    again = threading.Timer(INTERRUPT_AGAIN_S, _thread.interrupt_main)
+    again = threading.Timer(INTERRUPT_AGAIN_S, deliver_again, (signal_of(unraisable.exc_value),))
     again.daemon = True
     _interrupts_again.append(again)
     again.start()

@@ -6,12 +6,14 @@ into one session file with a progress bar (and the live window if asked), then i
 from __future__ import annotations
 
 import math
+import signal
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
 from rich.console import Console
 
+from acq.process_signals import signal_of, signals_deferred, stop_reason
 from acq.recording.tags import parse_tags, require_plain_text
 from acq.ui.analyze_cli import identify, print_result_and_draw
 from acq.ui.options import Folder, tag_option
@@ -78,8 +80,6 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
     current, drive = open_bench(bench, fast=fast)
     recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=session_tags)
     if live:
-        from acq.process_signals import signals_deferred
-
         with signals_deferred():  # a Ctrl-C inside Qt's import: a fatal error of shiboken's start-up, or lost
             from acq.ui.live import LiveView, require_display  # Qt is imported only when asked for
 
@@ -91,20 +91,19 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
         result = (live_view.record(lambda: _record_with_progress(recorder, duration, label)) if live_view
                   else _record_with_progress(recorder, duration, label))
     except BaseException as e:  # before the recording ran: finish its file, release the devices
-        recorder.abort("interrupted by user (Ctrl-C)" if isinstance(e, KeyboardInterrupt)
-                       else f"{type(e).__name__}: {e}")
+        recorder.abort(stop_reason(e) if isinstance(e, KeyboardInterrupt) else f"{type(e).__name__}: {e}")
         if not isinstance(e, KeyboardInterrupt):
             raise
         # one line naming the file, as for a Ctrl-C while recording (it was "acq: interrupted")
         click.echo(f"acq: interrupted twice: stopped before {session.path} was finished — acq check {session.path} "
                    "repairs it" if recorder.stop_request is not None else
-                   f"acq: interrupted before the recording started — nothing recorded ({session.path}: no samples, "
+                   f"acq: {_stopped(e)} before the recording started — nothing recorded ({session.path}: no samples, "
                    "status interrupted)", err=True)
         return EXIT_INTERRUPTED
     try:
         return _after_recording(result, analyze=not no_analyze)
-    except KeyboardInterrupt:  # a Ctrl-C once the recorder had let go of its signals: the file is finished
-        click.echo(_interrupted_after_recording(result, analyze=not no_analyze), err=True)
+    except KeyboardInterrupt as e:  # a Ctrl-C once the recorder had let go of its signals: the file is finished
+        click.echo(_interrupted_after_recording(result, e, analyze=not no_analyze), err=True)
         return EXIT_INTERRUPTED
 
 
@@ -146,15 +145,22 @@ def _kept(result: RecordingResult) -> str:
             f"{result.encoder_samples} encoder samples)")
 
 
-def _interrupted_after_recording(result: RecordingResult, *, analyze: bool) -> str:
-    """The one line of a Ctrl-C after the recorder finished the file (during its summary, identification or report):
-    what the file holds and, with ``analyze``, how far the identification got (read from the disk)."""
+def _stopped(e: BaseException) -> str:
+    """What stopped acq, as its line says it: "interrupted" (Ctrl-C), else the signal's stop reason ("stopped by
+    SIGTERM")."""
+    return "interrupted" if signal_of(e) == signal.SIGINT else stop_reason(e)
+
+
+def _interrupted_after_recording(result: RecordingResult, e: BaseException, *, analyze: bool) -> str:
+    """The one line of a Ctrl-C (``e``: its KeyboardInterrupt) after the recorder finished the file (during its
+    summary, identification or report): what the file holds and, with ``analyze``, how far the identification got
+    (read from the disk)."""
     from acq.offline.analyze import output_paths
     from analysis import AnalysisRequest
 
     if result.status == "complete":
-        line = (f"acq: interrupted after the recording — {result.path} is complete ({result.current_samples} current "
-                f"samples, {result.encoder_samples} encoder samples)")
+        line = (f"acq: {_stopped(e)} after the recording — {result.path} is complete ({result.current_samples} "
+                f"current samples, {result.encoder_samples} encoder samples)")
     else:
         line = f"acq: interrupted: {result.stop_reason} — {_kept(result)}"
     if not analyze or not (result.current_samples and result.encoder_samples):

@@ -15,6 +15,7 @@ from rich.table import Table
 from acq.commissioning.selftest import SLOW_MOVE, Stopped, run_selftest
 from acq.commissioning.selftest_checks import Check
 from acq.config import bench_label, load_bench, load_profile, resolve_profile_path
+from acq.process_signals import stop_reason
 from acqcore.errors import EXIT_INTERRUPTED, ConfigError
 from drivers.limits import refuse_beyond_limits
 
@@ -118,7 +119,7 @@ def selftest_command(bench_path: Path | None, profile_name: str | None, fast: bo
     except (Stopped, KeyboardInterrupt) as e:  # the person stopped it: not a fault of the bench
         where = (f"during {e.stage}" if isinstance(e, Stopped) else
                  f"after {checks[-1].stage} · {checks[-1].name}" if checks else "before its first check")
-        click.echo(stopped_line(where, e.reason if isinstance(e, Stopped) else "interrupted by user (Ctrl-C)"),
+        click.echo(stopped_line(where, e.reason if isinstance(e, Stopped) else stop_reason(e)),
                    err=True)  # one plain line (rich would wrap it)
         return EXIT_INTERRUPTED
     finally:
