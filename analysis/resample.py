@@ -91,9 +91,11 @@ def fir_decimate(x: np.ndarray, h: np.ndarray, q: int) -> np.ndarray:
     for c in range(1, q):
         g[1:, c] = taps[q - c::q]
     row0, rows = first - m, n_out + m  # rows of q samples from row0·q on, zero outside x
-    padded = np.zeros(x.shape[:-1] + (rows * q,))
+    padded = np.empty(x.shape[:-1] + (rows * q,))
     a, b = max(0, row0 * q), min(n_in, (row0 + rows) * q)
     padded[..., a - row0 * q:b - row0 * q] = x[..., a:b]
+    padded[..., :a - row0 * q] = 0.0  # only the ends are zeros: not the whole array written twice
+    padded[..., b - row0 * q:] = 0.0
     blocks = padded.reshape(x.shape[:-1] + (rows, q))
     y = np.empty(x.shape[:-1] + (n_out,))
     for k0 in range(0, n_out, _DECIMATE_BLOCK):
