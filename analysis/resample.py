@@ -158,7 +158,9 @@ def sample_at(x: np.ndarray, rate_hz: float, t0_s: float, t_s: np.ndarray) -> np
     # the end conditions (mirror instead of not-a-knot), whose effect decays by 2 − √3 ≈ 0.27 per sample from the
     # ends: < 1e-11 beyond the 20 samples of the anti-alias filter's edge_s margin.
     pos = (t - t0_s) * rate_hz
-    coef = spline_filter1d(np.asarray(x, dtype=np.float64), order=3, axis=-1, mode="mirror")
+    x = np.asarray(x, dtype=np.float64)
+    # into an empty array: ndimage zeroes the output it allocates, and the filter writes every element of it anyway
+    coef = spline_filter1d(x, order=3, axis=-1, output=np.empty(x.shape), mode="mirror")
     flat = coef.reshape(-1, coef.shape[-1])
     at = np.reshape(pos, (1, -1))
     out = np.stack([map_coordinates(row, at, order=3, prefilter=False, mode="mirror") for row in flat])
