@@ -136,8 +136,9 @@ def spline_factor(g: np.ndarray, m: int, smoothing: float) -> np.ndarray:
     n = g.size
     nk = -(-n // m)
     W = bspline_weights(m)
-    G2 = np.zeros(nk * m)
+    G2 = np.empty(nk * m)
     np.square(g, out=G2[:n])
+    G2[n:] = 0.0  # the last knot span's samples past n
     pairs = [(k, l) for k in range(4) for l in range(k, 4)]
     # (10, m) @ (m, nk): one row per pair of active coefficients, read contiguously below
     diag = np.stack([W[:, k] * W[:, l] for k, l in pairs]) @ G2.reshape(nk, m).T
