@@ -213,20 +213,24 @@ def spline_fit(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray, extra: 
     if offset is not None:
         start[ny:ny + nd] = offset.support()[:, 0] // m
     # (R = diag(d)·U: Rᵀz = p is Uᵀw = p, z = w/d, and R·c = b is U·c = b/d). Z is Pt's memory seen transposed
-    # (Fortran order), each column solved (and divided by d) in place of its row of Pt: Pt is not needed after, and
-    # Z's 12 MB (18 columns of a 20 s chunk) are neither zeroed nor copied; a column's rows before its start are zero
-    # in Pt already, and stay so (0/d)
+    # (Fortran order), each column solved and divided by d in place of its row of Pt (Pt is not needed after): Z's
+    # 12 MB (18 columns of a 20 s chunk) are neither zeroed nor gathered, copied and scattered back. A column's rows
+    # before its start are zero in Pt already, and stay so (0/d). Pt's rows a … b − 1 from column j on are a Fortran-
+    # ordered block of Z for j = 0 (each run of consecutive columns starting there) or a single row
     for j in np.unique(start):
-        which = np.flatnonzero(start == j)
-        w = _banded_triangular_solve(r_band[:, j:], Pt[which, j:].T, transpose=True, overwrite_b=True)
-        w /= r_band[3][j:, None]
-        Pt[which, j:] = w.T
+        cols = np.flatnonzero(start == j)
+        runs = np.split(cols, np.flatnonzero(np.diff(cols) > 1) + 1) if j == 0 else np.split(cols, cols.size)
+        for run in runs:
+            z = Pt[run[0]:run[-1] + 1, j:].T
+            # LAPACK solves z itself (Fortran-contiguous), and NumPy skips assigning an array to itself
+            z[...] = _banded_triangular_solve(r_band[:, j:], z, transpose=True, overwrite_b=True)
+            z /= r_band[3][j:, None]
     Z = Pt.T
     Zy, Zu = Z[:, :ny], Z[:, ny:]
     beta = np.linalg.lstsq(VV - Zu.T @ Zu, VY - Zu.T @ Zy, rcond=None)[0]
     b = Zy - Zu @ beta
     b /= r_band[3][:, None]
-    coef = _banded_triangular_solve(r_band, b, transpose=False)
+    coef = _banded_triangular_solve(r_band, b, transpose=False, overwrite_b=True)
     c4 = np.empty((ny, nk, 4))  # the 4 coefficients active in each knot span, per right-hand side
     for k in range(4):
         c4[:, :, k] = coef[k:k + nk].T
