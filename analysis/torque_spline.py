@@ -87,7 +87,8 @@ class SlowOffset:
         q1 = int(np.searchsorted(bounds, s1 - 1, side="right")) - 1
         k = q1 - q0 + 4
         values = np.empty((k + (0 if below is None else below.shape[0]), s1 - s0))
-        values[:k] = 0.0
+        if q1 > q0:  # inside one knot interval its 4 pieces below fill the k = 4 rows whole: no zeros to write first
+            values[:k] = 0.0
         for q in range(q0, q1 + 1):  # knot interval q carries functions q … q + 3
             a, b = max(s0, int(bounds[q])), min(s1, int(bounds[q + 1]))
             values[q - q0:q - q0 + 4, a - s0:b - s0] = self._pieces(q, a, b)
