@@ -90,20 +90,30 @@ def fir_decimate(x: np.ndarray, h: np.ndarray, q: int) -> np.ndarray:
     g[:m, 0] = taps[0::q]
     for c in range(1, q):
         g[1:, c] = taps[q - c::q]
-    row0, rows = first - m, n_out + m  # rows of q samples from row0·q on, zero outside x
-    padded = np.zeros(x.shape[:-1] + (rows * q,))
-    a, b = max(0, row0 * q), min(n_in, (row0 + rows) * q)
-    padded[..., a - row0 * q:b - row0 * q] = x[..., a:b]
-    blocks = padded.reshape(x.shape[:-1] + (rows, q))
+    row0 = first - m  # x in rows of q samples from row0·q on, zero outside it
     y = np.empty(x.shape[:-1] + (n_out,))
     for k0 in range(0, n_out, _DECIMATE_BLOCK):
         k1 = min(n_out, k0 + _DECIMATE_BLOCK)
-        products = g @ np.swapaxes(blocks[..., k0:k1 + m, :], -1, -2)  # (..., m + 1, k1 − k0 + m)
+        blocks = _sample_rows(x, (row0 + k0) * q, k1 - k0 + m, q)
+        products = g @ np.swapaxes(blocks, -1, -2)  # (..., m + 1, k1 − k0 + m)
         out = y[..., k0:k1]
         np.copyto(out, products[..., m, :k1 - k0])
         for r in range(m - 1, -1, -1):
             out += products[..., r, m - r:m - r + k1 - k0]
     return y
+
+
+def _sample_rows(x: np.ndarray, start: int, count: int, q: int) -> np.ndarray:
+    """``x[..., start:start + count·q]`` as ``count`` rows of ``q`` samples, shape (..., count, q), zero outside x: a
+    view of x where the rows lie inside it (no copy of the record), a zero-padded copy at its ends."""
+    stop = start + count * q
+    if start >= 0 and stop <= x.shape[-1]:
+        return x[..., start:stop].reshape(x.shape[:-1] + (count, q))
+    rows = np.zeros(x.shape[:-1] + (count * q,))
+    a, b = max(0, start), min(x.shape[-1], stop)
+    if a < b:
+        rows[..., a - start:b - start] = x[..., a:b]
+    return rows.reshape(x.shape[:-1] + (count, q))
 
 
 # The filters below are designed once per set of arguments (read-only): an analysis asks for the same few ~10 times
@@ -156,7 +166,9 @@ def sample_at(x: np.ndarray, rate_hz: float, t0_s: float, t_s: np.ndarray) -> np
     # the end conditions (mirror instead of not-a-knot), whose effect decays by 2 − √3 ≈ 0.27 per sample from the
     # ends: < 1e-11 beyond the 20 samples of the anti-alias filter's edge_s margin.
     pos = (t - t0_s) * rate_hz
-    coef = spline_filter1d(np.asarray(x, dtype=np.float64), order=3, axis=-1, mode="mirror")
+    x = np.asarray(x, dtype=np.float64)
+    # into an empty array: ndimage zeroes the output it allocates, and the filter writes every element of it anyway
+    coef = spline_filter1d(x, order=3, axis=-1, output=np.empty(x.shape), mode="mirror")
     flat = coef.reshape(-1, coef.shape[-1])
     at = np.reshape(pos, (1, -1))
     out = np.stack([map_coordinates(row, at, order=3, prefilter=False, mode="mirror") for row in flat])

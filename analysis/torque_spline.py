@@ -56,14 +56,21 @@ class SlowOffset:
         return self.intervals + 3
 
     def bounds(self) -> np.ndarray:
-        """First sample of each knot interval, then ``n``: shape (intervals + 1,)."""
+        """First sample of each knot interval, then ``n``: shape (intervals + 1,) (read-only)."""
+        return self._bounds
+
+    @cached_property
+    def _bounds(self) -> np.ndarray:
+        """:meth:`bounds`, computed once (:func:`spline_fit` asks for it in every block)."""
         q = np.arange(self.intervals + 1)
         first = np.ceil(q * self.span).astype(np.int64)
         # ⌊i/span⌋ ≥ q decides, as it does sample by sample: correct ceil(q·span)'s rounding by one either way
         first -= (first > 0) & (np.floor((first - 1) / self.span) >= q)
         first += np.floor(first / self.span) < q
         first[0], first[-1] = 0, self.n
-        return np.minimum(first, self.n)
+        out = np.minimum(first, self.n)
+        out.flags.writeable = False
+        return out
 
     def support(self) -> np.ndarray:
         """Samples [start, stop) outside which each function is zero, shape (count, 2)."""
@@ -71,15 +78,22 @@ class SlowOffset:
         return np.stack((bounds[np.clip(j - 3, 0, self.intervals)], bounds[np.clip(j + 1, 0, self.intervals)]),
                         axis=1)
 
-    def block(self, s0: int, s1: int) -> tuple[np.ndarray, np.ndarray]:
-        """The functions non-zero on samples ``s0`` … ``s1`` − 1: their indices and values there, shape (k, s1 − s0)."""
+    def block(self, s0: int, s1: int, below: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """The functions non-zero on samples ``s0`` … ``s1`` − 1: their indices and values there, shape (k, s1 − s0);
+        with ``below`` (rows on the same samples) the values and then those rows in one array, shape
+        (k + len(below), s1 − s0), written in place instead of joined by a copy."""
         bounds = self.bounds()
         q0 = int(np.searchsorted(bounds, s0, side="right")) - 1
         q1 = int(np.searchsorted(bounds, s1 - 1, side="right")) - 1
-        values = np.zeros((q1 - q0 + 4, s1 - s0))
+        k = q1 - q0 + 4
+        values = np.empty((k + (0 if below is None else below.shape[0]), s1 - s0))
+        if q1 > q0:  # inside one knot interval its 4 pieces below fill the k = 4 rows whole: no zeros to write first
+            values[:k] = 0.0
         for q in range(q0, q1 + 1):  # knot interval q carries functions q … q + 3
             a, b = max(s0, int(bounds[q])), min(s1, int(bounds[q + 1]))
             values[q - q0:q - q0 + 4, a - s0:b - s0] = self._pieces(q, a, b)
+        if below is not None:
+            values[k:] = below
         return np.arange(q0, q1 + 4), values
 
     def curve(self, beta: np.ndarray) -> np.ndarray:
@@ -123,8 +137,9 @@ def spline_factor(g: np.ndarray, m: int, smoothing: float) -> np.ndarray:
     n = g.size
     nk = -(-n // m)
     W = bspline_weights(m)
-    G2 = np.zeros(nk * m)
+    G2 = np.empty(nk * m)
     np.square(g, out=G2[:n])
+    G2[n:] = 0.0  # the last knot span's samples past n
     pairs = [(k, l) for k in range(4) for l in range(k, 4)]
     # (10, m) @ (m, nk): one row per pair of active coefficients, read contiguously below
     diag = np.stack([W[:, k] * W[:, l] for k, l in pairs]) @ G2.reshape(nk, m).T
@@ -172,8 +187,8 @@ def spline_fit(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray, extra: 
         if offset is None:
             act, v = dense, extra[:, s0:s1]
         else:
-            local, values = offset.block(s0, s1)
-            act, v = np.concatenate((local, dense)), np.concatenate((values, extra[:, s0:s1]))
+            local, v = offset.block(s0, s1, below=extra[:, s0:s1])
+            act = np.concatenate((local, dense))
         yb = Yt[:, s0:s1]
         VV[act[:, None], act] += v @ v.T
         VY[act] += v @ yb.T
@@ -183,8 +198,12 @@ def spline_fit(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray, extra: 
         np.multiply(v, g[s0:s1], out=rows[ny:, :s1 - s0])
         # (4, m) @ (m, rows·spans): a wide product (the tall (rows·spans, m) @ (m, 4) is ~10× slower in OpenBLAS)
         full = (W.T @ rows.reshape(-1, m).T).reshape(4, rows.shape[0], k1 - k0)
-        local_p = np.zeros((rows.shape[0], k1 - k0 + 3))  # the block's projections, then one scattered add into Pt
-        for k in range(4):
+        # the block's projections, then one scattered add into Pt (started from a copy of the first term, not zeros plus
+        # it: a zero's sign aside the same sums, and Pt, from zeros, holds no −0.0 for that sign to show in)
+        local_p = np.empty((rows.shape[0], k1 - k0 + 3))
+        local_p[:, :k1 - k0] = full[0]
+        local_p[:, k1 - k0:] = 0.0
+        for k in range(1, 4):
             local_p[:, k:k1 - k0 + k] += full[k]
         Pt[np.concatenate((np.arange(ny), ny + act)), k0:k1 + 3] += local_p
     # A = RᵀR (:func:`spline_factor`). The Schur complement needs Pᵤᵀ·A⁻¹·[P_y, Pᵤ] = Zᵤᵀ·[Z_y, Zᵤ] with Z = R⁻ᵀ·P (one
@@ -194,17 +213,25 @@ def spline_fit(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray, extra: 
     start = np.zeros(ny + ne, dtype=np.int64)
     if offset is not None:
         start[ny:ny + nd] = offset.support()[:, 0] // m
-    # (R = diag(d)·U: Rᵀz = p is Uᵀw = p, z = w/d, and R·c = b is U·c = b/d)
-    Z = np.zeros((nk + 3, ny + ne), order="F")
+    # (R = diag(d)·U: Rᵀz = p is Uᵀw = p, z = w/d, and R·c = b is U·c = b/d). Z is Pt's memory seen transposed
+    # (Fortran order), each column solved and divided by d in place of its row of Pt (Pt is not needed after): Z's
+    # 12 MB (18 columns of a 20 s chunk) are neither zeroed nor gathered, copied and scattered back. A column's rows
+    # before its start are zero in Pt already, and stay so (0/d). Pt's rows a … b − 1 from column j on are a Fortran-
+    # ordered block of Z for j = 0 (each run of consecutive columns starting there) or a single row
     for j in np.unique(start):
-        which = np.flatnonzero(start == j)
-        Z[j:, which] = _banded_triangular_solve(r_band[:, j:], Pt[which, j:].T, transpose=True)
-    Z /= r_band[3][:, None]
+        cols = np.flatnonzero(start == j)
+        runs = np.split(cols, np.flatnonzero(np.diff(cols) > 1) + 1) if j == 0 else np.split(cols, cols.size)
+        for run in runs:
+            z = Pt[run[0]:run[-1] + 1, j:].T
+            # LAPACK solves z itself (Fortran-contiguous), and NumPy skips assigning an array to itself
+            z[...] = _banded_triangular_solve(r_band[:, j:], z, transpose=True, overwrite_b=True)
+            z /= r_band[3][j:, None]
+    Z = Pt.T
     Zy, Zu = Z[:, :ny], Z[:, ny:]
     beta = np.linalg.lstsq(VV - Zu.T @ Zu, VY - Zu.T @ Zy, rcond=None)[0]
     b = Zy - Zu @ beta
     b /= r_band[3][:, None]
-    coef = _banded_triangular_solve(r_band, b, transpose=False)
+    coef = _banded_triangular_solve(r_band, b, transpose=False, overwrite_b=True)
     c4 = np.empty((ny, nk, 4))  # the 4 coefficients active in each knot span, per right-hand side
     for k in range(4):
         c4[:, :, k] = coef[k:k + nk].T
@@ -214,11 +241,12 @@ def spline_fit(y: np.ndarray, g: np.ndarray, m: int, r_band: np.ndarray, extra: 
     return (s_rows[0], beta[:, 0]) if y.ndim == 1 else (s_rows.T, beta)
 
 
-def _banded_triangular_solve(r_band: np.ndarray, b: np.ndarray, transpose: bool) -> np.ndarray:
+def _banded_triangular_solve(r_band: np.ndarray, b: np.ndarray, transpose: bool,
+                             overwrite_b: bool = False) -> np.ndarray:
     """U⁻ᵀ·b (``transpose``) or U⁻¹·b for U unit upper triangular in the banded storage of
     :func:`scipy.linalg.cholesky_banded` (its diagonal row not read; LAPACK dtbtrs, scipy.linalg offers no public
-    banded triangular solve)."""
-    x, info = dtbtrs(r_band, b, uplo="U", trans="T" if transpose else "N", diag="U")
+    banded triangular solve). ``overwrite_b``: b (Fortran order) may be solved in place instead of copied first."""
+    x, info = dtbtrs(r_band, b, uplo="U", trans="T" if transpose else "N", diag="U", overwrite_b=overwrite_b)
     if info != 0:
         raise np.linalg.LinAlgError(f"banded triangular solve failed (LAPACK info {info})")
     return x

@@ -33,6 +33,22 @@ FFTs instead of 12, the Hann window and the FIR filters designed once per length
 stacked solve; each child alternately, the same session files): 60 s 0.455, 0.456, 0.464, 0.465 s against 0.415,
 0.422, 0.424, 0.438 s at load 14–19 and 0.477, 0.484, 0.477 s against 0.446, 0.443, 0.436 s at load 10 (``--child``
 best of 5); 10 min 4.20, 4.05 s against 3.83, 3.71 s at load 19 (one run each), peak RSS 513–515 MB both.
+Session 16 (main at 7ed0994 against: the spline fit's triangular solves in place in its projections' array — no
+12 MB Z zeroed, gathered and scattered back per 20 s chunk —, the slow offset's values written beside the extra
+columns instead of joined by a copy, fir_decimate reading the record without a padded copy, the model's speed in
+estimator_check by scipy.fft, whose plan of the 59 909 = 139·431-sample length serves the inverse too; every change
+bit-identical: ``acq analyze --json`` of a 10 s and a 60 s session equal but for analysis_fingerprint). Two long-lived
+processes, main's tree and this one, alternating one analysis of the same 60 s session at a time, 40 each, one BLAS
+thread: 60 s 0.599 against 0.576 s CPU (medians; paired difference 22.5 ms, range 4.5…36.9 ms) at load 0.6–1.2,
+0.588 against 0.566 s (24 ms, 6…36 ms) at load 2, 0.648 against 0.623 s (28 ms, −13…65 ms) at load 7–12; 10 s 0.175
+against 0.172 s (30 each, load 1–2). This script, main and this tree alternately, 3 each: 60 s 0.60, 0.60, 0.60 against
+0.58, 0.58, 0.57 s at load 0.4–0.6; 10 min (one run each, 2 each) 5.69, 5.81 against 5.46, 5.32 s at load 2–4, peak
+RSS 516 MB against 511–516 MB. This machine reads main's 60 s at 0.60 s at load 0.5 (0.41 s in the notes above):
+compare trees interleaved, not against those figures. Of the 0.57 s, the spline fit is ~0.12 s (its BLAS
+products and LAPACK's sequential banded solves), the rest of the encoder torque ~0.11 s, the clock stages ~0.12 s,
+the anti-alias resampling with the alias terms ~0.08 s, FRF, fit and verdict ~0.1 s; what is left above the floor is
+arithmetic whose order fixes the results' bits (a different block size, summation order or FFT length changes the
+last digits of K).
 """
 
 from __future__ import annotations
