@@ -19,7 +19,7 @@ from contextlib import contextmanager
 STOP_REASONS: dict[int, str] = {
     signal.SIGINT: "interrupted by user (Ctrl-C)",
     signal.SIGTERM: "stopped by SIGTERM",
-    signal.SIGHUP: "stopped by SIGHUP (its terminal closed)",
+    signal.SIGHUP: "stopped by SIGHUP (a hang-up: its terminal closed, or kill -HUP)",
 }
 STOP_SIGNALS: tuple[int, ...] = tuple(STOP_REASONS)
 
@@ -64,8 +64,9 @@ def repeated_hangup(signum: int) -> bool:
     """For a stop signal's handler: True for a SIGHUP after the first, which the handler ignores — a closed terminal
     sends two (the kernel hangs up its foreground group, the shell forwards one more to its jobs), not a second Ctrl-C
     that quits at once (the review: a recording's file finished, then a KeyboardInterrupt in the drain). On the first,
-    standard output and error that went to the terminal go to /dev/null: a write to a hung-up terminal fails (EIO),
-    and acq ended "Input/output error", exit 1, instead of its stop's line and 130."""
+    standard output and error on a terminal that hung up go to /dev/null: a write to it fails (EIO), and acq ended
+    "Input/output error", exit 1, instead of its stop's line and 130. A SIGHUP sent to acq on a terminal still open
+    (``kill -HUP``) keeps its output: the stop's line is printed."""
     global _hung_up, _hangup_again
     if signum != signal.SIGHUP:
         return False
@@ -79,7 +80,9 @@ def repeated_hangup(signum: int) -> bool:
     try:
         for fd in (1, 2):
             with contextlib.suppress(OSError):  # a descriptor already closed stays so
-                if stat.S_ISCHR(os.fstat(fd).st_mode):  # a terminal; a pipe or a file (a log) keeps the lines
+                # a terminal that hung up (its files' operations fail with EIO: isatty is False — the kernel swaps them
+                # before it sends the SIGHUP); a pipe, a file (a log) or a terminal still open (kill -HUP) keeps the lines
+                if stat.S_ISCHR(os.fstat(fd).st_mode) and not os.isatty(fd):
                     os.dup2(devnull, fd)
     finally:
         os.close(devnull)

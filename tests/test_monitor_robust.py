@@ -32,7 +32,7 @@ def _env() -> dict[str, str]:
 
 
 @pytest.mark.parametrize(("signum", "reason"), [(signal.SIGTERM, "stopped by SIGTERM"),
-                                                (signal.SIGHUP, "stopped by SIGHUP (its terminal closed)")])
+                                                (signal.SIGHUP, "stopped by SIGHUP (a hang-up: its terminal closed, or kill -HUP)")])
 def test_sigterm_to_the_process_group_lets_the_analysis_under_way_finish_and_be_filed(tmp_path: Path, signum: int,
                                                                                       reason: str) -> None:
     """The trial: ``timeout -s TERM 8 acq monitor …`` (timeout signals its whole group) killed the analysis worker
@@ -419,3 +419,27 @@ def test_the_status_line_says_since_when_the_catalogue_is_unreachable() -> None:
     assert catalogue_text(MonitorStatus("joint1", catalogue_down_since="21:30:05", waiting=2)) == (
         "catalogue unreachable since 21:30:05 UTC (2 windows waiting)")
     assert catalogue_text(MonitorStatus("joint1", waiting=1)) == "1 window waiting for the catalogue"
+
+
+_TRACKER_PID = """
+import os, signal, time
+from multiprocessing import resource_tracker
+from acq.monitoring.analysis_pool import analysis_executor
+got = []
+signal.signal(signal.SIGHUP, lambda s, f: got.append(s))
+with analysis_executor(1, None) as pool:
+    tracker = resource_tracker._resource_tracker._pid
+    os.kill(tracker, signal.SIGHUP)  # a closed terminal hangs up its whole foreground group
+    time.sleep(0.3)
+    alive = os.waitpid(tracker, os.WNOHANG) == (0, 0)
+    blocked = int(next(l for l in open(f"/proc/{tracker}/status") if l.startswith("SigBlk:")).split()[1], 16)
+    print(alive, bool(blocked & (1 << (signal.SIGHUP - 1))), signal.pthread_sigmask(signal.SIG_BLOCK, []) == set())
+"""
+
+
+def test_the_resource_tracker_outlives_a_hangup_and_acq_keeps_its_own() -> None:
+    """The review of session 15: a closed terminal's SIGHUP killed the resource tracker ("alive: False"); it now
+    starts with SIGHUP blocked, which it keeps (it unblocks only SIGINT and SIGTERM), and acq's own mask is as it was —
+    ignored instead, a SIGHUP to acq while the tracker started was lost."""
+    run = subprocess.run([sys.executable, "-c", _TRACKER_PID], capture_output=True, text=True, timeout=120, env=_env())
+    assert run.stdout.split() == ["True", "True", "True"], run.stderr

@@ -41,12 +41,14 @@ def _start_forkserver_without_cwd() -> None:
         # inside the window left SIGINT unblocked while ignored — a Ctrl-C then was lost (the batch ran to its end,
         # 3 of 8 runs of test_ctrl_c_at_the_terminal_stops_a_batch_in_one_line[catalogue opened]); it ignores SIGINT
         # on its own (CPython's resource_tracker.main) — and SIGTERM, not SIGHUP: a closed terminal killed it (the
-        # review: "resource tracker … alive: False"), so it starts with SIGHUP ignored (not blocked: nothing is lost)
-        hangup = signal.signal(signal.SIGHUP, signal.SIG_IGN)
+        # review: "resource tracker … alive: False"), so it starts with SIGHUP blocked, which it keeps (it unblocks
+        # only SIGINT and SIGTERM); blocked, not ignored, here: a SIGHUP meanwhile reaches acq once it is unblocked
+        # (pthread_sigmask is the calling thread's, whichever thread: the tracker is spawned from it)
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGHUP})
         try:
             resource_tracker.ensure_running()
         finally:
-            signal.signal(signal.SIGHUP, hangup)
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         with _signals_ignored_by_children():
             forkserver.ensure_running()
     finally:

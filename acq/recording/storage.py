@@ -23,6 +23,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from pathlib import Path
 
+from acq.process_signals import signals_deferred
 from acqcore.errors import StorageError
 
 _CAUSES = {
@@ -173,13 +174,16 @@ def _rename_no_replace(tmp: Path | str, target: Path | str) -> None:
     except OSError as e:
         if e.errno not in (errno.EPERM, errno.EOPNOTSUPP, errno.EMLINK, errno.ENOSYS):
             raise
-        os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
-        try:
-            os.replace(tmp, target)
-        except BaseException:
-            with suppress(OSError):  # the empty placeholder would make every later try "exists"
-                os.unlink(target)
-            raise
+        # Ctrl-C / SIGTERM held back over the placeholder and the rename: raised as os.open returned it left the
+        # placeholder; as os.replace returned, the handler below removed the complete file (the review)
+        with signals_deferred():
+            os.close(os.open(target, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644))
+            try:
+                os.replace(tmp, target)
+            except OSError:
+                with suppress(OSError):  # the empty placeholder would make every later try "exists"
+                    os.unlink(target)
+                raise
         return
     with suppress(OSError):  # the target is complete under its name; a temp name left over is only clutter
         os.unlink(tmp)

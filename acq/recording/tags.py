@@ -29,9 +29,9 @@ def parse_tags(texts: Iterable[str]) -> dict[str, str | float]:
     (``payload_kg=2.5`` → 2.5), any other stays text (``serial=007`` → "007").
 
     Raises :class:`ConfigError` naming the tag for a text that is not UTF-8 or holds a control character
-    (:func:`require_plain_text`), without ``=``, a
-    key with other than letters, digits, ``_ . -``, an empty value, a number's spelling beyond a float's range (1e999:
-    inf, a tag that could never be matched, and not JSON) and a key given twice.
+    (:func:`require_plain_text`), without ``=``, a key with other than letters, digits, ``_ . -``, an empty value, a
+    number's spelling beyond a float's range (1e999: inf, a tag that could never be matched, and not JSON) and a key
+    given twice.
     """
     tags: dict[str, str | float] = {}
     given: dict[str, str] = {}

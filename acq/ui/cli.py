@@ -92,6 +92,9 @@ class LazyGroup(click.Group):
         except KeyboardInterrupt as e:
             raise _Interrupted(signal_of(e)) from None
         finally:
+            # the command has ended: a Ctrl-C still to be re-delivered would land in the reporting of its outcome
+            # (its error line half written, then a traceback and 130 — the review, with a slow stderr)
+            _cancel_interrupts_again()
             for s, h in outside.items():
                 signal.signal(s, h)  # type: ignore[arg-type]
 
@@ -141,7 +144,8 @@ def _exit_now(code: int) -> None:
     system: one then killed acq without a line (exit 130 / 143 in the shell) after its command had done all its work
     (0.8 s after ``acq analyze`` printed ``report:``, load 2), or turned an error's exit 2 into 143. Objects only the
     error's traceback held (a file opened without ``with``) are collected first, as the teardown would have closed
-    them. In-process callers (tests) get the usual SystemExit."""
+    them. In-process callers (tests) get the usual SystemExit. From here on the stop signals are ignored: a flush
+    blocked on a stalled pipe or terminal is ended only by SIGKILL."""
     if threading.current_thread() is not threading.main_thread() or "pytest" in sys.modules:
         sys.exit(code)
     # the command's code is final: a Ctrl-C re-delivered now (:func:`_interrupt_again`) or arriving in the collection
