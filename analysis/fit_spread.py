@@ -1,6 +1,7 @@
-"""The spread of a two-mass fit's parameters: the delete-one-block jackknife's covariance (from refits or, linearised,
-from one Gauss–Newton step per replicate), the inflation of a residual variance by the correlation of neighbouring
-Welch bins, and the 95 % intervals a covariance gives. Used by :mod:`analysis.fit`, which fits and brackets."""
+"""The spread of a two-mass fit's parameters: the delete-one-block jackknife's covariance of given replicates (the
+refits :mod:`analysis.fit` makes, ``_jackknife``) or, linearised, of one Gauss–Newton step per replicate, the inflation
+of a residual variance by the correlation of neighbouring Welch bins, and the 95 % intervals a covariance gives. Used
+by :mod:`analysis.fit`, which fits, refits and brackets."""
 
 from __future__ import annotations
 
