@@ -1,5 +1,6 @@
 """The one-phase torque's standard error from the angle (analysis.torque.angle_information_std) and the Welch segments
-left out where it is an outlying share of the torque (analysis.frf.unknown_torque_segments), on synthetic signals."""
+left out where it is an outlying share of the torque (analysis.unknown_torque.unknown_torque_segments), on synthetic
+signals."""
 
 from __future__ import annotations
 
@@ -8,8 +9,9 @@ import warnings
 import numpy as np
 import pytest
 
-from analysis.frf import estimate_frf, unknown_torque_segments
+from analysis.frf import estimate_frf
 from analysis.torque import angle_information_std
+from analysis.unknown_torque import unknown_torque_segments
 
 NPERSEG, STEP = 500, 250
 

@@ -18,7 +18,8 @@ the new ``every_s``); a restart after a crash resumes
 the numbering, analyses the windows left unanalysed and marks a window whose capture was cut
 ``interrupted`` (not counted): what it finds in the folder is read by :mod:`acq.monitoring.monitor_leftovers`; what
 a restart must agree with (bench, ``--window``, alarm rules, catalogue) is in
-:mod:`acq.monitoring.monitor_restart`, the monitor's identity (a copied folder is refused) in
+:mod:`acq.monitoring.monitor_restart`, the catalogue opened with it, the monitor's windows there and their trend in
+:mod:`acq.monitoring.monitor_catalogue`, the monitor's identity (a copied folder is refused) in
 :mod:`acq.monitoring.monitor_scope`, the alarm in :mod:`acq.monitoring.monitor_alarm` and its command in
 :mod:`acq.monitoring.alarm_command`, which raw windows it keeps and deletes (retention, the disk budget, the file
 system's room; two windows in a row the storage refuses stop it, exit 1) in :mod:`acq.monitoring.monitor_windows`,
@@ -30,28 +31,27 @@ the windows waiting for a catalogue out of reach in :mod:`acq.monitoring.catalog
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Iterator
-from contextlib import AbstractContextManager, ExitStack, contextmanager, suppress
+from collections.abc import Callable
+from contextlib import AbstractContextManager, ExitStack
 from pathlib import Path
 
 from acq.config import check_duration
 from acq.monitoring.alarm_command import AlarmCommands
 from acq.monitoring.alarm_rules import RULE_TAGS, AlarmRules
 from acq.monitoring.catalogue import Entry, Outcome
-from acq.monitoring.catalogue_backends import is_url
-from acq.monitoring.catalogue_spool import SPOOL_NAME, FilingQueue, Waiting
+from acq.monitoring.catalogue_spool import Waiting
 from acq.monitoring.folder_lock import folder_lock, removed_unless_used
 from acq.monitoring.monitor_alarm import AlarmState
+from acq.monitoring.monitor_catalogue import MonitorCatalogue
 from acq.monitoring.monitor_leftovers import leftovers
-from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock, catalogue_text, check_comparable, open_bound
-from acq.monitoring.monitor_scope import (IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, Identity, bound_identity,
-                                          check_user_tags, own_windows)
+from acq.monitoring.monitor_restart import EVERY_TAG, MachineClock
+from acq.monitoring.monitor_scope import IDENTITY_FILE, MONITOR_TAG, WINDOW_TAG, check_user_tags
 from acq.monitoring.monitor_status import MonitorSettings, MonitorStatus
 from acq.recording.room import SIZE_MARGIN, expected_session_bytes, require_file_size_limit
 from acq.monitoring.monitor_windows import FolderWindows, StorageFailures, check_budget, refused_as_damaged, write_cause
 from acq.monitoring.retention import WindowFiles
 from acq.monitoring.session_outcome import CATALOGUE_NAME
-from acq.monitoring.trend import ELAPSED_TAG, Trend, compute_trend
+from acq.monitoring.trend import ELAPSED_TAG, Trend
 from acq.monitoring.window_analyses import WindowAnalyses
 from acq.monitoring.window_bench import FACT_TAGS, window_recorder
 from acq.monitoring.window_judge import marked_file
@@ -82,16 +82,11 @@ class Monitor:
         self._alarms = AlarmCommands(settings.on_alarm, self._alarm_problem)
         self._alarm = AlarmState(self.status, self._alarms)
         self._filed = 0  # catalogue rows written by this run
-        self._alarm_before_spool: bool | None = None  # the alarm state before the spool's windows were filed
         self._size = expected_session_bytes(settings.bench, settings.window_s)
         # filed with every window: acq trend / fleet / view --trend of these windows judge them by the same rules
         self._rules = AlarmRules(settings.baseline_windows, settings.threshold_pct, settings.ewma_lambda)
         check_user_tags(settings.tags, (WINDOW_TAG, ELAPSED_TAG, EVERY_TAG, *RULE_TAGS.values(), *FACT_TAGS))
-        self._catalogue_location = settings.catalogue or settings.out_dir / CATALOGUE_NAME
-        # windows filed before monitors had an identity are this monitor's only in its own folder's catalogue
-        self._legacy = not is_url(self._catalogue_location) and \
-            Path(self._catalogue_location).resolve() == (settings.out_dir / CATALOGUE_NAME).resolve()
-        self._id = ""  # the monitor's identity (monitor_scope), read or made in its folder when it runs
+        self._catalogue = MonitorCatalogue(settings, self._rules)  # its identity, windows and trend; open while it runs
         self._clock = MachineClock(settings.every_s)  # a restart goes on from its last window (monitor_restart)
         # a window that cannot be written whole under ulimit -f: refused now, not every window failed for hours
         require_file_size_limit(self._size, f"a {settings.window_s:g} s window", "shorten --window")
@@ -99,8 +94,8 @@ class Monitor:
 
     @property
     def spool(self) -> Path:
-        """The file that keeps the windows waiting for a catalogue out of reach (:mod:`acq.monitoring.catalogue_spool`)."""
-        return self.s.out_dir / SPOOL_NAME
+        """The file of the windows waiting for a catalogue out of reach (:attr:`MonitorCatalogue.spool`)."""
+        return self._catalogue.spool
 
     @property
     def stopped_by(self) -> str | None:
@@ -129,9 +124,10 @@ class Monitor:
         return 3 if self._alarm.active else 0
 
     def _run(self) -> None:
-        with folder_lock(self.s.out_dir), self._identified() as windows, ExitStack() as pools, self._signals():
+        with folder_lock(self.s.out_dir), self._catalogue.opened() as (windows, from_spool), ExitStack() as pools, \
+                self._signals():
             self._analyses = WindowAnalyses(pools, self.s.jobs)
-            first = self._resume(windows)
+            first = self._resume(windows, from_spool)
             wall0 = time.monotonic()
             n = first
             while self._stop is None and self._failure is None and (
@@ -148,7 +144,7 @@ class Monitor:
             self.status.state = "alarm" if self._alarm.active else self.status.state
             # the windows of this monitor the catalogue holds, the analyses under way filed
             failure = None if self._failure is None else self._storage.error(self._failure, sum(
-                e.verdict not in ("interrupted", "not analysed") for e in self._own_windows(None)))
+                e.verdict not in ("interrupted", "not analysed") for e in self._catalogue.own_windows(None)))
             self.status.message = (f"stopped: {failure}" if failure else
                                    f"stopped: {self._stop}" if self._stop else "done")
             self._show()
@@ -173,9 +169,10 @@ class Monitor:
             self._storage_failed(n, "disk full", f"window {n + 1} not captured: disk full: {self.s.out_dir} has "
                                                  f"{free / 1e6:.1f} MB free, a window needs {need / 1e6:.1f} MB")
             return
+        tags = {**self.s.tags, WINDOW_TAG: n, ELAPSED_TAG: self._clock.at(n), EVERY_TAG: self.s.every_s,
+                MONITOR_TAG: self._catalogue.monitor_id, **self._rules.as_tags()}
         recorder = window_recorder(self.s.bench, self.s.out_dir, self.s.window_s, self._clock.at(n), fast=self.s.fast,
-                                   tags={**self.s.tags, WINDOW_TAG: n, ELAPSED_TAG: self._clock.at(n),
-                                         EVERY_TAG: self.s.every_s, MONITOR_TAG: self._id, **self._rules.as_tags()})
+                                   tags=tags)
         self._recorder = recorder
         if self._stop is not None:
             recorder.request_stop(self._stop)
@@ -261,17 +258,17 @@ class Monitor:
     def _record(self, key: str, outcome: Outcome, kind: str | None = None) -> None:
         """Catalogue one window (``kind``: how it counts when not by its verdict, :meth:`MonitorStatus.count`) — or,
         while the catalogue is out of reach, keep it waiting (:class:`FilingQueue`) — and file those waiting."""
-        self._filed_now(self._filing.file(Waiting(key, outcome, kind)))
+        self._filed_now(self._catalogue.filing.file(Waiting(key, outcome, kind)))
 
     def _flush(self, force: bool = False) -> None:
         """File the windows waiting for the catalogue, if it is back (``force``: without waiting for the backoff)."""
-        if self._filing.waiting:
-            self._filed_now(self._filing.flush(force))
+        if self._catalogue.filing.waiting:
+            self._filed_now(self._catalogue.filing.flush(force))
 
     def _filed_now(self, filed: list[Waiting]) -> None:
         for window in filed:
             self._filed_one(window)
-        st, filing = self.status, self._filing
+        st, filing = self.status, self._catalogue.filing
         if filing.notes:  # a window that waited, kept out by a later analysis of it
             st.message = "; ".join(filing.notes)
             filing.notes.clear()
@@ -290,26 +287,15 @@ class Monitor:
         self._windows.done(key, refused_as_damaged(self._windows.path(key), window.outcome.error, verdict))
         self._alarm.unjudged.append(key)
         try:
-            trend = self._trend()
-        except self.catalogue.errors as e:  # the server went away right after the write: judged when it is back
-            if not self._filing.lost_connection(e):
+            trend = self._catalogue.trend()
+        except self._catalogue.catalogue.errors as e:  # the server went away right after the write: judged once back
+            if not self._catalogue.filing.lost_connection(e):
                 raise
             return
         self._alarm.judge_unjudged(trend)
         self._alarms.reap(wait=False)  # an alarm command of an earlier window that ended meanwhile (--fast: no waits)
         self._retain(trend)
         self._show()
-
-    def _own_windows(self, joint: str | None) -> list[Entry]:
-        """This monitor's windows in the catalogue (of ``joint``; None: any), oldest first (:func:`own_windows`)."""
-        return own_windows(self.catalogue, self._id, joint, unowned=self._legacy)
-
-    def _trend(self) -> Trend:
-        entries = self._own_windows(self.s.bench.joint)
-        if not entries:
-            return Trend(self.s.bench.joint, [], None, "no windows yet", None, self.s.threshold_pct, self.s.ewma_lambda)
-        return compute_trend(self.s.bench.joint, entries, baseline_sessions=self.s.baseline_windows,
-                             threshold_pct=self.s.threshold_pct, ewma_lambda=self.s.ewma_lambda)
 
     def _alarm_problem(self, what: str) -> None:
         """Report what went wrong with an --on-alarm command in the status line and the final summary."""
@@ -343,33 +329,10 @@ class Monitor:
         self._show()
 
     # ---- resume after a crash --------------------------------------------------------------------------
-    @contextmanager
-    def _identified(self) -> Iterator[list[Entry]]:
-        """This folder's identity (a copied folder refused), bound to its catalogue (its windows filed elsewhere
-        refused, or moved here with ``move_catalogue``; windows not comparable refused) and written; the catalogue
-        open as :attr:`catalogue` inside; yields its windows in the catalogue. A refusal makes and writes nothing."""
-        s = self.s
-        identity: Identity = bound_identity(s.out_dir, new_identity=s.new_identity, moved=s.moved)
-        self._id = identity.monitor_id
-        self.catalogue, windows = open_bound(
-            s.out_dir, identity, self._catalogue_location, move=s.move_catalogue,
-            own_catalogue=s.out_dir / CATALOGUE_NAME, legacy=self._legacy,
-            check=lambda ws: check_comparable(s.out_dir, ws, s.bench, s.window_s, self._rules))
-        with self.catalogue:
-            self._filing = FilingQueue(self.catalogue, self.spool)
-            if self._filing.waiting:  # windows a run stopped while its catalogue was out of reach: filed first
-                with suppress(*self.catalogue.errors):  # still out of reach: the flush below says so
-                    self._alarm_before_spool = self._trend().alarm  # their alarm is judged in _resume, not assumed
-                self._alarm.unjudged += [w.key for w in self._filing.flush(force=True)]
-                if self._filing.waiting:
-                    raise StorageError(f"{catalogue_text(self._catalogue_location)}: {self._filing.problem} — "
-                                       f"{len(self._filing.waiting)} windows wait in {self._filing.spool}")
-                windows = self._own_windows(None)
-            yield windows
-
-    def _resume(self, windows: list[Entry]) -> int:
-        """Mark or analyse the windows a previous run left (``windows``: its windows in the catalogue); return the
-        next window's number."""
+    def _resume(self, windows: list[Entry], from_spool: list[str]) -> int:
+        """Mark or analyse the windows a previous run left (``windows``: its windows in the catalogue; ``from_spool``:
+        those just filed from the spool, their alarm still to judge); return the next window's number."""
+        self._alarm.unjudged += from_spool
         windows = sorted(windows, key=lambda e: int(e.tags[WINDOW_TAG]))
         known = {e.session_id: e for e in windows if e.joint == self.s.bench.joint}  # the same read, this joint's
         self._clock = MachineClock.resumed(windows, self.s.every_s)
@@ -378,12 +341,13 @@ class Monitor:
         self._resumed(numbers)
         # an alarm raised before the restart goes on: its command is not run again for the same episode (a power cut
         # in alarm announced it once more and counted it twice — the third trial)
-        trend = self._trend() if known else None
-        before = self._alarm_before_spool if self._alarm_before_spool is not None else trend is not None and trend.alarm
+        trend = self._catalogue.trend() if known else None
+        spooled = self._catalogue.alarm_before_spool
+        before = spooled if spooled is not None else trend is not None and trend.alarm
         self._alarm.active = bool(known) and before
         if trend is not None and self._alarm.unjudged:  # windows filed from the spool: an alarm in them was never raised
             self._alarm.judge_unjudged(trend)
-        for found in leftovers(self.s.out_dir, self._id, known, self.catalogue):
+        for found in leftovers(self.s.out_dir, self._catalogue.monitor_id, known, self._catalogue.catalogue):
             self._windows.add(found.files)
             if found.files.copied:
                 continue  # another monitor's: retention's only
@@ -396,12 +360,12 @@ class Monitor:
                 self._mark(key, "interrupted", found.interrupted)
             else:
                 self._submit(key)
-        trend = self._trend()
+        trend = self._catalogue.trend()
         self._retain(trend)
         self._collect(at_most=0)
         self._resumed(numbers)
         if numbers:  # the resumed trend's figures (last K, baseline, state) from the first status line on
-            self._alarm.judge(self._trend(), "")
+            self._alarm.judge(self._catalogue.trend(), "")
             self._show()
         return max(numbers, default=-1) + 1
 
