@@ -262,8 +262,9 @@ def test_spread_beyond_fit_is_the_parameters_covariance_at_the_bins_not_fitted()
 
 
 def test_a_windows_scatter_is_never_taken_below_the_random_error_of_the_modelled_torque_noise():
-    # a misfit of 3 % in every block (the replicates ±0.1 %: a jackknife of 0.3 %): the torque's modelled noise, 2 % of its power
-    # over 27 segments, gives each bin a random error of √(0.02/(2·0.98·27)) = 1.94 % and the window's mean 0.69 %
+    # a misfit of 3 % in every block (the replicates ±0.1 %: a jackknife of 0.3 %): the torque's modelled noise, 2 %
+    # of its power over 27 segments, gives each bin a random error of √(0.02/(2·0.98·27)) = 1.94 %, the window's mean
+    # 0.69 %
     f = 10.0 + 2.0 * np.arange(WINDOW_BINS)
     misfit = np.full(WINDOW_BINS, 0.03)
     reps = misfit + 0.001 * np.array([(-1) ** k for k in range(10)])[:, None]
