@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from analysis.adequacy import BandMisfit, band_misfits, critical_t, missed_spans
+from analysis.adequacy import BandMisfit, band_misfits, coherence_variance, critical_t, missed_spans
 from analysis.fit import band_mask, judged_fit, log_ratio_jacobian, model_log_ratios, model_misfits, quantisation_terms
 from analysis.fit_problem import FitResult, fitted_bins, rel_halfwidth
 from analysis.frf import FrequencyResponse
@@ -38,9 +38,10 @@ def missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, k
     The fitted model is judged up to the default band's top even where the fit's band ends below it
     (:func:`analysis.fit.judged_fit`; ``kernel_error`` at those bins), against the measurement as the Welch estimator
     really sees it (the fit's kernel model corrected by ``kernel_error``, :mod:`analysis.estimator_check`). The
-    allowance: the jackknife's scatter; the share of the encoder's quantisation error that repeats with every motion
-    period (``jitter.repeating_share``; the scatter cannot show it) — a random-phase error of the white-quantisation
-    bound √(N_q/|H·D|²G_xx) at each line of the motion, carried through the fit
+    allowance: the jackknife's scatter, never below the random error the torque estimate's modelled noise gives
+    (``random_variance`` of :func:`analysis.adequacy.band_misfits`); the share of the encoder's quantisation error
+    that repeats with every motion period (``jitter.repeating_share``; the scatter cannot show it) — a random-phase
+    error of the white-quantisation bound √(N_q/|H·D|²G_xx) at each line of the motion, carried through the fit
     (:func:`analysis.systematic_errors.quantisation_through_fit`); beyond the fitted band the model's own spread from
     its parameters' covariance (:func:`analysis.systematic_errors.spread_beyond_fit`); the chain's smooth errors
     (:data:`analysis.systematic_errors.CHAIN_WINDOW_STD`); and, taken off the misfit as the bound it is, the speed
@@ -61,7 +62,10 @@ def missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, k
     carried = carried + np.where(np.isfinite(beyond), beyond, 0.0)
     blind = ~np.isfinite(quant) | ~np.isfinite(lines) | ~(sqrt_w > 0) | unknown
     bound = loop_feedback_bound(quant, jitter.repeating_share)
-    windows = band_misfits(f, misfit.real, reps.real, carried[:f.size, :f.size], blind, CHAIN_WINDOW_STD, bound)
+    random = (None if frf.noise_ratio is None
+              else coherence_variance(1.0 - frf.noise_ratio[fitted_bins(frf, seen.band)], frf.n_segments))
+    windows = band_misfits(f, misfit.real, reps.real, carried[:f.size, :f.size], blind, CHAIN_WINDOW_STD, bound,
+                           random)
     t_crit = critical_t(len(windows), reps.shape[0])
     spans = missed_spans(windows, t_crit)
     judged = tuple((w.low_hz, w.high_hz, w.misfit, w.bound + t_crit * float(np.hypot(w.noise, w.systematic)))
@@ -79,6 +83,6 @@ def missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, k
                                          fit.options.kind, fitted)
         if estimate is not None and missed_spans(band_misfits(
                 f, misfit.real - estimate.misfit, reps.real - estimate.misfit[None, :], carried[:f.size, :f.size],
-                blind, CHAIN_WINDOW_STD, bound), t_crit):
+                blind, CHAIN_WINDOW_STD, bound, random), t_crit):
             estimate = None  # the estimate's error does not explain all of the misfit: the joint's advice stands
     return (spans[0] if spans else None), mode, judged, bins, estimate

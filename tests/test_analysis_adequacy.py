@@ -8,7 +8,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from analysis.adequacy import WINDOW_BINS, band_misfits, bandwidth_bins, critical_t, misfit_covariance
+from analysis.adequacy import (WINDOW_BINS, band_misfits, bandwidth_bins, coherence_variance, critical_t,
+                               misfit_covariance)
 from analysis.systematic_errors import (CHAIN_WINDOW_STD, chain_pull, line_variance, motion_lines,
                                         quantisation_through_fit, spread_beyond_fit, systematic_std)
 from analysis.fit import FitOptions, fit_two_mass, model_misfits
@@ -258,3 +259,18 @@ def test_spread_beyond_fit_is_the_parameters_covariance_at_the_bins_not_fitted()
     jac = np.array([[1.0 + 2.0j], [3.0 - 1.0j]])
     cov = spread_beyond_fit(jac, np.array([[0.01]]), np.array([True, False]), phase=True)
     np.testing.assert_allclose(cov, [[0, 0, 0, 0], [0, 0.09, 0, -0.03], [0, 0, 0, 0], [0, -0.03, 0, 0.01]], atol=1e-15)
+
+
+def test_a_windows_scatter_is_never_taken_below_the_random_error_of_the_modelled_torque_noise():
+    # a misfit of 3 % in every block (the replicates ±0.1 %: a jackknife of 0.3 %): the torque's modelled noise, 2 %
+    # of its power over 27 segments, gives each bin a random error of √(0.02/(2·0.98·27)) = 1.94 %, the window's mean
+    # 0.69 %
+    f = 10.0 + 2.0 * np.arange(WINDOW_BINS)
+    misfit = np.full(WINDOW_BINS, 0.03)
+    reps = misfit + 0.001 * np.array([(-1) ** k for k in range(10)])[:, None]
+    random = coherence_variance(np.full(WINDOW_BINS, 0.98), 27)
+    assert np.sqrt(random[0]) == pytest.approx(0.01944, abs=1e-5)
+    ((alone,), (floored,)) = band_misfits(f, misfit, reps), band_misfits(f, misfit, reps, random_variance=random)
+    assert alone.noise == pytest.approx(0.003, abs=1e-9) and alone.t == pytest.approx(10.0, abs=1e-6)
+    assert floored.noise == pytest.approx(0.006873, abs=1e-6) and floored.t == pytest.approx(4.365, abs=1e-3)
+    assert np.all(coherence_variance(np.array([0.0, 1.0]), 27) == [np.inf, 0.0])  # no coherence: not judged
