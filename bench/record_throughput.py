@@ -257,7 +257,7 @@ def record(bench: Bench, seconds: float, fast: bool, out: Path) -> tuple[float, 
     """Record; return (wall s, CPU s, samples stored over all channels, CPU s of the recording thread alone: the
     checks, the handoff and the writing, not the readers)."""
     current, drive = open_bench(bench, fast=fast)
-    recorder = Recorder(bench, load_profile("triangle_0.2s"), current, drive, out, seconds)
+    recorder = Recorder(bench, load_profile("triangle_0.2s"), current, drive, out, seconds, one_cpu=fast)
     wall0, cpu0, own0 = time.perf_counter(), time.process_time(), time.thread_time()
     result = recorder.run()
     wall, cpu, own = time.perf_counter() - wall0, time.process_time() - cpu0, time.thread_time() - own0
