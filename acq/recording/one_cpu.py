@@ -3,10 +3,12 @@
 In --fast mode the reader threads compute the simulated bench one after the other (its lock) while the recording
 thread writes what they handed over: on two CPUs every block crosses from one CPU's cache to the other's and every
 GIL hand-over wakes a thread on the other CPU. On one CPU the recorder's CPU time for a 10 s session of
-bench/record_throughput.py fell by ≈ 17 ms of ≈ 405 (the readers ≈ 10, the recording thread ≈ 4; the simulator
-read alone, nothing written, unchanged), and its wall time with it: the readers never ran in parallel anyway.
-In real time it changes nothing measurable (0.080 CPU s per recorded second either way), and a real device's
-reader waits on its device, not on a CPU: so it is only asked for --fast.
+bench/record_throughput.py fell from 410 to 385 ms (medians of 14 pairs; its readers −17 ms, the recording thread
+−7; the simulator read alone, nothing written, unchanged), and at loads up to 5 its wall time with it (the readers
+never ran in parallel anyway), but at load 6–7 the wall time rose (641 → 738 ms): a thread held to one busy CPU
+cannot move to the other. In real time it changes nothing measurable (0.07–0.08 CPU s per recorded second either
+way), and a real device's reader waits on its device, not on a CPU, and must not wait behind other work on its
+CPU: so it is only asked for --fast.
 """
 
 from __future__ import annotations
