@@ -179,7 +179,9 @@ session's current (3 channels, 100 chunks each, written alone); Python's cyclic 
 a reader's own per-block work beside the floor's (the covered count and the queue) 0.36 µs a block, 0.4 ms a session;
 direct chunk writes (``write_direct_chunk``) with Fletcher32 computed in numpy (bit-exact with HDF5's, the file read
 back with its checksums verified) cost 112 µs a chunk for the checksum alone against ≈ 8 µs for HDF5's whole filter:
-60–500 ms a session instead of 10.
+60–500 ms a session instead of 10. On one CPU the GIL's switch interval (``sys.setswitchinterval`` 1, 5 — the
+default — and 20 ms, 3 interleaved rounds at load 2.8–5.0) changed nothing: per CPU 0.89 / 0.90, 0.90 / 0.93 and
+0.90 / 0.93 (one thread / a thread per stream, medians), the recording thread 32.3, 32.2 and 31.6 ms.
 
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
