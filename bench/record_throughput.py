@@ -8,7 +8,9 @@
    each stream read in its own thread as the recorder's two readers read them (each simulated read holds the
    bench's lock for its whole block, :meth:`drivers.sim.bench.SimBench.exclusive`, so the two compute one after
    the other; what contention is left is the simulator's, counted alike in the recorder's figure and this
-   floor) — and their ratios (target, issue 17: ≥ 0.9), per wall second and per CPU second of the process;
+   floor) — and their ratios (target, issue 17: ≥ 0.9), per wall second and per CPU second of the process (the
+   recorder on one CPU as ``acq record --fast`` runs it, :mod:`acq.recording.one_cpu`; the floor where the kernel
+   puts it);
    and the recording thread's own rate (its CPU alone: the index checks, the handoff from the readers and the
    writing), the same writing alone (:func:`writer_alone`: the blocks of a recording replayed into a writer, no
    simulator beside it) and its readers' rate (the rest of the process's CPU: the simulator as the recorder reads
@@ -153,6 +155,34 @@ the ring's copies keep the GIL). Also in the way: a recorder killed with SIGKILL
 repair), and ``tests/test_durability.py`` logs the syncs in the recording process's memory, which the child's syncs
 never reach.
 
+Session 16, one CPU (2026-12-01; ``Recorder(one_cpu=True)``, which ``acq record --fast`` and this script's ``--fast``
+runs use): pinning the whole process to one CPU (``taskset -c``) first, 5 pairs at load 4.5–4.7: the recorder's CPU
+per 10 s session 406 → 388 ms (median), the floor 348 → 344, per CPU 0.87 / 0.87 → 0.89 / 0.89 (one thread / a
+thread per stream), the recording thread 38.5 → 33.8 ms, its readers 364 → 353, real time unchanged (0.076–0.085
+against 0.076–0.082 CPU s per recorded second). What the three threads paid on two CPUs was cross-CPU: blocks
+computed in one CPU's cache and copied from the other's, and GIL hand-overs that wake a thread on the other CPU. Then
+the recording thread and its readers alone on the CPU the recording thread is on (the readers inherit it; the thread
+gets its CPUs back after), 14 pairs interleaved with main 9605b70 (5 at load 1.8–2.5, 5 at 3.1–5.2, 4 at 5.7–7.0),
+``--repeat 5 --realtime-seconds 1``, medians (ranges) main → this: per CPU 0.860 (0.82–0.93) → 0.900 (0.88–0.95) a
+thread per stream, higher in 12 of 14 pairs, per-pair difference +0.045 (−0.03…+0.09); 0.845 (0.81–0.91) → 0.890
+(0.88–0.91) one thread, higher in 13 of 14, +0.055 (−0.01…+0.08); the recorder's CPU 410 → 385 ms (per pair −26,
+−42…−3), the recording thread 37.8 → 32.6 ms, its readers 370 → 351, the floor and the writing alone unchanged (352 /
+346, 24.2 / 24.5 ms); real time 0.068–0.082 → 0.070–0.083 (not pinned). Per wall second 0.850 → 0.860 (a thread per
+stream) and 0.815 → 0.870 (one thread), the recorder's wall 561 → 425 ms (per pair −27, −233…+260) — but at load
+5.7–7.0 the 4 pairs went the other way, 641 → 738 ms (0.915 → 0.805 a thread per stream): a thread held to one busy
+CPU cannot move to the other one. Hence --fast only: a real device's reader waits on its device, the gain is none
+there and the risk is a reader held behind other work on its CPU. Also measured this session, without gain (each
+below 2 ms a session, under the pairs' noise, not built): HDF5's ``set_extent`` is 0.5 ms for 240 calls (the recorder
+makes ≈ 90 a session: pre-sizing the extents and cutting them at the end would save ≈ 0.2 ms); writing the current
+blocks as parts of one commit straight from the readers' arrays, no copy into the write buffers: 9.4 → 8.4 ms per
+session's current (3 channels, 100 chunks each, written alone); Python's cyclic GC runs 0–1 times a session (0.3 ms);
+a reader's own per-block work beside the floor's (the covered count and the queue) 0.36 µs a block, 0.4 ms a session;
+direct chunk writes (``write_direct_chunk``) with Fletcher32 computed in numpy (bit-exact with HDF5's, the file read
+back with its checksums verified) cost 112 µs a chunk for the checksum alone against ≈ 8 µs for HDF5's whole filter:
+60–500 ms a session instead of 10. On one CPU the GIL's switch interval (``sys.setswitchinterval`` 1, 5 — the
+default — and 20 ms, 3 interleaved rounds at load 2.8–5.0) changed nothing: per CPU 0.89 / 0.90, 0.90 / 0.93 and
+0.90 / 0.93 (one thread / a thread per stream, medians), the recording thread 32.3, 32.2 and 31.6 ms.
+
 BLAS threads: ``--blas-threads 1`` (the default) measures what ``acq record`` runs with (``acq/entry.py`` pins one
 thread); ``default`` leaves OpenBLAS its own count. The simulator's state interpolation multiplies (5120 × 7) by
 (7 × 7) matrices per current block: OpenBLAS splits those over both cores and its second thread costs more than it
@@ -257,7 +287,7 @@ def record(bench: Bench, seconds: float, fast: bool, out: Path) -> tuple[float, 
     """Record; return (wall s, CPU s, samples stored over all channels, CPU s of the recording thread alone: the
     checks, the handoff and the writing, not the readers)."""
     current, drive = open_bench(bench, fast=fast)
-    recorder = Recorder(bench, load_profile("triangle_0.2s"), current, drive, out, seconds)
+    recorder = Recorder(bench, load_profile("triangle_0.2s"), current, drive, out, seconds, one_cpu=fast)
     wall0, cpu0, own0 = time.perf_counter(), time.process_time(), time.thread_time()
     result = recorder.run()
     wall, cpu, own = time.perf_counter() - wall0, time.process_time() - cpu0, time.thread_time() - own0

@@ -25,6 +25,7 @@ from typing import Any
 from acq.process_signals import STOP_REASONS, handled, repeated_hangup, stop_reason
 from acq.recording.device_reader import READ_TIMEOUT_S, DeviceReader
 from acq.recording.layout import Status, utc_now_iso
+from acq.recording.one_cpu import on_one_cpu
 from acq.recording.paths import new_session_path
 from acq.recording.room import FLUSH_BYTES
 from acq.recording.stream_check import StreamChecker, join_encoder_blocks
@@ -113,6 +114,8 @@ class Recorder:
     duration_s : seconds of data wanted in each stream (counted in samples, not wall time).
     listeners : called with each block written and each event stored (see :data:`Listener`).
     progress : called with the fraction recorded (0..1) as data arrives.
+    one_cpu : run the recording thread and its readers on one CPU (:mod:`acq.recording.one_cpu`): for a simulated
+        bench in --fast mode, whose readers compute rather than wait.
     """
 
     def __init__(
@@ -128,6 +131,7 @@ class Recorder:
         tags: dict[str, Any] | None = None,
         listeners: list[Listener] | None = None,
         progress: Callable[[float], None] | None = None,
+        one_cpu: bool = False,
     ) -> None:
         external = bench.listens()
         if external != (profile is None):
@@ -142,6 +146,7 @@ class Recorder:
         self.operator, self.tags = operator, tags
         self.listeners = listeners or []
         self.progress = progress
+        self.one_cpu = one_cpu
         self._started = False
         self._writer: SessionWriter | None = None
         self.session_path: Path | None = None  # the session file once created (also one finished failed at its start)
@@ -258,7 +263,7 @@ class Recorder:
         counts = {"current": 0, "encoder": 0}
         status: Status = "complete"
         reason = f"recorded {self.duration_s:g} s"
-        with stop_on_signals(self.request_stop):
+        with stop_on_signals(self.request_stop), on_one_cpu(self.one_cpu):  # the readers started inside inherit it
             # from here a stop signal raises nothing and the file is finished below; one before (a KeyboardInterrupt)
             # leaves it to abort() — _ran was set before the handlers, and one in between left the file "recording"
             self._ran = True

@@ -78,7 +78,8 @@ def record_command(profile_name: str | None, bench_path: Path | None, duration_s
     check_memory(bench)
     require_room(out_dir, bench, duration)  # before the devices start, not a progress bar run to its end for nothing
     current, drive = open_bench(bench, fast=fast)
-    recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=session_tags)
+    recorder = Recorder(bench, profile, current, drive, out_dir, duration, operator=operator, tags=session_tags,
+                        one_cpu=fast)
     if live:
         with signals_deferred():  # a Ctrl-C inside Qt's import: a fatal error of shiboken's start-up, or lost
             from acq.ui.live import LiveView, require_display  # Qt is imported only when asked for
