@@ -40,7 +40,7 @@ err = Console(stderr=True)
 @click.option("--out", "out_dir", type=Folder(), default=Path("sessions"), show_default=True,
               help="Folder for the session file.")
 @click.option("--operator", default="", help="Who is at the bench (stored in the session).")
-@click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time.")
+@click.option("--fast", is_flag=True, help="Simulated parts run as fast as possible instead of in real time (the recording on one CPU).")
 @click.option("--no-analyze", is_flag=True, help="Only record; do not identify the joint afterwards.")
 @click.option("--live", is_flag=True, help="Watch it in a live window: phase current, speed, position, counters, gaps.")
 @tag_option
