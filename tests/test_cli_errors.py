@@ -234,7 +234,9 @@ def test_no_catalogue_is_the_same_error_and_exit_code_for_trend_and_view(tmp_pat
     assert (trend.code, trend.err) == (view.code, view.err) == (2, message)
     # the trial: acq trend nosuchfolder advised filling a catalogue in a folder that is not there
     missing = tmp_path / "nosuchfolder"
-    for command in (["trend", str(missing), "--joint", "joint1"], ["fleet", str(missing)]):
+    for command in (["trend", str(missing), "--joint", "joint1"], ["fleet", str(missing)],
+                    ["trend", "--catalogue", str(missing / "catalogue.sqlite"), "--joint", "joint1"],
+                    ["fleet", "--catalogue", str(missing / "catalogue.sqlite")]):
         run = run_cli(capsys, *command)
         assert (run.code, run.err) == (2, f"acq: error: {missing / 'catalogue.sqlite'}: no catalogue — the folder "
                                           f"{missing} does not exist\n"), command

@@ -36,7 +36,8 @@ def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Pat
     if not is_url(path) and not Path(path).is_file():
         sessions = folder or Path("sessions")
         refused = None if catalogue else refused_write(sessions)  # acq analyze can make no catalogue there
-        fill = (f"fill it with acq analyze FOLDER/ --catalogue {path}" if catalogue else
+        fill = (f"the folder {Path(path).parent} does not exist" if catalogue and not Path(path).parent.exists() else
+                f"fill it with acq analyze FOLDER/ --catalogue {path}" if catalogue else
                 f"the folder {sessions} does not exist"
                 if not sessions.exists() else
                 f"{sessions} is not writable ({refused}): fill one with acq analyze {sessions}/ --result-dir DIR, "
