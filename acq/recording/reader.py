@@ -60,7 +60,12 @@ def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
         first_line = str(e).splitlines()[0] if str(e) else type(e).__name__
         if "file signature not found" in first_line:  # HDF5's words for a file of another kind
             first_line = "no HDF5 signature: another kind of file"
-        why = notes[0] if notes else first_line
+        # a writer holds HDF5's lock: a recorder making the file has it until its SWMR writing starts (tens of ms),
+        # any other HDF5 writer for as long as it writes — a file being written, not one cut, whatever its size says
+        locked = "unable to lock file" in first_line
+        if locked:
+            first_line = "locked by a process writing it (a recording just starting?) — try again in a moment"
+        why = notes[0] if notes and not locked else first_line
         raise ConfigError(f"{path}: not a readable HDF5 session file ({why})") from None
 
 
