@@ -107,8 +107,8 @@ def signals_deferred() -> Iterator[None]:
                 for s in STOP_SIGNALS if handled(s)}
     try:
         yield
-    finally:
+    finally:  # also when the block raised: a stop asked for meanwhile is never lost (its KeyboardInterrupt wins)
         for s, handler in previous.items():
             signal.signal(s, handler)
-    for signum in dict.fromkeys(caught):
-        signal.raise_signal(signum)
+        for signum in dict.fromkeys(caught):
+            signal.raise_signal(signum)

@@ -75,7 +75,8 @@ def missed_band(frf: FrequencyResponse, fit: FitResult, jitter: EncoderJitter, k
         mode = third_mode(f, misfit, reps, model_log_ratios(frf, seen), jac, sqrt_w, fit.options.kind,
                           fit.fitted.index("K_Nm_per_rad"), rel_halfwidth(fit, "K_Nm_per_rad"),
                           candidate_frequencies(fit.f_a, seen.band), fitted=fitted, use_phase=use_phase,
-                          systematic_cov=carried, blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound)
+                          systematic_cov=carried, blind=blind, chain_std=CHAIN_WINDOW_STD, bias_bound=bound,
+                          random_variance=random)
     bins = tuple((float(fb), float(m)) for fb, m in zip(f, misfit.real))
     estimate = None
     if spans and torque_from_angle:

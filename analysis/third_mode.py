@@ -122,7 +122,8 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
                candidates_hz: np.ndarray, *, fitted: np.ndarray | None = None, use_phase: bool = False,
                systematic_cov: np.ndarray | None = None,
                blind: np.ndarray | None = None, chain_std: float = 0.0,
-               bias_bound: np.ndarray | None = None) -> ThirdMode | None:
+               bias_bound: np.ndarray | None = None,
+               random_variance: np.ndarray | None = None) -> ThirdMode | None:
     """The candidate third mode with the largest t among those beyond noise that pull K beyond its interval (else the
     largest t of all).
 
@@ -158,6 +159,12 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
         amplitude rows then, with ``use_phase``, phase rows: :func:`analysis.systematic_errors.quantisation_through_fit`;
         bins not to judge; the chain's window error; the loop's bias bound per bin). The phase is given the same
         chain error and bound as |H| (both bound ln H, a complex number).
+    random_variance : ndarray, shape (n,), optional
+        Variance per bin of ln|H| that the torque estimate's modelled noise gives (as
+        :func:`analysis.adequacy.band_misfits` takes it; the phase's is the same, both being (1 − γ²)/(2γ²n_d) for
+        H1): an estimate's noise is never taken below Σ v_i²·σ_i² of its weights v, the bins taken as independent (the
+        smaller reading, as the window test takes it); a bin where it is infinite is not judged. None: the replicates'
+        scatter alone.
 
     Returns
     -------
@@ -170,6 +177,8 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
     judged = (np.isfinite(misfit) & (sqrt_w > 0) & np.all(np.isfinite(reps), axis=0)) if b else np.zeros(n, bool)
     if blind is not None:
         judged &= ~blind
+    if random_variance is not None:
+        judged &= np.isfinite(random_variance)  # no coherence the modelled noise would leave: nothing to judge there
     if b < 2 or candidates_hz.size == 0 or not np.any(judged):
         return None
     parts = 2 if use_phase else 1
@@ -184,6 +193,7 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
                else np.where(np.outer(rows_judged, rows_judged), systematic_cov[:parts * n, :parts * n], 0.0))
     bound = np.zeros(n) if bias_bound is None else np.where(judged & np.isfinite(bias_bound), bias_bound, 0.0)
     bound = np.tile(bound, parts)
+    random = np.zeros(parts * n) if random_variance is None else np.tile(np.where(judged, random_variance, 0.0), parts)
     window = np.tile(np.arange(n) // WINDOW_BINS, parts) + np.repeat(np.arange(parts), n) * n
     chain_cov = (window[:, None] == window[None, :]) * chain_std**2
     scatter = _along_frequency((b - 1) / b * np.sum((r - r.mean(axis=0)) ** 2, axis=0), rows_judged, n)
@@ -204,7 +214,7 @@ def third_mode(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.ndarr
             return None
         v = np.linalg.solve(normal, (regressors / variance[:, None]).T)[0]  # â = v·misfit
         a_reps = r @ v
-        noise2 = (b - 1) / b * float(np.sum((a_reps - a_reps.mean()) ** 2))
+        noise2 = max((b - 1) / b * float(np.sum((a_reps - a_reps.mean()) ** 2)), float(v**2 @ random))
         scale = float(np.sqrt(noise2 + v @ carried @ v + v @ chain_cov @ v))
         a = float(v @ m)
         return a, ((a - float(np.abs(v) @ bound)) / scale if scale > 0 else 0.0), scale

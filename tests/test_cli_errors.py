@@ -240,6 +240,16 @@ def test_no_catalogue_is_the_same_error_and_exit_code_for_trend_and_view(tmp_pat
         run = run_cli(capsys, *command)
         assert (run.code, run.err) == (2, f"acq: error: {missing / 'catalogue.sqlite'}: no catalogue — the folder "
                                           f"{missing} does not exist\n"), command
+    # a file where the folder should be: said so, not advised to fill a catalogue inside it
+    afile = tmp_path / "notes.txt"
+    afile.write_text("x")
+    for command in (["trend", "--catalogue", str(afile / "c.sqlite"), "--joint", "joint1"],
+                    ["fleet", "--catalogue", str(afile / "c.sqlite")]):
+        run = run_cli(capsys, *command)
+        assert (run.code, run.err) == (2, f"acq: error: {afile / 'c.sqlite'}: no catalogue — {afile} is a file, not a "
+                                          "folder\n"), command
+    run = run_cli(capsys, "trend", str(afile), "--joint", "joint1")  # as FOLDER: refused before any catalogue
+    assert (run.code, run.err) == (2, f"acq: error: {afile}: is a file, not a folder\n")
 
 
 @pytest.mark.parametrize("command", [("analyze", "{session}", "--no-report", "--catalogue", "{folder}"),

@@ -106,3 +106,27 @@ def test_a_file_locked_by_its_writer_is_said_so(tmp_path: Path) -> None:
     finally:
         writer.kill()
         writer.wait()
+
+
+def test_a_file_system_whose_locks_fail_is_said_so_with_the_way_round(tmp_path: Path,
+                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    """An NFS mount without its lock daemon refuses flock() with ENOLCK (a mount with no locks at all answers ENOSYS,
+    which open_read's best-effort locking skips): HDF5's words stand, with the setting that reads without locks. The
+    file system stands in here as HDF5's own error, raised where HDF5 opens the file."""
+    import h5py
+
+    path = tmp_path / "on_share.h5"
+    with h5py.File(path, "w"):
+        pass
+
+    def refuse(*_args: object, **_kwargs: object) -> None:
+        raise OSError("[Errno 37] Unable to synchronously open file (unable to lock file, errno = 37, error message = "
+                      "'No locks available')")
+
+    monkeypatch.setattr(h5py.h5f, "open", refuse)
+    with pytest.raises(ConfigError) as err:
+        load(path)
+    assert str(err.value) == (
+        f"{path}: not a readable HDF5 session file ([Errno 37] Unable to synchronously open file (unable to lock file, "
+        "errno = 37, error message = 'No locks available') — where the file system has no working locks, "
+        "HDF5_USE_FILE_LOCKING=FALSE reads without)")

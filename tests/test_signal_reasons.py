@@ -124,3 +124,22 @@ def test_a_signal_before_the_recording_started_names_itself(tmp_path: Path) -> N
     assert (code, _stop_reason(path)) == (130, ("interrupted", "stopped by SIGTERM"))
     assert lines == [f"acq: stopped by SIGTERM before the recording started — nothing recorded ({path}: no samples, "
                      "status interrupted)"]
+
+
+def test_a_stop_deferred_over_a_block_that_raised_still_reaches_its_handler() -> None:
+    # a SIGTERM inside a deferred block (a worker being started) whose body then failed was dropped with the deferring
+    # handler: the process went on as if never asked to stop
+    from acq.process_signals import signals_deferred
+
+    received: list[int] = []
+    before = signal.signal(signal.SIGTERM, lambda signum, frame: received.append(signum))
+    try:
+        with pytest.raises(ValueError, match="the body failed"):
+            with signals_deferred():
+                os.kill(os.getpid(), signal.SIGTERM)
+                time.sleep(0.01)  # the handler runs between bytecodes: it has run, deferred, by now
+                assert received == []
+                raise ValueError("the body failed")
+        assert received == [signal.SIGTERM]
+    finally:
+        signal.signal(signal.SIGTERM, before)

@@ -205,3 +205,30 @@ def test_a_healthy_joint_fitted_below_its_resonance_is_not_called_a_misfit_above
     assert abs(errors_pct(res, truth)["K_Nm_per_rad"]) < 0.5
     assert res.quality.reasons[0].startswith("fitted f_a 55 Hz … f_r 102 Hz lies outside the fit band 10…100 Hz")
     assert not any("does not fit" in r or "third mode" in r for r in res.quality.reasons), res.quality.reasons
+
+
+def test_a_modes_noise_is_never_taken_below_the_random_error_of_the_modelled_torque_noise() -> None:
+    # a third mass of 0.2 % of the load at 180 Hz (|H| 7 % off at most), the same in every block (the jackknife shows
+    # ±0.05 % per bin): beyond its level 20 times over; with the torque estimate's modelled noise leaving a coherence
+    # of 0.9 over 27 segments (4.4 % per bin, as the window test's floor takes it) its t is what that noise allows,
+    # below the level
+    from analysis.adequacy import coherence_variance
+    from analysis.third_mode import third_mode
+
+    p = TwoMassParams(1000.0, 2e-3, 4e-3, 0.05, 0.0, 0.0)
+    f = np.linspace(10.0, 400.0, 200)
+    log_ratios = _log_ratios_against_itself(p, f)
+    jac = np.stack([np.log(f), np.ones(f.size), f / 100.0], axis=1).astype(complex)
+    trace = -log_ratios(lambda x: third_mass_load_factor(x, 0.002, 180.0, THIRD_MODE_DAMPING))  # model/measured
+    reps = trace + 0.0005 * np.random.default_rng(2).standard_normal((10, f.size))
+    cands = candidate_frequencies(np.sqrt(p.K_Nm_per_rad / p.Jl_kgm2) / (2 * np.pi), (10.0, 400.0))
+
+    def judged(random: np.ndarray | None) -> object:
+        return third_mode(f, trace.astype(complex), reps.astype(complex), log_ratios, jac, np.ones(f.size),
+                          "amplitude", 0, 0.01, cands, random_variance=random)
+
+    alone, floored = judged(None), judged(coherence_variance(np.full(f.size, 0.9), 27))
+    assert alone.t > 20 * alone.t_crit and alone.mass_ratio == pytest.approx(0.002, rel=0.02)
+    assert 0 < floored.t < floored.t_crit and not floored.found
+    assert floored.mass_ratio == pytest.approx(alone.mass_ratio, rel=1e-9)  # the estimate itself unchanged
+    assert judged(np.full(f.size, np.inf)) is None  # no coherence anywhere: no bin to judge

@@ -30,16 +30,22 @@ class NoSessions(ConfigError):
         self.location, self.joints, self.awaited = location, list(joints), awaited
 
 
+def _not_a_folder(folder: Path) -> str | None:
+    """Why ``folder`` cannot hold a catalogue (it is not there, or is a file), else None."""
+    if folder.is_dir():
+        return None
+    return f"{folder} is a file, not a folder" if folder.exists() else f"the folder {folder} does not exist"
+
+
 def catalogue_location(folder: Path | None, catalogue: Path | str | None) -> Path | str:
     """The catalogue to read: ``catalogue`` (a file or URL) or FOLDER/catalogue.sqlite; an error when no file."""
     path = catalogue or (folder or Path("sessions")) / CATALOGUE_NAME
     if not is_url(path) and not Path(path).is_file():
         sessions = folder or Path("sessions")
         refused = None if catalogue else refused_write(sessions)  # acq analyze can make no catalogue there
-        fill = (f"the folder {Path(path).parent} does not exist" if catalogue and not Path(path).parent.exists() else
+        missing = _not_a_folder(Path(path).parent if catalogue else sessions)
+        fill = (missing if missing else
                 f"fill it with acq analyze FOLDER/ --catalogue {path}" if catalogue else
-                f"the folder {sessions} does not exist"
-                if not sessions.exists() else
                 f"{sessions} is not writable ({refused}): fill one with acq analyze {sessions}/ --result-dir DIR, "
                 "then acq trend DIR" if refused else f"fill one with acq analyze {sessions}/ first")
         uncatalogued = not catalogue and sessions.is_dir() and any(sessions.glob("*.h5"))

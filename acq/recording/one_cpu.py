@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 
 
 def current_cpu() -> int | None:
@@ -23,16 +23,19 @@ def current_cpu() -> int | None:
     try:
         with open("/proc/thread-self/stat", "rb") as f:
             fields = f.read().rsplit(b")", 1)[1].split()  # after the command name, which may hold spaces
-    except OSError:
+        return int(fields[36])  # field 39 of the line; the split starts at field 3
+    except (OSError, IndexError, ValueError):  # no /proc, or a kernel that writes the line otherwise
         return None
-    return int(fields[36])  # field 39 of the line; the split starts at field 3
 
 
 @contextmanager
 def on_one_cpu(enabled: bool = True) -> Iterator[None]:
     """While inside, the calling thread — and every thread it starts meanwhile, which inherits it — runs on the
     CPU it is on now; its own CPUs are given back on leaving. Nothing where the platform cannot pin a thread or
-    refuses to."""
+    refuses to.
+
+    Only the calling thread gets its CPUs back: a thread, a subprocess or a native pool (BLAS, a DAQ driver's) started
+    inside keeps the pin for its whole life — start nothing long-lived inside that should use every CPU."""
     cpu = current_cpu() if enabled and hasattr(os, "sched_setaffinity") else None
     if cpu is None:
         yield
@@ -46,4 +49,5 @@ def on_one_cpu(enabled: bool = True) -> Iterator[None]:
     try:
         yield
     finally:
-        os.sched_setaffinity(0, allowed)
+        with suppress(OSError):  # a CPU of ``allowed`` taken from the process meanwhile: stay where it runs
+            os.sched_setaffinity(0, allowed)

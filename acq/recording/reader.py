@@ -60,11 +60,14 @@ def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
         first_line = str(e).splitlines()[0] if str(e) else type(e).__name__
         if "file signature not found" in first_line:  # HDF5's words for a file of another kind
             first_line = "no HDF5 signature: another kind of file"
-        # a writer holds HDF5's lock: a recorder making the file has it until its SWMR writing starts (tens of ms),
-        # any other HDF5 writer for as long as it writes — a file being written, not one cut, whatever its size says
+        # errno 11 (EAGAIN): a writer holds HDF5's lock — a recorder making the file has it until its SWMR writing
+        # starts (tens of ms), any other HDF5 writer for as long as it writes: a file being written, not one cut,
+        # whatever its size says. Any other errno: the file system's locks failed (ENOSYS is skipped by open_read)
         locked = "unable to lock file" in first_line
-        if locked:
+        if locked and "errno = 11," in first_line:
             first_line = "locked by a process writing it (a recording just starting?) — try again in a moment"
+        elif locked:
+            first_line += " — where the file system has no working locks, HDF5_USE_FILE_LOCKING=FALSE reads without"
         why = notes[0] if notes and not locked else first_line
         raise ConfigError(f"{path}: not a readable HDF5 session file ({why})") from None
 
