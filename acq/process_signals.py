@@ -108,7 +108,15 @@ def signals_deferred() -> Iterator[None]:
     try:
         yield
     finally:  # also when the block raised: a stop asked for meanwhile is never lost (its KeyboardInterrupt wins)
-        for s, handler in previous.items():
-            signal.signal(s, handler)
-        for signum in dict.fromkeys(caught):
+        # blocked while the handlers are put back: one arriving between two restores would raise from the first
+        # restored handler and leave the others deferring for good; held pending, it reaches its own handler after
+        # (this thread's mask: another thread that leaves them unblocked can still take one — a window of 3 calls)
+        old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, previous) if previous else None
+        try:
+            for s, handler in previous.items():
+                signal.signal(s, handler)
+        finally:
+            if old_mask is not None:
+                signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        for signum in dict.fromkeys(caught):  # the first's handler raises: the rest were the same request
             signal.raise_signal(signum)

@@ -58,25 +58,35 @@ def filled_while_recording(folder: Path, leave_bytes: int) -> Iterator[None]:
     refused before it starts, so only this makes a disk full mid-recording)."""
     from acq.recording.storage import free_bytes
 
-    stop = threading.Event()
+    stop, filled = threading.Event(), threading.Event()
+    failed: list[BaseException] = []
 
     def fill() -> None:
-        while not stop.is_set():
-            if any(p.stat().st_size > 1 << 20 for p in folder.glob("*.h5")):
-                with (folder / "other-program.bin").open("wb") as f:
-                    # the recording goes on writing between the reading of the free space and the allocation (CI of
-                    # 2a1933c: ENOSPC here, the disk never filled, the recording ended ok): read it again and retry
-                    for _ in range(100):
-                        if (room := free_bytes(folder) - leave_bytes) <= 0:
-                            break
-                        try:
-                            os.posix_fallocate(f.fileno(), f.seek(0, os.SEEK_END), room)
-                            break
-                        except OSError as e:
-                            if e.errno != errno.ENOSPC:
-                                raise
-                return
-            time.sleep(0.001)
+        try:
+            while not stop.is_set():
+                if any(p.stat().st_size > 1 << 20 for p in folder.glob("*.h5")):
+                    with (folder / "other-program.bin").open("wb") as f:
+                        # the recording goes on writing between the reading of the free space and the allocation (CI
+                        # of 2a1933c: ENOSPC here, the disk never filled, the recording ended ok): read it again, leave
+                        # a growing margin, retry
+                        for attempt in range(100):
+                            room = free_bytes(folder) - leave_bytes - attempt * (64 << 10)
+                            if room <= 0:  # no more to take than what is to be left: as full as asked
+                                filled.set()
+                                return
+                            try:
+                                os.posix_fallocate(f.fileno(), f.seek(0, os.SEEK_END), room)
+                            except OSError as e:
+                                if e.errno != errno.ENOSPC:
+                                    raise
+                                time.sleep(0.001)
+                            else:
+                                filled.set()
+                                return
+                    return
+                time.sleep(0.001)
+        except BaseException as e:  # noqa: BLE001 - handed to the test's thread, which raises it
+            failed.append(e)
 
     filler = threading.Thread(target=fill)
     filler.start()
@@ -85,7 +95,9 @@ def filled_while_recording(folder: Path, leave_bytes: int) -> Iterator[None]:
     finally:
         stop.set()
         filler.join()
-    assert (folder / "other-program.bin").exists(), "the recording ended before the disk was filled"
+    if failed:
+        raise failed[0]
+    assert filled.is_set(), "the recording ended before the disk was filled"
 
 
 def _assert_counts_are_stored(path: Path, current: int, encoder: int) -> None:

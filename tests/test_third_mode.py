@@ -210,8 +210,8 @@ def test_a_healthy_joint_fitted_below_its_resonance_is_not_called_a_misfit_above
 def test_a_modes_noise_is_never_taken_below_the_random_error_of_the_modelled_torque_noise() -> None:
     # a third mass of 0.2 % of the load at 180 Hz (|H| 7 % off at most), the same in every block (the jackknife shows
     # ±0.05 % per bin): beyond its level 20 times over; with the torque estimate's modelled noise leaving a coherence
-    # of 0.9 over 27 segments (4.4 % per bin, as the window test's floor takes it) its t is what that noise allows,
-    # below the level
+    # of 0.9 over 27 segments (4.5 % per bin, as the window test's floor takes it) its t is what that noise allows:
+    # t 69.7 → 2.4 on |H| alone, below the level (with the phase 3.2: the phase adds what it knows of the mode)
     from analysis.adequacy import coherence_variance
     from analysis.third_mode import third_mode
 
@@ -220,15 +220,18 @@ def test_a_modes_noise_is_never_taken_below_the_random_error_of_the_modelled_tor
     log_ratios = _log_ratios_against_itself(p, f)
     jac = np.stack([np.log(f), np.ones(f.size), f / 100.0], axis=1).astype(complex)
     trace = -log_ratios(lambda x: third_mass_load_factor(x, 0.002, 180.0, THIRD_MODE_DAMPING))  # model/measured
-    reps = trace + 0.0005 * np.random.default_rng(2).standard_normal((10, f.size))
+    reps = trace + 0.0005 * np.random.default_rng(2).standard_normal((10, f.size)) * (1 + 1j)
     cands = candidate_frequencies(np.sqrt(p.K_Nm_per_rad / p.Jl_kgm2) / (2 * np.pi), (10.0, 400.0))
 
-    def judged(random: np.ndarray | None) -> object:
-        return third_mode(f, trace.astype(complex), reps.astype(complex), log_ratios, jac, np.ones(f.size),
-                          "amplitude", 0, 0.01, cands, random_variance=random)
+    def judged(random: np.ndarray | None, use_phase: bool = False) -> object:
+        return third_mode(f, trace, reps, log_ratios, jac, np.ones(f.size), "amplitude", 0, 0.01, cands,
+                          use_phase=use_phase, random_variance=random)
 
-    alone, floored = judged(None), judged(coherence_variance(np.full(f.size, 0.9), 27))
-    assert alone.t > 20 * alone.t_crit and alone.mass_ratio == pytest.approx(0.002, rel=0.02)
-    assert 0 < floored.t < floored.t_crit and not floored.found
-    assert floored.mass_ratio == pytest.approx(alone.mass_ratio, rel=1e-9)  # the estimate itself unchanged
+    random = coherence_variance(np.full(f.size, 0.9), 27)
+    for use_phase in (False, True):  # with the phase: its rows floored alike ((1 − γ²)/(2γ²n_d) is the phase's too)
+        alone, floored = judged(None, use_phase), judged(random, use_phase)
+        assert alone.t > 20 * alone.t_crit and alone.mass_ratio == pytest.approx(0.002, rel=0.02), use_phase
+        assert 0 < floored.t < alone.t / 10 and 0 < floored.t_amplitude < floored.t_crit, use_phase
+        assert not floored.found, use_phase
+        assert floored.mass_ratio == pytest.approx(alone.mass_ratio, rel=1e-9)  # the estimate itself unchanged
     assert judged(np.full(f.size, np.inf)) is None  # no coherence anywhere: no bin to judge

@@ -49,5 +49,8 @@ def on_one_cpu(enabled: bool = True) -> Iterator[None]:
     try:
         yield
     finally:
-        with suppress(OSError):  # a CPU of ``allowed`` taken from the process meanwhile: stay where it runs
+        try:
             os.sched_setaffinity(0, allowed)
+        except OSError:  # EINVAL: none of ``allowed`` is left to the process (its cpuset changed meanwhile)
+            with suppress(OSError):  # every CPU, which the kernel narrows to the cpuset's
+                os.sched_setaffinity(0, range(os.cpu_count() or 1))
