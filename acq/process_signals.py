@@ -110,13 +110,23 @@ def signals_deferred() -> Iterator[None]:
     finally:  # also when the block raised: a stop asked for meanwhile is never lost (its KeyboardInterrupt wins)
         # blocked while the handlers are put back: one arriving between two restores would raise from the first
         # restored handler and leave the others deferring for good; held pending, it reaches its own handler after
-        # (this thread's mask: another thread that leaves them unblocked can still take one — a window of 3 calls)
+        # (this thread's mask: where another thread leaves them unblocked, a handler already put back can still raise
+        # between two restores — the loop then puts back the rest and raises it after)
         old_mask = signal.pthread_sigmask(signal.SIG_BLOCK, previous) if previous else None
-        try:
-            for s, handler in previous.items():
-                signal.signal(s, handler)
-        finally:
-            if old_mask is not None:
-                signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)
+        raised: BaseException | None = None
+        for s, handler in previous.items():
+            while True:  # a restored handler raising in the next call leaves none of the others deferring for good
+                try:
+                    signal.signal(s, handler)
+                    break
+                except Exception as e:  # noqa: BLE001 - the call itself refused: raised after the rest are put back
+                    raised = raised or e
+                    break
+                except BaseException as e:  # a stop (KeyboardInterrupt) from a handler already put back: put this
+                    raised = raised or e  # one back again, raise it after
+        if old_mask is not None:
+            signal.pthread_sigmask(signal.SIG_SETMASK, old_mask)  # a stop held pending reaches its handler here
+        if raised is not None:
+            raise raised
         for signum in dict.fromkeys(caught):  # the first's handler raises: the rest were the same request
             signal.raise_signal(signum)

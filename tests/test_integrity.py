@@ -70,12 +70,15 @@ def filled_while_recording(folder: Path, leave_bytes: int) -> Iterator[None]:
                         # of 2a1933c: ENOSPC here, the disk never filled, the recording ended ok): read it again, leave
                         # a growing margin, retry
                         for attempt in range(100):
-                            room = free_bytes(folder) - leave_bytes - attempt * (64 << 10)
+                            room = free_bytes(folder) - leave_bytes
                             if room <= 0:  # no more to take than what is to be left: as full as asked
                                 filled.set()
                                 return
+                            take = room - attempt * (64 << 10)
+                            if take <= 0:
+                                break
                             try:
-                                os.posix_fallocate(f.fileno(), f.seek(0, os.SEEK_END), room)
+                                os.posix_fallocate(f.fileno(), f.seek(0, os.SEEK_END), take)
                             except OSError as e:
                                 if e.errno != errno.ENOSPC:
                                     raise
@@ -83,7 +86,7 @@ def filled_while_recording(folder: Path, leave_bytes: int) -> Iterator[None]:
                             else:
                                 filled.set()
                                 return
-                    return
+                    raise AssertionError(f"posix_fallocate kept failing with ENOSPC: {free_bytes(folder)} bytes free")
                 time.sleep(0.001)
         except BaseException as e:  # noqa: BLE001 - handed to the test's thread, which raises it
             failed.append(e)

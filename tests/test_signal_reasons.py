@@ -143,3 +143,37 @@ def test_a_stop_deferred_over_a_block_that_raised_still_reaches_its_handler() ->
         assert received == [signal.SIGTERM]
     finally:
         signal.signal(signal.SIGTERM, before)
+
+
+def test_a_stop_between_two_restores_still_puts_every_handler_back(monkeypatch: pytest.MonkeyPatch) -> None:
+    # where another thread takes a stop signal while signals_deferred puts the handlers back, the first one already
+    # put back raises at the next bytecode: the others were left deferring for good, SIGTERM ignored from then on.
+    # Here the raise is made to land right after the first handler is put back, as it would.
+    from acq import process_signals
+    from acq.process_signals import signals_deferred
+
+    def mine(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    before = {s: signal.signal(s, mine) for s in process_signals.STOP_SIGNALS}
+    real_signal, restores = signal.signal, []
+
+    def restore_then_stop(signum: int, handler: object) -> object:
+        old = real_signal(signum, handler)
+        if handler is mine:
+            restores.append(signum)
+            if len(restores) == 1:
+                raise KeyboardInterrupt  # the stop, handled by the handler just put back
+        return old
+
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            with signals_deferred():
+                monkeypatch.setattr(process_signals.signal, "signal", restore_then_stop)
+        monkeypatch.undo()
+        assert set(restores) == set(process_signals.STOP_SIGNALS)  # the first put back twice: raised between
+        assert all(signal.getsignal(s) is mine for s in process_signals.STOP_SIGNALS)
+    finally:
+        monkeypatch.undo()
+        for s, handler in before.items():
+            signal.signal(s, handler)
