@@ -84,10 +84,8 @@ def controllable_server(binaries: Path, durable: bool = False, password: str | N
         os.chown(root, nobody.pw_uid, nobody.pw_gid)
         as_user = ["runuser", "-u", "nobody", "--"]
     root.chmod(0o700)
-    data, port = root / "data", _free_port()
+    data = root / "data"
     env = {**os.environ, "LC_ALL": "C"}
-    settings = (f"-c listen_addresses=127.0.0.1 -p {port} -c unix_socket_directories={root} -c max_connections=60"
-                + ("" if durable else " -c fsync=off -c synchronous_commit=off"))
 
     def run(*args: str) -> None:
         done = subprocess.run([*as_user, *args], cwd=root, env=env, capture_output=True, text=True, timeout=120)
@@ -103,9 +101,21 @@ def controllable_server(binaries: Path, durable: bool = False, password: str | N
         auth = ["-A", "scram-sha-256", f"--pwfile={root / 'pwfile'}"]
     try:
         run(str(binaries / "initdb"), "-D", str(data), "-U", "acq", *auth, "-E", "UTF8", "--no-sync")
-        pg_ctl, start = [str(binaries / "pg_ctl"), "-D", str(data)], ["-l", str(root / "log"), "-w", "-o", settings,
-                                                                     "start"]
-        run(*pg_ctl, *start)
+        pg_ctl = [str(binaries / "pg_ctl"), "-D", str(data)]
+        for attempt in range(5):
+            # the port is free when asked, not held: another process (a second test worker's connections) may take
+            # it before the server binds it — then another
+            port = _free_port()
+            settings = (f"-c listen_addresses=127.0.0.1 -p {port} -c unix_socket_directories={root} "
+                        "-c max_connections=60" + ("" if durable else " -c fsync=off -c synchronous_commit=off"))
+            start = ["-l", str(root / "log"), "-w", "-o", settings, "start"]
+            (root / "log").unlink(missing_ok=True)
+            try:
+                run(*pg_ctl, *start)
+                break
+            except RuntimeError as e:
+                if "Address already in use" not in str(e) or attempt == 4:
+                    raise
         server = Server(f"postgresql://acq{'' if password is None else ':' + password}@127.0.0.1:{port}", run, pg_ctl,
                         start)
         try:
