@@ -166,9 +166,9 @@ def band_misfits(f_hz: np.ndarray, misfit: np.ndarray, replicate_misfits: np.nda
         :attr:`analysis.frf.FrequencyResponse.noise_ratio`): a window's standard error is never taken below
         √(mean/WINDOW_BINS) of it (its bins' errors taken as independent, the smaller reading: neighbouring bins of
         overlapped segments are correlated, which would raise it — a floor, not an estimate); None: the replicates'
-        scatter alone. Where the floor sets the error it is still judged at the t of B − 1 degrees of freedom, though the
-        model's variance has those of every segment averaged: stricter than it need be, never laxer. The replicates see that noise with B − 1 degrees of freedom, the model with those of every
-        segment averaged; on a healthy one-phase robot window (configs/benches/sim_robot.toml, seed 0 at 160 s) the
+        scatter alone. Where the floor sets the error it is still judged at the t of B − 1 degrees of freedom, though
+        the model's variance has those of every segment averaged: stricter than it need be, never laxer. The
+        replicates see that noise with B − 1 degrees of freedom, the model with those of every segment averaged; on a healthy one-phase robot window (configs/benches/sim_robot.toml, seed 0 at 160 s) the
         scatter of 178–192 Hz read 0.49 % against the model's 0.71 % and a misfit of the one-phase estimate's error,
         +3.2 % (+0.5 % with two phases), passed as a third mode at t 4.5 (level 4.3). The coherence measured is no
         such floor: it also holds the Welch window's own loss at the motion's lines and at the resonance, which is no

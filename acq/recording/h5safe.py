@@ -116,13 +116,11 @@ def open_read(path: Path) -> h5py.File:
     process holds still refuses the open (errno 11, :mod:`acq.recording.reader` says so).
     """
     lib = _libhdf5()
-    if lib is None:
-        return h5py.File(path, "r", swmr=True, locking="best-effort")
     fapl = h5py.h5p.create(h5py.h5p.FILE_ACCESS)
     fapl.set_fclose_degree(h5py.h5f.CLOSE_STRONG)
     fapl.set_file_locking(True, ignore_when_disabled=True)
-    if lib.H5Pset_metadata_read_attempts(fapl.id, READ_ATTEMPTS) < 0:
-        return h5py.File(path, "r", swmr=True, locking="best-effort")
+    if lib is None or lib.H5Pset_metadata_read_attempts(fapl.id, READ_ATTEMPTS) < 0:
+        return h5py.File(path, "r", swmr=True, locking="best-effort")  # HDF5's default attempts
     fid = h5py.h5f.open(os.fsencode(path), h5py.h5f.ACC_RDONLY | h5py.h5f.ACC_SWMR_READ, fapl=fapl)
     return h5py.File(fid)
 

@@ -61,9 +61,9 @@ def _open_for_reading(path: Path) -> tuple[h5py.File, list[str]]:
         first_line = str(e).splitlines()[0] if str(e) else type(e).__name__
         if "file signature not found" in first_line:  # HDF5's words for a file of another kind
             first_line = "no HDF5 signature: another kind of file"
-        # EAGAIN/EWOULDBLOCK (11 on Linux): a writer holds HDF5's lock — a recorder making the file has it until its SWMR writing
-        # starts (tens of ms), any other HDF5 writer for as long as it writes: a file being written, not one cut,
-        # whatever its size says. Any other errno: the file system's locks failed (ENOSYS is skipped by open_read)
+        # EAGAIN/EWOULDBLOCK (11 on Linux): a writer holds HDF5's lock — a recorder making the file has it until its
+        # SWMR writing starts (tens of ms), any other HDF5 writer for as long as it writes: a file being written, not
+        # one cut, whatever its size says. Any other errno: the file system's locks failed (open_read skips ENOSYS)
         locked = "unable to lock file" in first_line
         if locked and any(f"errno = {n}," in first_line for n in {errno.EAGAIN, errno.EWOULDBLOCK}):
             first_line = "locked by a process writing it (a recording just starting?) — try again in a moment"
